@@ -1,0 +1,32 @@
+"""Errors the planner raises on bad input or an impossible plan.
+
+Every error carries a stable machine-readable ``code`` (for HTTP clients), a plain
+``message`` and, where the cause is one field of the request, the ``field`` path
+(e.g. ``"segments[3].lower"``) so a user can find what to fix.
+"""
+
+from __future__ import annotations
+
+
+class PlannerError(ValueError):
+    """A request the planner cannot turn into a plan.
+
+    Codes: ``invalid_input`` (a field is malformed), ``unreachable`` (a pose outside the
+    legs' stroke), ``singular`` (a pose where the drives lose control of a direction),
+    ``not_settled`` (the robot did not settle at the end point within the tail),
+    ``no_path`` (segmentation found no corridor), ``too_large`` (a bound on work was hit),
+    ``infeasible`` (constrained mode could not meet its hard constraints).
+    """
+
+    def __init__(self, code: str, message: str, field: str | None = None):
+        self.code = code
+        self.message = message
+        self.field = field
+        super().__init__(f"{field}: {message}" if field else message)
+
+    def to_dict(self) -> dict:
+        return {"code": self.code, "message": self.message, "field": self.field}
+
+
+def invalid(field: str, message: str) -> PlannerError:
+    return PlannerError("invalid_input", message, field)

@@ -1,0 +1,153 @@
+"""The receding-horizon plan loop (paper Sections IV-V): a fast simulation of the robot
+under range-space predictive control.
+
+At every sample ``k``: factorise the model at the current state (eq. 8), discretise it
+(eq. 9), read the next ``N`` ranges, minimise the criterion (eqs. 22-23), apply the first
+move ``u(k)`` to the *nonlinear* model (eq. 6) integrated over one sample (RK4), and repeat.
+After the corridor's last sample the end point is held until the robot has settled.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from .discretisation import zoh
+from .errors import PlannerError, invalid
+from .ranges import RangeSequence, range_sequence, reference_sequence
+from .request import PlanRequest, parse_request
+from .robot import SINGULAR_TOL, Robot, load_robot
+from .solver import SOLVERS
+from .trajectory import build_result
+
+C_POSE = np.eye(3, 6)
+
+
+def rk4_sample(robot: Robot, x: np.ndarray, u: np.ndarray, Ts: float, substeps: int,
+               f0: np.ndarray | None = None) -> np.ndarray:
+    """The plant: the nonlinear model (eq. 6/7) under a constant drive force ``u`` over one
+    sample, by ``substeps`` classical Runge-Kutta steps. ``f0`` may pass ``x_dot`` at ``x``."""
+    h = Ts / substeps
+    f = robot.state_derivative
+    for i in range(substeps):
+        k1 = f0 if (i == 0 and f0 is not None) else f(x, u)
+        k2 = f(x + 0.5 * h * k1, u)
+        k3 = f(x + 0.5 * h * k2, u)
+        k4 = f(x + h * k3, u)
+        x = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    return x
+
+
+def check_segments(robot: Robot, segments) -> None:
+    """Every pose a segment allows must be reachable (within the legs' stroke) and regular.
+
+    For a fixed angle a leg's length is the distance from the tool point to the point
+    ``A_i - r_i(psi)``, so its extremes over a segment's box are exact (nearest point and
+    farthest corner); the angle range is sampled. Singularity is checked on a grid.
+    """
+    for si, seg in enumerate(segments):
+        path = f"segments[{si}]"
+        psis = np.linspace(seg.lower[2], seg.upper[2], 5 if seg.upper[2] > seg.lower[2] else 1)
+        for psi in psis:
+            c, s = math.cos(psi), math.sin(psi)
+            r = robot._r0 @ np.array([[c, s], [-s, c]])
+            P = robot.base - r  # (n, 2): leg i's length is |t - P_i|
+            lo, hi = seg.lower[:2], seg.upper[:2]
+            near = np.linalg.norm(np.maximum(np.maximum(lo - P, 0.0), P - hi), axis=1)
+            far = np.linalg.norm(np.maximum(np.abs(P - lo), np.abs(P - hi)), axis=1)
+            for i in range(robot.n_legs):
+                if near[i] < robot.length_min[i] - 1e-12:
+                    corner = np.clip(P[i], lo, hi)
+                    raise PlannerError("unreachable", f"segment {si} contains pose ({corner[0]:.4f} m, "
+                                       f"{corner[1]:.4f} m, {psi:.4f} rad) where leg {i + 1} would be "
+                                       f"{near[i]:.4f} m, shorter than its minimum {robot.length_min[i]:.4f} m", path)
+                if far[i] > robot.length_max[i] + 1e-12:
+                    corner = np.where(np.abs(P[i] - lo) > np.abs(P[i] - hi), lo, hi)
+                    raise PlannerError("unreachable", f"segment {si} contains pose ({corner[0]:.4f} m, "
+                                       f"{corner[1]:.4f} m, {psi:.4f} rad) where leg {i + 1} would be "
+                                       f"{far[i]:.4f} m, longer than its maximum {robot.length_max[i]:.4f} m", path)
+        g = np.linspace(0.0, 1.0, 3)
+        for fx in g:
+            for fy in g:
+                for psi in psis:
+                    pose = np.array([seg.lower[0] + fx * (seg.upper[0] - seg.lower[0]),
+                                     seg.lower[1] + fy * (seg.upper[1] - seg.lower[1]), psi])
+                    if robot.singularity_measure(pose) < SINGULAR_TOL:
+                        robot.check_pose(pose, path)
+
+
+def _settled(x, end, st) -> bool:
+    return (math.hypot(x[0] - end[0], x[1] - end[1]) < st.settle_position_m
+            and abs(x[2] - end[2]) < st.settle_angle_rad
+            and math.hypot(x[3], x[4]) < st.settle_speed_m_s
+            and abs(x[5]) < st.settle_rate_rad_s)
+
+
+def simulate(robot: Robot, seq: RangeSequence, st) -> dict:
+    """Run the receding-horizon loop; returns the sampled states, inputs and leg data."""
+    solver = SOLVERS[st.solver]
+    N, Ts, m = st.N, st.Ts, robot.n_legs
+    max_steps = seq.K + int(math.ceil(st.tail_max_s / Ts))
+    X = np.empty((max_steps + 1, 6))
+    U = np.zeros((max_steps + 1, m))
+    ACC = np.empty((max_steps + 1, 3))
+    x = np.concatenate((seq.start, np.zeros(3)))
+    X[0] = x
+    settled_at = None
+    k = 0
+    for k in range(max_steps):
+        A, B = robot.factorised(x)
+        Ad, Bd = zoh(A, B, Ts)
+        lo, hi, qa, qb, qu = seq.window(k, N)
+        u = solver(Ad, Bd, C_POSE, x, qa, qb, qu, lo, hi)[0]
+        xdot = A @ x + B @ u  # == f(x) + G(x) u exactly (eq. 8)
+        U[k] = u
+        ACC[k] = xdot[3:]
+        x = rk4_sample(robot, x, u, Ts, st.plant_substeps, xdot)
+        X[k + 1] = x
+        if not np.all(np.isfinite(x)) or abs(x[0]) + abs(x[1]) > 1e3:
+            raise PlannerError("diverged", f"the simulated robot diverged at t = {(k + 1) * Ts:.3f} s; "
+                               "try a smaller sample time or larger k_u", "settings")
+        if k + 1 >= seq.K and _settled(x, seq.end, st):
+            settled_at = k + 1
+            break
+    steps = k + 1
+    ACC[steps] = robot.acceleration(X[steps, :3], X[steps, 3:], U[steps])
+    return {"X": X[:steps + 1], "U": U[:steps + 1], "ACC": ACC[:steps + 1], "steps": steps,
+            "settled": settled_at is not None}
+
+
+def plan(request, *, robot: Robot | None = None, segments=None) -> dict:
+    """Plan a trajectory for a request (dict in the one JSON shape, or a parsed
+    :class:`PlanRequest`). Returns the result dict (see :mod:`planner.trajectory`)."""
+    t0 = time.perf_counter()
+    req = request if isinstance(request, PlanRequest) else parse_request(request)
+    st = req.settings
+    robot = robot or load_robot(req.robot)
+    m = robot.n_legs
+    if st.q_u is not None and len(st.q_u) != m:
+        raise invalid("settings.q_u", f"must have one entry per drive ({m}), got {len(st.q_u)}")
+    if segments is None:
+        segments = req.segments
+    if segments is None and req.layout is not None:
+        from .segmentation import corridor_from_request
+        segments = corridor_from_request(req, robot).segments
+    if segments is not None:
+        check_segments(robot, segments)
+        seq = range_sequence(segments, st, m)
+    else:
+        for i, pose in enumerate(req.reference):
+            robot.check_pose(pose, f"reference.pose[{i}]")
+        seq = reference_sequence(req.reference, st, m)
+    robot.check_pose(seq.start, "segments[0]" if segments is not None else "reference.pose[0]")
+    sim = simulate(robot, seq, st)
+    result = build_result(robot, req, seq, segments, sim, time.perf_counter() - t0)
+    if not sim["settled"] and st.require_settled:
+        mt = result["metrics"]
+        raise PlannerError("not_settled", f"the robot did not settle at the end point within "
+                           f"{st.tail_max_s:g} s after the corridor (end error {mt['end_error_m'] * 1e3:.3f} mm, "
+                           f"speed {mt['end_speed_m_s'] * 1e3:.3f} mm/s); lengthen settings.tail_max_s, "
+                           "add samples per segment or raise k_r", "settings.tail_max_s")
+    return result

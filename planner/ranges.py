@@ -1,0 +1,103 @@
+"""Segments to a per-sample range sequence (paper Section V.B, Table I, Fig. 4).
+
+Each segment's range ``[r_a, r_b]`` is held for ``S`` samples (default ``N``: "the all
+values are repeated in number equal length of horizon N"). Sample ``j = 1..K``
+(``K = segments x S``) belongs to segment ``(j - 1) // S``; sample 0 is the start. With
+``taper`` (default), a segment that follows a point (the start) spreads linearly out of
+that point over its samples, and a segment followed by a point (the end) narrows linearly
+onto it (Fig. 4 a, c). Past sample ``K`` the end point is held. At each step the criterion
+reads the next ``N`` samples of this sequence (:meth:`RangeSequence.window`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .request import Segment, Settings
+
+
+@dataclass
+class RangeSequence:
+    lower: np.ndarray  # (K, 3) r_a per sample 1..K [m, m, rad]
+    upper: np.ndarray  # (K, 3) r_b per sample
+    qa: np.ndarray  # (K, 3) diagonal of Q_ra per sample
+    qb: np.ndarray  # (K, 3) diagonal of Q_rb per sample
+    qu: np.ndarray  # (m,) diagonal of Q_u
+    segment: np.ndarray  # (K,) segment index per sample (-1 for a reference trajectory)
+    start: np.ndarray  # (3,) start pose
+    end: np.ndarray  # (3,) end pose
+
+    @property
+    def K(self) -> int:
+        return len(self.lower)
+
+    def window(self, k: int, N: int):
+        """Ranges and penalties for samples ``k+1..k+N``, the end held past ``K``."""
+        idx = np.minimum(np.arange(k, k + N), self.K - 1)
+        return (self.lower[idx], self.upper[idx], self.qa[idx], self.qb[idx],
+                np.broadcast_to(self.qu, (N, len(self.qu))))
+
+    def at(self, k: int):
+        """Range of sample ``k`` (0 = start point)."""
+        if k == 0:
+            return self.start, self.start
+        i = min(k - 1, self.K - 1)
+        return self.lower[i], self.upper[i]
+
+
+def _penalties(settings: Settings, n_drives: int):
+    qa = np.array(settings.q_ra) if settings.q_ra is not None else np.full(3, settings.k_r)
+    qb = np.array(settings.q_rb) if settings.q_rb is not None else np.full(3, settings.k_r)
+    if settings.q_u is not None:
+        if len(settings.q_u) != n_drives:
+            from .errors import invalid
+            raise invalid("settings.q_u", f"must have one entry per drive ({n_drives}), got {len(settings.q_u)}")
+        qu = np.array(settings.q_u)
+    else:
+        qu = np.full(n_drives, settings.k_u)
+    return qa, qb, qu
+
+
+def range_sequence(segments: list[Segment], settings: Settings, n_drives: int) -> RangeSequence:
+    """Section V.B: expand the corridor's segments into per-sample ranges."""
+    S = settings.S
+    n = len(segments)
+    lo = np.repeat(np.array([s.lower for s in segments]), S, axis=0)
+    hi = np.repeat(np.array([s.upper for s in segments]), S, axis=0)
+    qa0, qb0, qu = _penalties(settings, n_drives)
+    qa = np.repeat(np.array([s.q_ra if s.q_ra is not None else qa0 for s in segments]), S, axis=0)
+    qb = np.repeat(np.array([s.q_rb if s.q_rb is not None else qb0 for s in segments]), S, axis=0)
+    seg = np.repeat(np.arange(n), S)
+    if settings.taper:
+        alpha = (np.arange(1, S + 1) / S)[:, None]
+        for i in range(1, n):
+            if segments[i - 1].is_point and not segments[i].is_point:  # spread out of a point
+                p = segments[i - 1].centre
+                sl = slice(i * S, (i + 1) * S)
+                lo[sl] = p + (segments[i].lower - p) * alpha
+                hi[sl] = p + (segments[i].upper - p) * alpha
+        for i in range(n - 1):
+            if segments[i + 1].is_point and not segments[i].is_point:  # narrow onto a point
+                p = segments[i + 1].centre
+                sl = slice(i * S, (i + 1) * S)
+                if i > 0 and segments[i - 1].is_point:  # a single segment between two points
+                    lo[sl] = lo[sl] + (p - lo[sl]) * alpha
+                    hi[sl] = hi[sl] + (p - hi[sl]) * alpha
+                else:
+                    lo[sl] = segments[i].lower + (p - segments[i].lower) * alpha
+                    hi[sl] = segments[i].upper + (p - segments[i].upper) * alpha
+    return RangeSequence(lo, hi, qa, qb, qu, seg, segments[0].centre.copy(), segments[-1].centre.copy())
+
+
+def reference_sequence(reference: np.ndarray, settings: Settings, n_drives: int) -> RangeSequence:
+    """The tracking criterion (12) as a degenerate range: ``r_a = w``, ``Q_rb = 0``.
+
+    ``reference[0]`` is the start pose (sample 0); ``reference[j]`` the desired pose at sample j.
+    """
+    qa0, _, qu = _penalties(settings, n_drives)
+    w = reference[1:]
+    K = len(w)
+    return RangeSequence(w.copy(), w.copy(), np.tile(qa0, (K, 1)), np.zeros((K, 3)), qu,
+                         np.full(K, -1), reference[0].copy(), reference[-1].copy())
