@@ -85,9 +85,33 @@ def _settled(x, end, st) -> bool:
             and abs(x[5]) < st.settle_rate_rad_s)
 
 
-def simulate(robot: Robot, seq: RangeSequence, st) -> dict:
+class PaperController:
+    """The paper's controller: minimise the range-space criterion (22)-(23) over the
+    horizon, unconstrained, and return the first move ``u(k)``."""
+
+    def __init__(self, robot: Robot, seq: RangeSequence, st, segments=None):
+        self.seq, self.N = seq, st.N
+        self.solver = SOLVERS[st.solver]
+
+    def __call__(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray) -> np.ndarray:
+        lo, hi, qa, qb, qu = self.seq.window(k, self.N)
+        return self.solver(Ad, Bd, C_POSE, x, qa, qb, qu, lo, hi)[0]
+
+    def report(self) -> dict:
+        """Extra metrics of this controller (none for the paper's)."""
+        return {}
+
+
+def make_controller(robot: Robot, seq: RangeSequence, st, segments=None):
+    if st.mode == "constrained":
+        from .constrained import ConstrainedController
+        return ConstrainedController(robot, seq, st, segments)
+    return PaperController(robot, seq, st, segments)
+
+
+def simulate(robot: Robot, seq: RangeSequence, st, controller=None) -> dict:
     """Run the receding-horizon loop; returns the sampled states, inputs and leg data."""
-    solver = SOLVERS[st.solver]
+    controller = controller or PaperController(robot, seq, st)
     N, Ts, m = st.N, st.Ts, robot.n_legs
     max_steps = seq.K + int(math.ceil(st.tail_max_s / Ts))
     X = np.empty((max_steps + 1, 6))
@@ -100,8 +124,7 @@ def simulate(robot: Robot, seq: RangeSequence, st) -> dict:
     for k in range(max_steps):
         A, B = robot.factorised(x)
         Ad, Bd = zoh(A, B, Ts)
-        lo, hi, qa, qb, qu = seq.window(k, N)
-        u = solver(Ad, Bd, C_POSE, x, qa, qb, qu, lo, hi)[0]
+        u = controller(k, x, Ad, Bd)
         xdot = A @ x + B @ u  # == f(x) + G(x) u exactly (eq. 8)
         U[k] = u
         ACC[k] = xdot[3:]
@@ -142,8 +165,11 @@ def plan(request, *, robot: Robot | None = None, segments=None) -> dict:
             robot.check_pose(pose, f"reference.pose[{i}]")
         seq = reference_sequence(req.reference, st, m)
     robot.check_pose(seq.start, "segments[0]" if segments is not None else "reference.pose[0]")
-    sim = simulate(robot, seq, st)
+    controller = make_controller(robot, seq, st, segments)
+    sim = simulate(robot, seq, st, controller)
     result = build_result(robot, req, seq, segments, sim, time.perf_counter() - t0)
+    result["mode"] = st.mode
+    result["metrics"].update(controller.report())
     if not sim["settled"] and st.require_settled:
         mt = result["metrics"]
         raise PlannerError("not_settled", f"the robot did not settle at the end point within "

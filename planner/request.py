@@ -43,6 +43,7 @@ class Settings:
     q_u: list[float] | None = None  #: diagonal of Q_u, one per drive, overrides k_u
     taper: bool = True  #: spread the range out of a start point and narrow it onto an end point (Fig. 4)
     solver: str = "structured"  #: "structured" (banded, O(N)) or "qr" (the paper's Householder QR)
+    mode: str = "paper"  #: "paper" (the seed's soft criterion) or "constrained" (hard corridor and drive limits)
     settle_position_m: float = 1e-4  #: end-point position tolerance that counts as settled [m]
     settle_speed_m_s: float = 1e-3  #: speed below which the robot counts as stopped [m/s]
     settle_angle_rad: float = 1e-4  #: end-point angle tolerance [rad]
@@ -137,6 +138,10 @@ def parse_settings(raw, path: str = "settings") -> Settings:
             if not isinstance(raw[key], bool):
                 raise invalid(f"{path}.{key}", "must be true or false")
             setattr(s, key, raw[key])
+    if "mode" in raw:
+        if raw["mode"] not in ("paper", "constrained"):
+            raise invalid(f"{path}.mode", "must be 'paper' or 'constrained'")
+        s.mode = raw["mode"]
     if "solver" in raw:
         if raw["solver"] not in ("structured", "qr"):
             raise invalid(f"{path}.solver", "must be 'structured' or 'qr'")
