@@ -1,0 +1,178 @@
+"""Robot model (eqs. 1-9): constraint null space, exact factorisation, energy, the reduced
+model against an independent DAE solve, discretisation, and clear errors."""
+
+import copy
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from planner.discretisation import zoh
+from planner.errors import PlannerError
+from planner.robot import builtin_description, load_robot
+
+ROBOTS = ["moving-slide", "tri-slide"]
+
+
+def random_states(robot, rng, count=20):
+    """Random regular states near the home pose."""
+    out = []
+    while len(out) < count:
+        y = rng.uniform([-0.06, -0.06, -0.2], [0.06, 0.06, 0.2])
+        if np.all(robot.leg_lengths(y) > robot.length_min) and np.all(robot.leg_lengths(y) < robot.length_max):
+            v = rng.normal(size=3) * [0.3, 0.3, 1.0]
+            out.append(np.concatenate((y, v)))
+    return out
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_constraints_hold_and_R_spans_null_space(name):
+    robot = load_robot(name)
+    rng = np.random.default_rng(1)
+    for x in random_states(robot, rng):
+        s = robot.physical_coordinates(x[:3])
+        assert np.abs(robot.constraints(s)).max() < 1e-14
+        Phi = robot.constraint_jacobian(s)
+        R = robot.R_matrix(x[:3])
+        assert np.abs(Phi @ R).max() < 1e-13  # eq. (3)
+        assert np.linalg.matrix_rank(R) == 3
+        # R is ds/dy: compare with central differences of s(y)
+        eps = 1e-6
+        fd = np.column_stack([(robot.physical_coordinates(x[:3] + eps * e) -
+                               robot.physical_coordinates(x[:3] - eps * e)) / (2 * eps) for e in np.eye(3)])
+        assert np.allclose(fd, R, atol=1e-8)
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_factorisation_is_exact(name):
+    """Eq. (8): A(x) x + B(x) u == f(x) + G(x) u to rounding, at any state."""
+    robot = load_robot(name)
+    rng = np.random.default_rng(2)
+    for x in random_states(robot, rng):
+        u = rng.normal(size=robot.n_legs) * 50
+        A, B = robot.factorised(x)
+        f = robot.state_derivative(x, np.zeros(robot.n_legs))
+        assert np.allclose(A @ x, f, rtol=1e-12, atol=1e-12)
+        assert np.allclose(A @ x + B @ u, robot.state_derivative(x, u), rtol=1e-12, atol=1e-10)
+        assert np.allclose(A[:3], np.hstack((np.zeros((3, 3)), np.eye(3))))
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_reduced_model_equals_independent_dae_solve(name):
+    """Eq. (6) against the DAE (1)-(2) solved directly with Lagrange multipliers:
+    [M -Phi^T; Phi 0] [s_dd; lam] = [g + T u; -Phi_dot s_dot]."""
+    robot = load_robot(name)
+    n = robot.n_legs
+    rng = np.random.default_rng(3)
+    for x in random_states(robot, rng, 8):
+        y, v = x[:3], x[3:]
+        u = rng.normal(size=n) * 40
+        s = robot.physical_coordinates(y)
+        R = robot.R_matrix(y)
+        s_dot = R @ v
+        M = robot.mass_matrix(s)
+        Phi = robot.constraint_jacobian(s)
+        eps = 1e-6
+        Phi_dot = (robot.constraint_jacobian(s + eps * s_dot) - robot.constraint_jacobian(s - eps * s_dot)) / (2 * eps)
+        T = np.zeros((3 + 2 * n, n))
+        T[3:3 + n] = np.eye(n)
+        K = np.block([[M, -Phi.T], [Phi, np.zeros((2 * n, 2 * n))]])
+        rhs = np.concatenate((robot.forces_g(s, s_dot) + T @ u, -Phi_dot @ s_dot))
+        s_dd = np.linalg.solve(K, rhs)[:3 + 2 * n]
+        y_dd = robot.acceleration(y, v, u)
+        R_dot = (robot.R_matrix(y + eps * v) - robot.R_matrix(y - eps * v)) / (2 * eps)
+        assert np.allclose(R @ y_dd + R_dot @ v, s_dd, rtol=1e-7, atol=1e-7 * np.abs(s_dd).max())
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_unforced_frictionless_motion_conserves_kinetic_energy(name):
+    desc = copy.deepcopy(builtin_description(name))
+    legs = desc["legs"] if isinstance(desc["legs"], list) else [desc["legs"]]
+    for leg in legs:
+        leg["friction"] = 0.0
+    robot = load_robot(desc)
+    x0 = np.array([0.01, -0.02, 0.05, 0.15, -0.1, 0.8])
+    zero = np.zeros(robot.n_legs)
+    sol = solve_ivp(lambda t, x: robot.state_derivative(x, zero), (0, 0.25), x0, method="DOP853",
+                    rtol=1e-11, atol=1e-13, dense_output=True)
+    E0 = robot.kinetic_energy(x0)
+    energies = [robot.kinetic_energy(sol.sol(t)) for t in np.linspace(0, 0.25, 26)]
+    assert np.max(np.abs(np.array(energies) - E0)) < 1e-8 * E0
+    # the motion is genuinely nonlinear (not a trivial straight line)
+    assert np.linalg.norm(sol.y[3:, -1] - x0[3:]) > 1e-3
+
+
+def test_friction_dissipates_energy():
+    robot = load_robot("moving-slide")
+    x0 = np.array([0.0, 0.0, 0.0, 0.2, 0.1, 0.5])
+    zero = np.zeros(4)
+    sol = solve_ivp(lambda t, x: robot.state_derivative(x, zero), (0, 0.2), x0, rtol=1e-10, atol=1e-12)
+    E = [robot.kinetic_energy(x) for x in sol.y.T]
+    assert np.all(np.diff(E) <= 1e-12) and E[-1] < E[0]
+
+
+def test_drive_force_does_work_at_leg_speed():
+    """Power balance: d/dt (kinetic energy) = u . l_dot - friction losses (frictionless: u . l_dot)."""
+    desc = copy.deepcopy(builtin_description("moving-slide"))
+    desc["legs"]["friction"] = 0.0
+    robot = load_robot(desc)
+    x = np.array([0.02, 0.01, -0.1, 0.1, -0.2, 0.3])
+    u = np.array([30.0, -10.0, 5.0, 20.0])
+    xdot = robot.state_derivative(x, u)
+    M_r = robot.generalised_forces(x[:3], x[3:])[0]
+    eps = 1e-7
+    dE = (robot.kinetic_energy(x + eps * xdot) - robot.kinetic_energy(x - eps * xdot)) / (2 * eps)
+    l_dot = robot.leg_jacobian_batch(x[:3])[0] @ x[3:]
+    assert dE == pytest.approx(u @ l_dot, rel=1e-6)
+    assert M_r.shape == (3, 3) and np.all(np.linalg.eigvalsh(M_r) > 0)
+
+
+def test_zoh_equals_fine_integration_of_the_frozen_model():
+    """Eq. (9): Ad x + Bd u is the exact solution of x_dot = A x + B u over one sample."""
+    robot = load_robot("moving-slide")
+    x = np.array([0.02, -0.01, 0.1, 0.2, -0.1, 0.4])
+    u = np.array([20.0, -15.0, 8.0, 3.0])
+    A, B = robot.factorised(x)
+    Ts = 0.01
+    Ad, Bd = zoh(A, B, Ts)
+    sol = solve_ivp(lambda t, z: A @ z + B @ u, (0, Ts), x, method="DOP853", rtol=1e-13, atol=1e-15)
+    assert np.allclose(Ad @ x + Bd @ u, sol.y[:, -1], rtol=0, atol=1e-12)
+    # and the frozen model stays close to the nonlinear one over one sample (O(Ts^2) in velocity)
+    sol_nl = solve_ivp(lambda t, z: robot.state_derivative(z, u), (0, Ts), x, method="DOP853", rtol=1e-12, atol=1e-14)
+    err = np.abs(Ad @ x + Bd @ u - sol_nl.y[:, -1])
+    assert err[:3].max() < 1e-6 and err[3:].max() < 1e-4
+
+
+def test_singular_layout_is_rejected_with_a_clear_error():
+    """All legs pointing at the platform centre: no torque about it, singular in rotation."""
+    desc = copy.deepcopy(builtin_description("moving-slide"))
+    desc["base_pivots"] = [[-0.3, -0.3], [0.3, -0.3], [0.3, 0.3], [-0.3, 0.3]]
+    robot = load_robot(desc)
+    assert robot.singularity_measure(np.zeros(3)) < 1e-12
+    with pytest.raises(PlannerError) as err:
+        robot.check_pose(np.zeros(3), "segments[0]")
+    assert err.value.code == "singular" and "singular" in err.value.message
+    assert err.value.field == "segments[0]"
+
+
+def test_unreachable_pose_names_the_leg():
+    robot = load_robot("moving-slide")
+    with pytest.raises(PlannerError) as err:
+        robot.check_pose(np.array([0.3, 0.0, 0.0]), "segments[4]")
+    assert err.value.code == "unreachable"
+    assert "leg 1" in err.value.message and "0.4500" in err.value.message
+
+
+@pytest.mark.parametrize("mutate, field", [
+    (lambda d: d.update(base_pivots=[[0, 0], [1, 0]]), "robot.base_pivots"),
+    (lambda d: d["platform"].update(mass=-1), "robot.platform.mass"),
+    (lambda d: d["legs"].update(length_min=0.5), "robot.legs.length_min"),
+    (lambda d: d["legs"]["rod"].update(mass=float("nan")), "robot.legs.rod.mass"),
+    (lambda d: d.update(platform_pivots=[[0, 0]] * 3), "robot.platform_pivots"),
+])
+def test_bad_robot_description_names_the_field(mutate, field):
+    desc = copy.deepcopy(builtin_description("moving-slide"))
+    mutate(desc)
+    with pytest.raises(PlannerError) as err:
+        load_robot(desc)
+    assert err.value.field == field
