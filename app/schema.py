@@ -55,7 +55,7 @@ class SettingsModel(Strict):
     settle_angle_rad: Finite = Field(1e-4, gt=0, le=1, description="End-point angle tolerance in rad")
     settle_rate_rad_s: Finite = Field(1e-3, gt=0, le=1, description="Angular speed that counts as stopped in rad/s")
     tail_max_s: Finite = Field(3.0, ge=0, le=600, description="Longest time in s the end point is held for settling")
-    plant_substeps: int = Field(2, ge=1, le=50, description="RK4 steps of the nonlinear model per sample (count)")
+    plant_substeps: int = Field(1, ge=1, le=50, description="RK4 steps of the nonlinear model per sample (count)")
     require_settled: bool = Field(True, description="Fail with code not_settled instead of returning an unsettled plan")
 
 

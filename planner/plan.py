@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from .discretisation import zoh
+from .discretisation import zoh_factorised
 from .errors import PlannerError, invalid
 from .ranges import RangeSequence, range_sequence, reference_sequence
 from .request import PlanRequest, parse_request
@@ -45,37 +45,46 @@ def check_segments(robot: Robot, segments) -> None:
 
     For a fixed angle a leg's length is the distance from the tool point to the point
     ``A_i - r_i(psi)``, so its extremes over a segment's box are exact (nearest point and
-    farthest corner); the angle range is sampled. Singularity is checked on a grid.
+    farthest corner); the angle range is sampled (5 angles). Singularity is checked on a
+    3 x 3 grid of each box at the same angles. All segments at once.
     """
-    for si, seg in enumerate(segments):
-        path = f"segments[{si}]"
-        psis = np.linspace(seg.lower[2], seg.upper[2], 5 if seg.upper[2] > seg.lower[2] else 1)
-        for psi in psis:
-            c, s = math.cos(psi), math.sin(psi)
-            r = robot._r0 @ np.array([[c, s], [-s, c]])
-            P = robot.base - r  # (n, 2): leg i's length is |t - P_i|
-            lo, hi = seg.lower[:2], seg.upper[:2]
-            near = np.linalg.norm(np.maximum(np.maximum(lo - P, 0.0), P - hi), axis=1)
-            far = np.linalg.norm(np.maximum(np.abs(P - lo), np.abs(P - hi)), axis=1)
-            for i in range(robot.n_legs):
-                if near[i] < robot.length_min[i] - 1e-12:
-                    corner = np.clip(P[i], lo, hi)
-                    raise PlannerError("unreachable", f"segment {si} contains pose ({corner[0]:.4f} m, "
-                                       f"{corner[1]:.4f} m, {psi:.4f} rad) where leg {i + 1} would be "
-                                       f"{near[i]:.4f} m, shorter than its minimum {robot.length_min[i]:.4f} m", path)
-                if far[i] > robot.length_max[i] + 1e-12:
-                    corner = np.where(np.abs(P[i] - lo) > np.abs(P[i] - hi), lo, hi)
-                    raise PlannerError("unreachable", f"segment {si} contains pose ({corner[0]:.4f} m, "
-                                       f"{corner[1]:.4f} m, {psi:.4f} rad) where leg {i + 1} would be "
-                                       f"{far[i]:.4f} m, longer than its maximum {robot.length_max[i]:.4f} m", path)
-        g = np.linspace(0.0, 1.0, 3)
-        for fx in g:
-            for fy in g:
-                for psi in psis:
-                    pose = np.array([seg.lower[0] + fx * (seg.upper[0] - seg.lower[0]),
-                                     seg.lower[1] + fy * (seg.upper[1] - seg.lower[1]), psi])
-                    if robot.singularity_measure(pose) < SINGULAR_TOL:
-                        robot.check_pose(pose, path)
+    lo = np.array([s.lower for s in segments])  # (S, 3)
+    hi = np.array([s.upper for s in segments])
+    t = np.linspace(0.0, 1.0, 5)
+    psi = lo[:, 2:3] + (hi[:, 2:3] - lo[:, 2:3]) * t  # (S, 5)
+    c, s = np.cos(psi), np.sin(psi)
+    r0 = robot._r0
+    rx = c[..., None] * r0[:, 0] - s[..., None] * r0[:, 1]  # (S, 5, n)
+    ry = s[..., None] * r0[:, 0] + c[..., None] * r0[:, 1]
+    Px, Py = robot.base[:, 0] - rx, robot.base[:, 1] - ry
+    lx, ly = lo[:, None, None, 0], lo[:, None, None, 1]
+    hx, hy = hi[:, None, None, 0], hi[:, None, None, 1]
+    near = np.hypot(np.maximum(np.maximum(lx - Px, 0), Px - hx), np.maximum(np.maximum(ly - Py, 0), Py - hy))
+    far = np.hypot(np.maximum(np.abs(Px - lx), np.abs(Px - hx)), np.maximum(np.abs(Py - ly), np.abs(Py - hy)))
+    short = near < robot.length_min - 1e-12
+    long_ = far > robot.length_max + 1e-12
+    for bad, which in ((short, "short"), (long_, "long")):
+        if bad.any():
+            si, ai, leg = np.argwhere(bad)[0]
+            P = np.array([Px[si, ai, leg], Py[si, ai, leg]])
+            if which == "short":
+                pose_xy, length = np.clip(P, lo[si, :2], hi[si, :2]), near[si, ai, leg]
+                limit = f"shorter than its minimum {robot.length_min[leg]:.4f} m"
+            else:
+                pose_xy = np.where(np.abs(P - lo[si, :2]) > np.abs(P - hi[si, :2]), lo[si, :2], hi[si, :2])
+                length, limit = far[si, ai, leg], f"longer than its maximum {robot.length_max[leg]:.4f} m"
+            raise PlannerError("unreachable", f"segment {si} contains pose ({pose_xy[0]:.4f} m, {pose_xy[1]:.4f} m, "
+                               f"{psi[si, ai]:.4f} rad) where leg {leg + 1} would be {length:.4f} m, {limit}",
+                               f"segments[{si}]")
+    g = np.linspace(0.0, 1.0, 3)
+    gx, gy = np.meshgrid(g, g, indexing="ij")
+    xs = lo[:, None, None, 0] + (hi - lo)[:, None, None, 0] * gx.ravel()[None, :, None]  # (S, 9, 1)
+    ys = lo[:, None, None, 1] + (hi - lo)[:, None, None, 1] * gy.ravel()[None, :, None]
+    poses = np.stack(np.broadcast_arrays(xs, ys, psi[:, None, :]), axis=-1)  # (S, 9, 5, 3)
+    sigma = robot.singularity_measure_batch(poses.reshape(-1, 3)).reshape(poses.shape[:3])
+    if sigma.min() < SINGULAR_TOL:
+        si, gi, ai = np.unravel_index(np.argmin(sigma), sigma.shape)
+        robot.check_pose(poses[si, gi, ai], f"segments[{si}]")
 
 
 def _settled(x, end, st) -> bool:
@@ -122,10 +131,10 @@ def simulate(robot: Robot, seq: RangeSequence, st, controller=None) -> dict:
     settled_at = None
     k = 0
     for k in range(max_steps):
-        A, B = robot.factorised(x)
-        Ad, Bd = zoh(A, B, Ts)
+        A22, B2 = robot.factorised_blocks(x)  # eq. (8)
+        Ad, Bd = zoh_factorised(A22, B2, Ts)  # eq. (9)
         u = controller(k, x, Ad, Bd)
-        xdot = A @ x + B @ u  # == f(x) + G(x) u exactly (eq. 8)
+        xdot = np.concatenate((x[3:], A22 @ x[3:] + B2 @ u))  # == f(x) + G(x) u exactly (eq. 8)
         U[k] = u
         ACC[k] = xdot[3:]
         x = rk4_sample(robot, x, u, Ts, st.plant_substeps, xdot)

@@ -35,9 +35,14 @@ class RangeSequence:
 
     def window(self, k: int, N: int):
         """Ranges and penalties for samples ``k+1..k+N``, the end held past ``K``."""
-        idx = np.minimum(np.arange(k, k + N), self.K - 1)
-        return (self.lower[idx], self.upper[idx], self.qa[idx], self.qb[idx],
-                np.broadcast_to(self.qu, (N, len(self.qu))))
+        if getattr(self, "_padded_N", None) != N:
+            pad = lambda a: np.concatenate((a, np.repeat(a[-1:], N, axis=0)))  # noqa: E731
+            self._padded = tuple(pad(a) for a in (self.lower, self.upper, self.qa, self.qb))
+            self._qu = np.broadcast_to(self.qu, (N, len(self.qu)))
+            self._padded_N = N
+        k = min(k, self.K)
+        lo, hi, qa, qb = self._padded
+        return lo[k:k + N], hi[k:k + N], qa[k:k + N], qb[k:k + N], self._qu
 
     def at(self, k: int):
         """Range of sample ``k`` (0 = start point)."""

@@ -49,7 +49,7 @@ class Settings:
     settle_angle_rad: float = 1e-4  #: end-point angle tolerance [rad]
     settle_rate_rad_s: float = 1e-3  #: angular speed tolerance [rad/s]
     tail_max_s: float = 3.0  #: longest time the end point is held waiting for the robot to settle [s]
-    plant_substeps: int = 2  #: RK4 steps of the nonlinear model per sample [-]
+    plant_substeps: int = 1  #: RK4 steps of the nonlinear model per sample [-]
     require_settled: bool = True  #: raise ``not_settled`` instead of returning an unsettled plan
 
     @property

@@ -32,10 +32,21 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
+from scipy.linalg import get_lapack_funcs
 
 from .errors import PlannerError, invalid
 
 E3 = np.array([0.0, 0.0, 1.0])
+_gesv = get_lapack_funcs("gesv", dtype=np.float64)
+
+
+def _solve(M: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Solve a small dense system with LAPACK gesv directly (numpy's wrapper costs 5x more
+    than the solve itself at 3x3); raises on a singular matrix."""
+    _, _, x, info = _gesv(M, b)
+    if info != 0:
+        raise np.linalg.LinAlgError("singular reduced mass matrix")
+    return x
 
 #: smallest singular value of the dimensionless leg Jacobian below which a pose is singular
 SINGULAR_TOL = 1e-2
@@ -314,93 +325,149 @@ class Robot:
         return float(np.linalg.svd(Jn, compute_uv=False)[-1])
 
     # ---- dynamics ----------------------------------------------------------------------
+    # Hot path: planar vectors as complex numbers (x + iy), all legs at once, so that one
+    # evaluation is a few dozen small numpy operations.
+    @cached_property
+    def _const(self):
+        n = self.n_legs
+        return {
+            "r0": self._r0[:, 0] + 1j * self._r0[:, 1],
+            "base": self.base[:, 0] + 1j * self.base[:, 1],
+            "tool": complex(self.tool[0], self.tool[1]),
+            "w_r": np.concatenate((self.rod_mass, np.zeros(n))),  # weights of J_l rows in M_r
+            "swap": np.concatenate((np.arange(n, 2 * n), np.arange(n))),
+        }
+
     def _terms(self, y, v):
-        """Shared pieces of eqs. (5)-(8) at state (y, v)."""
-        l, e, r, rc, J_l, J_phi = self.leg_jacobians(y)
-        l_dot = J_l @ v
-        phi_dot = J_phi @ v
+        """Shared pieces of eqs. (4)-(8) at state (y, v), all legs at once.
+
+        Returns ``W = [J_l; J_phi]`` (2n, 3) (the leg rows of ``R``), ``M_r = R^T M R`` (3, 3)
+        and per-leg scalars: leg length ``l``, ``r x e``, ``r . e``, ``l_dot``, ``phi_dot``,
+        the leg inertia about its base pivot ``J_leg``, and the platform centre ``rc``
+        relative to the tool point (complex).
+        """
+        k = self._const
+        n = self.n_legs
+        z = complex(math.cos(y[2]), math.sin(y[2]))
+        r = k["r0"] * z  # pivots relative to the tool point, world frame
+        d = r + complex(y[0], y[1]) - k["base"]
+        l = np.abs(d)
+        e = d / l
+        re = r.conjugate() * e  # real: r . e, imag: r x e
+        ev = e.conjugate() * complex(v[0], v[1])  # real: e . v, imag: n . v
+        cross, dot = re.imag, re.real
         w = v[2]
-        m_r = self.rod_mass
-        J_leg = self._leg_inertia_const + m_r * (l - self.rod_com) ** 2
-        # reduced mass matrix R^T M R (eq. 5), accumulated block by block
+        l_dot = ev.real + cross * w
+        phi_dot = (ev.imag + dot * w) / l
+        el = e / l
+        W = np.empty((2 * n, 3))  # [J_l; J_phi]: rows (e, r x e) and (n, r . e) / l
+        W[:n, 0] = e.real
+        W[:n, 1] = e.imag
+        W[:n, 2] = cross
+        W[n:, 0] = -el.imag
+        W[n:, 1] = el.real
+        W[n:, 2] = dot / l
+        arm = l - self.rod_com
+        J_leg = self._leg_inertia_const + self.rod_mass * arm * arm
+        wts = k["w_r"].copy()
+        wts[n:] = J_leg
+        M_r = (W.T * wts) @ W
         mp = self.platform_mass
-        M_r = (J_l.T * m_r) @ J_l + (J_phi.T * J_leg) @ J_phi
+        rc = -k["tool"] * z
         M_r[0, 0] += mp
         M_r[1, 1] += mp
-        M_r[0, 2] -= mp * rc[1]
-        M_r[2, 0] -= mp * rc[1]
-        M_r[1, 2] += mp * rc[0]
-        M_r[2, 1] += mp * rc[0]
-        M_r[2, 2] += mp * (rc @ rc) + self.platform_inertia
-        return l, e, r, rc, J_l, J_phi, l_dot, phi_dot, w, J_leg, M_r
+        M_r[2, 2] += mp * abs(rc) ** 2 + self.platform_inertia
+        if rc != 0:
+            M_r[0, 2] -= mp * rc.imag
+            M_r[2, 0] -= mp * rc.imag
+            M_r[1, 2] += mp * rc.real
+            M_r[2, 1] += mp * rc.real
+        return W, M_r, l, cross, dot, l_dot, phi_dot, J_leg, rc
 
     def generalised_forces(self, y, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``R^T (g - M R_dot y_dot)`` (eq. 5/6) and its pieces.
+        """``R^T (g - M R_dot y_dot)`` of eqs. (5)/(6) and its pieces.
 
         Returns ``(M_r, h_r, J_l)``: reduced mass matrix (3, 3), reduced velocity-product and
-        friction forces (3,) and the leg Jacobian (n, 3), so that
-        ``M_r y_dd = h_r + J_l^T u``.
+        friction forces (3,) and the leg Jacobian (n, 3), so that ``M_r y_dd = h_r + J_l^T u``.
+        In physical coordinates ``h = g - M R_dot y_dot`` has, per leg (``a`` = rod centre
+        distance, ``w`` = psi_dot)::
+
+            h_l   = -m_r a phi_dot^2 + m_r (r.e) w^2 - friction l_dot
+            h_phi = 2 (J_leg / l - m_r (l - a)) l_dot phi_dot - J_leg (r x e) w^2 / l
+
+        and ``m_p w^2 rc`` on the platform centre.
         """
-        l, e, r, rc, J_l, J_phi, l_dot, phi_dot, w, J_leg, M_r = self._terms(y, v)
+        W, M_r, l, cross, dot, l_dot, phi_dot, J_leg, rc = self._terms(y, v)
+        return M_r, self._h_r(W, l, cross, dot, l_dot, phi_dot, J_leg, rc, v[2]), W[:self.n_legs]
+
+    def _h_r(self, W, l, cross, dot, l_dot, phi_dot, J_leg, rc, w, u=None):
         m_r = self.rod_mass
-        er = J_phi[:, 2] * l  # e . r
-        nr = -J_l[:, 2]  # n . r
-        # h = g - M R_dot y_dot in physical coordinates (platform, legs' l, legs' phi)
-        h_c = self.platform_mass * w * w * rc
-        h_l = -m_r * self.rod_com * phi_dot**2 + m_r * er * w * w - self.friction * l_dot
-        h_phi = (-2.0 * m_r * (l - self.rod_com) * l_dot * phi_dot
-                 + J_leg * (w * w * nr + 2.0 * l_dot * phi_dot) / l)
-        h_r = J_l.T @ h_l + J_phi.T @ h_phi
-        h_r[0] += h_c[0]
-        h_r[1] += h_c[1]
-        h_r[2] += -rc[1] * h_c[0] + rc[0] * h_c[1]
-        return M_r, h_r, J_l
+        h_l = m_r * (dot * w * w - self.rod_com * phi_dot * phi_dot) - self.friction * l_dot
+        if u is not None:
+            h_l = h_l + u
+        h_phi = (2.0 * (J_leg / l - m_r * (l - self.rod_com)) * l_dot * phi_dot - J_leg * cross * (w * w) / l)
+        h_r = W.T @ np.concatenate((h_l, h_phi))
+        if rc != 0:
+            h_r[0] += self.platform_mass * w * w * rc.real
+            h_r[1] += self.platform_mass * w * w * rc.imag
+        return h_r
 
     def acceleration(self, y, v, u) -> np.ndarray:
-        """Reduced equations of motion (eq. 6): ``y_dd = M_r^-1 (R^T (g - M R_dot y_dot) + R^T T u)`` [m/s^2, rad/s^2]."""
-        M_r, h_r, J_l = self.generalised_forces(y, v)
-        return np.linalg.solve(M_r, h_r + J_l.T @ u)
+        """Reduced equations of motion (eq. 6):
+        ``y_dd = (R^T M R)^-1 R^T (g - M R_dot y_dot) + (R^T M R)^-1 R^T T u`` [m/s^2, rad/s^2]."""
+        W, M_r, l, cross, dot, l_dot, phi_dot, J_leg, rc = self._terms(y, v)
+        return _solve(M_r, self._h_r(W, l, cross, dot, l_dot, phi_dot, J_leg, rc, v[2], u))
 
     def state_derivative(self, x, u) -> np.ndarray:
         """State-space model (eq. 7): ``x_dot = f(x) + G(x) u`` with ``x = (y, y_dot)``."""
-        return np.concatenate((x[3:], self.acceleration(x[:3], x[3:], u)))
+        out = np.empty(6)
+        out[:3] = x[3:]
+        out[3:] = self.acceleration(x[:3], x[3:], u)
+        return out
+
+    def factorised_blocks(self, x) -> tuple[np.ndarray, np.ndarray]:
+        """``A22`` (3, 3) and ``B2`` (3, n) of :meth:`factorised` (eq. 8)."""
+        y, v = x[:3], x[3:]
+        n = self.n_legs
+        W, M_r, l, cross, dot, l_dot, phi_dot, J_leg, rc = self._terms(y, v)
+        w = v[2]
+        m_r = self.rod_mass
+        c1 = J_leg / l - m_r * (l - self.rod_com)  # half the coefficient of l_dot phi_dot in h_phi
+        # K(v) with K v = h: half-gradients of the quadratic terms, gradients of the linear ones
+        a_sw = np.concatenate((-m_r * self.rod_com * phi_dot, c1 * phi_dot))  # times the other row block
+        a_own = np.concatenate((-self.friction, c1 * l_dot))  # times the own row block
+        K = a_sw[:, None] * W[self._const["swap"]] + a_own[:, None] * W
+        K[:n, 2] += m_r * dot * w
+        K[n:, 2] -= J_leg * cross * w / l
+        rhs = np.empty((3, 3 + n))
+        rhs[:, :3] = W.T @ K
+        rhs[:, 3:] = W[:n].T
+        if rc != 0:
+            rhs[0, 2] += self.platform_mass * w * rc.real
+            rhs[1, 2] += self.platform_mass * w * rc.imag
+        sol = _solve(M_r, rhs)
+        return sol[:, :3], sol[:, 3:]
 
     def factorised(self, x) -> tuple[np.ndarray, np.ndarray]:
         """State-dependent factorisation (eq. 8): ``x_dot = A(x) x + B(x) u``, exactly.
 
         ``A = [[0, I], [0, A22]]``. The free acceleration is ``Q(y, v) + L(y) v`` with ``Q``
-        quadratic in ``v`` (velocity products) and ``L v`` the viscous friction. Since
-        ``Q`` is a quadratic form, ``(1/2) dQ/dv v = Q`` (Euler), so
+        quadratic in ``v`` (velocity products) and ``L v`` the viscous friction. Since ``Q``
+        is a quadratic form, ``(1/2) dQ/dv v = Q`` (Euler), so
         ``A22 = M_r^-1 R^T ((1/2) dh_quad/dv + dh_lin/dv)`` reproduces ``f(x)`` exactly:
         ``A(x) x == f(x)``. ``B = [[0], [M_r^-1 J_l^T]]`` is the paper's ``G(x)``.
         """
-        y, v = x[:3], x[3:]
-        l, e, r, rc, J_l, J_phi, l_dot, phi_dot, w, J_leg, M_r = self._terms(y, v)
-        m_r = self.rod_mass
-        er = J_phi[:, 2] * l
-        nr = -J_l[:, 2]
-        # K(v) with K v = h: half-gradients of the quadratic terms, gradients of the linear ones
-        K_c = (self.platform_mass * w) * np.outer(rc, E3)
-        K_l = ((-m_r * self.rod_com * phi_dot)[:, None] * J_phi
-               + (m_r * er * w)[:, None] * E3 - self.friction[:, None] * J_l)
-        c1 = -2.0 * m_r * (l - self.rod_com) + 2.0 * J_leg / l  # coefficient of l_dot phi_dot
-        K_phi = ((0.5 * c1 * phi_dot)[:, None] * J_l + (0.5 * c1 * l_dot)[:, None] * J_phi
-                 + (J_leg * nr * w / l)[:, None] * E3)
-        K_r = J_l.T @ K_l + J_phi.T @ K_phi
-        K_r[:2] += K_c
-        K_r[2] += -rc[1] * K_c[0] + rc[0] * K_c[1]
-        sol = np.linalg.solve(M_r, np.hstack((K_r, J_l.T)))
-        n = self.n_legs
+        A22, B2 = self.factorised_blocks(x)
         A = np.zeros((6, 6))
         A[:3, 3:] = np.eye(3)
-        A[3:, 3:] = sol[:, :3]
-        B = np.zeros((6, n))
-        B[3:] = sol[:, 3:]
+        A[3:, 3:] = A22
+        B = np.zeros((6, self.n_legs))
+        B[3:] = B2
         return A, B
 
     def kinetic_energy(self, x) -> float:
         """Kinetic energy ``1/2 y_dot^T R^T M R y_dot`` [J]."""
-        M_r = self._terms(x[:3], x[3:])[-1]
+        M_r = self._terms(x[:3], x[3:])[1]
         return 0.5 * float(x[3:] @ M_r @ x[3:])
 
 

@@ -15,9 +15,9 @@ Two solvers give the same minimiser:
   (17)/(23) ``[Qa G; Qb G; Qu] u = [Qa (ra - f); Qb (rb - f); 0]``, Householder QR (19)-(20)
   and back substitution ``R1 u = c1`` (21). Cost grows as ``N^3``.
 * :func:`solve_structured` - the same problem kept in its stage-wise (sparse) form: the
-  optimality (KKT) conditions of the states, inputs and multipliers, ordered stage by stage,
-  form a banded matrix of fixed bandwidth, solved by one banded LU (LAPACK ``gbsv``). Cost
-  grows linearly in ``N``. Its solution equals the QR one to rounding (tests check 1e-9).
+  inputs are eliminated stage by stage and the optimality (KKT) conditions of the states
+  and multipliers, ordered stage by stage, form a banded matrix of fixed bandwidth, solved
+  by one banded LU (LAPACK ``gbsv``). Cost grows linearly in ``N``. Its solution equals the QR one to rounding (tests check 1e-9).
 """
 
 from __future__ import annotations
@@ -66,79 +66,80 @@ def solve_qr(Ad, Bd, C, x0, qa, qb, qu, ra, rb) -> np.ndarray:
 
 
 @lru_cache(maxsize=32)
-def _kkt_pattern(N: int, n: int, m: int, p: int):
+def _kkt_pattern(N: int, n: int, p: int):
     """Where each value of the stage-wise KKT matrix goes in LAPACK band storage.
 
-    Unknowns ordered per stage ``s = 0..N-1`` as ``[u_s, lam_{s+1}, x_{s+1}]``
-    (``nb = m + 2n`` each). Conditions (halved criterion, ``H = C^T (Qa^2 + Qb^2) C``,
-    ``q = C^T (Qa^2 ra + Qb^2 rb)``, ``Ru = Qu^2``)::
+    With the halved criterion, ``H = C^T (Qa^2 + Qb^2) C``, ``q = C^T (Qa^2 ra + Qb^2 rb)``
+    and ``Ru = Qu^2`` (diagonal, positive), the optimality conditions of
+    ``min sum x'Hx - 2q'x + u'Ru u`` subject to ``x_{s+1} = Ad x_s + Bd u_s`` are::
 
-        Ru_s u_s + Bd^T lam_{s+1}                        = 0
-        Bd u_s - x_{s+1} + Ad x_s                         = -Ad x_0 (s = 0), else 0
-        H_{s+1} x_{s+1} - lam_{s+1} + Ad^T lam_{s+2}       = q_{s+1}
+        Ru_s u_s + Bd^T lam_{s+1} = 0                      ->  u_s = -Ru_s^-1 Bd^T lam_{s+1}
+        -S_s lam_{s+1} - x_{s+1} + Ad x_s = -Ad x_0 (s = 0), else 0,   S_s = Bd Ru_s^-1 Bd^T
+        H_{s+1} x_{s+1} - lam_{s+1} + Ad^T lam_{s+2} = q_{s+1}
 
-    Values are gathered from ``v = [Ru (N m m), Bd (n m), Ad (n n), Hpose (N p p), -1]``.
+    Unknowns ordered per stage ``s = 0..N-1`` as ``[lam_{s+1}, x_{s+1}]`` (2n each): a
+    symmetric banded matrix with ``kl = ku = 2n - 1``. Values are gathered from
+    ``v = [-S (N n n), Ad (n n), diag(H) pose part (N p), -1]``.
     """
-    nb = m + 2 * n
+    nb = 2 * n
     dim = N * nb
     kl = ku = nb - 1
     s = np.arange(N)[:, None, None]
+    i, j = np.arange(n)[None, :, None], np.arange(n)[None, None, :]
     rows, cols, src = [], [], []
 
     def add(r, c, v):
         r, c, v = np.broadcast_arrays(r, c, v)
         rows.append(r.ravel()); cols.append(c.ravel()); src.append(v.ravel())
 
-    off_Ru, off_B = 0, N * m * m
-    off_A = off_B + n * m
+    off_A = N * n * n
     off_H = off_A + n * n
-    off_m1 = off_H + N * p * p
-    a, b = np.arange(m)[None, :, None], np.arange(m)[None, None, :]
-    add(s * nb + a, s * nb + b, off_Ru + s * m * m + a * m + b)  # Ru_s
-    i, a = np.arange(n)[None, :, None], np.arange(m)[None, None, :]
-    lam, u = s * nb + m + i, s * nb + a
-    add(lam, u, off_B + i * m + a)  # Bd
-    add(u, lam, off_B + i * m + a)  # Bd^T
-    k = np.arange(n)
-    add(s[:, :, 0] * nb + m + k, s[:, :, 0] * nb + m + n + k, off_m1)  # -I
-    add(s[:, :, 0] * nb + m + n + k, s[:, :, 0] * nb + m + k, off_m1)
-    c1, c2 = np.arange(p)[None, :, None], np.arange(p)[None, None, :]
-    add(s * nb + m + n + c1, s * nb + m + n + c2, off_H + s * p * p + c1 * p + c2)  # H (pose block)
+    off_m1 = off_H + N * p
+    add(s * nb + i, s * nb + j, s * n * n + i * n + j)  # -S_s
+    k = np.arange(n)[None, :]
+    add(s[:, :, 0] * nb + k, s[:, :, 0] * nb + n + k, off_m1)  # -I
+    add(s[:, :, 0] * nb + n + k, s[:, :, 0] * nb + k, off_m1)
+    c = np.arange(p)[None, :]
+    add(s[:, :, 0] * nb + n + c, s[:, :, 0] * nb + n + c, off_H + s[:, :, 0] * p + c)  # H (diagonal, pose)
     if N > 1:
         s1 = np.arange(1, N)[:, None, None]
-        i, j = np.arange(n)[None, :, None], np.arange(n)[None, None, :]
-        lam, xs = s1 * nb + m + i, (s1 - 1) * nb + m + n + j
+        lam, xs = s1 * nb + i, (s1 - 1) * nb + n + j
         add(lam, xs, off_A + i * n + j)  # Ad
         add(xs, lam, off_A + i * n + j)  # Ad^T
     rows, cols, src = (np.concatenate(z) for z in (rows, cols, src))
     flat = (kl + ku + rows - cols) * dim + cols
-    x_rows = (np.arange(N)[:, None] * nb + m + n + np.arange(p)).ravel()
+    x_rows = (np.arange(N)[:, None] * nb + n + np.arange(p)).ravel()
     return kl, ku, dim, flat, src, x_rows
 
 
 def solve_structured(Ad, Bd, C, x0, qa, qb, qu, ra, rb) -> np.ndarray:
-    """Same minimiser as :func:`solve_qr`, in ``O(N)``: one banded LU of the stage-wise
-    optimality conditions. ``C`` must select the first ``p`` states (``C = [I 0]``), as it
-    does for the pose output of eq. (9). Returns the input sequence, shape (N, m)."""
+    """Same minimiser as :func:`solve_qr`, in ``O(N)``: the inputs eliminated stage by
+    stage, one banded LU (LAPACK ``gbsv``) of the remaining optimality conditions (see
+    :func:`_kkt_pattern`). ``C`` must select the first ``p`` states (``C = [I 0]``), as it
+    does for the pose output of eq. (9); ``qu`` must be positive. Returns the input
+    sequence, shape (N, m)."""
     N, m = qu.shape
     n = Ad.shape[0]
     p = C.shape[0]
-    kl, ku, dim, flat, src, x_rows = _kkt_pattern(N, n, m, p)
+    kl, ku, dim, flat, src, x_rows = _kkt_pattern(N, n, p)
+    if qu.strides[0] == 0:  # the same Q_u at every stage (a broadcast row): one S block
+        rinv = 1.0 / (qu[0] * qu[0])
+        S = np.broadcast_to((Bd * rinv) @ Bd.T, (N, n, n))
+    else:
+        rinv = 1.0 / (qu * qu)  # Ru^-1, (N, m)
+        S = (Bd * rinv[:, None, :]) @ Bd.T  # (N, n, n)
     qa2, qb2 = qa * qa, qb * qb
-    Ru = np.zeros((N, m, m))
-    Ru[:, np.arange(m), np.arange(m)] = qu * qu
-    H = np.zeros((N, p, p))
-    H[:, np.arange(p), np.arange(p)] = qa2 + qb2
-    v = np.concatenate((Ru.ravel(), Bd.ravel(), Ad.ravel(), H.ravel(), (-1.0,)))
+    v = np.concatenate(((-S).ravel(), Ad.ravel(), (qa2 + qb2).ravel(), (-1.0,)))
     ab = np.zeros((2 * kl + ku + 1) * dim)
     ab[flat] = v[src]
     rhs = np.zeros(dim)
-    rhs[m:m + n] = -(Ad @ x0)
+    rhs[:n] = -(Ad @ x0)
     rhs[x_rows] = (qa2 * ra + qb2 * rb).ravel()
     _, _, sol, info = _gbsv(kl, ku, ab.reshape(2 * kl + ku + 1, dim), rhs, overwrite_ab=1, overwrite_b=1)
     if info != 0:
         raise np.linalg.LinAlgError(f"banded KKT solve failed (gbsv info {info})")
-    return sol.reshape(N, m + 2 * n)[:, :m]
+    lam = sol.reshape(N, 2 * n)[:, :n]
+    return -rinv * (lam @ Bd)
 
 
 SOLVERS = {"qr": solve_qr, "structured": solve_structured}

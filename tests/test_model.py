@@ -176,3 +176,16 @@ def test_bad_robot_description_names_the_field(mutate, field):
     with pytest.raises(PlannerError) as err:
         load_robot(desc)
     assert err.value.field == field
+
+
+def test_structured_zoh_equals_the_augmented_expm():
+    from planner.discretisation import zoh_factorised
+    robot = load_robot("tri-slide")
+    rng = np.random.default_rng(7)
+    for x in random_states(robot, rng, 5):
+        A, B = robot.factorised(x)
+        A22, B2 = robot.factorised_blocks(x)
+        for Ts in (0.001, 0.01, 0.2):  # the last one exceeds the series' range: falls back
+            Ad, Bd = zoh(A, B, Ts)
+            Ad2, Bd2 = zoh_factorised(A22, B2, Ts)
+            assert np.allclose(Ad2, Ad, rtol=0, atol=1e-14) and np.allclose(Bd2, Bd, rtol=1e-12, atol=1e-16)

@@ -1,0 +1,352 @@
+"""Constrained range-space predictive control (``settings.mode = "constrained"``).
+
+Beyond the paper. The paper's criterion (22)-(23) is soft: with equal penalties it pulls the
+robot toward the middle of each range and does not keep it inside. This mode keeps the same
+criterion and the same model (eq. 8/9, re-linearised every sample) and adds, over the whole
+horizon, hard constraints solved as one dense quadratic program per sample with DAQP (a dual
+active-set solver; chosen by ``benchmarks/bench_qp.py`` over OSQP, ProxSuite and Clarabel):
+
+* **corridor**: the predicted pose of sample ``j`` lies in that sample's range of the range
+  sequence (the time-indexed range, taper included), shrunk by :data:`MARGIN_M` /
+  :data:`MARGIN_RAD` on every side that is wide enough; for segments that carry an exact
+  convex ``polygon`` (triangles from the segmentation) the polygon's half-planes replace the
+  x/y box (mapped by the same per-axis affine taper as the box);
+* **drive forces**: ``|u_i| <= force_max_i`` (simple bounds, always hard: they are physical);
+* **leg strokes**: ``length_min <= l(y_j) <= length_max``, linearised about a nominal pose
+  (the previous step's predicted pose, shifted): ``l(y) ~ l(y0) + J_l(y0) (y - y0)``;
+* **leg speeds**: ``|J_l(y0_j) y_dot_j| <= speed_max`` (exact in the velocity, the Jacobian
+  taken at the nominal pose);
+* **no overshoot**: from the last segment before the end point on, the predicted position
+  never passes the end point along the approach direction (half-plane).
+
+Why the time-indexed range and not the union of the current and the next segment: the union
+of two cells is not convex in general (an L at a turn), while each time-indexed range is a
+convex box (or polygon), and consecutive ranges share an edge, so the robot crosses from one
+to the next between two samples. The taper out of the start and onto the end makes the range
+sequence start and end at the points, so the same constraints give the terminal condition:
+once the samples whose range is the end point enter the horizon, the predicted robot must be
+there (to within :data:`END_TOL_M`) for ``samples_per_segment + 1`` samples, i.e. at rest.
+A point range in x/y is a corner of its neighbouring cell in many corridors (Table I), so it
+is constrained to the box ``end +- END_TOL_M`` intersected with the neighbouring cell shrunk
+by the margin: the robot stops within a few micrometres of the end point, inside the cell.
+
+Margins. Constraints hold for the linear prediction; the plant is the nonlinear model. The
+model is exact at the current state and re-linearised every sample, so the one-sample
+mismatch is tiny (measured by ``benchmarks/bench_qp.py``: below 1e-9 m on Table I). A
+margin of 1 micrometre therefore keeps the actual samples inside. Metrics are always
+computed on the actual (nonlinear) trajectory; ``contained`` is true only if its corridor
+violation is at most :data:`CONTAIN_TOL_M`.
+
+Infeasibility. If the QP has no solution (e.g. limits too tight for the requested time),
+the step is solved again with the corridor, stroke and speed rows softened by three slack
+variables (one per kind, in m, m and m/s) with a large quadratic + linear penalty; forces
+stay hard. Every such step is counted (``infeasible_steps``) and its slack reported
+(``constraint_slack_max_m``); :func:`finalize` then marks the plan not contained and, when
+``settings.require_settled`` is true, raises ``PlannerError("infeasible")``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import daqp
+import numpy as np
+
+from .errors import PlannerError
+
+#: corridor margin [m]: constraints use each range shrunk by this on every side
+MARGIN_M = 1e-6
+#: angle margin [rad]
+MARGIN_RAD = 1e-6
+#: half-size of the box about a point range (end point) in x/y [m]
+END_TOL_M = 3e-6
+#: relative margin on the leg speed limit [-]
+SPEED_MARGIN = 1e-6
+#: a plan is "contained" when its actual corridor violation is at most this [m]
+CONTAIN_TOL_M = 1e-9
+#: slack below this counts as zero (solver rounding) [m]
+SLACK_TOL = 1e-10
+#: penalty weights of the slack variables (relative to the scaled criterion, which is O(1))
+SLACK_RHO2 = 1e8
+SLACK_RHO1 = 1e6
+#: rows are scaled so that 1 unit = this many metres before the solver sees them
+ROW_UNIT_M = 1e-3
+
+DAQP_SETTINGS = dict(primal_tol=1e-9, dual_tol=1e-12, iter_limit=2000)
+
+
+def halfplanes(polygon) -> tuple[np.ndarray, np.ndarray]:
+    """Half-planes ``a . p <= b`` (unit normals) of a convex polygon given by its vertices
+    (either orientation), shape ``(h, 2)`` and ``(h,)``. Degenerate edges are dropped."""
+    P = np.asarray(polygon, dtype=float)
+    area2 = np.sum(P[:, 0] * np.roll(P[:, 1], -1) - np.roll(P[:, 0], -1) * P[:, 1])
+    if area2 < 0:
+        P = P[::-1]
+    E = np.roll(P, -1, axis=0) - P
+    L = np.hypot(E[:, 0], E[:, 1])
+    keep = L > 1e-15
+    n = np.column_stack((E[keep, 1], -E[keep, 0])) / L[keep, None]  # outward for ccw
+    return n, np.einsum("ij,ij->i", n, P[keep])
+
+
+class PoseSets:
+    """The convex set each sample's predicted pose must lie in (see module docstring).
+
+    ``lo``/``hi`` (K, 3): the box per sample 1..K (shrunk); ``hp[j]``: ``(A (h, 2), b (h,))``
+    or ``None``, half-planes replacing the x/y box rows of sample ``j`` (0-based index into
+    the sequence); ``approach``: ``(d (2,), b)`` with ``d . p <= b`` from sample index
+    ``approach_from`` on, or ``None``.
+    """
+
+    def __init__(self, seq, segments, S: int):
+        K = seq.K
+        lo, hi = seq.lower.copy(), seq.upper.copy()
+        w = hi - lo
+        marg = np.array([MARGIN_M, MARGIN_M, MARGIN_RAD])
+        shrink = np.minimum(marg, 0.5 * w)
+        lo += shrink
+        hi -= shrink
+        self.hp = [None] * K
+        self.approach = None
+        self.approach_from = K
+        if segments is not None:
+            n = len(segments)
+            boxes = [(s.lower[:2], s.upper[:2]) for s in segments]
+            for j in range(K):
+                si = int(seq.segment[j])
+                seg = segments[si]
+                # x/y point range near the end: tiny box intersected with a neighbouring cell
+                if np.all(w[j, :2] <= 2 * MARGIN_M) and si >= n - 2:
+                    p = 0.5 * (seq.lower[j, :2] + seq.upper[j, :2])
+                    for h in (si, si - 1, si + 1, n - 2):
+                        if 0 <= h < n and not segments[h].is_point:
+                            blo, bhi = boxes[h][0] + MARGIN_M, boxes[h][1] - MARGIN_M
+                            if np.all(blo - END_TOL_M <= p) and np.all(p <= bhi + END_TOL_M):
+                                lo[j, :2] = np.maximum(p - END_TOL_M, blo)
+                                hi[j, :2] = np.minimum(p + END_TOL_M, bhi)
+                                break
+                poly = getattr(seg, "polygon", None)
+                if poly is not None and not seg.is_point:
+                    sw = seg.upper[:2] - seg.lower[:2]
+                    if np.all(sw > 0) and np.all(w[j, :2] > 4 * MARGIN_M):
+                        # the same per-axis affine map that tapers the box
+                        V = seq.lower[j, :2] + (np.asarray(poly, float) - seg.lower[:2]) * (w[j, :2] / sw)
+                        A, b = halfplanes(V)
+                        self.hp[j] = (A, b - MARGIN_M)
+            if n >= 3 and segments[-1].is_point:
+                d = segments[-1].centre[:2] - segments[-2].centre[:2]
+                nd = float(np.hypot(*d))
+                if nd > 1e-12:
+                    d = d / nd
+                    self.approach = (d, float(d @ segments[-1].centre[:2]))
+                    self.approach_from = max((n - 2) * S - 1, 0)
+        self.lo, self.hi = lo, hi
+
+
+class ConstrainedController:
+    """Receding-horizon controller with hard constraints (see module docstring).
+
+    Called as ``controller(k, x, Ad, Bd) -> u`` by :func:`planner.plan.simulate`;
+    :meth:`report` returns its metrics.
+    """
+
+    def __init__(self, robot, seq, st, segments=None):
+        self.robot, self.seq, self.st = robot, seq, st
+        self.N, self.m = st.N, robot.n_legs
+        self.umax = np.asarray(robot.force_max, float)
+        self.sets = PoseSets(seq, segments, st.S)
+        N, m = self.N, self.m
+        i, j = np.indices((N, N))
+        self._lag = np.where(i >= j, i - j, N)
+        self._z_prev = None  # previous scaled solution (N m,)
+        self._y_nom = None  # nominal poses (N, 3) for the leg linearisation
+        self.stats = {"steps": 0, "iterations": [], "slack": [], "solve_s": 0.0, "infeasible": 0,
+                      "pred_violation": 0.0, "fail": 0}
+        self.last_qp = None  # the last QP, for benchmarks
+
+    # ---- the QP of one step ---------------------------------------------------------
+    def build(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray) -> dict:
+        """The condensed QP of step ``k`` in the scaled inputs ``z = u / force_max``::
+
+            min 0.5 z'Hz + f'z   s.t.  -1 <= z <= 1,  bl <= A z <= bu  (rows with sense 5: equal)
+        """
+        N, m, robot, seq = self.N, self.m, self.robot, self.seq
+        P = np.empty((N + 1, 6, 6))
+        P[0] = np.eye(6)
+        for q in range(1, N + 1):
+            P[q] = Ad @ P[q - 1]
+        blocks = np.zeros((N + 1, 6, m))
+        blocks[:N] = P[:N] @ (Bd * self.umax)
+        Gx = blocks[self._lag].transpose(0, 2, 1, 3).reshape(N, 6, N * m)  # (N, 6, Nm)
+        free = P[1:] @ x  # (N, 6)
+        lo, hi, qa, qb, qu = seq.window(k, N)
+        idx = np.minimum(np.arange(k, k + N), seq.K - 1)
+        Gp, Gv = Gx[:, :3], Gx[:, 3:]
+        W = qa * qa + qb * qb
+        tgt = qa * qa * lo + qb * qb * hi
+        H = np.einsum("jai,ja,jab->ib", Gp, W, Gp, optimize=True).reshape(N * m, N * m) \
+            if False else (Gp.reshape(3 * N, N * m).T * W.ravel()) @ Gp.reshape(3 * N, N * m)
+        H[np.diag_indices(N * m)] += np.tile((qu[0] * self.umax) ** 2, N)
+        f = Gp.reshape(3 * N, N * m).T @ (W * free[:, :3] - tgt).ravel()
+        scale = 1.0 / max(float(np.max(np.diag(H))), 1e-300)
+        H *= scale
+        f *= scale
+
+        rows, blo, bup, kinds = [], [], [], []  # kinds: 0 pose (m), 1 stroke (m), 2 speed (m/s), 3 angle (rad)
+        sets = self.sets
+        plo, phi = sets.lo[idx], sets.hi[idx]
+        fp = free[:, :3]
+        for a in range(3):
+            sel = np.ones(N, bool)
+            if a < 2:
+                sel = np.array([sets.hp[q] is None for q in idx])
+            if np.any(sel):
+                rows.append(Gp[sel, a])
+                blo.append(plo[sel, a] - fp[sel, a])
+                bup.append(phi[sel, a] - fp[sel, a])
+                kinds.append(np.full(int(sel.sum()), 0 if a < 2 else 3))
+        for jj, q in enumerate(idx):
+            if sets.hp[q] is not None:
+                A_, b_ = sets.hp[q]
+                rows.append(A_ @ Gp[jj, :2])
+                bup.append(b_ - A_ @ fp[jj, :2])
+                blo.append(np.full(len(b_), -np.inf))
+                kinds.append(np.zeros(len(b_), int))
+        if sets.approach is not None:
+            sel = np.nonzero(idx >= sets.approach_from)[0]
+            if sel.size:
+                d, b = sets.approach
+                rows.append(np.einsum("a,jai->ji", d, Gp[sel, :2]))
+                bup.append(b - fp[sel, :2] @ d)
+                blo.append(np.full(sel.size, -np.inf))
+                kinds.append(np.zeros(sel.size, int))
+        # legs, linearised about the nominal poses
+        y_nom = self._y_nom if self._y_nom is not None else np.tile(x[:3], (N, 1))
+        J = robot.leg_jacobian_batch(y_nom)  # (N, n, 3)
+        l_nom = robot.leg_lengths(y_nom)
+        off = l_nom - np.einsum("jia,ja->ji", J, y_nom)
+        Jfree_p = np.einsum("jia,ja->ji", J, fp) + off
+        rows.append(np.einsum("jia,jak->jik", J, Gp).reshape(N * m, N * m))
+        blo.append((robot.length_min - Jfree_p).ravel())
+        bup.append((robot.length_max - Jfree_p).ravel())
+        kinds.append(np.ones(N * m, int))
+        vmax = robot.speed_max * (1.0 - SPEED_MARGIN)
+        Jfree_v = np.einsum("jia,ja->ji", J, free[:, 3:])
+        rows.append(np.einsum("jia,jak->jik", J, Gv).reshape(N * m, N * m))
+        blo.append((-vmax - Jfree_v).ravel())
+        bup.append((vmax - Jfree_v).ravel())
+        kinds.append(np.full(N * m, 2))
+        A = np.vstack(rows) / ROW_UNIT_M
+        bl = np.concatenate(blo) / ROW_UNIT_M
+        bu = np.concatenate(bup) / ROW_UNIT_M
+        kinds = np.concatenate(kinds)
+        return {"H": H, "f": f, "A": A, "bl": bl, "bu": bu, "kinds": kinds, "n_bounds": N * m,
+                "Gx": Gx, "free": free, "scale": scale}
+
+    # ---- solving ------------------------------------------------------------------------
+    def _solve_hard(self, qp):
+        nz = qp["n_bounds"]
+        bu = np.concatenate((np.ones(nz), qp["bu"]))
+        bl = np.concatenate((-np.ones(nz), qp["bl"]))
+        sense = np.zeros(len(bu), dtype=np.int32)
+        sense[np.nonzero(bu - bl <= 0)[0]] = 5
+        kw = dict(DAQP_SETTINGS)
+        if self._z_prev is not None:
+            z0 = np.concatenate((self._z_prev[self.m:], self._z_prev[-self.m:]))
+            kw["primal_start"] = z0
+        z, fval, flag, info = daqp.solve(qp["H"], qp["f"], qp["A"], bu, bl, sense, **kw)
+        return z, flag, info
+
+    def _solve_slack(self, qp):
+        """Soften corridor, stroke and speed rows with three slacks (m, m, m/s) >= 0."""
+        nz = qp["n_bounds"]
+        H, f, A, kinds = qp["H"], qp["f"], qp["A"], qp["kinds"]
+        ns = 3
+        Hs = np.zeros((nz + ns, nz + ns))
+        Hs[:nz, :nz] = H
+        # slack variables in units of ROW_UNIT_M
+        Hs[nz:, nz:] = np.eye(ns) * SLACK_RHO2
+        fs = np.concatenate((f, np.full(ns, SLACK_RHO1)))
+        kind_slack = np.where(kinds == 3, 0, np.minimum(kinds, 2))  # angle rows share the pose slack
+        S = np.zeros((len(kinds), ns))
+        S[np.arange(len(kinds)), kind_slack] = 1.0
+        lo_rows = np.hstack((A, S))
+        up_rows = np.hstack((A, -S))
+        # two one-sided rows per two-sided row: bl <= A z + s ; A z - s <= bu
+        As = np.vstack((up_rows, lo_rows))
+        bu = np.concatenate((qp["bu"], np.full(len(kinds), np.inf)))
+        bl = np.concatenate((np.full(len(kinds), -np.inf), qp["bl"]))
+        finite = np.isfinite(bu) | np.isfinite(bl)
+        As, bu, bl = As[finite], bu[finite], bl[finite]
+        bu = np.where(np.isfinite(bu), bu, 1e30)
+        bl = np.where(np.isfinite(bl), bl, -1e30)
+        ub = np.concatenate((np.ones(nz), np.full(ns, 1e30), bu))
+        lb = np.concatenate((-np.ones(nz), np.zeros(ns), bl))
+        sense = np.zeros(len(ub), dtype=np.int32)
+        z, fval, flag, info = daqp.solve(Hs, fs, As, ub, lb, sense, **DAQP_SETTINGS)
+        return z, flag, info
+
+    def __call__(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray) -> np.ndarray:
+        import time
+        t0 = time.perf_counter()
+        qp = self.build(k, x, Ad, Bd)
+        self.last_qp = qp
+        z, flag, info = self._solve_hard(qp)
+        slack = 0.0
+        iters = int(info["iterations"])
+        if flag < 1:
+            zs, flag2, info2 = self._solve_slack(qp)
+            iters += int(info2["iterations"])
+            if flag2 < 1:
+                self.stats["fail"] += 1
+                zs = np.concatenate((np.zeros(qp["n_bounds"]), np.zeros(3)))
+            z = zs[:qp["n_bounds"]]
+            slack = float(np.max(zs[qp["n_bounds"]:])) * ROW_UNIT_M
+            if slack > SLACK_TOL or flag2 < 1:
+                self.stats["infeasible"] += 1
+        else:
+            # measure how well the solver met the rows (in m / m/s / rad)
+            r = qp["A"] @ z
+            v = np.maximum(np.maximum(qp["bl"] - r, r - qp["bu"]), 0.0).max(initial=0.0) * ROW_UNIT_M
+            self.stats["pred_violation"] = max(self.stats["pred_violation"], float(v))
+        z = np.clip(z, -1.0, 1.0)
+        self.stats["iterations"].append(iters)
+        self.stats["slack"].append(slack)
+        self.stats["steps"] += 1
+        self._z_prev = z
+        Xp = np.einsum("jsk,k->js", qp["Gx"], z) + qp["free"]
+        self._y_nom = np.vstack((Xp[1:, :3], Xp[-1:, :3]))
+        self.stats["solve_s"] += time.perf_counter() - t0
+        return z[:self.m] * self.umax
+
+    def report(self) -> dict:
+        s = self.stats
+        it = np.array(s["iterations"]) if s["iterations"] else np.zeros(1)
+        return {
+            "qp_solver": "daqp",
+            "qp_iterations_median": float(np.median(it)),
+            "qp_iterations_max": int(it.max()),
+            "qp_time_ms": s["solve_s"] * 1e3,
+            "qp_failures": int(s["fail"]),
+            "infeasible_steps": int(s["infeasible"]),
+            "constraint_slack_max_m": float(max(s["slack"], default=0.0)),
+            "predicted_violation_max_m": s["pred_violation"],
+        }
+
+
+def finalize(result: dict, st) -> None:
+    """Judge containment on the actual trajectory; raise ``infeasible`` when asked to."""
+    mt = result["metrics"]
+    infeasible = mt.get("infeasible_steps", 0) > 0
+    mt["contained"] = bool(not infeasible and mt["max_corridor_violation_m"] <= CONTAIN_TOL_M
+                           and mt["time_indexed_violation_m"] <= CONTAIN_TOL_M)
+    mt["within_limits"] = bool(mt["max_force_ratio"] <= 1.0 + 1e-12 and mt["max_speed_ratio"] <= 1.0
+                               and mt["max_stroke_violation_m"] <= CONTAIN_TOL_M)
+    if infeasible and st.require_settled:
+        raise PlannerError(
+            "infeasible",
+            f"the constrained plan cannot keep the robot in the corridor within the drive limits: "
+            f"{mt['infeasible_steps']} of {mt['steps']} steps needed slack (up to "
+            f"{mt['constraint_slack_max_m'] * 1e3:.4f} mm); give the robot more time "
+            "(samples_per_segment, speed_m_s, total_time_s) or widen the corridor",
+            "settings")

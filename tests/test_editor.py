@@ -1,0 +1,414 @@
+"""Editor tests without a browser: the geometry it draws, and the editor's server-side
+behaviour (debounced re-plan on a worker thread, stale results dropped, errors reported,
+cell toggling, save/load through the store, request round trip)."""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import socket
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from app import editor as editor_mod
+from app import editor_geometry as geo
+from planner.robot import SINGULAR_TOL, load_robot
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+# ---------------------------------------------------------------------------- geometry
+def test_polygon_mesh_area_matches_polygons():
+    polys = [geo.rectangle([0, 0], [0.02, 0.01]), [[0, 0], [0.03, 0], [0, 0.04]],
+             [[0, 0], [0, 0.04], [0.03, 0]]]  # clockwise triangle is flipped
+    v, f = geo.polygon_mesh(polys, z=0.5)
+    tri = v[f]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    assert np.all(cross[:, 2] > 0), "every face must face the top-down camera (+z)"
+    assert np.isclose(0.5 * cross[:, 2].sum(), 0.02 * 0.01 + 2 * 0.5 * 0.03 * 0.04)
+    assert np.all(v[:, 2] == 0.5)
+
+
+def test_point_in_convex_and_shrink():
+    sq = geo.rectangle([0, 0], [1, 1])
+    assert geo.point_in_convex((0.5, 0.5), sq) and geo.point_in_convex((1.0, 0.3), sq)
+    assert not geo.point_in_convex((1.01, 0.5), sq)
+    assert geo.point_in_convex((0.5, 0.5), sq[::-1])
+    small = geo.shrink(sq, 0.5)
+    assert np.allclose(np.min(small, axis=0), [0.25, 0.25]) and np.allclose(np.max(small, axis=0), [0.75, 0.75])
+
+
+def test_reachable_boundary_separates_reachable_from_unreachable():
+    robot = load_robot("moving-slide")
+    xs, ys, mask = geo.reachable_mask(robot, [-0.3, -0.3], [0.3, 0.3], 0.0, n=61)
+    assert mask.any() and not mask.all()
+    # the mask agrees with the model at sample points
+    for iy, ix in [(30, 30), (0, 0), (30, 45), (45, 30)]:
+        pose = np.array([[xs[ix], ys[iy], 0.0]])
+        L = robot.leg_lengths(pose)[0]
+        ok = bool(np.all((L >= robot.length_min) & (L <= robot.length_max))
+                  and robot.singularity_measure_batch(pose)[0] >= SINGULAR_TOL)
+        assert mask[iy, ix] == ok
+    b = geo.mask_boundary(xs, ys, mask)
+    assert b.shape[1:] == (2, 3) and len(b) > 0
+    # every boundary edge's midpoint lies half a grid step between a reachable and an unreachable sample
+    h = xs[1] - xs[0]
+    mid = b.mean(axis=1)[:, :2]
+    for m in mid[:: max(1, len(mid) // 25)]:
+        n = np.array([[1, 0], [-1, 0], [0, 1], [0, -1]]) * h / 2
+        states = []
+        for d in n:
+            p = m + d
+            ix, iy = np.argmin(abs(xs - p[0])), np.argmin(abs(ys - p[1]))
+            if abs(xs[ix] - p[0]) < 1e-9 and abs(ys[iy] - p[1]) < 1e-9:
+                states.append(mask[iy, ix])
+        assert len(states) == 2 and states[0] != states[1]
+
+
+def test_robot_geometry_leg_lengths_match_model():
+    robot = load_robot("moving-slide")
+    pose = np.array([0.03, -0.02, 0.1])
+    g = geo.robot_geometry(robot, pose)
+    assert np.allclose(g["lengths"], robot.leg_lengths(pose[None])[0])
+    # platform keeps its shape: pivot distances are those of the description
+    d = np.linalg.norm(g["pivots"][:, None] - g["pivots"][None], axis=-1)
+    d0 = np.linalg.norm(robot.platform[:, None] - robot.platform[None], axis=-1)
+    assert np.allclose(d, d0)
+
+
+def test_time_ticks_every_tenth_second():
+    t = np.arange(0, 1.2501, 0.01)
+    poses = np.column_stack((t * 2.0, -t, np.zeros_like(t)))
+    ticks = geo.time_ticks(t, poses, 0.1)
+    assert len(ticks) == 13
+    assert np.allclose(ticks[:, 0], np.arange(13) * 0.2) and np.allclose(ticks[:, 1], -np.arange(13) * 0.1)
+
+
+def test_screen_plane_maps_are_inverse_for_a_top_down_camera():
+    # camera 1 m above (0.1, -0.05), looking down, image up = +y: OpenCV camera frame
+    # x_cam = +x world, y_cam = -y world, z_cam = -z world -> 180 deg about x
+    wxyz = (0.0, 1.0, 0.0, 0.0)
+    pos = (0.1, -0.05, 1.0)
+    fov, aspect = math.radians(60), 1.5
+    centre = geo.screen_to_plane((0.5, 0.5), pos, wxyz, fov, aspect)
+    assert np.allclose(centre, [0.1, -0.05])
+    top = geo.screen_to_plane((0.5, 0.0), pos, wxyz, fov, aspect)
+    assert np.isclose(top[1] - (-0.05), math.tan(fov / 2)), "upper screen edge is +y"
+    right = geo.screen_to_plane((1.0, 0.5), pos, wxyz, fov, aspect)
+    assert np.isclose(right[0] - 0.1, math.tan(fov / 2) * aspect), "right screen edge is +x"
+    for uv in [(0.2, 0.7), (0.9, 0.1)]:
+        p = geo.screen_to_plane(uv, pos, wxyz, fov, aspect)
+        assert np.allclose(geo.plane_to_screen(p, pos, wxyz, fov, aspect), uv)
+
+
+# ---------------------------------------------------------------------------- a stand-in segmentation
+class _FakeSeg:
+    def __init__(self, cells, path, segments, to_dict):
+        self.segments, self._d = segments, to_dict
+
+    def to_dict(self):
+        return self._d
+
+
+class FakeSegmentation:
+    """Square cells, blocked when an obstacle's bounding box meets the cell's middle,
+    unreachable when a corner is outside the legs' stroke; breadth-first path. Used only
+    when ``planner.segmentation`` is not available (it is built in parallel)."""
+
+    def __init__(self, delay: float = 0.0):
+        self.delay = delay
+        self.calls = 0
+
+    def segment(self, layout, robot, settings, field_path="layout"):
+        from planner.errors import PlannerError
+        from planner.request import Segment
+
+        self.calls += 1
+        time.sleep(self.delay)
+        lo, hi = np.array(layout["bounds"]["lower"]), np.array(layout["bounds"]["upper"])
+        h = (layout.get("cell") or {}).get("size") or 0.02
+        nx, ny = int(round((hi[0] - lo[0]) / h)), int(round((hi[1] - lo[1]) / h))
+        boxes = []
+        for ob in layout.get("obstacles", []):
+            p = np.array(geo.obstacle_polygon(ob))
+            boxes.append((p.min(axis=0), p.max(axis=0)))
+        cells, state = [], {}
+        for j in range(ny):
+            for i in range(nx):
+                a = lo + h * np.array([i, j])
+                b = a + h
+                cid = j * nx + i
+                corners = np.array([[a[0], a[1], 0], [b[0], a[1], 0], [b[0], b[1], 0], [a[0], b[1], 0]])
+                L = robot.leg_lengths(corners)
+                if not np.all((L >= robot.length_min) & (L <= robot.length_max)):
+                    st = "unreachable"
+                elif any(np.all(np.maximum(a, blo) < np.minimum(b, bhi)) for blo, bhi in boxes):
+                    st = "blocked"
+                else:
+                    st = "free"
+                state[(i, j)] = st
+                cells.append({"id": cid, "polygon": geo.rectangle(a, b), "state": st})
+
+        def cell_of(p):
+            return (min(int((p[0] - lo[0]) // h), nx - 1), min(int((p[1] - lo[1]) // h), ny - 1))
+
+        s, e = cell_of(layout["start"]), cell_of(layout["end"])
+        if state.get(e) == "unreachable":
+            raise PlannerError("unreachable", "end point lies in an unreachable cell", f"{field_path}.end")
+        prev, queue = {s: None}, [s]
+        while queue:
+            c = queue.pop(0)
+            if c == e:
+                break
+            for d in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+                n = (c[0] + d[0], c[1] + d[1])
+                if n in state and n not in prev and state[n] == "free":
+                    prev[n] = c
+                    queue.append(n)
+        if e not in prev:
+            raise PlannerError("no_path", "no free path of cells from the start to the end", field_path)
+        path = [e]
+        while prev[path[-1]] is not None:
+            path.append(prev[path[-1]])
+        path.reverse()
+        start, end = np.array(layout["start"], float), np.array(layout["end"], float)
+        segs = [Segment(start.copy(), start.copy())]
+        for (i, j) in path:
+            a = lo + h * np.array([i, j])
+            segs.append(Segment(np.array([a[0], a[1], 0.0]), np.array([a[0] + h, a[1] + h, 0.0])))
+        segs.append(Segment(end.copy(), end.copy()))
+        d = {"cell": {"shape": "square", "size": h}, "bounds": layout["bounds"], "cells": cells,
+             "path": [j * nx + i for (i, j) in path],
+             "segments": [{"lower": sg.lower.tolist(), "upper": sg.upper.tolist()} for sg in segs],
+             "start": start.tolist(), "end": end.tolist()}
+        return _FakeSeg(cells, path, segs, d)
+
+
+def real_segmentation_available() -> bool:
+    try:
+        from planner import segmentation  # noqa: F401
+        return hasattr(segmentation, "segment")
+    except ImportError:
+        return False
+
+
+@pytest.fixture(params=["real", "fake"])
+def seg_impl(request, monkeypatch):
+    if request.param == "real":
+        if not real_segmentation_available():
+            pytest.skip("planner.segmentation not available yet")
+        yield None
+    else:
+        fake = FakeSegmentation()
+        monkeypatch.setattr(editor_mod, "_segmentation_module", lambda: fake)
+        yield fake
+
+
+class MemStore:
+    """The agreed ``app.storage.Store`` corridor interface, in memory."""
+
+    def __init__(self):
+        self.rows, self.n = {}, 0
+
+    def create_corridor(self, request, name=None):
+        self.n += 1
+        rid = f"c{self.n:08d}"
+        self.rows[rid] = {"id": rid, "name": name, "created": "t", "updated": "t", "request": copy.deepcopy(request)}
+        return copy.deepcopy(self.rows[rid])
+
+    def get_corridor(self, rid):
+        return copy.deepcopy(self.rows.get(rid))
+
+    def update_corridor(self, rid, request, name=None):
+        if rid not in self.rows:
+            return None
+        self.rows[rid].update(request=copy.deepcopy(request), name=name)
+        return copy.deepcopy(self.rows[rid])
+
+    def delete_corridor(self, rid):
+        return self.rows.pop(rid, None) is not None
+
+    def list_corridors(self):
+        return [copy.deepcopy(r) for r in self.rows.values()]
+
+
+@pytest.fixture
+def editor(seg_impl):
+    h = editor_mod.start_editor("127.0.0.1", free_port(), MemStore(), debounce=0.15)
+    try:
+        assert h.wait_idle(60)
+        yield h
+    finally:
+        h.stop()
+
+
+# ---------------------------------------------------------------------------- editor behaviour
+def test_initial_plan_reaches_the_end_inside_the_corridor(editor):
+    assert editor.last_error is None, editor.last_error
+    assert editor.plans_done == 1
+    res, seg = editor.last_result, editor.last_segmentation
+    end = np.array(editor.request["layout"]["end"])
+    pose = np.array(res["pose"])
+    assert np.linalg.norm(pose[-1, :2] - end[:2]) < 1e-3
+    assert res["metrics"]["max_corridor_violation_m"] < 5e-3
+    # the planned path runs through the segmentation's path cells, none blocked
+    states = {c["id"]: c["state"] for c in seg["cells"]}
+    assert seg["path"] and all(states[i] == "free" for i in seg["path"])
+    # the metrics panel and the slider show this result
+    assert f"{res['metrics']['duration_s']:.3f} s" in editor._metrics.content
+    assert math.isclose(editor._time.max, res["time"][-1])
+
+
+def test_edits_are_debounced_into_one_plan(editor):
+    n0 = editor.plans_done
+    for x in np.linspace(0.02, 0.06, 8):  # a drag: many moves in quick succession
+        editor.move_handle("end", float(x), 0.06)
+    assert editor.plans_done == n0, "no plan may start while the edits keep coming"
+    assert editor.wait_idle(60)
+    assert editor.plans_done == n0 + 1
+    assert editor.request["layout"]["end"][:2] == [0.06, 0.06]
+    assert np.linalg.norm(np.array(editor.last_result["pose"][-1][:2]) - [0.06, 0.06]) < 1e-3
+    assert list(editor._gui_end.value[:2]) == [0.06, 0.06]
+
+
+def test_stale_result_never_overwrites_a_newer_one(seg_impl, monkeypatch):
+    fake = FakeSegmentation(delay=0.8)
+    monkeypatch.setattr(editor_mod, "_segmentation_module", lambda: fake)
+    h = editor_mod.start_editor("127.0.0.1", free_port(), None, debounce=0.05)
+    try:
+        time.sleep(0.3)  # the first (slow) plan is running now
+        t0 = time.monotonic()
+        h.move_handle("end", 0.02, 0.10)
+        assert time.monotonic() - t0 < 0.2, "an edit must return at once while a plan runs"
+        assert h.wait_idle(60)
+        assert h.stale_discarded >= 1
+        assert np.linalg.norm(np.array(h.last_result["pose"][-1][:2]) - [0.02, 0.10]) < 1e-3
+    finally:
+        h.stop()
+
+
+def test_errors_become_notifications_and_the_editor_recovers(editor):
+    good = editor.last_result
+    editor.move_handle("end", 0.15, 0.15)  # outside the reachable workspace
+    assert editor.wait_idle(60)
+    assert editor.last_error is not None and editor.last_error["code"] in ("unreachable", "no_path")
+    assert editor.notifications and editor.notifications[-1][1]
+    assert editor.last_result is good, "a failed plan keeps the last good trajectory"
+    # wall the start in: no path
+    editor.move_handle("end", 0.06, 0.04)
+    editor.edit(lambda r: r["layout"]["obstacles"].append({"type": "rectangle", "lower": [-0.16, -0.16],
+                                                            "upper": [-0.04, 0.16]}))
+    assert editor.wait_idle(60)
+    assert editor.last_error["code"] in ("no_path", "unreachable")
+    # bad input names the field
+    editor.edit(lambda r: r["settings"].__setitem__("Ts", -1.0))
+    assert editor.wait_idle(60)
+    assert editor.last_error["code"] == "invalid_input" and "Ts" in editor.last_error["message"]
+    # fix everything: planning works again
+    editor.edit(lambda r: (r["settings"].__setitem__("Ts", 0.01), r["layout"]["obstacles"].pop()))
+    assert editor.wait_idle(60)
+    assert editor.last_error is None and editor.last_result is not good
+
+
+def test_toggling_a_cell_blocks_it_and_toggling_again_frees_it(editor):
+    seg = editor.last_segmentation
+    free = [c for c in seg["cells"] if c["state"] == "free" and c["id"] in seg["path"][2:-2]]
+    cell = free[0]
+    cx, cy = np.mean(cell["polygon"], axis=0)
+    n_obs = len(editor.request["layout"]["obstacles"])
+    assert editor.toggle_cell_at(float(cx), float(cy))
+    assert editor.wait_idle(60)
+    states = {c["id"]: c["state"] for c in editor.last_segmentation["cells"]}
+    assert states[cell["id"]] == "blocked"
+    # only that cell: its neighbours keep their state
+    assert sum(states[i] == "blocked" for i in states) == sum(c["state"] == "blocked" for c in seg["cells"]) + 1
+    assert cell["id"] not in editor.last_segmentation["path"]
+    assert editor.toggle_cell_at(float(cx), float(cy))
+    assert editor.wait_idle(60)
+    assert len(editor.request["layout"]["obstacles"]) == n_obs
+    assert {c["id"]: c["state"] for c in editor.last_segmentation["cells"]}[cell["id"]] == "free"
+
+
+def test_settings_controls_change_the_request(editor):
+    editor._N.value = 30
+    editor._k_u.value = 1e-4
+    editor._mode.value = "paper"
+    editor._cell_size.value = 0.0  # auto
+    assert editor.wait_idle(60)
+    r = editor.request
+    assert r["settings"]["N"] == 30 and r["settings"]["k_u"] == 1e-4
+    assert "size" not in r["layout"]["cell"]
+    assert editor.last_result["settings"]["N"] == 30
+
+
+def test_save_load_and_import_round_trip(editor):
+    editor._save(new=True)
+    store = editor.store
+    (rec,) = store.list_corridors()
+    assert rec["request"] == editor.request
+    editor.move_handle("end", 0.04, 0.08)
+    editor._save(new=False)
+    assert store.get_corridor(rec["id"])["request"]["layout"]["end"][:2] == [0.04, 0.08]
+    editor.move_handle("end", 0.0, 0.10)
+    assert editor.wait_idle(60)
+    editor._refresh_stored()
+    editor._stored.value = editor._stored.options[0]
+    editor._load()
+    assert editor.request["layout"]["end"][:2] == [0.04, 0.08]
+    assert editor.wait_idle(60)
+    # import: the exported JSON loads back unchanged; broken JSON is a notification
+    exported = json.dumps(editor.request).encode()
+    upload = type("U", (), {"name": "x.json", "content": exported})()
+    editor._import(upload)
+    assert editor.request == json.loads(exported)
+    editor._import(type("U", (), {"name": "bad.json", "content": b"{nope"})())
+    assert editor.notifications[-1][0] == "Import failed"
+    editor._import(type("U", (), {"name": "bad.json", "content": b'{"layout": {"bounds": 3}}'})())
+    assert "layout.bounds" in editor.notifications[-1][1]
+    assert editor.request == json.loads(exported), "a bad import must not change the design"
+
+
+def test_segments_only_request_is_planned(editor):
+    with open("/work/shared/data/table1-corridor.json") if False else _table1() as f:
+        data = json.load(f)
+    editor._load_request(data, None, "table1")
+    assert editor.wait_idle(60)
+    assert editor.last_error is None
+    assert editor.last_segmentation is None
+    end = np.array(data["segments"][-1]["lower"][:2])
+    assert np.linalg.norm(np.array(editor.last_result["pose"][-1][:2]) - end) < 1e-3
+
+
+def _table1():
+    import pathlib
+
+    for p in (pathlib.Path("/work/shared/data/table1-corridor.json"),
+              pathlib.Path(__file__).parent / "data" / "table1-corridor.json"):
+        if p.exists():
+            return open(p)
+    pytest.skip("table1-corridor.json not found")
+
+
+def test_playback_moves_the_robot_along_the_trajectory(editor):
+    drawn = []
+    orig = editor._draw_robot
+    editor._draw_robot = lambda pose, force=None: (drawn.append(np.array(pose)), orig(pose, force))
+    editor._time.value = 0.0
+    editor._toggle_play()
+    deadline = time.monotonic() + editor._time.max + 5
+    while editor._playing and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not editor._playing
+    assert len(drawn) > 10
+    start, end = np.array(editor.request["layout"]["start"]), np.array(editor.request["layout"]["end"])
+    assert np.linalg.norm(drawn[0][:2] - start[:2]) < 0.01
+    assert np.linalg.norm(drawn[-1][:2] - end[:2]) < 1e-3
+    assert math.isclose(editor._time.value, editor._time.max)
