@@ -122,8 +122,10 @@ class LayoutModel(Strict):
     obstacles: list[ObstacleModel] = Field([], description="Obstacles in the workspace")
     clearance: Finite = Field(0.0, ge=0, description="Distance in m the tool point keeps from every obstacle")
     cell: CellModel = Field(CellModel(), description="Cell shape and size")
-    start: Pose = Field(description="Start pose [x, y, psi] in m, m, rad")
-    end: Pose = Field(description="End pose [x, y, psi] in m, m, rad")
+    start: Pose | None = Field(None, description="Start pose [x, y, psi] in m, m, rad (required here or at the "
+                               "request's top level)")
+    end: Pose | None = Field(None, description="End pose [x, y, psi] in m, m, rad (required here or at the "
+                             "request's top level)")
     psi_range: list[Finite] | None = Field(None, min_length=2, max_length=2,
                                            description="Allowed platform angle [min, max] in rad along the corridor")
 
@@ -141,6 +143,11 @@ class PlanRequestModel(Strict):
     layout: LayoutModel | None = Field(None, description="Instead of segments: a workspace with obstacles to "
                                        "segment into a corridor (Section V.B)")
     settings: SettingsModel = Field(SettingsModel(), description="Planner settings")
+    start: Pose | None = Field(None, description="Shorthand for layout.start: start pose [x, y, psi] in m, m, rad")
+    end: Pose | None = Field(None, description="Shorthand for layout.end: end pose [x, y, psi] in m, m, rad")
+    psi_range: list[Finite] | None = Field(None, min_length=2, max_length=2,
+                                           description="Shorthand for layout.psi_range: allowed platform angle "
+                                           "[min, max] in rad")
 
 
 def request_dict(model: PlanRequestModel) -> dict[str, Any]:

@@ -63,6 +63,7 @@ class Segment:
     upper: np.ndarray  # (3,)
     q_ra: np.ndarray | None = None  # (3,) per-segment override
     q_rb: np.ndarray | None = None
+    polygon: np.ndarray | None = None  # (k, 2) exact convex cell inside the box [m] (e.g. a triangle), CCW
 
     @property
     def centre(self) -> np.ndarray:
@@ -156,6 +157,16 @@ def parse_settings(raw, path: str = "settings") -> Settings:
     return s
 
 
+def _polygon(raw, path: str, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """A segment's exact convex cell: >= 3 finite [x, y] points [m] inside its (x, y) box."""
+    if not isinstance(raw, list) or len(raw) < 3:
+        raise invalid(path, "must be a list of at least 3 points [x, y] in m")
+    pts = np.array([_vec(q, f"{path}[{i}]", 2) for i, q in enumerate(raw)])
+    if np.any(pts < lo[:2] - 1e-9) or np.any(pts > hi[:2] + 1e-9):
+        raise invalid(path, "must lie inside the segment's box [lower, upper] (x, y)")
+    return pts
+
+
 def parse_segments(raw, path: str = "segments") -> list[Segment]:
     if not isinstance(raw, list):
         raise invalid(path, "must be a list of segments {lower: [x, y, psi], upper: [x, y, psi]}")
@@ -179,7 +190,8 @@ def parse_segments(raw, path: str = "segments") -> list[Segment]:
             raise invalid(f"{p}.lower", f"must be <= upper ({axis}: {lo[bad[0]]:g} > {hi[bad[0]]:g})")
         q_ra = _vec(seg["q_ra"], f"{p}.q_ra", 3, positive=True) if seg.get("q_ra") is not None else None
         q_rb = _vec(seg["q_rb"], f"{p}.q_rb", 3, positive=True) if seg.get("q_rb") is not None else None
-        out.append(Segment(lo, hi, q_ra, q_rb))
+        polygon = _polygon(seg["polygon"], f"{p}.polygon", lo, hi) if seg.get("polygon") is not None else None
+        out.append(Segment(lo, hi, q_ra, q_rb, polygon))
     return out
 
 
@@ -210,6 +222,11 @@ def parse_request(raw) -> PlanRequest:
     if name is not None and not isinstance(name, str):
         raise invalid("name", "must be a string")
     settings = parse_settings(raw.get("settings"))
+    layout = raw.get("layout")
+    if isinstance(layout, dict):  # top-level start/end/psi_range are shorthands for layout.*
+        extra = {k: raw[k] for k in ("start", "end", "psi_range") if raw.get(k) is not None and layout.get(k) is None}
+        if extra:
+            layout = {**layout, **extra}
     segments = parse_segments(raw["segments"]) if "segments" in given else None
     reference = parse_reference(raw["reference"]) if "reference" in given else None
     if segments is not None:
@@ -218,7 +235,7 @@ def parse_request(raw) -> PlanRequest:
             raise PlannerError("too_large", f"{len(segments)} segments x {settings.S} samples = {steps} steps "
                                f"exceeds the limit of {MAX_TOTAL_STEPS}", "settings.samples_per_segment")
     return PlanRequest(robot=robot, segments=segments, reference=reference, settings=settings,
-                       layout=raw.get("layout"), name=name, raw=raw)
+                       layout=layout, name=name, raw=raw)
 
 
 def settings_dict(s: Settings) -> dict:
