@@ -57,6 +57,12 @@ class SettingsModel(Strict):
     tail_max_s: Finite = Field(3.0, ge=0, le=600, description="Longest time in s the end point is held for settling")
     plant_substeps: int = Field(1, ge=1, le=50, description="RK4 steps of the nonlinear model per sample (count)")
     require_settled: bool = Field(True, description="Fail with code not_settled instead of returning an unsettled plan")
+    speed_m_s: Finite | None = Field(None, gt=0, le=100, description="Target mean tool speed along the corridor "
+                                     "in m/s; sets samples_per_segment (exclusive with it, total_time_s, fastest)")
+    total_time_s: Finite | None = Field(None, gt=0, le=3600, description="Time in s the corridor's range sequence "
+                                        "takes; sets samples_per_segment")
+    fastest: bool = Field(False, description="Constrained mode: the shortest timing (samples_per_segment) whose "
+                          "plan keeps the corridor and the drive force, stroke and speed limits")
 
 
 class CylinderModel(Strict):

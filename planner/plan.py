@@ -9,6 +9,7 @@ After the corridor's last sample the end point is held until the robot has settl
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
@@ -168,6 +169,14 @@ def plan(request, *, robot: Robot | None = None, segments=None) -> dict:
         segments = corridor_from_request(req, robot).segments
     if segments is not None:
         check_segments(robot, segments)
+        if st.fastest:  # issue 6: search the shortest feasible timing (runs plan() per candidate)
+            from .timing import fastest_plan
+            return fastest_plan(req, robot, segments, t0)
+    from .timing import resolve_timing, timing_info
+    st = resolve_timing(st, segments)  # speed_m_s / total_time_s -> samples_per_segment
+    if st is not req.settings:
+        req = dataclasses.replace(req, settings=st)
+    if segments is not None:
         seq = range_sequence(segments, st, m)
     else:
         for i, pose in enumerate(req.reference):
@@ -179,6 +188,10 @@ def plan(request, *, robot: Robot | None = None, segments=None) -> dict:
     result = build_result(robot, req, seq, segments, sim, time.perf_counter() - t0)
     result["mode"] = st.mode
     result["metrics"].update(controller.report())
+    result["timing"] = timing_info(st, segments)
+    if st.mode == "constrained":  # containment judged on the actual trajectory; may raise infeasible
+        from .constrained import finalize
+        finalize(result, st, segments)
     if not sim["settled"] and st.require_settled:
         mt = result["metrics"]
         raise PlannerError("not_settled", f"the robot did not settle at the end point within "

@@ -51,6 +51,9 @@ class Settings:
     tail_max_s: float = 3.0  #: longest time the end point is held waiting for the robot to settle [s]
     plant_substeps: int = 1  #: RK4 steps of the nonlinear model per sample [-]
     require_settled: bool = True  #: raise ``not_settled`` instead of returning an unsettled plan
+    speed_m_s: float | None = None  #: target mean tool speed along the corridor [m/s] (sets samples_per_segment)
+    total_time_s: float | None = None  #: time the corridor's range sequence takes [s] (sets samples_per_segment)
+    fastest: bool = False  #: constrained mode: shortest timing the drive limits allow (sets samples_per_segment)
 
     @property
     def S(self) -> int:
@@ -152,6 +155,22 @@ def parse_settings(raw, path: str = "settings") -> Settings:
             setattr(s, key, _finite(raw[key], f"{path}.{key}", lo=0.0, hi=1.0, lo_open=True))
     if "tail_max_s" in raw:
         s.tail_max_s = _finite(raw["tail_max_s"], f"{path}.tail_max_s", lo=0.0, hi=600.0)
+    timing = [k for k in ("samples_per_segment", "speed_m_s", "total_time_s") if raw.get(k) is not None]
+    if raw.get("fastest"):
+        timing.append("fastest")
+    if len(timing) > 1:
+        raise invalid(f"{path}.{timing[1]}", f"give only one of samples_per_segment, speed_m_s, total_time_s, "
+                      f"fastest; got {', '.join(timing)}")
+    if raw.get("speed_m_s") is not None:
+        s.speed_m_s = _finite(raw["speed_m_s"], f"{path}.speed_m_s", lo=0.0, hi=100.0, lo_open=True)
+    if raw.get("total_time_s") is not None:
+        s.total_time_s = _finite(raw["total_time_s"], f"{path}.total_time_s", lo=0.0, hi=3600.0, lo_open=True)
+    if "fastest" in raw:
+        if not isinstance(raw["fastest"], bool):
+            raise invalid(f"{path}.fastest", "must be true or false")
+        s.fastest = raw["fastest"]
+        if s.fastest and s.mode != "constrained":
+            raise invalid(f"{path}.fastest", "needs mode 'constrained' (only that mode keeps the drive limits)")
     if "plant_substeps" in raw:
         s.plant_substeps = _finite(raw["plant_substeps"], f"{path}.plant_substeps", lo=1, hi=50, integer=True)
     return s
