@@ -48,6 +48,7 @@ stay hard. Every such step is counted (``infeasible_steps``) and its slack repor
 from __future__ import annotations
 
 import math
+import time
 
 import daqp
 import numpy as np
@@ -165,7 +166,9 @@ class ConstrainedController:
         self._z_prev = None  # previous scaled solution (N m,)
         self._y_nom = None  # nominal poses (N, 3) for the leg linearisation
         self.stats = {"steps": 0, "iterations": [], "slack": [], "solve_s": 0.0, "infeasible": 0,
-                      "pred_violation": 0.0, "fail": 0, "refines": 0}
+                      "pred_violation": 0.0, "fail": 0, "refines": 0,
+                      "mismatch_m": 0.0, "mismatch_rad": 0.0}
+        self._x1_pred = None
         self.last_qp = None  # the last QP, for benchmarks
         self.correct = True  # one-step nonlinear correction (benchmarks switch it off to compare)
 
@@ -183,13 +186,21 @@ class ConstrainedController:
                 else (self._z_prev[:self.m] * self.umax if self._z_prev is not None else np.zeros(self.m))
         self._u0 = u0
         x1 = rk4_sample(self.robot, x, u0, self.st.Ts, self.st.plant_substeps)
+        self._x1 = x1
         return x1 - Ad @ x - Bd @ u0
 
     def build(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, u0=None) -> dict:
         """The condensed QP of step ``k`` in the scaled inputs ``z = u / force_max``::
 
-            min 0.5 z'Hz + f'z   s.t.  -1 <= z <= 1,  bl <= A z <= bu  (rows with sense 5: equal)
-        """
+            min 0.5 z'Hz + f'z   s.t.  -1 <= z <= 1,  bl <= A z <= bu  (rows with bl == bu: equal)
+
+        Every row is a linear function ``Sel`` of the predicted states ``X = free + Gx z``
+        (``Sel`` picks a pose coordinate, a half-plane normal, a leg Jacobian row, ...), so
+        ``A = Sel Gx`` and the bounds are ``b0 - Sel free``; a refinement of the one-step
+        offset only changes ``free`` (see :meth:`set_free`). Rows are in units of
+        :data:`ROW_UNIT_M` (m, m/s or rad). ``stroke`` holds the leg-stroke rows, used only
+        in the slack problem: with the corridor hard they are implied, since every pose of
+        every segment is within stroke (``check_segments``, exact for boxes)."""
         N, m, robot, seq = self.N, self.m, self.robot, self.seq
         P = np.empty((N + 1, 6, 6))
         P[0] = np.eye(6)
@@ -197,133 +208,153 @@ class ConstrainedController:
             P[q] = Ad @ P[q - 1]
         blocks = np.zeros((N + 1, 6, m))
         blocks[:N] = P[:N] @ (Bd * self.umax)
-        Gx = blocks[self._lag].transpose(0, 2, 1, 3).reshape(N, 6, N * m)  # (N, 6, Nm)
-        free = P[1:] @ x  # (N, 6)
-        if self.correct:
-            free += P[:N] @ self.first_step_offset(x, Ad, Bd, u0)
+        Gx = blocks[self._lag].transpose(0, 2, 1, 3).reshape(6 * N, N * m)
         lo, hi, qa, qb, qu = seq.window(k, N)
         idx = np.minimum(np.arange(k, k + N), seq.K - 1)
-        Gp, Gv = Gx[:, :3], Gx[:, 3:]
-        W = qa * qa + qb * qb
-        tgt = qa * qa * lo + qb * qb * hi
-        Gp2 = Gp.reshape(3 * N, N * m)
-        H = (Gp2.T * W.ravel()) @ Gp2
+        Gp2 = Gx.reshape(N, 6, N * m)[:, :3].reshape(3 * N, N * m)
+        W = (qa * qa + qb * qb).ravel()
+        H = (Gp2.T * W) @ Gp2
         H[np.diag_indices(N * m)] += np.tile((qu[0] * self.umax) ** 2, N)
-        f = Gp2.T @ (W * free[:, :3] - tgt).ravel()
         scale = 1.0 / max(float(np.max(np.diag(H))), 1e-300)
         H *= scale
-        f *= scale
 
-        rows, blo, bup, kinds = [], [], [], []  # kinds: 0 pose (m), 1 stroke (m), 2 speed (m/s), 3 angle (rad)
         sets = self.sets
+        sel_r, sel_c, sel_v, b0l, b0u = [], [], [], [], []
+        nrow = 0
+
+        def add(cols, vals, bl_, bu_):  # cols/vals (r, c): c entries per row
+            nonlocal nrow
+            r = cols.shape[0]
+            sel_r.append(np.repeat(np.arange(nrow, nrow + r), cols.shape[1]))
+            sel_c.append(cols.ravel())
+            sel_v.append(vals.ravel())
+            b0l.append(bl_)
+            b0u.append(bu_)
+            nrow += r
+
         plo, phi = sets.lo[idx], sets.hi[idx]
-        fp = free[:, :3]
-        for a in range(3):
-            sel = np.ones(N, bool)
-            if a < 2:
-                sel = np.array([sets.hp[q] is None for q in idx])
-            if np.any(sel):
-                rows.append(Gp[sel, a])
-                blo.append(plo[sel, a] - fp[sel, a])
-                bup.append(phi[sel, a] - fp[sel, a])
-                kinds.append(np.full(int(sel.sum()), 0 if a < 2 else 3))
-        for jj, q in enumerate(idx):
-            if sets.hp[q] is not None:
-                A_, b_ = sets.hp[q]
-                rows.append(A_ @ Gp[jj, :2])
-                bup.append(b_ - A_ @ fp[jj, :2])
-                blo.append(np.full(len(b_), -np.inf))
-                kinds.append(np.zeros(len(b_), int))
+        has_hp = np.array([sets.hp[q] is not None for q in idx])
+        jj = np.arange(N)
+        for ax in range(3):
+            sel = jj if ax == 2 else jj[~has_hp]
+            if sel.size:
+                add((6 * sel + ax)[:, None], np.ones((sel.size, 1)), plo[sel, ax], phi[sel, ax])
+        for j in jj[has_hp]:
+            A_, b_ = sets.hp[idx[j]]
+            add(6 * j + np.tile(np.arange(2), (len(b_), 1)), A_, np.full(len(b_), -np.inf), b_)
         if sets.approach is not None:
-            sel = np.nonzero(idx >= sets.approach_from)[0]
+            sel = jj[idx >= sets.approach_from]
             if sel.size:
                 d, b = sets.approach
-                rows.append(np.einsum("a,jai->ji", d, Gp[sel, :2]))
-                bup.append(b - fp[sel, :2] @ d)
-                blo.append(np.full(sel.size, -np.inf))
-                kinds.append(np.zeros(sel.size, int))
-        # legs, linearised about the nominal poses
+                add(6 * sel[:, None] + np.arange(2), np.tile(d, (sel.size, 1)),
+                    np.full(sel.size, -np.inf), np.full(sel.size, b))
+        # legs, linearised about the nominal poses (the previous step's prediction, shifted)
         y_nom = self._y_nom if self._y_nom is not None else np.tile(x[:3], (N, 1))
         J = robot.leg_jacobian_batch(y_nom)  # (N, n, 3)
-        l_nom = robot.leg_lengths(y_nom)
-        off = l_nom - np.einsum("jia,ja->ji", J, y_nom)
-        Jfree_p = np.einsum("jia,ja->ji", J, fp) + off
-        rows.append(np.einsum("jia,jak->jik", J, Gp).reshape(N * m, N * m))
-        blo.append((robot.length_min - Jfree_p).ravel())
-        bup.append((robot.length_max - Jfree_p).ravel())
-        kinds.append(np.ones(N * m, int))
         vmax = robot.speed_max * (1.0 - SPEED_MARGIN)
-        Jfree_v = np.einsum("jia,ja->ji", J, free[:, 3:])
-        rows.append(np.einsum("jia,jak->jik", J, Gv).reshape(N * m, N * m))
-        blo.append((-vmax - Jfree_v).ravel())
-        bup.append((vmax - Jfree_v).ravel())
-        kinds.append(np.full(N * m, 2))
-        A = np.vstack(rows) / ROW_UNIT_M
-        bl = np.concatenate(blo) / ROW_UNIT_M
-        bu = np.concatenate(bup) / ROW_UNIT_M
-        kinds = np.concatenate(kinds)
-        return {"H": H, "f": f, "A": A, "bl": bl, "bu": bu, "kinds": kinds, "n_bounds": N * m,
-                "Gx": Gx, "free": free, "scale": scale}
+        cols = (6 * jj[:, None, None] + 3 + np.arange(3)) + np.zeros((1, m, 1), int)
+        add(cols.reshape(N * m, 3), J.reshape(N * m, 3), np.tile(-vmax, N), np.tile(vmax, N))
+        n_hard = nrow
+        off = robot.leg_lengths(y_nom) - np.einsum("jia,ja->ji", J, y_nom)
+        add((cols - 3).reshape(N * m, 3), J.reshape(N * m, 3), (robot.length_min - off).ravel(),
+            (robot.length_max - off).ravel())
+        Sel = np.zeros((nrow, 6 * N))
+        Sel[np.concatenate(sel_r), np.concatenate(sel_c)] = np.concatenate(sel_v)
+        Sel /= ROW_UNIT_M
+        kinds = np.zeros(nrow, int)
+        kinds[n_hard - N * m:n_hard] = 2
+        kinds[n_hard:] = 1
+        qp = {"H": H, "A": Sel @ Gx, "Sel": Sel, "b0l": np.concatenate(b0l) / ROW_UNIT_M,
+              "b0u": np.concatenate(b0u) / ROW_UNIT_M, "kinds": kinds, "n_hard": n_hard,
+              "n_bounds": N * m, "Gx": Gx, "Gp2": Gp2, "W": W,
+              "tgt": (qa * qa * lo + qb * qb * hi).ravel(), "scale": scale, "P": P, "x": x,
+              "row_speed0": n_hard - N * m, "row_stroke0": n_hard}
+        self.set_free(qp, Ad, Bd, u0)
+        return qp
+
+    def set_free(self, qp, Ad, Bd, u0=None) -> None:
+        """The parts of the QP that depend on the free response (state with ``z = 0``)."""
+        N, P, x = self.N, qp["P"], qp["x"]
+        free = P[1:] @ x
+        if self.correct:
+            free += P[:N] @ self.first_step_offset(x, Ad, Bd, u0)
+        if self.correct:
+            # the first predicted sample becomes the actual one: take its leg rows at the
+            # plant's own next pose under the guessed move (refined with the move)
+            y1 = self._x1[:3]
+            J0 = self.robot.leg_jacobian_batch(y1)[0] / ROW_UNIT_M
+            rs, rl, m = qp["row_speed0"], qp["row_stroke0"], self.m
+            qp["Sel"][rs:rs + m, 3:6] = J0
+            qp["Sel"][rl:rl + m, 0:3] = J0
+            qp["A"][rs:rs + m] = J0 @ qp["Gx"][3:6]
+            qp["A"][rl:rl + m] = J0 @ qp["Gx"][0:3]
+            off0 = (self.robot.leg_lengths(y1)[0] - J0 @ y1 * ROW_UNIT_M) / ROW_UNIT_M
+            qp["b0l"][rl:rl + m] = self.robot.length_min / ROW_UNIT_M - off0
+            qp["b0u"][rl:rl + m] = self.robot.length_max / ROW_UNIT_M - off0
+        fr = free.ravel()
+        qp["free"] = fr
+        fp = free[:, :3].ravel()
+        qp["f"] = (qp["Gp2"].T @ (qp["W"] * fp - qp["tgt"])) * qp["scale"]
+        sf = qp["Sel"] @ fr
+        qp["bl"] = qp["b0l"] - sf
+        qp["bu"] = qp["b0u"] - sf
 
     # ---- solving ------------------------------------------------------------------------
     def _solve_hard(self, qp, z_start=None):
-        nz = qp["n_bounds"]
-        bu = np.concatenate((np.ones(nz), qp["bu"]))
-        bl = np.concatenate((-np.ones(nz), qp["bl"]))
+        nz, nh = qp["n_bounds"], qp["n_hard"]
+        bu = np.concatenate((np.ones(nz), qp["bu"][:nh]))
+        bl = np.concatenate((-np.ones(nz), qp["bl"][:nh]))
         sense = np.zeros(len(bu), dtype=np.int32)
-        sense[np.nonzero(bu - bl <= 0)[0]] = 5
+        sense[bu - bl <= 0] = 5
         kw = dict(DAQP_SETTINGS)
         if z_start is not None:
             kw["primal_start"] = z_start
         elif self._z_prev is not None:
             kw["primal_start"] = np.concatenate((self._z_prev[self.m:], self._z_prev[-self.m:]))
-        z, fval, flag, info = daqp.solve(qp["H"], qp["f"], qp["A"], bu, bl, sense, **kw)
+        z, fval, flag, info = daqp.solve(qp["H"], qp["f"], qp["A"][:nh], bu, bl, sense, **kw)
         return z, flag, info
 
     def _solve_slack(self, qp):
-        """Soften corridor, stroke and speed rows with three slacks (m, m, m/s) >= 0."""
+        """All rows (corridor, speed and stroke) softened by three slacks >= 0 (in
+        :data:`ROW_UNIT_M`: corridor m and rad, stroke m, speed m/s); forces stay hard."""
         nz = qp["n_bounds"]
         H, f, A, kinds = qp["H"], qp["f"], qp["A"], qp["kinds"]
         ns = 3
         Hs = np.zeros((nz + ns, nz + ns))
         Hs[:nz, :nz] = H
-        # slack variables in units of ROW_UNIT_M
         Hs[nz:, nz:] = np.eye(ns) * SLACK_RHO2
         fs = np.concatenate((f, np.full(ns, SLACK_RHO1)))
-        kind_slack = np.where(kinds == 3, 0, np.minimum(kinds, 2))  # angle rows share the pose slack
         S = np.zeros((len(kinds), ns))
-        S[np.arange(len(kinds)), kind_slack] = 1.0
-        lo_rows = np.hstack((A, S))
-        up_rows = np.hstack((A, -S))
-        # two one-sided rows per two-sided row: bl <= A z + s ; A z - s <= bu
-        As = np.vstack((up_rows, lo_rows))
+        S[np.arange(len(kinds)), kinds] = 1.0
+        # two one-sided rows per two-sided row: A z - s <= bu ; bl <= A z + s
+        As = np.vstack((np.hstack((A, -S)), np.hstack((A, S))))
         bu = np.concatenate((qp["bu"], np.full(len(kinds), np.inf)))
         bl = np.concatenate((np.full(len(kinds), -np.inf), qp["bl"]))
-        finite = np.isfinite(bu) | np.isfinite(bl)
-        As, bu, bl = As[finite], bu[finite], bl[finite]
-        bu = np.where(np.isfinite(bu), bu, 1e30)
-        bl = np.where(np.isfinite(bl), bl, -1e30)
+        keep = np.isfinite(bu) | np.isfinite(bl)
+        As, bu, bl = As[keep], np.where(np.isfinite(bu), bu, 1e30)[keep], np.where(np.isfinite(bl), bl, -1e30)[keep]
         ub = np.concatenate((np.ones(nz), np.full(ns, 1e30), bu))
         lb = np.concatenate((-np.ones(nz), np.zeros(ns), bl))
-        sense = np.zeros(len(ub), dtype=np.int32)
-        z, fval, flag, info = daqp.solve(Hs, fs, As, ub, lb, sense, **DAQP_SETTINGS)
+        z, fval, flag, info = daqp.solve(Hs, fs, As, ub, lb, np.zeros(len(ub), dtype=np.int32), **DAQP_SETTINGS)
         return z, flag, info
 
     def __call__(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray) -> np.ndarray:
-        import time
         t0 = time.perf_counter()
+        if self._x1_pred is not None:  # how far the plant landed from the prediction
+            e = np.abs(x[:3] - self._x1_pred[:3])
+            self.stats["mismatch_m"] = max(self.stats["mismatch_m"], float(np.hypot(e[0], e[1])))
+            self.stats["mismatch_rad"] = max(self.stats["mismatch_rad"], float(e[2]))
         qp = self.build(k, x, Ad, Bd)
         z, flag, info = self._solve_hard(qp)
         iters = int(info["iterations"])
         # where the first move changed much from the guess the offset was computed with,
-        # recompute the offset at the new move and solve again (a few steps per plan)
+        # recompute the offset at the new move and solve again
         for _ in range(REFINE_MAX):
             if flag < 1 or not self.correct:
                 break
             u1 = z[:self.m] * self.umax
             if np.max(np.abs(u1 - self._u0) / self.umax) <= REFINE_TOL:
                 break
-            qp = self.build(k, x, Ad, Bd, u1)
+            self.set_free(qp, Ad, Bd, u1)
             z, flag, info = self._solve_hard(qp, z)
             iters += int(info["iterations"])
             self.stats["refines"] += 1
@@ -334,23 +365,24 @@ class ConstrainedController:
             iters += int(info2["iterations"])
             if flag2 < 1:
                 self.stats["fail"] += 1
-                zs = np.concatenate((np.zeros(qp["n_bounds"]), np.zeros(3)))
+                zs = np.zeros(qp["n_bounds"] + 3)
             z = zs[:qp["n_bounds"]]
             slack = float(np.max(zs[qp["n_bounds"]:])) * ROW_UNIT_M
-            if slack > SLACK_TOL or flag2 < 1:
-                self.stats["infeasible"] += 1
+            self.stats["infeasible"] += 1
         else:
-            # measure how well the solver met the rows (in m / m/s / rad)
-            r = qp["A"] @ z
-            v = np.maximum(np.maximum(qp["bl"] - r, r - qp["bu"]), 0.0).max(initial=0.0) * ROW_UNIT_M
+            # how well the solver met the rows it was given (m, m/s, rad)
+            nh = qp["n_hard"]
+            r = qp["A"][:nh] @ z
+            v = np.maximum(np.maximum(qp["bl"][:nh] - r, r - qp["bu"][:nh]), 0.0).max(initial=0.0) * ROW_UNIT_M
             self.stats["pred_violation"] = max(self.stats["pred_violation"], float(v))
         z = np.clip(z, -1.0, 1.0)
         self.stats["iterations"].append(iters)
         self.stats["slack"].append(slack)
         self.stats["steps"] += 1
         self._z_prev = z
-        Xp = np.einsum("jsk,k->js", qp["Gx"], z) + qp["free"]
+        Xp = (qp["Gx"] @ z + qp["free"]).reshape(self.N, 6)
         self._y_nom = np.vstack((Xp[1:, :3], Xp[-1:, :3]))
+        self._x1_pred = Xp[0]
         self.stats["solve_s"] += time.perf_counter() - t0
         return z[:self.m] * self.umax
 
@@ -367,6 +399,8 @@ class ConstrainedController:
             "infeasible_steps": int(s["infeasible"]),
             "constraint_slack_max_m": float(max(s["slack"], default=0.0)),
             "predicted_violation_max_m": s["pred_violation"],
+            "model_mismatch_max_m": s["mismatch_m"],
+            "model_mismatch_max_rad": s["mismatch_rad"],
         }
 
 
