@@ -62,7 +62,7 @@ MARGIN_RAD = 1e-6
 #: half-size of the box about a point range (end point) in x/y [m]
 END_TOL_M = 3e-6
 #: relative margin on the leg speed limit [-]
-SPEED_MARGIN = 1e-6
+SPEED_MARGIN = 1e-5
 #: a plan is "contained" when its actual corridor violation is at most this [m]
 CONTAIN_TOL_M = 1e-9
 #: slack below this counts as zero (solver rounding) [m]

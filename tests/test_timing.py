@@ -1,0 +1,131 @@
+"""Segment timing (issue 6): speed target, total time, fastest feasible timing."""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from planner.errors import PlannerError
+from planner.plan import plan
+from planner.request import parse_request
+from planner.timing import centre_path_length, feasible
+
+TABLE1 = Path("/work/shared/data/table1-corridor.json")
+
+
+def table1() -> dict:
+    return json.loads(TABLE1.read_text())
+
+
+def with_settings(req: dict, **settings) -> dict:
+    req = copy.deepcopy(req)
+    req["settings"] = {**req.get("settings", {}), **settings}
+    return req
+
+
+def travel_time(res: dict, start, end) -> float:
+    """Actual time [s] from the last sample at the start point to the first sample from
+    which the robot stays within 0.1 mm of the end point."""
+    P = np.array(res["pose"])[:, :2]
+    t = np.array(res["time"])
+    left = np.nonzero(np.linalg.norm(P - start, axis=1) > 1e-9)[0][0] - 1
+    away = np.linalg.norm(P - end, axis=1) >= 1e-4
+    arrived = np.nonzero(away)[0][-1] + 1
+    return float(t[arrived] - t[left])
+
+
+def test_centre_path_length_table1():
+    req = parse_request(table1())
+    c = np.array([s.centre[:2] for s in req.segments])
+    manual = sum(np.linalg.norm(c[i + 1] - c[i]) for i in range(len(c) - 1))
+    assert centre_path_length(req.segments) == pytest.approx(manual)
+    assert manual > 0.2  # 9 cell steps of 20 mm plus two half-diagonals
+
+
+@pytest.mark.parametrize("speed", [0.05, 0.1, 0.2])
+def test_speed_target_gives_expected_travel_time(speed):
+    req = table1()
+    res = plan(with_settings(req, mode="constrained", speed_m_s=speed))
+    segs = parse_request(req).segments
+    n, Ts = len(segs), 0.01
+    L = centre_path_length(segs)
+    expected = L / speed
+    # the sequence's moving part: (n - 2) segments of S samples
+    assert res["timing"]["method"] == "speed_m_s"
+    assert abs(res["timing"]["moving_time_s"] - expected) <= (n - 2) * Ts
+    # the actual trajectory: leaves the start and reaches the end point that far apart
+    tt = travel_time(res, segs[0].centre[:2], segs[-1].centre[:2])
+    assert abs(tt - expected) <= (n - 2) * Ts + 2 * Ts
+    assert res["metrics"]["contained"]
+
+
+def test_total_time_sets_sequence_duration():
+    req = table1()
+    res = plan(with_settings(req, mode="constrained", total_time_s=1.5))
+    n = len(req["segments"])
+    S = res["settings"]["samples_per_segment"]
+    assert abs(n * S * 0.01 - 1.5) <= n * 0.01 / 2 + 1e-12
+    # the robot is at the end point (within 0.1 mm) by the end of the sequence
+    P = np.array(res["pose"])[:, :2]
+    k_end = n * S
+    assert np.linalg.norm(P[k_end] - np.array(req["segments"][-1]["lower"][:2])) < 1e-4
+    # paper mode accepts it too
+    paper = plan(with_settings(req, total_time_s=1.5))
+    assert paper["settings"]["samples_per_segment"] == S
+
+
+def test_fastest_respects_limits_and_one_faster_does_not():
+    req = table1()
+    res = plan(with_settings(req, mode="constrained", fastest=True))
+    mt = res["metrics"]
+    S = res["settings"]["samples_per_segment"]
+    assert res["timing"]["method"] == "fastest" and res["timing"]["feasible"]
+    assert mt["contained"] and mt["within_limits"] and mt["settled"]
+    F = np.abs(np.array(res["drives"]["force"]))
+    assert F.max() <= 150.0 * (1 + 1e-12)
+    assert np.abs(np.array(res["drives"]["velocity"])).max() <= 0.5
+    # faster than the default timing
+    assert S < 20
+    # one sample per segment fewer is not feasible
+    faster = plan(with_settings(req, mode="constrained", samples_per_segment=S - 1, require_settled=False))
+    assert not feasible(faster)
+
+
+@pytest.mark.parametrize("settings, field", [
+    ({"samples_per_segment": 10, "speed_m_s": 0.1}, "settings.speed_m_s"),
+    ({"speed_m_s": 0.1, "total_time_s": 2.0}, "settings.total_time_s"),
+    ({"mode": "constrained", "total_time_s": 2.0, "fastest": True}, "settings.fastest"),
+    ({"fastest": True}, "settings.fastest"),  # paper mode does not keep limits
+    ({"speed_m_s": 0}, "settings.speed_m_s"),
+    ({"total_time_s": -1}, "settings.total_time_s"),
+    ({"fastest": "yes", "mode": "constrained"}, "settings.fastest"),
+])
+def test_bad_timing_settings_name_the_field(settings, field):
+    with pytest.raises(PlannerError) as exc:
+        parse_request(with_settings(table1(), **settings))
+    assert exc.value.code == "invalid_input" and exc.value.field == field
+
+
+def test_speed_on_reference_is_an_error():
+    req = {"reference": {"pose": [[0, 0, 0], [0.001, 0, 0], [0.002, 0, 0]]}, "settings": {"speed_m_s": 0.1}}
+    with pytest.raises(PlannerError) as exc:
+        plan(req)
+    assert exc.value.field == "settings.speed_m_s"
+
+
+def test_too_slow_is_too_large():
+    with pytest.raises(PlannerError) as exc:
+        plan(with_settings(table1(), speed_m_s=1e-6))
+    assert exc.value.code == "too_large" and exc.value.field == "settings.speed_m_s"
+
+
+def test_schema_accepts_timing_fields():
+    from app.schema import PlanRequestModel, request_dict
+
+    body = with_settings(table1(), mode="constrained", speed_m_s=0.1)
+    d = request_dict(PlanRequestModel.model_validate(body))
+    assert parse_request(d).settings.speed_m_s == 0.1
