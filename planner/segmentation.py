@@ -13,15 +13,15 @@ Layout (all lengths in m, angles in rad)::
 
 Steps (:func:`segment`):
 
-1. **Free space** = bounds minus every obstacle grown by the clearance (shapely ``buffer``;
-   the grown outline is a polygon *circumscribing* the exact rounded shape, so it is
-   conservative by at most 0.13 % of the buffer distance), minus what the robot cannot reach
-   or is singular at over the allowed psi range.
+1. **Free space** = bounds minus every obstacle grown by the clearance (shapely ``buffer``:
+   flat sides offset exactly; circular arcs, of circles and of rounded corners, replaced by
+   polygons *circumscribing* them, so conservative by at most 0.13 % of the radius), minus
+   what the robot cannot reach or is singular at over the allowed psi range.
 2. **Cells**: a uniform grid over the bounds, anchored at ``bounds.lower``. Squares of edge
    ``s``; or equilateral triangles of edge ``s`` (rows of height ``s sqrt(3)/2``, alternately
    pointing up and down). A cell is *free* only if it lies wholly inside the bounds and its
    interior meets no grown obstacle (touching is allowed: there the tool is exactly at the
-   clearance); *blocked* otherwise; *unreachable* if free of obstacles but some pose in its
+   clearance; overlaps under 1e-9 of the cell size count as touching); *blocked* otherwise; *unreachable* if free of obstacles but some pose in its
    bounding box at some allowed angle is outside the legs' stroke or singular.
 3. **Path**: cells are adjacent when they share an edge. Among all paths of free cells from a
    cell holding the start to a cell holding the end, the one with the fewest cells is chosen,
@@ -114,18 +114,30 @@ class Layout:
     circles: dict = field(default_factory=dict)  # obstacle index -> (centre (2,), radius) [m]
 
     def grown(self) -> list:
-        """The obstacles grown by the clearance (shapely polygons circumscribing the exact
-        Minkowski sums, so conservative by at most 0.13 % of the buffer distance)."""
+        """The obstacles grown by the clearance (shapely polygons): flat sides exact, arcs
+        circumscribed (conservative by at most 0.13 % of the arc radius)."""
         out = []
         for i, ob in enumerate(self.obstacles):
             if i in self.circles:
                 c, r = self.circles[i]
-                out.append(shapely.Point(c).buffer((r + self.clearance) * _GROW, quad_segs=QUAD_SEGS))
+                out.append(_discs(c[None], r + self.clearance)[0])
             elif self.clearance > 0:
-                out.append(ob.buffer(self.clearance * _GROW, quad_segs=QUAD_SEGS))
+                # flat sides exact (offset by the clearance); the rounded corners are covered
+                # by polygons circumscribing the exact circles about each vertex
+                caps = _discs(np.asarray(ob.exterior.coords)[:-1], self.clearance)
+                out.append(shapely.union_all(np.concatenate(([ob.buffer(self.clearance, quad_segs=QUAD_SEGS)], caps))))
             else:
                 out.append(ob)
         return out
+
+
+def _discs(centres: np.ndarray, radius: float) -> np.ndarray:
+    """Regular ``4 QUAD_SEGS``-gons circumscribing circles of ``radius`` [m] about ``centres``
+    (k, 2): their edges touch the circle at multiples of ``pi / (2 QUAD_SEGS)``, so the
+    extreme sides (left, right, bottom, top) are exact."""
+    a = (np.arange(4 * QUAD_SEGS) + 0.5) * (math.pi / (2 * QUAD_SEGS))
+    ring = (radius * _GROW) * np.column_stack((np.cos(a), np.sin(a)))
+    return shapely.polygons(centres[:, None, :] + ring[None])
 
 
 def _obj(value, path: str) -> dict:
@@ -212,7 +224,7 @@ def _obstacle(o, path: str):
     if kind == "circle":
         c = _vec(o.get("center"), f"{path}.center", 2)
         r = _finite(o.get("radius"), f"{path}.radius", lo=0.0, lo_open=True)
-        return shapely.Point(c).buffer(r * _GROW, quad_segs=QUAD_SEGS)  # circumscribes the circle
+        return _discs(c[None], r)[0]  # circumscribes the circle
     pts = o.get("points")
     if not isinstance(pts, list) or len(pts) < 3:
         raise invalid(f"{path}.points", "a polygon needs a list of at least 3 points [x, y] in m")
@@ -707,10 +719,13 @@ def segment(layout: dict, robot, settings: Settings | None = None, field_path: s
         ci, gi = np.nonzero(near)
         if ci.size:
             uc, inv = np.unique(ci, return_inverse=True)
-            cells = shapely.polygons(grid.polygons[uc])[inv]
+            # interiors meet (touching is allowed): test the cell shrunk about its centre by
+            # 1e-9 of its size, which also absorbs rounding in the grown outlines
+            P = grid.polygons[uc]
+            centre = P.mean(axis=1, keepdims=True)
+            cells = shapely.polygons(centre + (P - centre) * (1.0 - 1e-9))[inv]
             shapely.prepare(garr)
-            # interiors meet: they intersect and do not merely touch (along an edge or at a point)
-            hit = shapely.intersects(garr[gi], cells) & ~shapely.touches(garr[gi], cells)
+            hit = shapely.intersects(garr[gi], cells)
             gi, ci = gi[hit], ci[hit]
             state[ci] = BLOCKED
             blocker[ci[::-1]] = gi[::-1]  # the lowest obstacle index wins
