@@ -1,0 +1,532 @@
+"""The HTTP planning service (FastAPI): POST a corridor, get a trajectory.
+
+Endpoints (OpenAPI at ``/docs``; SI units in every field description)::
+
+    GET  /health                      liveness + pool state (answers while plans run)
+    GET  /v1/robots, /v1/robots/{n}   built-in robot descriptions
+    POST /v1/plan                     plan request -> result JSON (CSV: Accept: text/csv or ?format=csv)
+    POST /v1/segment                  request with a layout -> cells and corridor, no planning
+    POST/GET /v1/corridors            save / list corridors (SQLite)
+    GET/PUT/DELETE /v1/corridors/{id} one saved corridor
+    POST /v1/corridors/{id}/plan      plan a saved corridor
+    GET  /v1/plans/{id}               a stored plan result again (JSON or CSV)
+    GET  /                            landing page (static/)
+
+Every 4xx/5xx has one body shape: ``{"error": {"code", "message", "field"}}``. Planning runs in
+worker processes (:mod:`app.workers`) with a per-request compute limit; request bodies are
+limited in size before parsing. Configuration by environment: ``RANGEPLAN_DATA_DIR``,
+``RANGEPLAN_WORKERS`` (default: CPU count), ``RANGEPLAN_PLAN_TIMEOUT_S`` (30),
+``RANGEPLAN_MAX_BODY_BYTES`` (2 MiB), ``RANGEPLAN_MAX_QUEUE`` (64), ``RANGEPLAN_EXECUTOR``
+(``process`` | ``thread``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import importlib.util
+import json
+import os
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import asynccontextmanager
+from pathlib import Path
+from typing import Any, Literal
+
+from fastapi import FastAPI, Query, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse, RedirectResponse, Response
+from pydantic import BaseModel, Field
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from app.schema import PlanRequestModel, request_dict
+from app.storage import Store, default_data_dir
+from app.workers import JobTimeout, PlanPool, PoolBusy, WorkerCrashed
+from planner.errors import PlannerError
+
+VERSION = "0.1.0"
+STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
+DEFAULT_MAX_BODY = 2 * 1024 * 1024
+DEFAULT_TIMEOUT_S = 30.0
+
+_CODES_BY_STATUS = {400: "bad_request", 404: "not_found", 405: "method_not_allowed", 406: "not_acceptable",
+                    413: "too_large", 415: "unsupported_media_type", 422: "invalid_input", 503: "busy"}
+
+
+# ---------------------------------------------------------------------------------------
+# response models (OpenAPI documentation; results are sent as pre-serialised JSON)
+
+class ErrorDetail(BaseModel):
+    code: str = Field(description="Stable machine-readable cause: invalid_input, unreachable, singular, "
+                      "not_settled, diverged, no_path, infeasible, too_large, timeout, not_found, busy, "
+                      "unavailable, internal_error, ...")
+    message: str = Field(description="Plain-language explanation")
+    field: str | None = Field(None, description="Path of the request field at fault, e.g. 'segments[3].lower'")
+    details: list[dict[str, Any]] | None = Field(None, description="All validation failures "
+                                                 "[{field, message}] when there are several")
+
+
+class ErrorResponse(BaseModel):
+    error: ErrorDetail
+
+
+class DrivesModel(BaseModel):
+    length: list[list[float]] = Field(description="Leg lengths per sample, one column per leg, m")
+    velocity: list[list[float]] = Field(description="Leg sliding speeds per sample, m/s")
+    force: list[list[float]] = Field(description="Drive forces per sample (held until the next sample), N")
+
+
+class CorridorOutModel(BaseModel):
+    lower: list[list[float]] = Field(description="Per-sample lower range limit [x, y, psi] in m, m, rad")
+    upper: list[list[float]] = Field(description="Per-sample upper range limit [x, y, psi] in m, m, rad")
+    violation_m: list[float] = Field(description="Per-sample distance of (x, y) outside its range, m")
+    segments: list[dict[str, Any]] | None = Field(description="The corridor segments {lower, upper} "
+                                                  "(m, m, rad); null for a tracking request")
+
+
+class MetricsModel(BaseModel):
+    duration_s: float = Field(description="Trajectory duration, s")
+    steps: int = Field(description="Number of samples planned (count)")
+    settled: bool = Field(description="Whether the robot settled at the end point")
+    end_error_m: float = Field(description="Final distance from the end point, m")
+    end_error_rad: float = Field(description="Final angle error, rad")
+    end_speed_m_s: float = Field(description="Final tool speed, m/s")
+    overshoot_m: float = Field(description="How far the robot passes the end point, m")
+    max_corridor_violation_m: float = Field(description="Largest distance outside the union of segments, m")
+    max_corridor_violation_rad: float = Field(description="Largest angle outside the corridor's psi range, rad")
+    time_indexed_violation_m: float = Field(description="Largest distance outside the per-sample range, m")
+    max_drive_force_n: float = Field(description="Largest drive force magnitude, N")
+    force_limit_n: float = Field(description="Smallest drive force limit of the robot, N")
+    max_force_ratio: float = Field(description="Largest |force| / force limit (dimensionless)")
+    max_drive_speed_m_s: float = Field(description="Largest leg sliding speed, m/s")
+    max_speed_ratio: float = Field(description="Largest |leg speed| / speed limit (dimensionless)")
+    max_stroke_violation_m: float = Field(description="Largest leg length outside its stroke, m")
+    min_singularity_measure: float = Field(description="Smallest singularity measure along the path "
+                                           "(dimensionless; singular near 0)")
+    energy: float = Field(description="Sum of squared drive forces times Ts, N^2 s")
+    path_length_m: float = Field(description="Length of the tool path, m")
+    compute_ms: float = Field(description="Planner compute time, ms")
+
+
+class PlanResultModel(BaseModel):
+    plan_id: str | None = Field(description="Id to fetch this result again at GET /v1/plans/{id}")
+    name: str | None = Field(description="Name of the request")
+    robot: str = Field(description="Robot name")
+    mode: str = Field(description="Controller mode: 'paper' or 'constrained'")
+    criterion: str = Field(description="'range-space' (segments) or 'tracking' (reference)")
+    settings: dict[str, Any] = Field(description="The settings used (SI units, see the request schema)")
+    units: dict[str, Any] = Field(description="Unit of each output array")
+    time: list[float] = Field(description="Sample times, s")
+    pose: list[list[float]] = Field(description="Tool pose per sample [x, y, psi] in m, m, rad")
+    velocity: list[list[float]] = Field(description="Velocity per sample in m/s, m/s, rad/s")
+    acceleration: list[list[float]] = Field(description="Acceleration per sample in m/s^2, m/s^2, rad/s^2")
+    drives: DrivesModel
+    corridor: CorridorOutModel
+    metrics: MetricsModel
+
+
+class CorridorRecordModel(BaseModel):
+    id: str = Field(description="Corridor id (uuid4 hex)")
+    name: str | None = Field(description="Corridor name")
+    created: str = Field(description="Creation time, ISO-8601 UTC")
+    updated: str = Field(description="Last update time, ISO-8601 UTC")
+    request: dict[str, Any] = Field(description="The plan request (same shape as the body of POST /v1/plan; "
+                                    "m, m, rad, s)")
+
+
+class SegmentationModel(BaseModel):
+    cell: dict[str, Any] = Field(description="Cell shape and size (m)")
+    bounds: dict[str, Any] = Field(description="Workspace bounds (m)")
+    cells: list[dict[str, Any]] = Field(description="Cells {id, polygon [[x, y], ...] in m, state}")
+    path: list[Any] = Field(description="Cell ids from start to end")
+    segments: list[dict[str, Any]] = Field(description="Corridor segments {lower, upper, polygon} in m, m, rad")
+
+
+class RobotSummaryModel(BaseModel):
+    name: str = Field(description="Built-in robot name")
+    description: str = Field(description="What the robot is")
+    legs: int = Field(description="Number of legs/drives (count)")
+
+
+class HealthModel(BaseModel):
+    status: str = Field(description="'ok'")
+    version: str
+    pool: dict[str, Any] = Field(description="Planning pool: mode, workers, jobs in flight, time limit (s)")
+    editor_port: int | None = Field(description="TCP port of the browser editor, if it runs")
+
+
+def _errors(*statuses: int) -> dict:
+    return {s: {"model": ErrorResponse, "description": {404: "Unknown id", 413: "Body too large",
+                                                        422: "Invalid input or planner error",
+                                                        503: "Too many plans queued",
+                                                        500: "Internal error"}.get(s, "Error")} for s in statuses}
+
+
+_PLAN_RESPONSES = {200: {"model": PlanResultModel, "description": "The planned trajectory (JSON, or CSV with a "
+                         "header naming each column with its unit)",
+                         "content": {"text/csv": {"schema": {"type": "string"}}}},
+                   **_errors(413, 422, 503)}
+
+
+# ---------------------------------------------------------------------------------------
+# errors
+
+def error_response(status: int, code: str, message: str, field: str | None = None,
+                   details: list | None = None, headers: dict | None = None) -> JSONResponse:
+    err = {"code": code, "message": message, "field": field}
+    if details:
+        err["details"] = details
+    return JSONResponse({"error": err}, status_code=status, headers=headers)
+
+
+def _union_tags() -> set[str]:
+    import app.schema as schema
+    tags = {"str", "int", "float", "bool", "list", "dict", "none"}
+    tags |= {n for n, v in vars(schema).items() if isinstance(v, type) and issubclass(v, BaseModel)}
+    return tags
+
+
+_TAGS = _union_tags()
+
+
+def field_path(loc) -> str | None:
+    """pydantic ``loc`` -> ``"segments[3].lower"`` (no leading "body", no union tags)."""
+    parts = list(loc)
+    if parts and parts[0] == "body":
+        parts = parts[1:]
+    out = ""
+    for p in parts:
+        if isinstance(p, int):
+            out += f"[{p}]"
+        elif isinstance(p, str) and (p in _TAGS or "[" in p or "-" in p):
+            continue  # union member / validator tag, not a field
+        else:
+            out += f".{p}" if out else str(p)
+    return out or None
+
+
+def _validation_response(exc: RequestValidationError) -> JSONResponse:
+    errs = exc.errors()
+    details = []
+    for e in errs:
+        msg = e.get("msg", "invalid value")
+        if e.get("type") == "json_invalid":
+            ctx = e.get("ctx") or {}
+            msg = f"body is not valid JSON: {ctx.get('error', msg)}"
+            details.append({"field": None, "message": msg})
+            continue
+        if e.get("type") == "missing" and tuple(e.get("loc", ())) == ("body",):
+            msg = "a JSON body is required"
+        details.append({"field": field_path(e.get("loc", ())), "message": msg})
+    # prefer a failure that is not a union-branch mismatch on a plain string
+    first = details[0] if details else {"field": None, "message": "invalid input"}
+    return error_response(422, "invalid_input", first["message"], first["field"],
+                          details if len(details) > 1 else None)
+
+
+# ---------------------------------------------------------------------------------------
+# body size limit (before parsing)
+
+class _TooLarge(StarletteHTTPException):
+    def __init__(self, limit: int):
+        super().__init__(413, f"request body larger than the limit of {limit} bytes")
+
+
+class BodySizeLimit:
+    """Reject bodies over ``limit`` bytes with 413: by Content-Length up front, and by
+    counting the streamed bytes (chunked bodies, lying headers)."""
+
+    def __init__(self, app, limit: int):
+        self.app, self.limit = app, limit
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        for k, v in scope.get("headers", ()):
+            if k == b"content-length":
+                try:
+                    n = int(v)
+                except ValueError:
+                    n = -1
+                if n < 0:
+                    return await error_response(400, "bad_request", "invalid Content-Length header")(
+                        scope, receive, send)
+                if n > self.limit:
+                    return await error_response(413, "too_large", f"request body of {n} bytes is larger "
+                                                f"than the limit of {self.limit} bytes")(scope, receive, send)
+        seen = 0
+        limit = self.limit
+
+        async def limited():
+            nonlocal seen
+            msg = await receive()
+            if msg["type"] == "http.request":
+                seen += len(msg.get("body", b""))
+                if seen > limit:
+                    raise _TooLarge(limit)
+            return msg
+
+        started = False
+
+        async def tracking_send(msg):
+            nonlocal started
+            if msg["type"] == "http.response.start":
+                started = True
+            await send(msg)
+
+        try:
+            await self.app(scope, limited, tracking_send)
+        except _TooLarge as exc:
+            if not started:
+                await error_response(413, "too_large", exc.detail)(scope, receive, send)
+
+
+# ---------------------------------------------------------------------------------------
+# the app
+
+def _env_float(name: str, default: float) -> float:
+    try:
+        return float(os.environ.get(name, default))
+    except ValueError:
+        return default
+
+
+def create_app(store: Store | None = None, *, workers: int | None = None, timeout_s: float | None = None,
+               max_body_bytes: int | None = None, max_queue: int | None = None, executor: str | None = None,
+               editor_port: int | None = None) -> FastAPI:
+    """The FastAPI app. ``store`` defaults to the SQLite file in :func:`default_data_dir`;
+    other arguments default to the ``RANGEPLAN_*`` environment variables."""
+    store = store if store is not None else Store(default_data_dir())
+    workers = workers or int(_env_float("RANGEPLAN_WORKERS", os.cpu_count() or 1))
+    timeout_s = timeout_s or _env_float("RANGEPLAN_PLAN_TIMEOUT_S", DEFAULT_TIMEOUT_S)
+    max_body = max_body_bytes or int(_env_float("RANGEPLAN_MAX_BODY_BYTES", DEFAULT_MAX_BODY))
+    max_queue = max_queue if max_queue is not None else int(_env_float("RANGEPLAN_MAX_QUEUE", 64))
+    executor = executor or os.environ.get("RANGEPLAN_EXECUTOR", "process")
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):
+        pool = PlanPool(workers, timeout_s, max_queue, mode=executor)
+        threads = ThreadPoolExecutor(max_workers=pool.capacity + 4, thread_name_prefix="rangeplan-wait")
+        app.state.pool, app.state.threads = pool, threads
+        try:
+            yield
+        finally:
+            pool.close()
+            threads.shutdown(wait=False, cancel_futures=True)
+
+    app = FastAPI(
+        title="rangeplan",
+        version=VERSION,
+        summary="Offline trajectory planning for planar parallel robots by range-space predictive control",
+        description="POST a corridor (ranges of poses the tool may pass through), get a time-optimal-ish, "
+                    "drive-force-aware trajectory for the full robot dynamics. SI units throughout: m, rad, "
+                    "s, N. Errors: `{\"error\": {\"code\", \"message\", \"field\"}}`.",
+        lifespan=lifespan,
+    )
+    app.state.store = store
+    app.state.editor_port = editor_port
+    app.add_middleware(BodySizeLimit, limit=max_body)
+
+    @app.exception_handler(RequestValidationError)
+    async def _on_validation(request: Request, exc: RequestValidationError):
+        return _validation_response(exc)
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _on_http(request: Request, exc: StarletteHTTPException):
+        code = _CODES_BY_STATUS.get(exc.status_code, "http_error")
+        msg = exc.detail if isinstance(exc.detail, str) else json.dumps(exc.detail)
+        if exc.status_code == 404 and msg == "Not Found":
+            msg = f"no such resource: {request.url.path}"
+        return error_response(exc.status_code, code, msg, headers=getattr(exc, "headers", None))
+
+    @app.exception_handler(PlannerError)
+    async def _on_planner(request: Request, exc: PlannerError):
+        return error_response(422, exc.code, exc.message, exc.field)
+
+    @app.exception_handler(Exception)
+    async def _on_internal(request: Request, exc: Exception):
+        return error_response(500, "internal_error", f"internal error: {type(exc).__name__}")
+
+    async def run_job(request: Request, job: dict, media_type: str = "application/json") -> Response:
+        pool: PlanPool = request.app.state.pool
+        loop = asyncio.get_running_loop()
+        try:
+            out = await loop.run_in_executor(request.app.state.threads, pool.run, job)
+        except JobTimeout:
+            return error_response(422, "timeout", f"planning took longer than the compute limit of "
+                                  f"{pool.timeout_s:g} s and was stopped; use fewer segments or samples, "
+                                  "a shorter settings.tail_max_s, or a larger settings.Ts")
+        except PoolBusy as exc:
+            return error_response(503, "busy", f"too many plans in progress ({exc}); retry shortly",
+                                  headers={"Retry-After": "1"})
+        except WorkerCrashed as exc:
+            return error_response(500, "internal_error", f"the planning process died: {exc}")
+        if out[0] == "error":
+            e = out[1]
+            return error_response(422, e["code"], e["message"], e.get("field"))
+        if out[0] == "crash":
+            return error_response(500, "internal_error", "the planner failed unexpectedly: "
+                                  + out[1].splitlines()[0])
+        _, payload, meta = out
+        headers = {}
+        if meta.get("plan_id"):
+            headers["Location"] = f"/v1/plans/{meta['plan_id']}"
+            headers["X-Plan-Id"] = meta["plan_id"]
+        return Response(payload, media_type=media_type, headers=headers)
+
+    def wants_csv(request: Request, fmt: str | None) -> bool:
+        if fmt is not None:
+            return fmt == "csv"
+        accept = request.headers.get("accept", "")
+        return "text/csv" in accept and "application/json" not in accept
+
+    def segmentation_available() -> bool:
+        return importlib.util.find_spec("planner.segmentation") is not None
+
+    async def plan_response(request: Request, req: dict, fmt: str | None, corridor_id: str | None = None):
+        if req.get("layout") is not None and not segmentation_available():
+            return error_response(501, "unavailable", "layout requests need planner.segmentation, which this "
+                                  "installation does not have; send segments instead", "layout")
+        csv = wants_csv(request, fmt)
+        job = {"kind": "plan", "request": req, "format": "csv" if csv else "json",
+               "store": str(request.app.state.store.path), "corridor_id": corridor_id}
+        return await run_job(request, job, "text/csv; charset=utf-8" if csv else "application/json")
+
+    Format = Query(None, description="Response format: 'json' (default) or 'csv' (one row per sample, "
+                   "units in the header); overrides the Accept header")
+
+    # -- service --------------------------------------------------------------------------
+    @app.get("/health", response_model=HealthModel, tags=["service"])
+    async def health(request: Request):
+        """Liveness: answers immediately, also while plans run."""
+        pool = getattr(request.app.state, "pool", None)
+        return {"status": "ok", "version": VERSION, "pool": pool.stats() if pool else {},
+                "editor_port": request.app.state.editor_port}
+
+    @app.get("/v1/robots", response_model=list[RobotSummaryModel], tags=["robots"])
+    def robots():
+        """The built-in robots."""
+        from planner.robot import builtin_description, builtin_robot_names
+        out = []
+        for name in builtin_robot_names():
+            d = builtin_description(name)
+            out.append({"name": name, "description": d.get("description", ""), "legs": len(d["base_pivots"])})
+        return out
+
+    @app.get("/v1/robots/{name}", tags=["robots"], responses=_errors(404))
+    def robot(name: str) -> dict[str, Any]:
+        """A built-in robot's full description (pivots in m, masses in kg, inertias in kg m^2,
+        limits in m, N, m/s); the same object a request may give as ``robot``."""
+        from planner.robot import builtin_description, builtin_robot_names
+        if name not in builtin_robot_names():
+            raise StarletteHTTPException(404, f"unknown robot {name!r}; built-in robots: "
+                                         f"{', '.join(builtin_robot_names())}")
+        return builtin_description(name)
+
+    # -- planning -------------------------------------------------------------------------
+    @app.post("/v1/plan", tags=["planning"], response_class=Response, responses=_PLAN_RESPONSES)
+    async def plan(body: PlanRequestModel, request: Request,
+                   format: Literal["json", "csv"] | None = Format):
+        """Plan a trajectory for a corridor (``segments``), a reference or a ``layout``.
+        The result is stored: fetch it again at ``GET /v1/plans/{plan_id}``."""
+        return await plan_response(request, request_dict(body), format)
+
+    @app.post("/v1/segment", tags=["planning"], response_class=Response,
+              responses={200: {"model": SegmentationModel, "description": "Cells and corridor"},
+                         **_errors(413, 422, 503)})
+    async def segment(body: PlanRequestModel, request: Request):
+        """Segment a ``layout`` (workspace with obstacles) into cells and a corridor, without planning."""
+        if body.layout is None:
+            return error_response(422, "invalid_input", "a segmentation request needs a layout", "layout")
+        if not segmentation_available():
+            return error_response(501, "unavailable", "planner.segmentation is not installed", "layout")
+        req = request_dict(body)
+        req.pop("segments", None)
+        req.pop("reference", None)
+        return await run_job(request, {"kind": "segment", "request": req})
+
+    @app.get("/v1/plans/{plan_id}", tags=["planning"], response_class=Response, responses={
+        200: _PLAN_RESPONSES[200], **_errors(404)})
+    def get_plan(plan_id: str, request: Request, format: Literal["json", "csv"] | None = Format):
+        """A stored plan result (the newest plans are kept; see RANGEPLAN_MAX_PLANS)."""
+        text = request.app.state.store.get_plan_json(plan_id)
+        if text is None:
+            raise StarletteHTTPException(404, f"no plan with id {plan_id!r}")
+        if wants_csv(request, format):
+            from planner.trajectory import to_csv
+            return Response(to_csv(json.loads(text)), media_type="text/csv; charset=utf-8")
+        return Response(text, media_type="application/json")
+
+    # -- corridors ------------------------------------------------------------------------
+    def checked(body: PlanRequestModel) -> dict:
+        req = request_dict(body)
+        from planner.request import parse_request
+        parse_request(req)  # meaning (lower <= upper, sizes) before it is saved; raises PlannerError
+        return req
+
+    def get_or_404(store: Store, corridor_id: str) -> dict:
+        rec = store.get_corridor(corridor_id)
+        if rec is None:
+            raise StarletteHTTPException(404, f"no corridor with id {corridor_id!r}")
+        return rec
+
+    @app.post("/v1/corridors", status_code=201, response_model=CorridorRecordModel, tags=["corridors"],
+              responses=_errors(413, 422))
+    def create_corridor(body: PlanRequestModel, request: Request, response: Response):
+        """Save a plan request as a corridor; its name is the request's ``name``."""
+        rec = request.app.state.store.create_corridor(checked(body), body.name)
+        response.headers["Location"] = f"/v1/corridors/{rec['id']}"
+        return rec
+
+    @app.get("/v1/corridors", response_model=list[CorridorRecordModel], tags=["corridors"])
+    def list_corridors(request: Request):
+        """All saved corridors, oldest first."""
+        return request.app.state.store.list_corridors()
+
+    @app.get("/v1/corridors/{corridor_id}", response_model=CorridorRecordModel, tags=["corridors"],
+             responses=_errors(404))
+    def get_corridor(corridor_id: str, request: Request):
+        return get_or_404(request.app.state.store, corridor_id)
+
+    @app.put("/v1/corridors/{corridor_id}", response_model=CorridorRecordModel, tags=["corridors"],
+             responses=_errors(404, 413, 422))
+    def update_corridor(corridor_id: str, body: PlanRequestModel, request: Request):
+        """Replace a saved corridor's request (and name)."""
+        rec = request.app.state.store.update_corridor(corridor_id, checked(body), body.name)
+        if rec is None:
+            raise StarletteHTTPException(404, f"no corridor with id {corridor_id!r}")
+        return rec
+
+    @app.delete("/v1/corridors/{corridor_id}", status_code=204, response_class=Response, tags=["corridors"],
+                responses=_errors(404))
+    def delete_corridor(corridor_id: str, request: Request):
+        if not request.app.state.store.delete_corridor(corridor_id):
+            raise StarletteHTTPException(404, f"no corridor with id {corridor_id!r}")
+        return Response(status_code=204)
+
+    @app.post("/v1/corridors/{corridor_id}/plan", tags=["corridors"], response_class=Response,
+              responses={**_PLAN_RESPONSES, **_errors(404)})
+    async def plan_corridor(corridor_id: str, request: Request,
+                            format: Literal["json", "csv"] | None = Format):
+        """Plan a saved corridor; the result is stored with a link to the corridor."""
+        store: Store = request.app.state.store
+        rec = await asyncio.get_running_loop().run_in_executor(None, store.get_corridor, corridor_id)
+        if rec is None:
+            raise StarletteHTTPException(404, f"no corridor with id {corridor_id!r}")
+        from pydantic import ValidationError
+        try:
+            model = PlanRequestModel.model_validate(rec["request"])
+        except ValidationError as exc:
+            e = exc.errors()[0]
+            return error_response(422, "invalid_input", "the saved corridor is not a valid plan request: "
+                                  + e["msg"], field_path(e["loc"]))
+        return await plan_response(request, request_dict(model), format, corridor_id)
+
+    # -- landing page ---------------------------------------------------------------------
+    if STATIC_DIR.is_dir():
+        from fastapi.staticfiles import StaticFiles
+        app.mount("/", StaticFiles(directory=STATIC_DIR, html=True), name="static")
+    else:
+        @app.get("/", include_in_schema=False)
+        def root():
+            return RedirectResponse("/docs")
+
+    return app

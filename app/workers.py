@@ -1,0 +1,297 @@
+"""Planning off the event loop: a small pool of worker processes with a per-job time limit.
+
+Planning is CPU-bound Python + small numpy (the GIL is held most of the time), so threads
+give no parallelism; worker processes do, and a process that runs past the time limit can
+be killed and replaced without disturbing the other jobs (a thread cannot be stopped).
+
+Each worker owns one end of a pipe, imports the planner once, then serves jobs. A job is
+a plain dict (``kind``: ``"plan"`` or ``"segment"``); the worker runs the planner, serialises
+the result to JSON itself, stores plans in the SQLite store itself (WAL, multi-process safe)
+and sends back ready-to-send bytes, so the server process only moves bytes.
+
+The pool is used from threads (``run`` blocks); the API calls it through a thread pool.
+``mode="thread"`` runs jobs in the calling thread instead (no parallelism under the GIL, no
+way to stop a runaway job; kept to measure the difference, see benchmarks/bench_http.py).
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import json  # noqa: E402
+import math  # noqa: E402
+import socket  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+from multiprocessing.connection import Connection  # noqa: E402
+import queue  # noqa: E402
+import threading  # noqa: E402
+import time  # noqa: E402
+import traceback  # noqa: E402
+
+
+class JobTimeout(Exception):
+    """The job ran longer than the pool's time limit (its worker was replaced)."""
+
+
+class PoolBusy(Exception):
+    """Too many jobs waiting for a worker."""
+
+
+class WorkerCrashed(Exception):
+    """The worker process died while running the job."""
+
+
+# ---------------------------------------------------------------------------------------
+# the job itself (runs in the worker process, or in a thread in "thread" mode)
+
+_stores: dict = {}
+
+
+def _store(path):
+    if path is None:
+        return None
+    st = _stores.get(path)
+    if st is None:
+        from app.storage import Store
+        st = _stores[path] = Store(path)
+    return st
+
+
+def _check_finite(obj, path="result"):
+    """json.dumps(allow_nan=False) says only *that* a value is not finite; say where."""
+    if isinstance(obj, float):
+        if not math.isfinite(obj):
+            return path
+    elif isinstance(obj, dict):
+        for k, v in obj.items():
+            p = _check_finite(v, f"{path}.{k}")
+            if p:
+                return p
+    elif isinstance(obj, list):
+        for i, v in enumerate(obj):
+            p = _check_finite(v, f"{path}[{i}]")
+            if p:
+                return p
+    return None
+
+
+def _dumps(result: dict) -> str:
+    try:
+        return json.dumps(result, allow_nan=False, separators=(",", ":"))
+    except ValueError:
+        from planner.errors import PlannerError
+        raise PlannerError("diverged", f"the planner produced a non-finite number at {_check_finite(result)}; "
+                           "try a smaller sample time or larger k_u", "settings") from None
+
+
+def run_job(job: dict) -> tuple:
+    """Run one job; returns ``("ok", payload: bytes, meta: dict)`` or
+    ``("error", PlannerError.to_dict())``."""
+    from planner.errors import PlannerError
+
+    try:
+        if job["kind"] == "plan":
+            from planner.plan import plan
+            from planner.trajectory import to_csv
+            from app.storage import new_id
+
+            result = plan(job["request"])
+            plan_id = new_id() if job.get("store") else None
+            result["plan_id"] = plan_id
+            text = _dumps(result)
+            if plan_id:
+                _store(job["store"]).save_plan_json(text, job["request"], job.get("corridor_id"), id=plan_id)
+            if job.get("format") == "csv":
+                payload = to_csv(result).encode()
+            else:
+                payload = text.encode()
+            return ("ok", payload, {"plan_id": plan_id})
+        if job["kind"] == "segment":
+            from planner.request import parse_request
+            from planner.robot import load_robot
+            from planner.segmentation import corridor_from_request
+
+            req = parse_request(job["request"])
+            robot = load_robot(req.robot)
+            seg = corridor_from_request(req, robot)
+            return ("ok", _dumps(seg.to_dict()).encode(), {})
+        if job["kind"] == "sleep":  # for tests of the time limit
+            time.sleep(float(job["seconds"]))
+            return ("ok", b"{}", {})
+        raise ValueError(f"unknown job kind {job['kind']!r}")
+    except PlannerError as exc:
+        return ("error", exc.to_dict())
+
+
+def _worker_main(conn) -> None:
+    # import the planner before the first job, not during it
+    import planner.plan  # noqa: F401
+    import planner.trajectory  # noqa: F401
+    import app.storage  # noqa: F401
+    while True:
+        try:
+            job = conn.recv()
+        except (EOFError, OSError, KeyboardInterrupt):
+            return
+        if job is None:
+            return
+        try:
+            out = run_job(job)
+        except MemoryError:
+            out = ("crash", "the planner ran out of memory")
+        except Exception as exc:  # a planner bug: report it, keep serving
+            out = ("crash", f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=8)}")
+        try:
+            conn.send(out)
+        except (OSError, ValueError):
+            return
+
+
+# ---------------------------------------------------------------------------------------
+# the pool (runs in the server process)
+
+class _Worker:
+    """A worker process started as ``python -m app.workers FD`` (a fresh interpreter that
+    never re-imports the server's ``__main__``), talking over a socket pair."""
+
+    def __init__(self):
+        parent, child = socket.socketpair()
+        try:
+            self.proc = subprocess.Popen([sys.executable, "-m", "app.workers", str(child.fileno())],
+                                         pass_fds=(child.fileno(),), stdin=subprocess.DEVNULL,
+                                         close_fds=True)
+        finally:
+            child.close()
+        self.conn = Connection(parent.detach())
+
+    def call(self, job: dict, timeout: float):
+        try:
+            self.conn.send(job)
+            if not self.conn.poll(timeout):
+                raise JobTimeout
+            return self.conn.recv()
+        except (EOFError, OSError) as exc:
+            raise WorkerCrashed(f"worker exited with status {self.proc.poll()} ({exc})") from None
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def kill(self) -> None:
+        try:
+            self.proc.kill()
+            self.proc.wait(5)
+        except (OSError, subprocess.TimeoutExpired):
+            pass
+        finally:
+            self.conn.close()
+
+    def stop(self) -> None:
+        try:
+            self.conn.send(None)
+        except (OSError, ValueError):
+            pass
+        try:
+            self.proc.wait(2)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait(2)
+        self.conn.close()
+
+
+class PlanPool:
+    """``workers`` planning processes (``mode="process"``) or inline execution
+    (``mode="thread"``); ``timeout_s`` bounds each job's compute time; at most ``max_queue``
+    jobs wait for a worker (more: :class:`PoolBusy`)."""
+
+    def __init__(self, workers: int | None = None, timeout_s: float = 30.0, max_queue: int = 64,
+                 mode: str = "process"):
+        if mode not in ("process", "thread"):
+            raise ValueError("mode must be 'process' or 'thread'")
+        self.mode = mode
+        self.n = max(1, int(workers or os.cpu_count() or 1))
+        self.timeout_s = float(timeout_s)
+        self.max_queue = int(max_queue)
+        self._lock = threading.Lock()
+        self._inflight = 0
+        self._idle: queue.Queue = queue.Queue()
+        self._workers: list[_Worker] = []
+        self._closed = False
+        self.replaced = 0
+        if mode == "process":
+            for _ in range(self.n):
+                w = _Worker()
+                self._workers.append(w)
+                self._idle.put(w)
+        else:
+            self._sem = threading.Semaphore(self.n)
+
+    @property
+    def capacity(self) -> int:
+        """Jobs accepted at once (running + waiting)."""
+        return self.n + self.max_queue
+
+    def stats(self) -> dict:
+        return {"mode": self.mode, "workers": self.n, "in_flight": self._inflight,
+                "timeout_s": self.timeout_s, "replaced_workers": self.replaced}
+
+    def run(self, job: dict):
+        """Run a job (blocking); returns what :func:`run_job` returns (or ``("crash", text)``
+        for an unexpected exception in the planner), or raises :class:`JobTimeout`,
+        :class:`PoolBusy` or :class:`WorkerCrashed` (the process died)."""
+        with self._lock:
+            if self._closed:
+                raise PoolBusy("the server is shutting down")
+            if self._inflight >= self.capacity:
+                raise PoolBusy(f"{self._inflight} jobs in progress")
+            self._inflight += 1
+        try:
+            if self.mode == "thread":
+                with self._sem:
+                    t0 = time.perf_counter()
+                    try:
+                        out = run_job(job)
+                    except Exception as exc:
+                        out = ("crash", f"{type(exc).__name__}: {exc}")
+                    if time.perf_counter() - t0 > self.timeout_s:
+                        raise JobTimeout  # cannot stop a thread: only report it afterwards
+                    return out
+            w = self._idle.get()
+            replacement = w
+            try:
+                if not w.alive():
+                    w.kill()
+                    replacement = w = self._replace(w)
+                return w.call(job, self.timeout_s)  # ("ok", ...), ("error", ...) or ("crash", text)
+            except (JobTimeout, WorkerCrashed, OSError) as exc:
+                w.kill()
+                replacement = self._replace(w)
+                if isinstance(exc, OSError):
+                    raise WorkerCrashed(str(exc)) from None
+                raise
+            finally:
+                self._idle.put(replacement)
+        finally:
+            with self._lock:
+                self._inflight -= 1
+
+    def _replace(self, old: _Worker) -> _Worker:
+        new = _Worker()
+        with self._lock:
+            self.replaced += 1
+            self._workers = [new if w is old else w for w in self._workers]
+        return new
+
+    def close(self) -> None:
+        with self._lock:
+            self._closed = True
+            workers, self._workers = self._workers, []
+        for w in workers:
+            w.stop()
+
+
+if __name__ == "__main__":
+    _worker_main(Connection(int(sys.argv[1])))
