@@ -1,0 +1,393 @@
+"""The HTTP API through FastAPI's TestClient (the real app, real worker processes, a
+temporary SQLite store): Table I over HTTP equals the CLI, CSV with units, the bad-input
+matrix with field paths and stable codes, saved corridors, stored plans, time limit,
+concurrent requests, landing page, OpenAPI descriptions."""
+
+from __future__ import annotations
+
+import copy
+import csv
+import io
+import json
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from app.api import create_app, field_path
+from app.storage import Store
+
+ROOT = Path(__file__).resolve().parent.parent
+TABLE1_PATH = ROOT / "static" / "examples" / "table1.json"
+TABLE1 = json.loads(TABLE1_PATH.read_text())
+P0 = {"lower": [0.0, 0.0, 0.0], "upper": [0.0, 0.0, 0.0]}
+
+
+def seg(lo, hi):
+    return {"lower": list(lo), "upper": list(hi)}
+
+
+def shifted(req: dict, dx: float, dy: float) -> dict:
+    out = copy.deepcopy(req)
+    for s in out["segments"]:
+        for k in ("lower", "upper"):
+            s[k][0] += dx
+            s[k][1] += dy
+    return out
+
+
+@pytest.fixture(scope="module")
+def store(tmp_path_factory):
+    return Store(tmp_path_factory.mktemp("data"))
+
+
+@pytest.fixture(scope="module")
+def client(store):
+    app = create_app(store, workers=2, timeout_s=60, max_body_bytes=256 * 1024)
+    with TestClient(app) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def table1_http(client):
+    r = client.post("/v1/plan", json=TABLE1)
+    assert r.status_code == 200, r.text
+    return r
+
+
+def strip_volatile(result: dict) -> dict:
+    out = copy.deepcopy(result)
+    out["metrics"].pop("compute_ms", None)
+    out.pop("plan_id", None)
+    return out
+
+
+def assert_error(r, status: int, code: str, field: str | None | type(...) = ...):
+    assert r.status_code == status, r.text
+    err = r.json()["error"]
+    assert err["code"] == code, err
+    assert isinstance(err["message"], str) and err["message"]
+    if field is not ...:
+        assert err["field"] == field, err
+    return err
+
+
+# ---------------------------------------------------------------------------------------
+# service
+
+def test_health_and_robots(client):
+    h = client.get("/health").json()
+    assert h["status"] == "ok" and h["pool"]["workers"] == 2 and h["pool"]["mode"] == "process"
+    robots = client.get("/v1/robots").json()
+    names = [r["name"] for r in robots]
+    assert "moving-slide" in names
+    ms = client.get("/v1/robots/moving-slide").json()
+    assert len(ms["base_pivots"]) == next(r["legs"] for r in robots if r["name"] == "moving-slide")
+    assert_error(client.get("/v1/robots/../../etc"), 404, "not_found")
+    assert_error(client.get("/v1/robots/no-such-robot"), 404, "not_found")
+
+
+# ---------------------------------------------------------------------------------------
+# planning
+
+def test_table1_over_http_equals_cli(table1_http, tmp_path):
+    """Same request, same numbers: the HTTP result equals `rangeplan plan` bit for bit
+    (apart from the measured compute time and the stored plan's id)."""
+    out = tmp_path / "cli.json"
+    p = subprocess.run([sys.executable, "-m", "app.cli", "plan", str(TABLE1_PATH), "-o", str(out)],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    cli = json.loads(out.read_text())
+    http = table1_http.json()
+    assert strip_volatile(http) == strip_volatile(cli)
+    # and it is a real plan: ends at the end point, inside the corridor, at rest
+    pose = np.array(http["pose"])
+    assert np.hypot(*(pose[-1, :2] - np.array(TABLE1["segments"][-1]["lower"][:2]))) < 1e-3
+    assert np.allclose(pose[0], TABLE1["segments"][0]["lower"])
+    assert http["metrics"]["settled"] is True
+    assert len(http["time"]) == len(http["pose"]) == len(http["drives"]["force"])
+
+
+def test_stored_plan_is_fetched_again(client, table1_http, store):
+    plan_id = table1_http.json()["plan_id"]
+    assert table1_http.headers["location"] == f"/v1/plans/{plan_id}"
+    again = client.get(f"/v1/plans/{plan_id}")
+    assert again.status_code == 200
+    assert again.json() == table1_http.json()
+    assert store.plan_info(plan_id)["request"]["segments"] == TABLE1["segments"]
+    assert_error(client.get("/v1/plans/" + "f" * 32), 404, "not_found")
+
+
+def _parse_csv(text: str):
+    rows = list(csv.reader(io.StringIO(text)))
+    return rows[0], np.array(rows[1:], dtype=float)
+
+
+@pytest.mark.parametrize("how", ["accept", "query"])
+def test_csv_has_units_and_same_numbers(client, table1_http, how):
+    if how == "accept":
+        r = client.post("/v1/plan", json=TABLE1, headers={"Accept": "text/csv"})
+    else:
+        r = client.post("/v1/plan?format=csv", json=TABLE1)
+    assert r.status_code == 200, r.text
+    assert r.headers["content-type"].startswith("text/csv")
+    header, data = _parse_csv(r.text)
+    units = ("_s", "_m", "_rad", "_m_s", "_rad_s", "_m_s2", "_rad_s2", "_n")
+    assert all(h.endswith(units) for h in header), header
+    res = table1_http.json()
+    assert data.shape[0] == len(res["time"])
+    assert np.array_equal(data[:, header.index("time_s")], res["time"])
+    assert np.array_equal(data[:, [header.index(c) for c in ("x_m", "y_m", "psi_rad")]], res["pose"])
+    forces = np.array(res["drives"]["force"])
+    assert np.array_equal(data[:, header.index("leg4_force_n")], forces[:, 3])
+    # the stored plan in CSV too
+    r2 = client.get(f"/v1/plans/{res['plan_id']}", params={"format": "csv"})
+    assert np.array_equal(_parse_csv(r2.text)[1], data)
+
+
+# ---------------------------------------------------------------------------------------
+# bad input: 422 (or 413) with the field path and a plain message, never 5xx
+
+def _bad_cases():
+    t = TABLE1
+    lower_gt_upper = copy.deepcopy(t)
+    lower_gt_upper["segments"][3]["lower"][0] = 0.5
+    return [
+        ("lower > upper", lower_gt_upper, "invalid_input", "segments[3].lower"),
+        ("one segment", {"segments": [P0]}, "invalid_input", "segments"),
+        ("no corridor", {"robot": "moving-slide"}, "invalid_input", "segments"),
+        ("pose of 2", {"segments": [{"lower": [0, 0], "upper": [0, 0, 0]}, P0]}, "invalid_input",
+         "segments[0].lower"),
+        ("string number", {"segments": [{"lower": [0, 0, "a"], "upper": [0, 0, 0]}, P0]}, "invalid_input",
+         "segments[0].lower[2]"),
+        ("Ts = 0", {**t, "settings": {"Ts": 0}}, "invalid_input", "settings.Ts"),
+        ("Ts < 0", {**t, "settings": {"Ts": -0.01}}, "invalid_input", "settings.Ts"),
+        ("horizon too long", {**t, "settings": {"N": 10_000}}, "invalid_input", "settings.N"),
+        ("samples too many", {**t, "settings": {"samples_per_segment": 10 ** 7}}, "invalid_input",
+         "settings.samples_per_segment"),
+        ("total steps", {"segments": [P0] * 150, "settings": {"samples_per_segment": 2000}}, "too_large",
+         "settings.samples_per_segment"),
+        ("unknown field", {**t, "colour": "red"}, "invalid_input", "colour"),
+        ("unknown setting", {**t, "settings": {"speed": 1}}, "invalid_input", "settings.speed"),
+        ("unknown robot", {**t, "robot": "no-such-robot"}, "invalid_input", "robot"),
+        ("negative k_u", {**t, "settings": {"k_u": -1}}, "invalid_input", "settings.k_u"),
+        ("unreachable", {"segments": [P0, seg([0.3, 0, 0], [0.3, 0, 0])]}, "unreachable", "segments[1]"),
+        ("not settled", {**t, "settings": {"tail_max_s": 0.0, "samples_per_segment": 1}}, "not_settled",
+         "settings.tail_max_s"),
+    ]
+
+
+@pytest.mark.parametrize("name, body, code, field", _bad_cases(), ids=[c[0] for c in _bad_cases()])
+def test_bad_input_matrix(client, name, body, code, field):
+    assert_error(client.post("/v1/plan", json=body), 422, code, field)
+
+
+@pytest.mark.parametrize("literal", ["NaN", "Infinity", "-Infinity", "1e999"])
+def test_non_finite_numbers_rejected(client, literal):
+    text = json.dumps(TABLE1).replace("-0.08", literal, 1)
+    r = client.post("/v1/plan", content=text, headers={"Content-Type": "application/json"})
+    assert_error(r, 422, "invalid_input", "segments[0].lower[0]")
+
+
+def test_invalid_json_and_missing_body(client):
+    r = client.post("/v1/plan", content=b'{"segments": [', headers={"Content-Type": "application/json"})
+    err = assert_error(r, 422, "invalid_input")
+    assert "JSON" in err["message"]
+    assert_error(client.post("/v1/plan"), 422, "invalid_input")
+    assert_error(client.post("/v1/plan", json=[1, 2]), 422, "invalid_input")
+
+
+def test_body_size_limit_by_header_and_by_stream(client):
+    big = {**TABLE1, "name": "x" * 100, "segments": TABLE1["segments"] * 400}  # > 256 KiB
+    text = json.dumps(big).encode()
+    assert len(text) > 256 * 1024
+    err = assert_error(client.post("/v1/plan", content=text, headers={"Content-Type": "application/json"}),
+                       413, "too_large", None)
+    assert "262144" in err["message"]
+
+    def chunks():  # chunked transfer: no Content-Length, the streamed size is counted
+        for i in range(0, len(text), 16384):
+            yield text[i:i + 16384]
+    r = client.post("/v1/plan", content=chunks(), headers={"Content-Type": "application/json"})
+    assert "content-length" not in {k.lower() for k in r.request.headers}
+    assert_error(r, 413, "too_large", None)
+    # the service is fine afterwards
+    assert client.get("/health").status_code == 200
+
+
+def test_field_path_strips_body_and_union_tags():
+    assert field_path(("body", "segments", 3, "lower")) == "segments[3].lower"
+    assert field_path(("body", "robot", "RobotModel", "legs", "list[LegModel]", 2, "rod")) == "robot.legs[2].rod"
+    assert field_path(("body",)) is None
+
+
+# ---------------------------------------------------------------------------------------
+# concurrency and the compute limit
+
+def test_concurrent_plans_do_not_mix(client, store):
+    """Six different corridors (Table I shifted) planned at once: each answer is the plan of
+    its own request (starts and ends at its own points) and its stored copy matches."""
+    shifts = [(dx, dy) for dx in (-0.02, 0.0, 0.02) for dy in (-0.02, 0.01)]
+    results: dict[int, dict] = {}
+
+    def go(i, dx, dy):
+        r = client.post("/v1/plan", json=shifted(TABLE1, dx, dy))
+        results[i] = r.json() if r.status_code == 200 else {"status": r.status_code, "body": r.text}
+
+    threads = [threading.Thread(target=go, args=(i, dx, dy)) for i, (dx, dy) in enumerate(shifts)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    ids = set()
+    for i, (dx, dy) in enumerate(shifts):
+        res = results[i]
+        assert "pose" in res, res
+        pose = np.array(res["pose"])
+        start = np.array(TABLE1["segments"][0]["lower"][:2]) + [dx, dy]
+        end = np.array(TABLE1["segments"][-1]["lower"][:2]) + [dx, dy]
+        assert np.allclose(pose[0, :2], start, atol=1e-12)
+        assert np.hypot(*(pose[-1, :2] - end)) < 1e-3
+        assert store.get_plan(res["plan_id"]) == res
+        ids.add(res["plan_id"])
+    assert len(ids) == len(shifts)
+
+
+def test_compute_limit_stops_runaway_plan(store):
+    """A plan longer than the limit answers 422 `timeout` promptly; the killed worker is
+    replaced and the next plan succeeds; /health answered meanwhile."""
+    app = create_app(store, workers=1, timeout_s=1.0)
+    long = {**TABLE1, "settings": {"samples_per_segment": 2000}}  # 24000 steps
+    with TestClient(app) as c:
+        done = {}
+
+        def slow():
+            done["r"] = c.post("/v1/plan", json=long)
+
+        th = threading.Thread(target=slow)
+        th.start()
+        h = c.get("/health")
+        assert h.status_code == 200
+        th.join(60)
+        assert not th.is_alive()
+        err = assert_error(done["r"], 422, "timeout", None)
+        assert "1 s" in err["message"]
+        assert c.get("/health").json()["pool"]["replaced_workers"] == 1
+        assert c.post("/v1/plan", json=TABLE1).status_code == 200
+
+
+# ---------------------------------------------------------------------------------------
+# saved corridors
+
+def test_corridor_lifecycle(client):
+    r = client.post("/v1/corridors", json=TABLE1)
+    assert r.status_code == 201, r.text
+    rec = r.json()
+    cid = rec["id"]
+    assert r.headers["location"] == f"/v1/corridors/{cid}"
+    assert rec["name"] == TABLE1["name"] and rec["request"]["segments"] == TABLE1["segments"]
+    assert client.get(f"/v1/corridors/{cid}").json() == rec
+    assert cid in [c["id"] for c in client.get("/v1/corridors").json()]
+
+    moved = {**shifted(TABLE1, 0.01, 0.0), "name": "moved"}
+    upd = client.put(f"/v1/corridors/{cid}", json=moved).json()
+    assert upd["name"] == "moved" and upd["request"]["segments"] == moved["segments"]
+
+    r = client.post(f"/v1/corridors/{cid}/plan")
+    assert r.status_code == 200, r.text
+    pose = np.array(r.json()["pose"])
+    assert np.hypot(*(pose[-1, :2] - np.array(moved["segments"][-1]["lower"][:2]))) < 1e-3
+    assert client.get(f"/v1/plans/{r.json()['plan_id']}").json() == r.json()
+    csv_r = client.post(f"/v1/corridors/{cid}/plan", headers={"Accept": "text/csv"})
+    assert csv_r.headers["content-type"].startswith("text/csv")
+
+    assert client.delete(f"/v1/corridors/{cid}").status_code == 204
+    for r in (client.get(f"/v1/corridors/{cid}"), client.delete(f"/v1/corridors/{cid}"),
+              client.put(f"/v1/corridors/{cid}", json=TABLE1), client.post(f"/v1/corridors/{cid}/plan")):
+        assert_error(r, 404, "not_found", None)
+
+
+def test_corridor_validated_before_saving(client):
+    n = len(client.get("/v1/corridors").json())
+    bad = copy.deepcopy(TABLE1)
+    bad["segments"][2]["upper"][1] = -1.0
+    assert_error(client.post("/v1/corridors", json=bad), 422, "invalid_input", "segments[2].lower")
+    assert_error(client.post("/v1/corridors", json={"segments": [P0]}), 422, "invalid_input", "segments")
+    assert len(client.get("/v1/corridors").json()) == n
+
+
+# ---------------------------------------------------------------------------------------
+# segmentation
+
+LAYOUT = {"robot": "moving-slide",
+          "layout": {"bounds": {"lower": [-0.1, -0.05], "upper": [0.1, 0.08]},
+                     "obstacles": [{"type": "rectangle", "lower": [-0.02, -0.05], "upper": [0.01, 0.03]}],
+                     "clearance": 0.0, "cell": {"shape": "square", "size": 0.02},
+                     "start": [-0.08, 0.0, 0.0], "end": [0.07, 0.0, 0.0]}}
+
+
+def test_segment_layout(client):
+    pytest.importorskip("planner.segmentation")
+    r = client.post("/v1/segment", json=LAYOUT)
+    assert r.status_code == 200, r.text
+    s = r.json()
+    cells = {c["id"]: c for c in s["cells"]}
+    assert s["path"] and all(cells[i]["state"] == "free" for i in s["path"])
+    segs = s["segments"]
+    assert segs[0]["lower"] == segs[0]["upper"] == LAYOUT["layout"]["start"]
+    assert segs[-1]["lower"] == segs[-1]["upper"] == LAYOUT["layout"]["end"]
+    # the corridor goes around the obstacle: no path cell's box overlaps its interior
+    ob = LAYOUT["layout"]["obstacles"][0]
+    for sg in segs[1:-1]:
+        lo, hi = np.array(sg["lower"][:2]), np.array(sg["upper"][:2])
+        overlap = np.minimum(hi, ob["upper"]) - np.maximum(lo, ob["lower"])
+        assert not np.all(overlap > 1e-9), sg
+
+
+def test_segment_errors(client):
+    pytest.importorskip("planner.segmentation")
+    assert_error(client.post("/v1/segment", json=TABLE1), 422, "invalid_input", "layout")
+    walled = copy.deepcopy(LAYOUT)
+    walled["layout"]["obstacles"] = [{"type": "rectangle", "lower": [-0.01, -0.05], "upper": [0.01, 0.08]}]
+    assert_error(client.post("/v1/segment", json=walled), 422, "no_path")
+    tiny = copy.deepcopy(LAYOUT)
+    tiny["layout"]["cell"]["size"] = 1e-5
+    assert_error(client.post("/v1/segment", json=tiny), 422, "too_large")
+    # a layout plans too (segmentation inside the plan)
+    r = client.post("/v1/plan", json=LAYOUT)
+    assert r.status_code == 200, r.text
+    pose = np.array(r.json()["pose"])
+    assert np.hypot(*(pose[-1, :2] - np.array(LAYOUT["layout"]["end"][:2]))) < 1e-3
+
+
+# ---------------------------------------------------------------------------------------
+# landing page and OpenAPI
+
+def test_landing_page(client):
+    r = client.get("/")
+    assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
+    html = r.text
+    assert 'href="/docs"' in html and "app.js" in html and "8080" in html
+    js = client.get("/app.js")
+    assert js.status_code == 200 and "/v1/plan" in js.text
+    assert client.get("/examples/table1.json").json() == TABLE1
+
+
+def test_openapi_every_field_described_with_unit_models(client):
+    spec = client.get("/openapi.json").json()
+    schemas = spec["components"]["schemas"]
+    undocumented = []
+    for name in ("PlanRequestModel", "SegmentModel", "SettingsModel", "PlanResultModel", "MetricsModel",
+                 "DrivesModel", "CorridorOutModel", "CorridorRecordModel", "LayoutModel"):
+        for prop, sch in schemas[name]["properties"].items():
+            if "description" not in sch and "$ref" not in sch and not any("$ref" in a for a in sch.get("anyOf", [])):
+                undocumented.append(f"{name}.{prop}")
+    assert not undocumented, undocumented
+    # the 422 responses document the one error shape, not FastAPI's default
+    plan_422 = spec["paths"]["/v1/plan"]["post"]["responses"]["422"]["content"]["application/json"]["schema"]
+    assert plan_422["$ref"].endswith("/ErrorResponse")
+    assert "text/csv" in spec["paths"]["/v1/plan"]["post"]["responses"]["200"]["content"]

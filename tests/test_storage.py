@@ -1,0 +1,123 @@
+"""The SQLite store: CRUD semantics, WAL mode, persistence, concurrent writers lose nothing."""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import threading
+from datetime import datetime
+from pathlib import Path
+
+import pytest
+
+from app.storage import Store, default_data_dir
+
+TABLE1 = json.loads((Path(__file__).resolve().parent.parent / "static" / "examples" / "table1.json").read_text())
+
+
+def test_default_data_dir_env(monkeypatch, tmp_path):
+    monkeypatch.setenv("RANGEPLAN_DATA_DIR", str(tmp_path / "d"))
+    assert default_data_dir() == tmp_path / "d"
+    monkeypatch.delenv("RANGEPLAN_DATA_DIR")
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "xdg"))
+    assert default_data_dir() == tmp_path / "xdg" / "rangeplan"
+
+
+def test_wal_mode_and_file_location(tmp_path):
+    st = Store(tmp_path / "data")
+    assert st.path == tmp_path / "data" / "rangeplan.sqlite3" and st.path.exists()
+    con = sqlite3.connect(st.path)
+    assert con.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    con.close()
+
+
+def test_corridor_crud_roundtrip(tmp_path):
+    st = Store(tmp_path)
+    rec = st.create_corridor(TABLE1)
+    assert len(rec["id"]) == 32 and int(rec["id"], 16) >= 0  # uuid4 hex
+    assert rec["name"] == TABLE1["name"]
+    assert rec["request"] == TABLE1
+    assert rec["created"].endswith("Z") and datetime.fromisoformat(rec["created"].replace("Z", "+00:00"))
+    assert st.get_corridor(rec["id"]) == rec
+
+    changed = json.loads(json.dumps(TABLE1))
+    changed["segments"][3]["upper"][0] = -0.021
+    upd = st.update_corridor(rec["id"], changed, name="moved")
+    assert upd["name"] == "moved" and upd["request"]["segments"][3]["upper"][0] == -0.021
+    assert upd["created"] == rec["created"] and upd["updated"] >= rec["updated"]
+    assert st.get_corridor(rec["id"])["request"] == changed
+
+    assert st.update_corridor("0" * 32, changed) is None
+    assert [r["id"] for r in st.list_corridors()] == [rec["id"]]
+    assert st.delete_corridor(rec["id"]) is True
+    assert st.delete_corridor(rec["id"]) is False
+    assert st.get_corridor(rec["id"]) is None and st.list_corridors() == []
+
+
+def test_corridors_survive_reopen(tmp_path):
+    ids = [Store(tmp_path).create_corridor(TABLE1, name=f"c{i}")["id"] for i in range(3)]
+    st = Store(tmp_path)
+    assert [r["id"] for r in st.list_corridors()] == ids
+    assert [r["name"] for r in st.list_corridors()] == ["c0", "c1", "c2"]
+
+
+def test_nan_is_refused_not_stored(tmp_path):
+    st = Store(tmp_path)
+    with pytest.raises(ValueError):
+        st.create_corridor({"segments": [{"lower": [float("nan"), 0, 0]}]})
+    assert st.list_corridors() == []
+
+
+def test_plans_saved_fetched_and_pruned(tmp_path):
+    st = Store(tmp_path, max_plans=5)
+    ids = [st.save_plan({"k": i, "pose": [[0.1 * i, 0.0, 0.0]]}, request={"i": i}) for i in range(8)]
+    assert st.count_plans() == 5
+    for i in range(3):
+        assert st.get_plan(ids[i]) is None  # the oldest went first
+    for i in range(3, 8):
+        assert st.get_plan(ids[i])["k"] == i
+        assert st.plan_info(ids[i])["request"] == {"i": i}
+
+
+def test_concurrent_writers_lose_nothing(tmp_path):
+    """8 threads, each its own Store object (as the API's worker processes have), create,
+    update and delete corridors and save plans at once: every write that returned is there."""
+    path = tmp_path / "db"
+    Store(path)
+    n_threads, per_thread = 8, 25
+    created: list[list[str]] = [[] for _ in range(n_threads)]
+    plans: list[list[str]] = [[] for _ in range(n_threads)]
+    errors = []
+    barrier = threading.Barrier(n_threads)
+
+    def work(t):
+        try:
+            st = Store(path)
+            barrier.wait()
+            for i in range(per_thread):
+                rec = st.create_corridor({"t": t, "i": i, "v": 0}, name=f"t{t}-{i}")
+                created[t].append(rec["id"])
+                assert st.update_corridor(rec["id"], {"t": t, "i": i, "v": 1}) is not None
+                plans[t].append(st.save_plan({"t": t, "i": i}, corridor_id=rec["id"]))
+                if i % 5 == 4:  # delete every fifth
+                    assert st.delete_corridor(rec["id"])
+        except Exception as exc:  # surfaced below
+            errors.append(repr(exc))
+
+    threads = [threading.Thread(target=work, args=(t,)) for t in range(n_threads)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    assert not errors, errors
+    st = Store(path)
+    records = {r["id"]: r for r in st.list_corridors()}
+    expected = {cid for t in range(n_threads) for i, cid in enumerate(created[t]) if i % 5 != 4}
+    assert set(records) == expected
+    for t in range(n_threads):
+        for i, cid in enumerate(created[t]):
+            if i % 5 != 4:
+                assert records[cid]["request"] == {"t": t, "i": i, "v": 1}
+                assert records[cid]["name"] == f"t{t}-{i}"
+            assert st.get_plan(plans[t][i]) == {"t": t, "i": i}
+    assert st.count_plans() == n_threads * per_thread
