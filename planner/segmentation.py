@@ -425,8 +425,9 @@ def _count(lay: Layout, s: float) -> tuple[int, int, int]:
 
 def _square_grid(x0, y0, s, nx, ny) -> _Grid:
     j, i = np.divmod(np.arange(nx * ny), nx)
-    lo = np.column_stack((x0 + s * i, y0 + s * j))
-    hi = lo + s
+    xs, ys = x0 + s * np.arange(nx + 1), y0 + s * np.arange(ny + 1)  # shared edges: identical floats
+    lo = np.column_stack((xs[i], ys[j]))
+    hi = np.column_stack((xs[i + 1], ys[j + 1]))
     poly = np.stack((lo, np.column_stack((hi[:, 0], lo[:, 1])), hi, np.column_stack((lo[:, 0], hi[:, 1]))), axis=1)
     ids = np.arange(nx * ny)
     east = ids[i < nx - 1]
@@ -450,9 +451,10 @@ def _triangle_grid(x0, y0, s, T, ny) -> _Grid:
     b, t = np.divmod(np.arange(T * ny), T)
     m = t - 1
     up = (m - b) % 2 == 0
-    xl = x0 + 0.5 * s * m
-    yb = y0 + h * b
-    xm, xr, yt = xl + 0.5 * s, xl + s, yb + h
+    xs = x0 + 0.5 * s * np.arange(-1, T + 2)  # lattice lines: shared edges get identical floats
+    ys = y0 + h * np.arange(ny + 1)
+    xl, xm, xr = xs[m + 1], xs[m + 2], xs[m + 3]
+    yb, yt = ys[b], ys[b + 1]
     p0 = np.column_stack((xl, np.where(up, yb, yt)))
     p1 = np.column_stack((np.where(up, xr, xm), yb))
     p2 = np.column_stack((np.where(up, xm, xr), yt))
@@ -577,7 +579,7 @@ def _holding(grid: _Grid, p) -> np.ndarray:
     d = np.roll(P, -1, axis=1) - P
     cross = d[..., 0] * (p[1] - P[..., 1]) - d[..., 1] * (p[0] - P[..., 0])  # >= 0 inside (CCW)
     scale = np.hypot(d[..., 0], d[..., 1])
-    return np.nonzero(np.all(cross >= -1e-9 * scale, axis=1))[0]
+    return np.nonzero(np.all(cross >= -1e-13 * scale, axis=1))[0]  # within 1e-13 m
 
 
 def _endpoint_cells(grid: _Grid, state, blocker, lay: Layout, key: str, path: str) -> np.ndarray:
