@@ -19,6 +19,31 @@ def _log(msg: str) -> None:
     print(f"rangeplan: {msg}", file=sys.stderr, flush=True)
 
 
+class _StopSignal(Exception):
+    """SIGTERM (e.g. ``docker stop``) as an exception, so the editor is stopped too."""
+
+    def __init__(self, previous=None):
+        super().__init__("terminated")
+        self.previous = previous
+
+    @classmethod
+    def install(cls) -> "_StopSignal":
+        import signal
+        import threading
+
+        if threading.current_thread() is not threading.main_thread():
+            return cls()
+
+        def handler(sig, frame):
+            raise cls()
+        return cls(signal.signal(signal.SIGTERM, handler))
+
+    def restore(self) -> None:
+        if self.previous is not None:
+            import signal
+            signal.signal(signal.SIGTERM, self.previous)
+
+
 def serve(host: str = "127.0.0.1", port: int = 8000, editor_port: int = 8080, editor: bool = True) -> int:
     """Run the API until interrupted (and the editor, when ``editor`` and available).
     Returns the process exit status."""
@@ -44,6 +69,7 @@ def serve(host: str = "127.0.0.1", port: int = 8000, editor_port: int = 8080, ed
                 handle = None
     app = create_app(store, editor_port=editor_port if handle is not None else None)
     _log(f"API: http://{host}:{port} (OpenAPI at /docs)")
+    stop_signal = _StopSignal.install()
     try:
         config = uvicorn.Config(app, host=host, port=port, log_level=os.environ.get("RANGEPLAN_LOG_LEVEL", "info"),
                                 access_log=os.environ.get("RANGEPLAN_ACCESS_LOG", "1") != "0")
@@ -51,9 +77,11 @@ def serve(host: str = "127.0.0.1", port: int = 8000, editor_port: int = 8080, ed
         server.run()
         # uvicorn returns (does not raise) when it cannot bind
         return 0 if server.started else 1
-    except KeyboardInterrupt:
-        return 130
+    except (KeyboardInterrupt, _StopSignal):
+        # uvicorn shut down gracefully, then re-raised the signal: a requested stop is a success
+        return 0
     finally:
+        stop_signal.restore()
         if handle is not None:
             try:
                 handle.stop()
