@@ -2,7 +2,8 @@
 
 Goal: a 0.3 m x 0.3 m workspace at 5 mm cells with 20 obstacles segments in <= 50 ms.
 Prints a table: median (and min/max) wall time of ``planner.segmentation.segment`` over
-several runs, per cell shape and psi range, with the cell counts and the path found.
+several runs, per cell shape and psi range, with the cell counts and the path found; and
+the time of ``reachable_region`` (the editor's reachable-workspace outline).
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_segmentation.py [--runs 15]
 """
@@ -19,7 +20,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from planner.robot import load_robot  # noqa: E402
-from planner.segmentation import segment  # noqa: E402
+from planner.segmentation import reachable_region, segment  # noqa: E402
 
 
 def layout(shape: str, psi_range=None, n_obstacles: int = 20, seed: int = 3) -> dict:
@@ -70,6 +71,20 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print("| " + " | ".join(str(v) if not isinstance(v, float) else f"{v:.1f}" for v in r) + " |")
+    print()
+    print("reachable_region (the editor's reachable-workspace outline), 0.4 m x 0.4 m")
+    print("| resolution [mm] | psi range [rad] | polygons | median ms | min ms | max ms |")
+    print("|---|---|---|---|---|---|")
+    bounds = {"lower": [-0.2, -0.2], "upper": [0.2, 0.2]}
+    for res in (0.005, 0.002):
+        for psi in ((0.0, 0.0), (-0.1, 0.1)):
+            times = []
+            for _ in range(args.runs):
+                t0 = time.perf_counter()
+                region = reachable_region(robot, bounds, psi, res)
+                times.append((time.perf_counter() - t0) * 1e3)
+            print(f"| {res * 1e3:g} | {psi[0]:g}..{psi[1]:g} | {len(region)} | {statistics.median(times):.1f} | "
+                  f"{min(times):.1f} | {max(times):.1f} |")
 
 
 if __name__ == "__main__":

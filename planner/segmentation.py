@@ -113,22 +113,33 @@ class Layout:
     psi_range: np.ndarray  # (2,) [rad]
     circles: dict = field(default_factory=dict)  # obstacle index -> (centre (2,), radius) [m]
 
-    def grown(self) -> list:
-        """The obstacles grown by the clearance (shapely polygons): flat sides exact, arcs
-        circumscribed (conservative by at most 0.13 % of the arc radius)."""
-        out = []
+    def grown_parts(self) -> tuple[np.ndarray, np.ndarray]:
+        """The obstacles grown by the clearance, as pieces whose union is each grown obstacle
+        (no union computed: the cell test checks each piece): ``(pieces, owner)``, shapely
+        polygons and the obstacle index of each. Flat sides are exact (offset by the clearance);
+        circles and the rounded corners (circles about each vertex) are circumscribed polygons,
+        conservative by at most 0.13 % of their radius."""
+        pieces, owner, centres, cowner = [], [], [], []
         for i, ob in enumerate(self.obstacles):
             if i in self.circles:
                 c, r = self.circles[i]
-                out.append(_discs(c[None], r + self.clearance)[0])
+                pieces.append(_discs(c[None], r + self.clearance)[0])
+                owner.append(i)
             elif self.clearance > 0:
-                # flat sides exact (offset by the clearance); the rounded corners are covered
-                # by polygons circumscribing the exact circles about each vertex
-                caps = _discs(np.asarray(ob.exterior.coords)[:-1], self.clearance)
-                out.append(shapely.union_all(np.concatenate(([ob.buffer(self.clearance, quad_segs=QUAD_SEGS)], caps))))
+                pieces.append(ob.buffer(self.clearance, quad_segs=QUAD_SEGS))
+                owner.append(i)
+                v = np.asarray(ob.exterior.coords)[:-1]
+                centres.append(v)
+                cowner.append(np.full(len(v), i))
             else:
-                out.append(ob)
-        return out
+                pieces.append(ob)
+                owner.append(i)
+        pieces = np.array(pieces, dtype=object)
+        owner = np.array(owner, dtype=np.int64)
+        if centres:
+            pieces = np.concatenate((pieces, _discs(np.concatenate(centres), self.clearance)))
+            owner = np.concatenate((owner, np.concatenate(cowner)))
+        return pieces, owner
 
 
 def _discs(centres: np.ndarray, radius: float) -> np.ndarray:
@@ -498,8 +509,16 @@ class Segmentation:
     path: list[int]  # cell ids, start -> end
     segments: list[Segment]  # start point, path cells' boxes, end point
     turns: int  # direction changes along the path
-    grown: list = field(default_factory=list)  # obstacles grown by the clearance (shapely)
+    grown_parts: tuple = ()  # (pieces, owner): obstacles grown by the clearance (Layout.grown_parts)
     compute_ms: float = 0.0
+
+    @property
+    def grown(self) -> list:
+        """Each obstacle grown by the clearance, as one shapely geometry (list in obstacle order)."""
+        if not self.grown_parts or not len(self.grown_parts[0]):
+            return []
+        pieces, owner = self.grown_parts
+        return [shapely.union_all(pieces[owner == i]) for i in range(int(owner.max()) + 1)]
 
     @property
     def counts(self) -> dict:
@@ -711,9 +730,8 @@ def segment(layout: dict, robot, settings: Settings | None = None, field_path: s
     tol = 1e-9 * s
     inside = np.all((grid.lo >= lay.lower - tol) & (grid.hi <= lay.upper + tol), axis=1)
     state[~inside] = BLOCKED
-    grown = lay.grown()
-    if grown:
-        garr = np.array(grown, dtype=object)
+    garr, owner = lay.grown_parts()
+    if len(garr):
         gb = shapely.bounds(garr)  # (G, 4) xmin, ymin, xmax, ymax
         # candidate pairs: bounding boxes overlap (numpy), then the exact test in shapely
         near = ((grid.lo[:, None, 0] <= gb[None, :, 2]) & (grid.hi[:, None, 0] >= gb[None, :, 0])
@@ -728,7 +746,7 @@ def segment(layout: dict, robot, settings: Settings | None = None, field_path: s
             cells = shapely.polygons(centre + (P - centre) * (1.0 - 1e-9))[inv]
             shapely.prepare(garr)
             hit = shapely.intersects(garr[gi], cells)
-            gi, ci = gi[hit], ci[hit]
+            gi, ci = owner[gi[hit]], ci[hit]
             state[ci] = BLOCKED
             blocker[ci[::-1]] = gi[::-1]  # the lowest obstacle index wins
 
@@ -765,7 +783,7 @@ def segment(layout: dict, robot, settings: Settings | None = None, field_path: s
                             polygon=grid.polygons[c].copy()))
     segs.append(Segment(lay.end.copy(), lay.end.copy()))
     return Segmentation(lay.shape, float(s), lay.lower, lay.upper, lay.clearance, lay.psi_range, lay.start, lay.end,
-                        grid.polygons, state, path, segs, turns, grown, (time.perf_counter() - t0) * 1e3)
+                        grid.polygons, state, path, segs, turns, (garr, owner), (time.perf_counter() - t0) * 1e3)
 
 
 def corridor_from_request(req: PlanRequest, robot=None) -> Segmentation:
