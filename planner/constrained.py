@@ -77,6 +77,27 @@ ROW_UNIT_M = 1e-3
 REFINE_TOL = 1e-4
 REFINE_MAX = 3
 
+#: move blocking: the first moves are free, later ones are held over 2 and then 4 samples
+MOVE_BLOCKING = False
+BLOCK_PLAN = ((6, 1), (8, 2))  # (samples, block length) in order; the rest in blocks of 4
+
+
+def move_blocks(N: int) -> np.ndarray:
+    """Block lengths (sum ``N``) of the moves: :data:`BLOCK_PLAN`, then blocks of 4."""
+    out, left = [], N
+    for samples, length in BLOCK_PLAN:
+        take = min(samples, left)
+        while take > 0:
+            b = min(length, take)
+            out.append(b)
+            take -= b
+            left -= b
+    while left > 0:
+        out.append(min(4, left))
+        left -= out[-1]
+    return np.array(out, int)
+
+
 DAQP_SETTINGS = dict(primal_tol=1e-9, dual_tol=1e-12, iter_limit=2000)
 
 
@@ -163,7 +184,20 @@ class ConstrainedController:
         N, m = self.N, self.m
         i, j = np.indices((N, N))
         self._lag = np.where(i >= j, i - j, N)
-        self._z_prev = None  # previous scaled solution (N m,)
+        self.blocks = move_blocks(N) if MOVE_BLOCKING else np.ones(N, int)
+        nb = len(self.blocks)
+        self._block_of = np.repeat(np.arange(nb), self.blocks)  # block index per sample
+        self._starts = np.concatenate(([0], np.cumsum(self.blocks)[:-1]))
+        self.nz = nb * m
+        # constrained samples: every sample up to the end of the first held block, then the
+        # last sample of each block (a move held over several samples cannot meet equality
+        # ranges, e.g. psi = const, at all of them; the near samples, which the plant
+        # actually visits, are all constrained)
+        ends = np.cumsum(self.blocks) - 1
+        first_held = int(np.argmax(self.blocks > 1)) if np.any(self.blocks > 1) else nb
+        self._con = np.unique(np.concatenate((np.arange(self._starts[first_held] if first_held < nb else N),
+                                              ends)))
+        self._z_prev = None  # previous scaled solution (nb m,)
         self._y_nom = None  # nominal poses (N, 3) for the leg linearisation
         self.stats = {"steps": 0, "iterations": [], "slack": [], "solve_s": 0.0, "infeasible": 0,
                       "pred_violation": 0.0, "fail": 0, "refines": 0,
@@ -182,8 +216,7 @@ class ConstrainedController:
         from .plan import rk4_sample
 
         if u0 is None:
-            u0 = self._z_prev[self.m:2 * self.m] * self.umax if self._z_prev is not None and self.N > 1 \
-                else (self._z_prev[:self.m] * self.umax if self._z_prev is not None else np.zeros(self.m))
+            u0 = self._shifted_moves()[0] * self.umax if self._z_prev is not None else np.zeros(self.m)
         self._u0 = u0
         x1 = rk4_sample(self.robot, x, u0, self.st.Ts, self.st.plant_substeps)
         self._x1 = x1
@@ -208,13 +241,15 @@ class ConstrainedController:
             P[q] = Ad @ P[q - 1]
         blocks = np.zeros((N + 1, 6, m))
         blocks[:N] = P[:N] @ (Bd * self.umax)
-        Gx = blocks[self._lag].transpose(0, 2, 1, 3).reshape(6 * N, N * m)
+        Gx = blocks[self._lag].transpose(0, 2, 1, 3).reshape(6 * N, N, m)
+        Gx = np.add.reduceat(Gx, self._starts, axis=1).reshape(6 * N, self.nz)  # moves held per block
+        nzv = self.nz
         lo, hi, qa, qb, qu = seq.window(k, N)
         idx = np.minimum(np.arange(k, k + N), seq.K - 1)
-        Gp2 = Gx.reshape(N, 6, N * m)[:, :3].reshape(3 * N, N * m)
+        Gp2 = Gx.reshape(N, 6, nzv)[:, :3].reshape(3 * N, nzv)
         W = (qa * qa + qb * qb).ravel()
         H = (Gp2.T * W) @ Gp2
-        H[np.diag_indices(N * m)] += np.tile((qu[0] * self.umax) ** 2, N)
+        H[np.diag_indices(nzv)] += (self.blocks[:, None] * (qu[0] * self.umax) ** 2).ravel()
         scale = 1.0 / max(float(np.max(np.diag(H))), 1e-300)
         H *= scale
 
@@ -234,41 +269,43 @@ class ConstrainedController:
 
         plo, phi = sets.lo[idx], sets.hi[idx]
         has_hp = np.array([sets.hp[q] is not None for q in idx])
-        jj = np.arange(N)
+        jj = self._con  # samples that carry constraints (all free moves, then block ends)
+        nc = len(jj)
         for ax in range(3):
-            sel = jj if ax == 2 else jj[~has_hp]
+            sel = jj if ax == 2 else jj[~has_hp[jj]]
             if sel.size:
                 add((6 * sel + ax)[:, None], np.ones((sel.size, 1)), plo[sel, ax], phi[sel, ax])
-        for j in jj[has_hp]:
+        for j in jj[has_hp[jj]]:
             A_, b_ = sets.hp[idx[j]]
             add(6 * j + np.tile(np.arange(2), (len(b_), 1)), A_, np.full(len(b_), -np.inf), b_)
         if sets.approach is not None:
-            sel = jj[idx >= sets.approach_from]
+            sel = jj[idx[jj] >= sets.approach_from]
             if sel.size:
                 d, b = sets.approach
                 add(6 * sel[:, None] + np.arange(2), np.tile(d, (sel.size, 1)),
                     np.full(sel.size, -np.inf), np.full(sel.size, b))
         # legs, linearised about the nominal poses (the previous step's prediction, shifted)
         y_nom = self._y_nom if self._y_nom is not None else np.tile(x[:3], (N, 1))
-        J = robot.leg_jacobian_batch(y_nom)  # (N, n, 3)
+        y_nom = y_nom[jj]
+        J = robot.leg_jacobian_batch(y_nom)  # (nc, n, 3)
         vmax = robot.speed_max * (1.0 - SPEED_MARGIN)
         cols = (6 * jj[:, None, None] + 3 + np.arange(3)) + np.zeros((1, m, 1), int)
-        add(cols.reshape(N * m, 3), J.reshape(N * m, 3), np.tile(-vmax, N), np.tile(vmax, N))
+        add(cols.reshape(nc * m, 3), J.reshape(nc * m, 3), np.tile(-vmax, nc), np.tile(vmax, nc))
         n_hard = nrow
         off = robot.leg_lengths(y_nom) - np.einsum("jia,ja->ji", J, y_nom)
-        add((cols - 3).reshape(N * m, 3), J.reshape(N * m, 3), (robot.length_min - off).ravel(),
+        add((cols - 3).reshape(nc * m, 3), J.reshape(nc * m, 3), (robot.length_min - off).ravel(),
             (robot.length_max - off).ravel())
         Sel = np.zeros((nrow, 6 * N))
         Sel[np.concatenate(sel_r), np.concatenate(sel_c)] = np.concatenate(sel_v)
         Sel /= ROW_UNIT_M
         kinds = np.zeros(nrow, int)
-        kinds[n_hard - N * m:n_hard] = 2
+        kinds[n_hard - nc * m:n_hard] = 2
         kinds[n_hard:] = 1
         qp = {"H": H, "A": Sel @ Gx, "Sel": Sel, "b0l": np.concatenate(b0l) / ROW_UNIT_M,
               "b0u": np.concatenate(b0u) / ROW_UNIT_M, "kinds": kinds, "n_hard": n_hard,
-              "n_bounds": N * m, "Gx": Gx, "Gp2": Gp2, "W": W,
+              "n_bounds": nzv, "Gx": Gx, "Gp2": Gp2, "W": W,
               "tgt": (qa * qa * lo + qb * qb * hi).ravel(), "scale": scale, "P": P, "x": x,
-              "row_speed0": n_hard - N * m, "row_stroke0": n_hard}
+              "row_speed0": n_hard - nc * m, "row_stroke0": n_hard}
         self.set_free(qp, Ad, Bd, u0)
         return qp
 
@@ -299,6 +336,16 @@ class ConstrainedController:
         qp["bl"] = qp["b0l"] - sf
         qp["bu"] = qp["b0u"] - sf
 
+    def _shifted_moves(self) -> np.ndarray:
+        """The previous solution's moves per sample (scaled), shifted by one sample (N, m)."""
+        U = self._z_prev.reshape(-1, self.m)[self._block_of]
+        return np.vstack((U[1:], U[-1:]))
+
+    def _shifted_start(self) -> np.ndarray:
+        """Warm start: the shifted moves averaged over each block."""
+        U = self._shifted_moves()
+        return (np.add.reduceat(U, self._starts, axis=0) / self.blocks[:, None]).ravel()
+
     # ---- solving ------------------------------------------------------------------------
     def _solve_hard(self, qp, z_start=None):
         nz, nh = qp["n_bounds"], qp["n_hard"]
@@ -310,7 +357,7 @@ class ConstrainedController:
         if z_start is not None:
             kw["primal_start"] = z_start
         elif self._z_prev is not None:
-            kw["primal_start"] = np.concatenate((self._z_prev[self.m:], self._z_prev[-self.m:]))
+            kw["primal_start"] = self._shifted_start()
         z, fval, flag, info = daqp.solve(qp["H"], qp["f"], qp["A"][:nh], bu, bl, sense, **kw)
         return z, flag, info
 
