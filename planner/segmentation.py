@@ -21,8 +21,10 @@ Steps (:func:`segment`):
    ``s``; or equilateral triangles of edge ``s`` (rows of height ``s sqrt(3)/2``, alternately
    pointing up and down). A cell is *free* only if it lies wholly inside the bounds and its
    interior meets no grown obstacle (touching is allowed: there the tool is exactly at the
-   clearance; overlaps under 1e-9 of the cell size count as touching); *blocked* otherwise; *unreachable* if free of obstacles but some pose in its
-   bounding box at some allowed angle is outside the legs' stroke or singular.
+   clearance; overlaps under 1e-9 of the cell size count as touching); *blocked* otherwise;
+   *unreachable* if free of obstacles but some pose in its bounding box at some allowed angle
+   is outside the legs' stroke or singular (stroke: exact per angle; singularity: on the
+   box's 3 x 3 grid, as the planner's segment check; angles: :func:`psi_samples`).
 3. **Path**: cells are adjacent when they share an edge. Among all paths of free cells from a
    cell holding the start to a cell holding the end, the one with the fewest cells is chosen,
    and among those the one with the fewest turns (breadth-first distances, then a dynamic
@@ -410,6 +412,19 @@ class _Grid:
     trans: np.ndarray  # (n_states, labels) next state
     cost: np.ndarray  # (n_states, labels) turn cost
     init_state: int
+    index: tuple = ()  # (x0, y0, xstep, ystep, ncols, nrows, col_offset, width_steps): id = row * ncols + col
+
+    def near(self, xmin: float, ymin: float, xmax: float, ymax: float) -> np.ndarray:
+        """Ids of the cells whose bounding box may meet the box [xmin, xmax] x [ymin, ymax]
+        (a superset, from the grid arithmetic)."""
+        x0, y0, xs, ys, nc, nr, off, w = self.index
+        c0 = max(int(math.floor((xmin - x0) / xs)) - off - w - 1, 0)
+        c1 = min(int(math.floor((xmax - x0) / xs)) - off + 1, nc - 1)
+        r0 = max(int(math.floor((ymin - y0) / ys)) - 1, 0)
+        r1 = min(int(math.floor((ymax - y0) / ys)) + 1, nr - 1)
+        if c0 > c1 or r0 > r1:
+            return np.empty(0, dtype=np.int64)
+        return (np.arange(r0, r1 + 1)[:, None] * nc + np.arange(c0, c1 + 1)[None, :]).ravel()
 
 
 def default_cell_size(lay: Layout, settings: Settings) -> float:
@@ -451,7 +466,8 @@ def _square_grid(x0, y0, s, nx, ny) -> _Grid:
     cost = (np.arange(5)[:, None] != np.arange(4)[None, :]).astype(np.int64)
     cost[4] = 0
     return _Grid(poly, lo, hi, np.column_stack((src, dst, lab)), 2 * j, 2 * i,
-                 (x0, y0, s / 2, s / 2, 2 * nx + 1, 2 * ny + 1), 5, trans, cost, 4)
+                 (x0, y0, s / 2, s / 2, 2 * nx + 1, 2 * ny + 1), 5, trans, cost, 4,
+                 (x0, y0, s, s, nx, ny, 0, 1))
 
 
 def _triangle_grid(x0, y0, s, T, ny) -> _Grid:
@@ -485,7 +501,8 @@ def _triangle_grid(x0, y0, s, T, ny) -> _Grid:
     trans = labels[None, :] * 4 + last[:, None]
     cost = ((prev[:, None] != 3) & (prev[:, None] != labels[None, :])).astype(np.int64)
     return _Grid(poly, lo, hi, np.column_stack((src, dst, lab)), 2 * b, m + 1,
-                 (x0 - 0.5 * s, y0, s / 2, h / 2, T + 2, 2 * ny + 1), 16, trans, cost, 15)
+                 (x0 - 0.5 * s, y0, s / 2, h / 2, T + 2, 2 * ny + 1), 16, trans, cost, 15,
+                 (x0, y0, s / 2, h, T, ny, -1, 2))
 
 
 # ---------------------------------------------------------------------------------------
@@ -733,10 +750,13 @@ def segment(layout: dict, robot, settings: Settings | None = None, field_path: s
     garr, owner = lay.grown_parts()
     if len(garr):
         gb = shapely.bounds(garr)  # (G, 4) xmin, ymin, xmax, ymax
-        # candidate pairs: bounding boxes overlap (numpy), then the exact test in shapely
-        near = ((grid.lo[:, None, 0] <= gb[None, :, 2]) & (grid.hi[:, None, 0] >= gb[None, :, 0])
-                & (grid.lo[:, None, 1] <= gb[None, :, 3]) & (grid.hi[:, None, 1] >= gb[None, :, 1]) & inside[:, None])
-        ci, gi = np.nonzero(near)
+        # candidate pairs: cells near each piece's bounding box (grid arithmetic), then the
+        # exact test in shapely
+        cand = [grid.near(*b) for b in gb]
+        gi = np.repeat(np.arange(len(garr)), [len(c) for c in cand])
+        ci = np.concatenate(cand) if cand else np.empty(0, dtype=np.int64)
+        keep = inside[ci]
+        gi, ci = gi[keep], ci[keep]
         if ci.size:
             uc, inv = np.unique(ci, return_inverse=True)
             # interiors meet (touching is allowed): test the cell shrunk about its centre by
@@ -779,8 +799,8 @@ def segment(layout: dict, robot, settings: Settings | None = None, field_path: s
     plo, phi = lay.psi_range
     segs = [Segment(lay.start.copy(), lay.start.copy())]
     for c in path:
-        segs.append(Segment(np.array([grid.lo[c, 0], grid.lo[c, 1], plo]), np.array([grid.hi[c, 0], grid.hi[c, 1], phi]),
-                            polygon=grid.polygons[c].copy()))
+        segs.append(Segment(np.array([grid.lo[c, 0], grid.lo[c, 1], plo]),
+                            np.array([grid.hi[c, 0], grid.hi[c, 1], phi]), polygon=grid.polygons[c].copy()))
     segs.append(Segment(lay.end.copy(), lay.end.copy()))
     return Segmentation(lay.shape, float(s), lay.lower, lay.upper, lay.clearance, lay.psi_range, lay.start, lay.end,
                         grid.polygons, state, path, segs, turns, (garr, owner), (time.perf_counter() - t0) * 1e3)
