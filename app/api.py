@@ -26,6 +26,7 @@ import asyncio
 import importlib.util
 import json
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -301,16 +302,33 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
     max_queue = max_queue if max_queue is not None else int(_env_float("RANGEPLAN_MAX_QUEUE", 64))
     executor = executor or os.environ.get("RANGEPLAN_EXECUTOR", "process")
 
+    start_lock = threading.Lock()
+
+    def ensure_pool(app: FastAPI) -> PlanPool:
+        """The pool, started at lifespan startup (or on first use by a server that runs no
+        lifespan, e.g. some ASGI test transports)."""
+        with start_lock:
+            if getattr(app.state, "pool", None) is None:
+                pool = PlanPool(workers, timeout_s, max_queue, mode=executor)
+                app.state.threads = ThreadPoolExecutor(max_workers=pool.capacity + 4,
+                                                       thread_name_prefix="rangeplan-wait")
+                app.state.pool = pool
+            return app.state.pool
+
+    def close_pool(app: FastAPI) -> None:
+        with start_lock:
+            pool, app.state.pool = getattr(app.state, "pool", None), None
+            if pool is not None:
+                pool.close()
+                app.state.threads.shutdown(wait=False, cancel_futures=True)
+
     @asynccontextmanager
     async def lifespan(app: FastAPI):
-        pool = PlanPool(workers, timeout_s, max_queue, mode=executor)
-        threads = ThreadPoolExecutor(max_workers=pool.capacity + 4, thread_name_prefix="rangeplan-wait")
-        app.state.pool, app.state.threads = pool, threads
+        ensure_pool(app)
         try:
             yield
         finally:
-            pool.close()
-            threads.shutdown(wait=False, cancel_futures=True)
+            close_pool(app)
 
     app = FastAPI(
         title="rangeplan",
@@ -323,6 +341,8 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
     )
     app.state.store = store
     app.state.editor_port = editor_port
+    app.state.pool = None
+    app.state.close_pool = lambda: close_pool(app)
     app.add_middleware(BodySizeLimit, limit=max_body)
 
     @app.exception_handler(RequestValidationError)
@@ -331,6 +351,9 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
 
     @app.exception_handler(StarletteHTTPException)
     async def _on_http(request: Request, exc: StarletteHTTPException):
+        if exc.status_code == 400 and exc.detail == "There was an error parsing the body":
+            # FastAPI's answer to a body that is not UTF-8: invalid JSON like any other
+            return error_response(422, "invalid_input", "body is not valid JSON (it must be UTF-8 text)")
         code = _CODES_BY_STATUS.get(exc.status_code, "http_error")
         msg = exc.detail if isinstance(exc.detail, str) else json.dumps(exc.detail)
         if exc.status_code == 404 and msg == "Not Found":
@@ -346,7 +369,7 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
         return error_response(500, "internal_error", f"internal error: {type(exc).__name__}")
 
     async def run_job(request: Request, job: dict, media_type: str = "application/json") -> Response:
-        pool: PlanPool = request.app.state.pool
+        pool = ensure_pool(request.app)
         loop = asyncio.get_running_loop()
         try:
             out = await loop.run_in_executor(request.app.state.threads, pool.run, job)

@@ -125,6 +125,23 @@ def run_job(job: dict) -> tuple:
         raise ValueError(f"unknown job kind {job['kind']!r}")
     except PlannerError as exc:
         return ("error", exc.to_dict())
+    except ArithmeticError as exc:  # numpy LinAlgError is a ValueError; see below
+        return ("error", _degenerate(exc, job))
+    except ValueError as exc:
+        import numpy as np
+        if isinstance(exc, np.linalg.LinAlgError):
+            # singular or non-finite model matrices: a degenerate robot description or pose
+            # the planner's own checks let through; the input's fault, not the server's
+            return ("error", _degenerate(exc, job))
+        raise
+
+
+def _degenerate(exc: Exception, job: dict) -> dict:
+    custom = isinstance(job.get("request", {}).get("robot"), dict)
+    return {"code": "singular", "field": "robot" if custom else None,
+            "message": f"the robot model is degenerate here ({type(exc).__name__}: {exc}); check that the "
+                       "robot's pivots are distinct, its legs have positive length, masses and inertias "
+                       "are positive, and the corridor avoids singular poses"}
 
 
 def _worker_main(conn) -> None:

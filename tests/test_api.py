@@ -391,3 +391,8 @@ def test_openapi_every_field_described_with_unit_models(client):
     plan_422 = spec["paths"]["/v1/plan"]["post"]["responses"]["422"]["content"]["application/json"]["schema"]
     assert plan_422["$ref"].endswith("/ErrorResponse")
     assert "text/csv" in spec["paths"]["/v1/plan"]["post"]["responses"]["200"]["content"]
+
+
+def test_non_utf8_body_is_invalid_input(client):
+    r = client.post("/v1/plan", content=b"\xff\xfe\x00{", headers={"Content-Type": "application/json"})
+    assert_error(r, 422, "invalid_input", None)
