@@ -49,6 +49,9 @@ from planner.robot import load_robot  # noqa: E402
 from planner.trajectory import corridor_violation  # noqa: E402
 
 TABLE1 = Path("/work/shared/data/table1-corridor.json")
+#: constrained-mode settings tuned for energy (the corridor is kept by constraints, so the
+#: range penalty only shapes the motion; a longer horizon sees further ahead)
+TUNED = {"k_r": 0.1, "N": 30}
 
 
 def casadi_dynamics(robot):
@@ -180,7 +183,7 @@ def solve_optimum(req: dict, K: int, robot, verbose=False) -> dict:
     opti.set_initial(X, np.hstack((cen, vel)).T)
     opti.set_initial(U, 0.0)
     opti.solver("ipopt", {"print_time": False, "ipopt.print_level": 5 if verbose else 0, "ipopt.sb": "yes",
-                          "ipopt.tol": 1e-8, "ipopt.constr_viol_tol": 1e-10, "ipopt.max_iter": 3000,
+                          "ipopt.tol": 1e-8, "ipopt.constr_viol_tol": 1e-10, "ipopt.max_iter": 3000, "ipopt.acceptable_iter": 0,
                           "ipopt.linear_solver": "mumps"})
     t0 = time.perf_counter()
     sol = opti.solve()
@@ -213,18 +216,22 @@ def main(argv=None) -> int:
 
     rows = []
     results = {}
-    for mode in ("paper", "constrained"):
+    S = base["settings"].get("samples_per_segment", base["settings"].get("N", 20))
+    configs = [("paper", {"mode": "paper"}), ("constrained", {"mode": "constrained"}),
+               (f"constr. k_r={TUNED['k_r']:g} N={TUNED['N']}", {"mode": "constrained", **TUNED,
+                                                                "samples_per_segment": S})]
+    for label, extra in configs:
         req = copy.deepcopy(base)
-        req["settings"]["mode"] = mode
+        req["settings"].update(extra)
         req["settings"]["require_settled"] = False
         times = []
         for _ in range(args.repeat):
             t0 = time.perf_counter()
             res = plan(req)
             times.append(time.perf_counter() - t0)
-        results[mode] = res
+        results[label] = res
         mt = res["metrics"]
-        rows.append((mode, statistics.median(times), mt["energy"], mt["max_corridor_violation_m"],
+        rows.append((label, statistics.median(times), mt["energy"], mt["max_corridor_violation_m"],
                      mt["end_error_m"], mt["overshoot_m"], mt["max_force_ratio"], mt["duration_s"]))
     K = results["constrained"]["metrics"]["steps"]
     req = copy.deepcopy(base)
@@ -251,16 +258,16 @@ def main(argv=None) -> int:
     print(f"IPOPT: {opt['status']}, {opt['iterations']} iterations, {K} intervals, {X.size + U.size} variables; "
           f"replaying its forces through the planner's plant: pose differs by {replay:.1e} (m/rad)")
     print()
-    hdr = (f"{'mode':15s} {'compute ms':>11s} {'energy N^2 s':>13s} {'max viol m':>11s} {'end err m':>10s} "
+    hdr = (f"{'mode':22s} {'compute ms':>11s} {'energy N^2 s':>13s} {'max viol m':>11s} {'end err m':>10s} "
            f"{'overshoot m':>11s} {'F/Fmax':>7s} {'duration s':>10s}")
     print(hdr)
     print("-" * len(hdr))
     for r in rows:
-        print(f"{r[0]:15s} {r[1] * 1e3:11.1f} {r[2]:13.2f} {r[3]:11.1e} {r[4]:10.1e} {r[5]:11.1e} {r[6]:7.3f} {r[7]:10.2f}")
-    e_c, e_o = rows[1][2], rows[2][2]
+        print(f"{r[0]:22s} {r[1] * 1e3:11.1f} {r[2]:13.2f} {r[3]:11.1e} {r[4]:10.1e} {r[5]:11.1e} {r[6]:7.3f} {r[7]:10.2f}")
     print()
-    print(f"constrained / IPOPT energy: {e_c / e_o:.3f} (goal <= 1.2); "
-          f"IPOPT / constrained compute time: {rows[2][1] / rows[1][1]:.1f}x (goal >= 50x)")
+    for r in rows[1:3]:
+        print(f"{r[0]}: energy / IPOPT's {r[2] / rows[3][2]:.3f} (goal <= 1.2); "
+              f"IPOPT time / its time {rows[3][1] / r[1]:.1f}x (goal >= 50x)")
     return 0
 
 
