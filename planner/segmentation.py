@@ -658,29 +658,35 @@ def _search(grid: _Grid, free: np.ndarray, sources: np.ndarray, targets: np.ndar
     on = ds[e[:, 0]] + 1 + de[e[:, 1]] == D
     e = e[on]
     layer = ds[e[:, 0]].astype(np.int64)
-    order = np.argsort(layer, kind="stable")
-    e, layer = e[order], layer[order]
-    cuts = np.searchsorted(layer, np.arange(D + 1))
     S = grid.n_states
-    INF = np.iinfo(np.int64).max // 4
+    # every (edge, incoming state) transition, sorted by (layer, target state): each layer's
+    # transitions are one slice, and the transitions into one target state are contiguous
+    u, v, lab = e[:, 0], e[:, 1], e[:, 2]
+    src = (u[:, None] * S + np.arange(S)).ravel()
+    tgt = (v[:, None] * S + grid.trans[:, lab].T).ravel()
+    cst = grid.cost[:, lab].T.ravel()
+    lay_t = np.repeat(layer, S)
+    order = np.lexsort((tgt, lay_t))
+    src, tgt, cst, lay_t = src[order], tgt[order], cst[order], lay_t[order]
+    n = len(tgt)
+    gstart = np.flatnonzero(np.r_[True, (tgt[1:] != tgt[:-1]) | (lay_t[1:] != lay_t[:-1])]) if n else np.empty(0, int)
+    cuts = np.searchsorted(lay_t, np.arange(D + 1))
+    gcuts = np.searchsorted(gstart, cuts)
+    INF = np.int64(1) << 40
     V = np.full(C * S, INF, dtype=np.int64)
     back = np.full(C * S, -1, dtype=np.int64)
     src0 = sources[de[sources] == D]
     V[src0 * S + grid.init_state] = 0
-    for L in range(D):
-        u, v, lab = e[cuts[L]:cuts[L + 1]].T
-        vals = V[u[:, None] * S + np.arange(S)] + grid.cost[:, lab].T  # (E, S)
-        tgt = v[:, None] * S + grid.trans[:, lab].T
-        srcs = u[:, None] * S + np.arange(S)
-        ok = vals < INF // 2
-        vals, tgt, srcs = vals[ok], tgt[ok], srcs[ok]
-        o = np.lexsort((vals, tgt))
-        tgt_s = tgt[o]
-        first = np.ones(len(o), dtype=bool)
-        first[1:] = tgt_s[1:] != tgt_s[:-1]
-        sel = o[first]
-        V[tgt[sel]] = vals[sel]
-        back[tgt[sel]] = srcs[sel]
+    for L in range(D):  # one layer of the shortest-path DAG at a time, vectorised within
+        a, b = cuts[L], cuts[L + 1]
+        K = np.int64(b - a)
+        key = (V[src[a:b]] + cst[a:b]) * K + np.arange(K)  # value, then position (ties: first)
+        best = np.minimum.reduceat(key, gstart[gcuts[L]:gcuts[L + 1]] - a)
+        val, idx = np.divmod(best, K)
+        ok = val < INF
+        t = tgt[gstart[gcuts[L]:gcuts[L + 1]]][ok]
+        V[t] = val[ok]
+        back[t] = src[a + idx[ok]]
     tv = V.reshape(C, S)[targets]
     k = np.argmin(tv)
     turns = int(tv.flat[k])

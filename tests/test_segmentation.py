@@ -101,8 +101,10 @@ def independent_turns(shape: str, polygons, path) -> int:
         return int(sum(np.any(d[i] != d[i - 1]) for i in range(1, len(d))))
     ori = []
     for a, b in zip(path[:-1], path[1:]):
-        e = shapely.intersection(shapely.Polygon(polygons[a]), shapely.Polygon(polygons[b]))
-        (x0, y0), (x1, y1) = e.coords[0], e.coords[-1]
+        A, B = np.asarray(polygons[a]), np.asarray(polygons[b])
+        shared = [p for p in A if np.min(np.linalg.norm(B - p, axis=1)) < 1e-9]
+        assert len(shared) == 2, (A, B)
+        (x0, y0), (x1, y1) = shared
         ori.append(round(math.degrees(math.atan2(y1 - y0, x1 - x0))) % 180)
     return sum(1 for i in range(2, len(ori)) if ori[i] != ori[i - 2])
 
@@ -384,8 +386,10 @@ def reference_grid(lay: dict):
     return cells, free, adj
 
 
-def reference_shortest(lay: dict):
-    """Fewest cells from a free cell holding the start to one holding the end, or None."""
+def reference_shortest(lay: dict, with_turns: bool = False):
+    """Fewest cells from a free cell holding the start to one holding the end, or None; with
+    ``with_turns`` also the fewest turns over all shortest paths (brute force; None when
+    the path is longer than 16 cells or there are more than 2000 shortest paths)."""
     cells, free, adj = reference_grid(lay)
 
     def holding(p):
@@ -395,17 +399,47 @@ def reference_shortest(lay: dict):
     src, dst = holding(lay["start"]), set(holding(lay["end"]))
     if not src or not dst:
         return "endpoint"
-    dist = {k: 1 for k in src}
-    q = deque(src)
-    while q:
-        u = q.popleft()
-        if u in dst:
-            return dist[u]
+
+    def bfs(seeds):
+        dist = {k: 1 for k in seeds}
+        q = deque(seeds)
+        while q:
+            u = q.popleft()
+            for v in adj[u]:
+                if free[v] and v not in dist:
+                    dist[v] = dist[u] + 1
+                    q.append(v)
+        return dist
+
+    ds = bfs(src)
+    reach = [ds[k] for k in dst if k in ds]
+    if not reach:
+        return None
+    n = min(reach)
+    if not with_turns or n > 16:
+        return n if not with_turns else (n, None)
+    dt = bfs(list(dst))
+    polys = [np.array(c) for c in cells]
+    best, count = [None], [0]
+
+    def walk(path):
+        if count[0] > 2000:
+            return
+        u = path[-1]
+        if len(path) == n:
+            if u in dst:
+                count[0] += 1
+                t = independent_turns(lay["cell"]["shape"], polys, path)
+                best[0] = t if best[0] is None else min(best[0], t)
+            return
         for v in adj[u]:
-            if free[v] and v not in dist:
-                dist[v] = dist[u] + 1
-                q.append(v)
-    return None
+            if free[v] and ds.get(v) == len(path) + 1 and dt.get(v) == n - len(path):
+                walk(path + [v])
+
+    for s0 in src:
+        if dt.get(s0) == n:
+            walk([s0])
+    return n, (best[0] if count[0] <= 2000 else None)
 
 
 coord = st.integers(-14, 14).map(lambda k: k * 0.004)  # on a 4 mm lattice: touching cases happen
@@ -445,7 +479,8 @@ def _endpoint_clear(lay):
 def test_random_layouts_corridor_free_connected_and_shortest(shape, data):
     lay = data.draw(random_layout(shape))
     assume(_endpoint_clear(lay))
-    ref = reference_shortest(lay)
+    ref = reference_shortest(lay, with_turns=True)
+    ref, ref_turns = ref if isinstance(ref, tuple) else (ref, None)
     try:
         seg = segment(lay, ROBOT)
     except PlannerError as e:
@@ -456,8 +491,10 @@ def test_random_layouts_corridor_free_connected_and_shortest(shape, data):
         return
     check_corridor(seg, lay)
     assert seg.counts["unreachable"] == 0  # the layout is well inside the robot's reach
-    assert len(seg.path) == ref
+    assert len(seg.path) == ref  # fewest cells
     assert seg.turns == independent_turns(shape, seg.polygons, seg.path)
+    if ref_turns is not None:
+        assert seg.turns == ref_turns  # fewest turns among the shortest paths (brute force)
 
 
 @st.composite
