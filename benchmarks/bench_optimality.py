@@ -12,7 +12,8 @@ with CasADi + IPOPT by direct multiple shooting:
 * the same pose sets per sample as the constrained mode (the time-indexed ranges, shrunk by
   the same 1 um margin, the end point's micrometre box, polygon half-planes), the same
   ``|u| <= force_max``, leg speeds ``|J_l(y) y_dot| <= speed_max`` (exact, not linearised);
-* start at rest at the start point, end at rest at the end point (equality);
+* start at rest at the start point (equality), end at rest (velocity zero) with the pose in
+  the constrained mode's stop box at the end point (a few micrometres inside the last cell);
 * minimise the drive energy ``sum u^2 Ts`` (the metric ``energy`` the planner reports),
   plus ``1e-9 sum |X_{k+1} - X_k|^2`` as a tiny regulariser.
 
@@ -140,9 +141,10 @@ def solve_optimum(req: dict, K: int, robot, verbose=False) -> dict:
     U = opti.variable(m, K)
     opti.subject_to(X[:, 1:] == F.map(K)(X[:, :-1], U))
     start = np.concatenate((seq.start, np.zeros(3)))
-    end = np.concatenate((seq.end, np.zeros(3)))
     opti.subject_to(X[:, 0] == start)
-    opti.subject_to(X[:, K] == end)
+    # at rest at the end: velocity zero, and the pose in the same end box as the constrained
+    # mode (the end point's micrometre box inside the last cell; the sample set of K below)
+    opti.subject_to(X[3:, K] == 0)
     fmax = robot.force_max.reshape(-1, 1)
     opti.subject_to(opti.bounded(-fmax, U, fmax))
     idx = np.minimum(np.arange(K), seq.K - 1)  # sample j = 1..K -> sequence index j-1
