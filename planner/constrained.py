@@ -74,7 +74,7 @@ SLACK_RHO1 = 1e6
 ROW_UNIT_M = 1e-3
 
 #: re-solve when the first move moved more than this fraction of force_max from its guess
-REFINE_TOL = 1e-4
+REFINE_TOL = 1e-3
 REFINE_MAX = 3
 
 #: move blocking: the first moves are free, later ones are held over 2 and then 4 samples
@@ -167,6 +167,7 @@ class PoseSets:
                     self.approach = (d, float(d @ segments[-1].centre[:2]))
                     self.approach_from = max((n - 2) * S - 1, 0)
         self.lo, self.hi = lo, hi
+        self.has_hp = np.array([h is not None for h in self.hp], bool)
 
 
 class ConstrainedController:
@@ -242,7 +243,9 @@ class ConstrainedController:
         blocks = np.zeros((N + 1, 6, m))
         blocks[:N] = P[:N] @ (Bd * self.umax)
         Gx = blocks[self._lag].transpose(0, 2, 1, 3).reshape(6 * N, N, m)
-        Gx = np.add.reduceat(Gx, self._starts, axis=1).reshape(6 * N, self.nz)  # moves held per block
+        if len(self.blocks) < N:
+            Gx = np.add.reduceat(Gx, self._starts, axis=1)  # moves held per block
+        Gx = Gx.reshape(6 * N, self.nz)
         nzv = self.nz
         lo, hi, qa, qb, qu = seq.window(k, N)
         idx = np.minimum(np.arange(k, k + N), seq.K - 1)
@@ -268,7 +271,7 @@ class ConstrainedController:
             nrow += r
 
         plo, phi = sets.lo[idx], sets.hi[idx]
-        has_hp = np.array([sets.hp[q] is not None for q in idx])
+        has_hp = sets.has_hp[idx]
         jj = self._con  # samples that carry constraints (all free moves, then block ends)
         nc = len(jj)
         for ax in range(3):
