@@ -39,10 +39,11 @@ violation is at most :data:`CONTAIN_TOL_M`.
 
 Infeasibility. If the QP has no solution (e.g. limits too tight for the requested time),
 the step is solved again with the corridor, stroke and speed rows softened by three slack
-variables (one per kind, in m, m and m/s) with a large quadratic + linear penalty; forces
-stay hard. Every such step is counted (``infeasible_steps``) and its slack reported
-(``constraint_slack_max_m``); :func:`finalize` then marks the plan not contained and, when
-``settings.require_settled`` is true, raises ``PlannerError("infeasible")``.
+variables (corridor m, stroke m, leg speed m/s) with a large quadratic + linear penalty;
+forces stay hard. With ``settings.require_settled`` (default) the plan stops there with
+``PlannerError("infeasible")`` (time and slack in the message); otherwise every such step is
+counted (``infeasible_steps``), its slack reported (``constraint_slack_max_m``,
+``speed_slack_max_m_s``) and :func:`finalize` marks the plan not contained.
 """
 
 from __future__ import annotations
@@ -202,7 +203,7 @@ class ConstrainedController:
         self._y_nom = None  # nominal poses (N, 3) for the leg linearisation
         self.stats = {"steps": 0, "iterations": [], "slack": [], "solve_s": 0.0, "infeasible": 0,
                       "pred_violation": 0.0, "fail": 0, "refines": 0,
-                      "mismatch_m": 0.0, "mismatch_rad": 0.0}
+                      "mismatch_m": 0.0, "mismatch_rad": 0.0, "speed_slack": 0.0}
         self._x1_pred = None
         self.last_qp = None  # the last QP, for benchmarks
         self.correct = True  # one-step nonlinear correction (benchmarks switch it off to compare)
@@ -417,8 +418,18 @@ class ConstrainedController:
                 self.stats["fail"] += 1
                 zs = np.zeros(qp["n_bounds"] + 3)
             z = zs[:qp["n_bounds"]]
-            slack = float(np.max(zs[qp["n_bounds"]:])) * ROW_UNIT_M
+            sl = zs[qp["n_bounds"]:] * ROW_UNIT_M  # corridor [m], stroke [m], leg speed [m/s]
+            slack = float(max(sl[0], sl[1]))
+            self.stats["speed_slack"] = max(self.stats["speed_slack"], float(sl[2]))
             self.stats["infeasible"] += 1
+            if self.st.require_settled:  # strict: stop at the first step that cannot keep the corridor
+                raise PlannerError(
+                    "infeasible",
+                    f"at t = {k * self.st.Ts:.3f} s the robot cannot keep the corridor within its drive "
+                    f"limits (the corridor needs {slack * 1e3:.4f} mm of slack, the leg speeds "
+                    f"{sl[2] * 1e3:.4f} mm/s); give it more time "
+                    "(samples_per_segment, speed_m_s, total_time_s), widen the corridor, or set "
+                    "require_settled to false to get the plan with its violations reported", "settings")
         else:
             # how well the solver met the rows it was given (m, m/s, rad)
             nh = qp["n_hard"]
@@ -448,6 +459,7 @@ class ConstrainedController:
             "qp_refinements": int(s["refines"]),
             "infeasible_steps": int(s["infeasible"]),
             "constraint_slack_max_m": float(max(s["slack"], default=0.0)),
+            "speed_slack_max_m_s": s["speed_slack"],
             "predicted_violation_max_m": s["pred_violation"],
             "model_mismatch_max_m": s["mismatch_m"],
             "model_mismatch_max_rad": s["mismatch_rad"],
