@@ -257,11 +257,32 @@ def test_concurrent_plans_do_not_mix(client, store):
     assert len(ids) == len(shifts)
 
 
+def long_corridor() -> dict:
+    """Table I's cells back and forth: 100 segments x 2000 samples = 200 000 steps, the
+    largest request the planner accepts (minutes of compute today, seconds if 50x faster)."""
+    mid = TABLE1["segments"][1:-1]
+    body = (mid + mid[::-1]) * 5
+    return {"segments": [TABLE1["segments"][0], *body[:98], TABLE1["segments"][-1]],
+            "settings": {"samples_per_segment": 2000}}
+
+
+def test_pool_time_limit_replaces_worker():
+    from app.workers import JobTimeout, PlanPool
+    pool = PlanPool(workers=1, timeout_s=0.5)
+    try:
+        with pytest.raises(JobTimeout):
+            pool.run({"kind": "sleep", "seconds": 60})
+        assert pool.replaced == 1
+        assert pool.run({"kind": "sleep", "seconds": 0}) == ("ok", b"{}", {})
+    finally:
+        pool.close()
+
+
 def test_compute_limit_stops_runaway_plan(store):
     """A plan longer than the limit answers 422 `timeout` promptly; the killed worker is
     replaced and the next plan succeeds; /health answered meanwhile."""
     app = create_app(store, workers=1, timeout_s=1.0)
-    long = {**TABLE1, "settings": {"samples_per_segment": 2000}}  # 24000 steps
+    long = long_corridor()
     with TestClient(app) as c:
         done = {}
 
@@ -396,3 +417,16 @@ def test_openapi_every_field_described_with_unit_models(client):
 def test_non_utf8_body_is_invalid_input(client):
     r = client.post("/v1/plan", content=b"\xff\xfe\x00{", headers={"Content-Type": "application/json"})
     assert_error(r, 422, "invalid_input", None)
+
+
+def test_degenerate_robot_is_422_singular_not_500(client):
+    """Found by the schemathesis run: a custom robot whose pivots all coincide (zero-length
+    legs) made the planner's linear algebra fail; the answer is a 422 naming the robot."""
+    leg = {"cylinder": {"com": 0.0, "inertia": 0.0, "mass": 0.0}, "rod": {"com": 0.0, "inertia": 0.0, "mass": 0.0},
+           "force_max": 5e-324, "length_max": 1.0, "length_min": 5e-324, "speed_max": 5e-324}
+    robot = {"base_pivots": [[0.0, 0.0]] * 3, "platform_pivots": [[0.0, 0.0]] * 3, "legs": leg,
+             "platform": {"inertia": 5e-324, "mass": 5e-324}}
+    r = client.post("/v1/plan", json={"robot": robot, "segments": [P0, P0]})
+    assert r.status_code == 422, r.text
+    assert r.json()["error"]["code"] in ("singular", "invalid_input")
+    assert r.json()["error"]["field"] is not None and r.json()["error"]["field"].startswith("robot")
