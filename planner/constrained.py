@@ -12,10 +12,13 @@ active-set solver; chosen by ``benchmarks/bench_qp.py`` over OSQP, ProxSuite and
   convex ``polygon`` (triangles from the segmentation) the polygon's half-planes replace the
   x/y box (mapped by the same per-axis affine taper as the box);
 * **drive forces**: ``|u_i| <= force_max_i`` (simple bounds, always hard: they are physical);
-* **leg strokes**: ``length_min <= l(y_j) <= length_max``, linearised about a nominal pose
-  (the previous step's predicted pose, shifted): ``l(y) ~ l(y0) + J_l(y0) (y - y0)``;
-* **leg speeds**: ``|J_l(y0_j) y_dot_j| <= speed_max`` (exact in the velocity, the Jacobian
-  taken at the nominal pose);
+* **leg speeds**: ``|J_l(y0_j) y_dot_j| <= speed_max (1 - SPEED_MARGIN)``, exact in the
+  velocity, the Jacobian taken at a nominal pose: the previous step's predicted pose (shifted)
+  and, for the first sample, the plant's own next pose under the guessed move;
+* **leg strokes**: ``length_min <= l(y0_j) + J_l(y0_j) (y_j - y0_j) <= length_max``
+  (linearised the same way). With the corridor hard these rows are implied (every pose of
+  every segment is within stroke: ``check_segments``, exact for boxes), so they enter only
+  the slack problem, where the corridor is soft; tests check the actual leg lengths;
 * **no overshoot**: from the last segment before the end point on, the predicted position
   never passes the end point along the approach direction (half-plane).
 
@@ -31,9 +34,15 @@ is constrained to the box ``end +- END_TOL_M`` intersected with the neighbouring
 by the margin: the robot stops within a few micrometres of the end point, inside the cell.
 
 Margins. Constraints hold for the linear prediction; the plant is the nonlinear model. The
-model is exact at the current state and re-linearised every sample, so the one-sample
-mismatch is tiny (measured by ``benchmarks/bench_qp.py``: below 1e-9 m on Table I). A
-margin of 1 micrometre therefore keeps the actual samples inside. Metrics are always
+model is exact at the current state and re-linearised every sample, but over one sample it
+is frozen: the plant lands up to ~5e-8 m and ~1e-6 rad from the prediction on Table I (more
+at higher speed). So the first predicted state is corrected by ``d = Phi(x, u0) - Ad x -
+Bd u0`` (:meth:`ConstrainedController.first_step_offset`: an RK4 step of the plant under the
+guessed move ``u0``), and re-solved with ``u0`` = the new move while it moves by more than
+:data:`REFINE_TOL` of ``force_max``. The remaining one-step mismatch (metric
+``model_mismatch_max_m``, printed by ``benchmarks/bench_qp.py``) is below 1e-9 m and 1e-7 rad
+on Table I, far inside the 1 micrometre margin, which therefore keeps the actual samples
+inside. Metrics are always
 computed on the actual (nonlinear) trajectory; ``contained`` is true only if its corridor
 violation is at most :data:`CONTAIN_TOL_M`.
 
