@@ -71,6 +71,8 @@ MARGIN_M = 1e-6
 MARGIN_RAD = 1e-6
 #: half-size of the box about a point range (end point) in x/y [m]
 END_TOL_M = 3e-6
+#: half-size of the angle box about a point angle range at the end [rad]
+END_TOL_RAD = 3e-6
 #: relative margin on the leg speed limit [-]
 SPEED_MARGIN = 1e-5
 #: a plan is "contained" when its actual corridor violation is at most this [m]
@@ -160,6 +162,17 @@ class PoseSets:
                             if np.all(blo - END_TOL_M <= p) and np.all(p <= bhi + END_TOL_M):
                                 lo[j, :2] = np.maximum(p - END_TOL_M, blo)
                                 hi[j, :2] = np.minimum(p + END_TOL_M, bhi)
+                                # a point angle too: an equality on psi at every sample
+                                # cannot damp a residual rotation (with one constant move per
+                                # sample the rate only flips sign), so give it the same kind
+                                # of box inside the cell's angle range where there is room
+                                q = seq.lower[j, 2]
+                                plo = segments[h].lower[2] + MARGIN_RAD
+                                phi_ = segments[h].upper[2] - MARGIN_RAD
+                                if w[j, 2] <= 2 * MARGIN_RAD and phi_ > plo and \
+                                        plo - END_TOL_RAD <= q <= phi_ + END_TOL_RAD:
+                                    lo[j, 2] = max(q - END_TOL_RAD, plo)
+                                    hi[j, 2] = min(q + END_TOL_RAD, phi_)
                                 break
                 poly = getattr(seg, "polygon", None)
                 if poly is not None and not seg.is_point:

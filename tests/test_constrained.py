@@ -237,3 +237,24 @@ def test_predictions_match_plant():
 
     res = plan(constrained(table1()))
     assert res["metrics"]["model_mismatch_max_m"] < 0.01 * MARGIN_M
+
+
+def test_layout_with_end_angle_settles_in_constrained_mode():
+    """Triangle cells around a round obstacle, the platform turning to 0.1 rad at the end:
+    the robot stops at the end pose (an equality on psi at every end sample would leave a
+    residual rotation flipping sign forever) and every sample keeps the angle range."""
+    pytest.importorskip("planner.segmentation")
+    req = {"robot": "moving-slide",
+           "layout": {"bounds": {"lower": [-0.1, -0.05], "upper": [0.1, 0.08]},
+                      "obstacles": [{"type": "circle", "center": [0.0, 0.0], "radius": 0.02}],
+                      "cell": {"shape": "triangle", "size": 0.015},
+                      "start": [-0.08, 0.0, 0.0], "end": [0.07, 0.0, 0.1], "psi_range": [-0.05, 0.15]},
+           "settings": {"mode": "constrained"}}
+    res = plan(req)
+    mt = res["metrics"]
+    assert mt["settled"] and mt["contained"]
+    P = np.array(res["pose"])
+    assert abs(P[-1, 2] - 0.1) < 1e-4 and np.linalg.norm(P[-1, :2] - [0.07, 0.0]) < 1e-4
+    assert P[:, 2].min() >= -0.05 - 1e-9 and P[:, 2].max() <= 0.15 + 1e-9
+    assert mt["overshoot_m"] < 1e-4
+    check_limits(res, load_robot("moving-slide"))
