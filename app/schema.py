@@ -41,7 +41,7 @@ class SettingsModel(Strict):
     samples_per_segment: int | None = Field(None, ge=1, le=MAX_SAMPLES_PER_SEGMENT,
                                             description="Samples each segment is held (count); default N")
     k_r: Finite = Field(1.0, gt=0, description="Range penalty: Q_ra = Q_rb = k_r I (1/m, 1/rad)")
-    k_u: Finite = Field(2e-4, gt=0, description="Drive-force penalty: Q_u = k_u I (1/N)")
+    k_u: Finite = Field(1e-3, gt=0, description="Drive-force penalty: Q_u = k_u I (1/N)")
     q_ra: list[Finite] | None = Field(None, min_length=3, max_length=3, description="Diagonal of Q_ra (1/m, 1/m, 1/rad)")
     q_rb: list[Finite] | None = Field(None, min_length=3, max_length=3, description="Diagonal of Q_rb (1/m, 1/m, 1/rad)")
     q_u: list[Finite] | None = Field(None, min_length=1, description="Diagonal of Q_u, one per drive (1/N)")

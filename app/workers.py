@@ -149,6 +149,10 @@ def _worker_main(conn) -> None:
     import planner.plan  # noqa: F401
     import planner.trajectory  # noqa: F401
     import app.storage  # noqa: F401
+    try:
+        conn.send("ready")  # the job clock starts only after this
+    except (OSError, ValueError):
+        return
     while True:
         try:
             job = conn.recv()
@@ -171,6 +175,9 @@ def _worker_main(conn) -> None:
 # ---------------------------------------------------------------------------------------
 # the pool (runs in the server process)
 
+STARTUP_TIMEOUT_S = 120.0
+
+
 class _Worker:
     """A worker process started as ``python -m app.workers FD`` (a fresh interpreter that
     never re-imports the server's ``__main__``), talking over a socket pair."""
@@ -184,9 +191,14 @@ class _Worker:
         finally:
             child.close()
         self.conn = Connection(parent.detach())
+        self.ready = False
 
     def call(self, job: dict, timeout: float):
         try:
+            if not self.ready:  # interpreter start and imports do not count against the job
+                if not self.conn.poll(STARTUP_TIMEOUT_S) or self.conn.recv() != "ready":
+                    raise WorkerCrashed("worker did not start")
+                self.ready = True
             self.conn.send(job)
             if not self.conn.poll(timeout):
                 raise JobTimeout

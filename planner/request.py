@@ -37,7 +37,7 @@ class Settings:
     N: int = 20  #: prediction horizon [samples]
     samples_per_segment: int | None = None  #: samples each segment is held [-]; default N
     k_r: float = 1.0  #: range penalty: Q_ra = Q_rb = k_r I [1/m, 1/rad]
-    k_u: float = 2e-4  #: drive-force penalty: Q_u = k_u I [1/N]
+    k_u: float = 1e-3  #: drive-force penalty: Q_u = k_u I [1/N]
     q_ra: list[float] | None = None  #: diagonal of Q_ra (x, y, psi), overrides k_r
     q_rb: list[float] | None = None  #: diagonal of Q_rb (x, y, psi), overrides k_r
     q_u: list[float] | None = None  #: diagonal of Q_u, one per drive, overrides k_u

@@ -138,6 +138,14 @@ class Robot:
         if n < 3:
             raise invalid(f"{field_path}.base_pivots", f"needs at least 3 legs for 3 DOF, got {n}")
         plat = _points(desc.get("platform_pivots"), f"{field_path}.platform_pivots", n)
+        for pts, key in ((base, "base_pivots"), (plat, "platform_pivots")):
+            gap = np.linalg.norm(pts[:, None] - pts[None], axis=-1) + np.eye(n)
+            if gap.min() < 1e-6:
+                i, j = np.unravel_index(np.argmin(gap), gap.shape)
+                raise invalid(f"{field_path}.{key}", f"pivots {i + 1} and {j + 1} coincide; each leg needs its own pivot")
+        extent = np.ptp(plat, axis=0)
+        if np.linalg.matrix_rank(plat - plat.mean(axis=0), tol=1e-6) < 1 or extent.max() < 1e-6:
+            raise invalid(f"{field_path}.platform_pivots", "the platform pivots must span a platform")
         pf = desc.get("platform")
         if not isinstance(pf, dict):
             raise invalid(f"{field_path}.platform", "must be an object {mass, inertia}")
@@ -297,7 +305,10 @@ class Robot:
     def singularity_measure_batch(self, poses: np.ndarray) -> np.ndarray:
         """:meth:`singularity_measure` for a batch of poses (k, 3) -> (k,)."""
         Jn = self.leg_jacobian_batch(poses) * np.array([1.0, 1.0, 1.0 / self.char_length])
-        return np.linalg.svd(Jn, compute_uv=False)[:, -1]
+        finite = np.all(np.isfinite(Jn), axis=(1, 2))  # a zero-length leg has no direction
+        sigma = np.zeros(len(Jn))
+        sigma[finite] = np.linalg.svd(Jn[finite], compute_uv=False)[:, -1]
+        return sigma
 
     def check_pose(self, y, field_path: str = "pose") -> None:
         """Raise a clear :class:`PlannerError` if pose ``y`` is unreachable or singular."""
@@ -320,9 +331,7 @@ class Robot:
     def singularity_measure(self, y) -> float:
         """Smallest singular value of the dimensionless leg Jacobian ``J_l diag(1, 1, 1/L)``
         (0 at a singular pose, ~1 well inside the workspace)."""
-        _, _, _, _, J_l, _ = self.leg_jacobians(np.asarray(y, dtype=float))
-        Jn = J_l * np.array([1.0, 1.0, 1.0 / self.char_length])
-        return float(np.linalg.svd(Jn, compute_uv=False)[-1])
+        return float(self.singularity_measure_batch(np.asarray(y, dtype=float)[None])[0])
 
     # ---- dynamics ----------------------------------------------------------------------
     # Hot path: planar vectors as complex numbers (x + iy), all legs at once, so that one

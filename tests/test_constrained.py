@@ -116,6 +116,7 @@ def test_force_limit_active_and_kept():
     desc["legs"] = dict(desc["legs"], force_max=18.0)
     req = table1()
     req["robot"] = desc
+    req.setdefault("settings", {})["k_u"] = 2e-4  # a stiff tracking weight: paper forces reach ~22 N
     paper = plan(req)
     assert paper["metrics"]["max_drive_force_n"] > 18.0  # the limit would bind
     res = plan(constrained(req))

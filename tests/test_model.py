@@ -155,6 +155,13 @@ def test_singular_layout_is_rejected_with_a_clear_error():
     assert err.value.field == "segments[0]"
 
 
+def test_zero_length_leg_is_singular_not_nan():
+    """A pose that puts a platform pivot on its base pivot: no leg direction, so singular."""
+    robot = load_robot("moving-slide")
+    pose = np.array([robot.base[0, 0] - robot.platform[0, 0], robot.base[0, 1] - robot.platform[0, 1], 0.0])
+    assert robot.singularity_measure(pose) == 0.0
+
+
 def test_unreachable_pose_names_the_leg():
     robot = load_robot("moving-slide")
     with pytest.raises(PlannerError) as err:
@@ -169,6 +176,8 @@ def test_unreachable_pose_names_the_leg():
     (lambda d: d["legs"].update(length_min=0.5), "robot.legs.length_min"),
     (lambda d: d["legs"]["rod"].update(mass=float("nan")), "robot.legs.rod.mass"),
     (lambda d: d.update(platform_pivots=[[0, 0]] * 3), "robot.platform_pivots"),
+    (lambda d: d.update(platform_pivots=[[0.1, 0.1]] * 4), "robot.platform_pivots"),
+    (lambda d: d.update(base_pivots=[[0.4, 0.2], [0.4, 0.2], [0.2, -0.4], [-0.2, 0.4]]), "robot.base_pivots"),
 ])
 def test_bad_robot_description_names_the_field(mutate, field):
     desc = copy.deepcopy(builtin_description("moving-slide"))

@@ -94,8 +94,8 @@ def test_table1_paper_mode_is_soft_and_reports_it(t1):
 
 
 def test_qr_and_structured_plans_agree():
-    a = plan(table1(solver="qr", N=10))
-    b = plan(table1(solver="structured", N=10))
+    a = plan(table1(solver="qr", N=10, k_u=2e-4))
+    b = plan(table1(solver="structured", N=10, k_u=2e-4))
     assert len(a["time"]) == len(b["time"])
     assert np.abs(np.array(a["pose"]) - np.array(b["pose"])).max() < 1e-9
     assert np.abs(np.array(a["drives"]["force"]) - np.array(b["drives"]["force"])).max() < 1e-6
