@@ -52,7 +52,7 @@ from planner.trajectory import corridor_violation  # noqa: E402
 TABLE1 = Path("/work/shared/data/table1-corridor.json")
 #: constrained-mode settings tuned for energy (the corridor is kept by constraints, so the
 #: range penalty only shapes the motion; a longer horizon sees further ahead)
-TUNED = {"k_r": 0.1, "N": 30}
+TUNED = {"k_r": 0.1, "k_u": 2e-4, "N": 30}
 
 
 def casadi_dynamics(robot):
@@ -220,7 +220,7 @@ def main(argv=None) -> int:
     results = {}
     S = base["settings"].get("samples_per_segment", base["settings"].get("N", 20))
     configs = [("paper", {"mode": "paper"}), ("constrained", {"mode": "constrained"}),
-               (f"constr. k_r={TUNED['k_r']:g} N={TUNED['N']}", {"mode": "constrained", **TUNED,
+               (f"constr. k_r={TUNED['k_r']:g} k_u={TUNED['k_u']:g} N={TUNED['N']}", {"mode": "constrained", **TUNED,
                                                                 "samples_per_segment": S})]
     for label, extra in configs:
         req = copy.deepcopy(base)
