@@ -212,14 +212,18 @@ class Robot:
         l = np.sqrt(np.einsum("ij,ij->i", d, d))
         return l, d / l[:, None], r, -(rot @ self.tool)
 
-    def leg_lengths(self, poses: np.ndarray) -> np.ndarray:
-        """Leg lengths [m] for a batch of poses (k, 3) -> (k, n)."""
+    def _leg_vectors_batch(self, poses: np.ndarray):
+        """For a batch of poses (k, 3): pivots relative to the tool point ``(rx, ry)`` and
+        leg vectors base pivot -> platform pivot ``(dx, dy)``, each (k, n) [m]."""
         poses = np.atleast_2d(poses)
         c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
         rx = c[:, None] * self._r0[:, 0] - s[:, None] * self._r0[:, 1]
         ry = s[:, None] * self._r0[:, 0] + c[:, None] * self._r0[:, 1]
-        dx = poses[:, :1] + rx - self.base[:, 0]
-        dy = poses[:, 1:2] + ry - self.base[:, 1]
+        return rx, ry, poses[:, :1] + rx - self.base[:, 0], poses[:, 1:2] + ry - self.base[:, 1]
+
+    def leg_lengths(self, poses: np.ndarray) -> np.ndarray:
+        """Leg lengths [m] for a batch of poses (k, 3) -> (k, n)."""
+        _, _, dx, dy = self._leg_vectors_batch(poses)
         return np.hypot(dx, dy)
 
     def leg_jacobians(self, y: np.ndarray):
@@ -292,12 +296,7 @@ class Robot:
     # ---- singularity and reach ----------------------------------------------------------
     def leg_jacobian_batch(self, poses: np.ndarray) -> np.ndarray:
         """Leg Jacobians ``J_l`` for a batch of poses (k, 3) -> (k, n, 3)."""
-        poses = np.atleast_2d(poses)
-        c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-        rx = c[:, None] * self._r0[:, 0] - s[:, None] * self._r0[:, 1]
-        ry = s[:, None] * self._r0[:, 0] + c[:, None] * self._r0[:, 1]
-        dx = poses[:, :1] + rx - self.base[:, 0]
-        dy = poses[:, 1:2] + ry - self.base[:, 1]
+        rx, ry, dx, dy = self._leg_vectors_batch(poses)
         l = np.hypot(dx, dy)
         ex, ey = dx / l, dy / l
         return np.stack((ex, ey, rx * ey - ry * ex), axis=-1)
