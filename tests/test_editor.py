@@ -200,16 +200,12 @@ def real_segmentation_available() -> bool:
         return False
 
 
-@pytest.fixture(params=["real", "fake"])
-def seg_impl(request, monkeypatch):
-    if request.param == "real":
-        if not real_segmentation_available():
-            pytest.skip("planner.segmentation not available yet")
-        yield None
-    else:
-        fake = FakeSegmentation()
-        monkeypatch.setattr(editor_mod, "_segmentation_module", lambda: fake)
-        yield fake
+@pytest.fixture
+def seg_impl():
+    """The editor runs on the real segmentation (planner.segmentation); the slow fake
+    above is used only where a test needs to control timing."""
+    assert real_segmentation_available()
+    yield None
 
 
 class MemStore:
@@ -302,12 +298,18 @@ def test_errors_become_notifications_and_the_editor_recovers(editor):
     assert editor.last_error is not None and editor.last_error["code"] in ("unreachable", "no_path")
     assert editor.notifications and editor.notifications[-1][1]
     assert editor.last_result is good, "a failed plan keeps the last good trajectory"
-    # wall the start in: no path
+    # a wall across the whole workspace between start and end: no path
     editor.move_handle("end", 0.06, 0.04)
-    editor.edit(lambda r: r["layout"]["obstacles"].append({"type": "rectangle", "lower": [-0.16, -0.16],
-                                                            "upper": [-0.04, 0.16]}))
+    editor.edit(lambda r: r["layout"]["obstacles"].append({"type": "rectangle", "lower": [-0.04, -0.16],
+                                                            "upper": [-0.03, 0.16]}))
     assert editor.wait_idle(60)
-    assert editor.last_error["code"] in ("no_path", "unreachable")
+    assert editor.last_error["code"] == "no_path"
+    # an obstacle over the start: the error names the start
+    editor.edit(lambda r: r["layout"]["obstacles"].__setitem__(-1, {"type": "rectangle", "lower": [-0.1, -0.02],
+                                                                     "upper": [-0.06, 0.02]}))
+    assert editor.wait_idle(60)
+    assert editor.last_error["code"] == "invalid_input" and editor.last_error["field"] == "layout.start"
+    assert "obstacle" in editor.notifications[-1][1]
     # bad input names the field
     editor.edit(lambda r: r["settings"].__setitem__("Ts", -1.0))
     assert editor.wait_idle(60)
@@ -377,7 +379,7 @@ def test_save_load_and_import_round_trip(editor):
 
 
 def test_segments_only_request_is_planned(editor):
-    with open("/work/shared/data/table1-corridor.json") if False else _table1() as f:
+    with _table1() as f:
         data = json.load(f)
     editor._load_request(data, None, "table1")
     assert editor.wait_idle(60)

@@ -1,0 +1,202 @@
+"""Geometry for the browser editor (numpy only, no viser): what the editor draws, as
+arrays it can hand to the scene, and the screen <-> plane maps of a top-down camera.
+
+Everything is in the workspace plane z = 0, SI units (m, rad). Kept apart from
+:mod:`app.editor` so it can be tested without a browser or a server.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+# Colours (RGB 0-255) of the cell states and the drawing layers.
+CELL_COLOURS = {"free": (222, 235, 247), "blocked": (90, 90, 90), "unreachable": (244, 204, 204)}
+#: z of each layer [m] above the plane so that later layers draw on top
+Z = {"cells": 0.0, "grid": 0.0005, "corridor": 0.001, "obstacles": 0.0015, "reach": 0.002,
+     "trajectory": 0.003, "ticks": 0.0035, "robot": 0.004, "handles": 0.006}
+
+
+def polygon_mesh(polygons: list, z: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Fan-triangulate convex polygons ``[[[x, y], ...], ...]`` [m] into one mesh:
+    vertices (V, 3) [m] and faces (F, 3) (counter-clockwise seen from +z)."""
+    verts, faces, base = [], [], 0
+    for poly in polygons:
+        p = np.asarray(poly, dtype=float)
+        if len(p) >= 2 and np.allclose(p[0], p[-1]):
+            p = p[:-1]
+        n = len(p)
+        if n < 3:
+            continue
+        area2 = np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1])
+        if area2 < 0:  # clockwise: flip so the face normal points to the camera (+z)
+            p = p[::-1]
+        verts.append(np.column_stack((p, np.full(n, z))))
+        faces.append(np.column_stack((np.zeros(n - 2, int), np.arange(1, n - 1), np.arange(2, n))) + base)
+        base += n
+    if not verts:
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int32)
+    return np.concatenate(verts), np.concatenate(faces).astype(np.int32)
+
+
+def polygon_edges(polygons: list, z: float = 0.0) -> np.ndarray:
+    """Closed outlines of polygons as line segments (M, 2, 3) [m]."""
+    segs = []
+    for poly in polygons:
+        p = np.asarray(poly, dtype=float)
+        if len(p) < 2:
+            continue
+        q = np.roll(p, -1, axis=0)
+        segs.append(np.stack((np.column_stack((p, np.full(len(p), z))),
+                              np.column_stack((q, np.full(len(q), z)))), axis=1))
+    return np.concatenate(segs) if segs else np.zeros((0, 2, 3))
+
+
+def rectangle(lower, upper) -> list[list[float]]:
+    """Corners of an axis-aligned rectangle, counter-clockwise [m]."""
+    (x0, y0), (x1, y1) = lower, upper
+    return [[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+
+
+def circle(center, radius, n: int = 32) -> list[list[float]]:
+    a = np.linspace(0.0, 2 * math.pi, n, endpoint=False)
+    return np.column_stack((center[0] + radius * np.cos(a), center[1] + radius * np.sin(a))).tolist()
+
+
+def obstacle_polygon(ob: dict) -> list[list[float]]:
+    """An obstacle of the layout (rectangle, polygon or circle) as a polygon [m]."""
+    if ob.get("type") == "rectangle":
+        return rectangle(ob["lower"], ob["upper"])
+    if ob.get("type") == "circle":
+        return circle(ob["center"], ob["radius"])
+    return [list(map(float, p)) for p in ob.get("points", [])]
+
+
+def point_in_convex(point, polygon) -> bool:
+    """Whether ``point`` [m] lies in the convex ``polygon`` (either orientation, edges included)."""
+    p = np.asarray(polygon, dtype=float)
+    q = np.roll(p, -1, axis=0)
+    cross = (q[:, 0] - p[:, 0]) * (point[1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (point[0] - p[:, 0])
+    return bool(np.all(cross >= -1e-12) or np.all(cross <= 1e-12))
+
+
+def shrink(polygon, factor: float) -> list[list[float]]:
+    """Polygon scaled by ``factor`` about its vertex centroid."""
+    p = np.asarray(polygon, dtype=float)
+    c = p.mean(axis=0)
+    return (c + factor * (p - c)).tolist()
+
+
+def reachable_mask(robot, lower, upper, psi: float, n: int = 96):
+    """Sample the rectangle [lower, upper] [m] on an ``n`` x ``n`` grid of points and mark
+    the poses (x, y, psi) the robot reaches: every leg within its stroke and the pose
+    regular (singularity measure >= the robot module's tolerance).
+
+    Returns ``(xs, ys, mask)``: grid coordinates [m] and a boolean (n, n) array indexed [iy, ix].
+    """
+    from planner.robot import SINGULAR_TOL
+
+    xs = np.linspace(lower[0], upper[0], n)
+    ys = np.linspace(lower[1], upper[1], n)
+    X, Y = np.meshgrid(xs, ys)
+    poses = np.column_stack((X.ravel(), Y.ravel(), np.full(X.size, float(psi))))
+    L = robot.leg_lengths(poses)
+    ok = np.all((L >= robot.length_min) & (L <= robot.length_max), axis=1)
+    if ok.any():
+        sing = np.zeros(len(poses))
+        sing[ok] = robot.singularity_measure_batch(poses[ok])
+        ok &= sing >= SINGULAR_TOL
+    return xs, ys, ok.reshape(n, n)
+
+
+def mask_boundary(xs: np.ndarray, ys: np.ndarray, mask: np.ndarray, z: float = 0.0) -> np.ndarray:
+    """Boundary between True and False samples of a grid mask as line segments (M, 2, 3):
+    a staircase through the midpoints between neighbouring samples (resolution = grid step)."""
+    hx = np.diff(xs).mean() / 2 if len(xs) > 1 else 0.0
+    hy = np.diff(ys).mean() / 2 if len(ys) > 1 else 0.0
+    segs = []
+    iy, ix = np.nonzero(mask[:, 1:] != mask[:, :-1])  # change between columns ix and ix+1
+    if len(ix):
+        x = 0.5 * (xs[ix] + xs[ix + 1])
+        segs.append(np.stack((np.column_stack((x, ys[iy] - hy)), np.column_stack((x, ys[iy] + hy))), axis=1))
+    iy, ix = np.nonzero(mask[1:, :] != mask[:-1, :])  # change between rows iy and iy+1
+    if len(ix):
+        y = 0.5 * (ys[iy] + ys[iy + 1])
+        segs.append(np.stack((np.column_stack((xs[ix] - hx, y)), np.column_stack((xs[ix] + hx, y))), axis=1))
+    if not segs:
+        return np.zeros((0, 2, 3))
+    s = np.concatenate(segs)
+    return np.concatenate((s, np.full(s.shape[:2] + (1,), z)), axis=2)
+
+
+def robot_geometry(robot, pose) -> dict:
+    """The robot drawn at ``pose`` = [x, y, psi] (tool point, m, m, rad): base pivots (n, 2),
+    platform pivots in the world frame (n, 2) and leg lengths (n,) [m]."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    rot = np.array([[c, -s], [s, c]])
+    pivots = np.asarray(pose[:2], dtype=float) + robot._r0 @ rot.T
+    return {"base": robot.base.copy(), "pivots": pivots,
+            "lengths": np.linalg.norm(pivots - robot.base, axis=1)}
+
+
+def sample_at(time: np.ndarray, values: np.ndarray, t: float) -> np.ndarray:
+    """Linear interpolation of per-sample ``values`` (K, d) at time ``t`` [s] (clamped)."""
+    t = float(np.clip(t, time[0], time[-1]))
+    return np.array([np.interp(t, time, values[:, j]) for j in range(values.shape[1])])
+
+
+def time_ticks(time: np.ndarray, poses: np.ndarray, every: float = 0.1) -> np.ndarray:
+    """Tool positions (M, 2) [m] at t = 0, every, 2 every, ... [s] along the trajectory."""
+    ts = np.arange(0.0, time[-1] + 1e-9, every)
+    return np.column_stack((np.interp(ts, time, poses[:, 0]), np.interp(ts, time, poses[:, 1])))
+
+
+def view_extent(bounds_lower, bounds_upper, robot) -> tuple[np.ndarray, float]:
+    """Centre (2,) [m] and half-size [m] of a square view that shows the workspace bounds
+    and the robot's base pivots."""
+    pts = np.vstack((np.asarray(bounds_lower, float), np.asarray(bounds_upper, float), robot.base))
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    return 0.5 * (lo + hi), 0.5 * float(np.max(hi - lo)) * 1.08
+
+
+def camera_height(half_size: float, fov_rad: float) -> float:
+    """Height [m] of a camera looking straight down with vertical field of view ``fov_rad``
+    that sees a square of half-size ``half_size`` [m] from edge to edge (vertically)."""
+    return half_size / math.tan(fov_rad / 2)
+
+
+def quat_to_matrix(wxyz) -> np.ndarray:
+    w, x, y, z = (float(v) for v in wxyz)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def screen_to_plane(screen_uv, cam_position, cam_wxyz, fov_rad: float, aspect: float):
+    """Point [x, y] [m] on the plane z = 0 under a screen position ``(u, v)`` in 0..1
+    (OpenCV image coordinates: (0, 0) upper left) of a camera in viser's convention
+    (camera frame: +z forward, +x right, +y down), or None if the ray misses the plane."""
+    t = math.tan(fov_rad / 2)
+    d_cam = np.array([(2 * screen_uv[0] - 1) * t * aspect, (2 * screen_uv[1] - 1) * t, 1.0])
+    d = quat_to_matrix(cam_wxyz) @ d_cam
+    o = np.asarray(cam_position, dtype=float)
+    if abs(d[2]) < 1e-12:
+        return None
+    s = -o[2] / d[2]
+    if s <= 0:
+        return None
+    p = o + s * d
+    return np.array([p[0], p[1]])
+
+
+def plane_to_screen(point, cam_position, cam_wxyz, fov_rad: float, aspect: float):
+    """Inverse of :func:`screen_to_plane`: screen (u, v) in 0..1 of the plane point [x, y, (z)] [m]."""
+    p = np.zeros(3)
+    p[:len(point)] = point
+    R = quat_to_matrix(cam_wxyz)
+    c = R.T @ (p - np.asarray(cam_position, dtype=float))
+    t = math.tan(fov_rad / 2)
+    return np.array([(c[0] / c[2] / (t * aspect) + 1) / 2, (c[1] / c[2] / t + 1) / 2])
