@@ -359,7 +359,7 @@ class Editor:
             self._N.on_update(lambda _: self._on_setting("N", int(self._N.value)))
             self._k_r = gui.add_number("k_r, range penalty (1/m)", 1.0, min=1e-9, max=1e12, step=0.1)
             self._k_r.on_update(lambda _: self._on_setting("k_r", float(self._k_r.value)))
-            self._k_u = gui.add_number("k_u, force penalty (1/N)", 2e-4, min=1e-12, max=1e12, step=1e-5)
+            self._k_u = gui.add_number("k_u, force penalty (1/N)", 1e-3, min=1e-12, max=1e12, step=1e-5)
             self._k_u.on_update(lambda _: self._on_setting("k_u", float(self._k_u.value)))
             if _HAS_SPEED:
                 self._speed = gui.add_number("Speed (m/s)", 0.1, min=0.0, max=10.0, step=0.01)
