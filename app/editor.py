@@ -282,8 +282,9 @@ class Editor:
         cam = self.server.initial_camera
         fov = cam.fov
         h = geo.camera_height(half, fov)
-        pos = (float(centre[0]), float(centre[1]), h)
-        look = (float(centre[0]), float(centre[1]), 0.0)
+        cx = float(centre[0]) + 0.36 * half  # the control panel covers the right of the page
+        pos = (cx, float(centre[1]), h)
+        look = (cx, float(centre[1]), 0.0)
         if client is None:
             cam.position, cam.look_at, cam.up = pos, look, (0.0, 1.0, 0.0)
             cam.near, cam.far = 0.001, 100.0
@@ -822,7 +823,7 @@ class Editor:
                                 colors=(20, 60, 220), thickness=3.0, thickness_units="screen")
         ticks = geo.time_ticks(t, pose, TICK_EVERY_S)
         scene.add_point_cloud("/result/ticks", np.column_stack((ticks, np.full(len(ticks), geo.Z["ticks"]))),
-                              colors=(255, 140, 0), point_size=0.006, point_shape="circle")
+                              colors=(255, 140, 0), point_size=0.0035, point_shape="circle")
         # corridor the planner used (the request's segments when there is no layout)
         if result["corridor"].get("segments") and self.request.get("layout") is None:
             boxes = [geo.rectangle(s["lower"][:2], s["upper"][:2]) for s in result["corridor"]["segments"]]
@@ -888,11 +889,11 @@ class Editor:
         scene.add_line_segments("/robot/legs", np.stack((base, piv), axis=1),
                                 colors=np.repeat(leg_col[:, None, :], 2, axis=1), thickness=5.0, thickness_units="screen")
         v, f = geo.polygon_mesh([g["pivots"]], z)
-        scene.add_mesh_simple("/robot/platform", v, f, color=(120, 120, 220), opacity=0.45, side="double")
+        scene.add_mesh_simple("/robot/platform", v, f, color=(120, 120, 220), opacity=0.15, side="double")
         scene.add_line_segments("/robot/platform_edge", geo.polygon_edges([g["pivots"]], z),
                                 colors=(40, 40, 160), thickness=2.0, thickness_units="screen")
         scene.add_point_cloud("/robot/pivots", np.vstack((base, piv)), colors=(20, 20, 20),
-                              point_size=0.012, point_shape="circle")
+                              point_size=0.008, point_shape="circle")
         scene.add_point_cloud("/robot/tool", np.array([[pose[0], pose[1], z]]), colors=(220, 0, 0),
                               point_size=0.01, point_shape="diamond")
 

@@ -157,7 +157,7 @@ def view_extent(bounds_lower, bounds_upper, robot) -> tuple[np.ndarray, float]:
     and the robot's base pivots."""
     pts = np.vstack((np.asarray(bounds_lower, float), np.asarray(bounds_upper, float), robot.base))
     lo, hi = pts.min(axis=0), pts.max(axis=0)
-    return 0.5 * (lo + hi), 0.5 * float(np.max(hi - lo)) * 1.08
+    return 0.5 * (lo + hi), 0.5 * float(np.max(hi - lo)) * 1.04
 
 
 def camera_height(half_size: float, fov_rad: float) -> float:
