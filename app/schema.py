@@ -46,8 +46,10 @@ class SettingsModel(Strict):
     q_rb: list[Finite] | None = Field(None, min_length=3, max_length=3, description="Diagonal of Q_rb (1/m, 1/m, 1/rad)")
     q_u: list[Finite] | None = Field(None, min_length=1, description="Diagonal of Q_u, one per drive (1/N)")
     taper: bool = Field(True, description="Spread the range out of the start point and narrow it onto the end point")
-    solver: Literal["structured", "qr"] = Field("structured", description="'structured' (banded, O(N)) or "
-                                                "'qr' (the paper's Householder QR); same solution")
+    solver: Literal["riccati", "structured", "qr"] = Field(
+        "riccati", description="How the horizon problem is solved (same solution): 'riccati' (default: "
+        "Riccati recursion, the whole loop compiled), 'structured' (banded KKT, numpy reference) or 'qr' "
+        "(the paper's Householder QR, numpy reference)")
     mode: Literal["paper", "constrained"] = Field("paper", description="'paper': the seed's soft range "
                                                   "criterion; 'constrained': hard corridor and drive limits")
     settle_position_m: Finite = Field(1e-4, gt=0, le=1, description="End-point position tolerance in m")

@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 
+from . import kernels
 from .discretisation import zoh_factorised
 from .errors import PlannerError, invalid
 from .ranges import RangeSequence, range_sequence, reference_sequence
@@ -119,9 +120,61 @@ def make_controller(robot: Robot, seq: RangeSequence, st, segments=None):
     return PaperController(robot, seq, st, segments)
 
 
+#: solvers whose loop runs on the numpy reference implementation of every stage
+REFERENCE_SOLVERS = ("structured", "qr")
+
+
+def _diverged(k: int, Ts: float) -> PlannerError:
+    return PlannerError("diverged", f"the simulated robot diverged at t = {(k + 1) * Ts:.3f} s; "
+                        "try a smaller sample time or larger k_u", "settings")
+
+
+def _singular(t: float, x: np.ndarray) -> PlannerError:
+    return PlannerError("singular", f"the robot model is degenerate at t = {t:.3f} s, pose ({x[0]:.4f} m, "
+                        f"{x[1]:.4f} m, {x[2]:.4f} rad): its reduced mass matrix or the horizon problem is "
+                        "singular; check the robot's masses and inertias and keep the corridor away from "
+                        "singular poses", "robot")
+
+
+def simulate_compiled(robot: Robot, seq: RangeSequence, st) -> dict:
+    """The paper-mode loop of :func:`simulate` with the Riccati solver, run whole in
+    :func:`planner.kernels.simulate_paper` (same steps, same stopping rule)."""
+    N, Ts = st.N, st.Ts
+    max_steps = seq.K + int(math.ceil(st.tail_max_s / Ts))
+    pad = lambda a: np.ascontiguousarray(np.concatenate((a, np.repeat(a[-1:], N, axis=0))))  # noqa: E731
+    settle = np.array([st.settle_position_m, st.settle_angle_rad, st.settle_speed_m_s, st.settle_rate_rad_s])
+    x0 = np.concatenate((seq.start, np.zeros(3)))
+    X, U, ACC, steps, settled, status = kernels.simulate_paper(
+        robot_kernel_array(robot), x0, pad(seq.lower), pad(seq.upper), pad(seq.qa), pad(seq.qb),
+        np.ascontiguousarray(seq.qu, dtype=float), seq.K, N, Ts, st.plant_substeps, max_steps,
+        np.asarray(seq.end, dtype=float), settle)
+    if status == kernels.DIVERGED:
+        raise _diverged(max(steps - 1, 0), Ts)
+    if status == kernels.SINGULAR:
+        raise _singular(steps * Ts, X[steps])
+    return {"X": X, "U": U, "ACC": ACC, "steps": steps, "settled": bool(settled)}
+
+
+def robot_kernel_array(robot: Robot) -> np.ndarray:
+    """The robot packed for :mod:`planner.kernels` (cached on the robot)."""
+    rb = robot.__dict__.get("_kernel_array")
+    if rb is None:
+        rb = kernels.robot_array(robot)
+        object.__setattr__(robot, "_kernel_array", rb)
+    return rb
+
+
 def simulate(robot: Robot, seq: RangeSequence, st, controller=None) -> dict:
-    """Run the receding-horizon loop; returns the sampled states, inputs and leg data."""
+    """Run the receding-horizon loop; returns the sampled states, inputs and leg data.
+
+    With the default Riccati solver the paper's loop runs compiled
+    (:func:`simulate_compiled`) and other controllers (constrained mode) get the compiled
+    model, hold and plant per step; the ``structured`` and ``qr`` solvers run every stage on
+    the numpy reference implementation."""
     controller = controller or PaperController(robot, seq, st)
+    reference = st.solver in REFERENCE_SOLVERS
+    if type(controller) is PaperController and not reference:
+        return simulate_compiled(robot, seq, st)
     N, Ts, m = st.N, st.Ts, robot.n_legs
     max_steps = seq.K + int(math.ceil(st.tail_max_s / Ts))
     X = np.empty((max_steps + 1, 6))
@@ -131,18 +184,26 @@ def simulate(robot: Robot, seq: RangeSequence, st, controller=None) -> dict:
     X[0] = x
     settled_at = None
     k = 0
+    rb = robot_kernel_array(robot)
     for k in range(max_steps):
-        A22, B2 = robot.factorised_blocks(x)  # eq. (8)
-        Ad, Bd = zoh_factorised(A22, B2, Ts)  # eq. (9)
+        if reference:
+            A22, B2 = robot.factorised_blocks(x)  # eq. (8)
+            Ad, Bd = zoh_factorised(A22, B2, Ts)  # eq. (9)
+        else:
+            A22, B2, Ad, Bd, ok = kernels.model_step(rb, x, Ts)  # eqs. (8)-(9), compiled
+            if not ok:
+                raise _singular(k * Ts, x)
         u = controller(k, x, Ad, Bd)
         xdot = np.concatenate((x[3:], A22 @ x[3:] + B2 @ u))  # == f(x) + G(x) u exactly (eq. 8)
         U[k] = u
         ACC[k] = xdot[3:]
-        x = rk4_sample(robot, x, u, Ts, st.plant_substeps, xdot)
+        if reference:
+            x = rk4_sample(robot, x, u, Ts, st.plant_substeps, xdot)
+        else:
+            x = kernels.rk4(rb, x, np.ascontiguousarray(u, dtype=float), Ts, st.plant_substeps, xdot)
         X[k + 1] = x
         if not np.all(np.isfinite(x)) or abs(x[0]) + abs(x[1]) > 1e3:
-            raise PlannerError("diverged", f"the simulated robot diverged at t = {(k + 1) * Ts:.3f} s; "
-                               "try a smaller sample time or larger k_u", "settings")
+            raise _diverged(k, Ts)
         if k + 1 >= seq.K and _settled(x, seq.end, st):
             settled_at = k + 1
             break

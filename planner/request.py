@@ -42,7 +42,7 @@ class Settings:
     q_rb: list[float] | None = None  #: diagonal of Q_rb (x, y, psi), overrides k_r
     q_u: list[float] | None = None  #: diagonal of Q_u, one per drive, overrides k_u
     taper: bool = True  #: spread the range out of a start point and narrow it onto an end point (Fig. 4)
-    solver: str = "structured"  #: "structured" (banded, O(N)) or "qr" (the paper's Householder QR)
+    solver: str = "riccati"  #: "riccati" (compiled loop, O(N)), "structured" (numpy, banded, O(N)) or "qr" (numpy, the paper's Householder QR)
     mode: str = "paper"  #: "paper" (the seed's soft criterion) or "constrained" (hard corridor and drive limits)
     settle_position_m: float = 1e-4  #: end-point position tolerance that counts as settled [m]
     settle_speed_m_s: float = 1e-3  #: speed below which the robot counts as stopped [m/s]
@@ -147,8 +147,8 @@ def parse_settings(raw, path: str = "settings") -> Settings:
             raise invalid(f"{path}.mode", "must be 'paper' or 'constrained'")
         s.mode = raw["mode"]
     if "solver" in raw:
-        if raw["solver"] not in ("structured", "qr"):
-            raise invalid(f"{path}.solver", "must be 'structured' or 'qr'")
+        if raw["solver"] not in ("riccati", "structured", "qr"):
+            raise invalid(f"{path}.solver", "must be 'riccati', 'structured' or 'qr'")
         s.solver = raw["solver"]
     for key in ("settle_position_m", "settle_speed_m_s", "settle_angle_rad", "settle_rate_rad_s"):
         if key in raw:

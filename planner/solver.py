@@ -142,4 +142,22 @@ def solve_structured(Ad, Bd, C, x0, qa, qb, qu, ra, rb) -> np.ndarray:
     return -rinv * (lam @ Bd)
 
 
-SOLVERS = {"qr": solve_qr, "structured": solve_structured}
+def solve_riccati(Ad, Bd, C, x0, qa, qb, qu, ra, rb) -> np.ndarray:
+    """Same minimiser as :func:`solve_qr`, in ``O(N)``, by the compiled backward Riccati
+    recursion :func:`planner.kernels.riccati` (``C = [I 0]``, ``Ad`` with the block structure
+    of eq. (9), one ``Q_u`` for the horizon: ``qu[0]`` is used). Returns the input sequence, shape (N, m)."""
+    from .kernels import riccati
+
+    N, m = qu.shape
+    if Ad.shape != (6, 6) or C.shape != (3, 6) or np.any(C != np.eye(3, 6)):
+        raise ValueError("solve_riccati needs the 6-state model of eq. (9) and C = [I 0] (the pose)")
+    if np.any(Ad[:, :3] != np.eye(6, 3)):
+        raise ValueError("solve_riccati needs Ad = [[I, *], [0, *]] (the hold of eq. 9)")
+    U = np.empty((N, m))
+    c = np.ascontiguousarray
+    if not riccati(c(Ad), c(Bd), c(x0, dtype=float), c(qa), c(qb), c(qu[0], dtype=float), c(ra), c(rb), U):
+        raise np.linalg.LinAlgError("Riccati recursion: Ru + Bd' P Bd is not positive definite")
+    return U
+
+
+SOLVERS = {"qr": solve_qr, "structured": solve_structured, "riccati": solve_riccati}

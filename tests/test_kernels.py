@@ -1,0 +1,175 @@
+"""The compiled step (planner/kernels.py) equals the numpy reference implementation of every
+stage, and a whole compiled plan equals the reference loop's plan."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from planner import kernels
+from planner.discretisation import zoh, zoh_factorised
+from planner.errors import PlannerError
+from planner.plan import C_POSE, plan, rk4_sample
+from planner.robot import load_robot
+from planner.solver import solve_qr, solve_riccati
+
+ROOT = Path(__file__).resolve().parent.parent
+TABLE1 = json.loads((ROOT / "static" / "examples" / "table1.json").read_text())
+
+
+def robots():
+    ms = load_robot("moving-slide")
+    desc = json.loads((ROOT / "planner" / "data" / "moving-slide.json").read_text())
+    desc["tool_offset"] = [0.012, -0.007]  # exercises the platform-centre terms
+    return [ms, load_robot("tri-slide"), load_robot(desc)]
+
+
+def states(rng, count=20):
+    x = np.zeros((count, 6))
+    x[:, :2] = rng.uniform(-0.03, 0.03, (count, 2))
+    x[:, 2] = rng.uniform(-0.1, 0.1, count)
+    x[:, 3:] = rng.normal(size=(count, 3)) * [0.3, 0.3, 1.0]
+    return x
+
+
+@pytest.mark.parametrize("ri", range(3))
+def test_model_kernels_equal_the_reference_model(ri):
+    robot = robots()[ri]
+    rb = kernels.robot_array(robot)
+    n = robot.n_legs
+    rng = np.random.default_rng(ri)
+    for x in states(rng):
+        u = rng.normal(size=n) * 20
+        A22, B2 = np.empty((3, 3)), np.empty((3, n))
+        assert kernels.factorised_blocks(rb, x, A22, B2)
+        A22r, B2r = robot.factorised_blocks(x)
+        assert np.allclose(A22, A22r, rtol=1e-12, atol=1e-12 * np.abs(A22r).max())
+        assert np.allclose(B2, B2r, rtol=1e-12, atol=1e-12 * np.abs(B2r).max())
+        acc = np.empty(3)
+        assert kernels.acceleration(rb, x, u, acc)
+        ref = robot.acceleration(x[:3], x[3:], u)
+        assert np.allclose(acc, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+        # and the factorisation is exact in the kernel too: A22 v + B2 u == acceleration
+        assert np.allclose(A22 @ x[3:] + B2 @ u, acc, rtol=1e-11, atol=1e-11 * np.abs(acc).max())
+
+
+@pytest.mark.parametrize("Ts", [0.001, 0.01, 0.5, 5.0])  # the last two take the expm branch
+def test_zoh_kernel_equals_the_matrix_exponential(Ts):
+    robot = load_robot("moving-slide")
+    x = np.array([0.01, -0.02, 0.05, 0.4, -0.3, 2.0])
+    A22, B2 = robot.factorised_blocks(x)
+    Ad, Bd = np.empty((6, 6)), np.empty((6, 4))
+    kernels.zoh(A22, B2, Ts, Ad, Bd)
+    A, B = robot.factorised(x)
+    Ae, Be = zoh(A, B, Ts)
+    assert np.allclose(Ad, Ae, rtol=1e-12, atol=1e-13 * np.abs(Ae).max())
+    assert np.allclose(Bd, Be, rtol=1e-12, atol=1e-13 * np.abs(Be).max())
+    if Ts <= 0.01:
+        Af, Bf = zoh_factorised(A22, B2, Ts)
+        assert np.allclose(Ad, Af, rtol=1e-14, atol=1e-16) and np.allclose(Bd, Bf, rtol=1e-14, atol=1e-18)
+    assert np.array_equal(Ad[:, :3], np.eye(6, 3))  # the structure the Riccati kernel relies on
+
+
+@pytest.mark.parametrize("N", [1, 2, 10, 20, 80])
+def test_riccati_equals_the_paper_qr(N):
+    robot = load_robot("moving-slide")
+    x = np.array([0.01, 0.02, 0.05, 0.1, -0.05, 0.2])
+    A, B = robot.factorised(x)
+    Ad, Bd = zoh(A, B, 0.01)
+    Ad[:, :3] = np.eye(6, 3)  # exact structure (expm gives it to rounding)
+    rng = np.random.default_rng(N)
+    qa = np.ones((N, 3)) * rng.uniform(0.5, 2.0, (N, 1))
+    qb = np.ones((N, 3)) * rng.uniform(0.5, 2.0, (N, 1))
+    qu = np.broadcast_to(np.array([2e-3, 3e-3, 1e-3, 5e-3]), (N, 4))
+    ra = rng.normal(size=(N, 3)) * 0.02
+    rb = ra + rng.uniform(0, 0.02, (N, 3))
+    u_qr = solve_qr(Ad, Bd, C_POSE, x, qa, qb, qu, ra, rb)
+    u_ric = solve_riccati(Ad, Bd, C_POSE, x, qa, qb, qu, ra, rb)
+    assert np.abs(u_qr - u_ric).max() <= 1e-9 * max(1.0, np.abs(u_qr).max())
+
+
+def test_riccati_refuses_a_model_without_the_hold_structure():
+    Ad, Bd = np.eye(6) * 0.5, np.ones((6, 4))
+    q = np.ones((3, 3))
+    with pytest.raises(ValueError, match="Ad"):
+        solve_riccati(Ad, Bd, C_POSE, np.zeros(6), q, q, np.ones((3, 4)), q, q)
+
+
+@pytest.mark.parametrize("substeps", [1, 3])
+def test_rk4_kernel_equals_the_reference_plant(substeps):
+    robot = load_robot("moving-slide")
+    rb = kernels.robot_array(robot)
+    rng = np.random.default_rng(substeps)
+    for x in states(rng, 5):
+        u = rng.normal(size=4) * 30
+        f0 = robot.state_derivative(x, u)
+        ref = rk4_sample(robot, x, u, 0.01, substeps, f0)
+        out = kernels.rk4(rb, x, u, 0.01, substeps, f0)
+        assert np.allclose(out, ref, rtol=1e-13, atol=1e-15)
+
+
+def test_cholesky_refuses_a_matrix_that_is_not_positive_definite():
+    M = np.diag([1.0, -1.0, 1.0])
+    assert not kernels._chol3_solve(M, np.ones((3, 1)))
+
+
+def _with(req, **settings):
+    return {**req, "settings": {**req.get("settings", {}), **settings}}
+
+
+@pytest.mark.parametrize("settings", [{}, {"N": 10, "k_u": 2e-4}, {"plant_substeps": 2, "Ts": 0.005, "require_settled": False}])
+def test_compiled_plan_equals_the_reference_loop(settings):
+    a = plan(_with(TABLE1, **settings))
+    b = plan(_with(TABLE1, solver="structured", **settings))
+    assert a["metrics"]["steps"] == b["metrics"]["steps"]
+    assert np.abs(np.array(a["pose"]) - np.array(b["pose"])).max() < 1e-9
+    assert np.abs(np.array(a["velocity"]) - np.array(b["velocity"])).max() < 1e-8
+    fa, fb = np.array(a["drives"]["force"]), np.array(b["drives"]["force"])
+    assert np.abs(fa - fb).max() < 1e-7 * np.abs(fb).max()
+    assert np.abs(np.array(a["acceleration"]) - np.array(b["acceleration"])).max() < 1e-7
+
+
+def test_compiled_plan_of_a_three_leg_robot_equals_the_reference_loop():
+    req = {"robot": "tri-slide", "segments": [
+        {"lower": [-0.04, -0.02, 0.0], "upper": [-0.04, -0.02, 0.0]},
+        {"lower": [-0.04, -0.02, 0.0], "upper": [-0.02, 0.0, 0.0]},
+        {"lower": [0.02, 0.0, 0.0], "upper": [0.02, 0.0, 0.0]},
+    ]}
+    a, b = plan(req), plan(_with(req, solver="structured"))
+    assert a["metrics"]["steps"] == b["metrics"]["steps"]
+    assert np.abs(np.array(a["pose"]) - np.array(b["pose"])).max() < 1e-9
+
+
+def test_compiled_loop_reports_a_degenerate_model_with_the_field(monkeypatch):
+    """A plant whose hold overflows the horizon problem (a strongly negative friction, which
+    a valid description cannot have) stops the compiled loop with a clear error naming
+    the robot, the time and the pose, not NaN output."""
+    import planner.plan as plan_module
+
+    real = plan_module.robot_kernel_array
+
+    def unstable(robot):
+        rb = real(robot).copy()
+        n = robot.n_legs
+        rb[kernels._FRIC * n:(kernels._FRIC + 1) * n] = -2e4  # N s/m
+        return rb
+
+    monkeypatch.setattr(plan_module, "robot_kernel_array", unstable)
+    with pytest.raises(PlannerError) as exc:
+        plan(TABLE1)
+    assert exc.value.code == "singular" and exc.value.field == "robot"
+    assert "t = 0.000 s, pose (-0.0800 m, 0.0000 m, 0.0000 rad)" in str(exc.value)
+
+
+def test_compiled_loop_stops_on_a_runaway_state():
+    robot = load_robot("moving-slide")
+    rb = kernels.robot_array(robot)
+    K, N = 5, 3
+    rng = np.full((K + N, 3), 2000.0)  # ranges 2 km away: the first sample leaves the workspace
+    q = np.ones((K + N, 3))
+    x0 = np.array([1000.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    X, U, ACC, steps, settled, status = kernels.simulate_paper(
+        rb, x0, rng, rng, q, q, np.full(4, 1e-9), K, N, 0.01, 1, 50, rng[0], np.array([1e-4, 1e-4, 1e-3, 1e-3]))
+    assert status == kernels.DIVERGED and not settled
+    assert steps == 1 and len(X) == 2 and abs(X[1, 0]) + abs(X[1, 1]) > 1e3
