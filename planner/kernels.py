@@ -547,3 +547,56 @@ def simulate_paper(rb, x0, lo, hi, qa, qb, qu, K, N, Ts, substeps, max_steps, en
             status = SINGULAR
         ACC[steps] = a
     return X[:steps + 1], U[:steps + 1], ACC[:steps + 1], steps, settled, status
+
+
+@njit(cache=True)
+def smallest_singular_values(J):
+    """Smallest singular value of each ``(r, 3)`` matrix of the batch ``J`` (k, r, 3), by
+    one-sided Jacobi rotations of the columns (accurate to rounding relative to each singular
+    value, like LAPACK's ``gesvd`` used by the reference); 0 for a matrix with a non-finite
+    entry. Same as ``np.linalg.svd(J, compute_uv=False)[:, -1]``."""
+    k, r, c = J.shape
+    out = np.empty(k)
+    A = np.empty((r, c))
+    for b in range(k):
+        finite = True
+        for i in range(r):
+            for j in range(c):
+                A[i, j] = J[b, i, j]
+                if not math.isfinite(A[i, j]):
+                    finite = False
+        if not finite:
+            out[b] = 0.0
+            continue
+        for sweep in range(60):
+            rotated = False
+            for p in range(c - 1):
+                for q in range(p + 1, c):
+                    alpha = 0.0
+                    beta = 0.0
+                    gamma = 0.0
+                    for i in range(r):
+                        alpha += A[i, p] * A[i, p]
+                        beta += A[i, q] * A[i, q]
+                        gamma += A[i, p] * A[i, q]
+                    if abs(gamma) <= 1e-16 * math.sqrt(alpha * beta) or gamma == 0.0:
+                        continue
+                    rotated = True
+                    zeta = (beta - alpha) / (2.0 * gamma)
+                    t = (1.0 if zeta >= 0 else -1.0) / (abs(zeta) + math.sqrt(1.0 + zeta * zeta))
+                    cs = 1.0 / math.sqrt(1.0 + t * t)
+                    sn = cs * t
+                    for i in range(r):
+                        ap, aq = A[i, p], A[i, q]
+                        A[i, p] = cs * ap - sn * aq
+                        A[i, q] = sn * ap + cs * aq
+            if not rotated:
+                break
+        smin = math.inf
+        for j in range(c):
+            nrm = 0.0
+            for i in range(r):
+                nrm += A[i, j] * A[i, j]
+            smin = min(smin, math.sqrt(nrm))
+        out[b] = smin
+    return out

@@ -303,11 +303,12 @@ class Robot:
 
     def singularity_measure_batch(self, poses: np.ndarray) -> np.ndarray:
         """:meth:`singularity_measure` for a batch of poses (k, 3) -> (k,)."""
-        Jn = self.leg_jacobian_batch(poses) * np.array([1.0, 1.0, 1.0 / self.char_length])
-        finite = np.all(np.isfinite(Jn), axis=(1, 2))  # a zero-length leg has no direction
-        sigma = np.zeros(len(Jn))
-        sigma[finite] = np.linalg.svd(Jn[finite], compute_uv=False)[:, -1]
-        return sigma
+        from .kernels import smallest_singular_values
+
+        with np.errstate(invalid="ignore", divide="ignore"):  # a zero-length leg has no direction
+            Jn = self.leg_jacobian_batch(poses) * np.array([1.0, 1.0, 1.0 / self.char_length])
+        # compiled one-sided Jacobi (0 where not finite); equals the SVD's (tests/test_kernels.py)
+        return smallest_singular_values(np.ascontiguousarray(Jn))
 
     def check_pose(self, y, field_path: str = "pose") -> None:
         """Raise a clear :class:`PlannerError` if pose ``y`` is unreachable or singular."""

@@ -173,3 +173,23 @@ def test_compiled_loop_stops_on_a_runaway_state():
         rb, x0, rng, rng, q, q, np.full(4, 1e-9), K, N, 0.01, 1, 50, rng[0], np.array([1e-4, 1e-4, 1e-3, 1e-3]))
     assert status == kernels.DIVERGED and not settled
     assert steps == 1 and len(X) == 2 and abs(X[1, 0]) + abs(X[1, 1]) > 1e3
+
+
+def test_smallest_singular_values_equal_the_svd():
+    rng = np.random.default_rng(7)
+    J = rng.normal(size=(200, 4, 3))
+    J[:40, :, 2] = 0.3 * J[:40, :, 0] + 0.7 * J[:40, :, 1] + rng.normal(size=(40, 4)) * 1e-6  # near singular
+    J[40:45, :, 2] = J[40:45, :, 0]  # singular
+    J[45, 1, 1] = np.nan
+    ok = np.all(np.isfinite(J), axis=(1, 2))
+    ref = np.zeros(len(J))
+    ref[ok] = np.linalg.svd(J[ok], compute_uv=False)[:, -1]
+    got = kernels.smallest_singular_values(J)
+    assert got[45] == 0.0
+    assert np.allclose(got, ref, rtol=1e-10, atol=1e-14)
+    # and the robot's measure uses it: a pose's sigma matches the SVD of its scaled Jacobian
+    robot = load_robot("moving-slide")
+    poses = np.column_stack((rng.uniform(-0.05, 0.05, (50, 2)), rng.uniform(-0.2, 0.2, 50)))
+    Jn = robot.leg_jacobian_batch(poses) * np.array([1.0, 1.0, 1.0 / robot.char_length])
+    assert np.allclose(robot.singularity_measure_batch(poses), np.linalg.svd(Jn, compute_uv=False)[:, -1],
+                       rtol=1e-10, atol=1e-14)
