@@ -297,6 +297,9 @@ def riccati(Ad, Bd, x0, qa, qb, qu, ra, rb_, U):
     is not positive definite."""
     N, m = U.shape
     n, ny = 6, 3  # state (pose, velocity) and pose sizes, fixed so that loops unroll
+    # Products are written with the independent outputs innermost (axpy form), so that the
+    # multiply-adds pipeline instead of waiting on one running sum. Ad = [[I, T1], [0, T0]]
+    # (eq. 9) and P symmetric are used: (P Ad)[:, :3] = P[:, :3], (Bd' P Ad)[:, :3] = (P Bd)[:3]'.
     P = np.zeros((n, n))
     p = np.zeros(n)
     for i in range(ny):
@@ -305,32 +308,45 @@ def riccati(Ad, Bd, x0, qa, qb, qu, ra, rb_, U):
     Ks = np.empty((N, m, n))
     ks = np.empty((N, m))
     PB = np.empty((n, m))
-    PA = np.empty((n, n))
+    PA = np.empty((n, n))  # only columns 3..5 are used
+    Lam = np.empty((m, m))
     L = np.zeros((m, m))
     G = np.empty((m, n + 1))  # [Bd' P Ad, Bd' p], then overwritten by [K, k]
     BtPA = np.empty((m, n))
+    pn = np.empty(n)
     for j in range(N - 1, -1, -1):
+        PB[:, :] = 0.0
+        PA[:, 3:] = 0.0
         for a in range(n):
-            for b in range(m):
-                acc = 0.0
-                for c in range(n):
-                    acc += P[a, c] * Bd[c, b]
-                PB[a, b] = acc
-            for b in range(3):  # Ad = [[I, *], [0, *]] (eq. 9): the first 3 columns of P Ad are P's
-                PA[a, b] = P[a, b]
-            for b in range(3, n):
-                acc = 0.0
-                for c in range(n):
-                    acc += P[a, c] * Ad[c, b]
-                PA[a, b] = acc
-        # Lam = Ru + Bd' P Bd (lower triangle) and its Cholesky factor L, in place
+            for c in range(n):
+                pac = P[a, c]
+                for b in range(m):
+                    PB[a, b] += pac * Bd[c, b]
+                for b in range(3, n):
+                    PA[a, b] += pac * Ad[c, b]
+        Lam[:, :] = 0.0
+        BtPA[:, 3:] = 0.0
+        for c in range(n):
+            for a in range(m):
+                bca = Bd[c, a]
+                for b in range(m):
+                    Lam[a, b] += bca * PB[c, b]
+                for b in range(3, n):
+                    BtPA[a, b] += bca * PA[c, b]
+        for a in range(m):
+            for b in range(3):
+                BtPA[a, b] = PB[b, a]
+            acc = 0.0
+            for c in range(n):
+                acc += Bd[c, a] * p[c]
+            for b in range(n):
+                G[a, b] = BtPA[a, b]
+            G[a, n] = acc
+            Lam[a, a] += qu[a] * qu[a]
+        # Cholesky factor L of Lam = Ru + Bd' P Bd
         for a in range(m):
             for b in range(a + 1):
-                acc = 0.0
-                for c in range(n):
-                    acc += Bd[c, a] * PB[c, b]
-                if a == b:
-                    acc += qu[a] * qu[a]
+                acc = Lam[a, b]
                 for c in range(b):
                     acc -= L[a, c] * L[b, c]
                 if a == b:
@@ -339,63 +355,68 @@ def riccati(Ad, Bd, x0, qa, qb, qu, ra, rb_, U):
                     L[a, a] = math.sqrt(acc)
                 else:
                     L[a, b] = acc / L[b, b]
-            for b in range(n):
-                acc = 0.0
-                for c in range(n):
-                    acc += Bd[c, a] * PA[c, b]
-                BtPA[a, b] = acc
-                G[a, b] = acc
-            acc = 0.0
-            for c in range(n):
-                acc += Bd[c, a] * p[c]
-            G[a, n] = acc
-        # [K, k] = Lam^-1 [Bd' P Ad, Bd' p]
-        for col in range(n + 1):
-            for a in range(m):
-                acc = G[a, col]
-                for c in range(a):
-                    acc -= L[a, c] * G[c, col]
-                G[a, col] = acc / L[a, a]
-            for a in range(m - 1, -1, -1):
-                acc = G[a, col]
-                for c in range(a + 1, m):
-                    acc -= L[c, a] * G[c, col]
-                G[a, col] = acc / L[a, a]
+        # [K, k] = Lam^-1 [Bd' P Ad, Bd' p]: forward then backward substitution, all columns at once
+        for a in range(m):
+            for c in range(a):
+                lac = L[a, c]
+                for col in range(n + 1):
+                    G[a, col] -= lac * G[c, col]
+            inv = 1.0 / L[a, a]
+            for col in range(n + 1):
+                G[a, col] *= inv
+        for a in range(m - 1, -1, -1):
+            for c in range(a + 1, m):
+                lca = L[c, a]
+                for col in range(n + 1):
+                    G[a, col] -= lca * G[c, col]
+            inv = 1.0 / L[a, a]
+            for col in range(n + 1):
+                G[a, col] *= inv
         for a in range(m):
             for b in range(n):
                 Ks[j, a, b] = G[a, b]
             ks[j, a] = G[a, n]
         if j == 0:
             break
-        # P <- H_j + Ad' P Ad - (Bd' P Ad)' K (symmetric: lower triangle, mirrored),
-        # p <- q_j + Ad' p - (Bd' P Ad)' k  (Ad' P Bd = (Bd' P Ad)' as P is symmetric)
-        pn = np.empty(n)
-        for a in range(n):
-            if a < 3:  # column a of Ad is the unit vector e_a
-                acc = p[a]
-            else:
-                acc = 0.0
-                for c in range(n):
-                    acc += Ad[c, a] * p[c]
-            for c in range(m):
-                acc -= BtPA[c, a] * G[c, n]
+        # P <- H_j + Ad' P Ad - (Bd' P Ad)' K,  p <- q_j + Ad' p - (Bd' P Ad)' k
+        # (Ad' P Bd = (Bd' P Ad)' as P is symmetric). Ad' P Ad: [[P11, (P Ad)_12], [., Ad_2' (P Ad)_2]]
+        for a in range(3):
+            pn[a] = p[a]
+            for b in range(3):
+                PA[a, b] = P[a, b]  # reuse PA's first columns as the new P's work space
+        for a in range(3, n):
+            acc = 0.0
+            for c in range(n):
+                acc += Ad[c, a] * p[c]
             pn[a] = acc
-        for a in range(n):
-            for b in range(a + 1):
-                if a < 3:
-                    acc = PA[a, b]
-                else:
-                    acc = 0.0
-                    for c in range(n):
-                        acc += Ad[c, a] * PA[c, b]
-                for c in range(m):
-                    acc -= BtPA[c, a] * G[c, b]
-                P[a, b] = acc
-                P[b, a] = acc
+        for a in range(3):
+            for b in range(3, n):
+                P[a, b] = PA[a, b]
+        for a in range(3, n):
+            for b in range(3, n):
+                P[a, b] = 0.0
+        for c in range(n):
+            for a in range(3, n):
+                aca = Ad[c, a]
+                for b in range(3, n):
+                    P[a, b] += aca * PA[c, b]
+        for a in range(3):
+            for b in range(3):
+                P[a, b] = PA[a, b]
+        for c in range(m):
+            gk = G[c, n]
+            for a in range(n):
+                bta = BtPA[c, a]
+                pn[a] -= bta * gk
+                for b in range(a, n):
+                    P[a, b] -= bta * G[c, b]
+        for a in range(n):  # mirror the upper triangle
+            for b in range(a):
+                P[a, b] = P[b, a]
         for i in range(ny):
             P[i, i] += qa[j - 1, i] ** 2 + qb[j - 1, i] ** 2
             pn[i] += qa[j - 1, i] ** 2 * ra[j - 1, i] + qb[j - 1, i] ** 2 * rb_[j - 1, i]
-        p = pn
+        p[:] = pn
     x = x0.copy()
     xn = np.empty(n)
     for j in range(N):
