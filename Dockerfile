@@ -3,6 +3,7 @@
 #   docker run --rm -p 8000:8000 -p 8080:8080 -v rangeplan-data:/data rangeplan
 # The install steps below are the Makefile's ($(STAMP) recipe, what `make run` runs) with
 # PYTHON=python, so the image runs what CI tests; tests/test_dockerfile.py keeps them identical.
+# The last step compiles the planner's numba kernels into planner/__pycache__ (cached on disk).
 FROM python:3.11-slim
 
 # same environment as the Makefile exports (single-threaded BLAS for small dense matrices)
@@ -25,7 +26,8 @@ USER rangeplan
 
 RUN python -m venv .venv \
     && .venv/bin/python -m pip install --quiet --upgrade pip \
-    && .venv/bin/python -m pip install --quiet -e '.[test]'
+    && .venv/bin/python -m pip install --quiet -e '.[test]' \
+    && .venv/bin/python -m planner.plan
 
 ENV PATH=/app/.venv/bin:$PATH
 VOLUME ["/data"]

@@ -260,3 +260,21 @@ def plan(request, *, robot: Robot | None = None, segments=None) -> dict:
                            f"speed {mt['end_speed_m_s'] * 1e3:.3f} mm/s); lengthen settings.tail_max_s, "
                            "add samples per segment or raise k_r", "settings.tail_max_s")
     return result
+
+
+def warm_up() -> float:
+    """Compile (first run after installing) or load (afterwards, from the on-disk cache) the
+    compiled kernels by planning a short corridor in both modes; returns the seconds taken.
+    Servers call it before taking jobs, ``make`` after installing."""
+    t0 = time.perf_counter()
+    segments = [{"lower": [0.0, 0.0, 0.0], "upper": [0.0, 0.0, 0.0]},
+                {"lower": [0.0, 0.0, 0.0], "upper": [0.01, 0.01, 0.0]},
+                {"lower": [0.01, 0.01, 0.0], "upper": [0.01, 0.01, 0.0]}]
+    for mode in ("paper", "constrained"):
+        plan({"robot": "moving-slide", "segments": segments,
+              "settings": {"mode": mode, "N": 5, "require_settled": False, "tail_max_s": 0.05}})
+    return time.perf_counter() - t0
+
+
+if __name__ == "__main__":
+    print(f"planner kernels ready in {warm_up():.1f} s")
