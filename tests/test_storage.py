@@ -121,3 +121,29 @@ def test_concurrent_writers_lose_nothing(tmp_path):
                 assert records[cid]["name"] == f"t{t}-{i}"
             assert st.get_plan(plans[t][i]) == {"t": t, "i": i}
     assert st.count_plans() == n_threads * per_thread
+
+
+def test_pruning_reads_the_seq_index_and_old_files_get_it(tmp_path):
+    """Pruning finds the oldest plan to keep on the small seq index, not by reading every
+    kept plan's row; a database made before the index existed gets it when opened."""
+    path = tmp_path / "old.sqlite3"
+    con = sqlite3.connect(path)
+    con.executescript("PRAGMA journal_mode=WAL;" + _SCHEMA_WITHOUT_INDEX)
+    for i in range(4):
+        con.execute("INSERT INTO plans (id, created, result) VALUES (?, 'x', ?)", (f"old{i}", json.dumps({"k": i})))
+    con.commit()
+    con.close()
+    st = Store(path, max_plans=3)
+    new = st.save_plan({"k": 4})
+    assert st.count_plans() == 3
+    assert [st.get_plan(i) for i in ("old0", "old1")] == [None, None]
+    assert st.get_plan("old2") == {"k": 2} and st.get_plan(new) == {"k": 4}
+    with st._connect() as con:
+        assert con.execute("SELECT sql FROM sqlite_master WHERE name = 'plans_by_seq'").fetchone()[0].endswith(
+            "ON plans (seq)")
+
+
+_SCHEMA_WITHOUT_INDEX = """
+CREATE TABLE plans (seq INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT NOT NULL UNIQUE, created TEXT NOT NULL,
+                    corridor_id TEXT, request TEXT, result TEXT NOT NULL);
+"""
