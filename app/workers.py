@@ -23,6 +23,8 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import json  # noqa: E402
 import math  # noqa: E402
+from itertools import chain  # noqa: E402
+import orjson  # noqa: E402
 import socket  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
@@ -71,7 +73,7 @@ def _check_finite(obj, path="result"):
             p = _check_finite(v, f"{path}.{k}")
             if p:
                 return p
-    elif isinstance(obj, list):
+    elif isinstance(obj, (list, tuple)):
         for i, v in enumerate(obj):
             p = _check_finite(v, f"{path}[{i}]")
             if p:
@@ -79,9 +81,56 @@ def _check_finite(obj, path="result"):
     return None
 
 
-def _dumps(result: dict) -> str:
+def _all_finite(obj) -> bool:
+    """Quick test that ``obj`` holds no NaN or infinity (the JSON encoder would write them as
+    null): each flat list of numbers, and each list of such rows, is summed in C, and a NaN
+    or infinity makes the sum non-finite. May answer False for finite numbers whose sum
+    overflows; :func:`_check_finite` then decides. ~20x cheaper than walking every float."""
+    if isinstance(obj, float):
+        return math.isfinite(obj)
+    if isinstance(obj, dict):
+        return all(map(_all_finite, obj.values()))
+    if isinstance(obj, (list, tuple)):
+        try:
+            return math.isfinite(sum(obj))
+        except TypeError:  # not a flat list of numbers
+            pass
+        except OverflowError:  # an int too large for a float
+            return all(map(_all_finite, obj))
+        try:  # rows of numbers, e.g. a pose per sample
+            # (a row that is a dict sums its keys, not its values; but a dict with number
+            # keys is not orjson's to encode: _dumps then checks with the stdlib encoder)
+            return math.isfinite(sum(chain.from_iterable(obj)))
+        except (TypeError, OverflowError):
+            return all(map(_all_finite, obj))
+    return True
+
+
+# orjson writes a Table I result (~145 kB, ~8000 floats) in ~0.3 ms against ~4.5 ms for the
+# stdlib encoder; the numbers are the same (shortest round-trip form; only the exponent
+# spelling differs: 1e-7 vs 1e-07). Anything orjson would encode differently from the stdlib
+# (dataclasses, datetimes, subclasses of dict/str/int, non-str keys, huge ints) makes it
+# raise TypeError, and the stdlib encodes that result as before.
+_ORJSON_OPT = (orjson.OPT_PASSTHROUGH_DATACLASS | orjson.OPT_PASSTHROUGH_DATETIME
+               | orjson.OPT_PASSTHROUGH_SUBCLASS)
+
+
+def _float_subclass(obj):
+    if isinstance(obj, float):  # e.g. numpy.float64: the same number as a float
+        return float(obj)
+    raise TypeError
+
+
+def _dumps(result: dict) -> bytes:
+    """``result`` as compact UTF-8 JSON; a NaN or infinity anywhere is a ``diverged``
+    PlannerError naming where it is."""
+    if _all_finite(result):
+        try:
+            return orjson.dumps(result, default=_float_subclass, option=_ORJSON_OPT)
+        except TypeError:
+            pass
     try:
-        return json.dumps(result, allow_nan=False, separators=(",", ":"))
+        return json.dumps(result, allow_nan=False, separators=(",", ":")).encode()
     except ValueError:
         from planner.errors import PlannerError
         raise PlannerError("diverged", f"the planner produced a non-finite number at {_check_finite(result)}; "
@@ -102,13 +151,14 @@ def run_job(job: dict) -> tuple:
             result = plan(job["request"])
             plan_id = new_id() if job.get("store") else None
             result["plan_id"] = plan_id
-            text = _dumps(result)
+            data = _dumps(result)
             if plan_id:
-                _store(job["store"]).save_plan_json(text, job["request"], job.get("corridor_id"), id=plan_id)
+                _store(job["store"]).save_plan_json(data.decode(), job["request"], job.get("corridor_id"),
+                                                    id=plan_id)
             if job.get("format") == "csv":
                 payload = to_csv(result).encode()
             else:
-                payload = text.encode()
+                payload = data
             return ("ok", payload, {"plan_id": plan_id})
         if job["kind"] == "segment":
             from planner.request import parse_request
@@ -118,7 +168,7 @@ def run_job(job: dict) -> tuple:
             req = parse_request(job["request"])
             robot = load_robot(req.robot)
             seg = corridor_from_request(req, robot)
-            return ("ok", _dumps(seg.to_dict()).encode(), {})
+            return ("ok", _dumps(seg.to_dict()), {})
         if job["kind"] == "sleep":  # for tests of the time limit
             time.sleep(float(job["seconds"]))
             return ("ok", b"{}", {})

@@ -430,3 +430,57 @@ def test_degenerate_robot_is_422_singular_not_500(client):
     assert r.status_code == 422, r.text
     assert r.json()["error"]["code"] in ("singular", "invalid_input")
     assert r.json()["error"]["field"] is not None and r.json()["error"]["field"].startswith("robot")
+
+
+# ---------------------------------------------------------------------------------------
+# the workers' result encoding (orjson with a quick finiteness check; the stdlib otherwise)
+
+def _same_json_values(a, b) -> bool:
+    """Equal, float for float bit for bit (so -0.0 != 0.0), and int stays int."""
+    if type(a) is not type(b):
+        return False
+    if isinstance(a, float):
+        return a.hex() == b.hex()
+    if isinstance(a, dict):
+        return list(a) == list(b) and all(_same_json_values(a[k], b[k]) for k in a)
+    if isinstance(a, list):
+        return len(a) == len(b) and all(_same_json_values(x, y) for x, y in zip(a, b))
+    return a == b
+
+
+def test_result_encoding_has_the_stdlib_numbers():
+    from app.workers import _dumps
+    rng = np.random.default_rng(7)
+    rows = (rng.normal(size=(50, 3)) * 10.0 ** rng.integers(-300, 300, size=(50, 3))).tolist()
+    result = {"name": "coin\u00e7on \u2013 \u00b5m", "plan_id": None, "steps": 3, "settled": True,
+              "time": [0.0, 0.01, 0.02, 1e-7, 1e16, 1e22, 5e-324, -0.0, 1.7976931348623157e308],
+              "pose": rows, "pair": (1.5, -2.5), "np": np.float64(0.1) * 3,
+              "huge": [1e308, 1e308], "nested": {"a": [[1, 2.5], [True, None]], "b": []}}
+    out = _dumps(result)
+    assert isinstance(out, bytes)
+    stdlib = json.loads(json.dumps(result, allow_nan=False))
+    assert _same_json_values(json.loads(out), stdlib)
+    # what orjson would write differently (non-string keys) is the stdlib's to encode
+    assert json.loads(_dumps({"a": {1: 2.0}})) == {"a": {"1": 2.0}}
+
+
+@pytest.mark.parametrize("where, put", [
+    ("result.pose[17][1]", lambda r: r["pose"][17].__setitem__(1, float("nan"))),
+    ("result.time[3]", lambda r: r["time"].__setitem__(3, float("inf"))),
+    ("result.metrics.energy", lambda r: r["metrics"].__setitem__("energy", -float("inf"))),
+    ("result.pair[0]", lambda r: r.__setitem__("pair", (float("nan"), 1.0))),
+    ("result.drives.force[0][2]", lambda r: r["drives"]["force"][0].__setitem__(2, float("nan"))),
+])
+def test_non_finite_result_is_diverged_naming_the_number(where, put):
+    from app.workers import _dumps
+    from planner.errors import PlannerError
+    result = {"time": [0.01 * k for k in range(20)], "pose": [[0.1, 0.2, 0.0]] * 20,
+              "metrics": {"energy": 1.0, "steps": 19}, "pair": (1.0, 2.0),
+              "drives": {"force": [[1.0, 2.0, 3.0, 4.0] for _ in range(20)]}}
+    result["pose"] = [list(p) for p in result["pose"]]
+    put(result)
+    with pytest.raises(PlannerError) as exc:
+        _dumps(result)
+    assert exc.value.code == "diverged" and exc.value.field == "settings"
+    assert f"at {where};" in exc.value.message
+
