@@ -484,3 +484,16 @@ def test_non_finite_result_is_diverged_naming_the_number(where, put):
     assert exc.value.code == "diverged" and exc.value.field == "settings"
     assert f"at {where};" in exc.value.message
 
+
+def test_worker_plans_builtin_robot_like_the_planner():
+    """The worker keeps one model per built-in robot: its results are the planner's own,
+    and an unknown robot name is still the planner's error naming the field."""
+    from app.workers import run_job
+    from planner.plan import plan
+    job = {"kind": "plan", "request": TABLE1, "format": "json", "store": None}
+    for _ in range(2):
+        status, payload, meta = run_job(job)
+        assert status == "ok" and meta == {"plan_id": None}
+        assert strip_volatile(json.loads(payload)) == strip_volatile(json.loads(json.dumps(plan(TABLE1))))
+    status, err = run_job({**job, "request": {**TABLE1, "robot": "no-such-robot"}})
+    assert status == "error" and err["code"] == "invalid_input" and err["field"] == "robot"
