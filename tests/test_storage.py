@@ -147,3 +147,22 @@ _SCHEMA_WITHOUT_INDEX = """
 CREATE TABLE plans (seq INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT NOT NULL UNIQUE, created TEXT NOT NULL,
                     corridor_id TEXT, request TEXT, result TEXT NOT NULL);
 """
+
+
+def test_new_file_has_large_pages_existing_file_keeps_its_own(tmp_path):
+    st = Store(tmp_path / "new")
+    with st._connect() as con:
+        assert con.execute("PRAGMA page_size").fetchone()[0] == 16384
+    old = tmp_path / "old.sqlite3"
+    con = sqlite3.connect(old)
+    con.execute("CREATE TABLE t (x)")
+    con.commit()
+    default_page = con.execute("PRAGMA page_size").fetchone()[0]
+    con.close()
+    assert default_page != 16384
+    st = Store(old)
+    rec = st.create_corridor(TABLE1)
+    assert st.get_corridor(rec["id"])["request"] == TABLE1
+    with st._connect() as con:
+        assert con.execute("PRAGMA page_size").fetchone()[0] == default_page
+        assert con.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
