@@ -11,7 +11,7 @@ active-set solver; chosen by ``benchmarks/bench_qp.py`` over OSQP, ProxSuite and
   :data:`MARGIN_RAD` on every side that is wide enough; for segments that carry an exact
   convex ``polygon`` (triangles from the segmentation) the polygon's half-planes replace the
   x/y box (mapped by the same per-axis affine taper as the box);
-* **drive forces**: ``|u_i| <= force_max_i`` (simple bounds, always hard: they are physical);
+* **drive forces**: ``|u_i| <= force_max_i`` (bounds, always hard: they are physical);
 * **leg speeds**: ``|J_l(y0_j) y_dot_j| <= speed_max (1 - SPEED_MARGIN)``, exact in the
   velocity, the Jacobian taken at a nominal pose: the previous step's predicted pose (shifted)
   and, for the first sample, the plant's own next pose under the guessed move;
@@ -35,16 +35,33 @@ by the margin: the robot stops within a few micrometres of the end point, inside
 
 Margins. Constraints hold for the linear prediction; the plant is the nonlinear model. The
 model is exact at the current state and re-linearised every sample, but over one sample it
-is frozen: the plant lands up to ~5e-8 m and ~1e-6 rad from the prediction on Table I (more
+is frozen: the plant lands up to ~2e-8 m and ~4e-7 rad from the prediction on Table I (more
 at higher speed). So the first predicted state is corrected by ``d = Phi(x, u0) - Ad x -
 Bd u0`` (:meth:`ConstrainedController.first_step_offset`: an RK4 step of the plant under the
-guessed move ``u0``), and re-solved with ``u0`` = the new move while it moves by more than
-:data:`REFINE_TOL` of ``force_max``. The remaining one-step mismatch (metric
-``model_mismatch_max_m``, printed by ``benchmarks/bench_qp.py``) is below 1e-9 m and 1e-7 rad
-on Table I, far inside the 1 micrometre margin, which therefore keeps the actual samples
-inside. Metrics are always
-computed on the actual (nonlinear) trajectory; ``contained`` is true only if its corridor
-violation is at most :data:`CONTAIN_TOL_M`.
+guessed move ``u0``, the previous solution's), which leaves the one-step error
+``(dPhi/du - Bd)(u - u0)``. After each solve the plant is stepped under the solution's move
+``u``; while it lands farther than :data:`REFINE_TOL_M` / :data:`REFINE_TOL_RAD` (1e-3 and 1e-2
+of the margins) from the prediction, the offset is recomputed at ``u`` and the QP solved
+again (at most :data:`REFINE_MAX` times; 38 re-solves in 240 steps on Table I). The remaining one-step
+mismatch (metric ``model_mismatch_max_m``, printed by ``benchmarks/bench_qp.py``) is below
+1e-9 m and 1e-8 rad on Table I, far inside the 1 micrometre margin, which therefore keeps the
+actual samples inside. Metrics are always computed on the actual (nonlinear) trajectory;
+``contained`` is true only if its corridor violation is at most :data:`CONTAIN_TOL_M`.
+
+Speed (issue 6: Table I in ~75 ms against IPOPT's ~10 s). The QP of a step is assembled by
+:mod:`planner.constrained_kernels` (compiled; the numpy :meth:`~ConstrainedController.build_numpy`
+is the reference), and two reformulations shrink what DAQP is given without changing the
+minimiser:
+
+* **equalities eliminated**: a point range (psi = 0 along Table I: one equality per sample)
+  is an equality row, which costs DAQP about as much as the rest of the solve together.
+  Where a sample has equalities, its move is parametrised on the null space of their one-step
+  effect, ``z_i = Z_i w_i + K_i (c_i - C_i Y_i)`` (:func:`~planner.constrained_kernels.reduce_setup`);
+  the QP in ``w`` has fewer variables and no equalities, its force bounds become rows;
+* **rows screened**: DAQP gets only the rows within :data:`SCREEN_ROWS` of a bound at the
+  warm start (and forces within :data:`SCREEN_FORCE` of ``force_max``); at its solution every
+  row is checked, and a violated one is added and the QP solved again (1 of 240 steps on
+  Table I). A solution of fewer rows that meets all rows solves the whole QP.
 
 Infeasibility. If the QP has no solution (e.g. limits too tight for the requested time),
 the step is solved again with the corridor, stroke and speed rows softened by three slack
@@ -63,6 +80,7 @@ import time
 import daqp
 import numpy as np
 
+from . import constrained_kernels as ck
 from .errors import PlannerError
 
 #: corridor margin [m]: constraints use each range shrunk by this on every side
@@ -85,8 +103,10 @@ SLACK_RHO1 = 1e6
 #: rows are scaled so that 1 unit = this many metres before the solver sees them
 ROW_UNIT_M = 1e-3
 
-#: re-solve when the first move moved more than this fraction of force_max from its guess
-REFINE_TOL = 1e-3
+#: re-solve while the plant's next pose under the solution's first move lands farther than
+#: this from the QP's prediction of it (position [m], angle [rad]): 1e-3 and 1e-2 of the margins
+REFINE_TOL_M = 1e-9
+REFINE_TOL_RAD = 1e-8
 REFINE_MAX = 3
 
 #: move blocking: the first moves are free, later ones are held over 2 and then 4 samples
@@ -109,6 +129,18 @@ def move_blocks(N: int) -> np.ndarray:
         left -= out[-1]
     return np.array(out, int)
 
+
+#: the solver gets only the rows within this of a bound (row units: mm, mm of stroke, mm/s of
+#: leg speed, by row kind: corridor, stroke, speed) at the warm start's prediction, and the
+#: equalities; rows violated at its solution by more than SCREEN_TOL are added and it re-solves
+SCREEN_ROWS = (1.0, 1.0, 50.0)
+SCREEN_TOL = 1e-9
+#: with the equalities eliminated the force bounds are rows too: given to the solver where
+#: the warm start's force is within this fraction of force_max of the bound
+SCREEN_FORCE = 0.2
+#: eliminate the equality rows (point ranges) through the dynamics instead of giving them to
+#: the solver (compiled path, without move blocking)
+ELIMINATE_EQUALITIES = True
 
 DAQP_SETTINGS = dict(primal_tol=1e-9, dual_tol=1e-12, iter_limit=2000)
 
@@ -191,6 +223,13 @@ class PoseSets:
                     self.approach_from = max((n - 2) * S - 1, 0)
         self.lo, self.hi = lo, hi
         self.has_hp = np.array([h is not None for h in self.hp], bool)
+        # the half-planes flattened for the compiled assembly: those of sequence index s
+        # are hp_A[hp_ptr[s]:hp_ptr[s + 1]]
+        counts = [0 if h is None else len(h[1]) for h in self.hp]
+        self.hp_ptr = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
+        self.hp_A = np.ascontiguousarray(np.vstack([h[0] for h in self.hp if h is not None] or [np.zeros((0, 2))]),
+                                         dtype=float)
+        self.hp_b = np.concatenate([h[1] for h in self.hp if h is not None] or [np.zeros(0)]).astype(float)
 
 
 class ConstrainedController:
@@ -199,6 +238,10 @@ class ConstrainedController:
     Called as ``controller(k, x, Ad, Bd) -> u`` by :func:`planner.plan.simulate`;
     :meth:`report` returns its metrics.
     """
+
+    #: the step's QP assembled and solved by the compiled path (equalities eliminated, rows
+    #: screened); False: by the numpy reference (the QP in ``z`` with every row)
+    compiled = True
 
     def __init__(self, robot, seq, st, segments=None):
         self.robot, self.seq, self.st = robot, seq, st
@@ -224,29 +267,108 @@ class ConstrainedController:
         self._z_prev = None  # previous scaled solution (nb m,)
         self._y_nom = None  # nominal poses (N, 3) for the leg linearisation
         self.stats = {"steps": 0, "iterations": [], "slack": [], "solve_s": 0.0, "infeasible": 0,
-                      "pred_violation": 0.0, "fail": 0, "refines": 0,
+                      "pred_violation": 0.0, "fail": 0, "refines": 0, "screen_resolves": 0,
                       "mismatch_m": 0.0, "mismatch_rad": 0.0, "speed_slack": 0.0}
         self._x1_pred = None
         self.last_qp = None  # the last QP, for benchmarks
         self.correct = True  # one-step nonlinear correction (benchmarks switch it off to compare)
+        from .plan import robot_kernel_array
+        self._rb = robot_kernel_array(robot)
+        self._r0 = np.ascontiguousarray(robot._r0, dtype=float)
+        self._base = np.ascontiguousarray(robot.base, dtype=float)
+        self._lmin = np.ascontiguousarray(robot.length_min, dtype=float)
+        self._lmax = np.ascontiguousarray(robot.length_max, dtype=float)
+        self._vmax = np.ascontiguousarray(robot.speed_max * (1.0 - SPEED_MARGIN), dtype=float)
+        self._screen = np.array(SCREEN_ROWS, float)
+        self._du_leg = np.ascontiguousarray((np.asarray(seq.qu, float) * self.umax) ** 2)  # input weight per drive
+        self._du = (self.blocks[:, None] * self._du_leg).ravel()  # per column of z (block lengths)
+        self._lower = None  # padded range sequence, on first use
+        self._no_poses = np.zeros((0, 3))
+        self._ncol = (m * (self._block_of + 1)).astype(np.int64)  # columns of Gx non-zero in sample i
+        self._con = self._con.astype(np.int64)
+        self._block_of = self._block_of.astype(np.int64)
+        app = self.sets.approach
+        self._app = (app is not None, np.asarray(app[0] if app else np.zeros(2), dtype=float),
+                     float(app[1]) if app else 0.0, int(self.sets.approach_from))
 
     # ---- the QP of one step ---------------------------------------------------------
-    def first_step_offset(self, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, u0=None) -> np.ndarray:
+    def _plant(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The plant's state one sample after ``x`` under the move ``u`` (as the plan loop)."""
+        if self.compiled:
+            return ck.plant_step(self._rb, x, np.ascontiguousarray(u, dtype=float), self.st.Ts,
+                                 self.st.plant_substeps)
+        from .plan import rk4_sample
+        return rk4_sample(self.robot, x, u, self.st.Ts, self.st.plant_substeps)
+
+    def first_step_offset(self, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, u0=None, x1=None) -> np.ndarray:
         """``d = Phi(x, u0) - Ad x - Bd u0``: how far the plant's one-sample map ``Phi`` (the
         nonlinear model integrated as the plan loop does) lands from the linear prediction
         under ``u0``, the first move of the previous solution shifted. Adding ``d`` to the
         first predicted state leaves a one-step error ``(dPhi/du - Bd)(u - u0)`` only,
         second order in small quantities (see the module docstring)."""
-        from .plan import rk4_sample
-
         if u0 is None:
-            u0 = self._shifted_moves()[0] * self.umax if self._z_prev is not None else np.zeros(self.m)
+            if self._z_prev is None:
+                u0 = np.zeros(self.m)
+            else:  # the previous solution's move of sample 1 (as _shifted_moves()[0])
+                b = self._block_of[min(1, self.N - 1)]
+                u0 = self._z_prev[b * self.m:(b + 1) * self.m] * self.umax
         self._u0 = u0
-        x1 = rk4_sample(self.robot, x, u0, self.st.Ts, self.st.plant_substeps)
+        if x1 is None:
+            x1 = self._plant(x, u0)
         self._x1 = x1
-        return x1 - Ad @ x - Bd @ u0
+        self._d = ck.offset(x1, x, u0, Ad, Bd) if self.compiled else x1 - Ad @ x - Bd @ u0
+        return self._d
 
     def build(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, u0=None) -> dict:
+        """The QP of step ``k`` (see :meth:`build_numpy`), assembled by
+        :mod:`planner.constrained_kernels` (or by the numpy reference if not ``compiled``)."""
+        if not self.compiled:
+            return self.build_numpy(k, x, Ad, Bd, u0)
+        seq, sets = self.seq, self.sets
+        x = np.ascontiguousarray(x, dtype=float)
+        if self._lower is None:  # the range sequence padded as RangeSequence.window does
+            pad = lambda a: np.ascontiguousarray(np.concatenate((a, np.repeat(a[-1:], self.N, axis=0))),  # noqa: E731
+                                                 dtype=float)
+            self._lower, self._upper, self._qa, self._qb = (pad(a) for a in (seq.lower, seq.upper, seq.qa, seq.qb))
+        app_on, app_d, app_b, app_from = self._app
+        (W, tgt, col, val, b0l, b0u, kinds, n_hard, rs, rl) = ck.assemble(
+            self._block_of, k, seq.K, self._lower, self._upper, self._qa, self._qb, self._con, sets.lo, sets.hi,
+            sets.has_hp, sets.hp_ptr, sets.hp_A, sets.hp_b, app_on, app_d, app_b, app_from,
+            self._y_nom if self._y_nom is not None else self._no_poses, x, self._r0, self._base, self._vmax,
+            self._lmin, self._lmax, ROW_UNIT_M)
+        qp = {"col": col, "val": val, "b0l": b0l, "b0u": b0u, "kinds": kinds, "n_hard": n_hard,
+              "n_bounds": self.nz, "W": W, "tgt": tgt, "x": x, "Ad": Ad, "Bd": Bd,
+              "row_speed0": rs, "row_stroke0": rl}
+        if ELIMINATE_EQUALITIES and len(self.blocks) == self.N:
+            red = ck.reduce_setup(Ad, Bd, self.umax, W, self._du_leg, col, val, b0l, b0u, n_hard, self.N)
+            if red[0]:
+                qp["red"] = red
+        self.set_free(qp, Ad, Bd, u0)
+        return qp
+
+    def z_problem(self, qp, with_A: bool = True) -> dict:
+        """The step's QP in ``z`` (every row, as :meth:`build_numpy` states it): adds what
+        the compiled path has not formed of ``P, Gx, free, f, bl, bu, H, scale`` and ``A``
+        to ``qp``, and returns ``qp``."""
+        if "Gx" not in qp:
+            P, Gx = np.empty((self.N + 1, 6, 6)), np.empty((6 * self.N, self.nz))
+            ck.prediction(qp["Ad"], qp["Bd"], self.umax, self._block_of, len(self.blocks), P, Gx)
+            qp["P"], qp["Gx"] = P, Gx
+        if "free" not in qp:
+            qp["free"], qp["f1"], qp["bl"], qp["bu"] = ck.free_parts(
+                qp["P"], qp["x"], qp["d"], qp["Gx"], self._ncol, qp["W"], qp["tgt"], qp["col"], qp["val"],
+                qp["b0l"], qp["b0u"])
+        if "H" not in qp:
+            H = np.empty((self.nz, self.nz))
+            qp["scale"] = ck.hessian(qp["Ad"], qp["Bd"], self.umax, qp["W"], self._block_of, self._du, H)
+            qp["H"] = H
+        if "f" not in qp:
+            qp["f"] = qp["f1"] * qp["scale"]
+        if with_A and "A" not in qp:
+            qp["A"] = self.full_matrix(qp)
+        return qp
+
+    def build_numpy(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, u0=None) -> dict:
         """The condensed QP of step ``k`` in the scaled inputs ``z = u / force_max``::
 
             min 0.5 z'Hz + f'z   s.t.  -1 <= z <= 1,  bl <= A z <= bu  (rows with bl == bu: equal)
@@ -335,12 +457,35 @@ class ConstrainedController:
         self.set_free(qp, Ad, Bd, u0)
         return qp
 
-    def set_free(self, qp, Ad, Bd, u0=None) -> None:
-        """The parts of the QP that depend on the free response (state with ``z = 0``)."""
+    def set_free(self, qp, Ad, Bd, u0=None, x1=None) -> None:
+        """The parts of the QP that depend on the free response (state with ``z = 0``);
+        ``x1``: the plant's next state under ``u0`` if known."""
+        if not self.compiled:
+            return self.set_free_numpy(qp, Ad, Bd, u0, x1)
+        x = qp["x"]
+        d = self.first_step_offset(x, Ad, Bd, u0, x1) if self.correct else np.zeros(6)
+        qp["d"] = d
+        if self.correct:
+            # the first sample's leg rows at the plant's own next pose under the guessed move
+            # (see set_free_numpy)
+            ck.first_legs(self._x1, self._r0, self._base, self._lmin, self._lmax, ROW_UNIT_M, qp["row_speed0"],
+                          qp["row_stroke0"], qp["val"], qp["b0l"], qp["b0u"])
+        for key in ("free", "f1", "bl", "bu", "f", "A"):  # what depends on d or the leg rows
+            qp.pop(key, None)
+        if "red" in qp:
+            _, _, off, ecnt, eax, ceq, K, Z, Acl, L, G, _, scale, _, Bu = qp["red"]
+            qp["rzf"], qp["rXf"], qp["rf"], qp["rbl"], qp["rbu"] = ck.reduce_free(
+                x, d, qp["Ad"], Bu, ecnt, eax, ceq, K, Z, Acl, L, G, off, qp["W"], qp["tgt"], self._du_leg, scale,
+                qp["col"], qp["val"], qp["b0l"], qp["b0u"])
+        else:
+            self.z_problem(qp, with_A=False)
+
+    def set_free_numpy(self, qp, Ad, Bd, u0=None, x1=None) -> None:
+        """:meth:`set_free` in numpy (the reference)."""
         N, P, x = self.N, qp["P"], qp["x"]
         free = P[1:] @ x
         if self.correct:
-            free += P[:N] @ self.first_step_offset(x, Ad, Bd, u0)
+            free += P[:N] @ self.first_step_offset(x, Ad, Bd, u0, x1)
         if self.correct:
             # the first predicted sample becomes the actual one: take its leg rows at the
             # plant's own next pose under the guessed move (refined with the move)
@@ -372,8 +517,112 @@ class ConstrainedController:
         U = self._shifted_moves()
         return (np.add.reduceat(U, self._starts, axis=0) / self.blocks[:, None]).ravel()
 
+    def full_matrix(self, qp) -> np.ndarray:
+        """``A = Sel Gx`` of all rows (the compiled path forms only the rows it gives the
+        solver; the slack problem and benchmarks need all)."""
+        if "A" not in qp:
+            self.z_problem(qp, with_A=False)
+            A = np.empty((len(qp["b0l"]), qp["n_bounds"]))
+            ck.constraint_matrix(qp["col"], qp["val"], qp["Gx"], self._ncol, A)
+            return A
+        return qp["A"]
+
     # ---- solving ------------------------------------------------------------------------
+    def _start(self, z_start=None):
+        if z_start is not None:
+            return z_start
+        if self._z_prev is not None:
+            return ck.shifted_start(self._z_prev, self._block_of, self.blocks, self.m)
+        return None
+
     def _solve_hard(self, qp, z_start=None):
+        """The hard QP. Compiled: the solver gets the equalities and the rows near a bound at
+        the warm start (:data:`SCREEN_ROWS`); the solution is then checked against every
+        row, and a violated row is added and the QP solved again from there. A solution of
+        fewer rows that meets all rows is the solution of the whole QP (the same unique
+        minimiser), so this changes only the time. Sets ``qp["X"]`` (predicted states) and
+        ``qp["viol"]`` (largest row violation, row units)."""
+        if not self.compiled:
+            return self._solve_hard_numpy(qp, z_start)
+        if "red" in qp:
+            return self._solve_reduced(qp, z_start)
+        self.z_problem(qp, with_A=False)
+        nz, nh = qp["n_bounds"], qp["n_hard"]
+        start = self._start(z_start)
+        X = np.empty(6 * self.N)
+        keep = qp.get("keep")
+        if keep is None:  # rows near a bound at the warm start's prediction
+            ck.predict(qp["Gx"], self._ncol, qp["free"], start if start is not None else np.zeros(nz), X)
+            keep = np.zeros(nh, bool)
+            ck.screen(qp["col"], qp["val"], qp["b0l"], qp["b0u"], qp["kinds"], nh, X, self._screen, keep)
+            qp["keep"] = keep
+        kw = dict(DAQP_SETTINGS)
+        iters = 0
+        while True:
+            A, bu, bl, sense = ck.solver_problem(keep, qp["col"], qp["val"], qp["Gx"], self._ncol, qp["bl"],
+                                                 qp["bu"], nz)
+            if start is not None:
+                kw["primal_start"] = start
+            z, fval, flag, info = daqp.solve(qp["H"], qp["f"], A, bu, bl, sense, **kw)
+            iters += int(info["iterations"])
+            if flag < 1:  # fewer rows infeasible: the whole QP is too
+                break
+            ck.predict(qp["Gx"], self._ncol, qp["free"], z, X)
+            worst, added = ck.check_rows(qp["col"], qp["val"], qp["b0l"], qp["b0u"], nh, X, keep, SCREEN_TOL)
+            if added == 0:
+                qp["X"], qp["viol"] = X, worst
+                break
+            self.stats["screen_resolves"] += 1
+            start = z
+        info = dict(info, iterations=iters)
+        return z, flag, info
+
+    def _solve_reduced(self, qp, z_start=None):
+        """The hard QP with its equalities eliminated (see
+        :func:`planner.constrained_kernels.reduce_setup`; the same minimiser), screened and
+        checked as in :meth:`_solve_hard`, every row and force bound checked at the
+        solution. Returns the moves ``z``."""
+        _, _, off, ecnt, eax, ceq, K, Z, _, L, G, Hw, _, elim, Bu = qp["red"]
+        N, m, nh = self.N, self.m, qp["n_hard"]
+        x, d, Ad = qp["x"], qp["d"], qp["Ad"]
+        start = self._start(z_start)
+        ws = ck.reduce_start(start, Z, off, m) if start is not None else None
+        z, X = np.empty(N * m), np.empty(6 * N)
+        keep, keepf = qp.get("rkeep"), qp.get("rkeepf")
+        if keep is None:  # rows near a bound at the warm start
+            if ws is not None:
+                ck.reduce_forward(x, d, Ad, Bu, ecnt, eax, ceq, K, Z, off, ws, z, X)
+            else:
+                z, X = qp["rzf"], qp["rXf"]
+            keep, keepf = np.zeros(nh, bool), np.zeros(N * m, bool)
+            ck.reduce_screen(qp["col"], qp["val"], qp["b0l"], qp["b0u"], qp["kinds"], nh, elim, X, z, self._screen,
+                             SCREEN_FORCE, keep, keepf)
+            qp["rkeep"], qp["rkeepf"] = keep, keepf
+            z, X = np.empty(N * m), np.empty(6 * N)
+        kw = dict(DAQP_SETTINGS)
+        iters = 0
+        while True:
+            A, bu, bl, sense = ck.reduce_problem(keep, keepf, qp["col"], qp["val"], G, off, L, Z, ecnt, qp["rzf"],
+                                                 qp["rbl"], qp["rbu"], m)
+            if ws is not None:
+                kw["primal_start"] = ws
+            w, fval, flag, info = daqp.solve(Hw, qp["rf"], A, bu, bl, sense, **kw)
+            iters += int(info["iterations"])
+            if flag < 1:  # fewer rows infeasible: the whole QP is too
+                z = np.zeros(N * m)
+                break
+            ck.reduce_forward(x, d, Ad, Bu, ecnt, eax, ceq, K, Z, off, w, z, X)
+            worst, added = ck.reduce_check(qp["col"], qp["val"], qp["b0l"], qp["b0u"], nh, elim, X, z, keep, keepf,
+                                           SCREEN_TOL)
+            if added == 0:
+                qp["viol"], qp["X"] = worst, X
+                break
+            self.stats["screen_resolves"] += 1
+            ws = w
+        return z, flag, dict(info, iterations=iters)
+
+    def _solve_hard_numpy(self, qp, z_start=None):
+        """The hard QP in ``z`` with every row given to DAQP (the reference)."""
         nz, nh = qp["n_bounds"], qp["n_hard"]
         bu = np.concatenate((np.ones(nz), qp["bu"][:nh]))
         bl = np.concatenate((-np.ones(nz), qp["bl"][:nh]))
@@ -391,6 +640,7 @@ class ConstrainedController:
         """All rows (corridor, speed and stroke) softened by three slacks >= 0 (in
         :data:`ROW_UNIT_M`: corridor m and rad, stroke m, speed m/s); forces stay hard."""
         nz = qp["n_bounds"]
+        self.z_problem(qp)
         H, f, A, kinds = qp["H"], qp["f"], qp["A"], qp["kinds"]
         ns = 3
         Hs = np.zeros((nz + ns, nz + ns))
@@ -413,26 +663,34 @@ class ConstrainedController:
     def __call__(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray) -> np.ndarray:
         t0 = time.perf_counter()
         if self._x1_pred is not None:  # how far the plant landed from the prediction
-            e = np.abs(x[:3] - self._x1_pred[:3])
-            self.stats["mismatch_m"] = max(self.stats["mismatch_m"], float(np.hypot(e[0], e[1])))
-            self.stats["mismatch_rad"] = max(self.stats["mismatch_rad"], float(e[2]))
+            p = self._x1_pred
+            self.stats["mismatch_m"] = max(self.stats["mismatch_m"], math.hypot(x[0] - p[0], x[1] - p[1]))
+            self.stats["mismatch_rad"] = max(self.stats["mismatch_rad"], abs(float(x[2] - p[2])))
         qp = self.build(k, x, Ad, Bd)
         z, flag, info = self._solve_hard(qp)
         iters = int(info["iterations"])
-        # where the first move changed much from the guess the offset was computed with,
-        # recompute the offset at the new move and solve again
+        # while the plant under the solution's first move lands farther from the prediction
+        # than the tolerance, recompute the offset at that move and solve again
         for _ in range(REFINE_MAX):
             if flag < 1 or not self.correct:
                 break
             u1 = z[:self.m] * self.umax
-            if np.max(np.abs(u1 - self._u0) / self.umax) <= REFINE_TOL:
+            if self.compiled:
+                x1, e_m, e_rad = ck.one_step_error(self._rb, x, u1, Ad, Bd, self._d, self.st.Ts,
+                                                   self.st.plant_substeps)
+            else:
+                x1 = self._plant(x, u1)
+                e = np.abs(x1 - (Ad @ x + Bd @ u1 + self._d))  # plant - predicted first state
+                e_m, e_rad = math.hypot(e[0], e[1]), e[2]
+            if e_m <= REFINE_TOL_M and e_rad <= REFINE_TOL_RAD:
                 break
-            self.set_free(qp, Ad, Bd, u1)
+            self.set_free(qp, Ad, Bd, u1, x1)
             z, flag, info = self._solve_hard(qp, z)
             iters += int(info["iterations"])
             self.stats["refines"] += 1
         self.last_qp = qp
         slack = 0.0
+        hard_ok = flag >= 1
         if flag < 1:
             zs, flag2, info2 = self._solve_slack(qp)
             iters += int(info2["iterations"])
@@ -455,16 +713,28 @@ class ConstrainedController:
         else:
             # how well the solver met the rows it was given (m, m/s, rad)
             nh = qp["n_hard"]
-            r = qp["A"][:nh] @ z
-            v = np.maximum(np.maximum(qp["bl"][:nh] - r, r - qp["bu"][:nh]), 0.0).max(initial=0.0) * ROW_UNIT_M
+            if self.compiled:
+                v = qp["viol"] * ROW_UNIT_M
+            else:
+                r = qp["A"][:nh] @ z
+                v = np.maximum(np.maximum(qp["bl"][:nh] - r, r - qp["bu"][:nh]), 0.0).max(initial=0.0) * ROW_UNIT_M
             self.stats["pred_violation"] = max(self.stats["pred_violation"], float(v))
-        z = np.clip(z, -1.0, 1.0)
         self.stats["iterations"].append(iters)
         self.stats["slack"].append(slack)
         self.stats["steps"] += 1
+        if self.compiled:
+            if hard_ok and "red" in qp:  # the reduced solve's own prediction
+                X = qp["X"]
+            else:
+                self.z_problem(qp, with_A=False)
+                X = np.empty(6 * self.N)
+                ck.predict(qp["Gx"], self._ncol, qp["free"], np.clip(z, -1.0, 1.0), X)
+            z, Xp, self._y_nom = ck.finish(z, X)
+        else:
+            z = np.clip(z, -1.0, 1.0)
+            Xp = (qp["Gx"] @ z + qp["free"]).reshape(self.N, 6)
+            self._y_nom = np.vstack((Xp[1:, :3], Xp[-1:, :3]))
         self._z_prev = z
-        Xp = (qp["Gx"] @ z + qp["free"]).reshape(self.N, 6)
-        self._y_nom = np.vstack((Xp[1:, :3], Xp[-1:, :3]))
         self._x1_pred = Xp[0]
         self.stats["solve_s"] += time.perf_counter() - t0
         return z[:self.m] * self.umax
@@ -541,3 +811,21 @@ def finalize(result: dict, st, segments=None) -> None:
             f"{mt['constraint_slack_max_m'] * 1e3:.4f} mm); give the robot more time "
             "(samples_per_segment, speed_m_s, total_time_s) or widen the corridor",
             "settings")
+
+
+def warm_up() -> None:
+    """Compile (first run after installing) or load (afterwards, from numba's cache) the
+    kernels of every path of the compiled controller by planning two tiny corridors: with
+    equalities eliminated (psi fixed), the QP in ``z`` (a psi range), and the slack problem
+    (too little time). For :func:`planner.plan.warm_up`."""
+    from .plan import plan
+
+    fixed = [{"lower": [0.0, 0.0, 0.0], "upper": [0.0, 0.0, 0.0]},
+             {"lower": [0.0, 0.0, 0.0], "upper": [0.01, 0.01, 0.0]},
+             {"lower": [0.01, 0.01, 0.0], "upper": [0.01, 0.01, 0.0]}]
+    turning = [{"lower": [0.0, 0.0, 0.0], "upper": [0.0, 0.0, 0.0]},
+               {"lower": [0.0, 0.0, 0.0], "upper": [0.04, 0.01, 0.02]},
+               {"lower": [0.04, 0.01, 0.02], "upper": [0.04, 0.01, 0.02]}]
+    for segments, extra in ((fixed, {}), (turning, {"samples_per_segment": 30}), (turning, {"samples_per_segment": 2})):
+        plan({"robot": "moving-slide", "segments": segments,
+              "settings": {"mode": "constrained", "N": 5, "require_settled": False, "tail_max_s": 0.05, **extra}})

@@ -261,3 +261,103 @@ def test_layout_with_end_angle_settles_in_constrained_mode():
     assert P[:, 2].min() >= -0.05 - 1e-9 and P[:, 2].max() <= 0.15 + 1e-9
     assert mt["overshoot_m"] < 1e-4
     check_limits(res, load_robot("moving-slide"))
+
+
+# ---- the compiled path (planner/constrained_kernels.py) against the numpy reference ------
+
+def _psi_corridor() -> dict:
+    """Turning platform: psi ranges of non-zero width (no equality rows but at the ends)."""
+    segs = [{"lower": [-0.05, 0.0, 0.0], "upper": [-0.05, 0.0, 0.0]},
+            {"lower": [-0.05, -0.01, 0.0], "upper": [-0.03, 0.01, 0.02]},
+            {"lower": [-0.03, -0.01, 0.02], "upper": [-0.01, 0.01, 0.06]},
+            {"lower": [-0.01, -0.01, 0.06], "upper": [0.01, 0.01, 0.10]},
+            {"lower": [0.01, -0.01, 0.10], "upper": [0.03, 0.01, 0.12]},
+            {"lower": [0.03, 0.0, 0.12], "upper": [0.03, 0.0, 0.12]}]
+    return constrained({"robot": "moving-slide", "segments": segs})
+
+
+def _close(a, b, rel=1e-10) -> bool:
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    fin = np.isfinite(b)
+    if not np.array_equal(np.isfinite(a), fin):
+        return False
+    scale = max(float(np.abs(b[fin]).max(initial=0.0)), 1e-300)
+    return bool(np.all(np.abs(a[fin] - b[fin]) <= rel * scale))
+
+
+@pytest.mark.parametrize("case", ["table1", "triangle", "psi"])
+def test_compiled_assembly_equals_numpy_assembly(case, monkeypatch):
+    """At every 20th step the compiled QP equals the numpy reference's QP in z: prediction,
+    Hessian, linear term, every row (corridor boxes, triangle half-planes, no-overshoot,
+    leg speeds and strokes) and its bounds."""
+    from planner import constrained as C
+
+    make = {"table1": lambda: constrained(table1()), "triangle": lambda: _layout("triangle"), "psi": _psi_corridor}
+    req = make[case]()
+    orig = C.ConstrainedController.__call__
+    checked = []
+
+    def spy(self, k, x, Ad, Bd):
+        if k % 20 == 0:
+            qc = self.z_problem(self.build(k, x, Ad, Bd))
+            monkeypatch.setattr(C.ConstrainedController, "compiled", False)
+            qn = self.build(k, x, Ad, Bd)
+            monkeypatch.setattr(C.ConstrainedController, "compiled", True)
+            for key in ("Gx", "free", "H", "A", "bl", "bu"):
+                assert _close(qc[key], qn[key]), (k, key)
+            assert _close(qc["f"], qn["f"], 1e-9), k  # a difference of nearly equal terms
+            assert np.array_equal(qc["kinds"], qn["kinds"]) and qc["n_hard"] == qn["n_hard"]
+            checked.append(("hp" if np.any(np.count_nonzero(qn["Sel"], axis=1) == 2) else "box"))
+        return orig(self, k, x, Ad, Bd)
+
+    monkeypatch.setattr(C.ConstrainedController, "__call__", spy)
+    plan(req)
+    assert len(checked) >= 5
+    if case == "triangle":
+        assert "hp" in checked  # half-plane rows were compared
+
+
+@pytest.mark.parametrize("q_u", [None, [1e-3, 3e-3, 5e-4, 1.5e-3]])
+def test_eliminated_equalities_give_the_same_minimiser(q_u, monkeypatch):
+    """Table I fixes psi = 0: one equality row per sample. The compiled path eliminates them
+    (and gives DAQP only the rows near a bound); its moves equal those of DAQP on the whole
+    QP in z, every row given, equalities as equalities. Unequal drive weights ``q_u`` make
+    the reduced Hessian's coupling terms between moves non-zero."""
+    from planner import constrained as C
+
+    orig = C.ConstrainedController.__call__
+    diffs = []
+
+    def spy(self, k, x, Ad, Bd):
+        if k % 10 == 0:
+            qp = self.build(k, x, Ad, Bd)
+            assert "red" in qp  # the elimination is in use
+            nw = qp["red"][1]
+            assert nw < self.nz
+            z_red, flag_red, _ = self._solve_hard(qp)
+            z_full, flag_full, _ = self._solve_hard_numpy(self.z_problem(qp))
+            assert flag_red == 1 and flag_full == 1
+            diffs.append(float(np.abs(z_red - z_full).max()))
+        return orig(self, k, x, Ad, Bd)
+
+    monkeypatch.setattr(C.ConstrainedController, "__call__", spy)
+    plan(constrained(table1(), **({"q_u": q_u} if q_u else {})))
+    assert len(diffs) >= 20
+    assert max(diffs) < 1e-7  # scaled moves (force / force_max)
+
+
+@pytest.mark.parametrize("case", ["table1", "psi"])
+def test_compiled_plan_equals_numpy_plan(case, monkeypatch):
+    """The whole plan: compiled path (equalities eliminated on Table I, the QP in z on the
+    turning corridor) against the numpy reference with every row given to the solver."""
+    from planner import constrained as C
+
+    req = constrained(table1()) if case == "table1" else _psi_corridor()
+    fast = plan(req)
+    monkeypatch.setattr(C.ConstrainedController, "compiled", False)
+    ref = plan(req)
+    P, Pr = np.array(fast["pose"]), np.array(ref["pose"])
+    assert P.shape == Pr.shape
+    assert np.abs(P - Pr).max() < 1e-9
+    assert np.abs(np.array(fast["drives"]["force"]) - np.array(ref["drives"]["force"])).max() < 1e-6
+    assert fast["metrics"]["qp_refinements"] == ref["metrics"]["qp_refinements"]

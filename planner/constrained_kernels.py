@@ -1,0 +1,961 @@
+"""The constrained mode's per-step QP compiled (numba): assembly, the equality elimination,
+screening and checking of rows (see :class:`planner.constrained.ConstrainedController`).
+
+Why compiled: the numpy assembly of one step's QP is a few dozen array operations on small
+arrays plus the dense products ``Sel Gx`` and ``Gp2' W Gp2``; most of its cost was call
+overhead and multiplications by the zeros of the block lower-triangular prediction matrix.
+Here products skip those zeros, the Hessian comes from a backward recursion, and the
+constraint selection ``Sel`` is kept sparse (at most three entries per row: a pose
+coordinate, a half-plane normal, a leg Jacobian row). The numpy assembly
+(``ConstrainedController.build_numpy``) stays the reference; ``tests/test_constrained.py``
+checks that both give the same QP, and that the QP with its equalities eliminated has the
+same minimiser.
+
+Layout shared with :mod:`planner.constrained`: states are stacked per sample,
+``X[6 i + a]`` (``a`` = x, y, psi, x_dot, y_dot, psi_dot of sample ``i + 1``); the scaled
+inputs ``z`` are stacked per move block, ``z[m b + l]``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .kernels import rk4, state_derivative
+
+#: kinds of rows (the slack variable that softens each in the slack problem)
+KIND_CORRIDOR, KIND_STROKE, KIND_SPEED = 0, 1, 2
+
+
+@njit(cache=True)
+def leg_rows(r0, base, poses, J, L):
+    """Leg Jacobians ``J_l`` (k, n, 3) and leg lengths (k, n) at the poses (k, 3), into ``J``
+    and ``L``; as :meth:`Robot.leg_jacobian_batch` and :meth:`Robot.leg_lengths`."""
+    n = r0.shape[0]
+    for k in range(poses.shape[0]):
+        c, s = math.cos(poses[k, 2]), math.sin(poses[k, 2])
+        for i in range(n):
+            rx = c * r0[i, 0] - s * r0[i, 1]
+            ry = s * r0[i, 0] + c * r0[i, 1]
+            dx = poses[k, 0] + rx - base[i, 0]
+            dy = poses[k, 1] + ry - base[i, 1]
+            li = math.hypot(dx, dy)
+            ex, ey = dx / li, dy / li
+            J[k, i, 0], J[k, i, 1], J[k, i, 2] = ex, ey, rx * ey - ry * ex
+            L[k, i] = li
+
+
+@njit(cache=True)
+def prediction(Ad, Bd, umax, block_of, nb, P, Gx):
+    """``P[q] = Ad^q`` (q = 0..N) into ``P`` (N+1, 6, 6) and the prediction matrix
+    ``X = free + Gx z`` into ``Gx`` (6N, nb m): block ``(i, b)`` is the sum over the samples
+    ``j <= i`` of move block ``b`` of ``Ad^(i-j) Bd diag(umax)``."""
+    N = P.shape[0] - 1
+    m = Bd.shape[1]
+    for a in range(6):
+        for c in range(6):
+            P[0, a, c] = 1.0 if a == c else 0.0
+    for q in range(1, N + 1):
+        for a in range(6):
+            for c in range(6):
+                acc = 0.0
+                for t in range(6):
+                    acc += Ad[a, t] * P[q - 1, t, c]
+                P[q, a, c] = acc
+    Bu = np.empty((6, m))
+    for a in range(6):
+        for l in range(m):
+            Bu[a, l] = Bd[a, l] * umax[l]
+    PB = np.empty((N, 6, m))
+    for q in range(N):
+        for a in range(6):
+            for l in range(m):
+                acc = 0.0
+                for t in range(6):
+                    acc += P[q, a, t] * Bu[t, l]
+                PB[q, a, l] = acc
+    Gx[:, :] = 0.0
+    for i in range(N):
+        for j in range(i + 1):
+            c0 = m * block_of[j]
+            for a in range(6):
+                for l in range(m):
+                    Gx[6 * i + a, c0 + l] += PB[i - j, a, l]
+
+
+@njit(cache=True)
+def hessian(Ad, Bd, umax, W, block_of, du, H):
+    """``H = Gp2' diag(W) Gp2 + diag(du)``, ``Gp2`` the pose rows of the prediction matrix
+    ``Gx`` (see :func:`prediction`), scaled so that its largest diagonal entry is 1, into
+    ``H`` (nb m, nb m); returns the scale.
+
+    Without forming ``Gp2' W Gp2``: with ``Q_i = diag(W_i, 0)`` (6, 6) the weight of sample
+    ``i`` and ``Pi_j = sum_{i >= j} (Ad^(i-j))' Q_i Ad^(i-j)`` (backward:
+    ``Pi_j = Q_j + Ad' Pi_{j+1} Ad``), the block of moves ``j1 <= j2`` is
+    ``(Ad^(j2-j1) Bu)' Pi_j2 Bu`` (``Bu = Bd diag(umax)``), summed over the samples of each
+    move block. O(N^2) small blocks instead of the O(N^3) product."""
+    N = block_of.shape[0]
+    m = Bd.shape[1]
+    nz = H.shape[0]
+    Bu = np.empty((6, m))
+    for a in range(6):
+        for l in range(m):
+            Bu[a, l] = Bd[a, l] * umax[l]
+    PB = np.empty((N, 6, m))  # Ad^q Bu
+    PB[0] = Bu
+    for q in range(1, N):
+        for a in range(6):
+            for l in range(m):
+                acc = 0.0
+                for t in range(6):
+                    acc += Ad[a, t] * PB[q - 1, t, l]
+                PB[q, a, l] = acc
+    PiB = np.empty((N, 6, m))  # Pi_j Bu
+    Pi = np.zeros((6, 6))
+    T = np.empty((6, 6))
+    for j in range(N - 1, -1, -1):
+        if j < N - 1:  # Pi <- Ad' Pi Ad
+            for a in range(6):
+                for c in range(6):
+                    acc = 0.0
+                    for t in range(6):
+                        acc += Pi[a, t] * Ad[t, c]
+                    T[a, c] = acc
+            for a in range(6):
+                for c in range(a, 6):
+                    acc = 0.0
+                    for t in range(6):
+                        acc += Ad[t, a] * T[t, c]
+                    Pi[a, c] = acc
+                    Pi[c, a] = acc
+        for a in range(3):
+            Pi[a, a] += W[3 * j + a]
+        for a in range(6):
+            for l in range(m):
+                acc = 0.0
+                for t in range(6):
+                    acc += Pi[a, t] * Bu[t, l]
+                PiB[j, a, l] = acc
+    H[:, :] = 0.0
+    for j2 in range(N):
+        c2 = m * block_of[j2]
+        for j1 in range(j2 + 1):
+            c1 = m * block_of[j1]
+            q = j2 - j1
+            for l1 in range(m):
+                for l2 in range(m):
+                    acc = 0.0
+                    for a in range(6):
+                        acc += PB[q, a, l1] * PiB[j2, a, l2]
+                    H[c1 + l1, c2 + l2] += acc
+                    if j1 != j2:
+                        H[c2 + l2, c1 + l1] += acc
+    big = 0.0
+    for c in range(nz):
+        H[c, c] += du[c]
+        big = max(big, H[c, c])
+    scale = 1.0 / max(big, 1e-300)
+    for c1 in range(nz):
+        for c2 in range(nz):
+            H[c1, c2] *= scale
+    return scale
+
+
+@njit(cache=True)
+def rows(jj, idx, lo, hi, has_hp, hp_ptr, hp_A, hp_b, app_on, app_d, app_b, app_from,
+         J, L, y_nom, vmax, lmin, lmax, unit):
+    """The constraint rows of one step (order and meaning as the numpy assembly in
+    :meth:`ConstrainedController.build`), as a sparse selection of predicted states: row
+    ``r`` is ``sum_k val[r, k] X[col[r, k]]`` (``col`` -1: unused) with bounds
+    ``b0l <= . <= b0u`` (all divided by ``unit``). ``jj``: constrained samples (0-based),
+    ``idx``: sequence index per sample; ``lo, hi, has_hp, hp_*``: the pose sets per sequence
+    index (half-planes of sequence index ``s`` are ``hp_A[hp_ptr[s]:hp_ptr[s+1]]``);
+    ``J, L``: leg Jacobians and lengths at the nominal poses ``y_nom`` of the samples ``jj``.
+    Returns ``(col, val, b0l, b0u, kinds, n_hard, row_speed0, row_stroke0)``."""
+    nc = jj.shape[0]
+    m = J.shape[1]
+    nrow = 0
+    for ax in range(3):
+        for t in range(nc):
+            if ax == 2 or not has_hp[idx[jj[t]]]:
+                nrow += 1
+    for t in range(nc):
+        s = idx[jj[t]]
+        if has_hp[s]:
+            nrow += hp_ptr[s + 1] - hp_ptr[s]
+    if app_on:
+        for t in range(nc):
+            if idx[jj[t]] >= app_from:
+                nrow += 1
+    nrow += 2 * nc * m
+    col = np.full((nrow, 3), -1, np.int64)
+    val = np.zeros((nrow, 3))
+    b0l = np.empty(nrow)
+    b0u = np.empty(nrow)
+    kinds = np.zeros(nrow, np.int64)
+    r = 0
+    for ax in range(3):
+        for t in range(nc):
+            j = jj[t]
+            s = idx[j]
+            if ax == 2 or not has_hp[s]:
+                col[r, 0] = 6 * j + ax
+                val[r, 0] = 1.0 / unit
+                b0l[r] = lo[s, ax] / unit
+                b0u[r] = hi[s, ax] / unit
+                r += 1
+    for t in range(nc):
+        j = jj[t]
+        s = idx[j]
+        if has_hp[s]:
+            for h in range(hp_ptr[s], hp_ptr[s + 1]):
+                col[r, 0], col[r, 1] = 6 * j, 6 * j + 1
+                val[r, 0], val[r, 1] = hp_A[h, 0] / unit, hp_A[h, 1] / unit
+                b0l[r] = -np.inf
+                b0u[r] = hp_b[h] / unit
+                r += 1
+    if app_on:
+        for t in range(nc):
+            j = jj[t]
+            if idx[j] >= app_from:
+                col[r, 0], col[r, 1] = 6 * j, 6 * j + 1
+                val[r, 0], val[r, 1] = app_d[0] / unit, app_d[1] / unit
+                b0l[r] = -np.inf
+                b0u[r] = app_b / unit
+                r += 1
+    row_speed0 = r
+    for t in range(nc):
+        j = jj[t]
+        for i in range(m):
+            for a in range(3):
+                col[r, a] = 6 * j + 3 + a
+                val[r, a] = J[t, i, a] / unit
+            b0l[r] = -vmax[i] / unit
+            b0u[r] = vmax[i] / unit
+            kinds[r] = KIND_SPEED
+            r += 1
+    n_hard = r
+    for t in range(nc):
+        j = jj[t]
+        for i in range(m):
+            off = L[t, i] - (J[t, i, 0] * y_nom[t, 0] + J[t, i, 1] * y_nom[t, 1] + J[t, i, 2] * y_nom[t, 2])
+            for a in range(3):
+                col[r, a] = 6 * j + a
+                val[r, a] = J[t, i, a] / unit
+            b0l[r] = (lmin[i] - off) / unit
+            b0u[r] = (lmax[i] - off) / unit
+            kinds[r] = KIND_STROKE
+            r += 1
+    return col, val, b0l, b0u, kinds, n_hard, row_speed0, n_hard
+
+
+@njit(cache=True)
+def constraint_matrix(col, val, Gx, ncol, A):
+    """``A = Sel Gx`` for the sparse selection ``(col, val)`` (see :func:`rows`), into
+    ``A`` (nrow, nz); ``ncol[i]``: the columns of ``Gx`` that can be non-zero in sample
+    ``i``'s rows (the move blocks started by then)."""
+    for r in range(col.shape[0]):
+        _matrix_row_into(col, val, Gx, ncol, A, r, r)
+
+
+@njit(cache=True)
+def first_leg_rows(J0, L0, y1, unit, lmin, lmax, rs, rl, val, b0l, b0u):
+    """Put the first sample's leg rows (speed rows from ``rs``, stroke rows from ``rl``) at
+    the pose ``y1`` (Jacobians ``J0`` (n, 3), lengths ``L0`` (n,)): their selection and the
+    stroke bounds."""
+    m = J0.shape[0]
+    for i in range(m):
+        for a in range(3):
+            val[rs + i, a] = J0[i, a] / unit
+            val[rl + i, a] = J0[i, a] / unit
+        off = (L0[i] - (J0[i, 0] * y1[0] + J0[i, 1] * y1[1] + J0[i, 2] * y1[2])) / unit
+        b0l[rl + i] = lmin[i] / unit - off
+        b0u[rl + i] = lmax[i] / unit - off
+
+
+@njit(cache=True)
+def free_response(P, x, d, Gx, ncol, W, tgt, scale, col, val, b0l, b0u, free, f, bl, bu):
+    """The parts of the QP that depend on the free response: ``free = X(z = 0)`` (6N,)
+    ``= P[1:] x + P[:N] d``, the cost's linear term ``f = scale Gp2' (W free_pose - tgt)``
+    and the row bounds ``b0 - Sel free``, into the given arrays."""
+    N = P.shape[0] - 1
+    nz = f.shape[0]
+    for i in range(N):
+        for a in range(6):
+            acc = 0.0
+            for t in range(6):
+                acc += P[i + 1, a, t] * x[t]
+            acc2 = 0.0
+            for t in range(6):
+                acc2 += P[i, a, t] * d[t]
+            free[6 * i + a] = acc + acc2
+    f[:] = 0.0
+    for i in range(N):
+        nc = ncol[i]
+        for a in range(3):
+            e = W[3 * i + a] * free[6 * i + a] - tgt[3 * i + a]
+            if e == 0.0:
+                continue
+            r = 6 * i + a
+            for q in range(nc):
+                f[q] += Gx[r, q] * e
+    for q in range(nz):
+        f[q] *= scale
+    for r in range(col.shape[0]):
+        sf = 0.0
+        for k in range(col.shape[1]):
+            c = col[r, k]
+            if c >= 0:
+                sf += val[r, k] * free[c]
+        bl[r] = b0l[r] - sf
+        bu[r] = b0u[r] - sf
+
+
+@njit(cache=True)
+def predict(Gx, ncol, free, z, X):
+    """The predicted states ``X = free + Gx z`` (6N,) into ``X``."""
+    N = ncol.shape[0]
+    for i in range(N):
+        nc = ncol[i]
+        for a in range(6):
+            r = 6 * i + a
+            acc = free[r]
+            for q in range(nc):
+                acc += Gx[r, q] * z[q]
+            X[r] = acc
+
+
+@njit(cache=True)
+def _row_value(col, val, X, r):
+    acc = 0.0
+    for k in range(col.shape[1]):
+        c = col[r, k]
+        if c >= 0:
+            acc += val[r, k] * X[c]
+    return acc
+
+
+@njit(cache=True)
+def screen(col, val, b0l, b0u, kinds, n_hard, X, delta, keep):
+    """Mark in ``keep`` the rows (of the first ``n_hard``) that the solver is given: the
+    equalities and every row within ``delta[kind]`` of a bound at the predicted states ``X``
+    (the warm start's prediction). Returns how many."""
+    count = 0
+    for r in range(n_hard):
+        v = _row_value(col, val, X, r)
+        d = delta[kinds[r]]
+        if b0u[r] - b0l[r] <= 0.0 or v - b0l[r] < d or b0u[r] - v < d:
+            keep[r] = True
+        if keep[r]:
+            count += 1
+    return count
+
+
+@njit(cache=True)
+def check_rows(col, val, b0l, b0u, n_hard, X, keep, tol):
+    """Largest violation of the first ``n_hard`` rows at the predicted states ``X``
+    (``b0l <= Sel X <= b0u``, i.e. ``bl <= A z <= bu``; 0 if none); rows not in ``keep``
+    violated by more than ``tol`` are added to ``keep``. Returns ``(worst, added)``."""
+    worst = 0.0
+    added = 0
+    for r in range(n_hard):
+        v = _row_value(col, val, X, r)
+        e = max(b0l[r] - v, v - b0u[r])
+        if e > worst:
+            worst = e
+        if e > tol and not keep[r]:
+            keep[r] = True
+            added += 1
+    return worst, added
+
+
+@njit(cache=True)
+def solver_problem(keep, col, val, Gx, ncol, bl, bu, nz):
+    """The rows in ``keep`` as DAQP takes them: ``A`` (k, nz) and the bounds and senses of
+    the ``nz`` simple bounds ``-1 <= z <= 1`` followed by the rows (sense 5: equality)."""
+    k = 0
+    for r in range(keep.shape[0]):
+        if keep[r]:
+            k += 1
+    A = np.empty((k, nz))
+    BU = np.empty(nz + k)
+    BL = np.empty(nz + k)
+    sense = np.zeros(nz + k, np.int32)
+    for q in range(nz):
+        BU[q] = 1.0
+        BL[q] = -1.0
+    i = 0
+    for r in range(keep.shape[0]):
+        if keep[r]:
+            _matrix_row_into(col, val, Gx, ncol, A, r, i)
+            BU[nz + i] = bu[r]
+            BL[nz + i] = bl[r]
+            if bu[r] - bl[r] <= 0.0:
+                sense[nz + i] = 5
+            i += 1
+    return A, BU, BL, sense
+
+
+@njit(cache=True)
+def _matrix_row_into(col, val, Gx, ncol, A, r, i):
+    """Row ``i`` of ``A`` = row ``r`` of ``Sel Gx``."""
+    A[i, :] = 0.0
+    for k in range(col.shape[1]):
+        c = col[r, k]
+        if c < 0:
+            continue
+        v = val[r, k]
+        nc = ncol[c // 6]
+        for q in range(nc):
+            A[i, q] += v * Gx[c, q]
+
+
+@njit(cache=True)
+def shifted_start(z_prev, block_of, blocks, m):
+    """Warm start: the previous solution's moves per sample shifted by one sample (the last
+    one repeated), averaged over each move block (as ``ConstrainedController._shifted_start``)."""
+    N = block_of.shape[0]
+    nb = blocks.shape[0]
+    out = np.zeros(nb * m)
+    for j in range(N):
+        src = block_of[min(j + 1, N - 1)]
+        b = block_of[j]
+        for l in range(m):
+            out[b * m + l] += z_prev[src * m + l]
+    for b in range(nb):
+        for l in range(m):
+            out[b * m + l] /= blocks[b]
+    return out
+
+
+# ---- one step, fused (few calls per step: numpy's per-call cost dominated these sizes) ----
+
+@njit(cache=True)
+def assemble(block_of, k, K, lower, upper, qa, qb, jj, lo, hi, has_hp, hp_ptr, hp_A,
+             hp_b, app_on, app_d, app_b, app_from, y_prev, x, r0, base, vmax, lmin, lmax, unit):
+    """The rows of step ``k``'s QP (:func:`rows`), with the legs linearised at
+    ``y_prev[jj]`` (the previous step's prediction, shifted; at ``x`` if ``y_prev`` is
+    empty), and the criterion's weights ``W`` and targets ``tgt`` of samples ``k+1..k+N``
+    (``lower, upper, qa, qb``: the range sequence padded with ``N`` copies of its last
+    sample, as ``RangeSequence.window``). Returns ``(W, tgt, col, val, b0l, b0u, kinds,
+    n_hard, row_speed0, row_stroke0)``."""
+    N = block_of.shape[0]
+    m = r0.shape[0]
+    kw = min(k, K)
+    W = np.empty(3 * N)
+    tgt = np.empty(3 * N)
+    for i in range(N):
+        for a in range(3):
+            ca, cb = qa[kw + i, a] * qa[kw + i, a], qb[kw + i, a] * qb[kw + i, a]
+            W[3 * i + a] = ca + cb
+            tgt[3 * i + a] = ca * lower[kw + i, a] + cb * upper[kw + i, a]
+    idx = np.empty(N, np.int64)
+    for j in range(N):
+        idx[j] = min(k + j, K - 1)
+    nc = jj.shape[0]
+    y_nom = np.empty((nc, 3))
+    for t in range(nc):
+        for a in range(3):
+            y_nom[t, a] = y_prev[jj[t], a] if y_prev.shape[0] > 0 else x[a]
+    J = np.empty((nc, m, 3))
+    L = np.empty((nc, m))
+    leg_rows(r0, base, y_nom, J, L)
+    col, val, b0l, b0u, kinds, n_hard, rs, rl = rows(jj, idx, lo, hi, has_hp, hp_ptr, hp_A, hp_b, app_on, app_d,
+                                                     app_b, app_from, J, L, y_nom, vmax, lmin, lmax, unit)
+    return W, tgt, col, val, b0l, b0u, kinds, n_hard, rs, rl
+
+
+@njit(cache=True)
+def plant_step(rb, x, u, Ts, substeps):
+    """The plant (``planner.kernels.rk4`` from ``x`` under ``u``, ``x_dot`` at ``x`` from
+    ``planner.kernels.state_derivative``): the state one sample later."""
+    f0 = np.empty(6)
+    state_derivative(rb, x, u, f0)
+    return rk4(rb, x, u, Ts, substeps, f0)
+
+
+@njit(cache=True)
+def offset(x1, x, u, Ad, Bd):
+    """``d = x1 - Ad x - Bd u`` (6,)."""
+    d = np.empty(6)
+    for a in range(6):
+        acc = x1[a]
+        for t in range(6):
+            acc -= Ad[a, t] * x[t]
+        for l in range(u.shape[0]):
+            acc -= Bd[a, l] * u[l]
+        d[a] = acc
+    return d
+
+
+@njit(cache=True)
+def first_legs(x1, r0, base, lmin, lmax, unit, rs, rl, val, b0l, b0u):
+    """The first sample's leg rows at the plant's next pose ``x1[:3]``
+    (:func:`first_leg_rows`)."""
+    m = r0.shape[0]
+    y1 = np.empty((1, 3))
+    for a in range(3):
+        y1[0, a] = x1[a]
+    J0 = np.empty((1, m, 3))
+    L0 = np.empty((1, m))
+    leg_rows(r0, base, y1, J0, L0)
+    first_leg_rows(J0[0], L0[0], y1[0], unit, lmin, lmax, rs, rl, val, b0l, b0u)
+
+
+@njit(cache=True)
+def free_parts(P, x, d, Gx, ncol, W, tgt, col, val, b0l, b0u):
+    """:func:`free_response` into new arrays, ``f`` not yet scaled: ``(free, f, bl, bu)``."""
+    N = P.shape[0] - 1
+    nrow = b0l.shape[0]
+    free = np.empty(6 * N)
+    f = np.empty(Gx.shape[1])
+    bl = np.empty(nrow)
+    bu = np.empty(nrow)
+    free_response(P, x, d, Gx, ncol, W, tgt, 1.0, col, val, b0l, b0u, free, f, bl, bu)
+    return free, f, bl, bu
+
+
+@njit(cache=True)
+def one_step_error(rb, x, u, Ad, Bd, d, Ts, substeps):
+    """The plant's next state under ``u`` and how far it lands from the QP's prediction of
+    it ``Ad x + Bd u + d``: ``(x1, position error [m], angle error [rad])``."""
+    x1 = plant_step(rb, x, u, Ts, substeps)
+    e = offset(x1, x, u, Ad, Bd)
+    return x1, math.hypot(e[0] - d[0], e[1] - d[1]), abs(e[2] - d[2])
+
+
+@njit(cache=True)
+def finish(z, X):
+    """After the solve: ``z`` clipped to the force bounds, the predicted states ``X`` as
+    (N, 6) and the nominal poses of the next step (the predicted poses shifted by one
+    sample)."""
+    nz = z.shape[0]
+    zc = np.empty(nz)
+    for q in range(nz):
+        zc[q] = min(max(z[q], -1.0), 1.0)
+    N = X.shape[0] // 6
+    Xr = X.reshape(N, 6)
+    y_nom = np.empty((N, 3))
+    for j in range(N):
+        s = min(j + 1, N - 1)
+        for a in range(3):
+            y_nom[j, a] = Xr[s, a]
+    return zc, Xr, y_nom
+
+
+# ---- equalities eliminated ---------------------------------------------------------------
+# A row fixing a pose coordinate of sample i (a point range, e.g. psi = 0 along Table I) is
+# an equality. DAQP handles each equality as a constraint that is always active, which
+# costs about as much as a third of the whole solve per equality at these sizes; here they
+# are eliminated through the dynamics instead. With C_i the fixed coordinates of sample i,
+# c_i their values, Bu = Bd diag(umax) and Y_i = Ad X_{i-1} (+ d at i = 0) the state before
+# move i acts, move i is parametrised as
+#
+#     z_i = Z_i w_i + K_i (c_i - C_i Y_i),    K_i = (C_i Bu)^+,  Z_i = basis of null(C_i Bu),
+#
+# so C_i X_i = C_i (Y_i + Bu z_i) = c_i for every w; the map w -> z is an affine bijection
+# onto the moves that meet the equalities, so the QP in w (fewer variables, no equalities,
+# force bounds as rows) has the same minimiser. Its prediction is the closed loop
+# X_i = F_i Ad X_{i-1} + Bu Z_i w_i + Bu K_i c_i with F_i = I - Bu K_i C_i, and its
+# Hessian again a backward recursion (see reduce_setup).
+
+
+@njit(cache=True)
+def reduce_setup(Ad, Bd, umax, W, du, col, val, b0l, b0u, n_hard, N):
+    """The equalities of the rows (single-entry rows on a pose coordinate with
+    ``b0l == b0u``) and the reduced QP's parts that do not depend on the one-step offset.
+    Returns ``(ok, nw, off, ecnt, eax, ceq, K, Z, Acl, L, G, Hw, scale, elim, Bu)``:
+    ``off[i]`` the first column of ``w_i`` (``nw = off[N]``), ``ecnt[i]``/``eax[i]``/``ceq[i]``
+    the number, coordinates and values of sample ``i``'s equalities, ``K, Z, Acl = F Ad``,
+    ``L = -K C Ad`` per sample, ``G`` (6N, nw) the closed-loop prediction ``X = Xf + G w``,
+    ``Hw`` the scaled Hessian and its scale, ``elim[r]`` whether row ``r`` is eliminated.
+    ``ok`` is False (use the QP in ``z``) where there is no equality or one cannot be
+    eliminated (``C_i Bu`` rank deficient, or nothing left to optimise)."""
+    m = Bd.shape[1]
+    nrow = col.shape[0]
+    ecnt = np.zeros(N, np.int64)
+    eax = np.zeros((N, 3), np.int64)
+    ceq = np.zeros((N, 3))
+    elim = np.zeros(nrow, np.bool_)
+    K = np.zeros((N, m, 3))
+    Z = np.zeros((N, m, m))
+    Acl = np.zeros((N, 6, 6))
+    L = np.zeros((N, m, 6))
+    off = np.zeros(N + 1, np.int64)
+    Bu = np.empty((6, m))
+    for a in range(6):
+        for l in range(m):
+            Bu[a, l] = Bd[a, l] * umax[l]
+    bad = (False, 0, off, ecnt, eax, ceq, K, Z, Acl, L, np.zeros((6 * N, 0)), np.zeros((0, 0)), 1.0, elim, Bu)
+    neq = 0
+    for r in range(n_hard):
+        c = col[r, 0]
+        if col[r, 1] < 0 and c >= 0 and c % 6 < 3 and b0u[r] - b0l[r] <= 0.0 and val[r, 0] != 0.0:
+            i = c // 6
+            dup = False
+            for t in range(ecnt[i]):
+                if eax[i, t] == c % 6:
+                    dup = True
+            if dup:
+                continue
+            eax[i, ecnt[i]] = c % 6
+            ceq[i, ecnt[i]] = b0l[r] / val[r, 0]
+            ecnt[i] += 1
+            elim[r] = True
+            neq += 1
+    if neq == 0:
+        return bad
+    # per pattern of fixed coordinates (a bit mask): K, Z and the closed-loop matrices
+    bnorm = 0.0
+    for a in range(6):
+        for l in range(m):
+            bnorm = max(bnorm, abs(Bu[a, l]))
+    for i in range(N):
+        e = ecnt[i]
+        if e > m:
+            return bad
+        if e == 0:
+            for l in range(m):
+                Z[i, l, l] = 1.0
+            for a in range(6):
+                Acl[i, a, :] = Ad[a, :]
+            off[i + 1] = off[i] + m
+            continue
+        same = -1
+        for h in range(i):
+            if ecnt[h] == e:
+                match = True
+                for t in range(e):
+                    if eax[h, t] != eax[i, t]:
+                        match = False
+                if match:
+                    same = h
+                    break
+        if same >= 0:
+            K[i] = K[same]
+            Z[i] = Z[same]
+            Acl[i] = Acl[same]
+            L[i] = L[same]
+        else:
+            CB = np.empty((e, m))
+            for t in range(e):
+                for l in range(m):
+                    CB[t, l] = Bu[eax[i, t], l]
+            U, s, Vt = np.linalg.svd(CB)
+            if not s[e - 1] > 1e-9 * bnorm:
+                return bad
+            for l in range(m):
+                for t in range(e):
+                    acc = 0.0
+                    for q in range(e):
+                        acc += Vt[q, l] / s[q] * U[t, q]
+                    K[i, l, t] = acc
+                for q in range(m - e):
+                    Z[i, l, q] = Vt[e + q, l]
+            # L = -K C Ad ; Acl = Ad + Bu L
+            for l in range(m):
+                for b in range(6):
+                    acc = 0.0
+                    for t in range(e):
+                        acc -= K[i, l, t] * Ad[eax[i, t], b]
+                    L[i, l, b] = acc
+            for a in range(6):
+                for b in range(6):
+                    acc = Ad[a, b]
+                    for l in range(m):
+                        acc += Bu[a, l] * L[i, l, b]
+                    Acl[i, a, b] = acc
+        off[i + 1] = off[i] + m - e
+    nw = off[N]
+    if nw == 0:
+        return bad
+    # closed-loop prediction: G[i, j] = Bu Z_j (i = j), Acl_i G[i-1, j] (i > j); row block i
+    # is Acl_i times row block i-1 (all earlier columns at once), then Bu Z_i
+    G = np.zeros((6 * N, nw))
+    for i in range(N):
+        if i > 0:
+            c_end = off[i]
+            for a in range(6):
+                for b in range(6):
+                    s_ = Acl[i, a, b]
+                    if s_ == 0.0:
+                        continue
+                    for c in range(c_end):
+                        G[6 * i + a, c] += s_ * G[6 * (i - 1) + b, c]
+        ni = off[i + 1] - off[i]
+        for a in range(6):
+            for q in range(ni):
+                acc = 0.0
+                for l in range(m):
+                    acc += Bu[a, l] * Z[i, l, q]
+                G[6 * i + a, off[i] + q] = acc
+    # Hessian (lower triangle, then mirrored): state weights Qt_i = diag(W_i, 0) +
+    # L_{i+1}' Du L_{i+1}, backward Pi_j = Qt_j + Acl_{j+1}' Pi_{j+1} Acl_{j+1}; the rows of w_j
+    # and columns of w_j1 (j1 <= j) are (G[j, j]' Pi_j) G[j, j1]; plus Z_i' Du Z_i on the
+    # diagonal and Z_i' Du L_i G[i-1, j] in the rows of w_i, columns of w_j (j < i)
+    Hw = np.zeros((nw, nw))
+    Pi = np.zeros((6, 6))
+    T = np.empty((6, 6))
+    GPi = np.empty((m, 6))
+    for j in range(N - 1, -1, -1):
+        if j < N - 1:
+            for a in range(6):
+                for b in range(6):
+                    acc = 0.0
+                    for t in range(6):
+                        acc += Pi[a, t] * Acl[j + 1, t, b]
+                    T[a, b] = acc
+            for a in range(6):
+                for b in range(a, 6):
+                    acc = 0.0
+                    for t in range(6):
+                        acc += Acl[j + 1, t, a] * T[t, b]
+                    Pi[a, b] = acc
+                    Pi[b, a] = acc
+            if ecnt[j + 1] > 0:
+                for a in range(6):
+                    for b in range(6):
+                        acc = 0.0
+                        for l in range(m):
+                            acc += L[j + 1, l, a] * du[l] * L[j + 1, l, b]
+                        Pi[a, b] += acc
+        for a in range(3):
+            Pi[a, a] += W[3 * j + a]
+        nj = off[j + 1] - off[j]
+        for q in range(nj):
+            for a in range(6):
+                acc = 0.0
+                for t in range(6):
+                    acc += G[6 * j + t, off[j] + q] * Pi[t, a]
+                GPi[q, a] = acc
+        c_end = off[j + 1]
+        for q in range(nj):
+            r = off[j] + q
+            for a in range(6):
+                g = GPi[q, a]
+                if g == 0.0:
+                    continue
+                for c in range(c_end):
+                    Hw[r, c] += g * G[6 * j + a, c]
+    Mi = np.empty((m, 6))
+    for i in range(N):
+        ni = off[i + 1] - off[i]
+        for q1 in range(ni):
+            for q2 in range(ni):
+                acc = 0.0
+                for l in range(m):
+                    acc += Z[i, l, q1] * du[l] * Z[i, l, q2]
+                Hw[off[i] + q1, off[i] + q2] += acc
+        if ecnt[i] > 0 and i > 0:
+            for q in range(ni):
+                for b in range(6):
+                    acc = 0.0
+                    for l in range(m):
+                        acc += Z[i, l, q] * du[l] * L[i, l, b]
+                    Mi[q, b] = acc
+            c_end = off[i]
+            for q in range(ni):
+                r = off[i] + q
+                for b in range(6):
+                    g = Mi[q, b]
+                    if g == 0.0:
+                        continue
+                    for c in range(c_end):
+                        Hw[r, c] += g * G[6 * (i - 1) + b, c]
+    for r in range(nw):  # mirror the lower triangle
+        for c in range(r + 1, nw):
+            Hw[r, c] = Hw[c, r]
+    big = 0.0
+    for c in range(nw):
+        big = max(big, Hw[c, c])
+    scale = 1.0 / max(big, 1e-300)
+    for c1 in range(nw):
+        for c2 in range(nw):
+            Hw[c1, c2] *= scale
+    return True, nw, off, ecnt, eax, ceq, K, Z, Acl, L, G, Hw, scale, elim, Bu
+
+
+@njit(cache=True)
+def reduce_forward(x, d, Ad, Bu, ecnt, eax, ceq, K, Z, off, w, z, X):
+    """Moves ``z`` (N m) and states ``X`` (6N) of the parametrisation at ``w`` (see
+    :func:`reduce_setup`), by running the prediction model forward; ``w = 0`` gives the
+    free parts ``zf`` and ``Xf``."""
+    N = ecnt.shape[0]
+    m = Bu.shape[1]
+    Y = np.empty(6)
+    for i in range(N):
+        for a in range(6):
+            acc = 0.0
+            for t in range(6):
+                acc += Ad[a, t] * (X[6 * (i - 1) + t] if i > 0 else x[t])
+            Y[a] = acc + (d[a] if i == 0 else 0.0)
+        e = ecnt[i]
+        for l in range(m):
+            acc = 0.0
+            for q in range(off[i + 1] - off[i]):
+                acc += Z[i, l, q] * w[off[i] + q]
+            for t in range(e):
+                acc += K[i, l, t] * (ceq[i, t] - Y[eax[i, t]])
+            z[m * i + l] = acc
+        for a in range(6):
+            acc = Y[a]
+            for l in range(m):
+                acc += Bu[a, l] * z[m * i + l]
+            X[6 * i + a] = acc
+
+
+@njit(cache=True)
+def reduce_free(x, d, Ad, Bu, ecnt, eax, ceq, K, Z, Acl, L, G, off, W, tgt, du, scale, col, val, b0l, b0u):
+    """The reduced QP's parts that depend on the one-step offset ``d``: the free moves and
+    states ``zf, Xf`` (``w = 0``), the linear term ``fw`` (scaled; adjoint recursion
+    ``lam_j = e_j + Acl_{j+1}' lam_{j+1}``, ``fw_j = G[j, j]' lam_j + Z_j' Du zf_j`` with
+    ``e_j = (W_j Xf_j - tgt_j, 0) + L_{j+1}' Du zf_{j+1}``) and the row bounds
+    ``b0 - Sel Xf``. Returns ``(zf, Xf, fw, bl, bu)``."""
+    N = ecnt.shape[0]
+    m = Bu.shape[1]
+    nw = off[N]
+    zf = np.empty(N * m)
+    Xf = np.empty(6 * N)
+    reduce_forward(x, d, Ad, Bu, ecnt, eax, ceq, K, Z, off, np.zeros(nw), zf, Xf)
+    fw = np.zeros(nw)
+    lam = np.zeros(6)
+    tmp = np.empty(6)
+    for j in range(N - 1, -1, -1):
+        if j < N - 1:
+            for b in range(6):
+                acc = 0.0
+                for a in range(6):
+                    acc += Acl[j + 1, a, b] * lam[a]
+                tmp[b] = acc
+            for b in range(6):
+                lam[b] = tmp[b]
+            if ecnt[j + 1] > 0:
+                for b in range(6):
+                    acc = 0.0
+                    for l in range(m):
+                        acc += L[j + 1, l, b] * du[l] * zf[m * (j + 1) + l]
+                    lam[b] += acc
+        for a in range(3):
+            lam[a] += W[3 * j + a] * Xf[6 * j + a] - tgt[3 * j + a]
+        for q in range(off[j + 1] - off[j]):
+            acc = 0.0
+            for a in range(6):
+                acc += G[6 * j + a, off[j] + q] * lam[a]
+            for l in range(m):
+                acc += Z[j, l, q] * du[l] * zf[m * j + l]
+            fw[off[j] + q] = acc * scale
+    nrow = col.shape[0]
+    bl = np.empty(nrow)
+    bu = np.empty(nrow)
+    for r in range(nrow):
+        sf = _row_value(col, val, Xf, r)
+        bl[r] = b0l[r] - sf
+        bu[r] = b0u[r] - sf
+    return zf, Xf, fw, bl, bu
+
+
+@njit(cache=True)
+def reduce_start(z, Z, off, m):
+    """A warm start in ``w`` from moves ``z``: ``w_i = Z_i' z_i``."""
+    N = off.shape[0] - 1
+    w = np.empty(off[N])
+    for i in range(N):
+        for q in range(off[i + 1] - off[i]):
+            acc = 0.0
+            for l in range(m):
+                acc += Z[i, l, q] * z[m * i + l]
+            w[off[i] + q] = acc
+    return w
+
+
+@njit(cache=True)
+def reduce_screen(col, val, b0l, b0u, kinds, n_hard, elim, X, z, delta, delta_force, keep, keepf):
+    """:func:`screen` for the reduced QP: rows (not eliminated) near a bound at ``X``, and
+    force rows with ``|z| > 1 - delta_force`` (the moves at the warm start)."""
+    for r in range(n_hard):
+        if elim[r]:
+            continue
+        v = _row_value(col, val, X, r)
+        dl = delta[kinds[r]]
+        if v - b0l[r] < dl or b0u[r] - v < dl:
+            keep[r] = True
+    for q in range(z.shape[0]):
+        if abs(z[q]) > 1.0 - delta_force:
+            keepf[q] = True
+
+
+@njit(cache=True)
+def reduce_check(col, val, b0l, b0u, n_hard, elim, X, z, keep, keepf, tol):
+    """:func:`check_rows` for the reduced QP at its moves ``z`` and states ``X``: every
+    row (the eliminated ones too) and the force bounds ``|z| <= 1``; violated rows not
+    given to the solver are added. Returns ``(worst, added)`` (row units; forces scaled)."""
+    worst = 0.0
+    added = 0
+    for r in range(n_hard):
+        v = _row_value(col, val, X, r)
+        e = max(b0l[r] - v, v - b0u[r])
+        worst = max(worst, e)
+        if e > tol and not keep[r] and not elim[r]:
+            keep[r] = True
+            added += 1
+    for q in range(z.shape[0]):
+        e = abs(z[q]) - 1.0
+        if e > tol and not keepf[q]:
+            keepf[q] = True
+            added += 1
+    return worst, added
+
+
+@njit(cache=True)
+def reduce_problem(keep, keepf, col, val, G, off, L, Z, ecnt, zf, bl, bu, m):
+    """The reduced QP's rows as DAQP takes them (no simple bounds): the kept rows
+    ``Sel G w`` and the kept force rows ``zf + Gz w`` (``Gz[i, i] = Z_i``,
+    ``Gz[i, j] = L_i G[i-1, j]``), with bounds and senses."""
+    N = ecnt.shape[0]
+    nw = off[N]
+    k = 0
+    for r in range(keep.shape[0]):
+        if keep[r]:
+            k += 1
+    for q in range(keepf.shape[0]):
+        if keepf[q]:
+            k += 1
+    A = np.zeros((k, nw))
+    BU = np.empty(k)
+    BL = np.empty(k)
+    sense = np.zeros(k, np.int32)
+    i = 0
+    for r in range(keep.shape[0]):
+        if not keep[r]:
+            continue
+        for t in range(col.shape[1]):
+            c = col[r, t]
+            if c < 0:
+                continue
+            v = val[r, t]
+            nc = off[c // 6 + 1]
+            for q in range(nc):
+                A[i, q] += v * G[c, q]
+        BU[i] = bu[r]
+        BL[i] = bl[r]
+        i += 1
+    for q in range(keepf.shape[0]):
+        if not keepf[q]:
+            continue
+        s = q // m
+        l = q - s * m
+        if s > 0 and ecnt[s] > 0:
+            for b in range(6):
+                lv = L[s, l, b]
+                if lv == 0.0:
+                    continue
+                for c in range(off[s]):
+                    A[i, c] += lv * G[6 * (s - 1) + b, c]
+        for t in range(off[s + 1] - off[s]):
+            A[i, off[s] + t] = Z[s, l, t]
+        BU[i] = 1.0 - zf[q]
+        BL[i] = -1.0 - zf[q]
+        i += 1
+    return A, BU, BL, sense
