@@ -49,7 +49,7 @@ from planner.request import parse_request  # noqa: E402
 from planner.robot import load_robot  # noqa: E402
 from planner.trajectory import corridor_violation  # noqa: E402
 
-TABLE1 = Path("/work/shared/data/table1-corridor.json")
+TABLE1 = Path(__file__).resolve().parents[1] / "static" / "examples" / "table1.json"
 #: constrained-mode settings tuned for energy (the corridor is kept by constraints, so the
 #: range penalty only shapes the motion; a longer horizon sees further ahead)
 TUNED = {"k_r": 0.1, "k_u": 2e-4, "N": 30}
