@@ -27,7 +27,7 @@ from pydantic import ValidationError
 
 from planner.errors import PlannerError
 from planner.plan import plan as run_plan
-from planner.request import Settings, parse_request
+from planner.request import MODE_DEFAULTS, Settings, parse_request
 from planner.robot import builtin_robot_names, load_robot
 from planner.trajectory import to_csv
 
@@ -52,7 +52,7 @@ DEFAULT_REQUEST: dict[str, Any] = {
         "start": [-0.08, 0.0, 0.0],
         "end": [0.06, 0.04, 0.0],
     },
-    "settings": {"mode": "paper", "Ts": 0.01, "N": 20, "k_r": 1.0, "k_u": 1e-3},
+    "settings": {"mode": "paper", "Ts": 0.01, **MODE_DEFAULTS["paper"]},
 }
 
 _HAS_SPEED = "speed_m_s" in Settings.__dataclass_fields__
@@ -353,14 +353,15 @@ class Editor:
             self._robot_dd.on_update(lambda _: self._on_robot(self._robot_dd.value))
             self._mode = gui.add_dropdown("Mode", ("paper", "constrained"), initial_value="paper",
                                           hint="paper: soft range criterion; constrained: hard corridor and drive limits")
-            self._mode.on_update(lambda _: self._on_setting("mode", self._mode.value))
+            self._mode.on_update(lambda _: self._on_mode(self._mode.value))
             self._Ts = gui.add_number("Sample time Ts (s)", 0.01, min=0.001, max=0.1, step=0.001)
             self._Ts.on_update(lambda _: self._on_setting("Ts", float(self._Ts.value)))
-            self._N = gui.add_number("Horizon N (samples)", 20, min=1, max=200, step=1)
+            paper = MODE_DEFAULTS["paper"]
+            self._N = gui.add_number("Horizon N (samples)", paper["N"], min=1, max=200, step=1)
             self._N.on_update(lambda _: self._on_setting("N", int(self._N.value)))
-            self._k_r = gui.add_number("k_r, range penalty (1/m)", 1.0, min=1e-9, max=1e12, step=0.1)
+            self._k_r = gui.add_number("k_r, range penalty (1/m)", paper["k_r"], min=1e-9, max=1e12, step=0.1)
             self._k_r.on_update(lambda _: self._on_setting("k_r", float(self._k_r.value)))
-            self._k_u = gui.add_number("k_u, force penalty (1/N)", 1e-3, min=1e-12, max=1e12, step=1e-5)
+            self._k_u = gui.add_number("k_u, force penalty (1/N)", paper["k_u"], min=1e-12, max=1e12, step=1e-5)
             self._k_u.on_update(lambda _: self._on_setting("k_u", float(self._k_u.value)))
             if _HAS_SPEED:
                 self._speed = gui.add_number("Speed (m/s)", 0.1, min=0.0, max=10.0, step=0.01)
@@ -419,9 +420,10 @@ class Editor:
                 self._robot_dd.value = r.get("robot", "moving-slide")
             self._mode.value = st.get("mode", "paper")
             self._Ts.value = float(st.get("Ts", 0.01))
-            self._N.value = int(st.get("N", 20))
-            self._k_r.value = float(st.get("k_r", 1.0))
-            self._k_u.value = float(st.get("k_u", 2e-4))
+            defaults = MODE_DEFAULTS.get(st.get("mode", "paper"), MODE_DEFAULTS["paper"])
+            self._N.value = int(st.get("N", defaults["N"]))
+            self._k_r.value = float(st.get("k_r", defaults["k_r"]))
+            self._k_u.value = float(st.get("k_u", defaults["k_u"]))
             if self._speed is not None and st.get("speed_m_s") is not None:
                 self._speed.value = float(st["speed_m_s"])
             self._name.value = r.get("name") or ""
@@ -465,6 +467,33 @@ class Editor:
             else:
                 st[key] = value
         self.edit(fn)
+
+    def _on_mode(self, mode: str) -> None:
+        """Switch the mode; N, k_r and k_u still at the old mode's defaults follow to the new
+        mode's defaults (planner.request.MODE_DEFAULTS), values the user changed stay."""
+        if self._syncing:
+            return
+        widgets = {"N": (self._N, int), "k_r": (self._k_r, float), "k_u": (self._k_u, float)}
+
+        def fn(r):
+            st = r.setdefault("settings", {})
+            old = MODE_DEFAULTS.get(st.get("mode", "paper"), MODE_DEFAULTS["paper"])
+            st["mode"] = mode
+            for key, value in MODE_DEFAULTS[mode].items():
+                if st.get(key, old[key]) == old[key]:
+                    st[key] = value
+            return {key: st[key] for key in widgets if key in st}
+
+        with self._lock:
+            shown = fn(self._request)
+        self._syncing = True
+        try:
+            for key, value in shown.items():
+                widget, cast = widgets[key]
+                widget.value = cast(value)
+        finally:
+            self._syncing = False
+        self.edit(lambda r: None)
 
     def _on_robot(self, name: str) -> None:
         if self._syncing:

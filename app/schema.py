@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from planner.request import MAX_HORIZON, MAX_SAMPLES_PER_SEGMENT, MAX_SEGMENTS
+from planner.request import DEFAULT_SAMPLES_PER_SEGMENT, MAX_HORIZON, MAX_SAMPLES_PER_SEGMENT, MAX_SEGMENTS, MODE_DEFAULTS
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Pose = Annotated[list[Finite], Field(min_length=3, max_length=3,
@@ -37,11 +37,18 @@ class SegmentModel(Strict):
 
 class SettingsModel(Strict):
     Ts: Finite = Field(0.01, gt=0, le=1.0, description="Sample time in s")
-    N: int = Field(20, ge=1, le=MAX_HORIZON, description="Prediction horizon in samples")
+    N: int | None = Field(None, ge=1, le=MAX_HORIZON, description="Prediction horizon in samples; default "
+                          f"{MODE_DEFAULTS['paper']['N']} in paper mode, {MODE_DEFAULTS['constrained']['N']} in "
+                          "constrained mode")
     samples_per_segment: int | None = Field(None, ge=1, le=MAX_SAMPLES_PER_SEGMENT,
-                                            description="Samples each segment is held (count); default N")
-    k_r: Finite = Field(1.0, gt=0, description="Range penalty: Q_ra = Q_rb = k_r I (1/m, 1/rad)")
-    k_u: Finite = Field(1e-3, gt=0, description="Drive-force penalty: Q_u = k_u I (1/N)")
+                                            description="Samples each segment is held (count); default N if N is "
+                                            f"given, else {DEFAULT_SAMPLES_PER_SEGMENT}")
+    k_r: Finite | None = Field(None, gt=0, description="Range penalty: Q_ra = Q_rb = k_r I (1/m, 1/rad); default "
+                               f"{MODE_DEFAULTS['paper']['k_r']:g} in paper mode, "
+                               f"{MODE_DEFAULTS['constrained']['k_r']:g} in constrained mode")
+    k_u: Finite | None = Field(None, gt=0, description="Drive-force penalty: Q_u = k_u I (1/N); default "
+                               f"{MODE_DEFAULTS['paper']['k_u']:g} in paper mode, "
+                               f"{MODE_DEFAULTS['constrained']['k_u']:g} in constrained mode")
     q_ra: list[Finite] | None = Field(None, min_length=3, max_length=3, description="Diagonal of Q_ra (1/m, 1/m, 1/rad)")
     q_rb: list[Finite] | None = Field(None, min_length=3, max_length=3, description="Diagonal of Q_rb (1/m, 1/m, 1/rad)")
     q_u: list[Finite] | None = Field(None, min_length=1, description="Diagonal of Q_u, one per drive (1/N)")

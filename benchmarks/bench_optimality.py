@@ -45,14 +45,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from planner.constrained import PoseSets  # noqa: E402
 from planner.plan import plan, rk4_sample  # noqa: E402
 from planner.ranges import range_sequence  # noqa: E402
-from planner.request import parse_request  # noqa: E402
+from planner.request import MODE_DEFAULTS, parse_request  # noqa: E402
 from planner.robot import load_robot  # noqa: E402
 from planner.trajectory import corridor_violation  # noqa: E402
 
 TABLE1 = Path(__file__).resolve().parents[1] / "static" / "examples" / "table1.json"
-#: constrained-mode settings tuned for energy (the corridor is kept by constraints, so the
-#: range penalty only shapes the motion; a longer horizon sees further ahead)
-TUNED = {"k_r": 0.1, "k_u": 2e-4, "N": 30}
+#: the paper mode's penalties and horizon, run in constrained mode for comparison with the
+#: constrained mode's own defaults (planner.request.MODE_DEFAULTS)
+PAPER_PENALTIES = MODE_DEFAULTS["paper"]
 
 
 def casadi_dynamics(robot):
@@ -200,7 +200,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=3, help="runs of each planner mode (median time)")
     ap.add_argument("--ipopt-repeat", type=int, default=1, help="runs of IPOPT (median time)")
-    ap.add_argument("--samples", type=int, default=None, help="samples_per_segment (default N = 20)")
+    ap.add_argument("--samples", type=int, default=None, help="samples_per_segment (default 20)")
     ap.add_argument("--input", default=str(TABLE1), help="plan request JSON with segments")
     ap.add_argument("--verbose", action="store_true")
     args = ap.parse_args(argv)
@@ -219,9 +219,11 @@ def main(argv=None) -> int:
     rows = []
     results = {}
     S = base["settings"].get("samples_per_segment", base["settings"].get("N", 20))
-    configs = [("paper", {"mode": "paper"}), ("constrained", {"mode": "constrained"}),
-               (f"constr. k_r={TUNED['k_r']:g} k_u={TUNED['k_u']:g} N={TUNED['N']}", {"mode": "constrained", **TUNED,
-                                                                "samples_per_segment": S})]
+    pp = PAPER_PENALTIES
+    configs = [("paper", {"mode": "paper", "samples_per_segment": S}),
+               ("constrained", {"mode": "constrained", "samples_per_segment": S}),
+               (f"constr. k_r={pp['k_r']:g} k_u={pp['k_u']:g} N={pp['N']}",
+                {"mode": "constrained", **pp, "samples_per_segment": S})]
     for label, extra in configs:
         req = copy.deepcopy(base)
         req["settings"].update(extra)

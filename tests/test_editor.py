@@ -351,6 +351,27 @@ def test_settings_controls_change_the_request(editor):
     assert editor.last_result["settings"]["N"] == 30
 
 
+def test_mode_switch_moves_untouched_penalties_to_the_mode_defaults(editor):
+    """N, k_r, k_u still at the paper defaults follow the mode to the constrained defaults;
+    a value the user changed stays; the plan uses what the request says."""
+    from planner.request import MODE_DEFAULTS
+
+    paper, con = MODE_DEFAULTS["paper"], MODE_DEFAULTS["constrained"]
+    editor._mode.value = "paper"
+    editor._N.value, editor._k_r.value, editor._k_u.value = paper["N"], paper["k_r"], 3e-4
+    editor._mode.value = "constrained"
+    st = editor.request["settings"]
+    assert (st["mode"], st["N"], st["k_r"], st["k_u"]) == ("constrained", con["N"], con["k_r"], 3e-4)
+    assert (editor._N.value, editor._k_r.value, editor._k_u.value) == (con["N"], con["k_r"], 3e-4)
+    assert editor.wait_idle(60)
+    used = editor.last_result["settings"]
+    assert (used["mode"], used["N"], used["k_r"], used["k_u"]) == ("constrained", con["N"], con["k_r"], 3e-4)
+    editor._mode.value = "paper"
+    st = editor.request["settings"]
+    assert (st["N"], st["k_r"], st["k_u"]) == (paper["N"], paper["k_r"], 3e-4)
+    assert editor.wait_idle(60)
+
+
 def test_save_load_and_import_round_trip(editor):
     editor._save(new=True)
     store = editor.store
