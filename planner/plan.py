@@ -253,6 +253,7 @@ def plan(request, *, robot: Robot | None = None, segments=None) -> dict:
     if st.mode == "constrained":  # containment judged on the actual trajectory; may raise infeasible
         from .constrained import finalize
         finalize(result, st, segments)
+    result["metrics"]["compute_ms"] = (time.perf_counter() - t0) * 1e3  # everything, result arrays included
     if not sim["settled"] and st.require_settled:
         mt = result["metrics"]
         raise PlannerError("not_settled", f"the robot did not settle at the end point within "
