@@ -28,7 +28,9 @@ from planner.plan import plan, warm_up  # noqa: E402
 from planner.request import MODE_DEFAULTS  # noqa: E402
 from planner.robot import builtin_description  # noqa: E402
 
-TABLE1 = json.loads((Path(__file__).resolve().parents[1] / "static" / "examples" / "table1.json").read_text())
+EXAMPLES = Path(__file__).resolve().parents[1] / "static" / "examples"
+TABLE1 = json.loads((EXAMPLES / "table1.json").read_text())
+PSI_TURN = json.loads((EXAMPLES / "psi-turn.json").read_text())
 BOUNDS = {"lower": [-0.1, -0.05], "upper": [0.1, 0.08]}
 
 
@@ -40,13 +42,6 @@ def _robot(**legs) -> dict:
 
 def corridors() -> list[tuple[str, dict]]:
     """(label, request) pairs; ``settings.samples_per_segment`` fixed so both runs share the timing."""
-    psi = [{"lower": [-0.05, 0.0, 0.0], "upper": [-0.05, 0.0, 0.0]},
-           {"lower": [-0.05, -0.01, 0.0], "upper": [-0.03, 0.01, 0.02]},
-           {"lower": [-0.03, -0.01, 0.02], "upper": [-0.01, 0.01, 0.06]},
-           {"lower": [-0.01, -0.01, 0.06], "upper": [0.01, 0.01, 0.10]},
-           {"lower": [0.01, -0.01, 0.10], "upper": [0.03, 0.01, 0.12]},
-           {"lower": [0.03, 0.0, 0.12], "upper": [0.03, 0.0, 0.12]}]
-
     def layout(shape, obstacle, size, end, psi_range=None):
         lay = {"bounds": BOUNDS, "obstacles": [obstacle], "cell": {"shape": shape, "size": size},
                "start": [-0.08, 0.0, 0.0], "end": end}
@@ -59,7 +54,7 @@ def corridors() -> list[tuple[str, dict]]:
     out = [("Table I", TABLE1, 20), ("Table I, S = 10", TABLE1, 10), ("Table I, S = 40", TABLE1, 40),
            ("Table I, speed_max 0.12 m/s", {**TABLE1, "robot": _robot(speed_max=0.12)}, 20),
            ("Table I, force_max 15 N", {**TABLE1, "robot": _robot(force_max=15.0)}, 20),
-           ("psi ranges 0..0.12 rad", {"robot": "moving-slide", "segments": psi}, 20),
+           ("psi ranges 0..0.12 rad", PSI_TURN, 20),
            ("layout, squares 20 mm", layout("square", rect, 0.02, [0.07, 0.0, 0.0]), 20),
            ("layout, triangles 20 mm", layout("triangle", rect, 0.02, [0.07, 0.0, 0.0]), 20),
            ("layout, triangles 15 mm, end psi 0.1", layout("triangle", circle, 0.015, [0.07, 0.0, 0.1],

@@ -19,6 +19,7 @@ from planner.plan import plan
 from planner.robot import builtin_description, load_robot
 
 TABLE1 = Path("/work/shared/data/table1-corridor.json")
+PSI_TURN = Path(__file__).resolve().parents[1] / "static" / "examples" / "psi-turn.json"
 TOL = 1e-9  # m
 
 
@@ -31,6 +32,11 @@ def table1() -> dict:
     segs += [{"lower": [x, y, 0.0], "upper": [x + 0.02, y + 0.02, 0.0]} for x, y in cells]
     segs += [{"lower": [0.06, 0.04, 0.0], "upper": [0.06, 0.04, 0.0]}]
     return {"robot": "moving-slide", "segments": segs}
+
+
+def psi_turn() -> dict:
+    """static/examples/psi-turn.json: psi ranges 0..0.12 rad over four 20 mm cells."""
+    return json.loads(PSI_TURN.read_text())
 
 
 def constrained(req: dict, **settings) -> dict:
@@ -206,14 +212,7 @@ def test_psi_ranges_honoured():
     """A corridor that turns the platform: psi ranges per segment, each narrower than the
     paper's pull to the middle would need; the constrained plan keeps every sample's psi in
     its range (time-indexed) to 1e-9 rad."""
-    segs = [{"lower": [-0.05, 0.0, 0.0], "upper": [-0.05, 0.0, 0.0]},
-            {"lower": [-0.05, -0.01, 0.0], "upper": [-0.03, 0.01, 0.02]},
-            {"lower": [-0.03, -0.01, 0.02], "upper": [-0.01, 0.01, 0.06]},
-            {"lower": [-0.01, -0.01, 0.06], "upper": [0.01, 0.01, 0.10]},
-            {"lower": [0.01, -0.01, 0.10], "upper": [0.03, 0.01, 0.12]},
-            {"lower": [0.03, 0.0, 0.12], "upper": [0.03, 0.0, 0.12]}]
-    req = {"robot": "moving-slide", "segments": segs}
-    res = plan(constrained(req))
+    res = plan(constrained(psi_turn()))
     P = np.array(res["pose"])
     lo, hi = np.array(res["corridor"]["lower"]), np.array(res["corridor"]["upper"])
     wide = hi[:, 2] - lo[:, 2] > 1e-9
@@ -304,13 +303,7 @@ def test_layout_with_end_angle_settles_in_constrained_mode():
 
 def _psi_corridor() -> dict:
     """Turning platform: psi ranges of non-zero width (no equality rows but at the ends)."""
-    segs = [{"lower": [-0.05, 0.0, 0.0], "upper": [-0.05, 0.0, 0.0]},
-            {"lower": [-0.05, -0.01, 0.0], "upper": [-0.03, 0.01, 0.02]},
-            {"lower": [-0.03, -0.01, 0.02], "upper": [-0.01, 0.01, 0.06]},
-            {"lower": [-0.01, -0.01, 0.06], "upper": [0.01, 0.01, 0.10]},
-            {"lower": [0.01, -0.01, 0.10], "upper": [0.03, 0.01, 0.12]},
-            {"lower": [0.03, 0.0, 0.12], "upper": [0.03, 0.0, 0.12]}]
-    return constrained({"robot": "moving-slide", "segments": segs})
+    return constrained(psi_turn())
 
 
 def _close(a, b, rel=1e-10) -> bool:
