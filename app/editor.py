@@ -482,18 +482,15 @@ class Editor:
             for key, value in MODE_DEFAULTS[mode].items():
                 if st.get(key, old[key]) == old[key]:
                     st[key] = value
-            return {key: st[key] for key in widgets if key in st}
 
-        with self._lock:
-            shown = fn(self._request)
+        self.edit(fn)
+        st = self.request["settings"]
         self._syncing = True
         try:
-            for key, value in shown.items():
-                widget, cast = widgets[key]
-                widget.value = cast(value)
+            for key, (widget, cast) in widgets.items():
+                widget.value = cast(st[key])
         finally:
             self._syncing = False
-        self.edit(lambda r: None)
 
     def _on_robot(self, name: str) -> None:
         if self._syncing:

@@ -31,7 +31,7 @@ MAX_TOTAL_STEPS = 200_000
 #: Defaults that depend on ``settings.mode``, applied where the request leaves the field out.
 #: The constrained mode keeps the corridor by its constraints, so its range penalty only has
 #: to pull the robot along: a lighter pull (k_r) and force penalty (k_u) with a longer
-#: horizon use 25-80 % less drive energy on every corridor measured, all contained and
+#: horizon use 6-75 % less drive energy on every corridor measured, all contained and
 #: settled (benchmarks/README.md, issue 6; on Table I 1.14x the IPOPT optimum instead of 1.5x).
 MODE_DEFAULTS = {"paper": {"N": 20, "k_r": 1.0, "k_u": 1e-3},
                  "constrained": {"N": 30, "k_r": 0.1, "k_u": 2e-4}}
