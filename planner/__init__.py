@@ -1,0 +1,40 @@
+"""rangeplan's numerical library: range-space predictive control of planar parallel robots
+(after *Range-space predictive control for optimal robot motion*; ``docs/architecture.md``).
+
+Layers, each importing only those below it (enforced by import-linter)::
+
+    orchestrator   plan(): validate -> model -> corridor -> controller -> simulate -> result
+    constraints    the constrained mode: constraint rows, QP per sample (DAQP)
+    corridor       segmentation of layouts into cells, range sequences      | horizon: eqs. 10-23
+    model          the robot: kinematics, reach, dynamics (eqs. 1-8), hold (eq. 9), plant
+    schema         the request and result models (pydantic), bounds and defaults
+    errors         PlannerError
+
+Glossary (paper symbol -> code name):
+
+==============  ==============================================================
+``y``           pose ``(x, y, psi)`` of the tool point [m, m, rad]; ``pose``
+``x``           state ``(y, y_dot)``; ``X`` in a simulation
+``s``           physical coordinates (``dynamics.physical_coordinates``)
+``R``           ``ds/dy`` (``dynamics.R_matrix``); ``J_l``: its leg-length rows
+``u``           drive forces [N], one per leg (``n_legs`` legs; never ``m``)
+``A(x), B(x)``  factorised model (``dynamics.factorised``, eq. 8)
+``Ad, Bd``      zero-order hold (``discretisation.zoh_factorised``, eq. 9)
+``F, G``        predictions (``horizon.prediction_matrices``, eq. 11)
+``N``           horizon [samples] (``Settings.N``)
+``r_a, r_b``    range limits: ``Segment.lower``, ``Segment.upper``; per sample
+                ``RangeSequence.lower`` / ``.upper``
+``Q_ra, Q_rb``  range penalties ``k_r`` or ``q_ra``, ``q_rb`` (diagonals)
+``Q_u``         force penalty ``k_u`` or ``q_u``
+(Table I)       samples each segment is held: ``samples_per_segment``
+``T_s``         sample time ``Settings.Ts`` [s]
+==============  ==============================================================
+"""
+
+from .errors import PlannerError
+from .model import RobotModel, load_robot
+from .orchestrator import plan, segment, to_csv, warm_up
+from .schema import PlanRequest, PlanResult, SegmentationResult, Settings, parse_request
+
+__all__ = ["plan", "segment", "warm_up", "to_csv", "PlanRequest", "PlanResult", "SegmentationResult", "Settings",
+           "parse_request", "RobotModel", "load_robot", "PlannerError"]

@@ -27,6 +27,7 @@ from functools import lru_cache
 import numpy as np
 from scipy.linalg import get_lapack_funcs, solve_triangular
 
+from .kernels import riccati
 from .prediction import prediction_matrices
 
 _gbsv = get_lapack_funcs("gbsv", dtype=np.float64)
@@ -144,9 +145,8 @@ def solve_structured(Ad, Bd, C, x0, qa, qb, qu, ra, rb) -> np.ndarray:
 
 def solve_riccati(Ad, Bd, C, x0, qa, qb, qu, ra, rb) -> np.ndarray:
     """Same minimiser as :func:`solve_qr`, in ``O(N)``, by the compiled backward Riccati
-    recursion :func:`planner.kernels.riccati` (``C = [I 0]``, ``Ad`` with the block structure
+    recursion :func:`planner.horizon.kernels.riccati` (``C = [I 0]``, ``Ad`` with the block structure
     of eq. (9), one ``Q_u`` for the horizon: ``qu[0]`` is used). Returns the input sequence, shape (N, m)."""
-    from .kernels import riccati
 
     N, m = qu.shape
     if Ad.shape != (6, 6) or C.shape != (3, 6) or np.any(C != np.eye(3, 6)):

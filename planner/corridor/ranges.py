@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .request import Segment, Settings
+from ..schema import Segment, Settings
 
 
 @dataclass
@@ -52,22 +52,17 @@ class RangeSequence:
         return self.lower[i], self.upper[i]
 
 
-def _penalties(settings: Settings, n_drives: int):
-    qa = np.array(settings.q_ra) if settings.q_ra is not None else np.full(3, settings.k_r)
-    qb = np.array(settings.q_rb) if settings.q_rb is not None else np.full(3, settings.k_r)
-    if settings.q_u is not None:
-        if len(settings.q_u) != n_drives:
-            from .errors import invalid
-            raise invalid("settings.q_u", f"must have one entry per drive ({n_drives}), got {len(settings.q_u)}")
-        qu = np.array(settings.q_u)
-    else:
-        qu = np.full(n_drives, settings.k_u)
+def _penalties(settings: Settings, n_drives: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Diagonals of ``Q_ra``, ``Q_rb`` (3,) and ``Q_u`` (n_drives,) from the settings."""
+    qa = np.array(settings.q_ra, float) if settings.q_ra is not None else np.full(3, settings.k_r)
+    qb = np.array(settings.q_rb, float) if settings.q_rb is not None else np.full(3, settings.k_r)
+    qu = np.array(settings.q_u, float) if settings.q_u is not None else np.full(n_drives, settings.k_u)
     return qa, qb, qu
 
 
 def range_sequence(segments: list[Segment], settings: Settings, n_drives: int) -> RangeSequence:
     """Section V.B: expand the corridor's segments into per-sample ranges."""
-    S = settings.S
+    S = settings.samples_per_segment
     n = len(segments)
     lo = np.repeat(np.array([s.lower for s in segments]), S, axis=0)
     hi = np.repeat(np.array([s.upper for s in segments]), S, axis=0)

@@ -23,7 +23,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .kernels import rk4, state_derivative
+from ..model.kernels import rk4, state_derivative
 
 #: kinds of rows (the slack variable that softens each in the slack problem)
 KIND_CORRIDOR, KIND_STROKE, KIND_SPEED = 0, 1, 2
@@ -468,12 +468,12 @@ def assemble(block_of, k, K, lower, upper, qa, qb, jj, lo, hi, has_hp, hp_ptr, h
 
 
 @njit(cache=True)
-def plant_step(rb, x, u, Ts, substeps):
+def plant_step(packed, x, u, Ts, substeps):
     """The plant (``planner.kernels.rk4`` from ``x`` under ``u``, ``x_dot`` at ``x`` from
     ``planner.kernels.state_derivative``): the state one sample later."""
     f0 = np.empty(6)
-    state_derivative(rb, x, u, f0)
-    return rk4(rb, x, u, Ts, substeps, f0)
+    state_derivative(packed, x, u, f0)
+    return rk4(packed, x, u, Ts, substeps, f0)
 
 
 @njit(cache=True)
@@ -518,10 +518,10 @@ def free_parts(P, x, d, Gx, ncol, W, tgt, col, val, b0l, b0u):
 
 
 @njit(cache=True)
-def one_step_error(rb, x, u, Ad, Bd, d, Ts, substeps):
+def one_step_error(packed, x, u, Ad, Bd, d, Ts, substeps):
     """The plant's next state under ``u`` and how far it lands from the QP's prediction of
     it ``Ad x + Bd u + d``: ``(x1, position error [m], angle error [rad])``."""
-    x1 = plant_step(rb, x, u, Ts, substeps)
+    x1 = plant_step(packed, x, u, Ts, substeps)
     e = offset(x1, x, u, Ad, Bd)
     return x1, math.hypot(e[0] - d[0], e[1] - d[1]), abs(e[2] - d[2])
 

@@ -29,17 +29,17 @@ have cells of one size, so a uniform count gives a near-uniform speed there.
 
 from __future__ import annotations
 
-import math
-import time
-from dataclasses import replace
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from .errors import PlannerError, invalid
-from .request import MAX_SAMPLES_PER_SEGMENT, MAX_TOTAL_STEPS, Settings
+from ..errors import PlannerError, invalid
+from ..schema import MAX_SAMPLES_PER_SEGMENT, MAX_TOTAL_STEPS, PlanResult, Segment, Settings, Timing
+
+__all__ = ["centre_path_length", "moving_segments", "resolve_timing", "timing_info", "feasible", "search_fastest"]
 
 
-def centre_path_length(segments) -> float:
+def centre_path_length(segments: Sequence[Segment]) -> float:
     """Length [m] of the polyline through the segments' centres (x, y)."""
     c = np.array([s.centre[:2] for s in segments])
     return float(np.sum(np.hypot(*np.diff(c, axis=0).T)))
@@ -60,14 +60,20 @@ def _check_size(S: int, n: int, field: str) -> int:
     return S
 
 
-def resolve_timing(st: Settings, segments) -> Settings:
+def method_of(st: Settings) -> str:
+    """Which timing setting decides ``samples_per_segment``."""
+    return ("speed_m_s" if st.speed_m_s is not None else "total_time_s" if st.total_time_s is not None
+            else "fastest" if st.fastest else "samples_per_segment")
+
+
+def resolve_timing(st: Settings, segments: Sequence[Segment] | None) -> Settings:
     """Settings with ``samples_per_segment`` set from ``speed_m_s`` or ``total_time_s``
     (unchanged otherwise). ``segments`` is ``None`` for a reference trajectory, which has
     its own timing (one pose per sample): then these settings are an error."""
-    if st.speed_m_s is None and st.total_time_s is None and not st.fastest:
+    method = method_of(st)
+    if method == "samples_per_segment":
         return st
-    field = ("settings.speed_m_s" if st.speed_m_s is not None else
-             "settings.total_time_s" if st.total_time_s is not None else "settings.fastest")
+    field = f"settings.{method}"
     if segments is None:
         raise invalid(field, "applies to a corridor (segments or layout); a reference trajectory "
                       "has one pose per sample")
@@ -78,56 +84,55 @@ def resolve_timing(st: Settings, segments) -> Settings:
             raise invalid(field, "the corridor's centre path has zero length; give samples_per_segment "
                           "or total_time_s instead")
         S = max(1, int(round(L / (st.speed_m_s * st.Ts * moving_segments(n)))))
-        return replace(st, samples_per_segment=_check_size(S, n, field))
+        return st.model_copy(update={"samples_per_segment": _check_size(S, n, field)})
     if st.total_time_s is not None:
         S = max(1, int(round(st.total_time_s / (n * st.Ts))))
-        return replace(st, samples_per_segment=_check_size(S, n, field))
+        return st.model_copy(update={"samples_per_segment": _check_size(S, n, field)})
     return st
 
 
-def timing_info(st: Settings, segments, method: str | None = None, **extra) -> dict:
+def timing_info(st: Settings, segments: Sequence[Segment] | None, **extra: object) -> Timing:
     """What the result reports under ``timing``."""
-    if method is None:
-        method = ("speed_m_s" if st.speed_m_s is not None else "total_time_s" if st.total_time_s is not None
-                  else "fastest" if st.fastest else "samples_per_segment")
-    info = {"method": method, "samples_per_segment": st.S, "sequence_time_s": None,
-            "moving_time_s": None, "path_length_m": None}
+    info: dict = {"method": method_of(st), "samples_per_segment": st.samples_per_segment, "sequence_time_s": None,
+                  "moving_time_s": None, "path_length_m": None, "evaluations": None, "feasible": None,
+                  "one_fewer_sample_infeasible": None}
     if segments is not None:
         n = len(segments)
-        info["sequence_time_s"] = n * st.S * st.Ts
-        info["moving_time_s"] = moving_segments(n) * st.S * st.Ts
+        info["sequence_time_s"] = n * st.samples_per_segment * st.Ts
+        info["moving_time_s"] = moving_segments(n) * st.samples_per_segment * st.Ts
         info["path_length_m"] = centre_path_length(segments)
     info.update(extra)
-    return info
+    return Timing.model_construct(**info)
 
 
-def feasible(result: dict) -> bool:
+def feasible(result: PlanResult) -> bool:
     """A constrained plan that keeps everything it promises (see the module docstring)."""
-    mt = result["metrics"]
-    return bool(mt.get("infeasible_steps", 1) == 0 and mt.get("contained", False)
-                and mt.get("within_limits", False) and mt["settled"])
+    mt = result.metrics
+    return bool(mt.infeasible_steps == 0 and mt.contained and mt.within_limits and mt.settled)
 
 
-def fastest_plan(req, robot, segments, t0: float) -> dict:
-    """The plan at the smallest feasible ``samples_per_segment`` (see module docstring)."""
-    from .plan import plan
+#: one candidate timing: (feasible, the plan or None, the error code or None)
+Candidate = tuple[bool, PlanResult | None, str | None]
 
-    st = req.settings
-    n = len(segments)
-    cache: dict[int, tuple[bool, dict | None, str | None]] = {}
 
-    def run(S: int):
+def search_fastest(plan_at: Callable[[int], PlanResult], st: Settings, n_segments: int) -> tuple[int, dict[int, Candidate]]:
+    """The smallest feasible ``samples_per_segment`` (see the module docstring) by planning
+    candidates with ``plan_at(S)``; returns ``(S, candidates)``, ``S = 0`` if none up to the
+    limit is feasible (then the largest tried is ``max(candidates)``)."""
+    cache: dict[int, Candidate] = {}
+
+    def run(S: int) -> bool:
         if S not in cache:
-            sub = replace(st, fastest=False, samples_per_segment=S, require_settled=False)
             try:
-                res = plan(replace(req, settings=sub), robot=robot, segments=segments)
+                res = plan_at(S)
                 cache[S] = (feasible(res), res, None)
             except PlannerError as exc:  # e.g. diverged: too fast
                 cache[S] = (False, None, exc.code)
         return cache[S][0]
 
-    s_max = min(MAX_SAMPLES_PER_SEGMENT, MAX_TOTAL_STEPS // n)
+    s_max = min(MAX_SAMPLES_PER_SEGMENT, MAX_TOTAL_STEPS // n_segments)
     S = min(st.N, s_max)
+    hi: int | None
     if run(S):
         hi, lo = S, 0
         while hi > 1:
@@ -148,13 +153,7 @@ def fastest_plan(req, robot, segments, t0: float) -> dict:
             else:
                 lo = cand
     if hi is None:
-        ok_res = cache[lo][1]
-        if st.require_settled or ok_res is None:
-            raise PlannerError("infeasible", f"no timing up to {lo} samples per segment keeps the corridor "
-                               "within the drive limits", "settings.fastest")
-        ok_res["timing"] = timing_info(replace(st, samples_per_segment=lo), segments, "fastest",
-                                       evaluations=len(cache), feasible=False)
-        return ok_res
+        return 0, cache
     while hi - lo > 1:
         mid = (lo + hi) // 2
         if run(mid):
@@ -163,12 +162,4 @@ def fastest_plan(req, robot, segments, t0: float) -> dict:
             lo = mid
     if hi > 1 and (hi - 1) not in cache:
         run(hi - 1)
-    res = cache[hi][1]
-    final = replace(st, samples_per_segment=hi)
-    from .request import settings_dict
-
-    res["settings"] = settings_dict(final)
-    res["timing"] = timing_info(final, segments, "fastest", evaluations=len(cache), feasible=True,
-                                one_fewer_sample_infeasible=bool(hi == 1 or not cache[hi - 1][0]))
-    res["metrics"]["compute_ms"] = (time.perf_counter() - t0) * 1e3
-    return res
+    return hi, cache

@@ -71,15 +71,17 @@ import shapely
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from .errors import PlannerError, invalid
-from .request import MAX_SEGMENTS, MAX_TOTAL_STEPS, PlanRequest, Segment, Settings, _finite, _vec
-from .robot import SINGULAR_TOL, Robot, load_robot
+from pydantic import ValidationError
 
-#: bound on the number of cells of one segmentation [-]
-MAX_CELLS = 40_000
-#: bound on the number of obstacles and on the vertices of one polygon obstacle [-]
-MAX_OBSTACLES = 2_000
-MAX_POLYGON_POINTS = 10_000
+from ..errors import PlannerError, invalid
+from ..model import SINGULAR_TOL, RobotModel, load_robot
+from ..model.reach import boxes_within_stroke, check_pose
+from ..schema import MAX_CELLS, MAX_SEGMENTS, MAX_TOTAL_STEPS, SQRT3_2, PlanRequest, Segment, Settings, cell_count, \
+    planner_error
+from ..schema import Layout as LayoutSpec
+from .geometry import halfplanes
+
+Robot = RobotModel
 #: nominal tool speed of the default cell-size rule [m/s]
 DEFAULT_SPEED = 0.1
 #: segments of a quarter circle in grown outlines (circumscribed: conservative by <= 0.13 %)
@@ -90,7 +92,6 @@ PSI_STEP = 0.05
 
 FREE, BLOCKED, UNREACHABLE = 0, 1, 2
 STATE_NAMES = ("free", "blocked", "unreachable")
-SQRT3_2 = math.sqrt(3.0) / 2.0
 
 _LAYOUT_KEYS = ("bounds", "obstacles", "clearance", "cell", "start", "end", "psi_range")
 _OBSTACLE_KEYS = {"rectangle": ("lower", "upper"), "polygon": ("points",), "circle": ("center", "radius")}
@@ -153,130 +154,38 @@ def _discs(centres: np.ndarray, radius: float) -> np.ndarray:
     return shapely.polygons(centres[:, None, :] + ring[None])
 
 
-def _obj(value, path: str) -> dict:
-    if not isinstance(value, dict):
-        raise invalid(path, "must be an object")
-    return value
-
-
 def parse_layout(raw, path: str = "layout") -> Layout:
-    """Validate a layout dict; every error is an ``invalid_input`` :class:`PlannerError`
-    naming the field (e.g. ``layout.obstacles[2].points``)."""
-    raw = _obj(raw, path)
-    for key in raw:
-        if key not in _LAYOUT_KEYS:
-            raise invalid(f"{path}.{key}", f"unknown field; a layout has {', '.join(_LAYOUT_KEYS)}")
-    b = _obj(raw.get("bounds"), f"{path}.bounds")
-    for key in b:
-        if key not in ("lower", "upper"):
-            raise invalid(f"{path}.bounds.{key}", "unknown field; bounds have lower and upper")
-    lower = _vec(b.get("lower"), f"{path}.bounds.lower", 2)
-    upper = _vec(b.get("upper"), f"{path}.bounds.upper", 2)
-    for i, axis in enumerate("xy"):
-        if not lower[i] < upper[i]:
-            raise invalid(f"{path}.bounds.upper", f"must be greater than bounds.lower in {axis} "
-                          f"({upper[i]:g} <= {lower[i]:g})")
-    obs_raw = raw.get("obstacles") or []
-    if not isinstance(obs_raw, list):
-        raise invalid(f"{path}.obstacles", "must be a list of obstacles")
-    if len(obs_raw) > MAX_OBSTACLES:
-        raise PlannerError("too_large", f"at most {MAX_OBSTACLES} obstacles, got {len(obs_raw)}", f"{path}.obstacles")
-    obstacles = [_obstacle(o, f"{path}.obstacles[{i}]") for i, o in enumerate(obs_raw)]
-    circles = {i: (np.array(o["center"], dtype=float), float(o["radius"]))
-               for i, o in enumerate(obs_raw) if o.get("type") == "circle"}
-    clearance = 0.0
-    if raw.get("clearance") is not None:
-        clearance = _finite(raw["clearance"], f"{path}.clearance", lo=0.0)
-    cell = raw.get("cell") or {}
-    cell = _obj(cell, f"{path}.cell")
-    for key in cell:
-        if key not in ("shape", "size"):
-            raise invalid(f"{path}.cell.{key}", "unknown field; a cell has shape and size")
-    shape = cell.get("shape") or "square"
-    if shape not in ("square", "triangle"):
-        raise invalid(f"{path}.cell.shape", f"must be 'square' or 'triangle', got {shape!r}")
-    size = None
-    if cell.get("size") is not None:
-        size = _finite(cell["size"], f"{path}.cell.size", lo=0.0, lo_open=True)
-    for key in ("start", "end"):
-        if raw.get(key) is None:
-            raise invalid(f"{path}.{key}", f"the {key} pose [x, y, psi] (m, m, rad) is required (in the layout "
-                          "or at the request's top level)")
-    start = _vec(raw["start"], f"{path}.start", 3)
-    end = _vec(raw["end"], f"{path}.end", 3)
-    if raw.get("psi_range") is not None:
-        psi_range = _vec(raw["psi_range"], f"{path}.psi_range", 2)
-        if psi_range[0] > psi_range[1]:
-            raise invalid(f"{path}.psi_range", f"must be [min, max] with min <= max, got [{psi_range[0]:g}, "
-                          f"{psi_range[1]:g}]")
-        for key, pose in (("start", start), ("end", end)):
-            if not psi_range[0] - 1e-12 <= pose[2] <= psi_range[1] + 1e-12:
-                raise invalid(f"{path}.psi_range", f"must contain the {key} angle {pose[2]:g} rad, got "
-                              f"[{psi_range[0]:g}, {psi_range[1]:g}]")
-    else:
-        psi_range = np.array([min(start[2], end[2]), max(start[2], end[2])])
-    return Layout(lower, upper, obstacles, clearance, shape, size, start, end, psi_range, circles)
-
-
-def _obstacle(o, path: str):
-    o = _obj(o, path)
-    kind = o.get("type")
-    if kind not in _OBSTACLE_KEYS:
-        raise invalid(f"{path}.type", f"must be 'rectangle', 'polygon' or 'circle', got {kind!r}")
-    for key, value in o.items():
-        if key != "type" and key not in _OBSTACLE_KEYS[kind] and value is not None:
-            raise invalid(f"{path}.{key}", f"not a field of a {kind} (a {kind} has {', '.join(_OBSTACLE_KEYS[kind])})")
-    if kind == "rectangle":
-        lo = _vec(o.get("lower"), f"{path}.lower", 2)
-        hi = _vec(o.get("upper"), f"{path}.upper", 2)
-        for i, axis in enumerate("xy"):
-            if not lo[i] < hi[i]:
-                raise invalid(f"{path}.upper", f"degenerate rectangle: upper must be greater than lower in {axis} "
-                              f"({hi[i]:g} <= {lo[i]:g})")
-        return shapely.box(lo[0], lo[1], hi[0], hi[1])
-    if kind == "circle":
-        c = _vec(o.get("center"), f"{path}.center", 2)
-        r = _finite(o.get("radius"), f"{path}.radius", lo=0.0, lo_open=True)
-        return _discs(c[None], r)[0]  # circumscribes the circle
-    pts = o.get("points")
-    if not isinstance(pts, list) or len(pts) < 3:
-        raise invalid(f"{path}.points", "a polygon needs a list of at least 3 points [x, y] in m")
-    if len(pts) > MAX_POLYGON_POINTS:
-        raise PlannerError("too_large", f"at most {MAX_POLYGON_POINTS} points per polygon, got {len(pts)}",
-                           f"{path}.points")
-    xy = np.array([_vec(p, f"{path}.points[{i}]", 2) for i, p in enumerate(pts)])
-    poly = shapely.Polygon(xy)
-    if not poly.is_valid:
-        raise invalid(f"{path}.points", f"degenerate polygon: {shapely.is_valid_reason(poly)} "
-                      "(the outline must not cross or touch itself)")
-    if not poly.area > 0:
-        raise invalid(f"{path}.points", "degenerate polygon: zero area")
-    return poly
+    """The workspace of a validated layout (:class:`planner.schema.Layout`, or a dict that is
+    validated here; errors name the field under ``path``): obstacles as shapely polygons."""
+    if not isinstance(raw, LayoutSpec):
+        try:
+            raw = LayoutSpec.model_validate(raw)
+        except ValidationError as exc:
+            raise planner_error(exc, path) from None
+    obstacles, circles = [], {}
+    for i, o in enumerate(raw.obstacles):
+        if o.type == "rectangle":
+            obstacles.append(shapely.box(o.lower[0], o.lower[1], o.upper[0], o.upper[1]))
+        elif o.type == "circle":
+            obstacles.append(_discs(np.asarray(o.center, float)[None], float(o.radius))[0])  # circumscribes it
+            circles[i] = (np.array(o.center, dtype=float), float(o.radius))
+        else:
+            obstacles.append(shapely.Polygon(o.points))
+    return Layout(np.array(raw.bounds.lower, float), np.array(raw.bounds.upper, float), obstacles,
+                  float(raw.clearance), raw.cell.shape, raw.cell.size, np.array(raw.start_pose, float),
+                  np.array(raw.end_pose, float), np.array(raw.angle_range, float), circles)
 
 
 # ---------------------------------------------------------------------------------------
 # geometry helpers
 # ---------------------------------------------------------------------------------------
 
-def halfplanes(polygon) -> tuple[np.ndarray, np.ndarray]:
-    """Half-planes ``A p <= b`` of a convex polygon (vertices (k, 2) in m, either orientation):
-    ``A`` (k, 2) unit outward normals, ``b`` (k,) in m."""
-    P = np.asarray(polygon, dtype=float)
-    area2 = np.sum(P[:, 0] * np.roll(P[:, 1], -1) - np.roll(P[:, 0], -1) * P[:, 1])
-    if area2 < 0:
-        P = P[::-1]
-    d = np.roll(P, -1, axis=0) - P
-    n = np.column_stack((d[:, 1], -d[:, 0]))
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    return n, np.einsum("ij,ij->i", n, P)
-
-
 def sigma_min_fast(robot: Robot, x: np.ndarray, y: np.ndarray, psi: float) -> np.ndarray:
     """:meth:`Robot.singularity_measure_batch` at poses ``(x, y, psi)`` (1-D arrays, one angle):
     smallest singular value of the dimensionless leg Jacobian, from the closed-form smallest
     eigenvalue of the 3 x 3 Gram matrix (much faster than a batched SVD)."""
     c, s = math.cos(psi), math.sin(psi)
-    r0 = robot._r0
+    r0 = robot.r0
     k = 1.0 / robot.char_length
     a11 = a22 = a33 = a12 = a13 = a23 = 0.0
     for i in range(robot.n_legs):  # a few legs: accumulate the Gram matrix leg by leg
@@ -314,27 +223,10 @@ def psi_samples(psi_range) -> np.ndarray:
     return np.linspace(lo, hi, 4 * k + 1)
 
 
-def _pivot_points(robot: Robot, psi: float) -> np.ndarray:
-    """``P_i(psi) = A_i - Rot(psi) r0_i`` (n, 2) [m]: leg i's length at tool point t is |t - P_i|."""
-    c, s = math.cos(psi), math.sin(psi)
-    return robot.base - robot._r0 @ np.array([[c, s], [-s, c]])
-
-
 def box_reach(robot: Robot, lo: np.ndarray, hi: np.ndarray, psis) -> np.ndarray:
     """Whether every pose in each box ``[lo, hi]`` ((C, 2) each, m) at every angle in ``psis``
-    keeps every leg within its stroke (C,) bool. Exact for each angle: a leg's length is the
-    distance to ``P_i(psi)``, shortest at the box's nearest point, longest at a corner."""
-    ok = np.ones(len(lo), dtype=bool)
-    lmin = robot.length_min - 1e-12
-    lmax = robot.length_max + 1e-12
-    for psi in psis:
-        P = _pivot_points(robot, psi)  # (n, 2)
-        gx = np.maximum(np.maximum(lo[:, None, 0] - P[:, 0], 0.0), P[:, 0] - hi[:, None, 0])
-        gy = np.maximum(np.maximum(lo[:, None, 1] - P[:, 1], 0.0), P[:, 1] - hi[:, None, 1])
-        fx = np.maximum(np.abs(P[:, 0] - lo[:, None, 0]), np.abs(P[:, 0] - hi[:, None, 0]))
-        fy = np.maximum(np.abs(P[:, 1] - lo[:, None, 1]), np.abs(P[:, 1] - hi[:, None, 1]))
-        ok &= np.all((gx * gx + gy * gy >= lmin * lmin) & (fx * fx + fy * fy <= lmax * lmax), axis=1)
-    return ok
+    keeps every leg within its stroke (C,) bool (:func:`planner.model.reach.boxes_within_stroke`)."""
+    return boxes_within_stroke(robot, lo, hi, psis)
 
 
 def _regular_windows(robot: Robot, lattice, rows: np.ndarray, cols: np.ndarray, psis) -> np.ndarray:
@@ -364,10 +256,14 @@ def reachable_region(robot, bounds, psi_range=(0.0, 0.0), resolution: float = 0.
     """
     robot = load_robot(robot)
     if isinstance(bounds, dict):
-        lower, upper = _vec(bounds.get("lower"), "bounds.lower", 2), _vec(bounds.get("upper"), "bounds.upper", 2)
+        lower, upper = np.asarray(bounds.get("lower"), float), np.asarray(bounds.get("upper"), float)
     else:
         lower, upper = np.asarray(bounds[0], float), np.asarray(bounds[1], float)
-    res = _finite(resolution, "resolution", lo=0.0, lo_open=True)
+    if lower.shape != (2,) or upper.shape != (2,) or not np.all(np.isfinite(np.concatenate((lower, upper)))):
+        raise invalid("bounds", "must be {lower: [x, y], upper: [x, y]} in m")
+    res = float(resolution)
+    if not (math.isfinite(res) and res > 0):
+        raise invalid("resolution", "must be a finite number > 0")
     if not np.all(upper > lower):
         raise invalid("bounds.upper", "must be greater than bounds.lower")
     nx, ny = (int(math.ceil((upper[i] - lower[i]) / res - 1e-9)) for i in range(2))
@@ -430,7 +326,7 @@ class _Grid:
 def default_cell_size(lay: Layout, settings: Settings) -> float:
     """The default cell edge [m] (see the module docstring)."""
     d = float(np.hypot(*(lay.end[:2] - lay.start[:2])))
-    s = DEFAULT_SPEED * settings.S * settings.Ts
+    s = DEFAULT_SPEED * settings.samples_per_segment * settings.Ts
     if d > 0:
         s = min(max(s, d / 50.0), d / 4.0)
     W, H = lay.upper - lay.lower
@@ -438,15 +334,6 @@ def default_cell_size(lay: Layout, settings: Settings) -> float:
     area = W * H if lay.shape == "square" else 2.0 * W * H / SQRT3_2  # cells ~ area / cell area
     s_cap = math.sqrt(area / (0.9 * MAX_CELLS))
     return max(s, s_cap)
-
-
-def _count(lay: Layout, s: float) -> tuple[int, int, int]:
-    W, H = lay.upper - lay.lower
-    if lay.shape == "square":
-        nx, ny = math.ceil(W / s - 1e-9), math.ceil(H / s - 1e-9)
-        return nx * ny, nx, ny
-    T, ny = math.ceil(2.0 * W / s - 1e-9) + 1, math.ceil(H / (s * SQRT3_2) - 1e-9)
-    return T * ny, T, ny
 
 
 def _square_grid(x0, y0, s, nx, ny) -> _Grid:
@@ -606,7 +493,7 @@ def _check_endpoint(lay: Layout, robot: Robot, key: str, path: str) -> None:
             why = "inside" if inside else f"within the clearance ({lay.clearance:g} m) of"
             raise invalid(f"{path}.{key}", f"the {key} {_fmt(pose)} is {why} obstacle {i} "
                           f"({path}.obstacles[{i}])")
-    robot.check_pose(pose, f"{path}.{key}")
+    check_pose(robot, pose, f"{path}.{key}")
 
 
 def _holding(grid: _Grid, p) -> np.ndarray:
@@ -739,7 +626,7 @@ def segment(layout: dict, robot, settings: Settings | None = None, field_path: s
     need = (s, s) if lay.shape == "square" else (s, s * SQRT3_2)
     if need[0] > W + 1e-12 or need[1] > H + 1e-12:
         raise invalid(size_path, f"a {lay.shape} cell of size {s:g} m does not fit in the {W:g} m x {H:g} m bounds")
-    n, nx, ny = _count(lay, s)
+    n, nx, ny = cell_count(lay.lower, lay.upper, lay.shape, s)
     if n > MAX_CELLS:
         raise PlannerError("too_large", f"cell size {s:g} m gives {n} {lay.shape} cells over the bounds, more than "
                            f"the limit of {MAX_CELLS}; use larger cells", size_path)
@@ -797,19 +684,24 @@ def segment(layout: dict, robot, settings: Settings | None = None, field_path: s
                            f"(now {s:g} m), a smaller clearance or a narrower psi_range", field_path)
     path, turns = found
     n_seg = len(path) + 2
-    if n_seg > MAX_SEGMENTS or n_seg * settings.S > MAX_TOTAL_STEPS:
-        raise PlannerError("too_large", f"the corridor has {n_seg} segments x {settings.S} samples, more than the "
+    if n_seg > MAX_SEGMENTS or n_seg * settings.samples_per_segment > MAX_TOTAL_STEPS:
+        raise PlannerError("too_large", f"the corridor has {n_seg} segments x {settings.samples_per_segment} samples, more than the "
                            f"limits ({MAX_SEGMENTS} segments, {MAX_TOTAL_STEPS} steps); use larger cells", size_path)
 
     # --- segments (Table I): start point, cells, end point
     plo, phi = lay.psi_range
-    segs = [Segment(lay.start.copy(), lay.start.copy())]
+    segs = [_segment(lay.start.copy(), lay.start.copy())]
     for c in path:
-        segs.append(Segment(np.array([grid.lo[c, 0], grid.lo[c, 1], plo]),
+        segs.append(_segment(np.array([grid.lo[c, 0], grid.lo[c, 1], plo]),
                             np.array([grid.hi[c, 0], grid.hi[c, 1], phi]), polygon=grid.polygons[c].copy()))
-    segs.append(Segment(lay.end.copy(), lay.end.copy()))
+    segs.append(_segment(lay.end.copy(), lay.end.copy()))
     return Segmentation(lay.shape, float(s), lay.lower, lay.upper, lay.clearance, lay.psi_range, lay.start, lay.end,
                         grid.polygons, state, path, segs, turns, (garr, owner), (time.perf_counter() - t0) * 1e3)
+
+
+def _segment(lower: np.ndarray, upper: np.ndarray, polygon: np.ndarray | None = None) -> Segment:
+    """A corridor segment built from the grid (valid by construction: not re-validated)."""
+    return Segment.model_construct(lower=lower, upper=upper, q_ra=None, q_rb=None, polygon=polygon)
 
 
 def corridor_from_request(req: PlanRequest, robot=None) -> Segmentation:
@@ -821,6 +713,6 @@ def corridor_from_request(req: PlanRequest, robot=None) -> Segmentation:
 
 def segment_request(raw: dict) -> dict:
     """A plan request dict with a ``layout`` -> :meth:`Segmentation.to_dict` (no planning)."""
-    from .request import parse_request
+    from ..schema import parse_request
     req = parse_request(raw)
     return corridor_from_request(req).to_dict()

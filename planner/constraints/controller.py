@@ -80,8 +80,11 @@ import time
 import daqp
 import numpy as np
 
-from . import constrained_kernels as ck
-from .errors import PlannerError
+from ..corridor.geometry import halfplanes
+from ..errors import PlannerError
+from ..model import kinematics
+from ..model.plant import rk4_sample
+from . import kernels as ck
 
 #: corridor margin [m]: constraints use each range shrunk by this on every side
 MARGIN_M = 1e-6
@@ -143,20 +146,6 @@ SCREEN_FORCE = 0.2
 ELIMINATE_EQUALITIES = True
 
 DAQP_SETTINGS = dict(primal_tol=1e-9, dual_tol=1e-12, iter_limit=2000)
-
-
-def halfplanes(polygon) -> tuple[np.ndarray, np.ndarray]:
-    """Half-planes ``a . p <= b`` (unit normals) of a convex polygon given by its vertices
-    (either orientation), shape ``(h, 2)`` and ``(h,)``. Degenerate edges are dropped."""
-    P = np.asarray(polygon, dtype=float)
-    area2 = np.sum(P[:, 0] * np.roll(P[:, 1], -1) - np.roll(P[:, 0], -1) * P[:, 1])
-    if area2 < 0:
-        P = P[::-1]
-    E = np.roll(P, -1, axis=0) - P
-    L = np.hypot(E[:, 0], E[:, 1])
-    keep = L > 1e-15
-    n = np.column_stack((E[keep, 1], -E[keep, 0])) / L[keep, None]  # outward for ccw
-    return n, np.einsum("ij,ij->i", n, P[keep])
 
 
 class PoseSets:
@@ -239,15 +228,15 @@ class ConstrainedController:
     :meth:`report` returns its metrics.
     """
 
-    #: the step's QP assembled and solved by the compiled path (equalities eliminated, rows
-    #: screened); False: by the numpy reference (the QP in ``z`` with every row)
-    compiled = True
-
     def __init__(self, robot, seq, st, segments=None):
         self.robot, self.seq, self.st = robot, seq, st
+        #: the step's QP assembled and solved by the compiled path (equalities eliminated,
+        #: rows screened); False (``backend: "reference"``): by the numpy reference (the QP
+        #: in ``z`` with every row)
+        self.compiled = st.backend == "compiled"
         self.N, self.m = st.N, robot.n_legs
         self.umax = np.asarray(robot.force_max, float)
-        self.sets = PoseSets(seq, segments, st.S)
+        self.sets = PoseSets(seq, segments, st.samples_per_segment)
         N, m = self.N, self.m
         i, j = np.indices((N, N))
         self._lag = np.where(i >= j, i - j, N)
@@ -272,9 +261,8 @@ class ConstrainedController:
         self._x1_pred = None
         self.last_qp = None  # the last QP, for benchmarks
         self.correct = True  # one-step nonlinear correction (benchmarks switch it off to compare)
-        from .plan import robot_kernel_array
-        self._rb = robot_kernel_array(robot)
-        self._r0 = np.ascontiguousarray(robot._r0, dtype=float)
+        self._rb = robot.packed
+        self._r0 = np.ascontiguousarray(robot.r0, dtype=float)
         self._base = np.ascontiguousarray(robot.base, dtype=float)
         self._lmin = np.ascontiguousarray(robot.length_min, dtype=float)
         self._lmax = np.ascontiguousarray(robot.length_max, dtype=float)
@@ -297,7 +285,6 @@ class ConstrainedController:
         if self.compiled:
             return ck.plant_step(self._rb, x, np.ascontiguousarray(u, dtype=float), self.st.Ts,
                                  self.st.plant_substeps)
-        from .plan import rk4_sample
         return rk4_sample(self.robot, x, u, self.st.Ts, self.st.plant_substeps)
 
     def first_step_offset(self, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, u0=None, x1=None) -> np.ndarray:
@@ -435,12 +422,12 @@ class ConstrainedController:
         # legs, linearised about the nominal poses (the previous step's prediction, shifted)
         y_nom = self._y_nom if self._y_nom is not None else np.tile(x[:3], (N, 1))
         y_nom = y_nom[jj]
-        J = robot.leg_jacobian_batch(y_nom)  # (nc, n, 3)
+        J = kinematics.leg_jacobians(robot, y_nom)  # (nc, n, 3)
         vmax = robot.speed_max * (1.0 - SPEED_MARGIN)
         cols = (6 * jj[:, None, None] + 3 + np.arange(3)) + np.zeros((1, m, 1), int)
         add(cols.reshape(nc * m, 3), J.reshape(nc * m, 3), np.tile(-vmax, nc), np.tile(vmax, nc))
         n_hard = nrow
-        off = robot.leg_lengths(y_nom) - np.einsum("jia,ja->ji", J, y_nom)
+        off = kinematics.leg_lengths(robot, y_nom) - np.einsum("jia,ja->ji", J, y_nom)
         add((cols - 3).reshape(nc * m, 3), J.reshape(nc * m, 3), (robot.length_min - off).ravel(),
             (robot.length_max - off).ravel())
         Sel = np.zeros((nrow, 6 * N))
@@ -490,13 +477,13 @@ class ConstrainedController:
             # the first predicted sample becomes the actual one: take its leg rows at the
             # plant's own next pose under the guessed move (refined with the move)
             y1 = self._x1[:3]
-            J0 = self.robot.leg_jacobian_batch(y1)[0] / ROW_UNIT_M
+            J0 = kinematics.leg_jacobians(self.robot, y1)[0] / ROW_UNIT_M
             rs, rl, m = qp["row_speed0"], qp["row_stroke0"], self.m
             qp["Sel"][rs:rs + m, 3:6] = J0
             qp["Sel"][rl:rl + m, 0:3] = J0
             qp["A"][rs:rs + m] = J0 @ qp["Gx"][3:6]
             qp["A"][rl:rl + m] = J0 @ qp["Gx"][0:3]
-            off0 = (self.robot.leg_lengths(y1)[0] - J0 @ y1 * ROW_UNIT_M) / ROW_UNIT_M
+            off0 = (kinematics.leg_lengths(self.robot, y1)[0] - J0 @ y1 * ROW_UNIT_M) / ROW_UNIT_M
             qp["b0l"][rl:rl + m] = self.robot.length_min / ROW_UNIT_M - off0
             qp["b0u"][rl:rl + m] = self.robot.length_max / ROW_UNIT_M - off0
         fr = free.ravel()
@@ -756,76 +743,3 @@ class ConstrainedController:
             "model_mismatch_max_m": s["mismatch_m"],
             "model_mismatch_max_rad": s["mismatch_rad"],
         }
-
-
-def polygon_violation(points: np.ndarray, segments) -> np.ndarray:
-    """Distance [m] of each point (k, 2) outside the union of the segments' exact cells (the
-    ``polygon`` where a segment has one, else its x/y box)."""
-    best = np.full(len(points), np.inf)
-    for seg in segments:
-        poly = getattr(seg, "polygon", None)
-        if poly is None:
-            d = np.linalg.norm(np.maximum(np.maximum(seg.lower[:2] - points, 0.0), points - seg.upper[:2]), axis=1)
-        else:
-            d = _polygon_distance(points, np.asarray(poly, float))
-        best = np.minimum(best, d)
-    return best
-
-
-def _polygon_distance(p: np.ndarray, V: np.ndarray) -> np.ndarray:
-    """Distance of points ``p`` (k, 2) to a convex polygon ``V`` (0 inside)."""
-    A, b = halfplanes(V)
-    inside = np.all(p @ A.T <= b + 0.0, axis=1)
-    E0, E1 = V, np.roll(V, -1, axis=0)
-    e = E1 - E0
-    t = np.clip(np.einsum("kia,ia->ki", p[:, None, :] - E0[None], e) / np.maximum(np.einsum("ia,ia->i", e, e), 1e-300),
-                0.0, 1.0)
-    q = E0[None] + t[..., None] * e[None]
-    d = np.linalg.norm(p[:, None, :] - q, axis=2).min(axis=1)
-    return np.where(inside, 0.0, d)
-
-
-def finalize(result: dict, st, segments=None) -> None:
-    """Judge containment on the actual trajectory; raise ``infeasible`` when asked to.
-
-    ``contained`` is true only if no step needed slack and the actual samples lie in the
-    union of the segments (their exact polygons where given) to :data:`CONTAIN_TOL_M`.
-    ``time_indexed_violation_m`` stays as computed; at the end point it is up to
-    ``sqrt(2) END_TOL_M`` by design (the robot stops in a micrometre box inside the last cell).
-    """
-    mt = result["metrics"]
-    infeasible = mt.get("infeasible_steps", 0) > 0
-    union = mt["max_corridor_violation_m"]
-    if segments is not None and any(getattr(s, "polygon", None) is not None for s in segments):
-        pv = float(polygon_violation(np.asarray(result["pose"])[:, :2], segments).max())
-        mt["max_polygon_violation_m"] = pv
-        union = max(union, pv)
-    mt["contained"] = bool(not infeasible and union <= CONTAIN_TOL_M)
-    mt["within_limits"] = bool(mt["max_force_ratio"] <= 1.0 + 1e-12 and mt["max_speed_ratio"] <= 1.0
-                               and mt["max_stroke_violation_m"] <= CONTAIN_TOL_M)
-    if infeasible and st.require_settled:
-        raise PlannerError(
-            "infeasible",
-            f"the constrained plan cannot keep the robot in the corridor within the drive limits: "
-            f"{mt['infeasible_steps']} of {mt['steps']} steps needed slack (up to "
-            f"{mt['constraint_slack_max_m'] * 1e3:.4f} mm); give the robot more time "
-            "(samples_per_segment, speed_m_s, total_time_s) or widen the corridor",
-            "settings")
-
-
-def warm_up() -> None:
-    """Compile (first run after installing) or load (afterwards, from numba's cache) the
-    kernels of every path of the compiled controller by planning two tiny corridors: with
-    equalities eliminated (psi fixed), the QP in ``z`` (a psi range), and the slack problem
-    (too little time). For :func:`planner.plan.warm_up`."""
-    from .plan import plan
-
-    fixed = [{"lower": [0.0, 0.0, 0.0], "upper": [0.0, 0.0, 0.0]},
-             {"lower": [0.0, 0.0, 0.0], "upper": [0.01, 0.01, 0.0]},
-             {"lower": [0.01, 0.01, 0.0], "upper": [0.01, 0.01, 0.0]}]
-    turning = [{"lower": [0.0, 0.0, 0.0], "upper": [0.0, 0.0, 0.0]},
-               {"lower": [0.0, 0.0, 0.0], "upper": [0.04, 0.01, 0.02]},
-               {"lower": [0.04, 0.01, 0.02], "upper": [0.04, 0.01, 0.02]}]
-    for segments, extra in ((fixed, {}), (turning, {"samples_per_segment": 30}), (turning, {"samples_per_segment": 2})):
-        plan({"robot": "moving-slide", "segments": segments,
-              "settings": {"mode": "constrained", "N": 5, "require_settled": False, "tail_max_s": 0.05, **extra}})

@@ -1,0 +1,153 @@
+"""The orchestrator: :func:`plan` turns a request into a :class:`~planner.schema.PlanResult`.
+
+validate (:func:`planner.schema.parse_request`) -> robot model -> corridor (the request's
+segments, or a layout segmented into cells) -> reach check -> timing -> range sequence ->
+controller (the paper's, or the constrained mode's) -> receding-horizon simulation ->
+result. This is the only place that composes the layers; the CLI, the HTTP workers and
+the editor all call it.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from ..constraints import ConstrainedController
+from ..corridor import RangeSequence, Segmentation, range_sequence, reference_sequence
+from ..corridor import segment as segment_layout
+from ..errors import PlannerError, invalid
+from ..model import RobotModel, load_robot
+from ..model.reach import check_pose, check_segments
+from ..schema import PlanRequest, PlanResult, Segment, Settings, parse_request
+from .result import build_result
+from .simulate import Controller, simulate
+from .timing import resolve_timing, search_fastest, timing_info
+
+__all__ = ["plan", "segment", "warm_up"]
+
+
+def _robot(req: PlanRequest, robot: RobotModel | None) -> RobotModel:
+    model = load_robot(robot if robot is not None else req.robot)
+    st = req.settings
+    if st.q_u is not None and len(st.q_u) != model.n_legs:
+        raise invalid("settings.q_u", f"must have one entry per drive ({model.n_legs}), got {len(st.q_u)}")
+    return model
+
+
+def segment(request: Any, *, robot: RobotModel | None = None) -> Segmentation:
+    """Segment a request's ``layout`` into cells and a corridor (no planning)."""
+    req = parse_request(request)
+    if req.layout is None:
+        raise invalid("layout", "the request has no layout to segment")
+    return segment_layout(req.layout, _robot(req, robot), req.settings)
+
+
+def plan(request: Any, *, robot: RobotModel | None = None, segments: Sequence[Segment] | None = None) -> PlanResult:
+    """Plan a trajectory for ``request`` (a dict in the one JSON shape or a validated
+    :class:`~planner.schema.PlanRequest`). ``robot`` overrides the request's robot model,
+    ``segments`` its corridor. Raises :class:`~planner.errors.PlannerError` naming the cause."""
+    t0 = time.perf_counter()
+    req = parse_request(request)
+    model = _robot(req, robot)
+    st = req.settings
+    if segments is None:
+        segments = req.segments
+    if segments is None and req.layout is not None:
+        segments = segment_layout(req.layout, model, st).segments
+    if segments is not None:
+        check_segments(model, segments)
+        if st.fastest:
+            result = _fastest(req.name, model, st, segments)
+            result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3
+            return result
+    st = resolve_timing(st, segments)  # speed_m_s / total_time_s -> samples_per_segment
+    result = _plan_once(req.name, model, st, segments, req)
+    result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3  # everything, result arrays included
+    mt = result.metrics
+    if not mt.settled and st.require_settled:
+        raise PlannerError("not_settled", f"the robot did not settle at the end point within "
+                           f"{st.tail_max_s:g} s after the corridor (end error {mt.end_error_m * 1e3:.3f} mm, "
+                           f"speed {mt.end_speed_m_s * 1e3:.3f} mm/s); lengthen settings.tail_max_s, "
+                           "add samples per segment or raise k_r", "settings.tail_max_s")
+    return result
+
+
+def _plan_once(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment] | None,
+               req: PlanRequest, **timing: object) -> PlanResult:
+    """One run of the loop at fixed timing; raises ``infeasible`` for a constrained plan that
+    needed slack when ``require_settled`` asks for a guaranteed plan."""
+    seq: RangeSequence
+    if segments is not None:
+        seq = range_sequence(list(segments), st, model.n_legs)
+    else:
+        assert req.reference is not None
+        for i, pose in enumerate(req.reference.pose):
+            check_pose(model, pose, f"reference.pose[{i}]")
+        seq = reference_sequence(req.reference.pose, st, model.n_legs)
+    check_pose(model, seq.start, "segments[0]" if segments is not None else "reference.pose[0]")
+    controller: Controller | None = None
+    if st.mode == "constrained":
+        controller = ConstrainedController(model, seq, st, segments)
+    sim = simulate(model, seq, st, controller)
+    report = controller.report() if controller is not None else {}
+    result = build_result(model, name, st, seq, segments, sim, report, timing_info(st, segments, **timing))
+    mt = result.metrics
+    if st.mode == "constrained" and (mt.infeasible_steps or 0) > 0 and st.require_settled:
+        raise PlannerError(
+            "infeasible",
+            f"the constrained plan cannot keep the robot in the corridor within the drive limits: "
+            f"{mt.infeasible_steps} of {mt.steps} steps needed slack (up to "
+            f"{(mt.constraint_slack_max_m or 0.0) * 1e3:.4f} mm); give the robot more time "
+            "(samples_per_segment, speed_m_s, total_time_s) or widen the corridor", "settings")
+    return result
+
+
+def _fastest(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment]) -> PlanResult:
+    """The plan at the smallest feasible ``samples_per_segment`` (:mod:`.timing`)."""
+    req = PlanRequest.model_construct(segments=list(segments), reference=None)
+
+    def plan_at(S: int) -> PlanResult:
+        sub = st.model_copy(update={"fastest": False, "samples_per_segment": S, "require_settled": False})
+        return _plan_once(name, model, sub, segments, req)
+
+    best, cache = search_fastest(plan_at, st, len(segments))
+    if best == 0:
+        largest = max(cache)
+        res = cache[largest][1]
+        if st.require_settled or res is None:
+            raise PlannerError("infeasible", f"no timing up to {largest} samples per segment keeps the corridor "
+                               "within the drive limits", "settings.fastest")
+        res.timing = timing_info(st.model_copy(update={"samples_per_segment": largest}), segments,
+                                 evaluations=len(cache), feasible=False)
+        return res
+    res = cache[best][1]
+    assert res is not None
+    final = st.model_copy(update={"samples_per_segment": best})
+    res.settings = final
+    res.timing = timing_info(final, segments, evaluations=len(cache), feasible=True,
+                             one_fewer_sample_infeasible=bool(best == 1 or not cache[best - 1][0]))
+    return res
+
+
+def warm_up() -> float:
+    """Compile (first run after installing) or load (afterwards, from numba's on-disk cache)
+    the compiled kernels of every path by planning tiny corridors: the paper mode; the
+    constrained mode with equalities eliminated (psi fixed), with the QP in the inputs (a
+    psi range) and the slack problem (too little time). Returns the seconds taken. Servers
+    call it before taking jobs, ``make`` after installing (``python -m planner``)."""
+    t0 = time.perf_counter()
+    fixed = [{"lower": [0.0, 0.0, 0.0], "upper": [0.0, 0.0, 0.0]},
+             {"lower": [0.0, 0.0, 0.0], "upper": [0.01, 0.01, 0.0]},
+             {"lower": [0.01, 0.01, 0.0], "upper": [0.01, 0.01, 0.0]}]
+    turning = [{"lower": [0.0, 0.0, 0.0], "upper": [0.0, 0.0, 0.0]},
+               {"lower": [0.0, 0.0, 0.0], "upper": [0.04, 0.01, 0.02]},
+               {"lower": [0.04, 0.01, 0.02], "upper": [0.04, 0.01, 0.02]}]
+    base = {"N": 5, "require_settled": False, "tail_max_s": 0.05}
+    runs: list[tuple[list, dict]] = [
+        (fixed, {"mode": "paper"}), (fixed, {"mode": "constrained"}),
+        (turning, {"mode": "constrained", "samples_per_segment": 30}),
+        (turning, {"mode": "constrained", "samples_per_segment": 2})]
+    for segs, extra in runs:
+        plan({"robot": "moving-slide", "segments": segs, "settings": {**base, **extra}})
+    return time.perf_counter() - t0

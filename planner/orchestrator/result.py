@@ -1,0 +1,143 @@
+"""The plan result, built in one place (:func:`build_result`) from a simulation: the
+per-sample arrays, every metric computed from the returned trajectory, the controller's
+figures and the timing; and its CSV form (:func:`to_csv`).
+
+Shapes and units are documented on :class:`planner.schema.PlanResult`.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..constraints import CONTAIN_TOL_M
+from ..corridor import RangeSequence
+from ..corridor.geometry import box_distance, corridor_violation, polygon_violation
+from ..errors import PlannerError
+from ..model import RobotModel, kinematics
+from ..schema import UNITS, CorridorSamples, CorridorSegment, Drives, Metrics, PlanResult, Segment, Settings, Timing
+from .simulate import Simulation
+
+__all__ = ["build_result", "overshoot", "to_csv", "csv_columns"]
+
+
+def overshoot(poses: np.ndarray, segments: Sequence[Segment] | None, end: np.ndarray, first_sample: int) -> float:
+    """How far [m] the robot passes the end point along its final approach direction
+    (from the centre of the segment before the end segment to the end point), over the
+    samples from ``first_sample`` on. 0 when it never passes it."""
+    if segments is None or len(segments) < 2:
+        d = end[:2] - poses[max(first_sample - 1, 0), :2]
+    else:
+        d = end[:2] - segments[-2].centre[:2]
+    norm = np.linalg.norm(d)
+    if norm < 1e-12:
+        return 0.0
+    past = (poses[first_sample:, :2] - end[:2]) @ (d / norm)
+    return float(max(0.0, past.max(initial=0.0)))
+
+
+def _check_finite(**arrays: np.ndarray) -> None:
+    for name, a in arrays.items():
+        if not np.all(np.isfinite(a)):
+            raise PlannerError("diverged", f"the planner produced a non-finite number in {name}; try a smaller "
+                               "sample time or larger k_u", "settings")
+
+
+def build_result(robot: RobotModel, name: str | None, st: Settings, seq: RangeSequence,
+                 segments: Sequence[Segment] | None, sim: Simulation, controller_report: dict,
+                 timing: Timing) -> PlanResult:
+    """The result of one simulated plan. ``compute_ms`` is left 0 for the caller to set."""
+    X, U, ACC, steps = sim.X, sim.U, sim.ACC, sim.steps
+    _check_finite(pose=X, force=U, acceleration=ACC)
+    K = steps + 1
+    t = np.arange(K) * st.Ts
+    poses, vel = X[:, :3], X[:, 3:]
+    lengths = kinematics.leg_lengths(robot, poses)
+    leg_vel = np.einsum("kij,kj->ki", kinematics.leg_jacobians(robot, poses), vel)
+    # per-sample ranges used by the criterion (sample 0: the start point)
+    idx = np.minimum(np.arange(K) - 1, seq.K - 1)
+    lower = seq.lower[idx].copy()
+    upper = seq.upper[idx].copy()
+    lower[0] = upper[0] = seq.start
+    ti_violation = box_distance(poses[:, :2], lower[:, :2], upper[:, :2])
+    if segments is not None:
+        union_violation = corridor_violation(poses, segments)
+        psi_lo = min(float(s.lower[2]) for s in segments)
+        psi_hi = max(float(s.upper[2]) for s in segments)
+        psi_violation = float(np.max(np.maximum(np.maximum(psi_lo - poses[:, 2], 0), poses[:, 2] - psi_hi)))
+        first = max((len(segments) - 2) * st.samples_per_segment, 0)
+    else:
+        union_violation = ti_violation
+        psi_violation = float(np.max(np.abs(poses[:, 2] - np.concatenate(([seq.start[2]], seq.upper[idx[1:], 2])))))
+        first = max(seq.K - st.N, 0)
+    stroke = float(np.max(np.maximum(np.maximum(robot.length_min - lengths, 0), lengths - robot.length_max)))
+    metrics = {
+        "duration_s": float(t[-1]),
+        "steps": int(steps),
+        "settled": bool(sim.settled),
+        "end_error_m": float(np.hypot(*(poses[-1, :2] - seq.end[:2]))),
+        "end_error_rad": float(abs(poses[-1, 2] - seq.end[2])),
+        "end_speed_m_s": float(np.hypot(vel[-1, 0], vel[-1, 1])),
+        "overshoot_m": overshoot(poses, segments, seq.end, first),
+        "max_corridor_violation_m": float(union_violation.max()),
+        "max_corridor_violation_rad": psi_violation,
+        "time_indexed_violation_m": float(ti_violation.max()),
+        "max_drive_force_n": float(np.abs(U).max()),
+        "force_limit_n": float(robot.force_max.min()),
+        "max_force_ratio": float((np.abs(U) / robot.force_max).max()),
+        "max_drive_speed_m_s": float(np.abs(leg_vel).max()),
+        "max_speed_ratio": float((np.abs(leg_vel) / robot.speed_max).max()),
+        "max_stroke_violation_m": stroke,
+        "min_singularity_measure": float(kinematics.singularity_measure(robot, poses).min()),
+        "energy": float(np.sum(U * U) * st.Ts),
+        "path_length_m": float(np.sum(np.hypot(*np.diff(poses[:, :2], axis=0).T))),
+        "compute_ms": 0.0,
+        **controller_report,
+    }
+    if st.mode == "constrained":  # containment judged on the actual (nonlinear) trajectory
+        union = metrics["max_corridor_violation_m"]
+        if segments is not None and any(s.polygon is not None for s in segments):
+            pv = float(polygon_violation(poses[:, :2], segments).max())
+            metrics["max_polygon_violation_m"] = pv
+            union = max(union, pv)
+        metrics["contained"] = bool(metrics.get("infeasible_steps", 0) == 0 and union <= CONTAIN_TOL_M)
+        metrics["within_limits"] = bool(metrics["max_force_ratio"] <= 1.0 + 1e-12 and metrics["max_speed_ratio"] <= 1.0
+                                        and stroke <= CONTAIN_TOL_M)
+    corridor = CorridorSamples.model_construct(
+        lower=lower, upper=upper, violation_m=ti_violation,
+        segments=None if segments is None else
+        [CorridorSegment.model_construct(lower=s.lower, upper=s.upper) for s in segments])
+    return PlanResult.model_construct(
+        plan_id=None, name=name, robot=robot.name, mode=st.mode,
+        criterion="range-space" if segments is not None else "tracking",
+        settings=st, units=UNITS, time=t, pose=poses, velocity=vel, acceleration=ACC,
+        drives=Drives.model_construct(length=lengths, velocity=leg_vel, force=U),
+        corridor=corridor, metrics=Metrics.model_construct(**{**dict.fromkeys(Metrics.model_fields), **metrics}),
+        timing=timing)
+
+
+def csv_columns(n_legs: int) -> list[str]:
+    """The CSV header: each column named with its unit."""
+    cols = ["time_s", "x_m", "y_m", "psi_rad", "vx_m_s", "vy_m_s", "psi_dot_rad_s",
+            "ax_m_s2", "ay_m_s2", "psi_ddot_rad_s2"]
+    cols += [f"leg{i + 1}_length_m" for i in range(n_legs)]
+    cols += [f"leg{i + 1}_velocity_m_s" for i in range(n_legs)]
+    cols += [f"leg{i + 1}_force_n" for i in range(n_legs)]
+    cols += ["range_lower_x_m", "range_lower_y_m", "range_lower_psi_rad",
+             "range_upper_x_m", "range_upper_y_m", "range_upper_psi_rad", "range_violation_m"]
+    return cols
+
+
+def to_csv(result: PlanResult) -> str:
+    """One row per sample, a header naming each column with its unit."""
+    d, c = result.drives, result.corridor
+    table = np.column_stack((result.time, result.pose, result.velocity, result.acceleration, d.length, d.velocity,
+                             d.force, c.lower, c.upper, c.violation_m))
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(csv_columns(np.asarray(d.force).shape[1]))
+    w.writerows([[repr(v) for v in row] for row in table.tolist()])
+    return buf.getvalue()

@@ -1,0 +1,32 @@
+"""The one definition of every shape rangeplan reads or writes (pydantic models).
+
+- :class:`PlanRequest` (with :class:`Segment`, :class:`Reference`, :class:`Layout`,
+  :class:`Settings`, :class:`RobotDescription`): the request of the CLI file, the HTTP body,
+  the editor's save file and storage. Validation is complete and names the field.
+- :class:`PlanResult` (with :class:`Metrics`, :class:`Timing`, :class:`Drives`,
+  :class:`CorridorSamples`): the result, and :class:`SegmentationResult`.
+- :mod:`~planner.schema.limits`: the bounds on work and the mode defaults.
+"""
+
+from .errors import error_details, field_path, format_validation_error, planner_error
+from .layout import SQRT3_2, Bounds, Cell, Circle, Layout, Obstacle, Polygon, Rectangle, cell_count
+from .limits import (DEFAULT_ROBOT, DEFAULT_SAMPLES_PER_SEGMENT, MAX_CELLS, MAX_HORIZON, MAX_LEGS, MAX_OBSTACLES,
+                     MAX_POLYGON_POINTS, MAX_SAMPLES_PER_SEGMENT, MAX_SEGMENTS, MAX_TOTAL_STEPS, MIN_TS,
+                     MODE_DEFAULTS)
+from .request import TIMING_FIELDS, PlanRequest, Reference, Segment, Settings, parse_request
+from .result import (UNITS, CorridorSamples, CorridorSegment, Drives, HalfPlanes, Metrics, PlanResult, RobotSummary,
+                     SegmentationCell, SegmentationResult, Timing)
+from .robot import BodyDescription, LegDescription, PlatformDescription, RobotDescription, builtin_description, \
+    builtin_robot_names
+
+__all__ = [
+    "PlanRequest", "Segment", "Reference", "Settings", "parse_request", "TIMING_FIELDS",
+    "Layout", "Bounds", "Cell", "Circle", "Obstacle", "Polygon", "Rectangle", "cell_count", "SQRT3_2",
+    "RobotDescription", "LegDescription", "BodyDescription", "PlatformDescription", "builtin_description",
+    "builtin_robot_names",
+    "PlanResult", "Metrics", "Timing", "Drives", "CorridorSamples", "CorridorSegment", "UNITS",
+    "SegmentationResult", "SegmentationCell", "HalfPlanes", "RobotSummary",
+    "error_details", "field_path", "format_validation_error", "planner_error",
+    "DEFAULT_ROBOT", "DEFAULT_SAMPLES_PER_SEGMENT", "MAX_CELLS", "MAX_HORIZON", "MAX_LEGS", "MAX_OBSTACLES",
+    "MAX_POLYGON_POINTS", "MAX_SAMPLES_PER_SEGMENT", "MAX_SEGMENTS", "MAX_TOTAL_STEPS", "MIN_TS", "MODE_DEFAULTS",
+]

@@ -1,0 +1,175 @@
+"""The layout: a workspace with obstacles that the planner cuts into cells and a corridor
+(the paper's Section V.B). Lengths in m, angles in rad.
+
+A layout that passes validation has a usable outline for every obstacle (no degenerate or
+self-crossing polygons, no zero-size rectangles) and, with an explicit cell size, a cell
+count within :data:`~planner.schema.limits.MAX_CELLS`; whether start and end are free and
+reachable needs the robot and is checked by :mod:`planner.corridor`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Literal, Union
+
+import numpy as np
+import shapely
+from pydantic import Discriminator, Field, Tag, field_validator, model_validator
+
+from ._types import fail, Finite, Points2, Strict, Vec2, Vec3
+from .limits import MAX_CELLS, MAX_OBSTACLES, MAX_POLYGON_POINTS
+
+__all__ = ["Bounds", "Cell", "Circle", "Layout", "Obstacle", "Polygon", "Rectangle", "cell_count", "SQRT3_2"]
+
+SQRT3_2 = math.sqrt(3.0) / 2.0  # height of an equilateral triangle of unit edge
+
+
+class Bounds(Strict):
+    lower: Vec2 = Field(description="Workspace lower corner [x, y] in m")
+    upper: Vec2 = Field(description="Workspace upper corner [x, y] in m")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> Bounds:
+        for i, axis in enumerate("xy"):
+            if not self.lower[i] < self.upper[i]:
+                raise fail(f"must be greater than bounds.lower in {axis} ({float(self.upper[i]):g} <= {float(self.lower[i]):g})", "upper")
+        return self
+
+
+class Rectangle(Strict):
+    type: Literal["rectangle"] = Field(description="Obstacle shape")
+    lower: Vec2 = Field(description="Lower corner [x, y] in m")
+    upper: Vec2 = Field(description="Upper corner [x, y] in m")
+
+    @model_validator(mode="after")
+    def _size(self) -> Rectangle:
+        for i, axis in enumerate("xy"):
+            if not self.lower[i] < self.upper[i]:
+                raise fail(f"degenerate rectangle: upper must be greater than lower in {axis} ({float(self.upper[i]):g} <= {float(self.lower[i]):g})", "upper")
+        return self
+
+
+class Circle(Strict):
+    type: Literal["circle"] = Field(description="Obstacle shape")
+    center: Vec2 = Field(description="Centre [x, y] in m")
+    radius: Finite = Field(gt=0, description="Radius in m")
+
+
+class Polygon(Strict):
+    type: Literal["polygon"] = Field(description="Obstacle shape")
+    points: Points2 = Field(min_length=3, max_length=MAX_POLYGON_POINTS,
+                            description="Vertices [[x, y], ...] in m, in order (either orientation)")
+
+    @field_validator("points")
+    @classmethod
+    def _simple(cls, v: np.ndarray) -> np.ndarray:
+        poly = shapely.Polygon(v)
+        if not poly.is_valid:
+            raise fail(f"degenerate polygon: {shapely.is_valid_reason(poly)} (the outline must not cross or touch itself)")
+        if not poly.area > 0:
+            raise fail("degenerate polygon: zero area")
+        return v
+
+
+def _obstacle_kind(value: Any) -> str | None:
+    kind = value.get("type") if isinstance(value, dict) else getattr(value, "type", None)
+    return f"~{kind}" if kind in ("rectangle", "circle", "polygon") else None
+
+
+def _drop_nulls(value: Any) -> Any:
+    """Obstacles written by older clients carry the other shapes' fields as null."""
+    if isinstance(value, dict):
+        return {k: v for k, v in value.items() if v is not None}
+    return value
+
+
+Obstacle = Annotated[
+    Union[Annotated[Rectangle, Tag("~rectangle")], Annotated[Circle, Tag("~circle")],
+          Annotated[Polygon, Tag("~polygon")]],
+    Discriminator(_obstacle_kind, custom_error_type="invalid_input",
+                  custom_error_message="type must be 'rectangle', 'polygon' or 'circle'",
+                  custom_error_context={"field": "type"}),
+]
+
+
+class Cell(Strict):
+    shape: Literal["square", "triangle"] = Field("square", description="Cell shape")
+    size: Finite | None = Field(None, gt=0, description="Cell edge length in m; default from the start-end "
+                                "distance and the sample time (see the README)")
+
+
+def cell_count(lower: np.ndarray, upper: np.ndarray, shape: str, size: float) -> tuple[int, int, int]:
+    """Cells a grid of ``shape`` with edge ``size`` [m] puts over the bounds: ``(count,
+    columns, rows)``; for triangles the columns are triangles per row."""
+    W, H = (np.asarray(upper, float) - np.asarray(lower, float)).tolist()
+    if shape == "square":
+        nx, ny = math.ceil(W / size - 1e-9), math.ceil(H / size - 1e-9)
+        return nx * ny, nx, ny
+    T, ny = math.ceil(2.0 * W / size - 1e-9) + 1, math.ceil(H / (size * SQRT3_2) - 1e-9)
+    return T * ny, T, ny
+
+
+class Layout(Strict):
+    """A workspace, its obstacles, and where the corridor starts and ends."""
+
+    bounds: Bounds
+    obstacles: list[Obstacle] = Field(default_factory=list, max_length=MAX_OBSTACLES,
+                                      description="Obstacles in the workspace")
+    clearance: Finite = Field(0.0, ge=0, description="Distance in m the tool point keeps from every obstacle")
+    cell: Cell = Field(default_factory=Cell, description="Cell shape and size")
+    start: Vec3 | None = Field(None, description="Start pose [x, y, psi] in m, m, rad (required here or at the "
+                               "request's top level)")
+    end: Vec3 | None = Field(None, description="End pose [x, y, psi] in m, m, rad (required here or at the "
+                             "request's top level)")
+    psi_range: Vec2 | None = Field(None, description="Allowed platform angle [min, max] in rad along the "
+                                   "corridor; default: between the start and end angles")
+
+    @field_validator("obstacles", mode="before")
+    @classmethod
+    def _nulls(cls, v: Any) -> Any:
+        return [_drop_nulls(o) for o in v] if isinstance(v, list) else v
+
+    @field_validator("psi_range")
+    @classmethod
+    def _psi_pair(cls, v: np.ndarray | None) -> np.ndarray | None:
+        if v is not None and v[0] > v[1]:
+            raise fail(f"must be [min, max] with min <= max, got [{float(v[0]):g}, {float(v[1]):g}]")
+        return v
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Layout:
+        for key in ("start", "end"):
+            pose = getattr(self, key)
+            if pose is None:
+                raise fail(f"the {key} pose [x, y, psi] (m, m, rad) is required (in the layout or at the request's top level)", key)
+        if self.psi_range is not None:
+            lo, hi = self.psi_range
+            for key in ("start", "end"):
+                angle = float(getattr(self, key)[2])
+                if not lo - 1e-12 <= angle <= hi + 1e-12:
+                    raise fail(f"must contain the {key} angle {angle:g} rad, got [{float(lo):g}, {float(hi):g}]", "psi_range")
+        if self.cell.size is not None:
+            n = cell_count(self.bounds.lower, self.bounds.upper, self.cell.shape, self.cell.size)[0]
+            if n > MAX_CELLS:
+                raise fail(f"cell size {self.cell.size:g} m gives {n} {self.cell.shape} cells over the bounds, more than the limit of {MAX_CELLS}; use larger cells", "cell.size", code="too_large")
+        return self
+
+    @property
+    def start_pose(self) -> np.ndarray:
+        """The start pose (validated to be present)."""
+        assert self.start is not None
+        return self.start
+
+    @property
+    def end_pose(self) -> np.ndarray:
+        """The end pose (validated to be present)."""
+        assert self.end is not None
+        return self.end
+
+    @property
+    def angle_range(self) -> np.ndarray:
+        """``psi_range``, or the range between the start and end angles [rad]."""
+        if self.psi_range is not None:
+            return self.psi_range
+        a, b = float(self.start_pose[2]), float(self.end_pose[2])
+        return np.array([min(a, b), max(a, b)])

@@ -1,0 +1,44 @@
+"""Bounds that keep one request's work finite, and the defaults that depend on the mode.
+
+Every bound here appears in the request schema (and so in the OpenAPI document) or is
+checked by a validator of :mod:`planner.schema.request` that names the field.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "MAX_HORIZON", "MAX_SAMPLES_PER_SEGMENT", "MAX_SEGMENTS", "MAX_TOTAL_STEPS", "MAX_CELLS",
+    "MAX_OBSTACLES", "MAX_POLYGON_POINTS", "MAX_LEGS", "MIN_TS", "MODE_DEFAULTS",
+    "DEFAULT_SAMPLES_PER_SEGMENT", "DEFAULT_ROBOT",
+]
+
+#: longest prediction horizon N [samples]
+MAX_HORIZON = 200
+#: most samples a segment is held [samples]
+MAX_SAMPLES_PER_SEGMENT = 2000
+#: most segments in a corridor
+MAX_SEGMENTS = 2000
+#: most samples one plan may simulate, the settling tail included [samples]
+MAX_TOTAL_STEPS = 200_000
+#: most cells a layout may be cut into
+MAX_CELLS = 40_000
+#: most obstacles in a layout
+MAX_OBSTACLES = 2_000
+#: most vertices of one obstacle polygon
+MAX_POLYGON_POINTS = 10_000
+#: most legs of a robot description
+MAX_LEGS = 16
+#: shortest sample time [s]
+MIN_TS = 1e-4
+
+#: Defaults that depend on ``settings.mode``, applied where the request leaves the field out.
+#: The constrained mode keeps the corridor by its constraints, so its range penalty only has
+#: to pull the robot along: a lighter pull (k_r) and force penalty (k_u) with a longer
+#: horizon use 6-75 % less drive energy on every corridor measured, all contained and
+#: settled (benchmarks/README.md, issue 6; on Table I 1.14x the IPOPT optimum instead of 1.5x).
+MODE_DEFAULTS: dict[str, dict[str, float]] = {"paper": {"N": 20, "k_r": 1.0, "k_u": 1e-3},
+                                              "constrained": {"N": 30, "k_r": 0.1, "k_u": 2e-4}}
+#: samples each segment is held when neither samples_per_segment nor N is given
+DEFAULT_SAMPLES_PER_SEGMENT = 20
+#: the robot a request without ``robot`` plans for
+DEFAULT_ROBOT = "moving-slide"

@@ -1,0 +1,273 @@
+"""The plan request: one JSON shape for the CLI file, the HTTP body, the editor's save file
+and storage. These models are its only definition and its only validator.
+
+::
+
+    {
+      "name": "seed Table I",
+      "robot": "moving-slide" | {robot description},
+      "segments": [{"lower": [x, y, psi], "upper": [x, y, psi]}, ...],   # m, m, rad
+      "settings": {"Ts": 0.01, "N": 20, "samples_per_segment": 20, "k_r": 1.0, "k_u": 0.001, ...}
+    }
+
+Instead of ``segments`` a request may give ``reference`` (a pose per sample: the paper's
+tracking criterion (12)) or ``layout`` (obstacles to segment: Section V.B). A request that
+validates can be planned as far as its numbers go; what needs the robot's reach or the
+dynamics (unreachable poses, no path, infeasible limits) is found by the planner.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Literal, Union
+
+import numpy as np
+from pydantic import Discriminator, Field, Tag, ValidationError, field_validator, model_validator
+
+from ..errors import PlannerError
+from ._types import Finite, fail, FloatArray, Points2, Rows3, Strict, Vec3
+from .errors import planner_error
+from .layout import Layout
+from .limits import (DEFAULT_ROBOT, DEFAULT_SAMPLES_PER_SEGMENT, MAX_HORIZON, MAX_SAMPLES_PER_SEGMENT, MAX_SEGMENTS,
+                     MAX_TOTAL_STEPS, MIN_TS, MODE_DEFAULTS)
+from .robot import RobotDescription, builtin_description, builtin_robot_names
+
+__all__ = ["PlanRequest", "Reference", "Segment", "Settings", "parse_request", "TIMING_FIELDS"]
+
+#: the settings that choose the timing of a corridor; at most one per request
+TIMING_FIELDS = ("samples_per_segment", "speed_m_s", "total_time_s", "fastest")
+_MODE_FIELDS = ("N", "k_r", "k_u", "samples_per_segment")
+
+
+class Segment(Strict):
+    """One range of the corridor (paper Section V.B): ``r_a = lower``, ``r_b = upper``."""
+
+    lower: Vec3 = Field(description="Lower range limit r_a = [x_a, y_a, psi_a] (m, m, rad)")
+    upper: Vec3 = Field(description="Upper range limit r_b = [x_b, y_b, psi_b] (m, m, rad)")
+    q_ra: Vec3 | None = Field(None, description="Diagonal of Q_ra for this segment's samples (1/m, 1/m, 1/rad), "
+                              ">= 0")
+    q_rb: Vec3 | None = Field(None, description="Diagonal of Q_rb for this segment's samples (1/m, 1/m, 1/rad), "
+                              ">= 0")
+    polygon: Points2 | None = Field(None, min_length=3, description="Exact convex cell (e.g. a triangle) inside "
+                                    "the box, vertices [[x, y], ...] in m; used by the constrained mode")
+
+    @field_validator("q_ra", "q_rb")
+    @classmethod
+    def _nonneg(cls, v: np.ndarray | None) -> np.ndarray | None:
+        if v is not None and np.any(v < 0):
+            raise fail("must be >= 0")
+        return v
+
+    @model_validator(mode="after")
+    def _box(self) -> Segment:
+        bad = np.nonzero(self.lower > self.upper)[0]
+        if bad.size:
+            i = int(bad[0])
+            raise fail(f"must be <= upper ({'x y psi'.split()[i]}: {self.lower[i]:g} > {self.upper[i]:g})", "lower")
+        if self.polygon is not None and (np.any(self.polygon < self.lower[:2] - 1e-9)
+                                         or np.any(self.polygon > self.upper[:2] + 1e-9)):
+            raise fail("must lie inside the segment's box [lower, upper] (x, y)", "polygon")
+        return self
+
+    @property
+    def centre(self) -> np.ndarray:
+        """The middle of the range [m, m, rad]."""
+        return 0.5 * (self.lower + self.upper)
+
+    @property
+    def is_point(self) -> bool:
+        """A range of zero size (a start or end point)."""
+        return bool(np.all(self.upper - self.lower <= 1e-12))
+
+
+class Reference(Strict):
+    """A trajectory to track (the paper's criterion (12)): one pose per sample."""
+
+    pose: Rows3 = Field(min_length=2, max_length=MAX_TOTAL_STEPS,
+                        description="Desired pose per sample, [x, y, psi] in m, m, rad; the first is the start")
+
+
+class Settings(Strict):
+    """Planner settings (SI units). ``N``, ``k_r``, ``k_u`` and ``samples_per_segment`` left out
+    (or null) take the mode's defaults; after validation they always hold numbers."""
+
+    Ts: Finite = Field(0.01, ge=MIN_TS, le=1.0, description="Sample time in s")
+    N: int = Field(None, ge=1, le=MAX_HORIZON, description="Prediction horizon in samples; default "
+                   f"{MODE_DEFAULTS['paper']['N']:g} in paper mode, {MODE_DEFAULTS['constrained']['N']:g} in "
+                   "constrained mode")
+    samples_per_segment: int = Field(None, ge=1, le=MAX_SAMPLES_PER_SEGMENT,
+                                     description="Samples each segment is held (count); default N if N is given, "
+                                     f"else {DEFAULT_SAMPLES_PER_SEGMENT}")
+    k_r: Finite = Field(None, gt=0, le=1e12, description="Range penalty: Q_ra = Q_rb = k_r I (1/m, 1/rad); "
+                        f"default {MODE_DEFAULTS['paper']['k_r']:g} in paper mode, "
+                        f"{MODE_DEFAULTS['constrained']['k_r']:g} in constrained mode")
+    k_u: Finite = Field(None, gt=0, le=1e12, description="Drive-force penalty: Q_u = k_u I (1/N); default "
+                        f"{MODE_DEFAULTS['paper']['k_u']:g} in paper mode, "
+                        f"{MODE_DEFAULTS['constrained']['k_u']:g} in constrained mode")
+    q_ra: Vec3 | None = Field(None, description="Diagonal of Q_ra (1/m, 1/m, 1/rad), >= 0; overrides k_r")
+    q_rb: Vec3 | None = Field(None, description="Diagonal of Q_rb (1/m, 1/m, 1/rad), >= 0; overrides k_r")
+    q_u: FloatArray | None = Field(None, min_length=1, description="Diagonal of Q_u, one positive number per "
+                                   "drive (1/N); overrides k_u")
+    taper: bool = Field(True, description="Spread the range out of the start point and narrow it onto the end point")
+    mode: Literal["paper", "constrained"] = Field(
+        "paper", description="'paper': the seed's soft range criterion; 'constrained': hard corridor and drive limits")
+    solver: Literal["riccati", "structured", "qr"] = Field(
+        "riccati", description="How the paper mode's horizon problem is solved (same minimiser): 'riccati' "
+        "(backward Riccati recursion, O(N)), 'structured' (banded KKT, O(N)) or 'qr' (the paper's Householder "
+        "QR, eqs. 17-23)")
+    backend: Literal["compiled", "reference"] = Field(
+        None, description="'compiled' (default with the riccati solver): model, hold, horizon solve, plant and the "
+        "constrained mode's QP assembly run as compiled kernels; 'reference' (default with the structured or qr "
+        "solver): the numpy implementation of every stage, same results")
+    settle_position_m: Finite = Field(1e-4, gt=0, le=1, description="End-point position tolerance in m")
+    settle_speed_m_s: Finite = Field(1e-3, gt=0, le=1, description="Speed that counts as stopped in m/s")
+    settle_angle_rad: Finite = Field(1e-4, gt=0, le=1, description="End-point angle tolerance in rad")
+    settle_rate_rad_s: Finite = Field(1e-3, gt=0, le=1, description="Angular speed that counts as stopped in rad/s")
+    tail_max_s: Finite = Field(3.0, ge=0, le=600, description="Longest time in s the end point is held for settling")
+    plant_substeps: int = Field(1, ge=1, le=50, description="RK4 steps of the nonlinear model per sample (count)")
+    require_settled: bool = Field(True, description="Fail with code not_settled instead of returning an unsettled plan")
+    speed_m_s: Finite | None = Field(None, gt=0, le=100, description="Target mean tool speed along the corridor "
+                                     "in m/s; sets samples_per_segment (exclusive with it, total_time_s, fastest)")
+    total_time_s: Finite | None = Field(None, gt=0, le=3600, description="Time in s the corridor's range sequence "
+                                        "takes; sets samples_per_segment")
+    fastest: bool = Field(False, description="Constrained mode: the shortest timing (samples_per_segment) whose "
+                          "plan keeps the corridor and the drive force, stroke and speed limits")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _nulls_are_defaults(cls, data: Any) -> Any:
+        if isinstance(data, dict) and any(data.get(k, 0) is None for k in (*_MODE_FIELDS, "backend")):
+            data = {k: v for k, v in data.items() if not (v is None and k in (*_MODE_FIELDS, "backend"))}
+        return data
+
+    @field_validator("q_u")
+    @classmethod
+    def _positive(cls, v: np.ndarray | None) -> np.ndarray | None:
+        if v is not None and np.any(v <= 0):
+            raise fail("must be a list with one positive number per drive")
+        return v
+
+    @field_validator("q_ra", "q_rb")
+    @classmethod
+    def _nonneg(cls, v: np.ndarray | None) -> np.ndarray | None:
+        if v is not None and np.any(v < 0):
+            raise fail("must be >= 0")
+        return v
+
+    @model_validator(mode="after")
+    def _resolve(self) -> Settings:
+        given = [k for k in TIMING_FIELDS if k in self.model_fields_set and getattr(self, k) not in (None, False)]
+        if len(given) > 1:
+            raise fail(f"give only one of samples_per_segment, speed_m_s, total_time_s, fastest; got {', '.join(given)}",
+                       given[1])
+        if self.fastest and self.mode != "constrained":
+            raise fail("needs mode 'constrained' (only that mode keeps the drive limits)", "fastest")
+        if self.backend == "compiled" and self.solver != "riccati":
+            raise fail(f"the compiled backend solves the horizon problem by the Riccati recursion; use backend "
+                       f"'reference' for the {self.solver} solver", "solver")
+        # fill in what the mode decides; __dict__ keeps them out of model_fields_set, so a
+        # dump with exclude_unset gives back what the client sent
+        filled = {k: v for k, v in MODE_DEFAULTS[self.mode].items() if getattr(self, k) is None}
+        if self.samples_per_segment is None:
+            filled["samples_per_segment"] = self.N if self.N is not None else DEFAULT_SAMPLES_PER_SEGMENT
+        if self.backend is None:
+            filled["backend"] = "compiled" if self.solver == "riccati" else "reference"
+        self.__dict__.update(filled)
+        return self
+
+    @property
+    def tail_steps(self) -> int:
+        """Most samples the end point is held for settling."""
+        return int(math.ceil(self.tail_max_s / self.Ts))
+
+
+def _robot_kind(value: Any) -> str:
+    return "~name" if isinstance(value, str) else "~description"
+
+
+RobotSpec = Annotated[
+    Union[Annotated[str, Tag("~name")], Annotated[RobotDescription, Tag("~description")]],
+    Discriminator(_robot_kind),
+]
+
+
+class PlanRequest(Strict):
+    """A plan request: a robot, and a corridor (``segments``), a trajectory to track
+    (``reference``) or a workspace to segment (``layout``), with settings."""
+
+    name: str | None = Field(None, max_length=200, description="Free-text name of the corridor")
+    robot: RobotSpec = Field(DEFAULT_ROBOT, description="Built-in robot name (GET /v1/robots) or a robot "
+                             "description")
+    segments: list[Segment] | None = Field(None, min_length=2, max_length=MAX_SEGMENTS,
+                                           description="The corridor: ranges in order, first the start point, "
+                                           "last the end point")
+    reference: Reference | None = Field(None, description="Instead of segments: a trajectory to track "
+                                        "(the paper's criterion (12))")
+    layout: Layout | None = Field(None, description="Instead of segments: a workspace with obstacles to "
+                                  "segment into a corridor (Section V.B)")
+    settings: Settings = Field(default_factory=Settings, description="Planner settings")
+    start: Vec3 | None = Field(None, description="Shorthand for layout.start: start pose [x, y, psi] in m, m, rad")
+    end: Vec3 | None = Field(None, description="Shorthand for layout.end: end pose [x, y, psi] in m, m, rad")
+    psi_range: Annotated[list[Finite], Field(min_length=2, max_length=2)] | None = Field(
+        None, description="Shorthand for layout.psi_range: allowed platform angle [min, max] in rad")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _shorthands(cls, data: Any) -> Any:
+        """Top-level ``start``, ``end`` and ``psi_range`` fill the layout's (which win)."""
+        if isinstance(data, dict) and isinstance(data.get("layout"), dict):
+            extra = {k: data[k] for k in ("start", "end", "psi_range")
+                     if data.get(k) is not None and data["layout"].get(k) is None}
+            if extra:
+                data = {**data, "layout": {**data["layout"], **extra}}
+        return data
+
+    @field_validator("robot")
+    @classmethod
+    def _known_robot(cls, v: str | RobotDescription) -> str | RobotDescription:
+        if isinstance(v, str) and v not in builtin_robot_names():
+            raise fail(f"unknown robot {v!r}; built-in robots: {', '.join(builtin_robot_names())}")
+        return v
+
+    @model_validator(mode="after")
+    def _one_corridor(self) -> PlanRequest:
+        given = [k for k in ("segments", "reference", "layout") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise fail(f"give exactly one of 'segments' (a corridor), 'reference' (a trajectory to track) or "
+                       f"'layout' (obstacles to segment); got {', '.join(given) or 'none'}", "segments")
+        st = self.settings
+        n_legs = self.robot_description.n_legs
+        if st.q_u is not None and len(st.q_u) != n_legs:
+            raise fail(f"must have one entry per drive ({n_legs}), got {len(st.q_u)}", "settings.q_u")
+        if self.segments is not None:
+            steps = len(self.segments) * st.samples_per_segment
+            if steps > MAX_TOTAL_STEPS:
+                raise fail(f"{len(self.segments)} segments x {st.samples_per_segment} samples = {steps} steps exceeds "
+                           f"the limit of {MAX_TOTAL_STEPS}", "settings.samples_per_segment", code="too_large")
+        if st.tail_steps > MAX_TOTAL_STEPS:
+            raise fail(f"a settling tail of {st.tail_max_s:g} s at Ts = {st.Ts:g} s is {st.tail_steps} samples, more "
+                       f"than the limit of {MAX_TOTAL_STEPS}; raise settings.Ts or lower settings.tail_max_s",
+                       "settings.Ts", code="too_large")
+        return self
+
+    @property
+    def robot_description(self) -> RobotDescription:
+        """The robot's description (a built-in one looked up by name)."""
+        return builtin_description(self.robot) if isinstance(self.robot, str) else self.robot
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The request as the client would send it again: what it gave, in JSON types."""
+        return self.model_dump(mode="json", exclude_unset=True)
+
+
+def parse_request(raw: Any) -> PlanRequest:
+    """Validate a request (a dict in the one JSON shape, or a :class:`PlanRequest`);
+    raises :class:`~planner.errors.PlannerError` naming the first failing field."""
+    if isinstance(raw, PlanRequest):
+        return raw
+    if not isinstance(raw, dict):
+        raise PlannerError("invalid_input", "a plan request must be a JSON object", "body")
+    try:
+        return PlanRequest.model_validate(raw)
+    except ValidationError as exc:
+        raise planner_error(exc) from None
