@@ -27,7 +27,7 @@ USER rangeplan
 RUN python -m venv .venv \
     && .venv/bin/python -m pip install --quiet --upgrade pip \
     && .venv/bin/python -m pip install --quiet -e '.[test]' \
-    && .venv/bin/python -m planner.plan
+    && .venv/bin/python -m planner
 
 ENV PATH=/app/.venv/bin:$PATH
 VOLUME ["/data"]

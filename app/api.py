@@ -23,7 +23,6 @@ limited in size before parsing. Configuration by environment: ``RANGEPLAN_DATA_D
 from __future__ import annotations
 
 import asyncio
-import importlib.util
 import json
 import os
 import threading
@@ -38,10 +37,12 @@ from fastapi.responses import JSONResponse, RedirectResponse, Response
 from pydantic import BaseModel, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from app.schema import PlanRequestModel, request_dict
 from app.storage import Store, default_data_dir
 from app.workers import JobTimeout, PlanPool, PoolBusy, WorkerCrashed
 from planner.errors import PlannerError
+from planner.orchestrator import to_csv
+from planner.schema import (PlanRequest, PlanResult, RobotDescription, RobotSummary, SegmentationResult,
+                            builtin_description, builtin_robot_names, error_details, field_path)
 
 VERSION = "0.1.0"
 STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
@@ -69,87 +70,18 @@ class ErrorResponse(BaseModel):
     error: ErrorDetail
 
 
-class DrivesModel(BaseModel):
-    length: list[list[float]] = Field(description="Leg lengths per sample, one column per leg, m")
-    velocity: list[list[float]] = Field(description="Leg sliding speeds per sample, m/s")
-    force: list[list[float]] = Field(description="Drive forces per sample (held until the next sample), N")
-
-
-class CorridorOutModel(BaseModel):
-    lower: list[list[float]] = Field(description="Per-sample lower range limit [x, y, psi] in m, m, rad")
-    upper: list[list[float]] = Field(description="Per-sample upper range limit [x, y, psi] in m, m, rad")
-    violation_m: list[float] = Field(description="Per-sample distance of (x, y) outside its range, m")
-    segments: list[dict[str, Any]] | None = Field(description="The corridor segments {lower, upper} "
-                                                  "(m, m, rad); null for a tracking request")
-
-
-class MetricsModel(BaseModel):
-    duration_s: float = Field(description="Trajectory duration, s")
-    steps: int = Field(description="Number of samples planned (count)")
-    settled: bool = Field(description="Whether the robot settled at the end point")
-    end_error_m: float = Field(description="Final distance from the end point, m")
-    end_error_rad: float = Field(description="Final angle error, rad")
-    end_speed_m_s: float = Field(description="Final tool speed, m/s")
-    overshoot_m: float = Field(description="How far the robot passes the end point, m")
-    max_corridor_violation_m: float = Field(description="Largest distance outside the union of segments, m")
-    max_corridor_violation_rad: float = Field(description="Largest angle outside the corridor's psi range, rad")
-    time_indexed_violation_m: float = Field(description="Largest distance outside the per-sample range, m")
-    max_drive_force_n: float = Field(description="Largest drive force magnitude, N")
-    force_limit_n: float = Field(description="Smallest drive force limit of the robot, N")
-    max_force_ratio: float = Field(description="Largest |force| / force limit (dimensionless)")
-    max_drive_speed_m_s: float = Field(description="Largest leg sliding speed, m/s")
-    max_speed_ratio: float = Field(description="Largest |leg speed| / speed limit (dimensionless)")
-    max_stroke_violation_m: float = Field(description="Largest leg length outside its stroke, m")
-    min_singularity_measure: float = Field(description="Smallest singularity measure along the path "
-                                           "(dimensionless; singular near 0)")
-    energy: float = Field(description="Sum of squared drive forces times Ts, N^2 s")
-    path_length_m: float = Field(description="Length of the tool path, m")
-    compute_ms: float = Field(description="Planner compute time, ms")
-
-
-class PlanResultModel(BaseModel):
-    plan_id: str | None = Field(description="Id to fetch this result again at GET /v1/plans/{id}")
-    name: str | None = Field(description="Name of the request")
-    robot: str = Field(description="Robot name")
-    mode: str = Field(description="Controller mode: 'paper' or 'constrained'")
-    criterion: str = Field(description="'range-space' (segments) or 'tracking' (reference)")
-    settings: dict[str, Any] = Field(description="The settings used (SI units, see the request schema)")
-    units: dict[str, Any] = Field(description="Unit of each output array")
-    time: list[float] = Field(description="Sample times, s")
-    pose: list[list[float]] = Field(description="Tool pose per sample [x, y, psi] in m, m, rad")
-    velocity: list[list[float]] = Field(description="Velocity per sample in m/s, m/s, rad/s")
-    acceleration: list[list[float]] = Field(description="Acceleration per sample in m/s^2, m/s^2, rad/s^2")
-    drives: DrivesModel
-    corridor: CorridorOutModel
-    metrics: MetricsModel
-
-
 class CorridorRecordModel(BaseModel):
     id: str = Field(description="Corridor id (uuid4 hex)")
     name: str | None = Field(description="Corridor name")
     created: str = Field(description="Creation time, ISO-8601 UTC")
     updated: str = Field(description="Last update time, ISO-8601 UTC")
-    request: dict[str, Any] = Field(description="The plan request (same shape as the body of POST /v1/plan; "
+    request: PlanRequest = Field(description="The plan request (same shape as the body of POST /v1/plan; "
                                     "m, m, rad, s)")
-
-
-class SegmentationModel(BaseModel):
-    cell: dict[str, Any] = Field(description="Cell shape and size (m)")
-    bounds: dict[str, Any] = Field(description="Workspace bounds (m)")
-    cells: list[dict[str, Any]] = Field(description="Cells {id, polygon [[x, y], ...] in m, state}")
-    path: list[Any] = Field(description="Cell ids from start to end")
-    segments: list[dict[str, Any]] = Field(description="Corridor segments {lower, upper, polygon} in m, m, rad")
-
-
-class RobotSummaryModel(BaseModel):
-    name: str = Field(description="Built-in robot name")
-    description: str = Field(description="What the robot is")
-    legs: int = Field(description="Number of legs/drives (count)")
 
 
 class HealthModel(BaseModel):
     status: str = Field(description="'ok'")
-    version: str
+    version: str = Field(description="rangeplan version")
     pool: dict[str, Any] = Field(description="Planning pool: mode, workers, jobs in flight, time limit (s)")
     editor_port: int | None = Field(description="TCP port of the browser editor, if it runs")
 
@@ -161,7 +93,7 @@ def _errors(*statuses: int) -> dict:
                                                         500: "Internal error"}.get(s, "Error")} for s in statuses}
 
 
-_PLAN_RESPONSES = {200: {"model": PlanResultModel, "description": "The planned trajectory (JSON, or CSV with a "
+_PLAN_RESPONSES = {200: {"model": PlanResult, "description": "The planned trajectory (JSON, or CSV with a "
                          "header naming each column with its unit)",
                          "content": {"text/csv": {"schema": {"type": "string"}}}},
                    **_errors(413, 422, 503)}
@@ -178,49 +110,12 @@ def error_response(status: int, code: str, message: str, field: str | None = Non
     return JSONResponse({"error": err}, status_code=status, headers=headers)
 
 
-def _union_tags() -> set[str]:
-    import app.schema as schema
-    tags = {"str", "int", "float", "bool", "list", "dict", "none"}
-    tags |= {n for n, v in vars(schema).items() if isinstance(v, type) and issubclass(v, BaseModel)}
-    return tags
-
-
-_TAGS = _union_tags()
-
-
-def field_path(loc) -> str | None:
-    """pydantic ``loc`` -> ``"segments[3].lower"`` (no leading "body", no union tags)."""
-    parts = list(loc)
-    if parts and parts[0] == "body":
-        parts = parts[1:]
-    out = ""
-    for p in parts:
-        if isinstance(p, int):
-            out += f"[{p}]"
-        elif isinstance(p, str) and (p in _TAGS or "[" in p or "-" in p):
-            continue  # union member / validator tag, not a field
-        else:
-            out += f".{p}" if out else str(p)
-    return out or None
-
-
 def _validation_response(exc: RequestValidationError) -> JSONResponse:
-    errs = exc.errors()
-    details = []
-    for e in errs:
-        msg = e.get("msg", "invalid value")
-        if e.get("type") == "json_invalid":
-            ctx = e.get("ctx") or {}
-            msg = f"body is not valid JSON: {ctx.get('error', msg)}"
-            details.append({"field": None, "message": msg})
-            continue
-        if e.get("type") == "missing" and tuple(e.get("loc", ())) == ("body",):
-            msg = "a JSON body is required"
-        details.append({"field": field_path(e.get("loc", ())), "message": msg})
-    # prefer a failure that is not a union-branch mismatch on a plain string
-    first = details[0] if details else {"field": None, "message": "invalid input"}
-    return error_response(422, "invalid_input", first["message"], first["field"],
-                          details if len(details) > 1 else None)
+    """422 with the first failing field (planner.schema's paths: ``segments[3].lower``)."""
+    details = error_details(exc.errors())
+    first = details[0] if details else {"code": "invalid_input", "field": None, "message": "invalid input"}
+    more = [{"field": d["field"], "message": d["message"]} for d in details] if len(details) > 1 else None
+    return error_response(422, first["code"], first["message"], first["field"], more)
 
 
 # ---------------------------------------------------------------------------------------
@@ -401,13 +296,7 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
         accept = request.headers.get("accept", "")
         return "text/csv" in accept and "application/json" not in accept
 
-    def segmentation_available() -> bool:
-        return importlib.util.find_spec("planner.segmentation") is not None
-
-    async def plan_response(request: Request, req: dict, fmt: str | None, corridor_id: str | None = None):
-        if req.get("layout") is not None and not segmentation_available():
-            return error_response(501, "unavailable", "layout requests need planner.segmentation, which this "
-                                  "installation does not have; send segments instead", "layout")
+    async def plan_response(request: Request, req: PlanRequest, fmt: str | None, corridor_id: str | None = None):
         csv = wants_csv(request, fmt)
         job = {"kind": "plan", "request": req, "format": "csv" if csv else "json",
                "store": str(request.app.state.store.path), "corridor_id": corridor_id}
@@ -424,21 +313,16 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
         return {"status": "ok", "version": VERSION, "pool": pool.stats() if pool else {},
                 "editor_port": request.app.state.editor_port}
 
-    @app.get("/v1/robots", response_model=list[RobotSummaryModel], tags=["robots"])
-    def robots():
+    @app.get("/v1/robots", response_model=list[RobotSummary], tags=["robots"])
+    def robots() -> list[RobotSummary]:
         """The built-in robots."""
-        from planner.robot import builtin_description, builtin_robot_names
-        out = []
-        for name in builtin_robot_names():
-            d = builtin_description(name)
-            out.append({"name": name, "description": d.get("description", ""), "legs": len(d["base_pivots"])})
-        return out
+        return [RobotSummary(name=name, description=builtin_description(name).description,
+                             legs=builtin_description(name).n_legs) for name in builtin_robot_names()]
 
-    @app.get("/v1/robots/{name}", tags=["robots"], responses=_errors(404))
-    def robot(name: str) -> dict[str, Any]:
+    @app.get("/v1/robots/{name}", response_model=RobotDescription, tags=["robots"], responses=_errors(404))
+    def robot(name: str) -> RobotDescription:
         """A built-in robot's full description (pivots in m, masses in kg, inertias in kg m^2,
         limits in m, N, m/s); the same object a request may give as ``robot``."""
-        from planner.robot import builtin_description, builtin_robot_names
         if name not in builtin_robot_names():
             raise StarletteHTTPException(404, f"unknown robot {name!r}; built-in robots: "
                                          f"{', '.join(builtin_robot_names())}")
@@ -446,25 +330,20 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
 
     # -- planning -------------------------------------------------------------------------
     @app.post("/v1/plan", tags=["planning"], response_class=Response, responses=_PLAN_RESPONSES)
-    async def plan(body: PlanRequestModel, request: Request,
+    async def plan(body: PlanRequest, request: Request,
                    format: Literal["json", "csv"] | None = Format):
         """Plan a trajectory for a corridor (``segments``), a reference or a ``layout``.
         The result is stored: fetch it again at ``GET /v1/plans/{plan_id}``."""
-        return await plan_response(request, request_dict(body), format)
+        return await plan_response(request, body, format)
 
     @app.post("/v1/segment", tags=["planning"], response_class=Response,
-              responses={200: {"model": SegmentationModel, "description": "Cells and corridor"},
+              responses={200: {"model": SegmentationResult, "description": "Cells and corridor"},
                          **_errors(413, 422, 503)})
-    async def segment(body: PlanRequestModel, request: Request):
+    async def segment(body: PlanRequest, request: Request):
         """Segment a ``layout`` (workspace with obstacles) into cells and a corridor, without planning."""
         if body.layout is None:
             return error_response(422, "invalid_input", "a segmentation request needs a layout", "layout")
-        if not segmentation_available():
-            return error_response(501, "unavailable", "planner.segmentation is not installed", "layout")
-        req = request_dict(body)
-        req.pop("segments", None)
-        req.pop("reference", None)
-        return await run_job(request, {"kind": "segment", "request": req})
+        return await run_job(request, {"kind": "segment", "request": body})
 
     @app.get("/v1/plans/{plan_id}", tags=["planning"], response_class=Response, responses={
         200: _PLAN_RESPONSES[200], **_errors(404)})
@@ -474,16 +353,13 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
         if text is None:
             raise StarletteHTTPException(404, f"no plan with id {plan_id!r}")
         if wants_csv(request, format):
-            from planner.trajectory import to_csv
-            return Response(to_csv(json.loads(text)), media_type="text/csv; charset=utf-8")
+            return Response(to_csv(PlanResult.model_validate_json(text)), media_type="text/csv; charset=utf-8")
         return Response(text, media_type="application/json")
 
     # -- corridors ------------------------------------------------------------------------
-    def checked(body: PlanRequestModel) -> dict:
-        req = request_dict(body)
-        from planner.request import parse_request
-        parse_request(req)  # meaning (lower <= upper, sizes) before it is saved; raises PlannerError
-        return req
+    def saved(body: PlanRequest) -> dict:
+        """What storage keeps: the request as the client sent it (validated exactly as for planning)."""
+        return body.to_json_dict()
 
     def get_or_404(store: Store, corridor_id: str) -> dict:
         rec = store.get_corridor(corridor_id)
@@ -491,29 +367,29 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
             raise StarletteHTTPException(404, f"no corridor with id {corridor_id!r}")
         return rec
 
-    @app.post("/v1/corridors", status_code=201, response_model=CorridorRecordModel, tags=["corridors"],
+    @app.post("/v1/corridors", status_code=201, response_model=CorridorRecordModel, response_model_exclude_unset=True, tags=["corridors"],
               responses=_errors(413, 422))
-    def create_corridor(body: PlanRequestModel, request: Request, response: Response):
+    def create_corridor(body: PlanRequest, request: Request, response: Response):
         """Save a plan request as a corridor; its name is the request's ``name``."""
-        rec = request.app.state.store.create_corridor(checked(body), body.name)
+        rec = request.app.state.store.create_corridor(saved(body), body.name)
         response.headers["Location"] = f"/v1/corridors/{rec['id']}"
         return rec
 
-    @app.get("/v1/corridors", response_model=list[CorridorRecordModel], tags=["corridors"])
+    @app.get("/v1/corridors", response_model=list[CorridorRecordModel], response_model_exclude_unset=True, tags=["corridors"])
     def list_corridors(request: Request):
         """All saved corridors, oldest first."""
         return request.app.state.store.list_corridors()
 
-    @app.get("/v1/corridors/{corridor_id}", response_model=CorridorRecordModel, tags=["corridors"],
+    @app.get("/v1/corridors/{corridor_id}", response_model=CorridorRecordModel, response_model_exclude_unset=True, tags=["corridors"],
              responses=_errors(404))
     def get_corridor(corridor_id: str, request: Request):
         return get_or_404(request.app.state.store, corridor_id)
 
-    @app.put("/v1/corridors/{corridor_id}", response_model=CorridorRecordModel, tags=["corridors"],
+    @app.put("/v1/corridors/{corridor_id}", response_model=CorridorRecordModel, response_model_exclude_unset=True, tags=["corridors"],
              responses=_errors(404, 413, 422))
-    def update_corridor(corridor_id: str, body: PlanRequestModel, request: Request):
+    def update_corridor(corridor_id: str, body: PlanRequest, request: Request):
         """Replace a saved corridor's request (and name)."""
-        rec = request.app.state.store.update_corridor(corridor_id, checked(body), body.name)
+        rec = request.app.state.store.update_corridor(corridor_id, saved(body), body.name)
         if rec is None:
             raise StarletteHTTPException(404, f"no corridor with id {corridor_id!r}")
         return rec
@@ -536,12 +412,12 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
             raise StarletteHTTPException(404, f"no corridor with id {corridor_id!r}")
         from pydantic import ValidationError
         try:
-            model = PlanRequestModel.model_validate(rec["request"])
+            model = PlanRequest.model_validate(rec["request"])
         except ValidationError as exc:
-            e = exc.errors()[0]
-            return error_response(422, "invalid_input", "the saved corridor is not a valid plan request: "
-                                  + e["msg"], field_path(e["loc"]))
-        return await plan_response(request, request_dict(model), format, corridor_id)
+            e = error_details(exc.errors())[0]
+            return error_response(422, e["code"], "the saved corridor is not a valid plan request: "
+                                  + e["message"], e["field"])
+        return await plan_response(request, model, format, corridor_id)
 
     # -- landing page ---------------------------------------------------------------------
     if STATIC_DIR.is_dir():

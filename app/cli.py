@@ -21,11 +21,11 @@ class InputError(Exception):
     """A user error: printed as one line, exit status 2."""
 
 
-def load_request(path: str) -> dict:
-    """Read a plan request file and validate it against the shared schema."""
+def load_request(path: str):
+    """Read a plan request file and validate it (:class:`planner.schema.PlanRequest`)."""
     from pydantic import ValidationError
 
-    from app.schema import PlanRequestModel, format_validation_error, request_dict
+    from planner.schema import PlanRequest, format_validation_error
 
     try:
         text = sys.stdin.read() if path == "-" else Path(path).read_text()
@@ -35,17 +35,16 @@ def load_request(path: str) -> dict:
         raw = json.loads(text)
     except json.JSONDecodeError as exc:
         raise InputError(f"{path}: not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
+    if not isinstance(raw, dict):
+        raise InputError(f"{path}: a plan request must be a JSON object")
     try:
-        model = PlanRequestModel.model_validate(raw)
+        return PlanRequest.model_validate(raw)
     except ValidationError as exc:
         raise InputError(f"{path}: {format_validation_error(exc)}") from None
-    return request_dict(model)
 
 
 def cmd_plan(args) -> int:
-    from planner.errors import PlannerError
-    from planner.plan import plan
-    from planner.trajectory import to_csv
+    from planner import PlannerError, plan, to_csv
 
     request = load_request(args.input)
     try:
@@ -55,13 +54,13 @@ def cmd_plan(args) -> int:
     if args.output and args.output.lower().endswith(".csv"):
         text = to_csv(result)
     else:
-        text = json.dumps(result, indent=None if args.compact else 1)
+        text = json.dumps(result.to_json_dict(), indent=None if args.compact else 1)
     if args.output and args.output != "-":
         Path(args.output).write_text(text + ("" if text.endswith("\n") else "\n"))
-        m = result["metrics"]
-        print(f"wrote {args.output}: {m['steps']} steps, {m['duration_s']:.2f} s, end error "
-              f"{m['end_error_m'] * 1e3:.3f} mm, max force {m['max_drive_force_n']:.1f} N, "
-              f"compute {m['compute_ms']:.0f} ms", file=sys.stderr)
+        m = result.metrics
+        print(f"wrote {args.output}: {m.steps} steps, {m.duration_s:.2f} s, end error "
+              f"{m.end_error_m * 1e3:.3f} mm, max force {m.max_drive_force_n:.1f} N, "
+              f"compute {m.compute_ms:.0f} ms", file=sys.stderr)
     else:
         sys.stdout.write(text if text.endswith("\n") else text + "\n")
     return 0

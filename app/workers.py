@@ -137,61 +137,31 @@ def _dumps(result: dict) -> bytes:
                            "try a smaller sample time or larger k_u", "settings") from None
 
 
-_robots: dict = {}
-
-
-def _builtin_robot(spec):
-    """This process's model of a built-in robot named ``spec`` (built once: reading and
-    building the description and packing it for the compiled kernels is ~0.3 ms a plan);
-    ``None`` for anything else, which the planner loads (and checks) itself."""
-    if not isinstance(spec, str):
-        return None
-    robot = _robots.get(spec)
-    if robot is None:
-        from planner.errors import PlannerError
-        from planner.robot import load_robot
-        try:
-            robot = load_robot(spec)
-        except PlannerError:  # not a built-in robot: the planner reports it
-            return None
-        _robots[spec] = robot
-    return robot
-
-
 def run_job(job: dict) -> tuple:
     """Run one job; returns ``("ok", payload: bytes, meta: dict)`` or
-    ``("error", PlannerError.to_dict())``."""
+    ``("error", PlannerError.to_dict())``. ``job["request"]`` is a validated
+    :class:`planner.schema.PlanRequest`."""
     from planner.errors import PlannerError
 
     try:
         if job["kind"] == "plan":
-            from planner.plan import plan
-            from planner.trajectory import to_csv
             from app.storage import new_id
+            from planner import plan, to_csv
 
             req = job["request"]
-            robot = _builtin_robot(req.get("robot", "moving-slide")) if isinstance(req, dict) else None
-            result = plan(req, robot=robot)
+            result = plan(req)
             plan_id = new_id() if job.get("store") else None
-            result["plan_id"] = plan_id
-            data = _dumps(result)
+            result.plan_id = plan_id
+            data = result.to_json()
             if plan_id:
-                _store(job["store"]).save_plan_json(data.decode(), job["request"], job.get("corridor_id"),
+                _store(job["store"]).save_plan_json(data.decode(), req.to_json_dict(), job.get("corridor_id"),
                                                     id=plan_id)
-            if job.get("format") == "csv":
-                payload = to_csv(result).encode()
-            else:
-                payload = data
+            payload = to_csv(result).encode() if job.get("format") == "csv" else data
             return ("ok", payload, {"plan_id": plan_id})
         if job["kind"] == "segment":
-            from planner.request import parse_request
-            from planner.robot import load_robot
-            from planner.segmentation import corridor_from_request
+            from planner import segment
 
-            req = parse_request(job["request"])
-            robot = load_robot(req.robot)
-            seg = corridor_from_request(req, robot)
-            return ("ok", _dumps(seg.to_dict()), {})
+            return ("ok", _dumps(segment(job["request"]).to_dict()), {})
         if job["kind"] == "sleep":  # for tests of the time limit
             time.sleep(float(job["seconds"]))
             return ("ok", b"{}", {})
@@ -210,7 +180,7 @@ def run_job(job: dict) -> tuple:
 
 
 def _degenerate(exc: Exception, job: dict) -> dict:
-    custom = isinstance(job.get("request", {}).get("robot"), dict)
+    custom = not isinstance(getattr(job.get("request"), "robot", None), str)
     return {"code": "singular", "field": "robot" if custom else None,
             "message": f"the robot model is degenerate here ({type(exc).__name__}: {exc}); check that the "
                        "robot's pivots are distinct, its legs have positive length, masses and inertias "
@@ -219,11 +189,10 @@ def _degenerate(exc: Exception, job: dict) -> dict:
 
 def _worker_main(conn) -> None:
     # import the planner and load its compiled kernels before the first job, not during it
-    import planner.plan
-    import planner.trajectory  # noqa: F401
-    import app.storage  # noqa: F401
+    import app.storage  # noqa: F401  (imported before the first job, not during it)
+    import planner
     try:
-        planner.plan.warm_up()  # ~0.3 s from numba's on-disk cache; the first plan paid it before
+        planner.warm_up()  # ~0.3 s from numba's on-disk cache; the first plan paid it before
     except Exception:  # noqa: BLE001 - a planner that cannot plan says so in each job's answer
         pass
     try:

@@ -34,3 +34,10 @@ def plan_json(request: Any, **kwargs: Any) -> dict[str, Any]:
     from planner import plan
 
     return plan(request, **kwargs).to_json_dict()
+
+
+def robot_description(name: str) -> dict[str, Any]:
+    """A built-in robot's description as a JSON dict (to modify in a test)."""
+    from planner.schema import builtin_description
+
+    return builtin_description(name).model_dump(mode="json")

@@ -19,6 +19,8 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.api import create_app, field_path
+from planner.errors import PlannerError
+from tests.support import robot_description
 from app.storage import Store
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -219,10 +221,18 @@ def test_body_size_limit_by_header_and_by_stream(client):
     assert client.get("/health").status_code == 200
 
 
-def test_field_path_strips_body_and_union_tags():
+def test_field_path_strips_body_and_union_tags(client):
     assert field_path(("body", "segments", 3, "lower")) == "segments[3].lower"
-    assert field_path(("body", "robot", "RobotModel", "legs", "list[LegModel]", 2, "rod")) == "robot.legs[2].rod"
+    assert field_path(("body", "robot", "~description", "legs", "~each", 2, "rod")) == "robot.legs[2].rod"
     assert field_path(("body",)) is None
+    # the union branch the client meant is named, not the first branch (a robot name)
+    desc = robot_description("moving-slide")
+    desc["platform"]["mass"] = 0
+    assert_error(client.post("/v1/plan", json={**TABLE1, "robot": desc}), 422, "invalid_input", "robot.platform.mass")
+    desc = robot_description("moving-slide")
+    desc["legs"] = [copy.deepcopy(desc["legs"]) for _ in range(4)]
+    desc["legs"][2]["rod"]["mass"] = -1.0
+    assert_error(client.post("/v1/plan", json={**TABLE1, "robot": desc}), 422, "invalid_input", "robot.legs[2].rod.mass")
 
 
 # ---------------------------------------------------------------------------------------
@@ -352,7 +362,6 @@ LAYOUT = {"robot": "moving-slide",
 
 
 def test_segment_layout(client):
-    pytest.importorskip("planner.segmentation")
     r = client.post("/v1/segment", json=LAYOUT)
     assert r.status_code == 200, r.text
     s = r.json()
@@ -370,7 +379,6 @@ def test_segment_layout(client):
 
 
 def test_segment_errors(client):
-    pytest.importorskip("planner.segmentation")
     assert_error(client.post("/v1/segment", json=TABLE1), 422, "invalid_input", "layout")
     walled = copy.deepcopy(LAYOUT)
     walled["layout"]["obstacles"] = [{"type": "rectangle", "lower": [-0.01, -0.05], "upper": [0.01, 0.08]}]
@@ -402,9 +410,12 @@ def test_openapi_every_field_described_with_unit_models(client):
     spec = client.get("/openapi.json").json()
     schemas = spec["components"]["schemas"]
     undocumented = []
-    for name in ("PlanRequestModel", "SegmentModel", "SettingsModel", "PlanResultModel", "MetricsModel",
-                 "DrivesModel", "CorridorOutModel", "CorridorRecordModel", "LayoutModel"):
-        for prop, sch in schemas[name]["properties"].items():
+    names = [n for n in schemas if n not in ("HTTPValidationError", "ValidationError")]
+    for want in ("PlanRequest", "Segment", "Settings", "PlanResult", "Metrics", "Drives", "CorridorSamples",
+                 "CorridorRecordModel", "Layout", "RobotDescription", "SegmentationResult", "Timing"):
+        assert any(n == want or n.startswith(f"{want}-") for n in names), (want, names)
+    for name in names:
+        for prop, sch in schemas[name].get("properties", {}).items():
             if "description" not in sch and "$ref" not in sch and not any("$ref" in a for a in sch.get("anyOf", [])):
                 undocumented.append(f"{name}.{prop}")
     assert not undocumented, undocumented
@@ -489,11 +500,73 @@ def test_worker_plans_builtin_robot_like_the_planner():
     """The worker keeps one model per built-in robot: its results are the planner's own,
     and an unknown robot name is still the planner's error naming the field."""
     from app.workers import run_job
-    from planner.plan import plan
-    job = {"kind": "plan", "request": TABLE1, "format": "json", "store": None}
+    from planner import parse_request
+    from tests.support import plan_json
+    job = {"kind": "plan", "request": parse_request(TABLE1), "format": "json", "store": None}
     for _ in range(2):
         status, payload, meta = run_job(job)
         assert status == "ok" and meta == {"plan_id": None}
-        assert strip_volatile(json.loads(payload)) == strip_volatile(json.loads(json.dumps(plan(TABLE1))))
-    status, err = run_job({**job, "request": {**TABLE1, "robot": "no-such-robot"}})
-    assert status == "error" and err["code"] == "invalid_input" and err["field"] == "robot"
+        assert strip_volatile(json.loads(payload)) == strip_volatile(plan_json(TABLE1))
+    with pytest.raises(PlannerError) as exc:  # validated before it reaches a worker
+        parse_request({**TABLE1, "robot": "no-such-robot"})
+    assert exc.value.code == "invalid_input" and exc.value.field == "robot"
+
+
+def _openapi_validator(client, name: str):
+    """A JSON-schema validator for ``#/components/schemas/<name>`` of the served OpenAPI
+    document (OpenAPI 3.1 schemas are JSON Schema 2020-12)."""
+    from jsonschema import Draft202012Validator
+
+    spec = client.get("/openapi.json").json()
+    schemas = spec["components"]["schemas"]
+    key = name if name in schemas else f"{name}-Output"
+    return Draft202012Validator({"$ref": f"#/components/schemas/{key}", "components": spec["components"]})
+
+
+def _assert_closed(schema: dict, schemas: dict, seen: set) -> None:
+    """Every object schema reachable from ``schema`` forbids fields it does not list."""
+    if isinstance(schema, dict):
+        ref = schema.get("$ref")
+        if ref:
+            name = ref.rsplit("/", 1)[-1]
+            if name not in seen:
+                seen.add(name)
+                _assert_closed(schemas[name], schemas, seen)
+            return
+        if schema.get("type") == "object" and "properties" in schema:
+            assert schema.get("additionalProperties") is False, schema.get("title")
+        for v in schema.values():
+            _assert_closed(v, schemas, seen)
+    elif isinstance(schema, list):
+        for v in schema:
+            _assert_closed(v, schemas, seen)
+
+
+@pytest.mark.parametrize("case", ["paper", "constrained", "layout", "fastest"])
+def test_real_results_validate_against_the_openapi_schema(client, case):
+    """The OpenAPI result schema lists every field a real result carries (it forbids any
+    other) in both modes, for a layout plan and for a fastest-timing plan."""
+    body = {"paper": TABLE1, "constrained": {**TABLE1, "settings": {"mode": "constrained"}},
+            "layout": LAYOUT, "fastest": {**TABLE1, "settings": {"mode": "constrained", "fastest": True}}}[case]
+    r = client.post("/v1/plan", json=body)
+    assert r.status_code == 200, r.text
+    validator = _openapi_validator(client, "PlanResult")
+    errors = sorted(validator.iter_errors(r.json()), key=lambda e: list(e.path))
+    assert not errors, [f"{list(e.path)}: {e.message}" for e in errors[:5]]
+    spec = client.get("/openapi.json").json()
+    _assert_closed(validator.schema, spec["components"]["schemas"], set())
+    res = r.json()
+    if case in ("constrained", "fastest"):
+        assert res["metrics"]["contained"] is True and res["metrics"]["qp_solver"] == "daqp"
+    assert res["timing"]["samples_per_segment"] == res["settings"]["samples_per_segment"]
+
+
+def test_other_responses_validate_against_the_openapi_schema(client):
+    r = client.post("/v1/segment", json=LAYOUT)
+    assert r.status_code == 200, r.text
+    assert not list(_openapi_validator(client, "SegmentationResult").iter_errors(r.json()))
+    r = client.get("/v1/robots/moving-slide")
+    assert r.status_code == 200 and not list(_openapi_validator(client, "RobotDescription").iter_errors(r.json()))
+    assert r.json()["platform"]["mass"] > 0
+    r = client.post("/v1/corridors", json=TABLE1)
+    assert r.status_code == 201 and not list(_openapi_validator(client, "CorridorRecordModel").iter_errors(r.json()))

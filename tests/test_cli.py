@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import pytest
 
-from tests.test_plan import TABLE1
+from tests.support import TABLE1_PATH as TABLE1
 
 CLI = [sys.executable, "-m", "app.cli"]
 

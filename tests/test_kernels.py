@@ -1,4 +1,4 @@
-"""The compiled step (planner/kernels.py) equals the numpy reference implementation of every
+"""The compiled twins (planner/model/kernels.py, planner/horizon/kernels.py, planner/orchestrator/kernels.py) equals the numpy reference implementation of every
 stage, and a whole compiled plan equals the reference loop's plan."""
 
 import json
@@ -7,15 +7,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from planner import kernels
-from planner.discretisation import zoh, zoh_factorised
+from planner.model import kernels
+from planner.orchestrator import kernels as loop_kernels
+from planner.orchestrator.simulate import C_POSE
+from planner.model.plant import rk4_sample
+from planner.model.discretisation import zoh, zoh_factorised
 from planner.errors import PlannerError
-from planner.plan import C_POSE, plan, rk4_sample
-from planner.robot import load_robot
-from planner.solver import solve_qr, solve_riccati
+from tests.support import TABLE1, plan_json as plan
+from planner.model import load_robot, dynamics, kinematics, reach
+from tests.support import robot_description
+from planner.horizon.solvers import solve_qr, solve_riccati
 
 ROOT = Path(__file__).resolve().parent.parent
-TABLE1 = json.loads((ROOT / "static" / "examples" / "table1.json").read_text())
 
 
 def robots():
@@ -36,19 +39,19 @@ def states(rng, count=20):
 @pytest.mark.parametrize("ri", range(3))
 def test_model_kernels_equal_the_reference_model(ri):
     robot = robots()[ri]
-    rb = kernels.robot_array(robot)
+    rb = robot.packed
     n = robot.n_legs
     rng = np.random.default_rng(ri)
     for x in states(rng):
         u = rng.normal(size=n) * 20
         A22, B2 = np.empty((3, 3)), np.empty((3, n))
         assert kernels.factorised_blocks(rb, x, A22, B2)
-        A22r, B2r = robot.factorised_blocks(x)
+        A22r, B2r = dynamics.factorised_blocks(robot, x)
         assert np.allclose(A22, A22r, rtol=1e-12, atol=1e-12 * np.abs(A22r).max())
         assert np.allclose(B2, B2r, rtol=1e-12, atol=1e-12 * np.abs(B2r).max())
         acc = np.empty(3)
         assert kernels.acceleration(rb, x, u, acc)
-        ref = robot.acceleration(x[:3], x[3:], u)
+        ref = dynamics.acceleration(robot, x[:3], x[3:], u)
         assert np.allclose(acc, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
         # and the factorisation is exact in the kernel too: A22 v + B2 u == acceleration
         assert np.allclose(A22 @ x[3:] + B2 @ u, acc, rtol=1e-11, atol=1e-11 * np.abs(acc).max())
@@ -58,10 +61,10 @@ def test_model_kernels_equal_the_reference_model(ri):
 def test_zoh_kernel_equals_the_matrix_exponential(Ts):
     robot = load_robot("moving-slide")
     x = np.array([0.01, -0.02, 0.05, 0.4, -0.3, 2.0])
-    A22, B2 = robot.factorised_blocks(x)
+    A22, B2 = dynamics.factorised_blocks(robot, x)
     Ad, Bd = np.empty((6, 6)), np.empty((6, 4))
     kernels.zoh(A22, B2, Ts, Ad, Bd)
-    A, B = robot.factorised(x)
+    A, B = dynamics.factorised(robot, x)
     Ae, Be = zoh(A, B, Ts)
     assert np.allclose(Ad, Ae, rtol=1e-12, atol=1e-13 * np.abs(Ae).max())
     assert np.allclose(Bd, Be, rtol=1e-12, atol=1e-13 * np.abs(Be).max())
@@ -75,7 +78,7 @@ def test_zoh_kernel_equals_the_matrix_exponential(Ts):
 def test_riccati_equals_the_paper_qr(N):
     robot = load_robot("moving-slide")
     x = np.array([0.01, 0.02, 0.05, 0.1, -0.05, 0.2])
-    A, B = robot.factorised(x)
+    A, B = dynamics.factorised(robot, x)
     Ad, Bd = zoh(A, B, 0.01)
     Ad[:, :3] = np.eye(6, 3)  # exact structure (expm gives it to rounding)
     rng = np.random.default_rng(N)
@@ -99,11 +102,11 @@ def test_riccati_refuses_a_model_without_the_hold_structure():
 @pytest.mark.parametrize("substeps", [1, 3])
 def test_rk4_kernel_equals_the_reference_plant(substeps):
     robot = load_robot("moving-slide")
-    rb = kernels.robot_array(robot)
+    rb = robot.packed
     rng = np.random.default_rng(substeps)
     for x in states(rng, 5):
         u = rng.normal(size=4) * 30
-        f0 = robot.state_derivative(x, u)
+        f0 = dynamics.state_derivative(robot, x, u)
         ref = rk4_sample(robot, x, u, 0.01, substeps, f0)
         out = kernels.rk4(rb, x, u, 0.01, substeps, f0)
         assert np.allclose(out, ref, rtol=1e-13, atol=1e-15)
@@ -141,37 +144,31 @@ def test_compiled_plan_of_a_three_leg_robot_equals_the_reference_loop():
     assert np.abs(np.array(a["pose"]) - np.array(b["pose"])).max() < 1e-9
 
 
-def test_compiled_loop_reports_a_degenerate_model_with_the_field(monkeypatch):
+def test_compiled_loop_reports_a_degenerate_model_with_the_field():
     """A plant whose hold overflows the horizon problem (a strongly negative friction, which
     a valid description cannot have) stops the compiled loop with a clear error naming
     the robot, the time and the pose, not NaN output."""
-    import planner.plan as plan_module
-
-    real = plan_module.robot_kernel_array
-
-    def unstable(robot):
-        rb = real(robot).copy()
-        n = robot.n_legs
-        rb[kernels._FRIC * n:(kernels._FRIC + 1) * n] = -2e4  # N s/m
-        return rb
-
-    monkeypatch.setattr(plan_module, "robot_kernel_array", unstable)
+    robot = load_robot(robot_description("moving-slide"))  # its own model, not the shared built-in
+    packed = robot.packed.copy()
+    n = robot.n_legs
+    packed[kernels._FRIC * n:(kernels._FRIC + 1) * n] = -2e4  # N s/m
+    object.__setattr__(robot, "packed", packed)
     with pytest.raises(PlannerError) as exc:
-        plan(TABLE1)
+        plan(TABLE1, robot=robot)
     assert exc.value.code == "singular" and exc.value.field == "robot"
     assert "t = 0.000 s, pose (-0.0800 m, 0.0000 m, 0.0000 rad)" in str(exc.value)
 
 
 def test_compiled_loop_stops_on_a_runaway_state():
     robot = load_robot("moving-slide")
-    rb = kernels.robot_array(robot)
+    rb = robot.packed
     K, N = 5, 3
     rng = np.full((K + N, 3), 2000.0)  # ranges 2 km away: the first sample leaves the workspace
     q = np.ones((K + N, 3))
     x0 = np.array([1000.0, 0.0, 0.0, 0.0, 0.0, 0.0])
-    X, U, ACC, steps, settled, status = kernels.simulate_paper(
+    X, U, ACC, steps, settled, status = loop_kernels.simulate_paper(
         rb, x0, rng, rng, q, q, np.full(4, 1e-9), K, N, 0.01, 1, 50, rng[0], np.array([1e-4, 1e-4, 1e-3, 1e-3]))
-    assert status == kernels.DIVERGED and not settled
+    assert status == loop_kernels.DIVERGED and not settled
     assert steps == 1 and len(X) == 2 and abs(X[1, 0]) + abs(X[1, 1]) > 1e3
 
 
@@ -190,6 +187,6 @@ def test_smallest_singular_values_equal_the_svd():
     # and the robot's measure uses it: a pose's sigma matches the SVD of its scaled Jacobian
     robot = load_robot("moving-slide")
     poses = np.column_stack((rng.uniform(-0.05, 0.05, (50, 2)), rng.uniform(-0.2, 0.2, 50)))
-    Jn = robot.leg_jacobian_batch(poses) * np.array([1.0, 1.0, 1.0 / robot.char_length])
-    assert np.allclose(robot.singularity_measure_batch(poses), np.linalg.svd(Jn, compute_uv=False)[:, -1],
+    Jn = kinematics.leg_jacobians(robot, poses) * np.array([1.0, 1.0, 1.0 / robot.char_length])
+    assert np.allclose(kinematics.singularity_measure(robot, poses), np.linalg.svd(Jn, compute_uv=False)[:, -1],
                        rtol=1e-10, atol=1e-14)

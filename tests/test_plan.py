@@ -9,18 +9,15 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from planner.errors import PlannerError
-from planner.plan import plan
-from planner.ranges import range_sequence
-from planner.request import parse_request
-from planner.robot import load_robot
-
-TABLE1 = Path(__file__).resolve().parents[2] / "shared" / "data" / "table1-corridor.json"
-if not TABLE1.exists():  # a clone with shared/ beside it (CI) or the copy in tests/data
-    TABLE1 = Path(__file__).resolve().parent / "data" / "table1-corridor.json"
+from planner.corridor import range_sequence
+from planner.model import dynamics, kinematics, load_robot, reach
+from planner.schema import parse_request
+from tests.support import TABLE1, robot_description
+from tests.support import plan_json as plan
 
 
 def table1(**settings):
-    req = json.loads(TABLE1.read_text())
+    req = copy.deepcopy(TABLE1)
     req["settings"] = settings
     return req
 
@@ -38,7 +35,7 @@ def test_table1_starts_at_start_and_ends_at_end(t1):
     assert t1["metrics"]["settled"]
     assert np.hypot(*t1["velocity"][-1][:2]) < 1e-3
     # the robot actually travelled the corridor: it passed near every square segment
-    segs = [s for s in json.loads(TABLE1.read_text())["segments"]]
+    segs = list(TABLE1["segments"])
     for s in segs[1:-1]:
         lo, hi = np.array(s["lower"][:2]), np.array(s["upper"][:2])
         d = np.linalg.norm(np.maximum(np.maximum(lo - pose[:, :2], 0), pose[:, :2] - hi), axis=1)
@@ -67,7 +64,7 @@ def test_table1_outputs_are_finite_and_consistent(t1):
     assert np.abs(pred - pose[1:]).max() < 1e-3 * step
     # drive lengths are the inverse kinematics of the pose
     robot = load_robot("moving-slide")
-    assert np.allclose(robot.leg_lengths(pose), t1["drives"]["length"], atol=1e-12)
+    assert np.allclose(kinematics.leg_lengths(robot, pose), t1["drives"]["length"], atol=1e-12)
 
 
 def test_table1_output_and_physics_agree(t1):
@@ -77,11 +74,11 @@ def test_table1_output_and_physics_agree(t1):
     U = np.array(t1["drives"]["force"])
     acc = np.array(t1["acceleration"])
     for k in range(0, len(X) - 1, 17):
-        sol = solve_ivp(lambda t, x: robot.state_derivative(x, U[k]), (0, 0.01), X[k],
+        sol = solve_ivp(lambda t, x: dynamics.state_derivative(robot, x, U[k]), (0, 0.01), X[k],
                         method="DOP853", rtol=1e-12, atol=1e-14)
         assert np.abs(sol.y[:3, -1] - X[k + 1, :3]).max() < 1e-9
         assert np.abs(sol.y[3:, -1] - X[k + 1, 3:]).max() < 1e-7
-        assert np.allclose(acc[k], robot.acceleration(X[k, :3], X[k, 3:], U[k]), rtol=1e-9, atol=1e-9)
+        assert np.allclose(acc[k], dynamics.acceleration(robot, X[k, :3], X[k, 3:], U[k]), rtol=1e-9, atol=1e-9)
 
 
 def test_table1_paper_mode_is_soft_and_reports_it(t1):
@@ -173,8 +170,7 @@ def test_bad_requests_name_the_field(mutate, code, field):
 def test_singular_robot_is_rejected_before_planning():
     req = table1()
     desc = load_robot("moving-slide")
-    from planner.robot import builtin_description
-    d = copy.deepcopy(builtin_description("moving-slide"))
+    d = copy.deepcopy(robot_description("moving-slide"))
     d["base_pivots"] = [[-0.3, -0.3], [0.3, -0.3], [0.3, 0.3], [-0.3, 0.3]]
     req["robot"] = d
     req["segments"] = [{"lower": [0, 0, 0], "upper": [0, 0, 0]}, {"lower": [0, 0, 0], "upper": [0.02, 0.02, 0]},

@@ -4,10 +4,11 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from planner.discretisation import zoh
-from planner.prediction import prediction_matrices
-from planner.robot import load_robot
-from planner.solver import solve_qr, solve_structured, square_root_solve, stacked_system
+from planner.model.discretisation import zoh
+from planner.horizon import prediction_matrices
+from planner.model import load_robot, dynamics, kinematics, reach
+from tests.support import robot_description
+from planner.horizon.solvers import solve_qr, solve_structured, square_root_solve, stacked_system
 
 C = np.eye(3, 6)
 
@@ -16,7 +17,7 @@ C = np.eye(3, 6)
 def model():
     robot = load_robot("moving-slide")
     x = np.array([0.01, 0.02, 0.05, 0.1, -0.05, 0.2])
-    A, B = robot.factorised(x)
+    A, B = dynamics.factorised(robot, x)
     Ad, Bd = zoh(A, B, 0.01)
     return x, Ad, Bd
 

@@ -10,15 +10,14 @@ import numpy as np
 import pytest
 
 from planner.errors import PlannerError
-from planner.plan import plan
-from planner.request import parse_request
-from planner.timing import centre_path_length, feasible
-
-TABLE1 = Path("/work/shared/data/table1-corridor.json")
+from planner.orchestrator.timing import centre_path_length, feasible
+from planner.schema import PlanResult, parse_request
+from tests.support import TABLE1
+from tests.support import plan_json as plan
 
 
 def table1() -> dict:
-    return json.loads(TABLE1.read_text())
+    return copy.deepcopy(TABLE1)
 
 
 def with_settings(req: dict, **settings) -> dict:
@@ -92,7 +91,7 @@ def test_fastest_respects_limits_and_one_faster_does_not():
     assert S < 20
     # one sample per segment fewer is not feasible
     faster = plan(with_settings(req, mode="constrained", samples_per_segment=S - 1, require_settled=False))
-    assert not feasible(faster)
+    assert not feasible(PlanResult.model_validate(faster))
 
 
 @pytest.mark.parametrize("settings, field", [
@@ -124,8 +123,6 @@ def test_too_slow_is_too_large():
 
 
 def test_schema_accepts_timing_fields():
-    from app.schema import PlanRequestModel, request_dict
-
     body = with_settings(table1(), mode="constrained", speed_m_s=0.1)
-    d = request_dict(PlanRequestModel.model_validate(body))
+    d = parse_request(body).to_json_dict()  # what storage keeps, read back
     assert parse_request(d).settings.speed_m_s == 0.1

@@ -13,7 +13,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, GetPydanticSchema
 from pydantic_core import PydanticCustomError, core_schema
 
-__all__ = ["Finite", "Strict", "fail", "Vec2", "Vec3", "Points2", "Rows3", "Rows", "FloatArray", "array_of"]
+__all__ = ["Finite", "Strict", "fail", "Pair", "Triple", "Vec2", "Vec3", "Points2", "Rows3", "Rows", "FloatArray", "array_of"]
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 
@@ -41,17 +41,19 @@ def _to_list(value: Any) -> Any:
     return np.asarray(value).tolist()
 
 
-_Pair = Annotated[list[Finite], Field(min_length=2, max_length=2)]
-_Triple = Annotated[list[Finite], Field(min_length=3, max_length=3)]
+#: [x, y] as JSON
+Pair = Annotated[list[Finite], Field(min_length=2, max_length=2)]
+#: [x, y, psi] as JSON
+Triple = Annotated[list[Finite], Field(min_length=3, max_length=3)]
 
 #: [x, y] in m
 Vec2 = Annotated[np.ndarray, array_of(list[Finite], min_length=2, max_length=2)]
 #: [x, y, psi] in m, m, rad
 Vec3 = Annotated[np.ndarray, array_of(list[Finite], min_length=3, max_length=3)]
 #: a list of [x, y] points in m
-Points2 = Annotated[np.ndarray, array_of(list[_Pair])]
+Points2 = Annotated[np.ndarray, array_of(list[Pair])]
 #: rows of [x, y, psi] (one per sample)
-Rows3 = Annotated[np.ndarray, array_of(list[_Triple])]
+Rows3 = Annotated[np.ndarray, array_of(list[Triple])]
 #: rows of numbers (one row per sample, one column per drive or axis)
 Rows = Annotated[np.ndarray, array_of(list[list[float]])]
 #: a flat list of numbers

@@ -16,7 +16,7 @@ import numpy as np
 import shapely
 from pydantic import Discriminator, Field, Tag, field_validator, model_validator
 
-from ._types import fail, Finite, Points2, Strict, Vec2, Vec3
+from ._types import Finite, Pair, Strict, Vec2, Vec3, array_of, fail
 from .limits import MAX_CELLS, MAX_OBSTACLES, MAX_POLYGON_POINTS
 
 __all__ = ["Bounds", "Cell", "Circle", "Layout", "Obstacle", "Polygon", "Rectangle", "cell_count", "SQRT3_2"]
@@ -55,10 +55,14 @@ class Circle(Strict):
     radius: Finite = Field(gt=0, description="Radius in m")
 
 
+#: a polygon's vertices [[x, y], ...] in m
+Vertices = Annotated[np.ndarray, array_of(list[Pair], min_length=3, max_length=MAX_POLYGON_POINTS)]
+
+
 class Polygon(Strict):
     type: Literal["polygon"] = Field(description="Obstacle shape")
-    points: Points2 = Field(min_length=3, max_length=MAX_POLYGON_POINTS,
-                            description="Vertices [[x, y], ...] in m, in order (either orientation)")
+    points: Vertices = Field(
+        description="Vertices [[x, y], ...] in m, in order (either orientation)")
 
     @field_validator("points")
     @classmethod

@@ -22,10 +22,10 @@ import math
 from typing import Annotated, Any, Literal, Union
 
 import numpy as np
-from pydantic import Discriminator, Field, Tag, ValidationError, field_validator, model_validator
+from pydantic import Discriminator, Field, StrictBool, Tag, ValidationError, field_validator, model_validator
 
 from ..errors import PlannerError
-from ._types import Finite, fail, FloatArray, Points2, Rows3, Strict, Vec3
+from ._types import Finite, Pair, Strict, Triple, Vec3, array_of, fail
 from .errors import planner_error
 from .layout import Layout
 from .limits import (DEFAULT_ROBOT, DEFAULT_SAMPLES_PER_SEGMENT, MAX_HORIZON, MAX_SAMPLES_PER_SEGMENT, MAX_SEGMENTS,
@@ -39,6 +39,14 @@ TIMING_FIELDS = ("samples_per_segment", "speed_m_s", "total_time_s", "fastest")
 _MODE_FIELDS = ("N", "k_r", "k_u", "samples_per_segment")
 
 
+#: a convex cell's vertices [[x, y], ...] in m
+CellVertices = Annotated[np.ndarray, array_of(list[Pair], min_length=3)]
+#: one pose per sample [[x, y, psi], ...]
+Poses = Annotated[np.ndarray, array_of(list[Triple], min_length=2, max_length=MAX_TOTAL_STEPS)]
+#: one positive number per drive
+PerDrive = Annotated[np.ndarray, array_of(list[Finite], min_length=1)]
+
+
 class Segment(Strict):
     """One range of the corridor (paper Section V.B): ``r_a = lower``, ``r_b = upper``."""
 
@@ -48,7 +56,7 @@ class Segment(Strict):
                               ">= 0")
     q_rb: Vec3 | None = Field(None, description="Diagonal of Q_rb for this segment's samples (1/m, 1/m, 1/rad), "
                               ">= 0")
-    polygon: Points2 | None = Field(None, min_length=3, description="Exact convex cell (e.g. a triangle) inside "
+    polygon: CellVertices | None = Field(None, description="Exact convex cell (e.g. a triangle) inside "
                                     "the box, vertices [[x, y], ...] in m; used by the constrained mode")
 
     @field_validator("q_ra", "q_rb")
@@ -83,8 +91,8 @@ class Segment(Strict):
 class Reference(Strict):
     """A trajectory to track (the paper's criterion (12)): one pose per sample."""
 
-    pose: Rows3 = Field(min_length=2, max_length=MAX_TOTAL_STEPS,
-                        description="Desired pose per sample, [x, y, psi] in m, m, rad; the first is the start")
+    pose: Poses = Field(
+        description="Desired pose per sample, [x, y, psi] in m, m, rad; the first is the start")
 
 
 class Settings(Strict):
@@ -106,9 +114,9 @@ class Settings(Strict):
                         f"{MODE_DEFAULTS['constrained']['k_u']:g} in constrained mode")
     q_ra: Vec3 | None = Field(None, description="Diagonal of Q_ra (1/m, 1/m, 1/rad), >= 0; overrides k_r")
     q_rb: Vec3 | None = Field(None, description="Diagonal of Q_rb (1/m, 1/m, 1/rad), >= 0; overrides k_r")
-    q_u: FloatArray | None = Field(None, min_length=1, description="Diagonal of Q_u, one positive number per "
+    q_u: PerDrive | None = Field(None, description="Diagonal of Q_u, one positive number per "
                                    "drive (1/N); overrides k_u")
-    taper: bool = Field(True, description="Spread the range out of the start point and narrow it onto the end point")
+    taper: StrictBool = Field(True, description="Spread the range out of the start point and narrow it onto the end point")
     mode: Literal["paper", "constrained"] = Field(
         "paper", description="'paper': the seed's soft range criterion; 'constrained': hard corridor and drive limits")
     solver: Literal["riccati", "structured", "qr"] = Field(
@@ -125,12 +133,12 @@ class Settings(Strict):
     settle_rate_rad_s: Finite = Field(1e-3, gt=0, le=1, description="Angular speed that counts as stopped in rad/s")
     tail_max_s: Finite = Field(3.0, ge=0, le=600, description="Longest time in s the end point is held for settling")
     plant_substeps: int = Field(1, ge=1, le=50, description="RK4 steps of the nonlinear model per sample (count)")
-    require_settled: bool = Field(True, description="Fail with code not_settled instead of returning an unsettled plan")
+    require_settled: StrictBool = Field(True, description="Fail with code not_settled instead of returning an unsettled plan")
     speed_m_s: Finite | None = Field(None, gt=0, le=100, description="Target mean tool speed along the corridor "
                                      "in m/s; sets samples_per_segment (exclusive with it, total_time_s, fastest)")
     total_time_s: Finite | None = Field(None, gt=0, le=3600, description="Time in s the corridor's range sequence "
                                         "takes; sets samples_per_segment")
-    fastest: bool = Field(False, description="Constrained mode: the shortest timing (samples_per_segment) whose "
+    fastest: StrictBool = Field(False, description="Constrained mode: the shortest timing (samples_per_segment) whose "
                           "plan keeps the corridor and the drive force, stroke and speed limits")
 
     @model_validator(mode="before")

@@ -12,9 +12,11 @@ from functools import lru_cache
 from importlib import resources
 
 import numpy as np
-from pydantic import Field, field_validator, model_validator
+from typing import Annotated, Any, Union
 
-from ._types import fail, Finite, Points2, Strict, Vec2
+from pydantic import Discriminator, Field, Tag, field_validator, model_validator
+
+from ._types import Finite, Pair, Strict, Vec2, array_of, fail
 from .limits import MAX_LEGS
 
 __all__ = ["BodyDescription", "LegDescription", "PlatformDescription", "RobotDescription",
@@ -53,6 +55,19 @@ class PlatformDescription(Strict):
     inertia: Finite = Field(gt=0, description="Platform moment of inertia about its centre in kg m^2")
 
 
+#: one pivot per leg, at least 3 legs [[x, y], ...] in m
+Pivots = Annotated[np.ndarray, array_of(list[Pair], min_length=3, max_length=MAX_LEGS)]
+
+
+def _legs_kind(value: Any) -> str:
+    return "~each" if isinstance(value, list) else "~shared"
+
+
+#: one leg description for all legs, or one per leg
+Legs = Annotated[Union[Annotated[LegDescription, Tag("~shared")], Annotated[list[LegDescription], Tag("~each")]],
+                 Discriminator(_legs_kind)]
+
+
 def _distinct(points: np.ndarray, what: str) -> np.ndarray:
     n = len(points)
     gap = np.linalg.norm(points[:, None] - points[None], axis=-1) + np.eye(n)
@@ -67,12 +82,12 @@ class RobotDescription(Strict):
 
     name: str = Field("custom", max_length=200, description="Name of the robot")
     description: str = Field("", max_length=2000, description="Free text")
-    base_pivots: Points2 = Field(description="Base pivots A_i [[x, y], ...], world frame, in m (one per leg)",
-                                 min_length=3, max_length=MAX_LEGS)
-    platform_pivots: Points2 = Field(description="Platform pivots b_i [[x, y], ...], platform frame about the "
-                                     "platform centre, in m (one per leg)", min_length=3, max_length=MAX_LEGS)
+    base_pivots: Pivots = Field(
+        description="Base pivots A_i [[x, y], ...], world frame, in m (one per leg, at least 3)")
+    platform_pivots: Pivots = Field(
+        description="Platform pivots b_i [[x, y], ...], platform frame about the platform centre, in m (one per leg)")
     platform: PlatformDescription
-    legs: LegDescription | list[LegDescription] = Field(
+    legs: Legs = Field(
         description="One leg description shared by all legs, or one per leg")
     tool_offset: Vec2 = Field(default_factory=lambda: np.zeros(2),
                               description="Tool point [x, y] in the platform frame, in m")
