@@ -31,8 +31,8 @@ from planner.request import MODE_DEFAULTS, Settings, parse_request
 from planner.robot import builtin_robot_names, load_robot
 from planner.trajectory import to_csv
 
-from . import editor_geometry as geo
-from .schema import PlanRequestModel, format_validation_error, request_dict
+from ..schema import PlanRequestModel, format_validation_error, request_dict
+from . import _geometry as geo
 
 log = logging.getLogger("rangeplan.editor")
 
