@@ -28,7 +28,7 @@ from pydantic import ValidationError
 from planner.errors import PlannerError
 from planner.plan import plan as run_plan
 from planner.request import MODE_DEFAULTS, Settings, parse_request
-from planner.robot import builtin_robot_names, load_robot
+from planner.robot import SINGULAR_TOL, builtin_robot_names, load_robot
 from planner.trajectory import to_csv
 
 from ..schema import PlanRequestModel, format_validation_error, request_dict
@@ -766,7 +766,8 @@ class Editor:
         for psi, col in ((lay["start"][2], (200, 30, 30)), (lay["end"][2], (200, 100, 0))):
             if segs and abs(psi - lay["start"][2]) < 1e-9:
                 continue
-            xs, ys, mask = geo.reachable_mask(robot, np.asarray(lo) - margin, np.asarray(hi) + margin, psi, n=120)
+            xs, ys, mask = geo.reachable_mask(robot, np.asarray(lo) - margin, np.asarray(hi) + margin, psi, n=120,
+                                                singular_tol=SINGULAR_TOL)
             b = geo.mask_boundary(xs, ys, mask, geo.Z["reach"])
             segs.append(b)
             colours.append(np.tile(np.array(col, np.uint8), (len(b), 2, 1)))
