@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from app import editor as editor_mod
-from app.editor import _editor
+from app.editor import _planning
 from app.editor import _geometry as geo
 from planner.robot import SINGULAR_TOL, load_robot
 
@@ -278,7 +278,7 @@ def test_edits_are_debounced_into_one_plan(editor):
 
 def test_stale_result_never_overwrites_a_newer_one(seg_impl, monkeypatch):
     fake = FakeSegmentation(delay=0.8)
-    monkeypatch.setattr(_editor, "_segmentation_module", lambda: fake)
+    monkeypatch.setattr(_planning, "segmentation_module", lambda: fake)
     h = editor_mod.start_editor("127.0.0.1", free_port(), None, debounce=0.05)
     try:
         time.sleep(0.3)  # the first (slow) plan is running now

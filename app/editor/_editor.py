@@ -16,7 +16,6 @@ from __future__ import annotations
 import copy
 import json
 import logging
-import math
 import threading
 import time
 from typing import Any
@@ -25,14 +24,20 @@ import numpy as np
 import viser
 from pydantic import ValidationError
 
-from planner.errors import PlannerError
-from planner.plan import plan as run_plan
-from planner.request import MODE_DEFAULTS, Settings, parse_request
-from planner.robot import SINGULAR_TOL, builtin_robot_names, load_robot
-from planner.trajectory import to_csv
 
 from ..schema import PlanRequestModel, format_validation_error, request_dict
 from . import _geometry as geo
+from ._planning import (
+    HAS_SPEED_SETTING,
+    MODE_DEFAULTS,
+    SINGULAR_TOL,
+    PlannerError,
+    PlanWorker,
+    RobotCache,
+    builtin_robot_names,
+    compute_plan,
+    to_csv,
+)
 
 log = logging.getLogger("rangeplan.editor")
 
@@ -55,87 +60,6 @@ DEFAULT_REQUEST: dict[str, Any] = {
     "settings": {"mode": "paper", "Ts": 0.01, **MODE_DEFAULTS["paper"]},
 }
 
-_HAS_SPEED = "speed_m_s" in Settings.__dataclass_fields__
-
-
-def _segmentation_module():
-    """``planner.segmentation`` (imported lazily so the editor starts even without it)."""
-    from planner import segmentation
-
-    return segmentation
-
-
-class _PlanWorker(threading.Thread):
-    """Runs re-plans off the GUI threads. ``schedule()`` bumps the generation and sets the
-    time the plan may start (debounce); the worker computes the newest generation only and
-    publishes a result only if no newer edit arrived meanwhile."""
-
-    def __init__(self, editor: "Editor", debounce: float):
-        super().__init__(name="rangeplan-editor-planner", daemon=True)
-        self.editor = editor
-        self.debounce = debounce
-        self.cv = threading.Condition()
-        self.requested = 0  # newest generation asked for
-        self.started = 0  # generation being computed / last computed
-        self.finished = 0  # last generation whose computation ended (published or discarded)
-        self.due = 0.0
-        self.stopping = False
-
-    def schedule(self, immediate: bool = False) -> int:
-        with self.cv:
-            self.requested += 1
-            self.due = time.monotonic() + (0.0 if immediate else self.debounce)
-            self.cv.notify_all()
-            return self.requested
-
-    def is_current(self, gen: int) -> bool:
-        with self.cv:
-            return gen == self.requested
-
-    def idle(self) -> bool:
-        with self.cv:
-            return self.finished == self.requested
-
-    def wait_idle(self, timeout: float) -> bool:
-        end = time.monotonic() + timeout
-        with self.cv:
-            while self.finished != self.requested:
-                left = end - time.monotonic()
-                if left <= 0:
-                    return False
-                self.cv.wait(min(left, 0.1))
-            return True
-
-    def stop(self) -> None:
-        with self.cv:
-            self.stopping = True
-            self.cv.notify_all()
-
-    def run(self) -> None:
-        while True:
-            with self.cv:
-                while not self.stopping:
-                    if self.requested != self.finished:
-                        wait = self.due - time.monotonic()
-                        if wait <= 0:
-                            break
-                        self.cv.wait(wait)
-                    else:
-                        self.cv.wait()
-                if self.stopping:
-                    return
-                gen = self.requested
-                self.started = gen
-            try:
-                self.editor._replan(gen)
-            except Exception as exc:  # the page never dies: report, keep the worker alive
-                log.exception("editor re-plan failed")
-                self.editor._notify("Internal error", f"{type(exc).__name__}: {exc}", color="red")
-            with self.cv:
-                self.finished = max(self.finished, gen)
-                self.cv.notify_all()
-
-
 class Editor:
     """The editor: one shared design (all browser tabs see and edit the same request)."""
 
@@ -153,7 +77,7 @@ class Editor:
         self.last_plan_generation = 0
         self.stale_discarded = 0  #: results dropped because a newer edit arrived
         self.notifications: list[tuple[str, str]] = []  #: every notification sent (title, body)
-        self._robot_cache: dict[str, Any] = {}
+        self._robots = RobotCache()
         self._playing = False
         self._play_thread: threading.Thread | None = None
         self._stopped = False
@@ -164,7 +88,7 @@ class Editor:
         self._build_gui()
         self._sync_gui_from_request()
         self._draw_layout()
-        self.worker = _PlanWorker(self, debounce)
+        self.worker = PlanWorker(self._replan, self._on_plan_crash, debounce)
         self.worker.start()
         self.server.on_client_connect(self._on_connect)
         self.worker.schedule(immediate=True)
@@ -243,10 +167,7 @@ class Editor:
 
     # ------------------------------------------------------------------ scene setup
     def _robot(self, spec):
-        key = json.dumps(spec, sort_keys=True)
-        if key not in self._robot_cache:
-            self._robot_cache[key] = load_robot(spec)
-        return self._robot_cache[key]
+        return self._robots.get(spec)
 
     def _setup_scene(self) -> None:
         scene = self.server.scene
@@ -363,7 +284,7 @@ class Editor:
             self._k_r.on_update(lambda _: self._on_setting("k_r", float(self._k_r.value)))
             self._k_u = gui.add_number("k_u, force penalty (1/N)", paper["k_u"], min=1e-12, max=1e12, step=1e-5)
             self._k_u.on_update(lambda _: self._on_setting("k_u", float(self._k_u.value)))
-            if _HAS_SPEED:
+            if HAS_SPEED_SETTING:
                 self._speed = gui.add_number("Speed (m/s)", 0.1, min=0.0, max=10.0, step=0.01)
                 self._speed.on_update(lambda _: self._on_setting("speed_m_s", float(self._speed.value) or None))
             else:
@@ -678,35 +599,11 @@ class Editor:
         self._download(client, "trajectory.csv", to_csv(res).encode())
 
     # ------------------------------------------------------------------ planning (worker thread)
-    def _compute(self, request: dict):
-        """Validate, segment and plan; returns (segmentation dict | None, result | None, error | None)."""
-        try:
-            model = PlanRequestModel.model_validate(request)
-        except ValidationError as exc:
-            return None, None, {"code": "invalid_input", "message": format_validation_error(exc), "field": None}
-        seg_dict = None
-        try:
-            req = parse_request(request_dict(model))
-            robot = self._robot(req.robot)
-            segments = req.segments
-            if req.layout is not None:
-                seg = _segmentation_module().segment(req.layout, robot, req.settings)
-                seg_dict = seg.to_dict()
-                segments = seg.segments
-            result = run_plan(req, robot=robot, segments=segments)
-            return seg_dict, result, None
-        except PlannerError as exc:
-            return seg_dict, None, exc.to_dict()
-        except ImportError as exc:
-            return None, None, {"code": "unavailable", "message": f"segmentation is not available: {exc}",
-                                "field": "layout"}
-
     def _replan(self, gen: int) -> None:
         request = self.request
         self._status.content = "Status: planning…"
-        t0 = time.perf_counter()
-        seg, result, error = self._compute(request)
-        dt = time.perf_counter() - t0
+        outcome = compute_plan(request, self._robots)
+        seg, result, error, dt = outcome.segmentation, outcome.result, outcome.error, outcome.seconds
         if not self.worker.is_current(gen):  # a newer edit arrived: drop this stale result
             with self._lock:
                 self.stale_discarded += 1
@@ -729,6 +626,9 @@ class Editor:
             m = result["metrics"]
             self._status.content = (f"Status: planned in {dt:.2f} s — duration {m['duration_s']:.2f} s, "
                                     f"{len(seg['path']) if seg else 0} cells in the corridor")
+
+    def _on_plan_crash(self, exc: Exception) -> None:
+        self._notify("Internal error", f"{type(exc).__name__}: {exc}", color="red")
 
     # ------------------------------------------------------------------ drawing
     def _draw_layout(self) -> None:
