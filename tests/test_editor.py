@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from app import editor as editor_mod
-from app.editor import _planning
 from app.editor import _geometry as geo
+from app.editor import _planning
 from planner.robot import SINGULAR_TOL, load_robot
 
 
@@ -260,8 +260,8 @@ def test_initial_plan_reaches_the_end_inside_the_corridor(editor):
     states = {c["id"]: c["state"] for c in seg["cells"]}
     assert seg["path"] and all(states[i] == "free" for i in seg["path"])
     # the metrics panel and the slider show this result
-    assert f"{res['metrics']['duration_s']:.3f} s" in editor._metrics.content
-    assert math.isclose(editor._time.max, res["time"][-1])
+    assert f"{res['metrics']['duration_s']:.3f} s" in editor.gui.metrics.content
+    assert math.isclose(editor.gui.time.max, res["time"][-1])
 
 
 def test_edits_are_debounced_into_one_plan(editor):
@@ -273,7 +273,7 @@ def test_edits_are_debounced_into_one_plan(editor):
     assert editor.plans_done == n0 + 1
     assert editor.request["layout"]["end"][:2] == [0.06, 0.06]
     assert np.linalg.norm(np.array(editor.last_result["pose"][-1][:2]) - [0.06, 0.06]) < 1e-3
-    assert list(editor._gui_end.value[:2]) == [0.06, 0.06]
+    assert list(editor.gui.end.value[:2]) == [0.06, 0.06]
 
 
 def test_stale_result_never_overwrites_a_newer_one(seg_impl, monkeypatch):
@@ -341,10 +341,10 @@ def test_toggling_a_cell_blocks_it_and_toggling_again_frees_it(editor):
 
 
 def test_settings_controls_change_the_request(editor):
-    editor._N.value = 30
-    editor._k_u.value = 1e-4
-    editor._mode.value = "paper"
-    editor._cell_size.value = 0.0  # auto
+    editor.gui.N.value = 30
+    editor.gui.k_u.value = 1e-4
+    editor.gui.mode.value = "paper"
+    editor.gui.cell_size.value = 0.0  # auto
     assert editor.wait_idle(60)
     r = editor.request
     assert r["settings"]["N"] == 30 and r["settings"]["k_u"] == 1e-4
@@ -358,44 +358,44 @@ def test_mode_switch_moves_untouched_penalties_to_the_mode_defaults(editor):
     from planner.request import MODE_DEFAULTS
 
     paper, con = MODE_DEFAULTS["paper"], MODE_DEFAULTS["constrained"]
-    editor._mode.value = "paper"
-    editor._N.value, editor._k_r.value, editor._k_u.value = paper["N"], paper["k_r"], 3e-4
-    editor._mode.value = "constrained"
+    editor.gui.mode.value = "paper"
+    editor.gui.N.value, editor.gui.k_r.value, editor.gui.k_u.value = paper["N"], paper["k_r"], 3e-4
+    editor.gui.mode.value = "constrained"
     st = editor.request["settings"]
     assert (st["mode"], st["N"], st["k_r"], st["k_u"]) == ("constrained", con["N"], con["k_r"], 3e-4)
-    assert (editor._N.value, editor._k_r.value, editor._k_u.value) == (con["N"], con["k_r"], 3e-4)
+    assert (editor.gui.N.value, editor.gui.k_r.value, editor.gui.k_u.value) == (con["N"], con["k_r"], 3e-4)
     assert editor.wait_idle(60)
     used = editor.last_result["settings"]
     assert (used["mode"], used["N"], used["k_r"], used["k_u"]) == ("constrained", con["N"], con["k_r"], 3e-4)
-    editor._mode.value = "paper"
+    editor.gui.mode.value = "paper"
     st = editor.request["settings"]
     assert (st["N"], st["k_r"], st["k_u"]) == (paper["N"], paper["k_r"], 3e-4)
     assert editor.wait_idle(60)
 
 
 def test_save_load_and_import_round_trip(editor):
-    editor._save(new=True)
+    editor.files.save(new=True)
     store = editor.store
     (rec,) = store.list_corridors()
     assert rec["request"] == editor.request
     editor.move_handle("end", 0.04, 0.08)
-    editor._save(new=False)
+    editor.files.save(new=False)
     assert store.get_corridor(rec["id"])["request"]["layout"]["end"][:2] == [0.04, 0.08]
     editor.move_handle("end", 0.0, 0.10)
     assert editor.wait_idle(60)
-    editor._refresh_stored()
-    editor._stored.value = editor._stored.options[0]
-    editor._load()
+    editor.files.refresh_stored()
+    editor.gui.stored.value = editor.gui.stored.options[0]
+    editor.files.load()
     assert editor.request["layout"]["end"][:2] == [0.04, 0.08]
     assert editor.wait_idle(60)
     # import: the exported JSON loads back unchanged; broken JSON is a notification
     exported = json.dumps(editor.request).encode()
     upload = type("U", (), {"name": "x.json", "content": exported})()
-    editor._import(upload)
+    editor.files.import_upload(upload)
     assert editor.request == json.loads(exported)
-    editor._import(type("U", (), {"name": "bad.json", "content": b"{nope"})())
+    editor.files.import_upload(type("U", (), {"name": "bad.json", "content": b"{nope"})())
     assert editor.notifications[-1][0] == "Import failed"
-    editor._import(type("U", (), {"name": "bad.json", "content": b'{"layout": {"bounds": 3}}'})())
+    editor.files.import_upload(type("U", (), {"name": "bad.json", "content": b'{"layout": {"bounds": 3}}'})())
     assert "layout.bounds" in editor.notifications[-1][1]
     assert editor.request == json.loads(exported), "a bad import must not change the design"
 
@@ -403,7 +403,7 @@ def test_save_load_and_import_round_trip(editor):
 def test_segments_only_request_is_planned(editor):
     with _table1() as f:
         data = json.load(f)
-    editor._load_request(data, None, "table1")
+    editor.files.load_request(data, None, "table1")
     assert editor.wait_idle(60)
     assert editor.last_error is None
     assert editor.last_segmentation is None
@@ -423,16 +423,17 @@ def _table1():
 
 def test_playback_moves_the_robot_along_the_trajectory(editor):
     drawn = []
-    orig = editor._draw_robot
-    editor._draw_robot = lambda pose, force=None: (drawn.append(np.array(pose)), orig(pose, force))
-    editor._time.value = 0.0
-    editor._toggle_play()
-    deadline = time.monotonic() + editor._time.max + 5
-    while editor._playing and time.monotonic() < deadline:
+    orig = editor.scene.show_robot
+    editor.scene.show_robot = lambda robot, pose, force=None: (drawn.append(np.array(pose)), orig(robot, pose, force))
+    editor.gui.time.value = 0.0
+    editor.gui.playback.toggle()
+    deadline = time.monotonic() + editor.gui.time.max + 5
+    while editor.gui.playback.playing and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert not editor._playing
+    assert not editor.gui.playback.playing
     assert len(drawn) > 10
     start, end = np.array(editor.request["layout"]["start"]), np.array(editor.request["layout"]["end"])
     assert np.linalg.norm(drawn[0][:2] - start[:2]) < 0.01
     assert np.linalg.norm(drawn[-1][:2] - end[:2]) < 1e-3
-    assert math.isclose(editor._time.value, editor._time.max)
+    assert math.isclose(editor.gui.time.value, editor.gui.time.max)
+

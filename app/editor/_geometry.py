@@ -18,7 +18,7 @@ import numpy as np
 CELL_COLOURS = {"free": (222, 235, 247), "blocked": (90, 90, 90), "unreachable": (244, 204, 204)}
 #: z of each layer [m] above the plane so that later layers draw on top
 Z = {"cells": 0.0, "grid": 0.0005, "corridor": 0.001, "obstacles": 0.0015, "reach": 0.002,
-     "trajectory": 0.003, "ticks": 0.0035, "robot": 0.004, "handles": 0.006}
+     "trajectory": 0.003, "ticks": 0.0035, "robot": 0.004, "pivots": 0.0045, "handles": 0.006}
 
 
 def polygon_mesh(polygons: list, z: float = 0.0) -> tuple[np.ndarray, np.ndarray]:

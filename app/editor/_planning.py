@@ -207,7 +207,7 @@ class PlanWorker(threading.Thread):
                 self.started = gen
             try:
                 self._run_generation(gen)
-            except Exception as exc:  # noqa: BLE001 - the page never dies: report, keep the worker alive
+            except Exception as exc:  # the page never dies: report, keep the worker alive
                 log.exception("editor re-plan failed")
                 self._on_crash(exc)
             with self._cv:
