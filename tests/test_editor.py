@@ -437,3 +437,87 @@ def test_playback_moves_the_robot_along_the_trajectory(editor):
     assert np.linalg.norm(drawn[-1][:2] - end[:2]) < 1e-3
     assert math.isclose(editor.gui.time.value, editor.gui.time.max)
 
+
+def test_scene_nodes_are_created_once_and_updated_in_place(seg_impl, monkeypatch):
+    """Every scene node is added once, when the editor starts; a re-plan, playback frames,
+    hiding (a failed plan, a request without a layout) and showing again only update the
+    kept viser handles: no node is added or removed after start."""
+    import viser
+    from viser._scene_handles import SceneNodeHandle
+
+    added, removed = [], []
+
+    def spy_add(method_name):
+        method = getattr(viser.SceneApi, method_name)
+
+        def add(self, name, *args, **kwargs):
+            added.append(name)
+            return method(self, name, *args, **kwargs)
+        return add
+
+    for method_name in dir(viser.SceneApi):
+        if method_name.startswith("add_"):
+            monkeypatch.setattr(viser.SceneApi, method_name, spy_add(method_name))
+    remove_by_name, remove = viser.SceneApi.remove_by_name, SceneNodeHandle.remove
+    monkeypatch.setattr(viser.SceneApi, "remove_by_name",
+                        lambda self, name: (removed.append(name), remove_by_name(self, name))[1])
+    monkeypatch.setattr(SceneNodeHandle, "remove", lambda self: (removed.append(self.name), remove(self))[1])
+
+    h = editor_mod.start_editor("127.0.0.1", free_port(), MemStore(), debounce=0.05)
+    try:
+        assert h.wait_idle(60) and h.last_error is None
+        scene = h.scene
+        assert len(added) == len(set(added)), "a node was added twice while the editor started"
+        assert {"/robot/legs", "/robot/platform", "/result/trajectory", "/seg/cells_free", "/handles/end"} <= set(added)
+        at_start = len(added)
+
+        # a re-plan updates the trajectory, cells and robot on the same handles
+        trajectory, legs = scene.trajectory, scene.legs
+        before = trajectory.points.copy()
+        h.move_handle("end", 0.02, 0.06)
+        assert h.wait_idle(60) and h.last_error is None
+        assert scene.trajectory is trajectory and scene.legs is legs
+        assert trajectory.visible and not np.array_equal(trajectory.points, before)
+        assert np.allclose(scene.gizmos["end"].position[:2], [0.02, 0.06])
+
+        # N playback frames move the platform frame and the legs: nothing added per frame
+        t_end = h.gui.time.max
+        poses, leg_points = [], []
+        for t in np.linspace(0.0, t_end, 40):
+            h.gui.time.value = round(float(t), 2)
+            poses.append(scene.platform.position.copy())
+            leg_points.append(scene.legs.points.copy())
+        assert len(added) == at_start, f"playback added nodes: {added[at_start:]}"
+        assert len({tuple(np.round(p, 6)) for p in poses}) > 30, "the platform must move frame by frame"
+        assert not np.array_equal(leg_points[0], leg_points[-1])
+        end = h.request["layout"]["end"]
+        assert np.allclose(poses[-1][:2], end[:2], atol=1e-3)
+        h.gui.playback.toggle()  # the real playback thread: the same, at PLAY_FPS
+        deadline = time.monotonic() + t_end + 5
+        while h.gui.playback.playing and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert len(added) == at_start
+
+        # a failed plan hides the result and the robot (visible = False), nothing re-added
+        h.move_handle("end", 0.15, 0.15)
+        assert h.wait_idle(60) and h.last_error is not None
+        assert not scene.trajectory.visible and not scene.ticks.visible and not scene.robot.visible
+        assert not any(node.visible for node in scene.cells.values())
+        h.move_handle("end", 0.06, 0.04)
+        assert h.wait_idle(60) and h.last_error is None
+        assert scene.trajectory.visible and scene.robot.visible and scene.cells["free"].visible
+
+        # a request without a layout hides the layout and its gizmos; a new layout shows them
+        with _table1() as f:
+            h.files.load_request(json.load(f), None, "table1")
+        assert h.wait_idle(60) and h.last_error is None
+        assert not scene.gizmos["start"].visible and not scene.obstacles.visible and not scene.bounds.visible
+        assert scene.corridor.visible and scene.trajectory.visible
+        h.new_layout()
+        assert h.wait_idle(60) and h.last_error is None
+        assert scene.gizmos["start"].visible and scene.obstacles.visible
+
+        assert added[at_start:] == [], "scene nodes were added after start"
+        assert removed == [], "scene nodes were removed"
+    finally:
+        h.stop()
