@@ -180,10 +180,11 @@ class Editor:
 
     def show_time(self, t: float) -> None:
         """Show the robot of the newest result at time ``t`` [s] (clamped to the plan)."""
-        res = self.state.last_result
-        robot = self.robots.of_request(self.state.request)
-        if res is None or robot is None:
+        with self.state.lock:
+            res, robot_spec = self.state.last_result, self.state.last_result_robot
+        if res is None:
             return
+        robot = self.robots.get(robot_spec)  # the robot it was planned for, even if changed since
         time_ = np.asarray(res["time"], float)
         pose = geo.sample_at(time_, np.asarray(res["pose"], float), t)
         k = int(np.clip(round(t / res["settings"]["Ts"]), 0, len(time_) - 1))

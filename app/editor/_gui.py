@@ -21,7 +21,13 @@ import numpy as np
 import viser
 
 from . import _state
-from ._planning import HAS_SPEED_SETTING, MODE_DEFAULTS, Robot, builtin_robot_names
+from ._planning import (
+    DEFAULT_ROBOT,
+    HAS_SPEED_SETTING,
+    MODE_DEFAULTS,
+    Robot,
+    builtin_robot_names,
+)
 
 if TYPE_CHECKING:
     from ._editor import Editor
@@ -158,7 +164,7 @@ class EditorGui:
 
     def _build_settings_tab(self, gui) -> None:
         editor = self._editor
-        self.robot = gui.add_dropdown("Robot", tuple(builtin_robot_names()), initial_value="moving-slide")
+        self.robot = gui.add_dropdown("Robot", tuple(builtin_robot_names()), initial_value=DEFAULT_ROBOT)
         self._on_input(self.robot, lambda: editor.set_robot(self.robot.value))
         self.mode = gui.add_dropdown("Mode", ("paper", "constrained"), initial_value="paper",
                                      hint="paper: soft range criterion; constrained: hard corridor and drive limits")
@@ -222,7 +228,7 @@ class EditorGui:
                 self.clearance.value = float(layout.get("clearance", 0.0))
                 self.bounds_lower.value = tuple(layout["bounds"]["lower"])
                 self.bounds_upper.value = tuple(layout["bounds"]["upper"])
-            robot = request.get("robot", "moving-slide")
+            robot = request.get("robot", DEFAULT_ROBOT)
             if isinstance(robot, str) and robot in builtin_robot_names():
                 self.robot.value = robot
             self.mode.value = settings.get("mode", "paper")

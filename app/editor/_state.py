@@ -18,7 +18,7 @@ from collections.abc import Callable
 from typing import Any
 
 from . import _geometry as geo
-from ._planning import MODE_DEFAULTS
+from ._planning import DEFAULT_ROBOT, MODE_DEFAULTS
 
 __all__ = [
     "DEFAULT_REQUEST",
@@ -69,6 +69,7 @@ class EditorState:
         self.corridor_id: str | None = None  #: id of the stored corridor the design came from / was saved as
         self.plans_done = 0  #: number of plan results published
         self.last_result: dict | None = None  #: newest published plan result
+        self.last_result_robot: Any = None  #: robot spec (name or description) of last_result
         self.last_segmentation: dict | None = None  #: newest published segmentation (to_dict)
         self.last_error: dict | None = None  #: newest error ({code, message, field}) or None
         self.last_plan_generation = 0  #: generation of the newest published result
@@ -101,6 +102,7 @@ class EditorState:
             self.last_error = error
             if result is not None:
                 self.last_result = result
+                self.last_result_robot = request.get("robot", DEFAULT_ROBOT)
                 self.plans_done += 1
                 self.last_plan_generation = gen
 
