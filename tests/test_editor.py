@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from app import editor as editor_mod
-from app import editor_geometry as geo
+from app.editor import _geometry as geo
+from app.editor import _planning
 from planner.robot import SINGULAR_TOL, load_robot
 
 
@@ -48,7 +49,7 @@ def test_point_in_convex_and_shrink():
 
 def test_reachable_boundary_separates_reachable_from_unreachable():
     robot = load_robot("moving-slide")
-    xs, ys, mask = geo.reachable_mask(robot, [-0.3, -0.3], [0.3, 0.3], 0.0, n=61)
+    xs, ys, mask = geo.reachable_mask(robot, [-0.3, -0.3], [0.3, 0.3], 0.0, n=61, singular_tol=SINGULAR_TOL)
     assert mask.any() and not mask.all()
     # the mask agrees with the model at sample points
     for iy, ix in [(30, 30), (0, 0), (30, 45), (45, 30)]:
@@ -259,8 +260,8 @@ def test_initial_plan_reaches_the_end_inside_the_corridor(editor):
     states = {c["id"]: c["state"] for c in seg["cells"]}
     assert seg["path"] and all(states[i] == "free" for i in seg["path"])
     # the metrics panel and the slider show this result
-    assert f"{res['metrics']['duration_s']:.3f} s" in editor._metrics.content
-    assert math.isclose(editor._time.max, res["time"][-1])
+    assert f"{res['metrics']['duration_s']:.3f} s" in editor.gui.metrics.content
+    assert math.isclose(editor.gui.time.max, res["time"][-1])
 
 
 def test_edits_are_debounced_into_one_plan(editor):
@@ -272,12 +273,12 @@ def test_edits_are_debounced_into_one_plan(editor):
     assert editor.plans_done == n0 + 1
     assert editor.request["layout"]["end"][:2] == [0.06, 0.06]
     assert np.linalg.norm(np.array(editor.last_result["pose"][-1][:2]) - [0.06, 0.06]) < 1e-3
-    assert list(editor._gui_end.value[:2]) == [0.06, 0.06]
+    assert list(editor.gui.end.value[:2]) == [0.06, 0.06]
 
 
 def test_stale_result_never_overwrites_a_newer_one(seg_impl, monkeypatch):
     fake = FakeSegmentation(delay=0.8)
-    monkeypatch.setattr(editor_mod, "_segmentation_module", lambda: fake)
+    monkeypatch.setattr(_planning, "segmentation_module", lambda: fake)
     h = editor_mod.start_editor("127.0.0.1", free_port(), None, debounce=0.05)
     try:
         time.sleep(0.3)  # the first (slow) plan is running now
@@ -340,10 +341,10 @@ def test_toggling_a_cell_blocks_it_and_toggling_again_frees_it(editor):
 
 
 def test_settings_controls_change_the_request(editor):
-    editor._N.value = 30
-    editor._k_u.value = 1e-4
-    editor._mode.value = "paper"
-    editor._cell_size.value = 0.0  # auto
+    editor.gui.N.value = 30
+    editor.gui.k_u.value = 1e-4
+    editor.gui.mode.value = "paper"
+    editor.gui.cell_size.value = 0.0  # auto
     assert editor.wait_idle(60)
     r = editor.request
     assert r["settings"]["N"] == 30 and r["settings"]["k_u"] == 1e-4
@@ -357,44 +358,44 @@ def test_mode_switch_moves_untouched_penalties_to_the_mode_defaults(editor):
     from planner.request import MODE_DEFAULTS
 
     paper, con = MODE_DEFAULTS["paper"], MODE_DEFAULTS["constrained"]
-    editor._mode.value = "paper"
-    editor._N.value, editor._k_r.value, editor._k_u.value = paper["N"], paper["k_r"], 3e-4
-    editor._mode.value = "constrained"
+    editor.gui.mode.value = "paper"
+    editor.gui.N.value, editor.gui.k_r.value, editor.gui.k_u.value = paper["N"], paper["k_r"], 3e-4
+    editor.gui.mode.value = "constrained"
     st = editor.request["settings"]
     assert (st["mode"], st["N"], st["k_r"], st["k_u"]) == ("constrained", con["N"], con["k_r"], 3e-4)
-    assert (editor._N.value, editor._k_r.value, editor._k_u.value) == (con["N"], con["k_r"], 3e-4)
+    assert (editor.gui.N.value, editor.gui.k_r.value, editor.gui.k_u.value) == (con["N"], con["k_r"], 3e-4)
     assert editor.wait_idle(60)
     used = editor.last_result["settings"]
     assert (used["mode"], used["N"], used["k_r"], used["k_u"]) == ("constrained", con["N"], con["k_r"], 3e-4)
-    editor._mode.value = "paper"
+    editor.gui.mode.value = "paper"
     st = editor.request["settings"]
     assert (st["N"], st["k_r"], st["k_u"]) == (paper["N"], paper["k_r"], 3e-4)
     assert editor.wait_idle(60)
 
 
 def test_save_load_and_import_round_trip(editor):
-    editor._save(new=True)
+    editor.files.save(new=True)
     store = editor.store
     (rec,) = store.list_corridors()
     assert rec["request"] == editor.request
     editor.move_handle("end", 0.04, 0.08)
-    editor._save(new=False)
+    editor.files.save(new=False)
     assert store.get_corridor(rec["id"])["request"]["layout"]["end"][:2] == [0.04, 0.08]
     editor.move_handle("end", 0.0, 0.10)
     assert editor.wait_idle(60)
-    editor._refresh_stored()
-    editor._stored.value = editor._stored.options[0]
-    editor._load()
+    editor.files.refresh_stored()
+    editor.gui.stored.value = editor.gui.stored.options[0]
+    editor.files.load()
     assert editor.request["layout"]["end"][:2] == [0.04, 0.08]
     assert editor.wait_idle(60)
     # import: the exported JSON loads back unchanged; broken JSON is a notification
     exported = json.dumps(editor.request).encode()
     upload = type("U", (), {"name": "x.json", "content": exported})()
-    editor._import(upload)
+    editor.files.import_upload(upload)
     assert editor.request == json.loads(exported)
-    editor._import(type("U", (), {"name": "bad.json", "content": b"{nope"})())
+    editor.files.import_upload(type("U", (), {"name": "bad.json", "content": b"{nope"})())
     assert editor.notifications[-1][0] == "Import failed"
-    editor._import(type("U", (), {"name": "bad.json", "content": b'{"layout": {"bounds": 3}}'})())
+    editor.files.import_upload(type("U", (), {"name": "bad.json", "content": b'{"layout": {"bounds": 3}}'})())
     assert "layout.bounds" in editor.notifications[-1][1]
     assert editor.request == json.loads(exported), "a bad import must not change the design"
 
@@ -402,7 +403,7 @@ def test_save_load_and_import_round_trip(editor):
 def test_segments_only_request_is_planned(editor):
     with _table1() as f:
         data = json.load(f)
-    editor._load_request(data, None, "table1")
+    editor.files.load_request(data, None, "table1")
     assert editor.wait_idle(60)
     assert editor.last_error is None
     assert editor.last_segmentation is None
@@ -422,16 +423,101 @@ def _table1():
 
 def test_playback_moves_the_robot_along_the_trajectory(editor):
     drawn = []
-    orig = editor._draw_robot
-    editor._draw_robot = lambda pose, force=None: (drawn.append(np.array(pose)), orig(pose, force))
-    editor._time.value = 0.0
-    editor._toggle_play()
-    deadline = time.monotonic() + editor._time.max + 5
-    while editor._playing and time.monotonic() < deadline:
+    orig = editor.scene.show_robot
+    editor.scene.show_robot = lambda robot, pose, force=None: (drawn.append(np.array(pose)), orig(robot, pose, force))
+    editor.gui.time.value = 0.0
+    editor.gui.playback.toggle()
+    deadline = time.monotonic() + editor.gui.time.max + 5
+    while editor.gui.playback.playing and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert not editor._playing
+    assert not editor.gui.playback.playing
     assert len(drawn) > 10
     start, end = np.array(editor.request["layout"]["start"]), np.array(editor.request["layout"]["end"])
     assert np.linalg.norm(drawn[0][:2] - start[:2]) < 0.01
     assert np.linalg.norm(drawn[-1][:2] - end[:2]) < 1e-3
-    assert math.isclose(editor._time.value, editor._time.max)
+    assert math.isclose(editor.gui.time.value, editor.gui.time.max)
+
+
+def test_scene_nodes_are_created_once_and_updated_in_place(seg_impl, monkeypatch):
+    """Every scene node is added once, when the editor starts; a re-plan, playback frames,
+    hiding (a failed plan, a request without a layout) and showing again only update the
+    kept viser handles: no node is added or removed after start."""
+    import viser
+    from viser._scene_handles import SceneNodeHandle
+
+    added, removed = [], []
+
+    def spy_add(method_name):
+        method = getattr(viser.SceneApi, method_name)
+
+        def add(self, name, *args, **kwargs):
+            added.append(name)
+            return method(self, name, *args, **kwargs)
+        return add
+
+    for method_name in dir(viser.SceneApi):
+        if method_name.startswith("add_"):
+            monkeypatch.setattr(viser.SceneApi, method_name, spy_add(method_name))
+    remove_by_name, remove = viser.SceneApi.remove_by_name, SceneNodeHandle.remove
+    monkeypatch.setattr(viser.SceneApi, "remove_by_name",
+                        lambda self, name: (removed.append(name), remove_by_name(self, name))[1])
+    monkeypatch.setattr(SceneNodeHandle, "remove", lambda self: (removed.append(self.name), remove(self))[1])
+
+    h = editor_mod.start_editor("127.0.0.1", free_port(), MemStore(), debounce=0.05)
+    try:
+        assert h.wait_idle(60) and h.last_error is None
+        scene = h.scene
+        assert len(added) == len(set(added)), "a node was added twice while the editor started"
+        assert {"/robot/legs", "/robot/platform", "/result/trajectory", "/seg/cells_free", "/handles/end"} <= set(added)
+        at_start = len(added)
+
+        # a re-plan updates the trajectory, cells and robot on the same handles
+        trajectory, legs = scene.trajectory, scene.legs
+        before = trajectory.points.copy()
+        h.move_handle("end", 0.02, 0.06)
+        assert h.wait_idle(60) and h.last_error is None
+        assert scene.trajectory is trajectory and scene.legs is legs
+        assert trajectory.visible and not np.array_equal(trajectory.points, before)
+        assert np.allclose(scene.gizmos["end"].position[:2], [0.02, 0.06])
+
+        # N playback frames move the platform frame and the legs: nothing added per frame
+        t_end = h.gui.time.max
+        poses, leg_points = [], []
+        for t in np.linspace(0.0, t_end, 40):
+            h.gui.time.value = round(float(t), 2)
+            poses.append(scene.platform.position.copy())
+            leg_points.append(scene.legs.points.copy())
+        assert len(added) == at_start, f"playback added nodes: {added[at_start:]}"
+        assert len({tuple(np.round(p, 6)) for p in poses}) > 30, "the platform must move frame by frame"
+        assert not np.array_equal(leg_points[0], leg_points[-1])
+        end = h.request["layout"]["end"]
+        assert np.allclose(poses[-1][:2], end[:2], atol=1e-3)
+        h.gui.playback.toggle()  # the real playback thread: the same, at PLAY_FPS
+        deadline = time.monotonic() + t_end + 5
+        while h.gui.playback.playing and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert len(added) == at_start
+
+        # a failed plan hides the result and the robot (visible = False), nothing re-added
+        h.move_handle("end", 0.15, 0.15)
+        assert h.wait_idle(60) and h.last_error is not None
+        assert not scene.trajectory.visible and not scene.ticks.visible and not scene.robot.visible
+        assert not any(node.visible for node in scene.cells.values())
+        h.move_handle("end", 0.06, 0.04)
+        assert h.wait_idle(60) and h.last_error is None
+        assert scene.trajectory.visible and scene.robot.visible and scene.cells["free"].visible
+
+        # a request without a layout hides the layout and its gizmos; a new layout shows them
+        with _table1() as f:
+            h.files.load_request(json.load(f), None, "table1")
+        assert h.wait_idle(60) and h.last_error is None
+        assert not scene.gizmos["start"].visible and not scene.obstacles.visible and not scene.bounds.visible
+        assert scene.corridor.visible and scene.trajectory.visible
+        h.new_layout()
+        assert h.wait_idle(60) and h.last_error is None
+        assert scene.gizmos["start"].visible and scene.obstacles.visible
+
+        assert added[at_start:] == [], "scene nodes were added after start"
+        assert removed == [], "scene nodes were removed"
+    finally:
+        h.stop()

@@ -1,8 +1,11 @@
-"""Geometry for the browser editor (numpy only, no viser): what the editor draws, as
-arrays it can hand to the scene, and the screen <-> plane maps of a top-down camera.
+"""Geometry for the browser editor (numpy only: no viser, no planner import): what the
+editor draws, as arrays it can hand to the scene, and the screen <-> plane maps of a
+top-down camera.
 
-Everything is in the workspace plane z = 0, SI units (m, rad). Kept apart from
-:mod:`app.editor` so it can be tested without a browser or a server.
+Everything is in the workspace plane z = 0, SI units (m, rad, s). Kept apart from the
+scene (:mod:`app.editor._scene`) so it can be tested without a browser or a server. A robot
+argument is a ``planner.robot.Robot`` (duck-typed: ``base``, ``platform``, ``tool``,
+``leg_lengths``, ...), handed in by the caller.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ import numpy as np
 CELL_COLOURS = {"free": (222, 235, 247), "blocked": (90, 90, 90), "unreachable": (244, 204, 204)}
 #: z of each layer [m] above the plane so that later layers draw on top
 Z = {"cells": 0.0, "grid": 0.0005, "corridor": 0.001, "obstacles": 0.0015, "reach": 0.002,
-     "trajectory": 0.003, "ticks": 0.0035, "robot": 0.004, "handles": 0.006}
+     "trajectory": 0.003, "ticks": 0.0035, "robot": 0.004, "pivots": 0.0045, "handles": 0.006}
 
 
 def polygon_mesh(polygons: list, z: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
@@ -60,6 +63,7 @@ def rectangle(lower, upper) -> list[list[float]]:
 
 
 def circle(center, radius, n: int = 32) -> list[list[float]]:
+    """A circle of ``radius`` [m] about ``center`` [m] as a polygon of ``n`` corners [m]."""
     a = np.linspace(0.0, 2 * math.pi, n, endpoint=False)
     return np.column_stack((center[0] + radius * np.cos(a), center[1] + radius * np.sin(a))).tolist()
 
@@ -88,15 +92,14 @@ def shrink(polygon, factor: float) -> list[list[float]]:
     return (c + factor * (p - c)).tolist()
 
 
-def reachable_mask(robot, lower, upper, psi: float, n: int = 96):
+def reachable_mask(robot, lower, upper, psi: float, n: int = 96, *, singular_tol: float):
     """Sample the rectangle [lower, upper] [m] on an ``n`` x ``n`` grid of points and mark
-    the poses (x, y, psi) the robot reaches: every leg within its stroke and the pose
-    regular (singularity measure >= the robot module's tolerance).
+    the poses (x, y, psi [rad]) the robot reaches: every leg within its stroke and the pose
+    regular (singularity measure >= ``singular_tol``, the planner's tolerance,
+    ``planner.robot.SINGULAR_TOL``).
 
     Returns ``(xs, ys, mask)``: grid coordinates [m] and a boolean (n, n) array indexed [iy, ix].
     """
-    from planner.robot import SINGULAR_TOL
-
     xs = np.linspace(lower[0], upper[0], n)
     ys = np.linspace(lower[1], upper[1], n)
     X, Y = np.meshgrid(xs, ys)
@@ -106,7 +109,7 @@ def reachable_mask(robot, lower, upper, psi: float, n: int = 96):
     if ok.any():
         sing = np.zeros(len(poses))
         sing[ok] = robot.singularity_measure_batch(poses[ok])
-        ok &= sing >= SINGULAR_TOL
+        ok &= sing >= singular_tol
     return xs, ys, ok.reshape(n, n)
 
 
@@ -130,12 +133,17 @@ def mask_boundary(xs: np.ndarray, ys: np.ndarray, mask: np.ndarray, z: float = 0
     return np.concatenate((s, np.full(s.shape[:2] + (1,), z)), axis=2)
 
 
+def platform_pivots_local(robot) -> np.ndarray:
+    """Platform pivots relative to the tool point, in the platform frame (n, 2) [m]."""
+    return np.asarray(robot.platform, dtype=float) - np.asarray(robot.tool, dtype=float)
+
+
 def robot_geometry(robot, pose) -> dict:
     """The robot drawn at ``pose`` = [x, y, psi] (tool point, m, m, rad): base pivots (n, 2),
     platform pivots in the world frame (n, 2) and leg lengths (n,) [m]."""
     c, s = math.cos(pose[2]), math.sin(pose[2])
     rot = np.array([[c, -s], [s, c]])
-    pivots = np.asarray(pose[:2], dtype=float) + robot._r0 @ rot.T
+    pivots = np.asarray(pose[:2], dtype=float) + platform_pivots_local(robot) @ rot.T
     return {"base": robot.base.copy(), "pivots": pivots,
             "lengths": np.linalg.norm(pivots - robot.base, axis=1)}
 
@@ -166,7 +174,13 @@ def camera_height(half_size: float, fov_rad: float) -> float:
     return half_size / math.tan(fov_rad / 2)
 
 
+def yaw_quaternion(psi: float) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) of a rotation by ``psi`` [rad] about +z."""
+    return np.array([math.cos(psi / 2), 0.0, 0.0, math.sin(psi / 2)])
+
+
 def quat_to_matrix(wxyz) -> np.ndarray:
+    """Rotation matrix (3, 3) of a unit quaternion (w, x, y, z)."""
     w, x, y, z = (float(v) for v in wxyz)
     return np.array([
         [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],

@@ -1,0 +1,131 @@
+"""The editor's files: corridors saved to / loaded from the store, the request JSON
+imported and exported, and the planned trajectory as a CSV download.
+
+A corridor is saved as its plan request (the one JSON shape); whatever is loaded or
+imported is validated as a plan request first and replaces the design only when valid.
+Failures become notifications naming the cause; they never change the design.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import TYPE_CHECKING, Any
+
+from pydantic import ValidationError
+
+from ..schema import PlanRequestModel, format_validation_error, request_dict
+from ._planning import to_csv
+
+if TYPE_CHECKING:
+    from ._editor import Editor
+
+__all__ = ["EditorFiles"]
+
+
+class EditorFiles:
+    """Save / load / import / export for ``editor``. ``store`` is an
+    :class:`app.storage.Store` (its corridor methods), or None: saving is off. ``client``
+    arguments are the viser client that asked (its notifications and downloads go to it)."""
+
+    def __init__(self, editor: Editor, store):
+        self._editor = editor
+        self.store = store
+        self.stored_ids: dict[str, str] = {}  #: stored corridor id by its label in the dropdown
+
+    # ------------------------------------------------------------------ store
+    def refresh_stored(self) -> None:
+        """Re-read the list of stored corridors into the dropdown."""
+        dropdown = self._editor.gui.stored
+        if self.store is None or dropdown is None:
+            return
+        try:
+            rows = self.store.list_corridors()
+        except Exception as exc:  # noqa: BLE001 - any store failure is shown, the editor goes on
+            self._editor.notify("Could not list corridors", str(exc))
+            return
+        self.stored_ids = {f"{r.get('name') or '(unnamed)'} · {r['id'][:8]}": r["id"] for r in rows}
+        dropdown.options = tuple(self.stored_ids) or ("(none)",)
+
+    def save(self, new: bool, client=None) -> None:
+        """Save the design as a new corridor (``new``) or over the one it was loaded from /
+        last saved as (a new one if there is none or it was deleted meanwhile)."""
+        state = self._editor.state
+        req = state.request
+        try:
+            PlanRequestModel.model_validate(req)
+            if new or state.corridor_id is None:
+                rec = self.store.create_corridor(req, name=req.get("name"))
+            else:
+                rec = self.store.update_corridor(state.corridor_id, req, name=req.get("name"))
+                if rec is None:
+                    rec = self.store.create_corridor(req, name=req.get("name"))
+        except ValidationError as exc:
+            self._editor.notify("Not saved", format_validation_error(exc), client=client)
+            return
+        except Exception as exc:  # noqa: BLE001 - any store failure is shown, the design stays
+            self._editor.notify("Not saved", f"{type(exc).__name__}: {exc}", client=client)
+            return
+        state.corridor_id = rec["id"]
+        self.refresh_stored()
+        self._editor.notify("Saved", f"corridor '{rec.get('name') or ''}' id {rec['id']}", color="green",
+                            client=client)
+
+    def load(self, client=None) -> None:
+        """Load the corridor chosen in the dropdown."""
+        dropdown = self._editor.gui.stored
+        cid = self.stored_ids.get(dropdown.value) if dropdown is not None else None
+        if cid is None:
+            self._editor.notify("Nothing to load", "choose a stored corridor first", color="yellow", client=client)
+            return
+        rec = self.store.get_corridor(cid)
+        if rec is None:
+            self._editor.notify("Not found", f"corridor {cid} no longer exists", client=client)
+            self.refresh_stored()
+            return
+        if self.load_request(rec["request"], client, f"corridor {cid}"):
+            self._editor.state.corridor_id = cid
+
+    # ------------------------------------------------------------------ request JSON
+    def import_upload(self, upload, client=None) -> None:
+        """Import an uploaded request JSON file (``upload.name``, ``upload.content`` bytes)."""
+        try:
+            data = json.loads(upload.content.decode("utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            self._editor.notify("Import failed", f"{upload.name}: not valid JSON ({exc})", client=client)
+            return
+        if self.load_request(data, client, upload.name):
+            self._editor.state.corridor_id = None
+
+    def load_request(self, data: Any, client, origin: str) -> bool:
+        """Replace the design with the plan request ``data`` (from ``origin``, for the
+        messages) and plan it at once; returns False (design unchanged) when it is invalid."""
+        try:
+            model = PlanRequestModel.model_validate(data)
+        except ValidationError as exc:
+            self._editor.notify("Import failed", f"{origin}: {format_validation_error(exc)}", client=client)
+            return False
+        req = request_dict(model)
+        if req.get("layout") is None:
+            self._editor.notify("No layout", f"{origin} has no layout (segments or a reference only): it is planned "
+                                "and shown, but the layout tools do nothing until you start a new layout",
+                                color="yellow", client=client)
+        self._editor.set_request(req, immediate=True)
+        self._editor.place_cameras()
+        return True
+
+    def export_request(self, client) -> None:
+        """Send the design to ``client`` as ``corridor.json``."""
+        self._download(client, "corridor.json", json.dumps(self._editor.request, indent=2).encode())
+
+    def download_csv(self, client) -> None:
+        """Send the newest trajectory to ``client`` as ``trajectory.csv``."""
+        result = self._editor.last_result
+        if result is None:
+            self._editor.notify("No trajectory", "plan a corridor first", color="yellow", client=client)
+            return
+        self._download(client, "trajectory.csv", to_csv(result).encode())
+
+    @staticmethod
+    def _download(client, filename: str, content: bytes) -> None:
+        if client is not None:
+            client.send_file_download(filename, content, save_immediately=True)

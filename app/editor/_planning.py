@@ -1,0 +1,215 @@
+"""Planning for the editor: the background re-plan worker and the one place the editor
+imports from ``planner``.
+
+Every other editor module gets the planner's functionality (plan, request parsing, the
+segmentation, robots, ``MODE_DEFAULTS``, ``to_csv``, ``PlannerError``, ...) through the
+names this module re-exports, so that a change of the planner's import paths touches this
+file only.
+
+Re-plans run on :class:`PlanWorker`, a thread with a debounce and a generation counter:
+``schedule()`` returns at once (GUI callbacks never wait for a plan), the worker computes
+only the newest generation, and the caller drops a result whose generation is no longer
+current (a stale result never overwrites a newer one).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from pydantic import ValidationError
+
+from planner.errors import PlannerError
+from planner.plan import plan as run_plan
+from planner.request import MODE_DEFAULTS, Settings, parse_request
+from planner.robot import SINGULAR_TOL, Robot, builtin_robot_names, load_robot
+from planner.trajectory import to_csv
+
+from ..schema import PlanRequestModel, format_validation_error, request_dict
+
+__all__ = [
+    "DEFAULT_ROBOT",
+    "HAS_SPEED_SETTING",
+    "MODE_DEFAULTS",
+    "SINGULAR_TOL",
+    "PlanOutcome",
+    "PlanWorker",
+    "PlannerError",
+    "Robot",
+    "RobotCache",
+    "builtin_robot_names",
+    "compute_plan",
+    "segmentation_module",
+    "to_csv",
+]
+
+log = logging.getLogger("rangeplan.editor")
+
+DEFAULT_ROBOT = "moving-slide"  #: robot of a request that names none (as ``planner.request``)
+#: whether this planner's settings have a travel speed ``speed_m_s`` [m/s]
+HAS_SPEED_SETTING = "speed_m_s" in Settings.__dataclass_fields__
+
+
+def segmentation_module():
+    """``planner.segmentation`` (imported lazily so the editor starts even without it).
+    Tests replace this function to control the segmentation's timing."""
+    from planner import segmentation
+
+    return segmentation
+
+
+class RobotCache:
+    """Robots loaded from their specs (a built-in name or a description dict), kept by
+    spec; safe to use from the GUI threads and the worker at once."""
+
+    def __init__(self) -> None:
+        self._robots: dict[str, Robot] = {}
+        self._lock = threading.Lock()
+
+    def get(self, spec) -> Robot:
+        """The robot of ``spec``; raises :class:`PlannerError` for a bad spec."""
+        key = json.dumps(spec, sort_keys=True)
+        with self._lock:
+            robot = self._robots.get(key)
+        if robot is None:
+            robot = load_robot(spec)
+            with self._lock:
+                robot = self._robots.setdefault(key, robot)
+        return robot
+
+    def of_request(self, request: dict, *, fallback: bool = False) -> Robot | None:
+        """The robot ``request`` names. For a bad spec: the default robot with
+        ``fallback``, else None."""
+        try:
+            return self.get(request.get("robot", DEFAULT_ROBOT))
+        except PlannerError:
+            return self.get(DEFAULT_ROBOT) if fallback else None
+
+
+@dataclass(frozen=True)
+class PlanOutcome:
+    """What one re-plan produced: the segmentation (``Segmentation.to_dict()``, or None for
+    a request without a layout or when segmenting failed), the plan result (or None) and
+    the error ``{code, message, field}`` (or None); ``seconds`` is the wall time [s]."""
+
+    segmentation: dict | None
+    result: dict | None
+    error: dict | None
+    seconds: float
+
+
+def compute_plan(request: dict, robots: RobotCache) -> PlanOutcome:
+    """Validate, segment (when the request has a layout) and plan ``request`` (the one
+    JSON shape). Never raises for a bad request or an impossible plan: those become
+    ``PlanOutcome.error``."""
+    t0 = time.perf_counter()
+
+    def outcome(seg, result, error) -> PlanOutcome:
+        return PlanOutcome(seg, result, error, time.perf_counter() - t0)
+
+    try:
+        model = PlanRequestModel.model_validate(request)
+    except ValidationError as exc:
+        return outcome(None, None, {"code": "invalid_input", "message": format_validation_error(exc), "field": None})
+    seg_dict = None
+    try:
+        req = parse_request(request_dict(model))
+        robot = robots.get(req.robot)
+        segments = req.segments
+        if req.layout is not None:
+            seg = segmentation_module().segment(req.layout, robot, req.settings)
+            seg_dict = seg.to_dict()
+            segments = seg.segments
+        return outcome(seg_dict, run_plan(req, robot=robot, segments=segments), None)
+    except PlannerError as exc:
+        return outcome(seg_dict, None, exc.to_dict())
+    except ImportError as exc:
+        return outcome(None, None, {"code": "unavailable", "message": f"segmentation is not available: {exc}",
+                                    "field": "layout"})
+
+
+class PlanWorker(threading.Thread):
+    """Runs re-plans off the GUI threads.
+
+    ``schedule()`` bumps the generation and sets the time the plan may start (the
+    debounce, [s]); the worker then calls ``run_generation(gen)`` for the newest
+    generation only. ``run_generation`` checks :meth:`is_current` before it publishes.
+    An exception in ``run_generation`` goes to ``on_crash`` and the worker keeps running.
+    """
+
+    def __init__(self, run_generation: Callable[[int], Any], on_crash: Callable[[Exception], Any],
+                 debounce_s: float):
+        super().__init__(name="rangeplan-editor-planner", daemon=True)
+        self._run_generation = run_generation
+        self._on_crash = on_crash
+        self.debounce_s = debounce_s  #: quiet time after the last edit before a re-plan starts [s]
+        self._cv = threading.Condition()
+        self.requested = 0  #: newest generation asked for
+        self.started = 0  #: generation being computed / last computed
+        self.finished = 0  #: last generation whose computation ended (published or discarded)
+        self._due = 0.0  # time.monotonic() [s] at which the newest generation may start
+        self._stopping = False
+
+    def schedule(self, immediate: bool = False) -> int:
+        """Ask for a re-plan (after the debounce unless ``immediate``); returns its generation."""
+        with self._cv:
+            self.requested += 1
+            self._due = time.monotonic() + (0.0 if immediate else self.debounce_s)
+            self._cv.notify_all()
+            return self.requested
+
+    def is_current(self, gen: int) -> bool:
+        """Whether ``gen`` is still the newest generation asked for."""
+        with self._cv:
+            return gen == self.requested
+
+    def idle(self) -> bool:
+        """Whether no re-plan is pending or running."""
+        with self._cv:
+            return self.finished == self.requested
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        """Wait up to ``timeout_s`` [s] until idle; returns whether it is."""
+        end = time.monotonic() + timeout_s
+        with self._cv:
+            while self.finished != self.requested:
+                left = end - time.monotonic()
+                if left <= 0:
+                    return False
+                self._cv.wait(min(left, 0.1))
+            return True
+
+    def stop(self) -> None:
+        """Ask the thread to end (it finishes a plan it is computing first)."""
+        with self._cv:
+            self._stopping = True
+            self._cv.notify_all()
+
+    def run(self) -> None:
+        while True:
+            with self._cv:
+                while not self._stopping:
+                    if self.requested != self.finished:
+                        wait = self._due - time.monotonic()
+                        if wait <= 0:
+                            break
+                        self._cv.wait(wait)
+                    else:
+                        self._cv.wait()
+                if self._stopping:
+                    return
+                gen = self.requested
+                self.started = gen
+            try:
+                self._run_generation(gen)
+            except Exception as exc:  # the page never dies: report, keep the worker alive
+                log.exception("editor re-plan failed")
+                self._on_crash(exc)
+            with self._cv:
+                self.finished = max(self.finished, gen)
+                self._cv.notify_all()

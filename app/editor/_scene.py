@@ -1,0 +1,296 @@
+"""The editor's 3-D scene (viser): every node is created once and updated in place.
+
+:class:`EditorScene` adds all of its scene nodes in its constructor (hidden until there
+is something to show) and keeps viser's handles. Showing a new layout, segmentation,
+plan or robot pose assigns the handles' properties (``points``, ``colors``,
+``vertices``/``faces``, ``position``/``wxyz``, ``text``, ``visible``, ...): viser sends
+an update message for a changed property only, and never removes or re-adds a node.
+Playback therefore moves the platform frame and the legs of the existing robot per
+frame. An empty layer (no obstacles, no corridor, no result) is hidden with
+``visible = False``; its last geometry stays on the handle.
+
+Top-down view of the workspace plane z = 0; x right, y up; units m, rad, s, N. Each
+layer sits a little above the plane (:data:`app.editor._geometry.Z`) so later layers
+draw on top.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import viser
+
+from . import _geometry as geo
+from ._planning import SINGULAR_TOL, Robot
+
+__all__ = ["TICK_EVERY_S", "EditorScene"]
+
+TICK_EVERY_S = 0.1  #: spacing of the time ticks on the trajectory [s]
+REACH_SAMPLES = 120  #: grid samples per side of the reachable-workspace outline
+HANDLE_SCALE = 0.12  #: size of a start/end gizmo, as a fraction of the larger bounds side
+DOT_RADIUS = 0.01  #: radius of a start/end dot, as a fraction of the larger bounds side
+
+# Placeholder geometry of a node created before there is anything to show (it is hidden).
+_NO_SEGMENTS = np.zeros((1, 2, 3))
+_NO_POINTS = np.zeros((1, 3))
+_NO_VERTICES, _NO_FACES = np.zeros((3, 3)), np.array([[0, 1, 2]], np.int32)
+#: outline of the reachable workspace at the start / end angle (RGB 0-255)
+_PIVOTS_ABOVE_PLATFORM = geo.Z["pivots"] - geo.Z["robot"]  #: z of pivots and tool in the platform frame [m]
+_REACH_COLOURS = {"start": (200, 30, 30), "end": (200, 100, 0)}
+
+
+def _show_lines(handle: viser.LineSegmentsHandle, segments: np.ndarray, colour=None) -> None:
+    """Show ``segments`` (M, 2, 3) [m] on a line node, or hide it when M = 0. With
+    ``colour`` (RGB 0-255) the colour is given per vertex (drawn a little lighter than
+    a node-wide colour; the caller keeps the node's colours and points in one update)."""
+    if len(segments):
+        if colour is not None:
+            handle.colors = np.tile(np.asarray(colour, np.uint8), (len(segments), 2, 1))
+        handle.points = segments
+    handle.visible = bool(len(segments))
+
+
+def _show_mesh(handle: viser.MeshHandle, vertices: np.ndarray, faces: np.ndarray) -> None:
+    """Show the mesh ``vertices`` (V, 3) [m], ``faces`` (F, 3), or hide the node when F = 0."""
+    if len(faces):
+        handle.vertices, handle.faces = vertices, faces
+    handle.visible = bool(len(faces))
+
+
+def _leg_colours(force_ratio: np.ndarray) -> np.ndarray:
+    """Per-vertex colours (n, 2, 3) of the legs: blue at no force, red at the force limit."""
+    r = np.clip(force_ratio, 0.0, 1.0)
+    rgb = np.column_stack((60 + 195 * r, np.full_like(r, 60.0), 200 - 160 * r)).astype(np.uint8)
+    return np.repeat(rgb[:, None, :], 2, axis=1)
+
+
+class EditorScene:
+    """The scene of one editor server (shared by all its clients).
+
+    ``on_click(event)`` and ``on_rect_select(event)`` get viser's scene click and
+    shift+drag rectangle events; ``on_handle_moved(which, x, y)`` gets the start ("start")
+    or end ("end") gizmo's new position [m] while the user drags it.
+    """
+
+    def __init__(self, server: viser.ViserServer, *, on_click: Callable[[Any], Any],
+                 on_rect_select: Callable[[Any], Any],
+                 on_handle_moved: Callable[[str, float, float], Any]):
+        self._server = server
+        self._on_handle_moved = on_handle_moved
+        self._dragging = {"start": False, "end": False}  # a gizmo the user holds
+        self._reach_cache: dict[tuple, np.ndarray] = {}  # outline segments by (robot, bounds, psi)
+        self._robot_drawn: Robot | None = None  # robot whose structure the robot nodes show
+        scene = server.scene
+        scene.set_up_direction("+z")
+        scene.world_axes.visible = False
+        scene.on_click()(on_click)
+        scene.on_rect_select(modifier="shift")(on_rect_select)
+        self._add_nodes(scene)
+
+    # ------------------------------------------------------------------ node creation (once)
+    def _add_nodes(self, scene) -> None:
+        def lines(name, colour, thickness_px):
+            return scene.add_line_segments(name, _NO_SEGMENTS, colors=colour, thickness=thickness_px,
+                                           thickness_units="screen", visible=False)
+
+        def mesh(name, colour, opacity, **kwargs):
+            return scene.add_mesh_simple(name, _NO_VERTICES, _NO_FACES, color=colour, opacity=opacity,
+                                         side="double", visible=False, **kwargs)
+
+        def points(name, colour, size_m, shape):
+            return scene.add_point_cloud(name, _NO_POINTS, colors=colour, point_size=size_m, point_shape=shape,
+                                         visible=False)
+
+        # segmentation: cells by state, grid, the corridor the path runs through
+        self.cells = {state: mesh(f"/seg/cells_{state}", colour, 1.0, flat_shading=True)
+                      for state, colour in geo.CELL_COLOURS.items()}
+        self.grid = lines("/seg/grid", (170, 170, 170), 0.5)
+        self.corridor_fill = mesh("/seg/corridor_fill", (150, 220, 150), 0.8, flat_shading=True)
+        self.corridor = lines("/seg/corridor", (0, 120, 0), 1.5)
+        # layout: bounds, obstacles, reachable workspace at the start / end angle
+        self.bounds = lines("/layout/bounds", (30, 30, 30), 2.0)
+        self.obstacles = mesh("/layout/obstacles", (60, 60, 60), 0.85, flat_shading=True)
+        self.obstacle_edges = lines("/layout/obstacle_edges", (0, 0, 0), 1.5)
+        self.reachable = {which: lines(f"/layout/reachable_{which}", _REACH_COLOURS[which], 2.0)
+                          for which in ("start", "end")}
+        # result: trajectory and its time ticks
+        self.trajectory = lines("/result/trajectory", (20, 60, 220), 3.0)
+        self.ticks = points("/result/ticks", (255, 140, 0), 0.0035, "circle")
+        # robot: one group; the platform is a frame moved per pose, its drawing fixed in it.
+        # Pivots and tool sit a little above the legs and the platform edge (Z["pivots"]).
+        self.robot = scene.add_frame("/robot", show_axes=False, visible=False)
+        self.legs = scene.add_line_segments("/robot/legs", _NO_SEGMENTS, colors=_leg_colours(np.zeros(1)),
+                                            thickness=5.0, thickness_units="screen")
+        self.base_pivots = points("/robot/base_pivots", (20, 20, 20), 0.008, "circle")
+        self.platform = scene.add_frame("/robot/platform", show_axes=False)
+        self.platform_fill = mesh("/robot/platform/fill", (120, 120, 220), 0.15)
+        self.platform_edge = lines("/robot/platform/edge", (40, 40, 160), 2.0)
+        self.platform_pivots = points("/robot/platform/pivots", (20, 20, 20), 0.008, "circle")
+        self.tool = scene.add_point_cloud("/robot/platform/tool", np.array([[0.0, 0.0, _PIVOTS_ABOVE_PLATFORM]]),
+                                          colors=(220, 0, 0), point_size=0.01, point_shape="diamond")
+        # start and end: planar gizmo (x, y only), dot and label
+        self.gizmos, self.dots, self.labels = {}, {}, {}
+        for which, colour in (("start", (0, 150, 0)), ("end", (200, 0, 150))):
+            gizmo = scene.add_transform_controls(f"/handles/{which}", active_axes=(True, True, False),
+                                                 disable_rotations=True, depth_test=False, visible=False)
+            gizmo.on_update(self._gizmo_callback(which))
+            self.gizmos[which] = gizmo
+            self.dots[which] = scene.add_icosphere(f"/handles/{which}/dot", radius=0.001, color=colour,
+                                                   visible=False)
+            self.labels[which] = scene.add_label(f"/handles/{which}/label", which, visible=False)
+
+    def _gizmo_callback(self, which: str):
+        def on_update(event) -> None:
+            self._dragging[which] = getattr(event, "phase", "update") in ("start", "update")
+            pos = event.target.position
+            self._on_handle_moved(which, float(pos[0]), float(pos[1]))
+        return on_update
+
+    # ------------------------------------------------------------------ camera
+    def place_camera(self, centre, half_size: float, client=None) -> None:
+        """Look straight down at ``centre`` (x, y) [m] so that a square of half-size
+        ``half_size`` [m] fills the view's height; for one ``client``, or the initial
+        camera of clients that connect later (None)."""
+        cam = self._server.initial_camera
+        height = geo.camera_height(half_size, cam.fov)
+        cx = float(centre[0]) + 0.36 * half_size  # the control panel covers the right of the page
+        pos, look = (cx, float(centre[1]), height), (cx, float(centre[1]), 0.0)
+        if client is None:
+            cam.position, cam.look_at, cam.up = pos, look, (0.0, 1.0, 0.0)
+            cam.near, cam.far = 0.001, 100.0
+        else:
+            with client.atomic():
+                client.camera.up_direction = (0.0, 1.0, 0.0)
+                client.camera.position = pos
+                client.camera.look_at = look
+
+    # ------------------------------------------------------------------ layout
+    def show_layout(self, layout: dict | None, robot: Robot) -> None:
+        """Bounds, obstacles, start/end gizmos and the reachable outline of ``layout`` (the
+        request's ``layout`` dict, or None for a request without one: all hidden)."""
+        marker_nodes = [*self.gizmos.values(), *self.dots.values(), *self.labels.values()]
+        if layout is None:
+            for node in (self.bounds, self.obstacles, self.obstacle_edges, *self.reachable.values(), *marker_nodes):
+                node.visible = False
+            return
+        lo = np.asarray(layout["bounds"]["lower"], float)
+        hi = np.asarray(layout["bounds"]["upper"], float)
+        span = max(float(np.max(hi - lo)), 1e-3)  # > 0 even while the user types inverted bounds
+        _show_lines(self.bounds, geo.polygon_edges([geo.rectangle(lo, hi)], geo.Z["grid"]))
+        polys = [geo.obstacle_polygon(ob) for ob in layout.get("obstacles", [])]
+        _show_mesh(self.obstacles, *geo.polygon_mesh(polys, geo.Z["obstacles"]))
+        _show_lines(self.obstacle_edges, geo.polygon_edges(polys, geo.Z["obstacles"]))
+        psi_start, psi_end = float(layout["start"][2]), float(layout["end"][2])
+        with self._server.atomic():  # per-vertex colours and points of an outline in one update
+            _show_lines(self.reachable["start"], self._reach_outline(robot, lo, hi, psi_start),
+                        _REACH_COLOURS["start"])
+            if abs(psi_end - psi_start) < 1e-9:  # same angle: one outline is enough
+                self.reachable["end"].visible = False
+            else:
+                _show_lines(self.reachable["end"], self._reach_outline(robot, lo, hi, psi_end),
+                            _REACH_COLOURS["end"])
+        limits = ((float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1])), (0.0, 0.0))
+        for which in ("start", "end"):
+            p = layout[which]
+            gizmo = self.gizmos[which]
+            gizmo.scale = HANDLE_SCALE * span
+            gizmo.translation_limits = limits
+            if not self._dragging[which]:  # never fight the user's drag
+                gizmo.position = (float(p[0]), float(p[1]), geo.Z["handles"])
+            self.dots[which].radius = DOT_RADIUS * span
+            self.labels[which].text = f"{which} (ψ {float(p[2]):.2f} rad)"
+        for node in marker_nodes:
+            node.visible = True
+
+    def _reach_outline(self, robot: Robot, lo: np.ndarray, hi: np.ndarray, psi: float) -> np.ndarray:
+        """Outline (M, 2, 3) [m] of the poses reachable at angle ``psi`` [rad] over the bounds
+        plus a 5 % margin; the last few are kept (a drag of start/end redraws the layout on
+        every move, with the same robot, bounds and angles)."""
+        key = (id(robot), *lo.tolist(), *hi.tolist(), psi)
+        outline = self._reach_cache.get(key)
+        if outline is None:
+            margin = 0.05 * (hi - lo)
+            xs, ys, mask = geo.reachable_mask(robot, lo - margin, hi + margin, psi, n=REACH_SAMPLES,
+                                              singular_tol=SINGULAR_TOL)
+            outline = geo.mask_boundary(xs, ys, mask, geo.Z["reach"])
+            if len(self._reach_cache) >= 8:
+                self._reach_cache.pop(next(iter(self._reach_cache)))
+            self._reach_cache[key] = outline
+        return outline
+
+    # ------------------------------------------------------------------ segmentation
+    def show_segmentation(self, seg: dict | None) -> None:
+        """Cells (by state), grid and corridor of a segmentation (``Segmentation.to_dict()``),
+        or hide them (None)."""
+        if seg is None:
+            for node in (*self.cells.values(), self.grid, self.corridor_fill, self.corridor):
+                node.visible = False
+            return
+        cells = seg["cells"]
+        for state, node in self.cells.items():
+            _show_mesh(node, *geo.polygon_mesh([c["polygon"] for c in cells if c["state"] == state],
+                                               geo.Z["cells"]))
+        _show_lines(self.grid, geo.polygon_edges([c["polygon"] for c in cells], geo.Z["grid"]))
+        by_id = {c["id"]: c for c in cells}
+        path = [by_id[i]["polygon"] for i in seg.get("path", []) if i in by_id]
+        _show_mesh(self.corridor_fill, *geo.polygon_mesh(path, geo.Z["corridor"]))
+        self.show_corridor(seg.get("segments", []))
+
+    def show_corridor(self, segments: list[dict]) -> None:
+        """Outline the corridor's boxes (``[{lower, upper}, ...]``, [m, m, rad]) in x, y."""
+        boxes = [geo.rectangle(s["lower"][:2], s["upper"][:2]) for s in segments]
+        _show_lines(self.corridor, geo.polygon_edges(boxes, geo.Z["corridor"]))
+
+    # ------------------------------------------------------------------ result
+    def show_result(self, result: dict | None) -> None:
+        """The planned trajectory and its time ticks (every :data:`TICK_EVERY_S` s), or
+        hide them and the robot (None). The robot's pose is :meth:`show_robot`'s."""
+        if result is None:
+            self.trajectory.visible = self.ticks.visible = False
+            self.hide_robot()
+            return
+        t = np.asarray(result["time"], float)
+        pose = np.asarray(result["pose"], float)
+        pts = np.column_stack((pose[:, :2], np.full(len(pose), geo.Z["trajectory"])))
+        _show_lines(self.trajectory, np.stack((pts[:-1], pts[1:]), axis=1))
+        ticks = geo.time_ticks(t, pose, TICK_EVERY_S)
+        self.ticks.points = np.column_stack((ticks, np.full(len(ticks), geo.Z["ticks"])))
+        self.ticks.visible = True
+
+    # ------------------------------------------------------------------ robot
+    def hide_robot(self) -> None:
+        """Hide the robot (no plan to show)."""
+        self.robot.visible = False
+
+    def show_robot(self, robot: Robot, pose, force=None) -> None:
+        """``robot`` at ``pose`` = [x, y, psi] (tool point; m, m, rad), legs coloured by
+        ``force`` (n,) [N] relative to the robot's force limit. Per call only the platform
+        frame's pose and the legs' points and colours change; the robot's drawing is redone
+        only when ``robot`` differs from the last one shown."""
+        with self._server.atomic():  # legs, colours and platform arrive as one update
+            if robot is not self._robot_drawn:
+                self._show_robot_structure(robot)
+            z = geo.Z["robot"]
+            g = geo.robot_geometry(robot, pose)
+            ends = np.stack((np.column_stack((g["base"], np.full(robot.n_legs, z))),
+                             np.column_stack((g["pivots"], np.full(robot.n_legs, z)))), axis=1)
+            ratio = np.zeros(robot.n_legs) if force is None else np.abs(force) / robot.force_max
+            self.legs.colors = _leg_colours(ratio)
+            self.legs.points = ends
+            self.platform.position = (float(pose[0]), float(pose[1]), z)
+            self.platform.wxyz = geo.yaw_quaternion(float(pose[2]))
+            self.robot.visible = True
+
+    def _show_robot_structure(self, robot: Robot) -> None:
+        """What changes only with the robot: base pivots (world) and the platform's
+        drawing in its own frame (origin at the tool point)."""
+        self.base_pivots.points = np.column_stack((robot.base, np.full(robot.n_legs, geo.Z["pivots"])))
+        local = geo.platform_pivots_local(robot)
+        _show_mesh(self.platform_fill, *geo.polygon_mesh([local], 0.0))
+        _show_lines(self.platform_edge, geo.polygon_edges([local], 0.0))
+        self.platform_pivots.points = np.column_stack((local, np.full(robot.n_legs, _PIVOTS_ABOVE_PLATFORM)))
+        for node in (self.base_pivots, self.platform_pivots):
+            node.visible = True
+        self._robot_drawn = robot

@@ -1,0 +1,217 @@
+"""The editor's state, without viser: the edited plan request and the newest plan outcome.
+
+The edited request is a plain dict in the one JSON shape of a plan request
+(:class:`app.schema.PlanRequestModel`, here with a ``layout``); every edit is a function
+that changes that dict in place under the state's lock. The newest published result,
+segmentation and error sit next to it, with the bookkeeping of which re-plan generation
+produced them. The request edits the GUI makes are plain functions here, so they can be
+tested without a browser.
+
+Units: m, rad, s, N (as in the request).
+"""
+
+from __future__ import annotations
+
+import copy
+import threading
+from collections.abc import Callable
+from typing import Any
+
+from . import _geometry as geo
+from ._planning import DEFAULT_ROBOT, MODE_DEFAULTS
+
+__all__ = [
+    "DEFAULT_REQUEST",
+    "EditorState",
+    "add_obstacle",
+    "clear_obstacles",
+    "mode_settings",
+    "move_point",
+    "remove_last_obstacle",
+    "set_layout_field",
+    "set_name",
+    "set_pose",
+    "set_setting",
+    "switch_mode",
+    "toggle_cell_obstacle",
+    "with_new_layout",
+]
+
+#: what the editor shows on first start: a wall with a gap between start and end
+DEFAULT_REQUEST: dict[str, Any] = {
+    "name": "editor example",
+    "robot": "moving-slide",
+    "layout": {
+        "bounds": {"lower": [-0.16, -0.16], "upper": [0.16, 0.16]},
+        "obstacles": [{"type": "rectangle", "lower": [-0.02, -0.12], "upper": [0.0, 0.04]}],
+        "clearance": 0.0,
+        "cell": {"shape": "square", "size": 0.02},
+        "start": [-0.08, 0.0, 0.0],
+        "end": [0.06, 0.04, 0.0],
+    },
+    "settings": {"mode": "paper", "Ts": 0.01, **MODE_DEFAULTS["paper"]},
+}
+
+Edit = Callable[[dict], Any]  #: changes a request dict in place; its return value is ignored
+
+
+class EditorState:
+    """The edited request and the newest plan outcome, shared by every browser tab.
+
+    ``lock`` guards all fields; :attr:`request` hands out copies, :meth:`apply` runs an
+    edit on the real dict. The ``last_*`` fields are what the newest *current* re-plan
+    published (a stale one only bumps :attr:`stale_discarded`).
+    """
+
+    def __init__(self, request: dict | None = None):
+        self.lock = threading.RLock()
+        self._request = copy.deepcopy(request if request is not None else DEFAULT_REQUEST)
+        self.corridor_id: str | None = None  #: id of the stored corridor the design came from / was saved as
+        self.plans_done = 0  #: number of plan results published
+        self.last_result: dict | None = None  #: newest published plan result
+        self.last_result_robot: Any = None  #: robot spec (name or description) of last_result
+        self.last_segmentation: dict | None = None  #: newest published segmentation (to_dict)
+        self.last_error: dict | None = None  #: newest error ({code, message, field}) or None
+        self.last_plan_generation = 0  #: generation of the newest published result
+        self.stale_discarded = 0  #: results dropped because a newer edit arrived
+
+    @property
+    def request(self) -> dict:
+        """A copy of the current request (the one JSON shape)."""
+        with self.lock:
+            return copy.deepcopy(self._request)
+
+    def replace(self, request: dict) -> None:
+        """Replace the whole request (import, load, new layout)."""
+        with self.lock:
+            self._request = copy.deepcopy(request)
+
+    def apply(self, edit: Edit) -> None:
+        """Run ``edit(request)`` on the request itself, under the lock."""
+        with self.lock:
+            edit(self._request)
+
+    def publish(self, gen: int, request: dict, segmentation: dict | None, result: dict | None,
+                error: dict | None) -> None:
+        """Record the outcome of the current re-plan ``gen`` of ``request``. A failed plan
+        keeps the last good result; a failed segmentation of a layout keeps the last
+        segmentation (the cells stay clickable)."""
+        with self.lock:
+            if segmentation is not None or error is None or request.get("layout") is None:
+                self.last_segmentation = segmentation
+            self.last_error = error
+            if result is not None:
+                self.last_result = result
+                self.last_result_robot = request.get("robot", DEFAULT_ROBOT)
+                self.plans_done += 1
+                self.last_plan_generation = gen
+
+    def discard_stale(self) -> None:
+        """Count a result dropped because a newer edit arrived while it was computed."""
+        with self.lock:
+            self.stale_discarded += 1
+
+
+# ---------------------------------------------------------------------------- request edits
+def set_pose(request: dict, which: str, pose) -> None:
+    """Set the layout's ``which`` ("start" | "end") pose to [x, y, psi] (m, m, rad)."""
+    if request.get("layout") is not None:
+        request["layout"][which] = [float(v) for v in pose]
+
+
+def move_point(request: dict, which: str, x: float, y: float) -> None:
+    """Move the layout's ``which`` point to (x, y) [m], keeping its angle psi."""
+    layout = request.get("layout")
+    if layout is not None:
+        layout[which][0], layout[which][1] = float(x), float(y)
+
+
+def set_layout_field(request: dict, path: tuple[str, ...], value) -> None:
+    """Set ``layout[path[0]][path[1]]...`` to ``value`` (None removes the field)."""
+    node = request.get("layout")
+    if node is None:
+        return
+    for key in path[:-1]:
+        node = node.setdefault(key, {})
+    if value is None:
+        node.pop(path[-1], None)
+    else:
+        node[path[-1]] = value
+
+
+def set_setting(request: dict, key: str, value) -> None:
+    """Set ``settings[key]`` to ``value`` (None removes it: the planner's default applies)."""
+    settings = request.setdefault("settings", {})
+    if value is None:
+        settings.pop(key, None)
+    else:
+        settings[key] = value
+
+
+def switch_mode(request: dict, mode: str) -> None:
+    """Switch ``settings.mode``; N, k_r and k_u still at the old mode's defaults follow to
+    the new mode's defaults (``MODE_DEFAULTS``), values the user changed stay."""
+    settings = request.setdefault("settings", {})
+    old = MODE_DEFAULTS.get(settings.get("mode", "paper"), MODE_DEFAULTS["paper"])
+    settings["mode"] = mode
+    for key, value in MODE_DEFAULTS[mode].items():
+        if settings.get(key, old[key]) == old[key]:
+            settings[key] = value
+
+
+def mode_settings(request: dict) -> dict:
+    """The request's N, k_r and k_u, each its mode's default where the request has none."""
+    settings = request.get("settings", {})
+    defaults = MODE_DEFAULTS.get(settings.get("mode", "paper"), MODE_DEFAULTS["paper"])
+    return {key: settings.get(key, value) for key, value in defaults.items()}
+
+
+def set_name(request: dict, name: str | None) -> None:
+    """Set the request's name (an empty name removes it)."""
+    if name:
+        request["name"] = name
+    else:
+        request.pop("name", None)
+
+
+def add_obstacle(request: dict, obstacle: dict) -> None:
+    """Append an obstacle (the layout's JSON shape, [m]) to the layout."""
+    if request.get("layout") is not None:
+        request["layout"]["obstacles"].append(obstacle)
+
+
+def remove_last_obstacle(request: dict) -> None:
+    """Remove the layout's newest obstacle, if any."""
+    layout = request.get("layout")
+    if layout is not None and layout["obstacles"]:
+        layout["obstacles"].pop()
+
+
+def clear_obstacles(request: dict) -> None:
+    """Remove every obstacle of the layout."""
+    if request.get("layout") is not None:
+        request["layout"]["obstacles"].clear()
+
+
+def toggle_cell_obstacle(request: dict, cell_polygon) -> None:
+    """Toggle the obstacle of one cell (``cell_polygon``, [m]): remove the polygon
+    obstacle inside it that an earlier toggle added, else add one covering the cell's
+    middle (80 % of it, so that it blocks that cell only)."""
+    layout = request.get("layout")
+    if layout is None:
+        return
+    obstacles = layout["obstacles"]
+    for i, ob in enumerate(obstacles):
+        if ob.get("type") == "polygon" and all(geo.point_in_convex(p, cell_polygon) for p in ob["points"]):
+            del obstacles[i]
+            return
+    obstacles.append({"type": "polygon", "points": geo.shrink(cell_polygon, 0.8)})
+
+
+def with_new_layout(request: dict) -> dict:
+    """A copy of ``request`` with the default layout in place of its corridor."""
+    out = copy.deepcopy(request)
+    out["layout"] = copy.deepcopy(DEFAULT_REQUEST["layout"])
+    out.pop("segments", None)
+    out.pop("reference", None)
+    return out
