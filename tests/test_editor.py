@@ -17,7 +17,7 @@ import pytest
 from app import editor as editor_mod
 from app.editor import _geometry as geo
 from app.editor import _planning
-from planner.robot import SINGULAR_TOL, load_robot
+from planner.model import SINGULAR_TOL, kinematics, load_robot
 
 
 def free_port() -> int:
@@ -49,14 +49,14 @@ def test_point_in_convex_and_shrink():
 
 def test_reachable_boundary_separates_reachable_from_unreachable():
     robot = load_robot("moving-slide")
-    xs, ys, mask = geo.reachable_mask(robot, [-0.3, -0.3], [0.3, 0.3], 0.0, n=61, singular_tol=SINGULAR_TOL)
+    xs, ys, mask = _planning.reachable_mask(robot, [-0.3, -0.3], [0.3, 0.3], 0.0, n=61)
     assert mask.any() and not mask.all()
     # the mask agrees with the model at sample points
     for iy, ix in [(30, 30), (0, 0), (30, 45), (45, 30)]:
         pose = np.array([[xs[ix], ys[iy], 0.0]])
-        L = robot.leg_lengths(pose)[0]
+        L = kinematics.leg_lengths(robot, pose)[0]
         ok = bool(np.all((L >= robot.length_min) & (L <= robot.length_max))
-                  and robot.singularity_measure_batch(pose)[0] >= SINGULAR_TOL)
+                  and kinematics.singularity_measure(robot, pose)[0] >= SINGULAR_TOL)
         assert mask[iy, ix] == ok
     b = geo.mask_boundary(xs, ys, mask)
     assert b.shape[1:] == (2, 3) and len(b) > 0
@@ -77,8 +77,8 @@ def test_reachable_boundary_separates_reachable_from_unreachable():
 def test_robot_geometry_leg_lengths_match_model():
     robot = load_robot("moving-slide")
     pose = np.array([0.03, -0.02, 0.1])
-    g = geo.robot_geometry(robot, pose)
-    assert np.allclose(g["lengths"], robot.leg_lengths(pose[None])[0])
+    g = _planning.robot_geometry(robot, pose)
+    assert np.allclose(g["lengths"], kinematics.leg_lengths(robot, pose[None])[0])
     # platform keeps its shape: pivot distances are those of the description
     d = np.linalg.norm(g["pivots"][:, None] - g["pivots"][None], axis=-1)
     d0 = np.linalg.norm(robot.platform[:, None] - robot.platform[None], axis=-1)
@@ -130,8 +130,10 @@ class FakeSegmentation:
 
     def segment(self, layout, robot, settings, field_path="layout"):
         from planner.errors import PlannerError
-        from planner.request import Segment
+        from planner.schema import Segment
 
+        if not isinstance(layout, dict):  # a validated planner.schema.Layout
+            layout = layout.model_dump(mode="json")
         self.calls += 1
         time.sleep(self.delay)
         lo, hi = np.array(layout["bounds"]["lower"]), np.array(layout["bounds"]["upper"])
@@ -148,7 +150,7 @@ class FakeSegmentation:
                 b = a + h
                 cid = j * nx + i
                 corners = np.array([[a[0], a[1], 0], [b[0], a[1], 0], [b[0], b[1], 0], [a[0], b[1], 0]])
-                L = robot.leg_lengths(corners)
+                L = kinematics.leg_lengths(robot, corners)
                 if not np.all((L >= robot.length_min) & (L <= robot.length_max)):
                     st = "unreachable"
                 elif any(np.all(np.maximum(a, blo) < np.minimum(b, bhi)) for blo, bhi in boxes):
@@ -181,11 +183,11 @@ class FakeSegmentation:
             path.append(prev[path[-1]])
         path.reverse()
         start, end = np.array(layout["start"], float), np.array(layout["end"], float)
-        segs = [Segment(start.copy(), start.copy())]
+        segs = [Segment(lower=start.copy(), upper=start.copy())]
         for (i, j) in path:
             a = lo + h * np.array([i, j])
-            segs.append(Segment(np.array([a[0], a[1], 0.0]), np.array([a[0] + h, a[1] + h, 0.0])))
-        segs.append(Segment(end.copy(), end.copy()))
+            segs.append(Segment(lower=np.array([a[0], a[1], 0.0]), upper=np.array([a[0] + h, a[1] + h, 0.0])))
+        segs.append(Segment(lower=end.copy(), upper=end.copy()))
         d = {"cell": {"shape": "square", "size": h}, "bounds": layout["bounds"], "cells": cells,
              "path": [j * nx + i for (i, j) in path],
              "segments": [{"lower": sg.lower.tolist(), "upper": sg.upper.tolist()} for sg in segs],
@@ -195,8 +197,8 @@ class FakeSegmentation:
 
 def real_segmentation_available() -> bool:
     try:
-        from planner import segmentation  # noqa: F401
-        return hasattr(segmentation, "segment")
+        from planner import corridor
+        return hasattr(corridor, "segment")
     except ImportError:
         return False
 
@@ -355,7 +357,7 @@ def test_settings_controls_change_the_request(editor):
 def test_mode_switch_moves_untouched_penalties_to_the_mode_defaults(editor):
     """N, k_r, k_u still at the paper defaults follow the mode to the constrained defaults;
     a value the user changed stays; the plan uses what the request says."""
-    from planner.request import MODE_DEFAULTS
+    from planner.schema import MODE_DEFAULTS
 
     paper, con = MODE_DEFAULTS["paper"], MODE_DEFAULTS["constrained"]
     editor.gui.mode.value = "paper"
@@ -412,13 +414,9 @@ def test_segments_only_request_is_planned(editor):
 
 
 def _table1():
-    import pathlib
+    from tests.support import TABLE1_PATH
 
-    for p in (pathlib.Path("/work/shared/data/table1-corridor.json"),
-              pathlib.Path(__file__).parent / "data" / "table1-corridor.json"):
-        if p.exists():
-            return open(p)
-    pytest.skip("table1-corridor.json not found")
+    return open(TABLE1_PATH)
 
 
 def test_playback_moves_the_robot_along_the_trajectory(editor):

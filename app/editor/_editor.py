@@ -2,7 +2,7 @@
 
 A person designs a corridor in the browser (top-down view of the workspace) and sees the
 robot move through it. The editor's state *is* a plan request in the one JSON shape
-(:class:`app.schema.PlanRequestModel`, with a ``layout``); every edit changes that dict
+(:class:`planner.schema.PlanRequest`, with a ``layout``); every edit changes that dict
 (:mod:`._state`) and asks for a re-plan. Planning runs on a worker thread with a debounce
 and a generation counter (:mod:`._planning`): GUI callbacks return at once, a stale result
 never overwrites a newer one, and a slow plan never freezes the page. Errors (no path,

@@ -11,10 +11,7 @@ from __future__ import annotations
 import json
 from typing import TYPE_CHECKING, Any
 
-from pydantic import ValidationError
-
-from ..schema import PlanRequestModel, format_validation_error, request_dict
-from ._planning import to_csv
+from ._planning import editable, to_csv, validate_request
 
 if TYPE_CHECKING:
     from ._editor import Editor
@@ -51,17 +48,18 @@ class EditorFiles:
         last saved as (a new one if there is none or it was deleted meanwhile)."""
         state = self._editor.state
         req = state.request
+        valid, message = validate_request(req)
+        if valid is None:  # saving validates exactly as planning does
+            self._editor.notify("Not saved", message or "invalid request", client=client)
+            return
+        req = valid.to_json_dict()
         try:
-            PlanRequestModel.model_validate(req)
             if new or state.corridor_id is None:
                 rec = self.store.create_corridor(req, name=req.get("name"))
             else:
                 rec = self.store.update_corridor(state.corridor_id, req, name=req.get("name"))
                 if rec is None:
                     rec = self.store.create_corridor(req, name=req.get("name"))
-        except ValidationError as exc:
-            self._editor.notify("Not saved", format_validation_error(exc), client=client)
-            return
         except Exception as exc:  # noqa: BLE001 - any store failure is shown, the design stays
             self._editor.notify("Not saved", f"{type(exc).__name__}: {exc}", client=client)
             return
@@ -99,12 +97,12 @@ class EditorFiles:
     def load_request(self, data: Any, client, origin: str) -> bool:
         """Replace the design with the plan request ``data`` (from ``origin``, for the
         messages) and plan it at once; returns False (design unchanged) when it is invalid."""
-        try:
-            model = PlanRequestModel.model_validate(data)
-        except ValidationError as exc:
-            self._editor.notify("Import failed", f"{origin}: {format_validation_error(exc)}", client=client)
+        model, message = validate_request(data) if isinstance(data, dict) else (None, "a plan request must be a "
+                                                                               "JSON object")
+        if model is None:
+            self._editor.notify("Import failed", f"{origin}: {message}", client=client)
             return False
-        req = request_dict(model)
+        req = editable(model)
         if req.get("layout") is None:
             self._editor.notify("No layout", f"{origin} has no layout (segments or a reference only): it is planned "
                                 "and shown, but the layout tools do nothing until you start a new layout",

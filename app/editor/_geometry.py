@@ -3,9 +3,9 @@ editor draws, as arrays it can hand to the scene, and the screen <-> plane maps 
 top-down camera.
 
 Everything is in the workspace plane z = 0, SI units (m, rad, s). Kept apart from the
-scene (:mod:`app.editor._scene`) so it can be tested without a browser or a server. A robot
-argument is a ``planner.robot.Robot`` (duck-typed: ``base``, ``platform``, ``tool``,
-``leg_lengths``, ...), handed in by the caller.
+scene (:mod:`app.editor._scene`) so it can be tested without a browser or a server. The
+robot's geometry (reach, leg lengths) comes from the planner through
+:mod:`app.editor._planning`.
 """
 
 from __future__ import annotations
@@ -92,27 +92,6 @@ def shrink(polygon, factor: float) -> list[list[float]]:
     return (c + factor * (p - c)).tolist()
 
 
-def reachable_mask(robot, lower, upper, psi: float, n: int = 96, *, singular_tol: float):
-    """Sample the rectangle [lower, upper] [m] on an ``n`` x ``n`` grid of points and mark
-    the poses (x, y, psi [rad]) the robot reaches: every leg within its stroke and the pose
-    regular (singularity measure >= ``singular_tol``, the planner's tolerance,
-    ``planner.robot.SINGULAR_TOL``).
-
-    Returns ``(xs, ys, mask)``: grid coordinates [m] and a boolean (n, n) array indexed [iy, ix].
-    """
-    xs = np.linspace(lower[0], upper[0], n)
-    ys = np.linspace(lower[1], upper[1], n)
-    X, Y = np.meshgrid(xs, ys)
-    poses = np.column_stack((X.ravel(), Y.ravel(), np.full(X.size, float(psi))))
-    L = robot.leg_lengths(poses)
-    ok = np.all((L >= robot.length_min) & (L <= robot.length_max), axis=1)
-    if ok.any():
-        sing = np.zeros(len(poses))
-        sing[ok] = robot.singularity_measure_batch(poses[ok])
-        ok &= sing >= singular_tol
-    return xs, ys, ok.reshape(n, n)
-
-
 def mask_boundary(xs: np.ndarray, ys: np.ndarray, mask: np.ndarray, z: float = 0.0) -> np.ndarray:
     """Boundary between True and False samples of a grid mask as line segments (M, 2, 3):
     a staircase through the midpoints between neighbouring samples (resolution = grid step)."""
@@ -131,21 +110,6 @@ def mask_boundary(xs: np.ndarray, ys: np.ndarray, mask: np.ndarray, z: float = 0
         return np.zeros((0, 2, 3))
     s = np.concatenate(segs)
     return np.concatenate((s, np.full(s.shape[:2] + (1,), z)), axis=2)
-
-
-def platform_pivots_local(robot) -> np.ndarray:
-    """Platform pivots relative to the tool point, in the platform frame (n, 2) [m]."""
-    return np.asarray(robot.platform, dtype=float) - np.asarray(robot.tool, dtype=float)
-
-
-def robot_geometry(robot, pose) -> dict:
-    """The robot drawn at ``pose`` = [x, y, psi] (tool point, m, m, rad): base pivots (n, 2),
-    platform pivots in the world frame (n, 2) and leg lengths (n,) [m]."""
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    rot = np.array([[c, -s], [s, c]])
-    pivots = np.asarray(pose[:2], dtype=float) + platform_pivots_local(robot) @ rot.T
-    return {"base": robot.base.copy(), "pivots": pivots,
-            "lengths": np.linalg.norm(pivots - robot.base, axis=1)}
 
 
 def sample_at(time: np.ndarray, values: np.ndarray, t: float) -> np.ndarray:

@@ -22,15 +22,14 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 from pydantic import ValidationError
 
-from planner.errors import PlannerError
-from planner.plan import plan as run_plan
-from planner.request import MODE_DEFAULTS, Settings, parse_request
-from planner.robot import SINGULAR_TOL, Robot, builtin_robot_names, load_robot
-from planner.trajectory import to_csv
-
-from ..schema import PlanRequestModel, format_validation_error, request_dict
+from planner import PlannerError, PlanRequest, PlanResult, RobotModel, load_robot
+from planner import plan as run_plan
+from planner import to_csv as _result_csv
+from planner.model import SINGULAR_TOL, kinematics
+from planner.schema import DEFAULT_ROBOT, MODE_DEFAULTS, Settings, builtin_robot_names, format_validation_error
 
 __all__ = [
     "DEFAULT_ROBOT",
@@ -46,21 +45,78 @@ __all__ = [
     "compute_plan",
     "segmentation_module",
     "to_csv",
+    "validate_request",
+    "editable",
+    "reachable_mask",
+    "robot_geometry",
 ]
 
 log = logging.getLogger("rangeplan.editor")
 
-DEFAULT_ROBOT = "moving-slide"  #: robot of a request that names none (as ``planner.request``)
+Robot = RobotModel
 #: whether this planner's settings have a travel speed ``speed_m_s`` [m/s]
-HAS_SPEED_SETTING = "speed_m_s" in Settings.__dataclass_fields__
+HAS_SPEED_SETTING = "speed_m_s" in Settings.model_fields
 
 
 def segmentation_module():
-    """``planner.segmentation`` (imported lazily so the editor starts even without it).
-    Tests replace this function to control the segmentation's timing."""
-    from planner import segmentation
+    """``planner.corridor`` (its ``segment``). Tests replace this function to control the
+    segmentation's timing."""
+    from planner import corridor
 
-    return segmentation
+    return corridor
+
+
+def validate_request(request: dict) -> tuple[PlanRequest | None, str | None]:
+    """The request validated as planning and storage validate it: ``(request, None)`` or
+    ``(None, one line naming the field and the cause)``."""
+    try:
+        return PlanRequest.model_validate(request), None
+    except ValidationError as exc:
+        return None, format_validation_error(exc)
+
+
+def reachable_mask(robot: RobotModel, lower, upper, psi: float, n: int = 96):
+    """Sample the rectangle [lower, upper] [m] on an ``n`` x ``n`` grid of points and mark
+    the poses (x, y, psi [rad]) the robot reaches: every leg within its stroke and the pose
+    regular (singularity measure >= the planner's ``SINGULAR_TOL``). Returns ``(xs, ys,
+    mask)``: grid coordinates [m] and a boolean (n, n) array indexed [iy, ix]."""
+    xs = np.linspace(lower[0], upper[0], n)
+    ys = np.linspace(lower[1], upper[1], n)
+    X, Y = np.meshgrid(xs, ys)
+    poses = np.column_stack((X.ravel(), Y.ravel(), np.full(X.size, float(psi))))
+    L = kinematics.leg_lengths(robot, poses)
+    ok = np.all((L >= robot.length_min) & (L <= robot.length_max), axis=1)
+    if ok.any():
+        sing = np.zeros(len(poses))
+        sing[ok] = kinematics.singularity_measure(robot, poses[ok])
+        ok &= sing >= SINGULAR_TOL
+    return xs, ys, ok.reshape(n, n)
+
+
+def robot_geometry(robot: RobotModel, pose) -> dict:
+    """The robot drawn at ``pose`` = [x, y, psi] (tool point, m, m, rad): base pivots (n, 2),
+    platform pivots in the world frame (n, 2) and leg lengths (n,) [m]."""
+    pose = np.asarray(pose, dtype=float)
+    rx, ry, dx, dy = kinematics.leg_vectors(robot, pose[None])
+    pivots = np.column_stack((pose[0] + rx[0], pose[1] + ry[0]))
+    return {"base": robot.base.copy(), "pivots": pivots, "lengths": np.hypot(dx[0], dy[0])}
+
+
+def editable(req: PlanRequest) -> dict:
+    """A validated request as the editor's state: what the client gave (settings the mode
+    decides stay unset), with the layout complete (every field, top-level start/end merged
+    in), in JSON types."""
+    out = req.to_json_dict()
+    if req.layout is not None:
+        out["layout"] = req.layout.model_dump(mode="json", exclude_none=True)
+        for key in ("start", "end", "psi_range"):
+            out.pop(key, None)
+    return out
+
+
+def to_csv(result: dict) -> str:
+    """The CSV of a plan result (as JSON types)."""
+    return _result_csv(PlanResult.model_validate(result))
 
 
 class RobotCache:
@@ -112,20 +168,18 @@ def compute_plan(request: dict, robots: RobotCache) -> PlanOutcome:
     def outcome(seg, result, error) -> PlanOutcome:
         return PlanOutcome(seg, result, error, time.perf_counter() - t0)
 
-    try:
-        model = PlanRequestModel.model_validate(request)
-    except ValidationError as exc:
-        return outcome(None, None, {"code": "invalid_input", "message": format_validation_error(exc), "field": None})
+    req, message = validate_request(request)
+    if req is None:
+        return outcome(None, None, {"code": "invalid_input", "message": message, "field": None})
     seg_dict = None
     try:
-        req = parse_request(request_dict(model))
-        robot = robots.get(req.robot)
+        robot = robots.get(request.get("robot", DEFAULT_ROBOT))
         segments = req.segments
         if req.layout is not None:
             seg = segmentation_module().segment(req.layout, robot, req.settings)
             seg_dict = seg.to_dict()
             segments = seg.segments
-        return outcome(seg_dict, run_plan(req, robot=robot, segments=segments), None)
+        return outcome(seg_dict, run_plan(req, robot=robot, segments=segments).to_json_dict(), None)
     except PlannerError as exc:
         return outcome(seg_dict, None, exc.to_dict())
     except ImportError as exc:

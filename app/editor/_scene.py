@@ -23,7 +23,7 @@ import numpy as np
 import viser
 
 from . import _geometry as geo
-from ._planning import SINGULAR_TOL, Robot
+from ._planning import Robot, reachable_mask, robot_geometry
 
 __all__ = ["TICK_EVERY_S", "EditorScene"]
 
@@ -212,8 +212,7 @@ class EditorScene:
         outline = self._reach_cache.get(key)
         if outline is None:
             margin = 0.05 * (hi - lo)
-            xs, ys, mask = geo.reachable_mask(robot, lo - margin, hi + margin, psi, n=REACH_SAMPLES,
-                                              singular_tol=SINGULAR_TOL)
+            xs, ys, mask = reachable_mask(robot, lo - margin, hi + margin, psi, n=REACH_SAMPLES)
             outline = geo.mask_boundary(xs, ys, mask, geo.Z["reach"])
             if len(self._reach_cache) >= 8:
                 self._reach_cache.pop(next(iter(self._reach_cache)))
@@ -273,7 +272,7 @@ class EditorScene:
             if robot is not self._robot_drawn:
                 self._show_robot_structure(robot)
             z = geo.Z["robot"]
-            g = geo.robot_geometry(robot, pose)
+            g = robot_geometry(robot, pose)
             ends = np.stack((np.column_stack((g["base"], np.full(robot.n_legs, z))),
                              np.column_stack((g["pivots"], np.full(robot.n_legs, z)))), axis=1)
             ratio = np.zeros(robot.n_legs) if force is None else np.abs(force) / robot.force_max
@@ -287,7 +286,7 @@ class EditorScene:
         """What changes only with the robot: base pivots (world) and the platform's
         drawing in its own frame (origin at the tool point)."""
         self.base_pivots.points = np.column_stack((robot.base, np.full(robot.n_legs, geo.Z["pivots"])))
-        local = geo.platform_pivots_local(robot)
+        local = robot.r0  # platform pivots about the tool point, platform frame
         _show_mesh(self.platform_fill, *geo.polygon_mesh([local], 0.0))
         _show_lines(self.platform_edge, geo.polygon_edges([local], 0.0))
         self.platform_pivots.points = np.column_stack((local, np.full(robot.n_legs, _PIVOTS_ABOVE_PLATFORM)))

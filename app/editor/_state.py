@@ -1,7 +1,7 @@
 """The editor's state, without viser: the edited plan request and the newest plan outcome.
 
 The edited request is a plain dict in the one JSON shape of a plan request
-(:class:`app.schema.PlanRequestModel`, here with a ``layout``); every edit is a function
+(:class:`planner.schema.PlanRequest`, here with a ``layout``); every edit is a function
 that changes that dict in place under the state's lock. The newest published result,
 segmentation and error sit next to it, with the bookkeeping of which re-plan generation
 produced them. The request edits the GUI makes are plain functions here, so they can be
