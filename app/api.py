@@ -41,8 +41,16 @@ from app.storage import Store, default_data_dir
 from app.workers import JobTimeout, PlanPool, PoolBusy, WorkerCrashed
 from planner.errors import PlannerError
 from planner.orchestrator import to_csv
-from planner.schema import (PlanRequest, PlanResult, RobotDescription, RobotSummary, SegmentationResult,
-                            builtin_description, builtin_robot_names, error_details, field_path)
+from planner.schema import (
+    PlanRequest,
+    PlanResult,
+    RobotDescription,
+    RobotSummary,
+    SegmentationResult,
+    builtin_description,
+    builtin_robot_names,
+    error_details,
+)
 
 VERSION = "0.1.0"
 STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
@@ -267,7 +275,7 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
         pool = ensure_pool(request.app)
         loop = asyncio.get_running_loop()
         try:
-            out = await loop.run_in_executor(request.app.state.threads, pool.run, job)
+            out: Any = await loop.run_in_executor(request.app.state.threads, pool.run, job)
         except JobTimeout:
             return error_response(422, "timeout", f"planning took longer than the compute limit of "
                                   f"{pool.timeout_s:g} s and was stopped; use fewer segments or samples, "
@@ -367,7 +375,8 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
             raise StarletteHTTPException(404, f"no corridor with id {corridor_id!r}")
         return rec
 
-    @app.post("/v1/corridors", status_code=201, response_model=CorridorRecordModel, response_model_exclude_unset=True, tags=["corridors"],
+    @app.post("/v1/corridors", status_code=201, response_model=CorridorRecordModel, response_model_exclude_unset=True,
+              tags=["corridors"],
               responses=_errors(413, 422))
     def create_corridor(body: PlanRequest, request: Request, response: Response):
         """Save a plan request as a corridor; its name is the request's ``name``."""
@@ -375,17 +384,20 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
         response.headers["Location"] = f"/v1/corridors/{rec['id']}"
         return rec
 
-    @app.get("/v1/corridors", response_model=list[CorridorRecordModel], response_model_exclude_unset=True, tags=["corridors"])
+    @app.get("/v1/corridors", response_model=list[CorridorRecordModel], response_model_exclude_unset=True,
+             tags=["corridors"])
     def list_corridors(request: Request):
         """All saved corridors, oldest first."""
         return request.app.state.store.list_corridors()
 
-    @app.get("/v1/corridors/{corridor_id}", response_model=CorridorRecordModel, response_model_exclude_unset=True, tags=["corridors"],
+    @app.get("/v1/corridors/{corridor_id}", response_model=CorridorRecordModel, response_model_exclude_unset=True,
+             tags=["corridors"],
              responses=_errors(404))
     def get_corridor(corridor_id: str, request: Request):
         return get_or_404(request.app.state.store, corridor_id)
 
-    @app.put("/v1/corridors/{corridor_id}", response_model=CorridorRecordModel, response_model_exclude_unset=True, tags=["corridors"],
+    @app.put("/v1/corridors/{corridor_id}", response_model=CorridorRecordModel, response_model_exclude_unset=True,
+             tags=["corridors"],
              responses=_errors(404, 413, 422))
     def update_corridor(corridor_id: str, body: PlanRequest, request: Request):
         """Replace a saved corridor's request (and name)."""

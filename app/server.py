@@ -27,7 +27,7 @@ class _StopSignal(Exception):
         self.previous = previous
 
     @classmethod
-    def install(cls) -> "_StopSignal":
+    def install(cls) -> _StopSignal:
         import signal
         import threading
 

@@ -23,16 +23,17 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import json  # noqa: E402
 import math  # noqa: E402
-from itertools import chain  # noqa: E402
-import orjson  # noqa: E402
+import queue  # noqa: E402
 import socket  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
-from multiprocessing.connection import Connection  # noqa: E402
-import queue  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
 import traceback  # noqa: E402
+from itertools import chain  # noqa: E402
+from multiprocessing.connection import Connection  # noqa: E402
+
+import orjson  # noqa: E402
 
 
 class JobTimeout(Exception):
@@ -153,9 +154,10 @@ def run_job(job: dict) -> tuple:
             plan_id = new_id() if job.get("store") else None
             result.plan_id = plan_id
             data = result.to_json()
-            if plan_id:
-                _store(job["store"]).save_plan_json(data.decode(), req.to_json_dict(), job.get("corridor_id"),
-                                                    id=plan_id)
+            store = _store(job.get("store"))
+            if plan_id and store is not None:
+                store.save_plan_json(data.decode(), req.to_json_dict(), job.get("corridor_id"),
+                                     id=plan_id)
             payload = to_csv(result).encode() if job.get("format") == "csv" else data
             return ("ok", payload, {"plan_id": plan_id})
         if job["kind"] == "segment":
@@ -193,7 +195,7 @@ def _worker_main(conn) -> None:
     import planner
     try:
         planner.warm_up()  # ~0.3 s from numba's on-disk cache; the first plan paid it before
-    except Exception:  # noqa: BLE001 - a planner that cannot plan says so in each job's answer
+    except Exception:
         pass
     try:
         conn.send("ready")  # the job clock starts only after this

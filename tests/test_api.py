@@ -19,9 +19,9 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.api import create_app, field_path
+from app.storage import Store
 from planner.errors import PlannerError
 from tests.support import robot_description
-from app.storage import Store
 
 ROOT = Path(__file__).resolve().parent.parent
 TABLE1_PATH = ROOT / "static" / "examples" / "table1.json"
@@ -232,7 +232,8 @@ def test_field_path_strips_body_and_union_tags(client):
     desc = robot_description("moving-slide")
     desc["legs"] = [copy.deepcopy(desc["legs"]) for _ in range(4)]
     desc["legs"][2]["rod"]["mass"] = -1.0
-    assert_error(client.post("/v1/plan", json={**TABLE1, "robot": desc}), 422, "invalid_input", "robot.legs[2].rod.mass")
+    r = client.post("/v1/plan", json={**TABLE1, "robot": desc})
+    assert_error(r, 422, "invalid_input", "robot.legs[2].rod.mass")
 
 
 # ---------------------------------------------------------------------------------------

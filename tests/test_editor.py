@@ -8,7 +8,6 @@ import copy
 import json
 import math
 import socket
-import threading
 import time
 
 import numpy as np

@@ -1,4 +1,5 @@
-"""The compiled twins (planner/model/kernels.py, planner/horizon/kernels.py, planner/orchestrator/kernels.py) equals the numpy reference implementation of every
+"""The compiled twins (planner/model/kernels.py, planner/horizon/kernels.py,
+planner/orchestrator/kernels.py) equal the numpy reference implementation of every
 stage, and a whole compiled plan equals the reference loop's plan."""
 
 import json
@@ -7,16 +8,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from planner.model import kernels
+from planner.errors import PlannerError
+from planner.horizon.solvers import solve_qr, solve_riccati
+from planner.model import dynamics, kernels, kinematics, load_robot
+from planner.model.discretisation import zoh, zoh_factorised
+from planner.model.plant import rk4_sample
 from planner.orchestrator import kernels as loop_kernels
 from planner.orchestrator.simulate import C_POSE
-from planner.model.plant import rk4_sample
-from planner.model.discretisation import zoh, zoh_factorised
-from planner.errors import PlannerError
-from tests.support import TABLE1, plan_json as plan
-from planner.model import load_robot, dynamics, kinematics, reach
-from tests.support import robot_description
-from planner.horizon.solvers import solve_qr, solve_riccati
+from tests.support import TABLE1, robot_description
+from tests.support import plan_json as plan
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -121,7 +121,8 @@ def _with(req, **settings):
     return {**req, "settings": {**req.get("settings", {}), **settings}}
 
 
-@pytest.mark.parametrize("settings", [{}, {"N": 10, "k_u": 2e-4}, {"plant_substeps": 2, "Ts": 0.005, "require_settled": False}])
+@pytest.mark.parametrize("settings", [{}, {"N": 10, "k_u": 2e-4},
+                                      {"plant_substeps": 2, "Ts": 0.005, "require_settled": False}])
 def test_compiled_plan_equals_the_reference_loop(settings):
     a = plan(_with(TABLE1, **settings))
     b = plan(_with(TABLE1, solver="structured", **settings))

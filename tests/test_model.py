@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from planner.model.discretisation import zoh
 from planner.errors import PlannerError
 from planner.model import dynamics, kinematics, load_robot, reach
+from planner.model.discretisation import zoh
 from tests.support import robot_description
 
 ROBOTS = ["moving-slide", "tri-slide"]
@@ -20,7 +20,8 @@ def random_states(robot, rng, count=20):
     out = []
     while len(out) < count:
         y = rng.uniform([-0.06, -0.06, -0.2], [0.06, 0.06, 0.2])
-        if np.all(kinematics.leg_lengths(robot, y) > robot.length_min) and np.all(kinematics.leg_lengths(robot, y) < robot.length_max):
+        L = kinematics.leg_lengths(robot, y)
+        if np.all(L > robot.length_min) and np.all(L < robot.length_max):
             v = rng.normal(size=3) * [0.3, 0.3, 1.0]
             out.append(np.concatenate((y, v)))
     return out
@@ -74,7 +75,8 @@ def test_reduced_model_equals_independent_dae_solve(name):
         M = dynamics.mass_matrix(robot, s)
         Phi = dynamics.constraint_jacobian(robot, s)
         eps = 1e-6
-        Phi_dot = (dynamics.constraint_jacobian(robot, s + eps * s_dot) - dynamics.constraint_jacobian(robot, s - eps * s_dot)) / (2 * eps)
+        Phi_dot = (dynamics.constraint_jacobian(robot, s + eps * s_dot)
+                   - dynamics.constraint_jacobian(robot, s - eps * s_dot)) / (2 * eps)
         T = np.zeros((3 + 2 * n, n))
         T[3:3 + n] = np.eye(n)
         K = np.block([[M, -Phi.T], [Phi, np.zeros((2 * n, 2 * n))]])
@@ -139,7 +141,8 @@ def test_zoh_equals_fine_integration_of_the_frozen_model():
     sol = solve_ivp(lambda t, z: A @ z + B @ u, (0, Ts), x, method="DOP853", rtol=1e-13, atol=1e-15)
     assert np.allclose(Ad @ x + Bd @ u, sol.y[:, -1], rtol=0, atol=1e-12)
     # and the frozen model stays close to the nonlinear one over one sample (O(Ts^2) in velocity)
-    sol_nl = solve_ivp(lambda t, z: dynamics.state_derivative(robot, z, u), (0, Ts), x, method="DOP853", rtol=1e-12, atol=1e-14)
+    sol_nl = solve_ivp(lambda t, z: dynamics.state_derivative(robot, z, u), (0, Ts), x, method="DOP853",
+                       rtol=1e-12, atol=1e-14)
     err = np.abs(Ad @ x + Bd @ u - sol_nl.y[:, -1])
     assert err[:3].max() < 1e-6 and err[3:].max() < 1e-4
 

@@ -1,16 +1,14 @@
 """The plan loop end to end (paper mode): Table I, a 3RPR robot, tracking, errors."""
 
 import copy
-import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from planner.errors import PlannerError
 from planner.corridor import range_sequence
-from planner.model import dynamics, kinematics, load_robot, reach
+from planner.errors import PlannerError
+from planner.model import dynamics, kinematics, load_robot
 from planner.schema import parse_request
 from tests.support import TABLE1, robot_description
 from tests.support import plan_json as plan
@@ -74,7 +72,7 @@ def test_table1_output_and_physics_agree(t1):
     U = np.array(t1["drives"]["force"])
     acc = np.array(t1["acceleration"])
     for k in range(0, len(X) - 1, 17):
-        sol = solve_ivp(lambda t, x: dynamics.state_derivative(robot, x, U[k]), (0, 0.01), X[k],
+        sol = solve_ivp(lambda t, x, u=U[k]: dynamics.state_derivative(robot, x, u), (0, 0.01), X[k],
                         method="DOP853", rtol=1e-12, atol=1e-14)
         assert np.abs(sol.y[:3, -1] - X[k + 1, :3]).max() < 1e-9
         assert np.abs(sol.y[3:, -1] - X[k + 1, 3:]).max() < 1e-7

@@ -4,11 +4,10 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from planner.model.discretisation import zoh
 from planner.horizon import prediction_matrices
-from planner.model import load_robot, dynamics, kinematics, reach
-from tests.support import robot_description
 from planner.horizon.solvers import solve_qr, solve_structured, square_root_solve, stacked_system
+from planner.model import dynamics, load_robot
+from planner.model.discretisation import zoh
 
 C = np.eye(3, 6)
 

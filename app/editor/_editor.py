@@ -18,6 +18,7 @@ Entry point: :func:`start_editor` (used by ``app.server.serve``).
 from __future__ import annotations
 
 import logging
+from typing import Any, cast
 from collections.abc import Callable
 
 import numpy as np
@@ -211,7 +212,8 @@ class Editor:
         clients = [client] if client is not None else list(self.server.get_clients().values())
         for c in clients:
             try:
-                c.add_notification(title, body, color=color, auto_close_seconds=8.0 if color != "red" else None)
+                c.add_notification(title, body, color=cast(Any, color),
+                                   auto_close_seconds=8.0 if color != "red" else None)
             except Exception:  # a client that went away must not break the editor
                 log.debug("notification to a client failed", exc_info=True)
 
@@ -291,6 +293,7 @@ class Editor:
             self.gui.show_status(f"**{error['code']}** — {error['message']}")
             self.notify(error_title(error), error_body(error))
             return
+        assert result is not None  # a plan without an error has a result
         self.scene.show_result(result)
         if request.get("layout") is None:  # the corridor the planner used: the request's segments
             self.scene.show_corridor(result["corridor"].get("segments") or [])

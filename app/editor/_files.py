@@ -37,7 +37,7 @@ class EditorFiles:
             return
         try:
             rows = self.store.list_corridors()
-        except Exception as exc:  # noqa: BLE001 - any store failure is shown, the editor goes on
+        except Exception as exc:
             self._editor.notify("Could not list corridors", str(exc))
             return
         self.stored_ids = {f"{r.get('name') or '(unnamed)'} · {r['id'][:8]}": r["id"] for r in rows}
@@ -60,7 +60,7 @@ class EditorFiles:
                 rec = self.store.update_corridor(state.corridor_id, req, name=req.get("name"))
                 if rec is None:
                     rec = self.store.create_corridor(req, name=req.get("name"))
-        except Exception as exc:  # noqa: BLE001 - any store failure is shown, the design stays
+        except Exception as exc:
             self._editor.notify("Not saved", f"{type(exc).__name__}: {exc}", client=client)
             return
         state.corridor_id = rec["id"]

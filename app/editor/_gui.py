@@ -102,7 +102,7 @@ class EditorGui:
         gui.configure_theme(control_width="large", dark_mode=False, show_logo=False, show_share_button=False)
         gui.add_markdown("**rangeplan corridor editor** — x right, y up, units m, rad, s, N")
         self.plan_button = gui.add_button("Plan", color="blue", hint="Re-plan now")
-        self.plan_button.on_click(lambda _: editor.plan_now())
+        self.plan_button.on_click(lambda _: None if editor.plan_now() else None)
         self.auto_replan = gui.add_checkbox("Re-plan on every edit", True)
         self.status = gui.add_markdown("Status: starting")
         self.time = gui.add_slider("Time (s)", min=0.0, max=1.0, step=0.01, initial_value=0.0)
@@ -299,7 +299,8 @@ _ERROR_TITLES = {"no_path": "No path", "unreachable": "Unreachable", "invalid_in
 
 def error_title(error: dict) -> str:
     """Notification title of a planner error ``{code, message, field}``."""
-    return _ERROR_TITLES.get(error.get("code"), str(error.get("code") or "Error"))
+    code = str(error.get("code") or "Error")
+    return _ERROR_TITLES.get(code, code)
 
 
 def error_body(error: dict) -> str:

@@ -17,12 +17,14 @@ Two solvers give the same minimiser:
 * :func:`solve_structured` - the same problem kept in its stage-wise (sparse) form: the
   inputs are eliminated stage by stage and the optimality (KKT) conditions of the states
   and multipliers, ordered stage by stage, form a banded matrix of fixed bandwidth, solved
-  by one banded LU (LAPACK ``gbsv``). Cost grows linearly in ``N``. Its solution equals the QR one to rounding (tests check 1e-9).
+  by one banded LU (LAPACK ``gbsv``). Cost grows linearly in ``N``. Its solution equals the QR one to
+  rounding (tests check 1e-9).
 """
 
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import Any, cast
 
 import numpy as np
 from scipy.linalg import get_lapack_funcs, solve_triangular
@@ -30,7 +32,7 @@ from scipy.linalg import get_lapack_funcs, solve_triangular
 from .kernels import riccati
 from .prediction import prediction_matrices
 
-_gbsv = get_lapack_funcs("gbsv", dtype=np.float64)
+_gbsv = cast(Any, get_lapack_funcs("gbsv", dtype=np.float64))
 
 
 def square_root_solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -87,11 +89,15 @@ def _kkt_pattern(N: int, n: int, p: int):
     kl = ku = nb - 1
     s = np.arange(N)[:, None, None]
     i, j = np.arange(n)[None, :, None], np.arange(n)[None, None, :]
-    rows, cols, src = [], [], []
+    rows: list[np.ndarray] = []
+    cols: list[np.ndarray] = []
+    src: list[np.ndarray] = []
 
     def add(r, c, v):
         r, c, v = np.broadcast_arrays(r, c, v)
-        rows.append(r.ravel()); cols.append(c.ravel()); src.append(v.ravel())
+        rows.append(r.ravel())
+        cols.append(c.ravel())
+        src.append(v.ravel())
 
     off_A = N * n * n
     off_H = off_A + n * n
@@ -107,10 +113,10 @@ def _kkt_pattern(N: int, n: int, p: int):
         lam, xs = s1 * nb + i, (s1 - 1) * nb + n + j
         add(lam, xs, off_A + i * n + j)  # Ad
         add(xs, lam, off_A + i * n + j)  # Ad^T
-    rows, cols, src = (np.concatenate(z) for z in (rows, cols, src))
-    flat = (kl + ku + rows - cols) * dim + cols
+    row_idx, col_idx, src_idx = (np.concatenate(z) for z in (rows, cols, src))
+    flat = (kl + ku + row_idx - col_idx) * dim + col_idx
     x_rows = (np.arange(N)[:, None] * nb + n + np.arange(p)).ravel()
-    return kl, ku, dim, flat, src, x_rows
+    return kl, ku, dim, flat, src_idx, x_rows
 
 
 def solve_structured(Ad, Bd, C, x0, qa, qb, qu, ra, rb) -> np.ndarray:

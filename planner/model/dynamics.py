@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from functools import lru_cache
+from typing import Any, cast
 
 import numpy as np
 from scipy.linalg import get_lapack_funcs
@@ -21,7 +22,7 @@ __all__ = ["R_matrix", "physical_coordinates", "loop_closure", "constraint_jacob
            "generalised_forces", "acceleration", "state_derivative", "factorised_blocks", "factorised",
            "kinetic_energy"]
 
-_gesv = get_lapack_funcs("gesv", dtype=np.float64)
+_gesv = cast(Any, get_lapack_funcs("gesv", dtype=np.float64))
 
 
 def _solve(M: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -359,7 +359,7 @@ def smallest_singular_values(J):
         if not finite:
             out[b] = 0.0
             continue
-        for sweep in range(60):
+        for _sweep in range(60):
             rotated = False
             for p in range(c - 1):
                 for q in range(p + 1, c):

@@ -76,5 +76,6 @@ def singularity_measure(model: RobotModel, poses: np.ndarray) -> np.ndarray:
     ~1 well inside the workspace. Computed by the compiled one-sided Jacobi
     :func:`~planner.model.kernels.smallest_singular_values` (equal to numpy's SVD, tested)."""
     with np.errstate(invalid="ignore", divide="ignore"):  # a zero-length leg has no direction
-        Jn = leg_jacobians(model, np.atleast_2d(np.asarray(poses, float))) * np.array([1.0, 1.0, 1.0 / model.char_length])
+        J = leg_jacobians(model, np.atleast_2d(np.asarray(poses, float)))
+        Jn = J * np.array([1.0, 1.0, 1.0 / model.char_length])
     return smallest_singular_values(np.ascontiguousarray(Jn))

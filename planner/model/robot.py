@@ -32,8 +32,8 @@ import numpy as np
 from pydantic import ValidationError
 
 from ..errors import PlannerError, invalid
-from .kernels import pack
 from ..schema import DEFAULT_ROBOT, RobotDescription, builtin_description, builtin_robot_names, planner_error
+from .kernels import pack
 
 __all__ = ["RobotModel", "load_robot"]
 

@@ -115,7 +115,8 @@ def feasible(result: PlanResult) -> bool:
 Candidate = tuple[bool, PlanResult | None, str | None]
 
 
-def search_fastest(plan_at: Callable[[int], PlanResult], st: Settings, n_segments: int) -> tuple[int, dict[int, Candidate]]:
+def search_fastest(plan_at: Callable[[int], PlanResult], st: Settings,
+                   n_segments: int) -> tuple[int, dict[int, Candidate]]:
     """The smallest feasible ``samples_per_segment`` (see the module docstring) by planning
     candidates with ``plan_at(S)``; returns ``(S, candidates)``, ``S = 0`` if none up to the
     limit is feasible (then the largest tried is ``max(candidates)``)."""

@@ -10,14 +10,42 @@
 
 from .errors import error_details, field_path, format_validation_error, planner_error
 from .layout import SQRT3_2, Bounds, Cell, Circle, Layout, Obstacle, Polygon, Rectangle, cell_count
-from .limits import (DEFAULT_ROBOT, DEFAULT_SAMPLES_PER_SEGMENT, MAX_CELLS, MAX_HORIZON, MAX_LEGS, MAX_OBSTACLES,
-                     MAX_POLYGON_POINTS, MAX_SAMPLES_PER_SEGMENT, MAX_SEGMENTS, MAX_TOTAL_STEPS, MIN_TS,
-                     MODE_DEFAULTS)
+from .limits import (
+                     DEFAULT_ROBOT,
+                     DEFAULT_SAMPLES_PER_SEGMENT,
+                     MAX_CELLS,
+                     MAX_HORIZON,
+                     MAX_LEGS,
+                     MAX_OBSTACLES,
+                     MAX_POLYGON_POINTS,
+                     MAX_SAMPLES_PER_SEGMENT,
+                     MAX_SEGMENTS,
+                     MAX_TOTAL_STEPS,
+                     MIN_TS,
+                     MODE_DEFAULTS,
+)
 from .request import TIMING_FIELDS, PlanRequest, Reference, Segment, Settings, parse_request
-from .result import (UNITS, CorridorSamples, CorridorSegment, Drives, HalfPlanes, Metrics, PlanResult, RobotSummary,
-                     SegmentationCell, SegmentationResult, Timing)
-from .robot import BodyDescription, LegDescription, PlatformDescription, RobotDescription, builtin_description, \
-    builtin_robot_names
+from .result import (
+                     UNITS,
+                     CorridorSamples,
+                     CorridorSegment,
+                     Drives,
+                     HalfPlanes,
+                     Metrics,
+                     PlanResult,
+                     RobotSummary,
+                     SegmentationCell,
+                     SegmentationResult,
+                     Timing,
+)
+from .robot import (
+                     BodyDescription,
+                     LegDescription,
+                     PlatformDescription,
+                     RobotDescription,
+                     builtin_description,
+                     builtin_robot_names,
+)
 
 __all__ = [
     "PlanRequest", "Segment", "Reference", "Settings", "parse_request", "TIMING_FIELDS",

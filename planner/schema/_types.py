@@ -7,13 +7,14 @@ serialise back to lists.
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, LiteralString, cast
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, GetPydanticSchema
 from pydantic_core import PydanticCustomError, core_schema
 
-__all__ = ["Finite", "Strict", "fail", "Pair", "Triple", "Vec2", "Vec3", "Points2", "Rows3", "Rows", "FloatArray", "array_of"]
+__all__ = ["Finite", "Strict", "fail", "Pair", "Triple", "Vec2", "Vec3", "Points2", "Rows3", "Rows", "FloatArray",
+           "array_of"]
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 
@@ -23,9 +24,9 @@ def array_of(inner: Any, **constraints: Any) -> GetPydanticSchema:
     ``min_length``), held as a float ``numpy.ndarray``, serialised as lists again."""
 
     def get_schema(_tp: Any, handler: Any) -> core_schema.CoreSchema:
-        schema = handler.generate_schema(inner)
+        schema = cast(core_schema.CoreSchema, handler.generate_schema(inner))
         if constraints:
-            schema = {**schema, **constraints}
+            schema = cast(core_schema.CoreSchema, {**schema, **constraints})
         return core_schema.no_info_after_validator_function(
             _to_array, schema,
             serialization=core_schema.plain_serializer_function_ser_schema(_to_list, return_schema=schema))
@@ -69,4 +70,5 @@ class Strict(BaseModel):
 def fail(message: str, field: str | None = None, code: str = "invalid_input") -> PydanticCustomError:
     """A validation error with a finished ``message``; ``field`` is a path below the
     validated model (see :mod:`planner.schema.errors`), ``code`` the error code."""
-    return PydanticCustomError(code, message, {"field": field} if field else None)
+    return PydanticCustomError(cast(LiteralString, code), cast(LiteralString, message),
+                               {"field": field} if field else None)

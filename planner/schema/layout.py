@@ -10,7 +10,7 @@ reachable needs the robot and is checked by :mod:`planner.corridor`.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import shapely
@@ -32,7 +32,8 @@ class Bounds(Strict):
     def _ordered(self) -> Bounds:
         for i, axis in enumerate("xy"):
             if not self.lower[i] < self.upper[i]:
-                raise fail(f"must be greater than bounds.lower in {axis} ({float(self.upper[i]):g} <= {float(self.lower[i]):g})", "upper")
+                raise fail(f"must be greater than bounds.lower in {axis} ({self.upper[i]:g} <= {self.lower[i]:g})",
+                           "upper")
         return self
 
 
@@ -45,7 +46,8 @@ class Rectangle(Strict):
     def _size(self) -> Rectangle:
         for i, axis in enumerate("xy"):
             if not self.lower[i] < self.upper[i]:
-                raise fail(f"degenerate rectangle: upper must be greater than lower in {axis} ({float(self.upper[i]):g} <= {float(self.lower[i]):g})", "upper")
+                raise fail(f"degenerate rectangle: upper must be greater than lower in {axis} "
+                           f"({self.upper[i]:g} <= {self.lower[i]:g})", "upper")
         return self
 
 
@@ -69,7 +71,8 @@ class Polygon(Strict):
     def _simple(cls, v: np.ndarray) -> np.ndarray:
         poly = shapely.Polygon(v)
         if not poly.is_valid:
-            raise fail(f"degenerate polygon: {shapely.is_valid_reason(poly)} (the outline must not cross or touch itself)")
+            raise fail(f"degenerate polygon: {shapely.is_valid_reason(poly)} (the outline must not cross or touch "
+                       "itself)")
         if not poly.area > 0:
             raise fail("degenerate polygon: zero area")
         return v
@@ -88,8 +91,7 @@ def _drop_nulls(value: Any) -> Any:
 
 
 Obstacle = Annotated[
-    Union[Annotated[Rectangle, Tag("~rectangle")], Annotated[Circle, Tag("~circle")],
-          Annotated[Polygon, Tag("~polygon")]],
+    Annotated[Rectangle, Tag("~rectangle")] | Annotated[Circle, Tag("~circle")] | Annotated[Polygon, Tag("~polygon")],
     Discriminator(_obstacle_kind, custom_error_type="invalid_input",
                   custom_error_message="type must be 'rectangle', 'polygon' or 'circle'",
                   custom_error_context={"field": "type"}),
@@ -120,7 +122,7 @@ class Layout(Strict):
     obstacles: list[Obstacle] = Field(default_factory=list, max_length=MAX_OBSTACLES,
                                       description="Obstacles in the workspace")
     clearance: Finite = Field(0.0, ge=0, description="Distance in m the tool point keeps from every obstacle")
-    cell: Cell = Field(default_factory=Cell, description="Cell shape and size")
+    cell: Cell = Field(default_factory=lambda: Cell.model_validate({}), description="Cell shape and size")
     start: Vec3 | None = Field(None, description="Start pose [x, y, psi] in m, m, rad (required here or at the "
                                "request's top level)")
     end: Vec3 | None = Field(None, description="End pose [x, y, psi] in m, m, rad (required here or at the "
@@ -145,17 +147,19 @@ class Layout(Strict):
         for key in ("start", "end"):
             pose = getattr(self, key)
             if pose is None:
-                raise fail(f"the {key} pose [x, y, psi] (m, m, rad) is required (in the layout or at the request's top level)", key)
+                raise fail(f"the {key} pose [x, y, psi] (m, m, rad) is required (in the layout or at the request's "
+                           "top level)", key)
         if self.psi_range is not None:
             lo, hi = self.psi_range
             for key in ("start", "end"):
                 angle = float(getattr(self, key)[2])
                 if not lo - 1e-12 <= angle <= hi + 1e-12:
-                    raise fail(f"must contain the {key} angle {angle:g} rad, got [{float(lo):g}, {float(hi):g}]", "psi_range")
+                    raise fail(f"must contain the {key} angle {angle:g} rad, got [{lo:g}, {hi:g}]", "psi_range")
         if self.cell.size is not None:
             n = cell_count(self.bounds.lower, self.bounds.upper, self.cell.shape, self.cell.size)[0]
             if n > MAX_CELLS:
-                raise fail(f"cell size {self.cell.size:g} m gives {n} {self.cell.shape} cells over the bounds, more than the limit of {MAX_CELLS}; use larger cells", "cell.size", code="too_large")
+                raise fail(f"cell size {self.cell.size:g} m gives {n} {self.cell.shape} cells over the bounds, more "
+                           f"than the limit of {MAX_CELLS}; use larger cells", "cell.size", code="too_large")
         return self
 
     @property

@@ -19,7 +19,7 @@ dynamics (unreachable poses, no path, infeasible limits) is found by the planner
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import Discriminator, Field, StrictBool, Tag, ValidationError, field_validator, model_validator
@@ -28,8 +28,16 @@ from ..errors import PlannerError
 from ._types import Finite, Pair, Strict, Triple, Vec3, array_of, fail
 from .errors import planner_error
 from .layout import Layout
-from .limits import (DEFAULT_ROBOT, DEFAULT_SAMPLES_PER_SEGMENT, MAX_HORIZON, MAX_SAMPLES_PER_SEGMENT, MAX_SEGMENTS,
-                     MAX_TOTAL_STEPS, MIN_TS, MODE_DEFAULTS)
+from .limits import (
+    DEFAULT_ROBOT,
+    DEFAULT_SAMPLES_PER_SEGMENT,
+    MAX_HORIZON,
+    MAX_SAMPLES_PER_SEGMENT,
+    MAX_SEGMENTS,
+    MAX_TOTAL_STEPS,
+    MIN_TS,
+    MODE_DEFAULTS,
+)
 from .robot import RobotDescription, builtin_description, builtin_robot_names
 
 __all__ = ["PlanRequest", "Reference", "Segment", "Settings", "parse_request", "TIMING_FIELDS"]
@@ -37,6 +45,9 @@ __all__ = ["PlanRequest", "Reference", "Segment", "Settings", "parse_request", "
 #: the settings that choose the timing of a corridor; at most one per request
 TIMING_FIELDS = ("samples_per_segment", "speed_m_s", "total_time_s", "fastest")
 _MODE_FIELDS = ("N", "k_r", "k_u", "samples_per_segment")
+#: the default of a setting the mode decides: replaced by a number in :meth:`Settings._resolve`
+#: (typed ``Any`` so that the field keeps its number type for the code that reads it)
+MODE_DECIDES: Any = None
 
 
 #: a convex cell's vertices [[x, y], ...] in m
@@ -100,23 +111,24 @@ class Settings(Strict):
     (or null) take the mode's defaults; after validation they always hold numbers."""
 
     Ts: Finite = Field(0.01, ge=MIN_TS, le=1.0, description="Sample time in s")
-    N: int = Field(None, ge=1, le=MAX_HORIZON, description="Prediction horizon in samples; default "
+    N: int = Field(MODE_DECIDES, ge=1, le=MAX_HORIZON, description="Prediction horizon in samples; default "
                    f"{MODE_DEFAULTS['paper']['N']:g} in paper mode, {MODE_DEFAULTS['constrained']['N']:g} in "
                    "constrained mode")
-    samples_per_segment: int = Field(None, ge=1, le=MAX_SAMPLES_PER_SEGMENT,
+    samples_per_segment: int = Field(MODE_DECIDES, ge=1, le=MAX_SAMPLES_PER_SEGMENT,
                                      description="Samples each segment is held (count); default N if N is given, "
                                      f"else {DEFAULT_SAMPLES_PER_SEGMENT}")
-    k_r: Finite = Field(None, gt=0, le=1e12, description="Range penalty: Q_ra = Q_rb = k_r I (1/m, 1/rad); "
+    k_r: Finite = Field(MODE_DECIDES, gt=0, le=1e12, description="Range penalty: Q_ra = Q_rb = k_r I (1/m, 1/rad); "
                         f"default {MODE_DEFAULTS['paper']['k_r']:g} in paper mode, "
                         f"{MODE_DEFAULTS['constrained']['k_r']:g} in constrained mode")
-    k_u: Finite = Field(None, gt=0, le=1e12, description="Drive-force penalty: Q_u = k_u I (1/N); default "
+    k_u: Finite = Field(MODE_DECIDES, gt=0, le=1e12, description="Drive-force penalty: Q_u = k_u I (1/N); default "
                         f"{MODE_DEFAULTS['paper']['k_u']:g} in paper mode, "
                         f"{MODE_DEFAULTS['constrained']['k_u']:g} in constrained mode")
     q_ra: Vec3 | None = Field(None, description="Diagonal of Q_ra (1/m, 1/m, 1/rad), >= 0; overrides k_r")
     q_rb: Vec3 | None = Field(None, description="Diagonal of Q_rb (1/m, 1/m, 1/rad), >= 0; overrides k_r")
     q_u: PerDrive | None = Field(None, description="Diagonal of Q_u, one positive number per "
                                    "drive (1/N); overrides k_u")
-    taper: StrictBool = Field(True, description="Spread the range out of the start point and narrow it onto the end point")
+    taper: StrictBool = Field(True, description="Spread the range out of the start point and narrow it onto the end "
+                              "point")
     mode: Literal["paper", "constrained"] = Field(
         "paper", description="'paper': the seed's soft range criterion; 'constrained': hard corridor and drive limits")
     solver: Literal["riccati", "structured", "qr"] = Field(
@@ -124,7 +136,7 @@ class Settings(Strict):
         "(backward Riccati recursion, O(N)), 'structured' (banded KKT, O(N)) or 'qr' (the paper's Householder "
         "QR, eqs. 17-23)")
     backend: Literal["compiled", "reference"] = Field(
-        None, description="'compiled' (default with the riccati solver): model, hold, horizon solve, plant and the "
+        MODE_DECIDES, description="'compiled' (default with the riccati solver): model, hold, horizon solve, plant and the "
         "constrained mode's QP assembly run as compiled kernels; 'reference' (default with the structured or qr "
         "solver): the numpy implementation of every stage, same results")
     settle_position_m: Finite = Field(1e-4, gt=0, le=1, description="End-point position tolerance in m")
@@ -133,7 +145,8 @@ class Settings(Strict):
     settle_rate_rad_s: Finite = Field(1e-3, gt=0, le=1, description="Angular speed that counts as stopped in rad/s")
     tail_max_s: Finite = Field(3.0, ge=0, le=600, description="Longest time in s the end point is held for settling")
     plant_substeps: int = Field(1, ge=1, le=50, description="RK4 steps of the nonlinear model per sample (count)")
-    require_settled: StrictBool = Field(True, description="Fail with code not_settled instead of returning an unsettled plan")
+    require_settled: StrictBool = Field(True, description="Fail with code not_settled instead of returning an "
+                                        "unsettled plan")
     speed_m_s: Finite | None = Field(None, gt=0, le=100, description="Target mean tool speed along the corridor "
                                      "in m/s; sets samples_per_segment (exclusive with it, total_time_s, fastest)")
     total_time_s: Finite | None = Field(None, gt=0, le=3600, description="Time in s the corridor's range sequence "
@@ -166,21 +179,23 @@ class Settings(Strict):
     def _resolve(self) -> Settings:
         given = [k for k in TIMING_FIELDS if k in self.model_fields_set and getattr(self, k) not in (None, False)]
         if len(given) > 1:
-            raise fail(f"give only one of samples_per_segment, speed_m_s, total_time_s, fastest; got {', '.join(given)}",
+            raise fail(f"give only one of samples_per_segment, speed_m_s, total_time_s, fastest; got "
+                       f"{', '.join(given)}",
                        given[1])
         if self.fastest and self.mode != "constrained":
             raise fail("needs mode 'constrained' (only that mode keeps the drive limits)", "fastest")
         if self.backend == "compiled" and self.solver != "riccati":
             raise fail(f"the compiled backend solves the horizon problem by the Riccati recursion; use backend "
                        f"'reference' for the {self.solver} solver", "solver")
-        # fill in what the mode decides; __dict__ keeps them out of model_fields_set, so a
-        # dump with exclude_unset gives back what the client sent
-        filled = {k: v for k, v in MODE_DEFAULTS[self.mode].items() if getattr(self, k) is None}
+        # fill in what the mode decides, bypassing pydantic's __setattr__ so that they stay out
+        # of model_fields_set: a dump with exclude_unset gives back what the client sent
+        filled: dict[str, Any] = {k: v for k, v in MODE_DEFAULTS[self.mode].items() if getattr(self, k) is None}
         if self.samples_per_segment is None:
             filled["samples_per_segment"] = self.N if self.N is not None else DEFAULT_SAMPLES_PER_SEGMENT
         if self.backend is None:
             filled["backend"] = "compiled" if self.solver == "riccati" else "reference"
-        self.__dict__.update(filled)
+        for key, value in filled.items():
+            object.__setattr__(self, key, value)
         return self
 
     @property
@@ -194,7 +209,7 @@ def _robot_kind(value: Any) -> str:
 
 
 RobotSpec = Annotated[
-    Union[Annotated[str, Tag("~name")], Annotated[RobotDescription, Tag("~description")]],
+    Annotated[str, Tag("~name")] | Annotated[RobotDescription, Tag("~description")],
     Discriminator(_robot_kind),
 ]
 
@@ -213,7 +228,7 @@ class PlanRequest(Strict):
                                         "(the paper's criterion (12))")
     layout: Layout | None = Field(None, description="Instead of segments: a workspace with obstacles to "
                                   "segment into a corridor (Section V.B)")
-    settings: Settings = Field(default_factory=Settings, description="Planner settings")
+    settings: Settings = Field(default_factory=lambda: Settings.model_validate({}), description="Planner settings")
     start: Vec3 | None = Field(None, description="Shorthand for layout.start: start pose [x, y, psi] in m, m, rad")
     end: Vec3 | None = Field(None, description="Shorthand for layout.end: end pose [x, y, psi] in m, m, rad")
     psi_range: Annotated[list[Finite], Field(min_length=2, max_length=2)] | None = Field(

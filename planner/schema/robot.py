@@ -10,10 +10,9 @@ from __future__ import annotations
 import json
 from functools import lru_cache
 from importlib import resources
+from typing import Annotated, Any
 
 import numpy as np
-from typing import Annotated, Any, Union
-
 from pydantic import Discriminator, Field, Tag, field_validator, model_validator
 
 from ._types import Finite, Pair, Strict, Vec2, array_of, fail
@@ -64,7 +63,7 @@ def _legs_kind(value: Any) -> str:
 
 
 #: one leg description for all legs, or one per leg
-Legs = Annotated[Union[Annotated[LegDescription, Tag("~shared")], Annotated[list[LegDescription], Tag("~each")]],
+Legs = Annotated[Annotated[LegDescription, Tag("~shared")] | Annotated[list[LegDescription], Tag("~each")],
                  Discriminator(_legs_kind)]
 
 
