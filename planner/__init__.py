@@ -17,7 +17,8 @@ Glossary (paper symbol -> code name):
 ``x``           state ``(y, y_dot)``; ``X`` in a simulation
 ``s``           physical coordinates (``dynamics.physical_coordinates``)
 ``R``           ``ds/dy`` (``dynamics.R_matrix``); ``J_l``: its leg-length rows
-``u``           drive forces [N], one per leg (``n_legs`` legs; never ``m``)
+``u``           drive forces [N], one per leg (``RobotModel.n_legs`` legs); in the
+                generic horizon solvers ``n`` and ``m`` are the state and input sizes
 ``A(x), B(x)``  factorised model (``dynamics.factorised``, eq. 8)
 ``Ad, Bd``      zero-order hold (``discretisation.zoh_factorised``, eq. 9)
 ``F, G``        predictions (``horizon.prediction_matrices``, eq. 11)
@@ -26,7 +27,8 @@ Glossary (paper symbol -> code name):
                 ``RangeSequence.lower`` / ``.upper``
 ``Q_ra, Q_rb``  range penalties ``k_r`` or ``q_ra``, ``q_rb`` (diagonals)
 ``Q_u``         force penalty ``k_u`` or ``q_u``
-(Table I)       samples each segment is held: ``samples_per_segment``
+(Table I)       samples each segment is held: ``samples_per_segment`` (``S`` in
+                formulas)
 ``T_s``         sample time ``Settings.Ts`` [s]
 ==============  ==============================================================
 """

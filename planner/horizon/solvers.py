@@ -129,14 +129,14 @@ def solve_structured(Ad, Bd, C, x0, qa, qb, qu, ra, rb) -> np.ndarray:
     n = Ad.shape[0]
     p = C.shape[0]
     kl, ku, dim, flat, src, x_rows = _kkt_pattern(N, n, p)
-    if qu.strides[0] == 0:  # the same Q_u at every stage (a broadcast row): one S block
+    if qu.strides[0] == 0:  # the same Q_u at every stage (a broadcast row): one S_s block
         rinv = 1.0 / (qu[0] * qu[0])
-        S = np.broadcast_to((Bd * rinv) @ Bd.T, (N, n, n))
+        BRB = np.broadcast_to((Bd * rinv) @ Bd.T, (N, n, n))
     else:
         rinv = 1.0 / (qu * qu)  # Ru^-1, (N, m)
-        S = (Bd * rinv[:, None, :]) @ Bd.T  # (N, n, n)
+        BRB = (Bd * rinv[:, None, :]) @ Bd.T  # S_s = Bd Ru_s^-1 Bd^T, (N, n, n)
     qa2, qb2 = qa * qa, qb * qb
-    v = np.concatenate(((-S).ravel(), Ad.ravel(), (qa2 + qb2).ravel(), (-1.0,)))
+    v = np.concatenate(((-BRB).ravel(), Ad.ravel(), (qa2 + qb2).ravel(), (-1.0,)))
     ab = np.zeros((2 * kl + ku + 1) * dim)
     ab[flat] = v[src]
     rhs = np.zeros(dim)

@@ -120,10 +120,10 @@ def simulate(robot: RobotModel, seq: RangeSequence, st: Settings, controller: Co
         if not reference:
             return _simulate_compiled(robot, seq, st)
         controller = PaperController(seq, st)
-    Ts, m = st.Ts, robot.n_legs
+    Ts = st.Ts
     max_steps = seq.K + st.tail_steps
     X = np.empty((max_steps + 1, 6))
-    U = np.zeros((max_steps + 1, m))
+    U = np.zeros((max_steps + 1, robot.n_legs))
     ACC = np.empty((max_steps + 1, 3))
     x = np.concatenate((seq.start, np.zeros(3)))
     X[0] = x
