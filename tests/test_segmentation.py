@@ -8,6 +8,7 @@ grid, reach with the robot's own leg lengths.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from collections import deque
@@ -15,17 +16,20 @@ from collections import deque
 import numpy as np
 import pytest
 import shapely
-from hypothesis import HealthCheck, assume, given, settings, strategies as st
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
 
 import planner
 from planner.corridor import corridor_from_request, count_turns, reachable_region, segment
+from planner.corridor.cells import default_cell_size
 from planner.corridor.geometry import halfplanes
-from planner.corridor.segmentation import default_cell_size, parse_layout, psi_samples, sigma_min_fast
+from planner.corridor.reach_region import psi_samples
+from planner.corridor.workspace import parse_layout
 from planner.errors import PlannerError
 from planner.model import SINGULAR_TOL, load_robot
-from planner.model.kinematics import leg_lengths, singularity_measure
+from planner.model.kinematics import leg_lengths, singularity_measure, singularity_measure_grid
 from planner.model.reach import check_pose
-from planner.schema import MAX_CELLS, PlanRequest, Settings, parse_request
+from planner.schema import MAX_CELLS, PlanRequest, SegmentationResult, Settings, parse_request
 from tests.support import plan_json
 
 ROBOT = load_robot("moving-slide")
@@ -74,7 +78,7 @@ def check_corridor(seg, lay: dict) -> None:
         for ob in obstacles:
             assert shapely.distance(poly, ob) >= clearance - 1e-9 * seg.size, (c, poly, ob)
             assert shapely.intersection(poly, ob).area <= 1e-12 * seg.size ** 2
-    for a, b in zip(polys[:-1], polys[1:]):
+    for a, b in itertools.pairwise(polys):
         shared = shapely.intersection(a, b)
         assert shared.geom_type in ("LineString", "MultiLineString") and shared.length > 0.5 * seg.size, shared
     start, end = np.array(lay["start"]), np.array(lay["end"])
@@ -103,7 +107,7 @@ def independent_turns(shape: str, polygons, path) -> int:
         d = np.sign(np.round(np.diff(c, axis=0) / 1e-9))
         return int(sum(np.any(d[i] != d[i - 1]) for i in range(1, len(d))))
     ori = []
-    for a, b in zip(path[:-1], path[1:]):
+    for a, b in itertools.pairwise(path):
         A, B = np.asarray(polygons[a]), np.asarray(polygons[b])
         shared = [p for p in A if np.min(np.linalg.norm(B - p, axis=1)) < 1e-9]
         assert len(shared) == 2, (A, B)
@@ -139,6 +143,19 @@ def test_hand_made_layout_corridor_is_free_connected_and_table_i_shaped(shape):
     assert len(again) == len(seg.segments)
     assert again[1].polygon is not None and again[0].polygon is None
     np.testing.assert_allclose(again[1].polygon, seg.segments[1].polygon)
+
+
+def test_to_result_is_the_schema_model_of_to_dict():
+    """One definition: the result model validates the dict the API sends and dumps to it again."""
+    lay = wall_layout(-0.002, 0.022, shape="triangle", size=0.01)
+    lay["obstacles"].append({"type": "circle", "center": [-0.035, -0.02], "radius": 0.008})
+    seg = segment(lay, ROBOT)
+    res = seg.to_result()
+    assert isinstance(res, SegmentationResult)
+    assert res.model_dump(mode="json") == seg.to_dict()
+    assert res.path == seg.path and res.counts == seg.counts and res.turns == seg.turns
+    np.testing.assert_array_equal(res.cells[seg.path[0]].polygon, np.round(seg.polygons[seg.path[0]], 12))
+    assert len(res.grown_obstacles) == len(lay["obstacles"])
 
 
 @pytest.mark.parametrize("shape", ["square", "triangle"])
@@ -264,12 +281,12 @@ def test_unreachable_cells_are_really_unreachable_and_free_cells_reachable():
     check_corridor(seg, lay)
 
 
-def test_sigma_min_fast_matches_the_robot_svd():
+def test_grid_singularity_measure_matches_the_robot_svd():
     rng = np.random.default_rng(1)
     P = rng.uniform(-0.15, 0.15, (500, 2))
     for robot in (ROBOT, load_robot("tri-slide")):
         for psi in (0.0, 0.3, -1.0):
-            a = sigma_min_fast(robot, P[:, 0], P[:, 1], psi)
+            a = singularity_measure_grid(robot, P, psi)
             b = singularity_measure(robot, np.column_stack((P, np.full(len(P), psi))))
             np.testing.assert_allclose(a, b, atol=1e-9)
 
@@ -376,7 +393,7 @@ def reference_grid(lay: dict):
         inside = np.all(P >= lo - 1e-12) and np.all(P <= hi + 1e-12)
         poly = shapely.Polygon(c)
         free.append(bool(inside and all(shapely.intersection(poly, ob).area <= 1e-9 * s * s for ob in obstacles)))
-    key = lambda p: (round(p[0] / (s / 4)), round(p[1] / (s * H3 / 2 if shape == "triangle" else s / 4)))  # noqa
+    key = lambda p: (round(p[0] / (s / 4)), round(p[1] / (s * H3 / 2 if shape == "triangle" else s / 4)))
     edges = {}
     for k, c in enumerate(cells):
         for a, b in zip(c, c[1:] + c[:1]):
