@@ -13,7 +13,7 @@ import numpy as np
 from .kernels import smallest_singular_values
 from .robot import RobotModel
 
-__all__ = ["GRID_TRUST", "SINGULAR_TOL", "leg_jacobians", "leg_lengths", "leg_rows", "leg_vectors", "legs",
+__all__ = ["GRID_BLOCK", "GRID_TRUST", "SINGULAR_TOL", "leg_jacobians", "leg_lengths", "leg_rows", "leg_vectors", "legs",
            "singularity_measure", "singularity_measure_grid"]
 
 #: smallest singular value of the dimensionless leg Jacobian below which a pose is singular
@@ -21,6 +21,9 @@ SINGULAR_TOL = 1e-2
 #: :func:`singularity_measure_grid` keeps its closed form where ``lam sqrt(1 - r^2) >= GRID_TRUST q``
 #: (rounding below ~1e-11 relative), and recomputes the other poses by :func:`singularity_measure`
 GRID_TRUST = 1e-4
+#: points per block of :func:`singularity_measure_grid` (its (n_legs, block) temporaries stay in
+#: cache: whole-grid temporaries made reachable_region at 2 mm ~12 % slower)
+GRID_BLOCK = 4096
 
 
 def leg_vectors(model: RobotModel, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -97,6 +100,9 @@ def singularity_measure_grid(model: RobotModel, points: np.ndarray, psi: float) 
     e.g. a symmetric robot at a symmetric pose). Those poses (``lam sqrt(1 - r^2) <`` GRID_TRUST
     ``q``, a handful in a workspace) are recomputed by :func:`singularity_measure`."""
     points = np.asarray(points, dtype=float).reshape(-1, 2)
+    if len(points) > GRID_BLOCK:
+        return np.concatenate([singularity_measure_grid(model, points[i:i + GRID_BLOCK], psi)
+                               for i in range(0, len(points), GRID_BLOCK)])
     rx, ry, dx0, dy0 = (a[0, :, None] for a in leg_vectors(model, np.array([[0.0, 0.0, float(psi)]])))
     dx = dx0 + points[:, 0]  # (n, k): leg vectors of the tool points (translated from the origin's)
     dy = dy0 + points[:, 1]
