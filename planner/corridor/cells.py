@@ -36,7 +36,7 @@ from ..schema import MAX_CELLS, SQRT3_2, Settings, cell_count
 from .workspace import Workspace
 
 __all__ = ["BLOCKED", "DEFAULT_SPEED", "FREE", "STATE_NAMES", "UNREACHABLE", "Grid", "block_obstacles", "build_grid",
-           "default_cell_size", "square_grid", "triangle_grid"]
+           "count_states", "default_cell_size", "square_grid", "triangle_grid"]
 
 #: nominal tool speed of the default cell-size rule [m/s]
 DEFAULT_SPEED = 0.1
@@ -44,6 +44,11 @@ DEFAULT_SPEED = 0.1
 #: cell states (values of ``Segmentation.state``) and their names in results
 FREE, BLOCKED, UNREACHABLE = 0, 1, 2
 STATE_NAMES = ("free", "blocked", "unreachable")
+
+
+def count_states(state: np.ndarray) -> dict[str, int]:
+    """Cells per state name (count) of a state array (C,)."""
+    return {name: int(np.count_nonzero(state == k)) for k, name in enumerate(STATE_NAMES)}
 
 
 @dataclass

@@ -58,7 +58,7 @@ from ..schema import (
     SegmentationResult,
     Settings,
 )
-from .cells import FREE, STATE_NAMES, UNREACHABLE, Grid, block_obstacles, build_grid, default_cell_size
+from .cells import FREE, STATE_NAMES, UNREACHABLE, Grid, block_obstacles, build_grid, count_states, default_cell_size
 from .geometry import halfplanes
 from .reach_region import boxes_reachable, psi_samples
 from .search import fewest_turns_path
@@ -98,7 +98,7 @@ class Segmentation:
     @property
     def counts(self) -> dict[str, int]:
         """Cells per state name (count)."""
-        return {name: int(np.count_nonzero(self.state == k)) for k, name in enumerate(STATE_NAMES)}
+        return count_states(self.state)
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON the API sends, in the shape of :class:`planner.schema.SegmentationResult`
@@ -204,7 +204,7 @@ def segment(layout: Layout | dict[str, Any], robot: Any, settings: Settings | No
     targets = _endpoint_cells(grid, state, blocker, ws, "end", field_path)
     found = fewest_turns_path(grid, state == FREE, sources, targets)
     if found is None:
-        cnt = {name: int(np.count_nonzero(state == k)) for k, name in enumerate(STATE_NAMES)}
+        cnt = count_states(state)
         raise PlannerError("no_path", f"no chain of free {ws.shape} cells (sharing edges) joins the start "
                            f"{format_point(ws.start)} to the end {format_point(ws.end)}: {cnt['free']} of "
                            f"{len(state)} cells are free, {cnt['blocked']} blocked by obstacles (grown by the "
