@@ -1,7 +1,7 @@
 """Benchmark: free-space segmentation (issue 3).
 
 Goal: a 0.3 m x 0.3 m workspace at 5 mm cells with 20 obstacles segments in <= 50 ms.
-Prints a table: median (and min/max) wall time of ``planner.segmentation.segment`` over
+Prints a table: median (and min/max) wall time of ``planner.corridor.segment`` over
 several runs, per cell shape and psi range, with the cell counts and the path found; and
 the time of ``reachable_region`` (the editor's reachable-workspace outline).
 
@@ -17,10 +17,10 @@ import time
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from planner.robot import load_robot  # noqa: E402
-from planner.segmentation import reachable_region, segment  # noqa: E402
+from planner.corridor import reachable_region, segment
+from planner.model import load_robot
 
 
 def layout(shape: str, psi_range=None, n_obstacles: int = 20, seed: int = 3) -> dict:

@@ -8,6 +8,7 @@ grid, reach with the robot's own leg lengths.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from collections import deque
@@ -15,15 +16,21 @@ from collections import deque
 import numpy as np
 import pytest
 import shapely
-from hypothesis import HealthCheck, assume, given, settings, strategies as st
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
 
+import planner
+from planner.corridor import corridor_from_request, count_turns, reachable_region, segment
+from planner.corridor.cells import default_cell_size
+from planner.corridor.geometry import halfplanes
+from planner.corridor.reach_region import psi_samples
+from planner.corridor.workspace import parse_layout
 from planner.errors import PlannerError
-from planner.request import Settings, parse_request, parse_segments
-from planner.robot import SINGULAR_TOL, load_robot
-from planner.segmentation import (
-    MAX_CELLS, count_turns, default_cell_size, halfplanes, parse_layout, psi_samples, reachable_region,
-    segment, sigma_min_fast,
-)
+from planner.model import SINGULAR_TOL, load_robot
+from planner.model.kinematics import leg_lengths, singularity_measure, singularity_measure_grid
+from planner.model.reach import check_pose
+from planner.schema import MAX_CELLS, PlanRequest, SegmentationResult, Settings, parse_request
+from tests.support import plan_json
 
 ROBOT = load_robot("moving-slide")
 H3 = math.sqrt(3.0) / 2.0
@@ -71,7 +78,7 @@ def check_corridor(seg, lay: dict) -> None:
         for ob in obstacles:
             assert shapely.distance(poly, ob) >= clearance - 1e-9 * seg.size, (c, poly, ob)
             assert shapely.intersection(poly, ob).area <= 1e-12 * seg.size ** 2
-    for a, b in zip(polys[:-1], polys[1:]):
+    for a, b in itertools.pairwise(polys):
         shared = shapely.intersection(a, b)
         assert shared.geom_type in ("LineString", "MultiLineString") and shared.length > 0.5 * seg.size, shared
     start, end = np.array(lay["start"]), np.array(lay["end"])
@@ -100,7 +107,7 @@ def independent_turns(shape: str, polygons, path) -> int:
         d = np.sign(np.round(np.diff(c, axis=0) / 1e-9))
         return int(sum(np.any(d[i] != d[i - 1]) for i in range(1, len(d))))
     ori = []
-    for a, b in zip(path[:-1], path[1:]):
+    for a, b in itertools.pairwise(path):
         A, B = np.asarray(polygons[a]), np.asarray(polygons[b])
         shared = [p for p in A if np.min(np.linalg.norm(B - p, axis=1)) < 1e-9]
         assert len(shared) == 2, (A, B)
@@ -132,10 +139,23 @@ def test_hand_made_layout_corridor_is_free_connected_and_table_i_shaped(shape):
     assert {c["state"] for c in d["cells"]} <= {"free", "blocked", "unreachable"}
     assert all(d["cells"][c]["state"] == "free" for c in d["path"])
     # the segments are a valid explicit corridor (polygons kept) and round-trip
-    again = parse_segments(d["segments"])
+    again = parse_request({"segments": d["segments"]}).segments
     assert len(again) == len(seg.segments)
     assert again[1].polygon is not None and again[0].polygon is None
     np.testing.assert_allclose(again[1].polygon, seg.segments[1].polygon)
+
+
+def test_to_result_is_the_schema_model_of_to_dict():
+    """One definition: the result model validates the dict the API sends and dumps to it again."""
+    lay = wall_layout(-0.002, 0.022, shape="triangle", size=0.01)
+    lay["obstacles"].append({"type": "circle", "center": [-0.035, -0.02], "radius": 0.008})
+    seg = segment(lay, ROBOT)
+    res = seg.to_result()
+    assert isinstance(res, SegmentationResult)
+    assert res.model_dump(mode="json") == seg.to_dict()
+    assert res.path == seg.path and res.counts == seg.counts and res.turns == seg.turns
+    np.testing.assert_array_equal(res.cells[seg.path[0]].polygon, np.round(seg.polygons[seg.path[0]], 12))
+    assert len(res.grown_obstacles) == len(lay["obstacles"])
 
 
 @pytest.mark.parametrize("shape", ["square", "triangle"])
@@ -242,9 +262,9 @@ def test_unreachable_cells_are_really_unreachable_and_free_cells_reachable():
         lo, hi = seg.polygons[c].min(axis=0), seg.polygons[c].max(axis=0)
         X, Y, PSI = np.meshgrid(lo[0] + (hi[0] - lo[0]) * t, lo[1] + (hi[1] - lo[1]) * t, psis)
         poses = np.column_stack((X.ravel(), Y.ravel(), PSI.ravel()))
-        L = ROBOT.leg_lengths(poses)
+        L = leg_lengths(ROBOT, poses)
         ok = np.all((L >= ROBOT.length_min - 1e-12) & (L <= ROBOT.length_max + 1e-12))
-        ok = ok and ROBOT.singularity_measure_batch(poses).min() >= SINGULAR_TOL
+        ok = ok and singularity_measure(ROBOT, poses).min() >= SINGULAR_TOL
         if seg.state[c] == 0:
             assert ok, c
         elif seg.state[c] == 2:
@@ -253,7 +273,7 @@ def test_unreachable_cells_are_really_unreachable_and_free_cells_reachable():
             viol = False
             for psi in np.linspace(-0.1, 0.1, 5):
                 cs, sn = math.cos(psi), math.sin(psi)
-                P = ROBOT.base - ROBOT._r0 @ np.array([[cs, sn], [-sn, cs]])
+                P = ROBOT.base - ROBOT.r0 @ np.array([[cs, sn], [-sn, cs]])
                 near = np.linalg.norm(np.clip(P, lo, hi) - P, axis=1)
                 far = np.linalg.norm(np.maximum(np.abs(P - lo), np.abs(P - hi)), axis=1)
                 viol |= bool(np.any(near < ROBOT.length_min) or np.any(far > ROBOT.length_max))
@@ -261,13 +281,13 @@ def test_unreachable_cells_are_really_unreachable_and_free_cells_reachable():
     check_corridor(seg, lay)
 
 
-def test_sigma_min_fast_matches_the_robot_svd():
+def test_grid_singularity_measure_matches_the_robot_svd():
     rng = np.random.default_rng(1)
     P = rng.uniform(-0.15, 0.15, (500, 2))
     for robot in (ROBOT, load_robot("tri-slide")):
         for psi in (0.0, 0.3, -1.0):
-            a = sigma_min_fast(robot, P[:, 0], P[:, 1], psi)
-            b = robot.singularity_measure_batch(np.column_stack((P, np.full(len(P), psi))))
+            a = singularity_measure_grid(robot, P, psi)
+            b = singularity_measure(robot, np.column_stack((P, np.full(len(P), psi))))
             np.testing.assert_allclose(a, b, atol=1e-9)
 
 
@@ -337,7 +357,7 @@ def test_reachable_region_is_reachable():
         cand = rng.uniform(-0.2, 0.2, (3000, 2))
         pts = cand[shapely.contains_xy(geom, cand[:, 0], cand[:, 1])]
     for psi in (-0.1, 0.0, 0.1):
-        L = ROBOT.leg_lengths(np.column_stack((pts, np.full(len(pts), psi))))
+        L = leg_lengths(ROBOT, np.column_stack((pts, np.full(len(pts), psi))))
         assert np.all(L >= ROBOT.length_min - 1e-12) and np.all(L <= ROBOT.length_max + 1e-12)
 
 
@@ -373,7 +393,7 @@ def reference_grid(lay: dict):
         inside = np.all(P >= lo - 1e-12) and np.all(P <= hi + 1e-12)
         poly = shapely.Polygon(c)
         free.append(bool(inside and all(shapely.intersection(poly, ob).area <= 1e-9 * s * s for ob in obstacles)))
-    key = lambda p: (round(p[0] / (s / 4)), round(p[1] / (s * H3 / 2 if shape == "triangle" else s / 4)))  # noqa
+    key = lambda p: (round(p[0] / (s / 4)), round(p[1] / (s * H3 / 2 if shape == "triangle" else s / 4)))
     edges = {}
     for k, c in enumerate(cells):
         for a, b in zip(c, c[1:] + c[:1]):
@@ -578,7 +598,7 @@ def test_error_start_cell_not_wholly_reachable():
     for cx in -0.2 + size * (np.arange(8) + 0.5):  # a cell centre that is reachable, a corner that is not
         for cy in -0.2 + size * (np.arange(8) + 0.5):
             corners = np.array([[cx + a * size / 2, cy + b * size / 2, 0.0] for a in (-1, 1) for b in (-1, 1)])
-            L, Lc = ROBOT.leg_lengths(corners), ROBOT.leg_lengths(np.array([[cx, cy, 0.0]]))
+            L, Lc = leg_lengths(ROBOT, corners), leg_lengths(ROBOT, np.array([[cx, cy, 0.0]]))
             centre_ok = np.all((Lc >= ROBOT.length_min) & (Lc <= ROBOT.length_max))
             corners_ok = np.all((L >= ROBOT.length_min) & (L <= ROBOT.length_max))
             if centre_ok and not corners_ok and found is None:
@@ -586,7 +606,7 @@ def test_error_start_cell_not_wholly_reachable():
     assert found is not None
     lay = base_layout(bounds={"lower": [-0.2, -0.2], "upper": [0.2, 0.2]}, start=[found[0], found[1], 0.0],
                       end=[0.0, 0.0, 0.0], cell={"shape": "square", "size": size})
-    ROBOT.check_pose(np.array(lay["start"]))  # reachable itself
+    check_pose(ROBOT, np.array(lay["start"]))  # reachable itself
     _err(lay, "unreachable", "layout.start", "not wholly reachable")
 
 
@@ -669,32 +689,29 @@ def test_top_level_start_end_are_shorthands_for_the_layout():
     lay = {k: v for k, v in base_layout().items() if k not in ("start", "end")}
     req = parse_request({"layout": lay, "start": [-0.06, -0.04, 0.0], "end": [0.06, -0.04, 0.0],
                          "psi_range": [-0.01, 0.01]})
-    assert req.layout["start"] == [-0.06, -0.04, 0.0] and req.layout["psi_range"] == [-0.01, 0.01]
+    assert req.layout.start.tolist() == [-0.06, -0.04, 0.0] and req.layout.psi_range.tolist() == [-0.01, 0.01]
     assert "start" not in lay  # the caller's dict is not modified
-    from app.schema import PlanRequestModel, request_dict
-    model = PlanRequestModel.model_validate({"layout": lay, "start": [-0.06, -0.04, 0.0], "end": [0.06, -0.04, 0.0]})
-    from planner.segmentation import corridor_from_request
-    seg = corridor_from_request(parse_request(request_dict(model)), ROBOT)
+    # planner.schema.PlanRequest is also the HTTP body's model: the shorthand reaches the corridor
+    model = PlanRequest.model_validate({"layout": lay, "start": [-0.06, -0.04, 0.0], "end": [0.06, -0.04, 0.0]})
+    seg = corridor_from_request(parse_request(model), ROBOT)
     np.testing.assert_array_equal(seg.segments[0].lower, [-0.06, -0.04, 0.0])
     # the layout's own start wins over the shorthand
     req = parse_request({"layout": base_layout(), "start": [0.0, 0.0, 0.0]})
-    assert req.layout["start"] == [-0.06, -0.04, 0.0]
+    assert req.layout.start.tolist() == [-0.06, -0.04, 0.0]
 
 
 def test_segment_request_helper_returns_the_dict():
-    from planner.segmentation import segment_request
-    d = segment_request({"robot": "moving-slide", "layout": base_layout()})
+    d = planner.segment({"robot": "moving-slide", "layout": base_layout()}).to_dict()
     assert d["segments"][0]["lower"] == [-0.06, -0.04, 0.0] and d["path"]
     with pytest.raises(PlannerError) as e:
-        segment_request({"segments": [{"lower": [0, 0, 0], "upper": [0, 0, 0]}] * 2})
+        planner.segment({"segments": [{"lower": [0, 0, 0], "upper": [0, 0, 0]}] * 2})
     assert e.value.field == "layout"
 
 
 @pytest.mark.parametrize("shape", ["square", "triangle"])
 def test_plan_a_layout_end_to_end_paper_mode(shape):
-    from planner.plan import plan
     lay = wall_layout(-0.002, 0.022, shape=shape, size=0.01)
-    res = plan({"robot": "moving-slide", "layout": lay})
+    res = plan_json({"robot": "moving-slide", "layout": lay})
     pose = np.array(res["pose"])
     np.testing.assert_array_equal(pose[0], lay["start"])
     assert np.linalg.norm(pose[-1, :2] - np.array(lay["end"][:2])) <= 1e-4
@@ -705,13 +722,11 @@ def test_plan_a_layout_end_to_end_paper_mode(shape):
 
 @pytest.mark.parametrize("shape", ["square", "triangle"])
 def test_constrained_mode_trajectory_avoids_every_obstacle(shape):
-    """Runs once planner/constrained.py (issue 6) exists: the hard corridor keeps every sampled
-    pose inside free cells, hence at least the clearance from every obstacle."""
-    pytest.importorskip("planner.constrained")
-    from planner.plan import plan
+    """The hard corridor (planner.constraints) keeps every sampled pose inside free cells,
+    hence at least the clearance from every obstacle."""
     lay = wall_layout(-0.002, 0.022, shape=shape, size=0.01)
     lay["obstacles"].append({"type": "circle", "center": [-0.035, -0.02], "radius": 0.008})
-    res = plan({"robot": "moving-slide", "layout": lay, "settings": {"mode": "constrained"}})
+    res = plan_json({"robot": "moving-slide", "layout": lay, "settings": {"mode": "constrained"}})
     pose = np.array(res["pose"])
     pts = shapely.points(pose[:, :2])
     for ob in exact_obstacles(lay):

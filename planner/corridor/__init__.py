@@ -1,8 +1,18 @@
 """The corridor: free-space segmentation of a layout into cells and a path of cells
-(Section V.B), and the range sequence the criterion reads sample by sample (Table I, Fig. 4)."""
+(Section V.B), and the range sequence the criterion reads sample by sample (Table I, Fig. 4).
+
+Segmentation, one module per step (:mod:`.segmentation` describes the whole):
+:mod:`.workspace` (obstacles grown by the clearance, start and end checks), :mod:`.cells`
+(square and triangle grids, default cell size, blocked cells), :mod:`.reach_region` (cells
+and grid squares the robot reaches, regular; :func:`reachable_region`), :mod:`.search`
+(fewest cells, then fewest turns), :mod:`.segmentation` (:func:`segment` and its result).
+Plane geometry: :mod:`.geometry`; per-sample ranges: :mod:`.ranges`.
+"""
 
 from .ranges import RangeSequence, range_sequence, reference_sequence
-from .segmentation import Segmentation, corridor_from_request, count_turns, reachable_region, segment
+from .reach_region import reachable_region
+from .search import count_turns
+from .segmentation import Segmentation, corridor_from_request, segment
 
-__all__ = ["RangeSequence", "range_sequence", "reference_sequence", "Segmentation", "corridor_from_request",
-           "count_turns", "reachable_region", "segment"]
+__all__ = ["RangeSequence", "Segmentation", "corridor_from_request", "count_turns", "range_sequence",
+           "reachable_region", "reference_sequence", "segment"]
