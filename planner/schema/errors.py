@@ -18,6 +18,9 @@ from ..errors import PlannerError
 
 __all__ = ["field_path", "error_details", "planner_error", "format_validation_error"]
 
+#: pydantic's numeric bound errors, said as the planner says them ("must be > 0, got -1")
+_BOUNDS = {"greater_than": ("gt", ">"), "greater_than_equal": ("ge", ">="), "less_than": ("lt", "<"),
+           "less_than_equal": ("le", "<=")}
 #: pydantic error types that mean "more than a bound on work" (list lengths, cell counts)
 _TOO_LARGE = {"too_long", "too_large"}
 
@@ -54,7 +57,10 @@ def error_details(errors: Sequence[Any]) -> list[dict[str, Any]]:
         if kind == "missing" and tuple(e.get("loc", ())) == ("body",):
             msg = "a JSON body is required"
         if kind == "extra_forbidden":
-            msg = "unknown field"
+            msg = "unknown field: not a field of this object"
+        elif kind in _BOUNDS and _BOUNDS[kind][0] in ctx:
+            key, op = _BOUNDS[kind]
+            msg = f"must be {op} {ctx[key]}, got {e.get('input')!r}"
         code = "too_large" if kind in _TOO_LARGE else "invalid_input"
         out.append({"code": code, "field": field_path(e.get("loc", ()), ctx.get("field")), "message": msg})
     return out
