@@ -67,7 +67,8 @@ def main() -> None:
                          c["blocked"], c["unreachable"], len(seg.path), seg.turns,
                          statistics.median(times), min(times), max(times)))
     print(f"segmentation, 0.3 m x 0.3 m, 5 mm cells, 20 obstacles, {args.runs} runs (goal: median <= 50 ms)")
-    print("| shape | psi range [rad] | cells | free | blocked | unreachable | path cells | turns | median ms | min ms | max ms |")
+    print("| shape | psi range [rad] | cells | free | blocked | unreachable | path cells | turns | median ms "
+          "| min ms | max ms |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print("| " + " | ".join(str(v) if not isinstance(v, float) else f"{v:.1f}" for v in r) + " |")

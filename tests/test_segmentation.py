@@ -393,7 +393,10 @@ def reference_grid(lay: dict):
         inside = np.all(P >= lo - 1e-12) and np.all(P <= hi + 1e-12)
         poly = shapely.Polygon(c)
         free.append(bool(inside and all(shapely.intersection(poly, ob).area <= 1e-9 * s * s for ob in obstacles)))
-    key = lambda p: (round(p[0] / (s / 4)), round(p[1] / (s * H3 / 2 if shape == "triangle" else s / 4)))
+
+    def key(p):
+        return (round(p[0] / (s / 4)), round(p[1] / (s * H3 / 2 if shape == "triangle" else s / 4)))
+
     edges = {}
     for k, c in enumerate(cells):
         for a, b in zip(c, c[1:] + c[:1]):
@@ -535,7 +538,8 @@ def random_mixed_layout(draw):
                               .tolist()})
     return {"bounds": {"lower": [-0.07, -0.07], "upper": [0.07, 0.07]}, "obstacles": obstacles,
             "clearance": draw(st.sampled_from([0.0, 0.001, 0.004])),
-            "cell": {"shape": draw(st.sampled_from(["square", "triangle"])), "size": draw(st.sampled_from([0.005, 0.009]))},
+            "cell": {"shape": draw(st.sampled_from(["square", "triangle"])),
+                     "size": draw(st.sampled_from([0.005, 0.009]))},
             "start": [draw(st.floats(-0.06, 0.06)), draw(st.floats(-0.06, 0.06)), 0.0],
             "end": [draw(st.floats(-0.06, 0.06)), draw(st.floats(-0.06, 0.06)), 0.0],
             "psi_range": draw(st.sampled_from([None, [-0.05, 0.05]]))}

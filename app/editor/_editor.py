@@ -18,8 +18,8 @@ Entry point: :func:`start_editor` (used by ``app.server.serve``).
 from __future__ import annotations
 
 import logging
-from typing import Any, cast
 from collections.abc import Callable
+from typing import Any, cast
 
 import numpy as np
 import viser

@@ -29,7 +29,7 @@ __all__ = ["PSI_STEP", "boxes_reachable", "psi_samples", "reachable_region", "re
 PSI_STEP = 0.05
 
 
-def psi_samples(psi_range: Sequence[float]) -> np.ndarray:
+def psi_samples(psi_range: Sequence[float] | np.ndarray) -> np.ndarray:
     """Angles [rad] at which reach is checked over ``psi_range`` [rad]: ``4k + 1`` evenly
     spaced samples (so they include the planner's 5-sample check), at most :data:`PSI_STEP`
     apart, capped at 33."""
@@ -56,11 +56,11 @@ def regular_windows(model: RobotModel, lattice: tuple, rows: np.ndarray, cols: n
     ok = np.ones(len(pts), dtype=bool)
     for psi in psis:  # one angle at a time: the grid variant's closed form is per angle
         ok &= singularity_measure_grid(model, points, psi) >= SINGULAR_TOL
-    return ok[inv.reshape(flat.shape)].all(axis=1)
+    return np.asarray(ok[inv.reshape(flat.shape)].all(axis=1))
 
 
-def boxes_reachable(model: RobotModel, lo: np.ndarray, hi: np.ndarray, psis: Sequence[float], lattice: tuple,
-                    rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+def boxes_reachable(model: RobotModel, lo: np.ndarray, hi: np.ndarray, psis: Sequence[float] | np.ndarray,
+                    lattice: tuple, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
     """Whether every pose in each box ``[lo, hi]`` ((C, 2), m) at every angle of ``psis``
     [rad] keeps every leg within its stroke and, on the box's 3 x 3 window of the lattice
     (:func:`regular_windows`), is regular -> (C,) bool."""

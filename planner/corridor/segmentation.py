@@ -183,7 +183,7 @@ def segment(layout: Layout | dict[str, Any], robot: Any, settings: Settings | No
     """
     t0 = time.perf_counter()
     model = load_robot(robot)
-    settings = settings or Settings()
+    settings = settings or Settings.model_validate({})
     ws = parse_layout(layout, field_path)
     for key in ("start", "end"):
         check_endpoint(ws, model, key, field_path)

@@ -77,7 +77,7 @@ def discs(centres: np.ndarray, radius: float) -> np.ndarray:
     extreme sides (left, right, bottom, top) are exact. Returns (k,) shapely polygons."""
     a = (np.arange(4 * QUAD_SEGS) + 0.5) * (math.pi / (2 * QUAD_SEGS))
     ring = (radius * _GROW) * np.column_stack((np.cos(a), np.sin(a)))
-    return shapely.polygons(centres[:, None, :] + ring[None])
+    return np.asarray(shapely.polygons(centres[:, None, :] + ring[None]))
 
 
 def parse_layout(raw: Layout | dict[str, Any], path: str = "layout") -> Workspace:

@@ -13,7 +13,8 @@ import numpy as np
 from .kernels import smallest_singular_values
 from .robot import RobotModel
 
-__all__ = ["GRID_BLOCK", "GRID_TRUST", "SINGULAR_TOL", "leg_jacobians", "leg_lengths", "leg_rows", "leg_vectors", "legs",
+__all__ = ["GRID_BLOCK", "GRID_TRUST", "SINGULAR_TOL", "leg_jacobians", "leg_lengths", "leg_rows", "leg_vectors",
+           "legs",
            "singularity_measure", "singularity_measure_grid"]
 
 #: smallest singular value of the dimensionless leg Jacobian below which a pose is singular

@@ -46,7 +46,8 @@ def leg_length_range(model: RobotModel, lo: np.ndarray, hi: np.ndarray,
     return near, far
 
 
-def boxes_within_stroke(model: RobotModel, lo: np.ndarray, hi: np.ndarray, psis: Sequence[float]) -> np.ndarray:
+def boxes_within_stroke(model: RobotModel, lo: np.ndarray, hi: np.ndarray,
+                        psis: Sequence[float] | np.ndarray) -> np.ndarray:
     """Whether every pose in each box ``[lo, hi]`` ((C, 2), m) at every angle of ``psis``
     keeps every leg within its stroke -> (C,) bool."""
     ok = np.ones(len(lo), dtype=bool)

@@ -136,7 +136,8 @@ class Settings(Strict):
         "(backward Riccati recursion, O(N)), 'structured' (banded KKT, O(N)) or 'qr' (the paper's Householder "
         "QR, eqs. 17-23)")
     backend: Literal["compiled", "reference"] = Field(
-        MODE_DECIDES, description="'compiled' (default with the riccati solver): model, hold, horizon solve, plant and the "
+        MODE_DECIDES, description="'compiled' (default with the riccati solver): model, hold, horizon solve, plant "
+        "and the "
         "constrained mode's QP assembly run as compiled kernels; 'reference' (default with the structured or qr "
         "solver): the numpy implementation of every stage, same results")
     settle_position_m: Finite = Field(1e-4, gt=0, le=1, description="End-point position tolerance in m")
