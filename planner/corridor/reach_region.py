@@ -41,7 +41,7 @@ def psi_samples(psi_range: Sequence[float] | np.ndarray) -> np.ndarray:
 
 
 def regular_windows(model: RobotModel, lattice: tuple, rows: np.ndarray, cols: np.ndarray,
-                    psis: Sequence[float]) -> np.ndarray:
+                    psis: Sequence[float] | np.ndarray) -> np.ndarray:
     """Whether the robot is regular (singularity measure >= ``SINGULAR_TOL``) at every angle
     of ``psis`` [rad] on all 9 points of each 3 x 3 window of the lattice (C,) bool. The
     lattice ``(x0, y0, dx, dy, nx, ny)`` holds the points ``x0 + i dx, y0 + j dy`` [m]; window
