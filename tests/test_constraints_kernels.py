@@ -88,9 +88,7 @@ def both(step: Step):
     ref = ReferenceAssembly(c.model, c.seq, c.st, c.constraints)
     out = []
     for asm in (c.assembly, ref):
-        qp = asm.build(step.k, step.x, step.Ad, step.Bd, step.y_nom)
-        asm.set_offset(qp, step.u0)
-        out.append((asm, qp))
+        out.append((asm, asm.build(step.k, step.x, step.Ad, step.Bd, step.y_nom, step.u0)))
     return out
 
 
@@ -160,8 +158,7 @@ def test_eliminated_equalities_give_the_same_minimiser(q_u):
     diffs = []
     for step in record_steps(req, 10):
         asm = step.controller.assembly
-        qp = asm.build(step.k, step.x, step.Ad, step.Bd, step.y_nom)
-        asm.set_offset(qp, step.u0)
+        qp = asm.build(step.k, step.x, step.Ad, step.Bd, step.y_nom, step.u0)
         assert qp.reduced is not None  # the elimination is in use
         assert qp.reduced.n_w < len(qp.W) // 3 * step.controller.n_legs
         red = asm.solve(qp, step.start)

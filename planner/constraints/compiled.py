@@ -52,9 +52,10 @@ class AssemblyInputs:
     def assemble(self, k: int, x: np.ndarray, y_prev: np.ndarray) -> tuple[np.ndarray, np.ndarray, Rows]:
         """The criterion's weights and targets (3N,) and the rows of step ``k`` at state ``x``,
         the legs linearised at ``y_prev`` (N, 3) (or at ``x``: ``y_prev`` empty)."""
-        W, tgt, *rows = ck.assemble(k, self.N, x, y_prev, ROW_UNIT_M, self.K, self.lower, self.upper, self.qa,
-                                    self.qb, self.r0, self.base, *self.constraint_args)
-        return W, tgt, Rows(*rows)
+        W, tgt, col, val, lower, upper, kinds, n_hard, speed0, stroke0 = ck.assemble(
+            k, self.N, x, y_prev, ROW_UNIT_M, self.K, self.lower, self.upper, self.qa, self.qb, self.r0, self.base,
+            *self.constraint_args)
+        return W, tgt, Rows(col, val, lower, upper, kinds, int(n_hard), int(speed0), int(stroke0))
 
 
 class CompiledAssembly:
@@ -72,35 +73,35 @@ class CompiledAssembly:
         self._legs = (self.inputs.r0, self.inputs.base, constraints.stroke.lmin, constraints.stroke.lmax)
         self._no_poses = np.zeros((0, 3))
 
-    def build(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, y_nom: np.ndarray | None) -> StepQP:
-        """The rows and criterion of step ``k`` (legs linearised at ``y_nom``, or at ``x``),
-        and the reduced QP where the rows have equalities; the offset is set by
-        :meth:`set_offset`."""
+    def build(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, y_nom: np.ndarray | None,
+              u0: np.ndarray) -> StepQP:
+        """The QP of step ``k`` at state ``x`` and model ``Ad, Bd``: the rows and criterion
+        (legs linearised at ``y_nom``, or at ``x``), the one-step offset under the guessed move
+        ``u0`` [N] (:meth:`set_offset`), and the reduced QP where the rows have equalities."""
         x = np.ascontiguousarray(x, dtype=float)
         W, tgt, rows = self.inputs.assemble(k, x, y_nom if y_nom is not None else self._no_poses)
-        reduced = ReducedQP.setup(Ad, Bd, self.umax, W, self.du, rows, self.N)
-        return StepQP(x, Ad, Bd, W, tgt, rows, reduced)
+        x1 = ck.plant_step(self.packed, x, np.ascontiguousarray(u0, dtype=float), self.Ts, self.substeps)
+        d = ck.offset(x1, x, u0, Ad, Bd)
+        rows.relinearise_first_legs(x1, *self._legs)
+        reduced = ReducedQP.setup(Ad, Bd, self.umax, self.du, x, d, W, tgt, rows)
+        return StepQP(x, Ad, Bd, W, tgt, rows, d, x1, reduced)
 
-    def set_offset(self, qp: StepQP, u0: np.ndarray, x1: np.ndarray | None = None) -> None:
-        """The one-step offset ``d = Phi(x, u0) - Ad x - Bd u0`` (``x1 = Phi(x, u0)``, the
-        plant's next state under ``u0`` [N], if known), sample 0's leg rows at ``x1``, and the
-        parts of the QP that depend on them."""
-        if x1 is None:
-            x1 = ck.plant_step(self.packed, qp.x, np.ascontiguousarray(u0, dtype=float), self.Ts, self.substeps)
+    def set_offset(self, qp: StepQP, u: np.ndarray, x1: np.ndarray) -> None:
+        """The one-step offset ``d = Phi(x, u) - Ad x - Bd u`` (``x1 = Phi(x, u)``: the plant's
+        next state under the move ``u`` [N]), sample 0's leg rows at ``x1``, and the parts of
+        the QP that depend on them."""
         qp.x1 = x1
-        qp.d = ck.offset(x1, qp.x, u0, qp.Ad, qp.Bd)
+        qp.d = ck.offset(x1, qp.x, u, qp.Ad, qp.Bd)
         qp.rows.relinearise_first_legs(x1, *self._legs)
         if qp.reduced is not None:
             qp.reduced.set_free(qp.x, qp.d, qp.Ad, qp.W, qp.tgt, self.du, qp.rows)
         if qp.full is not None:
-            qp.full.free = None
+            qp.full.set_free(qp.x, qp.d, qp.W, qp.tgt, qp.rows)
 
     def full(self, qp: StepQP) -> FullQP:
-        """The QP in ``z``, formed on first use and at the current offset."""
+        """The QP in ``z``, formed on first use."""
         if qp.full is None:
-            qp.full = FullQP.form(qp.Ad, qp.Bd, self.umax, qp.W, self.du_moves)
-        if qp.full.free is None:
-            qp.full.set_free(qp.x, qp.d, qp.W, qp.tgt, qp.rows)
+            qp.full = FullQP.form(qp.Ad, qp.Bd, self.umax, self.du_moves, qp.x, qp.d, qp.W, qp.tgt, qp.rows)
         return qp.full
 
     def solve(self, qp: StepQP, start: np.ndarray | None) -> QPSolution:

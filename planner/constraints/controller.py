@@ -14,8 +14,8 @@ nonlinear model. The model is exact at the current state and re-linearised every
 over one sample it is frozen: the plant lands up to ~2e-8 m and ~4e-7 rad from the prediction
 on Table I (more at higher speed). So the first predicted state is corrected by the one-step
 offset ``d = Phi(x, u0) - Ad x - Bd u0`` (an RK4 step of the plant under the guessed move
-``u0``, the previous solution's; ``set_offset`` of the assembly), which leaves the one-step
-error ``(dPhi/du - Bd)(u - u0)``. After each solve the plant is stepped under the solution's
+``u0``, the previous solution's; ``build`` and ``set_offset`` of the assembly), which leaves
+the one-step error ``(dPhi/du - Bd)(u - u0)``. After each solve the plant is stepped under the solution's
 move ``u``; while it lands farther than :data:`REFINE_TOL_M` / :data:`REFINE_TOL_RAD` (1e-3 and
 1e-2 of the margins) from the prediction, the offset is recomputed at ``u`` and the QP solved
 again (at most :data:`REFINE_MAX` times; 38 re-solves in 240 steps on Table I). The remaining
@@ -44,7 +44,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from typing import NamedTuple, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
@@ -96,21 +96,23 @@ class Constraints(NamedTuple):
 
 
 class Assembly(Protocol):
-    """Forms and solves the QP of a step (:class:`CompiledAssembly`, :class:`ReferenceAssembly`)."""
+    """Forms and solves the QP of a step: :class:`CompiledAssembly` or
+    :class:`ReferenceAssembly`, each with its own step data (``qp``)."""
 
-    def build(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, y_nom: np.ndarray | None): ...
+    def build(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, y_nom: np.ndarray | None,
+              u0: np.ndarray) -> Any: ...
 
-    def set_offset(self, qp, u0: np.ndarray, x1: np.ndarray | None = None) -> None: ...
+    def set_offset(self, qp: Any, u: np.ndarray, x1: np.ndarray) -> None: ...
 
-    def solve(self, qp, start: np.ndarray | None) -> QPSolution: ...
+    def solve(self, qp: Any, start: np.ndarray | None) -> QPSolution: ...
 
-    def one_step_error(self, qp, u: np.ndarray) -> tuple[np.ndarray, float, float]: ...
+    def one_step_error(self, qp: Any, u: np.ndarray) -> tuple[np.ndarray, float, float]: ...
 
-    def dense(self, qp) -> DenseQP: ...
+    def dense(self, qp: Any) -> DenseQP: ...
 
-    def violation(self, qp, sol: QPSolution) -> float: ...
+    def violation(self, qp: Any, sol: QPSolution) -> float: ...
 
-    def finish(self, qp, z: np.ndarray, hard: QPSolution | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+    def finish(self, qp: Any, z: np.ndarray, hard: QPSolution | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
 
 
 class ConstrainedController:
@@ -159,8 +161,7 @@ class ConstrainedController:
             p = self._x1_pred
             stats["mismatch_m"] = max(stats["mismatch_m"], math.hypot(x[0] - p[0], x[1] - p[1]))
             stats["mismatch_rad"] = max(stats["mismatch_rad"], abs(float(x[2] - p[2])))
-        qp = asm.build(k, x, Ad, Bd, self.y_nom)
-        asm.set_offset(qp, self.guess())
+        qp = asm.build(k, x, Ad, Bd, self.y_nom, self.guess())
         sol = asm.solve(qp, self.warm_start())
         iterations = sol.iterations
         # while the plant under the solution's first move lands farther from the prediction

@@ -129,12 +129,17 @@ class CorridorConstraint(RowConstraint):
             lower.append(lo[sel, ax])
             upper.append(hi[sel, ax])
         for j in samples[has_hp]:
-            A, b = self.hp[idx[j]]
+            A, b = self._halfplanes(int(idx[j]))
             cols.append(6 * j + np.tile(np.arange(2), (len(b), 1)))
             vals.append(A)
             lower.append(np.full(len(b), -np.inf))
             upper.append(b)
         return RowBlock(np.vstack(cols), np.vstack(vals), np.concatenate(lower), np.concatenate(upper), self.kind)
+
+    def _halfplanes(self, s: int) -> tuple[np.ndarray, np.ndarray]:
+        hp = self.hp[s]
+        assert hp is not None
+        return hp
 
     @property
     def kernel_args(self) -> tuple:
@@ -155,7 +160,7 @@ class EndApproachConstraint(RowConstraint):
         #: first sequence index with the row
         self.start_index = seq.K
         n = 0 if segments is None else len(segments)
-        if n >= 3 and segments[-1].is_point:
+        if segments is not None and n >= 3 and segments[-1].is_point:
             d = segments[-1].centre[:2] - segments[-2].centre[:2]
             nd = float(np.hypot(*d))
             if nd > 1e-12:
@@ -164,13 +169,16 @@ class EndApproachConstraint(RowConstraint):
                 self.start_index = max((n - 2) * samples_per_segment - 1, 0)
 
     def rows(self, step: StepContext) -> RowBlock:
+        """One row per sample from :attr:`start_index` on (none without the half-plane)."""
         sel = np.zeros(0, int) if self.half_plane is None else np.nonzero(step.idx >= self.start_index)[0]
-        d, b = self.half_plane if self.half_plane is not None else (np.zeros(2), 0.0)
+        d, b = self._half_plane()
         return RowBlock(6 * sel[:, None] + np.arange(2), np.tile(d, (sel.size, 1)), np.full(sel.size, -np.inf),
                         np.full(sel.size, b), self.kind)
 
+    def _half_plane(self) -> tuple[np.ndarray, float]:
+        return self.half_plane if self.half_plane is not None else (np.zeros(2), 0.0)
+
     @property
     def kernel_args(self) -> tuple:
-        on = self.half_plane is not None
-        d, b = self.half_plane if on else (np.zeros(2), 0.0)
-        return on, np.asarray(d, dtype=float), float(b), int(self.start_index)
+        d, b = self._half_plane()
+        return self.half_plane is not None, np.asarray(d, dtype=float), float(b), int(self.start_index)

@@ -7,7 +7,7 @@ the same minimiser and the same plan.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -40,10 +40,10 @@ class ReferenceQP:
     tgt: np.ndarray  #: (3N,) their targets
     H: np.ndarray  #: (N m, N m) Hessian, scaled
     scale: float
-    d: np.ndarray | None = None  #: (6,) one-step offset
-    x1: np.ndarray | None = None  #: (6,) the plant's next state under the move of ``d``
-    free: np.ndarray | None = None  #: (6N,) predicted states at ``z = 0``
-    dense: DenseQP | None = None  #: the QP, once the offset is set
+    d: np.ndarray = field(default_factory=lambda: np.zeros(6))  #: (6,) one-step offset
+    x1: np.ndarray = field(default_factory=lambda: np.zeros(6))  #: (6,) the plant's next state under its move
+    free: np.ndarray = field(default_factory=lambda: np.zeros(0))  #: (6N,) predicted states at ``z = 0``
+    dense: DenseQP | None = None  #: the QP at the offset
 
 
 class ReferenceAssembly:
@@ -57,17 +57,18 @@ class ReferenceAssembly:
         i, j = np.indices((self.N, self.N))
         self._lag = np.where(i >= j, i - j, self.N)
 
-    def build(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, y_nom: np.ndarray | None) -> ReferenceQP:
+    def build(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, y_nom: np.ndarray | None,
+              u0: np.ndarray) -> ReferenceQP:
         """The condensed QP of step ``k`` in the scaled inputs ``z = u / force_max``::
 
             min 0.5 z'Hz + f'z   s.t.  -1 <= z <= 1,  bl <= A z <= bu  (rows with bl == bu: equal)
 
         Every row is a linear function ``Sel`` of the predicted states ``X = free + Gx z``
-        (eq. 11), so ``A = Sel Gx`` and the bounds are ``b0 - Sel free``; the offset (set by
-        :meth:`set_offset`) only changes ``free`` and sample 0's leg rows. The criterion
-        (22)-(23) in ``z``: ``H = Gp2' W Gp2 + diag(du)``, ``f = Gp2' (W free_pose - tgt)``,
-        both scaled so that ``H``'s largest diagonal entry is 1. The legs are linearised at
-        ``y_nom`` (N, 3), or at ``x``."""
+        (eq. 11), so ``A = Sel Gx`` and the bounds are ``b0 - Sel free``; the one-step offset
+        under the guessed move ``u0`` [N] (:meth:`set_offset`) changes ``free`` and sample 0's
+        leg rows. The criterion (22)-(23) in ``z``: ``H = Gp2' W Gp2 + diag(du)``,
+        ``f = Gp2' (W free_pose - tgt)``, both scaled so that ``H``'s largest diagonal entry is
+        1. The legs are linearised at ``y_nom`` (N, 3), or at ``x``."""
         N, m, seq = self.N, self.n_legs, self.seq
         P = np.empty((N + 1, 6, 6))
         P[0] = np.eye(6)
@@ -89,16 +90,17 @@ class ReferenceAssembly:
         step = StepContext(np.minimum(np.arange(k, k + N), seq.K - 1), y_nom,
                            kinematics.leg_jacobians(self.model, y_nom), kinematics.leg_lengths(self.model, y_nom))
         rows = Rows.stack([c.rows(step) for c in self.constraints.rows], [c.hard for c in self.constraints.rows])
-        return ReferenceQP(x, Ad, Bd, rows, P, Gx, Gp2, W, (qa * qa * lo + qb * qb * hi).ravel(), H, scale)
+        qp = ReferenceQP(x, Ad, Bd, rows, P, Gx, Gp2, W, (qa * qa * lo + qb * qb * hi).ravel(), H, scale)
+        self.set_offset(qp, u0, rk4_sample(self.model, x, u0, self.Ts, self.substeps))
+        return qp
 
-    def set_offset(self, qp: ReferenceQP, u0: np.ndarray, x1: np.ndarray | None = None) -> None:
-        """The one-step offset ``d = Phi(x, u0) - Ad x - Bd u0`` (``x1 = Phi(x, u0)`` if
-        known), sample 0's leg rows at the pose ``x1[:3]``, and the QP at them."""
+    def set_offset(self, qp: ReferenceQP, u: np.ndarray, x1: np.ndarray) -> None:
+        """The one-step offset ``d = Phi(x, u) - Ad x - Bd u`` (``x1 = Phi(x, u)``: the plant's
+        next state under the move ``u`` [N]), sample 0's leg rows at the pose ``x1[:3]``, and
+        the QP at them."""
         N = self.N
-        if x1 is None:
-            x1 = rk4_sample(self.model, qp.x, u0, self.Ts, self.substeps)
         qp.x1 = x1
-        qp.d = x1 - qp.Ad @ qp.x - qp.Bd @ u0
+        qp.d = x1 - qp.Ad @ qp.x - qp.Bd @ u
         y1 = x1[:3]
         J0 = kinematics.leg_jacobians(self.model, y1)[0]
         self.constraints.leg_speed.first_sample(qp.rows, J0)
@@ -112,9 +114,14 @@ class ReferenceAssembly:
         qp.dense = DenseQP(qp.H, f, Sel @ qp.Gx, qp.rows.lower - sf, qp.rows.upper - sf, qp.rows.kinds,
                            qp.rows.n_hard)
 
+    def dense(self, qp: ReferenceQP) -> DenseQP:
+        """Every row formed (the slack problem)."""
+        assert qp.dense is not None  # set by build
+        return qp.dense
+
     def solve(self, qp: ReferenceQP, start: np.ndarray | None) -> QPSolution:
         """The hard QP, every hard row given to DAQP, from the warm start ``start``."""
-        return qp.dense.solve_hard(start)
+        return self.dense(qp).solve_hard(start)
 
     def one_step_error(self, qp: ReferenceQP, u: np.ndarray) -> tuple[np.ndarray, float, float]:
         """The plant's next state under ``u`` [N] and how far it lands from the prediction
@@ -123,13 +130,9 @@ class ReferenceAssembly:
         e = np.abs(x1 - (qp.Ad @ qp.x + qp.Bd @ u + qp.d))
         return x1, math.hypot(e[0], e[1]), float(e[2])
 
-    def dense(self, qp: ReferenceQP) -> DenseQP:
-        """Every row formed (the slack problem)."""
-        return qp.dense
-
     def violation(self, qp: ReferenceQP, sol: QPSolution) -> float:
         """Largest hard-row violation of a hard solution [row units]."""
-        return qp.dense.violation(sol.z)
+        return self.dense(qp).violation(sol.z)
 
     def finish(self, qp: ReferenceQP, z: np.ndarray, hard: QPSolution | None) -> tuple[np.ndarray, np.ndarray,
                                                                                          np.ndarray]:

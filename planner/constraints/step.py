@@ -44,35 +44,36 @@ SCREEN_TOL = 1e-9
 #: with the equalities eliminated the force bounds are rows too: given to the solver where
 #: the warm start's force is within this fraction of force_max of the bound
 SCREEN_FORCE = 0.2
-_SCREEN = np.array(SCREEN_ROWS, float)
+_SCREEN = np.array(SCREEN_ROWS, float)  # by RowKind
 
 
 @dataclass(slots=True, eq=False)
 class FullQP:
     """The step's QP in ``z`` (module docstring), compiled: the parts that depend on the
-    model only, formed once per step, and those that depend on the one-step offset ``d``
-    (``None`` until :meth:`set_free`)."""
+    model only, and those that depend on the one-step offset ``d`` (:meth:`set_free`)."""
 
     P: np.ndarray  #: (N+1, 6, 6) ``Ad^q``
     Gx: np.ndarray  #: (6N, N m) prediction matrix in ``z`` (eq. 11)
     H: np.ndarray  #: (N m, N m) Hessian, scaled (largest diagonal entry 1)
     scale: float  #: that scale
-    free: np.ndarray | None = None  #: (6N,) predicted states at ``z = 0``
-    f: np.ndarray | None = None  #: (N m,) linear term, scaled
-    lower: np.ndarray | None = None  #: (nrow,) row bounds minus ``Sel free``
-    upper: np.ndarray | None = None
-    keep: np.ndarray | None = None  #: (n_hard,) the rows given to DAQP (screening)
+    free: np.ndarray  #: (6N,) predicted states at ``z = 0``
+    f: np.ndarray  #: (N m,) linear term, scaled
+    lower: np.ndarray  #: (nrow,) row bounds minus ``Sel free``
+    upper: np.ndarray
+    keep: np.ndarray | None = None  #: (n_hard,) the rows given to DAQP (screening), once screened
 
     @classmethod
-    def form(cls, Ad: np.ndarray, Bd: np.ndarray, umax: np.ndarray, W: np.ndarray, du: np.ndarray) -> FullQP:
+    def form(cls, Ad: np.ndarray, Bd: np.ndarray, umax: np.ndarray, du: np.ndarray, x: np.ndarray, d: np.ndarray,
+             W: np.ndarray, tgt: np.ndarray, rows: Rows) -> FullQP:
         """Prediction and Hessian (``kernels.prediction``, ``kernels.hessian``) of the model
-        ``Ad, Bd``, force limits ``umax`` [N], pose weights ``W`` (3N,) and move weights
-        ``du`` (N m,)."""
+        ``Ad, Bd``, force limits ``umax`` [N], move weights ``du`` (N m,) and pose weights
+        ``W`` (3N,), and the parts at the offset ``d`` (:meth:`set_free`)."""
         N, nz = len(W) // 3, len(du)
         P, Gx, H = np.empty((N + 1, 6, 6)), np.empty((6 * N, nz)), np.empty((nz, nz))
         ck.prediction(Ad, Bd, umax, P, Gx)
         scale = ck.hessian(Ad, Bd, umax, W, du, H)
-        return cls(P, Gx, H, scale)
+        free, f, lower, upper = ck.free_parts(P, x, d, Gx, W, tgt, rows.col, rows.val, rows.lower, rows.upper)
+        return cls(P, Gx, H, scale, free, f * scale, lower, upper)
 
     def set_free(self, x: np.ndarray, d: np.ndarray, W: np.ndarray, tgt: np.ndarray, rows: Rows) -> None:
         """The parts at the free response ``free = P[1:] x + P[:N] d`` (``kernels.free_parts``)."""
@@ -96,18 +97,19 @@ class FullQP:
         """The hard QP, screened and checked (module docstring), from the warm start
         ``start`` (scaled moves, or None)."""
         X = np.empty(self.Gx.shape[0])
-        if self.keep is None:  # rows near a bound at the warm start's prediction
+        keep = self.keep
+        if keep is None:  # rows near a bound at the warm start's prediction
             ck.predict(self.Gx, self.free, start if start is not None else np.zeros(self.Gx.shape[1]), X)
-            self.keep = rows.screen(X, _SCREEN)
+            keep = self.keep = rows.screen(X, _SCREEN)
         iterations = 0
         while True:
-            A, bu, bl, sense = ck.solver_problem(self.keep, rows.col, rows.val, self.Gx, self.lower, self.upper)
+            A, bu, bl, sense = ck.solver_problem(keep, rows.col, rows.val, self.Gx, self.lower, self.upper)
             sol = solve_qp(self.H, self.f, A, bu, bl, sense, start)
             iterations += sol.iterations
             if not sol.ok:  # fewer rows infeasible: the whole QP is too
                 break
             ck.predict(self.Gx, self.free, sol.z, X)
-            worst, added = rows.check(X, self.keep, SCREEN_TOL)
+            worst, added = rows.check(X, keep, SCREEN_TOL)
             if added == 0:
                 sol.states, sol.violation = X, worst
                 break
@@ -120,8 +122,8 @@ class FullQP:
 class ReducedQP:
     """The step's QP with its equalities eliminated (module docstring; ``kernels.reduce_setup``
     explains the parametrisation): variables ``w`` (``n_w``), moves ``z_i = Z_i w_i + K_i
-    (c_i - C_i Y_i)``, states ``X = X_free + G w``. The fields after :attr:`Bu` depend on the
-    one-step offset (``None`` until :meth:`set_free`)."""
+    (c_i - C_i Y_i)``, states ``X = X_free + G w``. The fields from :attr:`z_free` on depend on
+    the one-step offset (:meth:`set_free`)."""
 
     n_w: int  #: number of variables
     offsets: np.ndarray  #: (N+1,) first variable of sample i's ``w_i``
@@ -137,24 +139,30 @@ class ReducedQP:
     scale: float  #: that scale
     eliminated: np.ndarray  #: (nrow,) rows replaced by the parametrisation
     Bu: np.ndarray  #: (6, m) ``Bd diag(umax)``
-    z_free: np.ndarray | None = None  #: (N m,) moves at ``w = 0``
-    X_free: np.ndarray | None = None  #: (6N,) states at ``w = 0``
-    f: np.ndarray | None = None  #: (n_w,) linear term, scaled
-    lower: np.ndarray | None = None  #: (nrow,) row bounds minus ``Sel X_free``
-    upper: np.ndarray | None = None
-    keep: np.ndarray | None = None  #: (n_hard,) rows given to DAQP
-    keep_force: np.ndarray | None = None  #: (N m,) force bounds given to DAQP (as rows)
+    z_free: np.ndarray  #: (N m,) moves at ``w = 0``
+    X_free: np.ndarray  #: (6N,) states at ``w = 0``
+    f: np.ndarray  #: (n_w,) linear term, scaled
+    lower: np.ndarray  #: (nrow,) row bounds minus ``Sel X_free``
+    upper: np.ndarray
+    keep: np.ndarray | None = None  #: (n_hard,) rows given to DAQP, once screened
+    keep_force: np.ndarray | None = None  #: (N m,) force bounds given to DAQP (as rows), once screened
 
     @classmethod
-    def setup(cls, Ad: np.ndarray, Bd: np.ndarray, umax: np.ndarray, W: np.ndarray, du: np.ndarray, rows: Rows,
-              N: int) -> ReducedQP | None:
-        """The reduced QP of the rows' equalities (``du``: move weight per drive), or None
-        where there is none or one cannot be eliminated (then the QP in ``z`` is solved)."""
-        ok, *parts = ck.reduce_setup(Ad, Bd, umax, W, du, rows.col, rows.val, rows.lower, rows.upper, rows.n_hard, N)
-        return cls(*parts) if ok else None
-
-    def _forward_args(self) -> tuple:
-        return self.Bu, self.eq_count, self.eq_axis, self.eq_value, self.K, self.Z, self.offsets
+    def setup(cls, Ad: np.ndarray, Bd: np.ndarray, umax: np.ndarray, du: np.ndarray, x: np.ndarray, d: np.ndarray,
+              W: np.ndarray, tgt: np.ndarray, rows: Rows) -> ReducedQP | None:
+        """The reduced QP of the rows' equalities (``du``: move weight per drive) at the
+        offset ``d``, or None where there is none or one cannot be eliminated (then the QP in
+        ``z`` is solved)."""
+        N = len(W) // 3
+        (ok, n_w, offsets, eq_count, eq_axis, eq_value, K, Z, A_closed, L, G, H, scale, eliminated,
+         Bu) = ck.reduce_setup(Ad, Bd, umax, W, du, rows.col, rows.val, rows.lower, rows.upper, rows.n_hard, N)
+        if not ok:
+            return None
+        z_free, X_free, f, lower, upper = ck.reduce_free(x, d, Ad, Bu, eq_count, eq_axis, eq_value, K, Z, A_closed, L,
+                                                         G, offsets, W, tgt, du, scale, rows.col, rows.val,
+                                                         rows.lower, rows.upper)
+        return cls(int(n_w), offsets, eq_count, eq_axis, eq_value, K, Z, A_closed, L, G, H, scale, eliminated, Bu,
+                   z_free, X_free, f, lower, upper)
 
     def set_free(self, x: np.ndarray, d: np.ndarray, Ad: np.ndarray, W: np.ndarray, tgt: np.ndarray, du: np.ndarray,
                  rows: Rows) -> None:
@@ -166,7 +174,8 @@ class ReducedQP:
     def forward(self, x: np.ndarray, d: np.ndarray, Ad: np.ndarray, w: np.ndarray, z: np.ndarray,
                 X: np.ndarray) -> None:
         """Moves ``z`` and states ``X`` at ``w``, into the given arrays (``kernels.reduce_forward``)."""
-        ck.reduce_forward(x, d, Ad, *self._forward_args(), w, z, X)
+        ck.reduce_forward(x, d, Ad, self.Bu, self.eq_count, self.eq_axis, self.eq_value, self.K, self.Z, self.offsets,
+                          w, z, X)
 
     def solve(self, x: np.ndarray, d: np.ndarray, Ad: np.ndarray, rows: Rows, start: np.ndarray | None) -> QPSolution:
         """The reduced QP, screened and checked as :meth:`FullQP.solve`, every row and force
@@ -174,27 +183,28 @@ class ReducedQP:
         m = self.Bu.shape[1]
         nz, nx, nh = len(self.eq_count) * m, 6 * len(self.eq_count), rows.n_hard
         ws = ck.reduce_start(start, self.Z, self.offsets, m) if start is not None else None
-        z, X = np.empty(nz), np.empty(nx)
-        if self.keep is None:  # rows near a bound at the warm start
+        keep, keep_force = self.keep, self.keep_force
+        if keep is None or keep_force is None:  # rows near a bound at the warm start
             if ws is not None:
+                z, X = np.empty(nz), np.empty(nx)
                 self.forward(x, d, Ad, ws, z, X)
             else:
                 z, X = self.z_free, self.X_free
-            self.keep, self.keep_force = np.zeros(nh, bool), np.zeros(nz, bool)
+            keep, keep_force = self.keep, self.keep_force = np.zeros(nh, bool), np.zeros(nz, bool)
             ck.reduce_screen(rows.col, rows.val, rows.lower, rows.upper, rows.kinds, nh, self.eliminated, X, z,
-                             _SCREEN, SCREEN_FORCE, self.keep, self.keep_force)
-            z, X = np.empty(nz), np.empty(nx)
+                             _SCREEN, SCREEN_FORCE, keep, keep_force)
+        z, X = np.empty(nz), np.empty(nx)
         iterations = 0
         while True:
-            A, bu, bl, sense = ck.reduce_problem(self.keep, self.keep_force, rows.col, rows.val, self.G, self.offsets,
-                                                 self.L, self.Z, self.eq_count, self.z_free, self.lower, self.upper, m)
+            A, bu, bl, sense = ck.reduce_problem(keep, keep_force, rows.col, rows.val, self.G, self.offsets, self.L,
+                                                 self.Z, self.eq_count, self.z_free, self.lower, self.upper, m)
             sol = solve_qp(self.H, self.f, A, bu, bl, sense, ws)
             iterations += sol.iterations
             if not sol.ok:  # fewer rows infeasible: the whole QP is too
                 return QPSolution(np.zeros(nz), sol.flag, iterations)
             self.forward(x, d, Ad, sol.z, z, X)
             worst, added = ck.reduce_check(rows.col, rows.val, rows.lower, rows.upper, nh, self.eliminated, X, z,
-                                           self.keep, self.keep_force, SCREEN_TOL)
+                                           keep, keep_force, SCREEN_TOL)
             if added == 0:
                 return QPSolution(z, sol.flag, iterations, X, worst)
             ws = sol.z
@@ -202,8 +212,9 @@ class ReducedQP:
 
 @dataclass(slots=True, eq=False)
 class StepQP:
-    """The QP of one step, compiled form: the model and rows of the step, the reduced QP where
-    the equalities are eliminated, the QP in ``z`` where needed (formed on first use)."""
+    """The QP of one step, compiled form: the model and rows of the step at the one-step
+    offset, the reduced QP where the equalities are eliminated, the QP in ``z`` where needed
+    (formed on first use)."""
 
     x: np.ndarray  #: (6,) state at the step
     Ad: np.ndarray  #: (6, 6) discretised model (eq. 9)
@@ -211,7 +222,7 @@ class StepQP:
     W: np.ndarray  #: (3N,) pose weights of the criterion
     tgt: np.ndarray  #: (3N,) their targets
     rows: Rows
+    d: np.ndarray  #: (6,) one-step offset (see the controller)
+    x1: np.ndarray  #: (6,) the plant's next state under the move of ``d``
     reduced: ReducedQP | None
     full: FullQP | None = None
-    d: np.ndarray | None = None  #: (6,) one-step offset (see the controller)
-    x1: np.ndarray | None = None  #: (6,) the plant's next state under the move of ``d``
