@@ -16,6 +16,8 @@ from ..corridor import RangeSequence
 from ..model import RobotModel
 from ..schema import Settings
 from . import kernels as ck
+from .corridor import CorridorConstraint, EndApproachConstraint
+from .drives import LegSpeedConstraint, LegStrokeConstraint
 from .qp import DenseQP, QPSolution
 from .rows import ROW_UNIT_M, Rows
 from .step import FullQP, ReducedQP, StepQP
@@ -23,7 +25,10 @@ from .step import FullQP, ReducedQP, StepQP
 if TYPE_CHECKING:
     from .controller import Constraints
 
-__all__ = ["AssemblyInputs", "CompiledAssembly"]
+__all__ = ["KERNEL_SECTIONS", "AssemblyInputs", "CompiledAssembly"]
+
+#: the row constraints :func:`kernels.assemble` fuses, in its (the row) order
+KERNEL_SECTIONS = (CorridorConstraint, EndApproachConstraint, LegSpeedConstraint, LegStrokeConstraint)
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,6 +47,12 @@ class AssemblyInputs:
 
     @classmethod
     def of(cls, model: RobotModel, seq: RangeSequence, N: int, constraints: Constraints) -> AssemblyInputs:
+        """The inputs of a plan: its range sequence, the legs and the row constraints (one of
+        each of :data:`KERNEL_SECTIONS`, in that order)."""
+        if tuple(type(c) for c in constraints.rows) != KERNEL_SECTIONS:
+            raise TypeError("the compiled assembly fuses the rows of "
+                            f"{', '.join(c.__name__ for c in KERNEL_SECTIONS)}, in this order")
+
         def pad(a: np.ndarray) -> np.ndarray:
             return np.ascontiguousarray(np.concatenate((a, np.repeat(a[-1:], N, axis=0))), dtype=float)
 

@@ -15,15 +15,16 @@ over one sample it is frozen: the plant lands up to ~2e-8 m and ~4e-7 rad from t
 on Table I (more at higher speed). So the first predicted state is corrected by the one-step
 offset ``d = Phi(x, u0) - Ad x - Bd u0`` (an RK4 step of the plant under the guessed move
 ``u0``, the previous solution's; ``build`` and ``set_offset`` of the assembly), which leaves
-the one-step error ``(dPhi/du - Bd)(u - u0)``. After each solve the plant is stepped under the solution's
-move ``u``; while it lands farther than :data:`REFINE_TOL_M` / :data:`REFINE_TOL_RAD` (1e-3 and
-1e-2 of the margins) from the prediction, the offset is recomputed at ``u`` and the QP solved
-again (at most :data:`REFINE_MAX` times; 38 re-solves in 240 steps on Table I). The remaining
-one-step mismatch (metric ``model_mismatch_max_m``, printed by ``benchmarks/bench_qp.py``) is
-below 1e-9 m and 1e-8 rad on Table I, far inside the 1 micrometre margin
-(:data:`~planner.constraints.corridor.MARGIN_M`), which therefore keeps the actual samples
-inside. Metrics are always computed on the actual (nonlinear) trajectory; ``contained`` is
-true only if its corridor violation is at most :data:`CONTAIN_TOL_M`.
+the one-step error ``(dPhi/du - Bd)(u - u0)``. After each solve the plant is stepped under the
+solution's move ``u``; while it lands farther than :data:`REFINE_TOL_M` /
+:data:`REFINE_TOL_RAD` (1e-3 and 1e-2 of the margins) from the prediction, the offset is
+recomputed at ``u`` and the QP solved again (at most :data:`REFINE_MAX` times; 8 re-solves in
+240 steps on Table I with the mode's defaults, 38 with the paper mode's penalties). The
+remaining one-step mismatch (metric ``model_mismatch_max_m``, printed by
+``benchmarks/bench_qp.py``) is below 1e-9 m and 1e-8 rad on Table I, far inside the
+1 micrometre margin (:data:`~planner.constraints.corridor.MARGIN_M`), which therefore keeps
+the actual samples inside. Metrics are always computed on the actual (nonlinear) trajectory;
+``contained`` is true only if its corridor violation is at most :data:`CONTAIN_TOL_M`.
 
 Backends. ``settings.backend`` picks, once at construction, the assembly that forms and
 solves each step's QP: :class:`~planner.constraints.compiled.CompiledAssembly` (compiled
@@ -44,6 +45,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from typing import Any, NamedTuple, Protocol
 
 import numpy as np
@@ -60,7 +62,7 @@ from .reference import ReferenceAssembly
 from .rows import ROW_UNIT_M, RowConstraint
 
 __all__ = ["CONTAIN_TOL_M", "REFINE_MAX", "REFINE_TOL_M", "REFINE_TOL_RAD", "Assembly", "ConstrainedController",
-           "Constraints"]
+           "Constraints", "ControllerStats"]
 
 #: a plan is "contained" when its actual corridor violation is at most this [m]
 CONTAIN_TOL_M = 1e-9
@@ -115,6 +117,22 @@ class Assembly(Protocol):
     def finish(self, qp: Any, z: np.ndarray, hard: QPSolution | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
 
 
+@dataclass
+class ControllerStats:
+    """What the controller counts over a plan (reported by :meth:`ConstrainedController.report`)."""
+
+    iterations: list[int] = field(default_factory=list)  #: DAQP iterations per step
+    solve_s: float = 0.0  #: time in the controller [s]
+    failures: int = 0  #: steps whose slack problem failed too
+    refinements: int = 0  #: re-solves at a refined offset
+    infeasible: int = 0  #: steps that needed the slack problem
+    slack_max_m: float = 0.0  #: largest corridor or stroke slack [m]
+    speed_slack_max_m_s: float = 0.0  #: largest leg-speed slack [m/s]
+    violation_max_m: float = 0.0  #: largest violation of a hard row at the solutions [m, m/s or rad]
+    mismatch_m: float = 0.0  #: largest distance of the plant's next position from the prediction [m]
+    mismatch_rad: float = 0.0  #: and of its angle [rad]
+
+
 class ConstrainedController:
     """Receding-horizon controller with hard constraints (see the module docstring).
 
@@ -134,9 +152,7 @@ class ConstrainedController:
         #: nominal poses (N, 3) of the leg linearisation: the previous prediction, shifted
         self.y_nom: np.ndarray | None = None
         self._x1_pred: np.ndarray | None = None
-        self.stats = {"steps": 0, "iterations": [], "slack": [], "solve_s": 0.0, "infeasible": 0,
-                      "pred_violation": 0.0, "fail": 0, "refines": 0, "mismatch_m": 0.0, "mismatch_rad": 0.0,
-                      "speed_slack": 0.0}
+        self.stats = ControllerStats()
 
     def guess(self) -> np.ndarray:
         """The guessed move of the offset [N]: the previous solution's move of sample 1 (its
@@ -159,8 +175,8 @@ class ConstrainedController:
         stats, asm = self.stats, self.assembly
         if self._x1_pred is not None:  # how far the plant landed from the prediction
             p = self._x1_pred
-            stats["mismatch_m"] = max(stats["mismatch_m"], math.hypot(x[0] - p[0], x[1] - p[1]))
-            stats["mismatch_rad"] = max(stats["mismatch_rad"], abs(float(x[2] - p[2])))
+            stats.mismatch_m = max(stats.mismatch_m, math.hypot(x[0] - p[0], x[1] - p[1]))
+            stats.mismatch_rad = max(stats.mismatch_rad, abs(float(x[2] - p[2])))
         qp = asm.build(k, x, Ad, Bd, self.y_nom, self.guess())
         sol = asm.solve(qp, self.warm_start())
         iterations = sol.iterations
@@ -176,37 +192,36 @@ class ConstrainedController:
             asm.set_offset(qp, u1, x1)
             sol = asm.solve(qp, sol.z)
             iterations += sol.iterations
-            stats["refines"] += 1
+            stats.refinements += 1
         if sol.ok:
-            z, hard, slack = sol.z, sol, 0.0
+            z, hard = sol.z, sol
             # how well the solver met the rows it was given (m, m/s, rad)
-            stats["pred_violation"] = max(stats["pred_violation"], float(asm.violation(qp, sol) * ROW_UNIT_M))
+            stats.violation_max_m = max(stats.violation_max_m, float(asm.violation(qp, sol) * ROW_UNIT_M))
         else:
-            z, slack, slack_iterations = self._slack_step(k, asm.dense(qp))
+            z, slack_iterations = self._slack_step(k, asm.dense(qp))
             hard = None
             iterations += slack_iterations
-        stats["iterations"].append(iterations)
-        stats["slack"].append(slack)
-        stats["steps"] += 1
+        stats.iterations.append(iterations)
         z, Xp, self.y_nom = asm.finish(qp, z, hard)
         self.z_prev = z
         self._x1_pred = Xp[0]
-        stats["solve_s"] += time.perf_counter() - t0
+        stats.solve_s += time.perf_counter() - t0
         return z[:self.n_legs] * self.constraints.forces.umax
 
-    def _slack_step(self, k: int, dense: DenseQP) -> tuple[np.ndarray, float, int]:
-        """The step's moves from the slack problem, its corridor/stroke slack [m] and its
-        iterations; raises ``infeasible`` with ``require_settled``."""
+    def _slack_step(self, k: int, dense: DenseQP) -> tuple[np.ndarray, int]:
+        """The step's moves from the slack problem and its iterations; counts the step and its
+        slack, raises ``infeasible`` with ``require_settled``."""
         nz = len(dense.f)
         sol = dense.solve_slack()
         zs = sol.z
         if not sol.ok:
-            self.stats["fail"] += 1
+            self.stats.failures += 1
             zs = np.zeros(nz + 3)
         sl = zs[nz:] * ROW_UNIT_M  # corridor [m], stroke [m], leg speed [m/s]
         slack = float(max(sl[0], sl[1]))
-        self.stats["speed_slack"] = max(self.stats["speed_slack"], float(sl[2]))
-        self.stats["infeasible"] += 1
+        self.stats.slack_max_m = max(self.stats.slack_max_m, slack)
+        self.stats.speed_slack_max_m_s = max(self.stats.speed_slack_max_m_s, float(sl[2]))
+        self.stats.infeasible += 1
         if self.st.require_settled:  # strict: stop at the first step that cannot keep the corridor
             raise PlannerError(
                 "infeasible",
@@ -215,23 +230,23 @@ class ConstrainedController:
                 f"{sl[2] * 1e3:.4f} mm/s); give it more time "
                 "(samples_per_segment, speed_m_s, total_time_s), widen the corridor, or set "
                 "require_settled to false to get the plan with its violations reported", "settings")
-        return zs[:nz], slack, sol.iterations
+        return zs[:nz], sol.iterations
 
     def report(self) -> dict:
         """The controller's metrics (names as in :class:`planner.schema.Metrics`)."""
         s = self.stats
-        it = np.array(s["iterations"]) if s["iterations"] else np.zeros(1)
+        it = np.array(s.iterations) if s.iterations else np.zeros(1)
         return {
             "qp_solver": "daqp",
             "qp_iterations_median": float(np.median(it)),
             "qp_iterations_max": int(it.max()),
-            "qp_time_ms": s["solve_s"] * 1e3,
-            "qp_failures": int(s["fail"]),
-            "qp_refinements": int(s["refines"]),
-            "infeasible_steps": int(s["infeasible"]),
-            "constraint_slack_max_m": float(max(s["slack"], default=0.0)),
-            "speed_slack_max_m_s": s["speed_slack"],
-            "predicted_violation_max_m": s["pred_violation"],
-            "model_mismatch_max_m": s["mismatch_m"],
-            "model_mismatch_max_rad": s["mismatch_rad"],
+            "qp_time_ms": s.solve_s * 1e3,
+            "qp_failures": s.failures,
+            "qp_refinements": s.refinements,
+            "infeasible_steps": s.infeasible,
+            "constraint_slack_max_m": s.slack_max_m,
+            "speed_slack_max_m_s": s.speed_slack_max_m_s,
+            "predicted_violation_max_m": s.violation_max_m,
+            "model_mismatch_max_m": s.mismatch_m,
+            "model_mismatch_max_rad": s.mismatch_rad,
         }

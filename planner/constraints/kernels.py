@@ -1,18 +1,19 @@
 """The constrained mode's per-step QP, compiled (numba): the rows of the constraints, the
 prediction and Hessian, the equality elimination, the screening and checking of rows.
 
-Why compiled: the numpy assembly of one step's QP (:class:`~planner.constraints.reference.
-ReferenceAssembly`, the reference) is a few dozen array operations on small arrays plus the
-dense products ``Sel Gx`` and ``Gp2' W Gp2``; most of its cost was call overhead and
-multiplications by the zeros of the block lower-triangular prediction matrix. Here products
-skip those zeros, the Hessian comes from a backward recursion, and the constraint selection
-``Sel`` is kept sparse (at most three entries per row: a pose coordinate, a half-plane normal,
-a leg Jacobian row). ``tests/test_constraints_kernels.py`` checks that both assemblies give
-the same QP, and that the QP with its equalities eliminated has the same minimiser.
+Why compiled: the numpy assembly of one step's QP
+(:class:`~planner.constraints.reference.ReferenceAssembly`, the reference) is a few dozen
+array operations on small arrays plus the dense products ``Sel Gx`` and ``Gp2' W Gp2``; most
+of its cost was call overhead and multiplications by the zeros of the block lower-triangular
+prediction matrix. Here products skip those zeros, the Hessian comes from a backward
+recursion, and the constraint selection ``Sel`` is kept sparse (at most three entries per
+row: a pose coordinate, a half-plane normal, a leg Jacobian row).
+``tests/test_constraints_kernels.py`` checks that both assemblies give the same QP, and that
+the QP with its equalities eliminated has the same minimiser.
 
-The kernels are positional; each is called through one method of the typed step data
-(:mod:`~planner.constraints.rows`, :mod:`~planner.constraints.step`) or of the compiled
-assembly (:mod:`~planner.constraints.compiled`), never from elsewhere.
+The kernels are positional and internal: they are called only from methods of the typed
+step data (:mod:`~planner.constraints.rows`, :mod:`~planner.constraints.step`) and of the
+compiled assembly (:mod:`~planner.constraints.compiled`), which name what they pass.
 
 Layout: states are stacked per sample, ``X[6 i + a]`` (``a`` = x, y, psi, x_dot, y_dot,
 psi_dot of sample ``i + 1``); the scaled moves ``z = u / force_max`` per sample,

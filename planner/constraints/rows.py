@@ -81,23 +81,24 @@ class Rows:
 
     @classmethod
     def stack(cls, blocks: Sequence[RowBlock], hard: Sequence[bool]) -> Rows:
-        """The rows of the blocks in order (the hard ones must come first), in row units."""
+        """The rows of the blocks in order, in row units; ``hard[i]``: block ``i`` is hard
+        (the hard blocks come first)."""
+        assert list(hard) == sorted(hard, reverse=True), "hard rows first"
         n = [len(b.lower) for b in blocks]
+        starts = np.concatenate(([0], np.cumsum(n)[:-1])).astype(int)
         col = np.full((sum(n), 3), -1, np.int64)
         val = np.zeros((sum(n), 3))
-        r = 0
-        for b, nb in zip(blocks, n, strict=True):
-            c = b.col.shape[1]
-            col[r:r + nb, :c] = b.col
-            val[r:r + nb, :c] = b.val
-            r += nb
-        kinds = np.concatenate([np.full(nb, int(b.kind), np.int64) for b, nb in zip(blocks, n, strict=True)])
-        starts = np.concatenate(([0], np.cumsum(n)))
-        first = {b.kind: int(s) for b, s in reversed(list(zip(blocks, starts, strict=False)))}
+        for b, r, nb in zip(blocks, starts, n):
+            col[r:r + nb, :b.col.shape[1]] = b.col
+            val[r:r + nb, :b.col.shape[1]] = b.val
+        kinds = np.concatenate([np.full(nb, int(b.kind), np.int64) for b, nb in zip(blocks, n)])
+
+        def first(kind: RowKind) -> int:  # the first row of that kind (sample 0's), -1 if none
+            return next((int(r) for b, r in zip(blocks, starts) if b.kind == kind), -1)
+
         return cls(col, val / ROW_UNIT_M, np.concatenate([b.lower for b in blocks]) / ROW_UNIT_M,
                    np.concatenate([b.upper for b in blocks]) / ROW_UNIT_M, kinds,
-                   int(sum(nb for nb, h in zip(n, hard, strict=True) if h)),
-                   first.get(RowKind.SPEED, -1), first.get(RowKind.STROKE, -1))
+                   sum(nb for nb, h in zip(n, hard) if h), first(RowKind.SPEED), first(RowKind.STROKE))
 
     @property
     def n_rows(self) -> int:
