@@ -1,7 +1,7 @@
 """Constrained mode: its own defaults against the paper mode's penalties, on several corridors.
 
 The constrained mode keeps the corridor by constraints, so its penalties only pull the robot
-along. ``planner.request.MODE_DEFAULTS`` gives it a lighter pull and a longer horizon than
+along. ``planner.schema.MODE_DEFAULTS`` gives it a lighter pull and a longer horizon than
 the paper mode (``k_r`` 0.1, ``k_u`` 2e-4, ``N`` 30 instead of 1, 1e-3, 20). This script plans
 each corridor in constrained mode with both, at the same timing (samples per segment), and
 prints drive energy, peak force, containment, settling and compute time side by side.
@@ -23,10 +23,8 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from planner.errors import PlannerError  # noqa: E402
-from planner.plan import plan, warm_up  # noqa: E402
-from planner.request import MODE_DEFAULTS  # noqa: E402
-from planner.robot import builtin_description  # noqa: E402
+from planner import PlannerError, plan, warm_up
+from planner.schema import MODE_DEFAULTS, builtin_description
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "static" / "examples"
 TABLE1 = json.loads((EXAMPLES / "table1.json").read_text())
@@ -35,7 +33,7 @@ BOUNDS = {"lower": [-0.1, -0.05], "upper": [0.1, 0.08]}
 
 
 def _robot(**legs) -> dict:
-    desc = builtin_description("moving-slide")
+    desc = builtin_description("moving-slide").model_dump(mode="json", exclude_none=True)
     desc["legs"] = dict(desc["legs"], **legs)
     return desc
 
@@ -75,7 +73,7 @@ def run(req: dict, extra: dict, repeat: int):
     for _ in range(repeat):
         t0 = time.perf_counter()
         try:
-            res = plan(req)
+            res = plan(req).to_json_dict()
         except PlannerError as exc:
             return None, exc.code
         times.append((time.perf_counter() - t0) * 1e3)

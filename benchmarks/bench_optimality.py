@@ -6,8 +6,8 @@ with CasADi + IPOPT by direct multiple shooting:
 * states ``X_k`` (6) and drive forces ``U_k`` (n) for ``k = 0..K`` (``K`` = the constrained
   plan's number of steps, so the same duration);
 * ``X_{k+1} = RK4(X_k, U_k)`` with the *full nonlinear* nRPR dynamics (eq. 6), written in
-  CasADi symbols from ``planner/robot.py``'s equations and checked here against
-  ``robot.state_derivative`` at random states before solving; one RK4 step per sample with
+  CasADi symbols from ``planner/model/dynamics.py``'s equations and checked here against
+  ``dynamics.state_derivative`` at random states before solving; one RK4 step per sample with
   ``plant_substeps`` substeps, as the planner's plant;
 * the same pose sets per sample as the constrained mode (the time-indexed ranges, shrunk by
   the same 1 um margin, the end point's micrometre box, polygon half-planes), the same
@@ -43,25 +43,27 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from planner.constrained import PoseSets  # noqa: E402
-from planner.plan import plan, rk4_sample  # noqa: E402
-from planner.ranges import range_sequence  # noqa: E402
-from planner.request import MODE_DEFAULTS, parse_request  # noqa: E402
-from planner.robot import load_robot  # noqa: E402
-from planner.trajectory import corridor_violation  # noqa: E402
+from planner import plan
+from planner.constraints import CorridorConstraint, EndApproachConstraint
+from planner.corridor import range_sequence
+from planner.corridor.geometry import corridor_violation
+from planner.model import dynamics, load_robot
+from planner.model.plant import rk4_sample
+from planner.orchestrator.result import overshoot
+from planner.schema import MODE_DEFAULTS, parse_request
 
 TABLE1 = Path(__file__).resolve().parents[1] / "static" / "examples" / "table1.json"
 #: the paper mode's penalties and horizon, run in constrained mode for comparison with the
-#: constrained mode's own defaults (planner.request.MODE_DEFAULTS)
+#: constrained mode's own defaults (planner.schema.MODE_DEFAULTS)
 PAPER_PENALTIES = MODE_DEFAULTS["paper"]
 
 
 def casadi_dynamics(robot):
     """``x_dot = f(x, u)`` of the nRPR robot in CasADi symbols (same equations as
-    ``Robot._terms`` / ``Robot._h_r``: reduced mass matrix ``R^T M R``, velocity products,
+    ``planner.model.dynamics``: reduced mass matrix ``R^T M R``, velocity products,
     viscous leg friction, ``J_l^T u``)."""
     import casadi as ca
 
@@ -70,11 +72,11 @@ def casadi_dynamics(robot):
     px, py, psi, vx, vy, w = (x[i] for i in range(6))
     c, s = ca.cos(psi), ca.sin(psi)
     mp, m_r, a = robot.platform_mass, robot.rod_mass, robot.rod_com
-    Jc = robot._leg_inertia_const
+    Jc = robot.leg_inertia_const
     M = ca.SX.zeros(3, 3)
     h = ca.SX.zeros(3)
     for i in range(robot.n_legs):
-        r0x, r0y = robot._r0[i]
+        r0x, r0y = robot.r0[i]
         rx, ry = c * r0x - s * r0y, s * r0x + c * r0y
         dx, dy = px + rx - robot.base[i, 0], py + ry - robot.base[i, 1]
         l = ca.sqrt(dx * dx + dy * dy)
@@ -106,7 +108,7 @@ def casadi_dynamics(robot):
 
 
 def check_dynamics(robot, f, trials: int = 200) -> float:
-    """Largest relative difference between the CasADi dynamics and ``robot.state_derivative``."""
+    """Largest relative difference between the CasADi dynamics and ``dynamics.state_derivative``."""
     rng = np.random.default_rng(1)
     worst = 0.0
     for _ in range(trials):
@@ -114,7 +116,7 @@ def check_dynamics(robot, f, trials: int = 200) -> float:
                             rng.uniform(-0.5, 0.5, 2), rng.uniform(-2, 2, 1)))
         u = rng.uniform(-1, 1, robot.n_legs) * robot.force_max
         a = np.array(f(x, u)).ravel()
-        b = robot.state_derivative(x, u)
+        b = dynamics.state_derivative(robot, x, u)
         worst = max(worst, float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-12)))
     return worst
 
@@ -127,7 +129,8 @@ def solve_optimum(req: dict, K: int, robot, verbose=False) -> dict:
     st = pr.settings
     segs = pr.segments
     seq = range_sequence(segs, st, robot.n_legs)
-    sets = PoseSets(seq, segs, st.S)
+    sets = CorridorConstraint(seq, segs)
+    approach = EndApproachConstraint(seq, segs, st.samples_per_segment)
     f = casadi_dynamics(robot)
     Ts, sub, m = st.Ts, st.plant_substeps, robot.n_legs
     xs, us = ca.SX.sym("x", 6), ca.SX.sym("u", m)
@@ -163,9 +166,9 @@ def solve_optimum(req: dict, K: int, robot, verbose=False) -> dict:
     for q in hp_rows:
         A_, b_ = sets.hp[idx[q]]
         opti.subject_to(A_ @ P[:2, q] <= b_)
-    if sets.approach is not None:
-        d, b = sets.approach
-        sel = [q for q in range(K) if idx[q] >= sets.approach_from]
+    if approach.half_plane is not None:
+        d, b = approach.half_plane
+        sel = [q for q in range(K) if idx[q] >= approach.start_index]
         if sel:
             opti.subject_to(d[0] * P[0, sel] + d[1] * P[1, sel] <= b)
     # leg speeds, exact
@@ -173,7 +176,7 @@ def solve_optimum(req: dict, K: int, robot, verbose=False) -> dict:
     c_, s_ = ca.cos(y[2]), ca.sin(y[2])
     ld = []
     for i in range(m):
-        r0x, r0y = robot._r0[i]
+        r0x, r0y = robot.r0[i]
         rx, ry = c_ * r0x - s_ * r0y, s_ * r0x + c_ * r0y
         dx, dy = y[0] + rx - robot.base[i, 0], y[1] + ry - robot.base[i, 1]
         l = ca.sqrt(dx * dx + dy * dy)
@@ -189,8 +192,8 @@ def solve_optimum(req: dict, K: int, robot, verbose=False) -> dict:
     opti.set_initial(X, np.hstack((cen, vel)).T)
     opti.set_initial(U, 0.0)
     opti.solver("ipopt", {"print_time": False, "ipopt.print_level": 5 if verbose else 0, "ipopt.sb": "yes",
-                          "ipopt.tol": 1e-8, "ipopt.constr_viol_tol": 1e-10, "ipopt.max_iter": 3000, "ipopt.acceptable_iter": 0,
-                          "ipopt.linear_solver": "mumps"})
+                          "ipopt.tol": 1e-8, "ipopt.constr_viol_tol": 1e-10, "ipopt.max_iter": 3000,
+                          "ipopt.acceptable_iter": 0, "ipopt.linear_solver": "mumps"})
     t0 = time.perf_counter()
     sol = opti.solve()
     dt = time.perf_counter() - t0
@@ -215,7 +218,7 @@ def main(argv=None) -> int:
     robot = load_robot(base.get("robot", "moving-slide"))
     f = casadi_dynamics(robot)
     err = check_dynamics(robot, f)
-    print(f"CasADi dynamics vs robot.state_derivative at 200 random states: max relative difference {err:.1e}")
+    print(f"CasADi dynamics vs dynamics.state_derivative at 200 random states: max relative difference {err:.1e}")
     if err > 1e-10:
         print("dynamics differ: not the same model; stopping")
         return 1
@@ -239,10 +242,10 @@ def main(argv=None) -> int:
             res = plan(req)
             times.append(time.perf_counter() - t0)
         results[label] = res
-        mt = res["metrics"]
-        rows.append((label, statistics.median(times), mt["energy"], mt["max_corridor_violation_m"],
-                     mt["end_error_m"], mt["overshoot_m"], mt["max_force_ratio"], mt["duration_s"]))
-    K = results["constrained"]["metrics"]["steps"]
+        mt = res.metrics
+        rows.append((label, statistics.median(times), mt.energy, mt.max_corridor_violation_m,
+                     mt.end_error_m, mt.overshoot_m, mt.max_force_ratio, mt.duration_s))
+    K = results["constrained"].metrics.steps
     req = copy.deepcopy(base)
     req["settings"]["mode"] = "constrained"
     times, opt = [], None
@@ -260,8 +263,8 @@ def main(argv=None) -> int:
     for k in range(K):
         x = rk4_sample(robot, x, U[k], Ts, st.plant_substeps)
         replay = max(replay, float(np.max(np.abs(x[:3] - X[k + 1, :3]))))
-    from planner.trajectory import overshoot
-    over = overshoot(X[:, :3], opt["segments"], opt["seq"].end, max((len(opt["segments"]) - 2) * st.S, 0))
+    over = overshoot(X[:, :3], opt["segments"], opt["seq"].end,
+                     max((len(opt["segments"]) - 2) * st.samples_per_segment, 0))
     rows.append(("IPOPT optimum", statistics.median(times), float(np.sum(U * U) * Ts), viol, end_err, over,
                  float(np.max(np.abs(U) / robot.force_max)), K * Ts))
     print(f"IPOPT: {opt['status']}, {opt['iterations']} iterations, {K} intervals, {X.size + U.size} variables; "
@@ -272,7 +275,8 @@ def main(argv=None) -> int:
     print(hdr)
     print("-" * len(hdr))
     for r in rows:
-        print(f"{r[0]:22s} {r[1] * 1e3:11.1f} {r[2]:13.2f} {r[3]:11.1e} {r[4]:10.1e} {r[5]:11.1e} {r[6]:7.3f} {r[7]:10.2f}")
+        print(f"{r[0]:22s} {r[1] * 1e3:11.1f} {r[2]:13.2f} {r[3]:11.1e} {r[4]:10.1e} {r[5]:11.1e} {r[6]:7.3f} "
+              f"{r[7]:10.2f}")
     print()
     for r in rows[1:3]:
         print(f"{r[0]}: energy / IPOPT's {r[2] / rows[3][2]:.3f} (goal <= 1.2); "

@@ -11,7 +11,7 @@ Candidates: DAQP (dense dual active set; warm and cold), OSQP (ADMM, sparse; war
 ProxSuite ProxQP (dense augmented Lagrangian; cold and warm), Clarabel (interior point;
 no warm start). Tolerances are set as tight as each solver supports sensibly (1e-9 primal).
 A last row times the DAQP calls the planner itself makes: the same QPs with the equalities
-eliminated and only the rows near a bound (see planner/constrained.py).
+eliminated and only the rows near a bound (see planner/constraints/step.py).
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_qp.py [--repeat 3] [--samples 20]
 
@@ -30,54 +30,54 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from planner import constrained as C  # noqa: E402
-from planner.plan import plan  # noqa: E402
+from planner import plan
+from planner.constraints import ROW_UNIT_M
+from planner.constraints import qp as QP
+from planner.constraints.compiled import CompiledAssembly
 
 ROOT = Path(__file__).resolve().parents[1]
 TABLE1 = ROOT / "static" / "examples" / "table1.json"
 
 
-def record_problems(req: dict) -> tuple[list[dict], dict, list[dict]]:
+def record_problems(req: dict) -> tuple[list[dict], object, list[dict]]:
     """The hard QP in z of every solve (every row, as the numpy reference states it), and
     the DAQP calls the planner actually makes (equalities eliminated, rows screened)."""
     import daqp
 
     probs, calls = [], []
-    orig = C.ConstrainedController._solve_hard
+    orig = CompiledAssembly.solve
     orig_daqp = daqp.solve
 
-    def rec(self, qp, z_start=None):
-        z, flag, info = orig(self, qp, z_start)
-        self.z_problem(qp)
-        nz, nh = qp["n_bounds"], qp["n_hard"]
-        if z_start is None and self._z_prev is not None:
-            z_start = np.concatenate((self._z_prev[self.m:], self._z_prev[-self.m:]))
-        probs.append({"H": qp["H"].copy(), "f": qp["f"].copy(), "A": qp["A"][:nh].copy(),
-                      "bl": qp["bl"][:nh].copy(), "bu": qp["bu"][:nh].copy(), "nz": nz,
-                      "z0": None if z_start is None else z_start.copy(), "z_daqp": z.copy(), "flag": flag})
-        return z, flag, info
+    def rec(self, qp, start):
+        sol = orig(self, qp, start)
+        dense = self.dense(qp)
+        nh = dense.n_hard
+        probs.append({"H": dense.H.copy(), "f": dense.f.copy(), "A": dense.A[:nh].copy(),
+                      "bl": dense.lower[:nh].copy(), "bu": dense.upper[:nh].copy(), "nz": len(dense.f),
+                      "z0": None if start is None else start.copy(), "z_daqp": sol.z.copy(), "flag": sol.flag})
+        return sol
 
     def rec_daqp(H, f, A, bu, bl, sense, **kw):
         calls.append({"args": (H.copy(), f.copy(), A.copy(), bu.copy(), bl.copy(), sense.copy()), "kw": dict(kw)})
         return orig_daqp(H, f, A, bu, bl, sense, **kw)
 
-    C.ConstrainedController._solve_hard = rec
-    C.daqp.solve = rec_daqp
+    CompiledAssembly.solve = rec
+    QP.daqp.solve = rec_daqp
     try:
         res = plan(req)
     finally:
-        C.ConstrainedController._solve_hard = orig
-        C.daqp.solve = orig_daqp
+        CompiledAssembly.solve = orig
+        QP.daqp.solve = orig_daqp
     return probs, res, calls
 
 
 def violation_m(p, z) -> float:
     r = p["A"] @ z
-    v = np.maximum(np.maximum(p["bl"] - r, r - p["bu"]), 0.0).max(initial=0.0) * C.ROW_UNIT_M
-    vb = np.maximum(np.abs(z) - 1.0, 0.0).max(initial=0.0) * C.ROW_UNIT_M  # force bound, scaled
+    v = np.maximum(np.maximum(p["bl"] - r, r - p["bu"]), 0.0).max(initial=0.0) * ROW_UNIT_M
+    vb = np.maximum(np.abs(z) - 1.0, 0.0).max(initial=0.0) * ROW_UNIT_M  # force bound, scaled
     return float(max(v, vb))
 
 
@@ -95,7 +95,7 @@ def s_daqp(p, warm):
     bl = np.concatenate((-np.ones(nz), p["bl"]))
     sense = np.zeros(len(bu), dtype=np.int32)
     sense[bu - bl <= 0] = 5
-    kw = dict(C.DAQP_SETTINGS)
+    kw = dict(QP.DAQP_SETTINGS)
     if warm and p["z0"] is not None:
         kw["primal_start"] = p["z0"]
     z, _, flag, info = daqp.solve(p["H"], p["f"], p["A"], bu, bl, sense, **kw)
@@ -185,11 +185,12 @@ def main(argv=None) -> int:
         req["settings"]["samples_per_segment"] = args.samples
     probs, res, calls = record_problems(req)
     probs = probs[::args.every]
-    mt = res["metrics"]
-    print(f"Table I, constrained, samples_per_segment={res['settings']['samples_per_segment']}: "
-          f"{len(probs)} QPs ({probs[0]['nz']} variables, {len(probs[0]['bu'])}-{max(len(p['bu']) for p in probs)} rows)")
-    print(f"one-step plant vs prediction mismatch: {mt['model_mismatch_max_m']:.2e} m, "
-          f"{mt['model_mismatch_max_rad']:.2e} rad; actual corridor violation {mt['max_corridor_violation_m']:.1e} m")
+    mt = res.metrics
+    rows = max(len(p["bu"]) for p in probs)
+    print(f"Table I, constrained, samples_per_segment={res.settings.samples_per_segment}: "
+          f"{len(probs)} QPs ({probs[0]['nz']} variables, {len(probs[0]['bu'])}-{rows} rows)")
+    print(f"one-step plant vs prediction mismatch: {mt.model_mismatch_max_m:.2e} m, "
+          f"{mt.model_mismatch_max_rad:.2e} rad; actual corridor violation {mt.max_corridor_violation_m:.1e} m")
     print("Rows below: each candidate on the whole QP in z (every hard row, equalities as equalities).")
     print()
     hdr = f"{'solver':18s} {'median ms':>10s} {'total ms':>9s} {'iter med':>8s} {'iter max':>8s} " \
@@ -219,7 +220,7 @@ def main(argv=None) -> int:
         print(f"{name:18s} {statistics.median(times) * 1e3:10.3f} {sum(times) * 1e3:9.1f} "
               f"{statistics.median(iters):8.0f} {max(iters):8d} {fails:8d} {viol:11.1e} {gap:9.1e}")
     # the QPs the planner gives DAQP: equalities eliminated (fewer variables, forces as rows),
-    # only the rows near a bound (planner/constrained.py); violation and gap are checked by
+    # only the rows near a bound (planner/constraints/step.py); violation and gap are checked by
     # the planner against every row, so only time and iterations here
     import daqp
 

@@ -1,7 +1,28 @@
 """The constrained mode (beyond the paper): the range-space criterion with hard corridor,
 drive-force, leg-speed, stroke and no-overshoot constraints, solved every sample as a
-quadratic program (DAQP)."""
+quadratic program (DAQP).
 
-from .controller import CONTAIN_TOL_M, END_TOL_M, END_TOL_RAD, MARGIN_M, ConstrainedController, PoseSets
+Modules, by concept:
 
-__all__ = ["ConstrainedController", "PoseSets", "CONTAIN_TOL_M", "END_TOL_M", "END_TOL_RAD", "MARGIN_M"]
+==============  ==========================================================================
+``rows``        what a constraint gives: rows on the predicted states (:class:`Rows`)
+``corridor``    corridor boxes and cell half-planes, the end box; no overshoot at the end
+``drives``      drive-force bounds, leg-speed and leg-stroke rows
+``qp``          the DAQP wrapper, the dense QP of a step and its slack problem
+``step``        the step's QP in compiled form: equalities eliminated, rows screened
+``compiled``    the compiled assembly (``backend: "compiled"``)
+``reference``   the numpy reference assembly (``backend: "reference"``)
+``controller``  the receding-horizon controller: composes the constraints, refines, reports
+``kernels``     the compiled kernels (numba)
+==============  ==========================================================================
+"""
+
+from .controller import CONTAIN_TOL_M, ConstrainedController, Constraints
+from .corridor import END_TOL_M, END_TOL_RAD, MARGIN_M, MARGIN_RAD, CorridorConstraint, EndApproachConstraint
+from .drives import SPEED_MARGIN, DriveForceConstraint, LegSpeedConstraint, LegStrokeConstraint
+from .qp import DenseQP, QPSolution
+from .rows import ROW_UNIT_M, RowKind, Rows
+
+__all__ = ["CONTAIN_TOL_M", "END_TOL_M", "END_TOL_RAD", "MARGIN_M", "MARGIN_RAD", "ROW_UNIT_M", "SPEED_MARGIN",
+           "ConstrainedController", "Constraints", "CorridorConstraint", "DenseQP", "DriveForceConstraint",
+           "EndApproachConstraint", "LegSpeedConstraint", "LegStrokeConstraint", "QPSolution", "RowKind", "Rows"]

@@ -1,19 +1,25 @@
-"""The constrained mode's per-step QP compiled (numba): assembly, the equality elimination,
-screening and checking of rows (see :class:`planner.constrained.ConstrainedController`).
+"""The constrained mode's per-step QP, compiled (numba): the rows of the constraints, the
+prediction and Hessian, the equality elimination, the screening and checking of rows.
 
-Why compiled: the numpy assembly of one step's QP is a few dozen array operations on small
-arrays plus the dense products ``Sel Gx`` and ``Gp2' W Gp2``; most of its cost was call
-overhead and multiplications by the zeros of the block lower-triangular prediction matrix.
-Here products skip those zeros, the Hessian comes from a backward recursion, and the
-constraint selection ``Sel`` is kept sparse (at most three entries per row: a pose
-coordinate, a half-plane normal, a leg Jacobian row). The numpy assembly
-(``ConstrainedController.build_numpy``) stays the reference; ``tests/test_constrained.py``
-checks that both give the same QP, and that the QP with its equalities eliminated has the
-same minimiser.
+Why compiled: the numpy assembly of one step's QP
+(:class:`~planner.constraints.reference.ReferenceAssembly`, the reference) is a few dozen
+array operations on small arrays plus the dense products ``Sel Gx`` and ``Gp2' W Gp2``; most
+of its cost was call overhead and multiplications by the zeros of the block lower-triangular
+prediction matrix. Here products skip those zeros, the Hessian comes from a backward
+recursion, and the constraint selection ``Sel`` is kept sparse (at most three entries per
+row: a pose coordinate, a half-plane normal, a leg Jacobian row).
+``tests/test_constraints_kernels.py`` checks that both assemblies give the same QP, and that
+the QP with its equalities eliminated has the same minimiser.
 
-Layout shared with :mod:`planner.constrained`: states are stacked per sample,
-``X[6 i + a]`` (``a`` = x, y, psi, x_dot, y_dot, psi_dot of sample ``i + 1``); the scaled
-inputs ``z`` are stacked per move block, ``z[m b + l]``.
+The kernels are positional and internal: they are called only from methods of the typed
+step data (:mod:`~planner.constraints.rows`, :mod:`~planner.constraints.step`) and of the
+compiled assembly (:mod:`~planner.constraints.compiled`), which name what they pass.
+
+Layout: states are stacked per sample, ``X[6 i + a]`` (``a`` = x, y, psi, x_dot, y_dot,
+psi_dot of sample ``i + 1``); the scaled moves ``z = u / force_max`` per sample,
+``z[m i + l]`` (``m`` legs). Rows are a sparse selection of predicted states: row ``r`` is
+``sum_k val[r, k] X[col[r, k]]`` (``col`` -1: unused) with bounds ``b0l <= . <= b0u``, all in
+row units (``unit`` = :data:`~planner.constraints.rows.ROW_UNIT_M` metres).
 """
 
 from __future__ import annotations
@@ -25,14 +31,22 @@ from numba import njit
 
 from ..model.kernels import rk4, state_derivative
 
-#: kinds of rows (the slack variable that softens each in the slack problem)
+__all__ = ["KIND_CORRIDOR", "KIND_SPEED", "KIND_STROKE", "approach_count", "approach_fill", "assemble",
+           "check_rows", "constraint_matrix", "corridor_count", "corridor_fill", "finish", "first_legs", "free_parts",
+           "hessian", "leg_rows", "offset", "one_step_error", "plant_step", "predict", "prediction", "reduce_check",
+           "reduce_forward", "reduce_free", "reduce_problem", "reduce_screen", "reduce_setup", "reduce_start", "screen",
+           "solver_problem", "speed_fill", "stroke_fill"]
+
+#: kinds of rows (the slack variable that softens each in the slack problem); the values of
+#: :class:`planner.constraints.rows.RowKind`
 KIND_CORRIDOR, KIND_STROKE, KIND_SPEED = 0, 1, 2
 
 
 @njit(cache=True)
 def leg_rows(r0, base, poses, J, L):
-    """Leg Jacobians ``J_l`` (k, n, 3) and leg lengths (k, n) at the poses (k, 3), into ``J``
-    and ``L``; as :meth:`Robot.leg_jacobian_batch` and :meth:`Robot.leg_lengths`."""
+    """Leg Jacobians ``J_l`` (k, n, 3) and leg lengths (k, n) [m] at the poses (k, 3), into
+    ``J`` and ``L``: the compiled twin of :func:`planner.model.kinematics.leg_jacobians` and
+    :func:`~planner.model.kinematics.leg_lengths` (``r0``: :attr:`RobotModel.r0`)."""
     n = r0.shape[0]
     for k in range(poses.shape[0]):
         c, s = math.cos(poses[k, 2]), math.sin(poses[k, 2])
@@ -48,10 +62,10 @@ def leg_rows(r0, base, poses, J, L):
 
 
 @njit(cache=True)
-def prediction(Ad, Bd, umax, block_of, nb, P, Gx):
-    """``P[q] = Ad^q`` (q = 0..N) into ``P`` (N+1, 6, 6) and the prediction matrix
-    ``X = free + Gx z`` into ``Gx`` (6N, nb m): block ``(i, b)`` is the sum over the samples
-    ``j <= i`` of move block ``b`` of ``Ad^(i-j) Bd diag(umax)``."""
+def prediction(Ad, Bd, umax, P, Gx):
+    """Eq. (11) in the scaled moves: ``P[q] = Ad^q`` (q = 0..N) into ``P`` (N+1, 6, 6) and the
+    prediction matrix of ``X = free + Gx z`` into ``Gx`` (6N, N m): block ``(i, j)``
+    (``j <= i``) is ``Ad^(i-j) Bd diag(umax)``."""
     N = P.shape[0] - 1
     m = Bd.shape[1]
     for a in range(6):
@@ -66,52 +80,51 @@ def prediction(Ad, Bd, umax, block_of, nb, P, Gx):
                 P[q, a, c] = acc
     Bu = np.empty((6, m))
     for a in range(6):
-        for l in range(m):
-            Bu[a, l] = Bd[a, l] * umax[l]
+        for lg in range(m):
+            Bu[a, lg] = Bd[a, lg] * umax[lg]
     PB = np.empty((N, 6, m))
     for q in range(N):
         for a in range(6):
-            for l in range(m):
+            for lg in range(m):
                 acc = 0.0
                 for t in range(6):
-                    acc += P[q, a, t] * Bu[t, l]
-                PB[q, a, l] = acc
+                    acc += P[q, a, t] * Bu[t, lg]
+                PB[q, a, lg] = acc
     Gx[:, :] = 0.0
     for i in range(N):
         for j in range(i + 1):
-            c0 = m * block_of[j]
             for a in range(6):
-                for l in range(m):
-                    Gx[6 * i + a, c0 + l] += PB[i - j, a, l]
+                for lg in range(m):
+                    Gx[6 * i + a, m * j + lg] += PB[i - j, a, lg]
 
 
 @njit(cache=True)
-def hessian(Ad, Bd, umax, W, block_of, du, H):
-    """``H = Gp2' diag(W) Gp2 + diag(du)``, ``Gp2`` the pose rows of the prediction matrix
-    ``Gx`` (see :func:`prediction`), scaled so that its largest diagonal entry is 1, into
-    ``H`` (nb m, nb m); returns the scale.
+def hessian(Ad, Bd, umax, W, du, H):
+    """The criterion's Hessian ``H = Gp2' diag(W) Gp2 + diag(du)``, ``Gp2`` the pose rows of
+    the prediction matrix ``Gx`` (see :func:`prediction`), scaled so that its largest diagonal
+    entry is 1, into ``H`` (N m, N m); returns the scale.
 
     Without forming ``Gp2' W Gp2``: with ``Q_i = diag(W_i, 0)`` (6, 6) the weight of sample
     ``i`` and ``Pi_j = sum_{i >= j} (Ad^(i-j))' Q_i Ad^(i-j)`` (backward:
     ``Pi_j = Q_j + Ad' Pi_{j+1} Ad``), the block of moves ``j1 <= j2`` is
-    ``(Ad^(j2-j1) Bu)' Pi_j2 Bu`` (``Bu = Bd diag(umax)``), summed over the samples of each
-    move block. O(N^2) small blocks instead of the O(N^3) product."""
-    N = block_of.shape[0]
+    ``(Ad^(j2-j1) Bu)' Pi_j2 Bu`` (``Bu = Bd diag(umax)``). O(N^2) small blocks instead of
+    the O(N^3) product."""
+    N = W.shape[0] // 3
     m = Bd.shape[1]
     nz = H.shape[0]
     Bu = np.empty((6, m))
     for a in range(6):
-        for l in range(m):
-            Bu[a, l] = Bd[a, l] * umax[l]
+        for lg in range(m):
+            Bu[a, lg] = Bd[a, lg] * umax[lg]
     PB = np.empty((N, 6, m))  # Ad^q Bu
     PB[0] = Bu
     for q in range(1, N):
         for a in range(6):
-            for l in range(m):
+            for lg in range(m):
                 acc = 0.0
                 for t in range(6):
-                    acc += Ad[a, t] * PB[q - 1, t, l]
-                PB[q, a, l] = acc
+                    acc += Ad[a, t] * PB[q - 1, t, lg]
+                PB[q, a, lg] = acc
     PiB = np.empty((N, 6, m))  # Pi_j Bu
     Pi = np.zeros((6, 6))
     T = np.empty((6, 6))
@@ -133,16 +146,16 @@ def hessian(Ad, Bd, umax, W, block_of, du, H):
         for a in range(3):
             Pi[a, a] += W[3 * j + a]
         for a in range(6):
-            for l in range(m):
+            for lg in range(m):
                 acc = 0.0
                 for t in range(6):
-                    acc += Pi[a, t] * Bu[t, l]
-                PiB[j, a, l] = acc
+                    acc += Pi[a, t] * Bu[t, lg]
+                PiB[j, a, lg] = acc
     H[:, :] = 0.0
     for j2 in range(N):
-        c2 = m * block_of[j2]
+        c2 = m * j2
         for j1 in range(j2 + 1):
-            c1 = m * block_of[j1]
+            c1 = m * j1
             q = j2 - j1
             for l1 in range(m):
                 for l2 in range(m):
@@ -163,51 +176,45 @@ def hessian(Ad, Bd, umax, W, block_of, du, H):
     return scale
 
 
+# ---- the rows of each constraint (compiled twins of the constraint objects' ``rows``) -------
+# Each constraint has a count and a fill: ``*_count`` gives its number of rows for the
+# samples' sequence indices ``idx`` (N,), ``*_fill`` writes them from row ``r`` on and returns
+# the next free row. :func:`assemble` calls them in row order.
+
 @njit(cache=True)
-def rows(jj, idx, lo, hi, has_hp, hp_ptr, hp_A, hp_b, app_on, app_d, app_b, app_from,
-         J, L, y_nom, vmax, lmin, lmax, unit):
-    """The constraint rows of one step (order and meaning as the numpy assembly in
-    :meth:`ConstrainedController.build`), as a sparse selection of predicted states: row
-    ``r`` is ``sum_k val[r, k] X[col[r, k]]`` (``col`` -1: unused) with bounds
-    ``b0l <= . <= b0u`` (all divided by ``unit``). ``jj``: constrained samples (0-based),
-    ``idx``: sequence index per sample; ``lo, hi, has_hp, hp_*``: the pose sets per sequence
-    index (half-planes of sequence index ``s`` are ``hp_A[hp_ptr[s]:hp_ptr[s+1]]``);
-    ``J, L``: leg Jacobians and lengths at the nominal poses ``y_nom`` of the samples ``jj``.
-    Returns ``(col, val, b0l, b0u, kinds, n_hard, row_speed0, row_stroke0)``."""
-    nc = jj.shape[0]
-    m = J.shape[1]
-    nrow = 0
+def corridor_count(idx, has_hp, hp_ptr):
+    """Rows of :class:`~planner.constraints.corridor.CorridorConstraint`: one per sample and
+    box axis (x and y only where the sample has no half-planes), and its half-planes."""
+    N = idx.shape[0]
+    n = 0
     for ax in range(3):
-        for t in range(nc):
-            if ax == 2 or not has_hp[idx[jj[t]]]:
-                nrow += 1
-    for t in range(nc):
-        s = idx[jj[t]]
+        for j in range(N):
+            if ax == 2 or not has_hp[idx[j]]:
+                n += 1
+    for j in range(N):
+        s = idx[j]
         if has_hp[s]:
-            nrow += hp_ptr[s + 1] - hp_ptr[s]
-    if app_on:
-        for t in range(nc):
-            if idx[jj[t]] >= app_from:
-                nrow += 1
-    nrow += 2 * nc * m
-    col = np.full((nrow, 3), -1, np.int64)
-    val = np.zeros((nrow, 3))
-    b0l = np.empty(nrow)
-    b0u = np.empty(nrow)
-    kinds = np.zeros(nrow, np.int64)
-    r = 0
+            n += hp_ptr[s + 1] - hp_ptr[s]
+    return n
+
+
+@njit(cache=True)
+def corridor_fill(idx, unit, lo, hi, has_hp, hp_ptr, hp_A, hp_b, col, val, b0l, b0u, kinds, r):
+    """The corridor rows: ``lo <= pose_j <= hi`` per axis (sorted by axis, then sample), then
+    the half-planes ``A (x, y)_j <= b`` of the samples that have them (the pose sets per
+    sequence index; half-planes of sequence index ``s`` are ``hp_A[hp_ptr[s]:hp_ptr[s+1]]``)."""
+    N = idx.shape[0]
     for ax in range(3):
-        for t in range(nc):
-            j = jj[t]
+        for j in range(N):
             s = idx[j]
             if ax == 2 or not has_hp[s]:
                 col[r, 0] = 6 * j + ax
                 val[r, 0] = 1.0 / unit
                 b0l[r] = lo[s, ax] / unit
                 b0u[r] = hi[s, ax] / unit
+                kinds[r] = KIND_CORRIDOR
                 r += 1
-    for t in range(nc):
-        j = jj[t]
+    for j in range(N):
         s = idx[j]
         if has_hp[s]:
             for h in range(hp_ptr[s], hp_ptr[s + 1]):
@@ -215,73 +222,155 @@ def rows(jj, idx, lo, hi, has_hp, hp_ptr, hp_A, hp_b, app_on, app_d, app_b, app_
                 val[r, 0], val[r, 1] = hp_A[h, 0] / unit, hp_A[h, 1] / unit
                 b0l[r] = -np.inf
                 b0u[r] = hp_b[h] / unit
+                kinds[r] = KIND_CORRIDOR
                 r += 1
+    return r
+
+
+@njit(cache=True)
+def approach_count(idx, app_on, app_from):
+    """Rows of :class:`~planner.constraints.corridor.EndApproachConstraint`: one per sample
+    from sequence index ``app_from`` on."""
+    n = 0
     if app_on:
-        for t in range(nc):
-            j = jj[t]
+        for j in range(idx.shape[0]):
+            if idx[j] >= app_from:
+                n += 1
+    return n
+
+
+@njit(cache=True)
+def approach_fill(idx, unit, app_on, app_d, app_b, app_from, col, val, b0l, b0u, kinds, r):
+    """The no-overshoot rows ``d . (x, y)_j <= b``."""
+    if app_on:
+        for j in range(idx.shape[0]):
             if idx[j] >= app_from:
                 col[r, 0], col[r, 1] = 6 * j, 6 * j + 1
                 val[r, 0], val[r, 1] = app_d[0] / unit, app_d[1] / unit
                 b0l[r] = -np.inf
                 b0u[r] = app_b / unit
+                kinds[r] = KIND_CORRIDOR
                 r += 1
-    row_speed0 = r
-    for t in range(nc):
-        j = jj[t]
-        for i in range(m):
+    return r
+
+
+@njit(cache=True)
+def speed_fill(J, unit, vmax, col, val, b0l, b0u, kinds, r):
+    """:class:`~planner.constraints.drives.LegSpeedConstraint`: ``|J_l(y0_j) y_dot_j| <= vmax``
+    per sample and leg (``J`` (N, n, 3) at the nominal poses)."""
+    for j in range(J.shape[0]):
+        for i in range(J.shape[1]):
             for a in range(3):
                 col[r, a] = 6 * j + 3 + a
-                val[r, a] = J[t, i, a] / unit
+                val[r, a] = J[j, i, a] / unit
             b0l[r] = -vmax[i] / unit
             b0u[r] = vmax[i] / unit
             kinds[r] = KIND_SPEED
             r += 1
-    n_hard = r
-    for t in range(nc):
-        j = jj[t]
-        for i in range(m):
-            off = L[t, i] - (J[t, i, 0] * y_nom[t, 0] + J[t, i, 1] * y_nom[t, 1] + J[t, i, 2] * y_nom[t, 2])
+    return r
+
+
+@njit(cache=True)
+def stroke_fill(J, L, y_nom, unit, lmin, lmax, col, val, b0l, b0u, kinds, r):
+    """:class:`~planner.constraints.drives.LegStrokeConstraint`: ``lmin <= l(y0_j) + J_l(y0_j)
+    (y_j - y0_j) <= lmax`` per sample and leg (``L`` (N, n) leg lengths at ``y_nom``)."""
+    for j in range(J.shape[0]):
+        for i in range(J.shape[1]):
+            off = L[j, i] - (J[j, i, 0] * y_nom[j, 0] + J[j, i, 1] * y_nom[j, 1] + J[j, i, 2] * y_nom[j, 2])
             for a in range(3):
                 col[r, a] = 6 * j + a
-                val[r, a] = J[t, i, a] / unit
+                val[r, a] = J[j, i, a] / unit
             b0l[r] = (lmin[i] - off) / unit
             b0u[r] = (lmax[i] - off) / unit
             kinds[r] = KIND_STROKE
             r += 1
-    return col, val, b0l, b0u, kinds, n_hard, row_speed0, n_hard
+    return r
 
 
 @njit(cache=True)
-def constraint_matrix(col, val, Gx, ncol, A):
-    """``A = Sel Gx`` for the sparse selection ``(col, val)`` (see :func:`rows`), into
-    ``A`` (nrow, nz); ``ncol[i]``: the columns of ``Gx`` that can be non-zero in sample
-    ``i``'s rows (the move blocks started by then)."""
-    for r in range(col.shape[0]):
-        _matrix_row_into(col, val, Gx, ncol, A, r, r)
+def assemble(k, N, x, y_prev, unit, K, lower, upper, qa, qb, r0, base,
+             lo, hi, has_hp, hp_ptr, hp_A, hp_b, app_on, app_d, app_b, app_from, vmax, lmin, lmax):
+    """The rows and criterion of step ``k`` in one call (few calls per step: numpy's per-call
+    cost dominated these sizes). Inputs: the step (``k``, horizon ``N``, state ``x``, the
+    previous step's predicted poses shifted ``y_prev`` (N, 3), empty at the first step: then
+    the legs are linearised at ``x``), the row unit, the range sequence padded with ``N``
+    copies of its last sample (``K`` samples; ``lower, upper, qa, qb`` as
+    ``RangeSequence.window``), the legs (``r0``, ``base``), then each constraint's arrays in row
+    order: corridor (``lo .. hp_b``), end approach (``app_*``), leg speed (``vmax``), stroke
+    (``lmin``, ``lmax``).
+
+    Returns ``(W, tgt, col, val, b0l, b0u, kinds, n_hard, speed0, stroke0)``: the criterion's
+    weights ``W = qa^2 + qb^2`` and targets ``tgt = qa^2 r_a + qb^2 r_b`` of samples
+    ``k+1..k+N`` (3N,), the rows, the number of hard rows (the stroke rows after them enter
+    only the slack problem) and the first leg-speed and stroke rows (those of sample 0)."""
+    m = r0.shape[0]
+    kw = min(k, K)
+    W = np.empty(3 * N)
+    tgt = np.empty(3 * N)
+    for i in range(N):
+        for a in range(3):
+            ca, cb = qa[kw + i, a] * qa[kw + i, a], qb[kw + i, a] * qb[kw + i, a]
+            W[3 * i + a] = ca + cb
+            tgt[3 * i + a] = ca * lower[kw + i, a] + cb * upper[kw + i, a]
+    idx = np.empty(N, np.int64)
+    for j in range(N):
+        idx[j] = min(k + j, K - 1)
+    y_nom = np.empty((N, 3))
+    for j in range(N):
+        for a in range(3):
+            y_nom[j, a] = y_prev[j, a] if y_prev.shape[0] > 0 else x[a]
+    J = np.empty((N, m, 3))
+    L = np.empty((N, m))
+    leg_rows(r0, base, y_nom, J, L)
+    nrow = corridor_count(idx, has_hp, hp_ptr) + approach_count(idx, app_on, app_from) + 2 * N * m
+    col = np.full((nrow, 3), -1, np.int64)
+    val = np.zeros((nrow, 3))
+    b0l = np.empty(nrow)
+    b0u = np.empty(nrow)
+    kinds = np.zeros(nrow, np.int64)
+    r = corridor_fill(idx, unit, lo, hi, has_hp, hp_ptr, hp_A, hp_b, col, val, b0l, b0u, kinds, 0)
+    r = approach_fill(idx, unit, app_on, app_d, app_b, app_from, col, val, b0l, b0u, kinds, r)
+    speed0 = r
+    r = speed_fill(J, unit, vmax, col, val, b0l, b0u, kinds, r)
+    n_hard = r
+    stroke_fill(J, L, y_nom, unit, lmin, lmax, col, val, b0l, b0u, kinds, r)
+    return W, tgt, col, val, b0l, b0u, kinds, n_hard, speed0, n_hard
 
 
 @njit(cache=True)
-def first_leg_rows(J0, L0, y1, unit, lmin, lmax, rs, rl, val, b0l, b0u):
-    """Put the first sample's leg rows (speed rows from ``rs``, stroke rows from ``rl``) at
-    the pose ``y1`` (Jacobians ``J0`` (n, 3), lengths ``L0`` (n,)): their selection and the
-    stroke bounds."""
-    m = J0.shape[0]
+def first_legs(x1, r0, base, lmin, lmax, unit, speed0, stroke0, val, b0l, b0u):
+    """Sample 0's leg rows linearised at the plant's next pose ``x1[:3]`` instead of the
+    nominal pose: the leg-speed rows from ``speed0`` and the stroke rows from ``stroke0``
+    (their selection and the stroke bounds), in place."""
+    m = r0.shape[0]
+    y1 = np.empty((1, 3))
+    for a in range(3):
+        y1[0, a] = x1[a]
+    J = np.empty((1, m, 3))
+    L = np.empty((1, m))
+    leg_rows(r0, base, y1, J, L)
     for i in range(m):
         for a in range(3):
-            val[rs + i, a] = J0[i, a] / unit
-            val[rl + i, a] = J0[i, a] / unit
-        off = (L0[i] - (J0[i, 0] * y1[0] + J0[i, 1] * y1[1] + J0[i, 2] * y1[2])) / unit
-        b0l[rl + i] = lmin[i] / unit - off
-        b0u[rl + i] = lmax[i] / unit - off
+            val[speed0 + i, a] = J[0, i, a] / unit
+            val[stroke0 + i, a] = J[0, i, a] / unit
+        off = (L[0, i] - (J[0, i, 0] * y1[0, 0] + J[0, i, 1] * y1[0, 1] + J[0, i, 2] * y1[0, 2])) / unit
+        b0l[stroke0 + i] = lmin[i] / unit - off
+        b0u[stroke0 + i] = lmax[i] / unit - off
 
 
 @njit(cache=True)
-def free_response(P, x, d, Gx, ncol, W, tgt, scale, col, val, b0l, b0u, free, f, bl, bu):
-    """The parts of the QP that depend on the free response: ``free = X(z = 0)`` (6N,)
-    ``= P[1:] x + P[:N] d``, the cost's linear term ``f = scale Gp2' (W free_pose - tgt)``
-    and the row bounds ``b0 - Sel free``, into the given arrays."""
+def free_parts(P, x, d, Gx, W, tgt, col, val, b0l, b0u):
+    """The parts of the QP in ``z`` that depend on the free response (the prediction at
+    ``z = 0``): ``free = P[1:] x + P[:N] d`` (6N,), the cost's linear term, not yet scaled,
+    ``f = Gp2' (W free_pose - tgt)``, and the row bounds ``b0 - Sel free``. Returns
+    ``(free, f, bl, bu)``."""
     N = P.shape[0] - 1
-    nz = f.shape[0]
+    m = Gx.shape[1] // N
+    nrow = b0l.shape[0]
+    free = np.empty(6 * N)
+    f = np.zeros(Gx.shape[1])
+    bl = np.empty(nrow)
+    bu = np.empty(nrow)
     for i in range(N):
         for a in range(6):
             acc = 0.0
@@ -291,9 +380,8 @@ def free_response(P, x, d, Gx, ncol, W, tgt, scale, col, val, b0l, b0u, free, f,
             for t in range(6):
                 acc2 += P[i, a, t] * d[t]
             free[6 * i + a] = acc + acc2
-    f[:] = 0.0
     for i in range(N):
-        nc = ncol[i]
+        nc = m * (i + 1)
         for a in range(3):
             e = W[3 * i + a] * free[6 * i + a] - tgt[3 * i + a]
             if e == 0.0:
@@ -301,24 +389,21 @@ def free_response(P, x, d, Gx, ncol, W, tgt, scale, col, val, b0l, b0u, free, f,
             r = 6 * i + a
             for q in range(nc):
                 f[q] += Gx[r, q] * e
-    for q in range(nz):
-        f[q] *= scale
     for r in range(col.shape[0]):
-        sf = 0.0
-        for k in range(col.shape[1]):
-            c = col[r, k]
-            if c >= 0:
-                sf += val[r, k] * free[c]
+        sf = _row_value(col, val, free, r)
         bl[r] = b0l[r] - sf
         bu[r] = b0u[r] - sf
+    return free, f, bl, bu
 
 
 @njit(cache=True)
-def predict(Gx, ncol, free, z, X):
-    """The predicted states ``X = free + Gx z`` (6N,) into ``X``."""
-    N = ncol.shape[0]
+def predict(Gx, free, z, X):
+    """The predicted states ``X = free + Gx z`` (6N,) into ``X`` (sample ``i``'s rows of ``Gx``
+    are zero past the moves ``0..i``)."""
+    N = Gx.shape[0] // 6
+    m = Gx.shape[1] // N
     for i in range(N):
-        nc = ncol[i]
+        nc = m * (i + 1)
         for a in range(6):
             r = 6 * i + a
             acc = free[r]
@@ -335,6 +420,29 @@ def _row_value(col, val, X, r):
         if c >= 0:
             acc += val[r, k] * X[c]
     return acc
+
+
+@njit(cache=True)
+def _matrix_row_into(col, val, Gx, A, r, i):
+    """Row ``i`` of ``A`` = row ``r`` of ``Sel Gx``."""
+    N = Gx.shape[0] // 6
+    m = Gx.shape[1] // N
+    A[i, :] = 0.0
+    for k in range(col.shape[1]):
+        c = col[r, k]
+        if c < 0:
+            continue
+        v = val[r, k]
+        nc = m * (c // 6 + 1)
+        for q in range(nc):
+            A[i, q] += v * Gx[c, q]
+
+
+@njit(cache=True)
+def constraint_matrix(col, val, Gx, A):
+    """``A = Sel Gx`` of every row, into ``A`` (nrow, N m)."""
+    for r in range(col.shape[0]):
+        _matrix_row_into(col, val, Gx, A, r, r)
 
 
 @njit(cache=True)
@@ -363,8 +471,7 @@ def check_rows(col, val, b0l, b0u, n_hard, X, keep, tol):
     for r in range(n_hard):
         v = _row_value(col, val, X, r)
         e = max(b0l[r] - v, v - b0u[r])
-        if e > worst:
-            worst = e
+        worst = max(worst, e)
         if e > tol and not keep[r]:
             keep[r] = True
             added += 1
@@ -372,9 +479,11 @@ def check_rows(col, val, b0l, b0u, n_hard, X, keep, tol):
 
 
 @njit(cache=True)
-def solver_problem(keep, col, val, Gx, ncol, bl, bu, nz):
-    """The rows in ``keep`` as DAQP takes them: ``A`` (k, nz) and the bounds and senses of
-    the ``nz`` simple bounds ``-1 <= z <= 1`` followed by the rows (sense 5: equality)."""
+def solver_problem(keep, col, val, Gx, bl, bu):
+    """The rows in ``keep`` as DAQP takes them: ``A`` (k, N m) and the bounds and senses of
+    the ``N m`` simple bounds ``-1 <= z <= 1`` (the drive forces) followed by the rows
+    (sense 5: equality)."""
+    nz = Gx.shape[1]
     k = 0
     for r in range(keep.shape[0]):
         if keep[r]:
@@ -389,7 +498,7 @@ def solver_problem(keep, col, val, Gx, ncol, bl, bu, nz):
     i = 0
     for r in range(keep.shape[0]):
         if keep[r]:
-            _matrix_row_into(col, val, Gx, ncol, A, r, i)
+            _matrix_row_into(col, val, Gx, A, r, i)
             BU[nz + i] = bu[r]
             BL[nz + i] = bl[r]
             if bu[r] - bl[r] <= 0.0:
@@ -398,79 +507,12 @@ def solver_problem(keep, col, val, Gx, ncol, bl, bu, nz):
     return A, BU, BL, sense
 
 
-@njit(cache=True)
-def _matrix_row_into(col, val, Gx, ncol, A, r, i):
-    """Row ``i`` of ``A`` = row ``r`` of ``Sel Gx``."""
-    A[i, :] = 0.0
-    for k in range(col.shape[1]):
-        c = col[r, k]
-        if c < 0:
-            continue
-        v = val[r, k]
-        nc = ncol[c // 6]
-        for q in range(nc):
-            A[i, q] += v * Gx[c, q]
-
-
-@njit(cache=True)
-def shifted_start(z_prev, block_of, blocks, m):
-    """Warm start: the previous solution's moves per sample shifted by one sample (the last
-    one repeated), averaged over each move block (as ``ConstrainedController._shifted_start``)."""
-    N = block_of.shape[0]
-    nb = blocks.shape[0]
-    out = np.zeros(nb * m)
-    for j in range(N):
-        src = block_of[min(j + 1, N - 1)]
-        b = block_of[j]
-        for l in range(m):
-            out[b * m + l] += z_prev[src * m + l]
-    for b in range(nb):
-        for l in range(m):
-            out[b * m + l] /= blocks[b]
-    return out
-
-
-# ---- one step, fused (few calls per step: numpy's per-call cost dominated these sizes) ----
-
-@njit(cache=True)
-def assemble(block_of, k, K, lower, upper, qa, qb, jj, lo, hi, has_hp, hp_ptr, hp_A,
-             hp_b, app_on, app_d, app_b, app_from, y_prev, x, r0, base, vmax, lmin, lmax, unit):
-    """The rows of step ``k``'s QP (:func:`rows`), with the legs linearised at
-    ``y_prev[jj]`` (the previous step's prediction, shifted; at ``x`` if ``y_prev`` is
-    empty), and the criterion's weights ``W`` and targets ``tgt`` of samples ``k+1..k+N``
-    (``lower, upper, qa, qb``: the range sequence padded with ``N`` copies of its last
-    sample, as ``RangeSequence.window``). Returns ``(W, tgt, col, val, b0l, b0u, kinds,
-    n_hard, row_speed0, row_stroke0)``."""
-    N = block_of.shape[0]
-    m = r0.shape[0]
-    kw = min(k, K)
-    W = np.empty(3 * N)
-    tgt = np.empty(3 * N)
-    for i in range(N):
-        for a in range(3):
-            ca, cb = qa[kw + i, a] * qa[kw + i, a], qb[kw + i, a] * qb[kw + i, a]
-            W[3 * i + a] = ca + cb
-            tgt[3 * i + a] = ca * lower[kw + i, a] + cb * upper[kw + i, a]
-    idx = np.empty(N, np.int64)
-    for j in range(N):
-        idx[j] = min(k + j, K - 1)
-    nc = jj.shape[0]
-    y_nom = np.empty((nc, 3))
-    for t in range(nc):
-        for a in range(3):
-            y_nom[t, a] = y_prev[jj[t], a] if y_prev.shape[0] > 0 else x[a]
-    J = np.empty((nc, m, 3))
-    L = np.empty((nc, m))
-    leg_rows(r0, base, y_nom, J, L)
-    col, val, b0l, b0u, kinds, n_hard, rs, rl = rows(jj, idx, lo, hi, has_hp, hp_ptr, hp_A, hp_b, app_on, app_d,
-                                                     app_b, app_from, J, L, y_nom, vmax, lmin, lmax, unit)
-    return W, tgt, col, val, b0l, b0u, kinds, n_hard, rs, rl
-
+# ---- the plant's one-step map and the offset (the refinement, see planner.constraints.controller)
 
 @njit(cache=True)
 def plant_step(packed, x, u, Ts, substeps):
-    """The plant (``planner.kernels.rk4`` from ``x`` under ``u``, ``x_dot`` at ``x`` from
-    ``planner.kernels.state_derivative``): the state one sample later."""
+    """The plant (:func:`planner.model.kernels.rk4` from ``x`` under ``u``, ``x_dot`` at ``x``
+    from :func:`~planner.model.kernels.state_derivative`): the state one sample later."""
     f0 = np.empty(6)
     state_derivative(packed, x, u, f0)
     return rk4(packed, x, u, Ts, substeps, f0)
@@ -484,37 +526,10 @@ def offset(x1, x, u, Ad, Bd):
         acc = x1[a]
         for t in range(6):
             acc -= Ad[a, t] * x[t]
-        for l in range(u.shape[0]):
-            acc -= Bd[a, l] * u[l]
+        for lg in range(u.shape[0]):
+            acc -= Bd[a, lg] * u[lg]
         d[a] = acc
     return d
-
-
-@njit(cache=True)
-def first_legs(x1, r0, base, lmin, lmax, unit, rs, rl, val, b0l, b0u):
-    """The first sample's leg rows at the plant's next pose ``x1[:3]``
-    (:func:`first_leg_rows`)."""
-    m = r0.shape[0]
-    y1 = np.empty((1, 3))
-    for a in range(3):
-        y1[0, a] = x1[a]
-    J0 = np.empty((1, m, 3))
-    L0 = np.empty((1, m))
-    leg_rows(r0, base, y1, J0, L0)
-    first_leg_rows(J0[0], L0[0], y1[0], unit, lmin, lmax, rs, rl, val, b0l, b0u)
-
-
-@njit(cache=True)
-def free_parts(P, x, d, Gx, ncol, W, tgt, col, val, b0l, b0u):
-    """:func:`free_response` into new arrays, ``f`` not yet scaled: ``(free, f, bl, bu)``."""
-    N = P.shape[0] - 1
-    nrow = b0l.shape[0]
-    free = np.empty(6 * N)
-    f = np.empty(Gx.shape[1])
-    bl = np.empty(nrow)
-    bu = np.empty(nrow)
-    free_response(P, x, d, Gx, ncol, W, tgt, 1.0, col, val, b0l, b0u, free, f, bl, bu)
-    return free, f, bl, bu
 
 
 @njit(cache=True)
@@ -530,7 +545,7 @@ def one_step_error(packed, x, u, Ad, Bd, d, Ts, substeps):
 def finish(z, X):
     """After the solve: ``z`` clipped to the force bounds, the predicted states ``X`` as
     (N, 6) and the nominal poses of the next step (the predicted poses shifted by one
-    sample)."""
+    sample, the last repeated)."""
     nz = z.shape[0]
     zc = np.empty(nz)
     for q in range(nz):
@@ -586,8 +601,8 @@ def reduce_setup(Ad, Bd, umax, W, du, col, val, b0l, b0u, n_hard, N):
     off = np.zeros(N + 1, np.int64)
     Bu = np.empty((6, m))
     for a in range(6):
-        for l in range(m):
-            Bu[a, l] = Bd[a, l] * umax[l]
+        for lg in range(m):
+            Bu[a, lg] = Bd[a, lg] * umax[lg]
     bad = (False, 0, off, ecnt, eax, ceq, K, Z, Acl, L, np.zeros((6 * N, 0)), np.zeros((0, 0)), 1.0, elim, Bu)
     neq = 0
     for r in range(n_hard):
@@ -610,15 +625,15 @@ def reduce_setup(Ad, Bd, umax, W, du, col, val, b0l, b0u, n_hard, N):
     # per pattern of fixed coordinates (a bit mask): K, Z and the closed-loop matrices
     bnorm = 0.0
     for a in range(6):
-        for l in range(m):
-            bnorm = max(bnorm, abs(Bu[a, l]))
+        for lg in range(m):
+            bnorm = max(bnorm, abs(Bu[a, lg]))
     for i in range(N):
         e = ecnt[i]
         if e > m:
             return bad
         if e == 0:
-            for l in range(m):
-                Z[i, l, l] = 1.0
+            for lg in range(m):
+                Z[i, lg, lg] = 1.0
             for a in range(6):
                 Acl[i, a, :] = Ad[a, :]
             off[i + 1] = off[i] + m
@@ -641,31 +656,31 @@ def reduce_setup(Ad, Bd, umax, W, du, col, val, b0l, b0u, n_hard, N):
         else:
             CB = np.empty((e, m))
             for t in range(e):
-                for l in range(m):
-                    CB[t, l] = Bu[eax[i, t], l]
+                for lg in range(m):
+                    CB[t, lg] = Bu[eax[i, t], lg]
             U, s, Vt = np.linalg.svd(CB)
             if not s[e - 1] > 1e-9 * bnorm:
                 return bad
-            for l in range(m):
+            for lg in range(m):
                 for t in range(e):
                     acc = 0.0
                     for q in range(e):
-                        acc += Vt[q, l] / s[q] * U[t, q]
-                    K[i, l, t] = acc
+                        acc += Vt[q, lg] / s[q] * U[t, q]
+                    K[i, lg, t] = acc
                 for q in range(m - e):
-                    Z[i, l, q] = Vt[e + q, l]
+                    Z[i, lg, q] = Vt[e + q, lg]
             # L = -K C Ad ; Acl = Ad + Bu L
-            for l in range(m):
+            for lg in range(m):
                 for b in range(6):
                     acc = 0.0
                     for t in range(e):
-                        acc -= K[i, l, t] * Ad[eax[i, t], b]
-                    L[i, l, b] = acc
+                        acc -= K[i, lg, t] * Ad[eax[i, t], b]
+                    L[i, lg, b] = acc
             for a in range(6):
                 for b in range(6):
                     acc = Ad[a, b]
-                    for l in range(m):
-                        acc += Bu[a, l] * L[i, l, b]
+                    for lg in range(m):
+                        acc += Bu[a, lg] * L[i, lg, b]
                     Acl[i, a, b] = acc
         off[i + 1] = off[i] + m - e
     nw = off[N]
@@ -688,8 +703,8 @@ def reduce_setup(Ad, Bd, umax, W, du, col, val, b0l, b0u, n_hard, N):
         for a in range(6):
             for q in range(ni):
                 acc = 0.0
-                for l in range(m):
-                    acc += Bu[a, l] * Z[i, l, q]
+                for lg in range(m):
+                    acc += Bu[a, lg] * Z[i, lg, q]
                 G[6 * i + a, off[i] + q] = acc
     # Hessian (lower triangle, then mirrored): state weights Qt_i = diag(W_i, 0) +
     # L_{i+1}' Du L_{i+1}, backward Pi_j = Qt_j + Acl_{j+1}' Pi_{j+1} Acl_{j+1}; the rows of w_j
@@ -718,8 +733,8 @@ def reduce_setup(Ad, Bd, umax, W, du, col, val, b0l, b0u, n_hard, N):
                 for a in range(6):
                     for b in range(6):
                         acc = 0.0
-                        for l in range(m):
-                            acc += L[j + 1, l, a] * du[l] * L[j + 1, l, b]
+                        for lg in range(m):
+                            acc += L[j + 1, lg, a] * du[lg] * L[j + 1, lg, b]
                         Pi[a, b] += acc
         for a in range(3):
             Pi[a, a] += W[3 * j + a]
@@ -745,15 +760,15 @@ def reduce_setup(Ad, Bd, umax, W, du, col, val, b0l, b0u, n_hard, N):
         for q1 in range(ni):
             for q2 in range(ni):
                 acc = 0.0
-                for l in range(m):
-                    acc += Z[i, l, q1] * du[l] * Z[i, l, q2]
+                for lg in range(m):
+                    acc += Z[i, lg, q1] * du[lg] * Z[i, lg, q2]
                 Hw[off[i] + q1, off[i] + q2] += acc
         if ecnt[i] > 0 and i > 0:
             for q in range(ni):
                 for b in range(6):
                     acc = 0.0
-                    for l in range(m):
-                        acc += Z[i, l, q] * du[l] * L[i, l, b]
+                    for lg in range(m):
+                        acc += Z[i, lg, q] * du[lg] * L[i, lg, b]
                     Mi[q, b] = acc
             c_end = off[i]
             for q in range(ni):
@@ -792,17 +807,17 @@ def reduce_forward(x, d, Ad, Bu, ecnt, eax, ceq, K, Z, off, w, z, X):
                 acc += Ad[a, t] * (X[6 * (i - 1) + t] if i > 0 else x[t])
             Y[a] = acc + (d[a] if i == 0 else 0.0)
         e = ecnt[i]
-        for l in range(m):
+        for lg in range(m):
             acc = 0.0
             for q in range(off[i + 1] - off[i]):
-                acc += Z[i, l, q] * w[off[i] + q]
+                acc += Z[i, lg, q] * w[off[i] + q]
             for t in range(e):
-                acc += K[i, l, t] * (ceq[i, t] - Y[eax[i, t]])
-            z[m * i + l] = acc
+                acc += K[i, lg, t] * (ceq[i, t] - Y[eax[i, t]])
+            z[m * i + lg] = acc
         for a in range(6):
             acc = Y[a]
-            for l in range(m):
-                acc += Bu[a, l] * z[m * i + l]
+            for lg in range(m):
+                acc += Bu[a, lg] * z[m * i + lg]
             X[6 * i + a] = acc
 
 
@@ -834,8 +849,8 @@ def reduce_free(x, d, Ad, Bu, ecnt, eax, ceq, K, Z, Acl, L, G, off, W, tgt, du, 
             if ecnt[j + 1] > 0:
                 for b in range(6):
                     acc = 0.0
-                    for l in range(m):
-                        acc += L[j + 1, l, b] * du[l] * zf[m * (j + 1) + l]
+                    for lg in range(m):
+                        acc += L[j + 1, lg, b] * du[lg] * zf[m * (j + 1) + lg]
                     lam[b] += acc
         for a in range(3):
             lam[a] += W[3 * j + a] * Xf[6 * j + a] - tgt[3 * j + a]
@@ -843,8 +858,8 @@ def reduce_free(x, d, Ad, Bu, ecnt, eax, ceq, K, Z, Acl, L, G, off, W, tgt, du, 
             acc = 0.0
             for a in range(6):
                 acc += G[6 * j + a, off[j] + q] * lam[a]
-            for l in range(m):
-                acc += Z[j, l, q] * du[l] * zf[m * j + l]
+            for lg in range(m):
+                acc += Z[j, lg, q] * du[lg] * zf[m * j + lg]
             fw[off[j] + q] = acc * scale
     nrow = col.shape[0]
     bl = np.empty(nrow)
@@ -864,8 +879,8 @@ def reduce_start(z, Z, off, m):
     for i in range(N):
         for q in range(off[i + 1] - off[i]):
             acc = 0.0
-            for l in range(m):
-                acc += Z[i, l, q] * z[m * i + l]
+            for lg in range(m):
+                acc += Z[i, lg, q] * z[m * i + lg]
             w[off[i] + q] = acc
     return w
 
@@ -945,16 +960,16 @@ def reduce_problem(keep, keepf, col, val, G, off, L, Z, ecnt, zf, bl, bu, m):
         if not keepf[q]:
             continue
         s = q // m
-        l = q - s * m
+        lg = q - s * m
         if s > 0 and ecnt[s] > 0:
             for b in range(6):
-                lv = L[s, l, b]
+                lv = L[s, lg, b]
                 if lv == 0.0:
                     continue
                 for c in range(off[s]):
                     A[i, c] += lv * G[6 * (s - 1) + b, c]
         for t in range(off[s + 1] - off[s]):
-            A[i, off[s] + t] = Z[s, l, t]
+            A[i, off[s] + t] = Z[s, lg, t]
         BU[i] = 1.0 - zf[q]
         BL[i] = -1.0 - zf[q]
         i += 1

@@ -1,0 +1,146 @@
+"""The compiled assembly (``settings.backend = "compiled"``): each step's QP assembled by the
+kernels of :mod:`planner.constraints.kernels`, with the equalities eliminated and the rows
+screened (:mod:`planner.constraints.step`). Same interface as
+:class:`~planner.constraints.reference.ReferenceAssembly`, the numpy reference; the
+controller picks one of the two at construction.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..corridor import RangeSequence
+from ..model import RobotModel
+from ..schema import Settings
+from . import kernels as ck
+from .corridor import CorridorConstraint, EndApproachConstraint
+from .drives import LegSpeedConstraint, LegStrokeConstraint
+from .qp import DenseQP, QPSolution
+from .rows import ROW_UNIT_M, Rows
+from .step import FullQP, ReducedQP, StepQP
+
+if TYPE_CHECKING:
+    from .controller import Constraints
+
+__all__ = ["KERNEL_SECTIONS", "AssemblyInputs", "CompiledAssembly"]
+
+#: the row constraints :func:`kernels.assemble` fuses, in its (the row) order
+KERNEL_SECTIONS = (CorridorConstraint, EndApproachConstraint, LegSpeedConstraint, LegStrokeConstraint)
+
+
+@dataclass(frozen=True, eq=False)
+class AssemblyInputs:
+    """What :func:`kernels.assemble` reads that does not change during a plan."""
+
+    N: int  #: horizon [samples]
+    K: int  #: samples of the range sequence
+    lower: np.ndarray  #: (K + N, 3) ``r_a`` per sample, the last repeated N times (as ``RangeSequence.window``)
+    upper: np.ndarray  #: (K + N, 3) ``r_b``
+    qa: np.ndarray  #: (K + N, 3) diagonals of ``Q_ra``
+    qb: np.ndarray  #: (K + N, 3) diagonals of ``Q_rb``
+    r0: np.ndarray  #: (n_legs, 2) platform pivots relative to the tool point [m]
+    base: np.ndarray  #: (n_legs, 2) base pivots [m]
+    constraint_args: tuple  #: the row constraints' kernel arguments, in row order
+
+    @classmethod
+    def of(cls, model: RobotModel, seq: RangeSequence, N: int, constraints: Constraints) -> AssemblyInputs:
+        """The inputs of a plan: its range sequence, the legs and the row constraints (one of
+        each of :data:`KERNEL_SECTIONS`, in that order)."""
+        if tuple(type(c) for c in constraints.rows) != KERNEL_SECTIONS:
+            raise TypeError("the compiled assembly fuses the rows of "
+                            f"{', '.join(c.__name__ for c in KERNEL_SECTIONS)}, in this order")
+
+        def pad(a: np.ndarray) -> np.ndarray:
+            return np.ascontiguousarray(np.concatenate((a, np.repeat(a[-1:], N, axis=0))), dtype=float)
+
+        args = tuple(a for c in constraints.rows for a in c.kernel_args)
+        return cls(N, seq.K, pad(seq.lower), pad(seq.upper), pad(seq.qa), pad(seq.qb),
+                   np.ascontiguousarray(model.r0, dtype=float), np.ascontiguousarray(model.base, dtype=float), args)
+
+    def assemble(self, k: int, x: np.ndarray, y_prev: np.ndarray) -> tuple[np.ndarray, np.ndarray, Rows]:
+        """The criterion's weights and targets (3N,) and the rows of step ``k`` at state ``x``,
+        the legs linearised at ``y_prev`` (N, 3) (or at ``x``: ``y_prev`` empty)."""
+        W, tgt, col, val, lower, upper, kinds, n_hard, speed0, stroke0 = ck.assemble(
+            k, self.N, x, y_prev, ROW_UNIT_M, self.K, self.lower, self.upper, self.qa, self.qb, self.r0, self.base,
+            *self.constraint_args)
+        return W, tgt, Rows(col, val, lower, upper, kinds, int(n_hard), int(speed0), int(stroke0))
+
+
+class CompiledAssembly:
+    """The step's QP by the compiled kernels (see the module docstring)."""
+
+    def __init__(self, model: RobotModel, seq: RangeSequence, st: Settings, constraints: Constraints):
+        self.N = st.N
+        self.Ts, self.substeps = st.Ts, st.plant_substeps
+        self.packed = model.packed
+        self.umax = constraints.forces.umax
+        #: move weight per drive ``(q_u force_max)^2``, and per move of the horizon
+        self.du = np.ascontiguousarray((np.asarray(seq.qu, float) * self.umax) ** 2)
+        self.du_moves = np.tile(self.du, self.N)
+        self.inputs = AssemblyInputs.of(model, seq, self.N, constraints)
+        self._legs = (self.inputs.r0, self.inputs.base, constraints.stroke.lmin, constraints.stroke.lmax)
+        self._no_poses = np.zeros((0, 3))
+
+    def build(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, y_nom: np.ndarray | None,
+              u0: np.ndarray) -> StepQP:
+        """The QP of step ``k`` at state ``x`` and model ``Ad, Bd``: the rows and criterion
+        (legs linearised at ``y_nom``, or at ``x``), the one-step offset under the guessed move
+        ``u0`` [N] (:meth:`set_offset`), and the reduced QP where the rows have equalities."""
+        x = np.ascontiguousarray(x, dtype=float)
+        W, tgt, rows = self.inputs.assemble(k, x, y_nom if y_nom is not None else self._no_poses)
+        x1 = ck.plant_step(self.packed, x, np.ascontiguousarray(u0, dtype=float), self.Ts, self.substeps)
+        d = ck.offset(x1, x, u0, Ad, Bd)
+        rows.relinearise_first_legs(x1, *self._legs)
+        reduced = ReducedQP.setup(Ad, Bd, self.umax, self.du, x, d, W, tgt, rows)
+        return StepQP(x, Ad, Bd, W, tgt, rows, d, x1, reduced)
+
+    def set_offset(self, qp: StepQP, u: np.ndarray, x1: np.ndarray) -> None:
+        """The one-step offset ``d = Phi(x, u) - Ad x - Bd u`` (``x1 = Phi(x, u)``: the plant's
+        next state under the move ``u`` [N]), sample 0's leg rows at ``x1``, and the parts of
+        the QP that depend on them."""
+        qp.x1 = x1
+        qp.d = ck.offset(x1, qp.x, u, qp.Ad, qp.Bd)
+        qp.rows.relinearise_first_legs(x1, *self._legs)
+        if qp.reduced is not None:
+            qp.reduced.set_free(qp.x, qp.d, qp.Ad, qp.W, qp.tgt, self.du, qp.rows)
+        if qp.full is not None:
+            qp.full.set_free(qp.x, qp.d, qp.W, qp.tgt, qp.rows)
+
+    def full(self, qp: StepQP) -> FullQP:
+        """The QP in ``z``, formed on first use."""
+        if qp.full is None:
+            qp.full = FullQP.form(qp.Ad, qp.Bd, self.umax, self.du_moves, qp.x, qp.d, qp.W, qp.tgt, qp.rows)
+        return qp.full
+
+    def solve(self, qp: StepQP, start: np.ndarray | None) -> QPSolution:
+        """The hard QP from the warm start ``start`` (scaled moves): reduced where the
+        equalities are eliminated, else in ``z``; screened and checked."""
+        if qp.reduced is not None:
+            return qp.reduced.solve(qp.x, qp.d, qp.Ad, qp.rows, start)
+        return self.full(qp).solve(qp.rows, start)
+
+    def one_step_error(self, qp: StepQP, u: np.ndarray) -> tuple[np.ndarray, float, float]:
+        """The plant's next state under ``u`` [N] and how far it lands from the prediction
+        ``Ad x + Bd u + d`` ([m], [rad])."""
+        return ck.one_step_error(self.packed, qp.x, u, qp.Ad, qp.Bd, qp.d, self.Ts, self.substeps)
+
+    def dense(self, qp: StepQP) -> DenseQP:
+        """Every row formed (the slack problem)."""
+        return self.full(qp).dense(qp.rows)
+
+    def violation(self, qp: StepQP, sol: QPSolution) -> float:
+        """Largest hard-row violation of a hard solution [row units] (checked by the solve)."""
+        return sol.violation
+
+    def finish(self, qp: StepQP, z: np.ndarray, hard: QPSolution | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The moves ``z`` clipped to the force bounds, the predicted states (N, 6) and the
+        nominal poses of the next step; ``hard``: the hard solution if ``z`` is its moves (a
+        reduced solve has formed their prediction), None after the slack problem."""
+        if hard is not None and qp.reduced is not None:
+            X = hard.states
+        else:
+            X = self.full(qp).predict(np.clip(z, -1.0, 1.0))
+        return ck.finish(z, X)

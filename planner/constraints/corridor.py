@@ -1,0 +1,184 @@
+"""The corridor as constraints: the convex set each predicted pose must lie in, and the
+no-overshoot half-plane at the end.
+
+**Corridor** (:class:`CorridorConstraint`): the predicted pose of sample ``j`` lies in that
+sample's range of the range sequence (the time-indexed range, taper included), shrunk by
+:data:`MARGIN_M` / :data:`MARGIN_RAD` on every side that is wide enough; for segments that
+carry an exact convex ``polygon`` (triangles from the segmentation) the polygon's half-planes
+replace the x/y box (mapped by the same per-axis affine taper as the box).
+
+Why the time-indexed range and not the union of the current and the next segment: the union
+of two cells is not convex in general (an L at a turn), while each time-indexed range is a
+convex box (or polygon), and consecutive ranges share an edge, so the robot crosses from one
+to the next between two samples. The taper out of the start and onto the end makes the range
+sequence start and end at the points, so the same constraints give the terminal condition:
+once the samples whose range is the end point enter the horizon, the predicted robot must be
+there (to within :data:`END_TOL_M`) for ``samples_per_segment + 1`` samples, i.e. at rest.
+A point range in x/y is a corner of its neighbouring cell in many corridors (Table I), so it
+is constrained to the box ``end +- END_TOL_M`` intersected with the neighbouring cell shrunk
+by the margin: the robot stops within a few micrometres of the end point, inside the cell.
+
+Margins: the constraints hold for the linear prediction, the plant is the nonlinear model;
+the one-step mismatch left after the refinement (:mod:`planner.constraints.controller`) is
+below 1e-9 m on Table I, far inside the 1 micrometre margin, which therefore keeps the
+actual samples inside.
+
+**No overshoot** (:class:`EndApproachConstraint`): from the last segment before the end point
+on, the predicted position never passes the end point along the approach direction.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..corridor import RangeSequence
+from ..corridor.geometry import halfplanes
+from ..schema import Segment
+from .rows import RowBlock, RowConstraint, RowKind, StepContext
+
+__all__ = ["END_TOL_M", "END_TOL_RAD", "MARGIN_M", "MARGIN_RAD", "CorridorConstraint", "EndApproachConstraint"]
+
+#: corridor margin [m]: constraints use each range shrunk by this on every side
+MARGIN_M = 1e-6
+#: angle margin [rad]
+MARGIN_RAD = 1e-6
+#: half-size of the box about a point range (end point) in x/y [m]
+END_TOL_M = 3e-6
+#: half-size of the angle box about a point angle range at the end [rad]
+END_TOL_RAD = 3e-6
+
+
+class CorridorConstraint(RowConstraint):
+    """``lo_s <= pose_j <= hi_s`` (boxes) or ``A_s (x, y)_j <= b_s`` (half-planes, with the
+    angle row of the box) for every sample ``j`` of the horizon, ``s`` its sequence index:
+    the pose sets (see the module docstring). Compiled twin: ``kernels.corridor_fill``.
+
+    ``lo``/``hi`` (K, 3): the shrunk box per sample 1..K [m, m, rad]; ``hp[s]``:
+    ``(A (h, 2), b (h,))`` or ``None``, half-planes replacing the x/y box rows of sequence
+    index ``s`` [m]."""
+
+    kind = RowKind.CORRIDOR
+
+    def __init__(self, seq: RangeSequence, segments: Sequence[Segment] | None):
+        K = seq.K
+        lo, hi = seq.lower.copy(), seq.upper.copy()
+        w = hi - lo
+        marg = np.array([MARGIN_M, MARGIN_M, MARGIN_RAD])
+        shrink = np.minimum(marg, 0.5 * w)
+        lo += shrink
+        hi -= shrink
+        self.hp: list[tuple[np.ndarray, np.ndarray] | None] = [None] * K
+        if segments is not None:
+            n = len(segments)
+            boxes = [(s.lower[:2], s.upper[:2]) for s in segments]
+            for j in range(K):
+                si = int(seq.segment[j])
+                seg = segments[si]
+                # x/y point range near the end: tiny box intersected with a neighbouring cell
+                if np.all(w[j, :2] <= 2 * MARGIN_M) and si >= n - 2:
+                    p = 0.5 * (seq.lower[j, :2] + seq.upper[j, :2])
+                    for h in (si, si - 1, si + 1, n - 2):
+                        if 0 <= h < n and not segments[h].is_point:
+                            blo, bhi = boxes[h][0] + MARGIN_M, boxes[h][1] - MARGIN_M
+                            if np.all(blo - END_TOL_M <= p) and np.all(p <= bhi + END_TOL_M):
+                                lo[j, :2] = np.maximum(p - END_TOL_M, blo)
+                                hi[j, :2] = np.minimum(p + END_TOL_M, bhi)
+                                # a point angle too: an equality on psi at every sample
+                                # cannot damp a residual rotation (with one constant move per
+                                # sample the rate only flips sign), so give it the same kind
+                                # of box inside the cell's angle range where there is room
+                                q = seq.lower[j, 2]
+                                plo = segments[h].lower[2] + MARGIN_RAD
+                                phi_ = segments[h].upper[2] - MARGIN_RAD
+                                if w[j, 2] <= 2 * MARGIN_RAD and phi_ > plo and \
+                                        plo - END_TOL_RAD <= q <= phi_ + END_TOL_RAD:
+                                    lo[j, 2] = max(q - END_TOL_RAD, plo)
+                                    hi[j, 2] = min(q + END_TOL_RAD, phi_)
+                                break
+                poly = seg.polygon
+                if poly is not None and not seg.is_point:
+                    sw = seg.upper[:2] - seg.lower[:2]
+                    if np.all(sw > 0) and np.all(w[j, :2] > 4 * MARGIN_M):
+                        # the same per-axis affine map that tapers the box
+                        V = seq.lower[j, :2] + (np.asarray(poly, float) - seg.lower[:2]) * (w[j, :2] / sw)
+                        A, b = halfplanes(V)
+                        self.hp[j] = (A, b - MARGIN_M)
+        self.lo, self.hi = lo, hi
+        self.has_hp = np.array([h is not None for h in self.hp], bool)
+        # the half-planes flattened for the compiled rows: those of sequence index s are
+        # hp_A[hp_ptr[s]:hp_ptr[s + 1]]
+        counts = [0 if h is None else len(h[1]) for h in self.hp]
+        self.hp_ptr = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
+        self.hp_A = np.ascontiguousarray(np.vstack([h[0] for h in self.hp if h is not None] or [np.zeros((0, 2))]),
+                                         dtype=float)
+        self.hp_b = np.concatenate([h[1] for h in self.hp if h is not None] or [np.zeros(0)]).astype(float)
+
+    def rows(self, step: StepContext) -> RowBlock:
+        """Box rows sorted by axis, then sample (x and y only where the sample has no
+        half-planes), then the half-planes sample by sample."""
+        idx = step.idx
+        samples = np.arange(len(idx))
+        lo, hi, has_hp = self.lo[idx], self.hi[idx], self.has_hp[idx]
+        cols, vals, lower, upper = [], [], [], []
+        for ax in range(3):
+            sel = samples if ax == 2 else samples[~has_hp]
+            cols.append(np.column_stack((6 * sel + ax, np.full(sel.size, -1))))
+            vals.append(np.column_stack((np.ones(sel.size), np.zeros(sel.size))))
+            lower.append(lo[sel, ax])
+            upper.append(hi[sel, ax])
+        for j in samples[has_hp]:
+            A, b = self._halfplanes(int(idx[j]))
+            cols.append(6 * j + np.tile(np.arange(2), (len(b), 1)))
+            vals.append(A)
+            lower.append(np.full(len(b), -np.inf))
+            upper.append(b)
+        return RowBlock(np.vstack(cols), np.vstack(vals), np.concatenate(lower), np.concatenate(upper), self.kind)
+
+    def _halfplanes(self, s: int) -> tuple[np.ndarray, np.ndarray]:
+        hp = self.hp[s]
+        assert hp is not None
+        return hp
+
+    @property
+    def kernel_args(self) -> tuple:
+        return self.lo, self.hi, self.has_hp, self.hp_ptr, self.hp_A, self.hp_b
+
+
+class EndApproachConstraint(RowConstraint):
+    """No overshoot: ``d . (x, y)_j <= d . end`` [m] with ``d`` the unit direction from the
+    last cell's centre to the end point, for the samples from sequence index
+    :attr:`start_index` on (the last segment before the end point). Only for corridors of at
+    least three segments that end in a point. Compiled twin: ``kernels.approach_fill``."""
+
+    kind = RowKind.CORRIDOR
+
+    def __init__(self, seq: RangeSequence, segments: Sequence[Segment] | None, samples_per_segment: int):
+        #: approach direction (2,) and bound [m], or None (no rows)
+        self.half_plane: tuple[np.ndarray, float] | None = None
+        #: first sequence index with the row
+        self.start_index = seq.K
+        n = 0 if segments is None else len(segments)
+        if segments is not None and n >= 3 and segments[-1].is_point:
+            d = segments[-1].centre[:2] - segments[-2].centre[:2]
+            nd = float(np.hypot(*d))
+            if nd > 1e-12:
+                d = d / nd
+                self.half_plane = (d, float(d @ segments[-1].centre[:2]))
+                self.start_index = max((n - 2) * samples_per_segment - 1, 0)
+
+    def rows(self, step: StepContext) -> RowBlock:
+        """One row per sample from :attr:`start_index` on (none without the half-plane)."""
+        sel = np.zeros(0, int) if self.half_plane is None else np.nonzero(step.idx >= self.start_index)[0]
+        d, b = self._half_plane()
+        return RowBlock(6 * sel[:, None] + np.arange(2), np.tile(d, (sel.size, 1)), np.full(sel.size, -np.inf),
+                        np.full(sel.size, b), self.kind)
+
+    def _half_plane(self) -> tuple[np.ndarray, float]:
+        return self.half_plane if self.half_plane is not None else (np.zeros(2), 0.0)
+
+    @property
+    def kernel_args(self) -> tuple:
+        d, b = self._half_plane()
+        return self.half_plane is not None, np.asarray(d, dtype=float), float(b), int(self.start_index)

@@ -1,0 +1,114 @@
+"""The solver: one wrapper around DAQP, and the dense QP of a step (hard and slack).
+
+DAQP (a dual active-set solver for dense QPs) was chosen by ``benchmarks/bench_qp.py`` over
+OSQP, ProxSuite and Clarabel. Every DAQP call of the constrained mode goes through
+:func:`solve_qp`.
+
+Infeasibility. If the hard QP has no solution (e.g. limits too tight for the requested time),
+the step is solved again with the corridor, stroke and speed rows softened by three slack
+variables (corridor m, stroke m, leg speed m/s; :meth:`DenseQP.solve_slack`) with a large
+quadratic + linear penalty; forces stay hard. What the controller does with the slack is
+described in :mod:`planner.constraints.controller`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import daqp
+import numpy as np
+
+__all__ = ["DAQP_SETTINGS", "SLACK_RHO1", "SLACK_RHO2", "DenseQP", "QPSolution", "solve_qp"]
+
+#: DAQP's tolerances (rows in row units: 1e-9 of a millimetre) and iteration limit
+DAQP_SETTINGS = {"primal_tol": 1e-9, "dual_tol": 1e-12, "iter_limit": 2000}
+#: penalty weights of the slack variables (relative to the scaled criterion, which is O(1))
+SLACK_RHO2 = 1e8
+SLACK_RHO1 = 1e6
+#: sense of an equality row for DAQP
+EQUALITY = 5
+
+
+@dataclass(slots=True, eq=False)
+class QPSolution:
+    """A solution of the step's QP (or of a smaller one standing for it)."""
+
+    z: np.ndarray  #: the minimiser (scaled moves; with the slacks after them in the slack problem)
+    flag: int  #: DAQP's exit flag (>= 1: solved)
+    iterations: int  #: DAQP iterations, summed over the solves it took
+    states: np.ndarray | None = None  #: (6N,) predicted states at ``z`` where the solve formed them
+    violation: float = 0.0  #: largest violation of the hard rows at ``z`` [row units], if checked
+
+    @property
+    def ok(self) -> bool:
+        """Whether the QP was solved."""
+        return self.flag >= 1
+
+
+def solve_qp(H: np.ndarray, f: np.ndarray, A: np.ndarray, upper: np.ndarray, lower: np.ndarray,
+             sense: np.ndarray, start: np.ndarray | None = None) -> QPSolution:
+    """``min 0.5 x'Hx + f'x`` s.t. ``lower <= (x_bounds, A x) <= upper`` by DAQP with
+    :data:`DAQP_SETTINGS`: the first ``len(upper) - len(A)`` entries of the bounds are simple
+    bounds on ``x``, the rest bound the rows of ``A``; ``sense`` per bound (0, or
+    :data:`EQUALITY`); ``start``: a primal warm start."""
+    kw = dict(DAQP_SETTINGS)
+    if start is not None:
+        kw["primal_start"] = start
+    x, _, flag, info = daqp.solve(H, f, A, upper, lower, sense, **kw)
+    return QPSolution(x, int(flag), int(info["iterations"]))
+
+
+@dataclass(slots=True, eq=False)
+class DenseQP:
+    """The step's QP in the scaled moves ``z = u / force_max``, every row formed::
+
+        min 0.5 z'Hz + f'z   s.t.  -1 <= z <= 1,  lower <= A z <= upper  (lower == upper: equality)
+
+    The first :attr:`n_hard` rows are hard; the rest (leg strokes) enter only the slack
+    problem. Rows in row units (``ROW_UNIT_M``)."""
+
+    H: np.ndarray  #: (nz, nz) Hessian, scaled (largest diagonal entry 1)
+    f: np.ndarray  #: (nz,) linear term, scaled the same way
+    A: np.ndarray  #: (nrow, nz) rows
+    lower: np.ndarray  #: (nrow,)
+    upper: np.ndarray  #: (nrow,)
+    kinds: np.ndarray  #: (nrow,) :class:`~planner.constraints.rows.RowKind`
+    n_hard: int
+
+    def solve_hard(self, start: np.ndarray | None = None) -> QPSolution:
+        """The hard QP with every hard row given to DAQP (the numpy reference's solve)."""
+        nz, nh = len(self.f), self.n_hard
+        bu = np.concatenate((np.ones(nz), self.upper[:nh]))
+        bl = np.concatenate((-np.ones(nz), self.lower[:nh]))
+        sense = np.zeros(len(bu), dtype=np.int32)
+        sense[bu - bl <= 0] = EQUALITY
+        return solve_qp(self.H, self.f, self.A[:nh], bu, bl, sense, start)
+
+    def violation(self, z: np.ndarray) -> float:
+        """Largest violation of the hard rows at ``z`` [row units] (0 if none)."""
+        nh = self.n_hard
+        r = self.A[:nh] @ z
+        return float(np.maximum(np.maximum(self.lower[:nh] - r, r - self.upper[:nh]), 0.0).max(initial=0.0))
+
+    def solve_slack(self) -> QPSolution:
+        """Every row (corridor, speed and stroke) softened by three slacks ``s >= 0`` (row
+        units: corridor m and rad, stroke m, speed m/s, by :class:`RowKind`), penalised by
+        ``SLACK_RHO2 |s|^2 / 2 + SLACK_RHO1 sum(s)``; forces stay hard. The solution is
+        ``(z, s)``."""
+        nz, kinds = len(self.f), self.kinds
+        ns = 3
+        Hs = np.zeros((nz + ns, nz + ns))
+        Hs[:nz, :nz] = self.H
+        Hs[nz:, nz:] = np.eye(ns) * SLACK_RHO2
+        fs = np.concatenate((self.f, np.full(ns, SLACK_RHO1)))
+        S = np.zeros((len(kinds), ns))
+        S[np.arange(len(kinds)), kinds] = 1.0
+        # two one-sided rows per two-sided row: A z - s <= bu ; bl <= A z + s
+        As = np.vstack((np.hstack((self.A, -S)), np.hstack((self.A, S))))
+        bu = np.concatenate((self.upper, np.full(len(kinds), np.inf)))
+        bl = np.concatenate((np.full(len(kinds), -np.inf), self.lower))
+        keep = np.isfinite(bu) | np.isfinite(bl)
+        As, bu, bl = As[keep], np.where(np.isfinite(bu), bu, 1e30)[keep], np.where(np.isfinite(bl), bl, -1e30)[keep]
+        ub = np.concatenate((np.ones(nz), np.full(ns, 1e30), bu))
+        lb = np.concatenate((-np.ones(nz), np.zeros(ns), bl))
+        return solve_qp(Hs, fs, As, ub, lb, np.zeros(len(ub), dtype=np.int32))

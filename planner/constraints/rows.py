@@ -1,0 +1,153 @@
+"""Constraint rows: what every constraint object gives, and the rows of one step.
+
+Every constraint of the QP except the drive-force bounds is a *row*: a linear function of
+the predicted states ``X`` (6N: pose and velocity of samples 1..N) between two bounds,
+
+    lower[r] <= sum_k val[r, k] X[col[r, k]] <= upper[r]      (at most 3 entries per row),
+
+i.e. a sparse selection ``Sel`` of the states: ``Sel X`` in ``[lower, upper]``. With the
+prediction ``X = free + Gx z`` (eq. 11 in the scaled moves ``z``) a row becomes
+``lower - Sel free <= (Sel Gx) z <= upper - Sel free``. Rows are scaled so that one unit is
+:data:`ROW_UNIT_M` metres (m of pose, m/s of leg speed, m of stroke, rad of angle), which
+keeps the solver's tolerances meaningful in every kind.
+
+A constraint object (:class:`RowConstraint`) gives its :class:`RowBlock` for a step from a
+:class:`StepContext` (its numpy reference), and the arrays its compiled twin in
+:mod:`planner.constraints.kernels` reads (:attr:`RowConstraint.kernel_args`). The rows of a
+step (:class:`Rows`) are the blocks of all constraints in the order they are composed.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+
+from . import kernels as ck
+
+__all__ = ["ROW_UNIT_M", "RowBlock", "RowConstraint", "RowKind", "Rows", "StepContext"]
+
+#: rows are scaled so that 1 unit = this many metres before the solver sees them
+ROW_UNIT_M = 1e-3
+
+
+class RowKind(IntEnum):
+    """What a row bounds; the index of the slack variable that softens it in the slack
+    problem and of its screening distance (:data:`planner.constraints.step.SCREEN_ROWS`)."""
+
+    CORRIDOR = ck.KIND_CORRIDOR  #: a pose coordinate or a half-plane [m, rad]
+    STROKE = ck.KIND_STROKE  #: a leg length [m]
+    SPEED = ck.KIND_SPEED  #: a leg speed [m/s]
+
+
+@dataclass(slots=True, eq=False)
+class StepContext:
+    """What a constraint needs to give its rows of one step (``N`` samples, ``n_legs`` legs)."""
+
+    idx: np.ndarray  #: (N,) sequence index of each sample (``min(k + j, K - 1)``)
+    y_nom: np.ndarray  #: (N, 3) nominal poses of the leg linearisation [m, m, rad]
+    J: np.ndarray  #: (N, n_legs, 3) leg Jacobians ``J_l`` at ``y_nom``
+    L: np.ndarray  #: (N, n_legs) leg lengths at ``y_nom`` [m]
+
+
+@dataclass(slots=True, eq=False)
+class RowBlock:
+    """One constraint's rows (in metres, not yet in row units)."""
+
+    col: np.ndarray  #: (r, c) state indices, ``c`` <= 3
+    val: np.ndarray  #: (r, c) coefficients
+    lower: np.ndarray  #: (r,) lower bounds (``-inf``: none)
+    upper: np.ndarray  #: (r,) upper bounds
+    kind: RowKind
+
+
+@dataclass(slots=True, eq=False)
+class Rows:
+    """The rows of one step (row units): ``lower <= Sel X <= upper`` with ``Sel`` given
+    sparse by ``col``/``val``. The first :attr:`n_hard` rows are hard; the rest (the leg
+    strokes) enter only the slack problem."""
+
+    col: np.ndarray  #: (nrow, 3) int64 state indices, -1 where unused
+    val: np.ndarray  #: (nrow, 3) coefficients, divided by ROW_UNIT_M
+    lower: np.ndarray  #: (nrow,) ``b0l``
+    upper: np.ndarray  #: (nrow,) ``b0u``
+    kinds: np.ndarray  #: (nrow,) int64 :class:`RowKind`
+    n_hard: int  #: rows given to the hard QP
+    speed0: int  #: first leg-speed row (sample 0's)
+    stroke0: int  #: first stroke row (sample 0's)
+
+    @classmethod
+    def stack(cls, blocks: Sequence[RowBlock], hard: Sequence[bool]) -> Rows:
+        """The rows of the blocks in order, in row units; ``hard[i]``: block ``i`` is hard
+        (the hard blocks come first)."""
+        assert list(hard) == sorted(hard, reverse=True), "hard rows first"
+        n = [len(b.lower) for b in blocks]
+        starts = np.concatenate(([0], np.cumsum(n)[:-1])).astype(int)
+        col = np.full((sum(n), 3), -1, np.int64)
+        val = np.zeros((sum(n), 3))
+        for b, r, nb in zip(blocks, starts, n):
+            col[r:r + nb, :b.col.shape[1]] = b.col
+            val[r:r + nb, :b.col.shape[1]] = b.val
+        kinds = np.concatenate([np.full(nb, int(b.kind), np.int64) for b, nb in zip(blocks, n)])
+
+        def first(kind: RowKind) -> int:  # the first row of that kind (sample 0's), -1 if none
+            return next((int(r) for b, r in zip(blocks, starts) if b.kind == kind), -1)
+
+        return cls(col, val / ROW_UNIT_M, np.concatenate([b.lower for b in blocks]) / ROW_UNIT_M,
+                   np.concatenate([b.upper for b in blocks]) / ROW_UNIT_M, kinds,
+                   sum(nb for nb, h in zip(n, hard) if h), first(RowKind.SPEED), first(RowKind.STROKE))
+
+    @property
+    def n_rows(self) -> int:
+        """Number of rows, hard and slack-only."""
+        return len(self.lower)
+
+    def selection(self, n_states: int) -> np.ndarray:
+        """The dense selection ``Sel`` (nrow, n_states) (the numpy reference's form)."""
+        Sel = np.zeros((self.n_rows, n_states))
+        r, k = np.nonzero(self.col >= 0)
+        Sel[r, self.col[r, k]] = self.val[r, k]
+        return Sel
+
+    # ---- compiled (kernels.py): the rows at predicted states --------------------------------
+    def screen(self, X: np.ndarray, delta: np.ndarray) -> np.ndarray:
+        """The hard rows the solver is given: the equalities and every row within
+        ``delta[kind]`` (row units) of a bound at the predicted states ``X`` (``kernels.screen``)."""
+        keep = np.zeros(self.n_hard, bool)
+        ck.screen(self.col, self.val, self.lower, self.upper, self.kinds, self.n_hard, X, delta, keep)
+        return keep
+
+    def check(self, X: np.ndarray, keep: np.ndarray, tol: float) -> tuple[float, int]:
+        """Largest violation of the hard rows at ``X`` (row units); rows violated by more
+        than ``tol`` and not in ``keep`` are added to it. Returns ``(worst, added)``."""
+        return ck.check_rows(self.col, self.val, self.lower, self.upper, self.n_hard, X, keep, tol)
+
+    def relinearise_first_legs(self, x1: np.ndarray, r0: np.ndarray, base: np.ndarray, lmin: np.ndarray,
+                               lmax: np.ndarray) -> None:
+        """Sample 0's leg-speed and stroke rows at the pose ``x1[:3]`` (``kernels.first_legs``;
+        the numpy twins: :meth:`LegSpeedConstraint.first_sample`,
+        :meth:`LegStrokeConstraint.first_sample`)."""
+        ck.first_legs(x1, r0, base, lmin, lmax, ROW_UNIT_M, self.speed0, self.stroke0, self.val, self.lower,
+                      self.upper)
+
+
+class RowConstraint(ABC):
+    """A constraint that gives rows on the predicted states (see the module docstring)."""
+
+    #: what its rows bound (the slack that softens them)
+    kind: RowKind
+    #: hard (the hard QP) or only in the slack problem
+    hard: bool = True
+
+    @abstractmethod
+    def rows(self, step: StepContext) -> RowBlock:
+        """Its rows of one step, numpy (the reference of its compiled twin)."""
+
+    @property
+    @abstractmethod
+    def kernel_args(self) -> tuple:
+        """The arrays its section of :func:`planner.constraints.kernels.assemble` reads, in
+        that kernel's order."""
