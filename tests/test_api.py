@@ -18,9 +18,10 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from app.api import create_app, field_path
+from app.api import create_app
 from app.storage import Store
 from planner.errors import PlannerError
+from planner.schema import field_path
 from tests.support import robot_description
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -121,7 +121,7 @@ class _FakeSeg:
 class FakeSegmentation:
     """Square cells, blocked when an obstacle's bounding box meets the cell's middle,
     unreachable when a corner is outside the legs' stroke; breadth-first path. Used only
-    when ``planner.segmentation`` is not available (it is built in parallel)."""
+    when a test needs to control the segmentation's timing."""
 
     def __init__(self, delay: float = 0.0):
         self.delay = delay
@@ -204,7 +204,7 @@ def real_segmentation_available() -> bool:
 
 @pytest.fixture
 def seg_impl():
-    """The editor runs on the real segmentation (planner.segmentation); the slow fake
+    """The editor runs on the real segmentation (planner.corridor); the slow fake
     above is used only where a test needs to control timing."""
     assert real_segmentation_available()
     yield None
