@@ -24,6 +24,7 @@ compiled kernels); the quantities of a pose are stateless functions of the model
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -124,7 +125,6 @@ def load_robot(spec: Any = None, field_path: str = "robot") -> RobotModel:
             model = _builtin[spec] = RobotModel.from_description(builtin_description(spec))
         return model
     if isinstance(spec, Path):
-        import json
         spec = json.loads(spec.read_text())
     if isinstance(spec, dict):
         try:
