@@ -218,11 +218,11 @@ def test_obstacle_layout_constrained(shape):
     """Around an obstacle, with square or triangular cells: every actual sample inside the
     union of the exact cells (shapely, independent of the planner), clear of the obstacle."""
     shapely = pytest.importorskip("shapely")
-    from planner.corridor import corridor_from_request
+    from planner import segment
 
     req = _layout(shape)
     robot = load_robot("moving-slide")
-    segments = corridor_from_request(parse_request(req), robot).segments
+    segments = segment(parse_request(req), robot=robot).segments
     res = plan(req)
     P = res.pose
     cells = [shapely.Polygon(s.polygon) if s.polygon is not None else shapely.box(*s.lower[:2], *s.upper[:2])

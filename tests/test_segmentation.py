@@ -20,7 +20,8 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 import planner
-from planner.corridor import corridor_from_request, count_turns, reachable_region, segment
+from planner import segment as segment_request
+from planner.corridor import count_turns, reachable_region, segment
 from planner.corridor.cells import default_cell_size
 from planner.corridor.geometry import halfplanes
 from planner.corridor.reach_region import psi_samples
@@ -697,7 +698,7 @@ def test_top_level_start_end_are_shorthands_for_the_layout():
     assert "start" not in lay  # the caller's dict is not modified
     # planner.schema.PlanRequest is also the HTTP body's model: the shorthand reaches the corridor
     model = PlanRequest.model_validate({"layout": lay, "start": [-0.06, -0.04, 0.0], "end": [0.06, -0.04, 0.0]})
-    seg = corridor_from_request(parse_request(model), ROBOT)
+    seg = segment_request(parse_request(model), robot=ROBOT)
     np.testing.assert_array_equal(seg.segments[0].lower, [-0.06, -0.04, 0.0])
     # the layout's own start wins over the shorthand
     req = parse_request({"layout": base_layout(), "start": [0.0, 0.0, 0.0]})

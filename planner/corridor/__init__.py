@@ -12,7 +12,7 @@ Plane geometry: :mod:`.geometry`; per-sample ranges: :mod:`.ranges`.
 from .ranges import RangeSequence, range_sequence, reference_sequence
 from .reach_region import reachable_region
 from .search import count_turns
-from .segmentation import Segmentation, corridor_from_request, segment
+from .segmentation import Segmentation, segment
 
-__all__ = ["RangeSequence", "Segmentation", "corridor_from_request", "count_turns", "range_sequence",
+__all__ = ["RangeSequence", "Segmentation", "count_turns", "range_sequence",
            "reachable_region", "reference_sequence", "segment"]

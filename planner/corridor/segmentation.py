@@ -47,13 +47,12 @@ from typing import Any
 import numpy as np
 import shapely
 
-from ..errors import PlannerError, invalid
+from ..errors import PlannerError
 from ..model import load_robot
 from ..schema import (
     MAX_SEGMENTS,
     MAX_TOTAL_STEPS,
     Layout,
-    PlanRequest,
     Segment,
     SegmentationResult,
     Settings,
@@ -64,7 +63,7 @@ from .reach_region import boxes_reachable, psi_samples
 from .search import fewest_turns_path
 from .workspace import Workspace, check_endpoint, format_point, parse_layout
 
-__all__ = ["Segmentation", "corridor_from_request", "segment"]
+__all__ = ["Segmentation", "segment"]
 
 
 @dataclass
@@ -227,11 +226,3 @@ def segment(layout: Layout | dict[str, Any], robot: Any, settings: Settings | No
     segs.append(_cell_segment(ws.end.copy(), ws.end.copy()))
     return Segmentation(ws.shape, float(s), ws.lower, ws.upper, ws.clearance, ws.psi_range, ws.start, ws.end,
                         grid.polygons, state, path, segs, turns, grown, (time.perf_counter() - t0) * 1e3)
-
-
-def corridor_from_request(req: PlanRequest, robot: Any = None) -> Segmentation:
-    """Segment a parsed request's ``layout`` with its settings (the plan loop's entry);
-    ``robot`` overrides the request's robot."""
-    if req.layout is None:
-        raise invalid("layout", "the request has no layout to segment")
-    return segment(req.layout, load_robot(robot if robot is not None else req.robot), req.settings)
