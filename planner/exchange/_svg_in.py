@@ -90,6 +90,7 @@ def read_svg(data: bytes, units: tuple[str, float] | None, tolerance: Callable[[
         circle = _circle(el) if kind in ("circle", "ellipse") else None
         try:
             path = Path(el)
+            path.reify()  # its transform into the segments (reify=True leaves it on rotated ellipses)
         except Exception:
             ignored[f"{kind} (unreadable)"] += 1
             continue
