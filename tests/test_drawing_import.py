@@ -236,7 +236,7 @@ def test_svg_shapes_units_layers_and_y_up():
     # units option: one user unit is a cm; the path outside any group is on "(no layer)"
     res = import_drawing(SVG.encode(), {"units": "cm", "layers": ["(no layer)"]})
     assert res.report.units_source == "option"
-    r, h = 0.05, 0.05  # the closed cubic + arc blob, 10 x 5 cm across
+    r = 0.05  # the closed cubic + arc blob, 10 x 5 cm across
     assert 0.5 * math.pi * r * r < res.report.area_m2 < 0.1 * 0.1
 
 

@@ -178,7 +178,7 @@ def test_joint_stream_plays_through_halstreamer_into_hal(plans, tmp_path):
     sampled = _stream_rows((tmp_path / "sampled.txt").read_text())
     start = int(np.argmin(np.abs(sampled[:, 0] - rows[0, 0])))  # before the first period the pins are 0
     got = sampled[start:start + n]
-    assert got.shape == rows.shape and np.max(np.abs(got - rows)) <= 1e-6, "HAL did not play the stream sample by sample"
+    assert got.shape == rows.shape and np.max(np.abs(got - rows)) <= 1e-6, "HAL did not play the stream in order"
 
 
 def test_dxf_has_path_corridor_obstacles_in_mm(plans, tmp_path):
