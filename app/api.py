@@ -94,9 +94,6 @@ class ErrorResponse(BaseModel):
     error: ErrorDetail
 
 
-CorridorRecordModel = CorridorRecord  # the one definition: planner.schema.records
-
-
 class HealthModel(BaseModel):
     status: str = Field(description="'ok'")
     version: str = Field(description="rangeplan version")
@@ -432,7 +429,7 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
             raise StarletteHTTPException(404, f"no corridor with id {corridor_id!r}")
         return rec
 
-    @app.post("/v1/corridors", status_code=201, response_model=CorridorRecordModel, response_model_exclude_unset=True,
+    @app.post("/v1/corridors", status_code=201, response_model=CorridorRecord, response_model_exclude_unset=True,
               tags=["corridors"],
               responses=_errors(413, 422))
     def create_corridor(body: PlanRequest, request: Request, response: Response):
@@ -441,19 +438,19 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
         response.headers["Location"] = f"/v1/corridors/{rec['id']}"
         return rec
 
-    @app.get("/v1/corridors", response_model=list[CorridorRecordModel], response_model_exclude_unset=True,
+    @app.get("/v1/corridors", response_model=list[CorridorRecord], response_model_exclude_unset=True,
              tags=["corridors"])
     def list_corridors(request: Request):
         """All saved corridors, oldest first."""
         return request.app.state.store.list_corridors()
 
-    @app.get("/v1/corridors/{corridor_id}", response_model=CorridorRecordModel, response_model_exclude_unset=True,
+    @app.get("/v1/corridors/{corridor_id}", response_model=CorridorRecord, response_model_exclude_unset=True,
              tags=["corridors"],
              responses=_errors(404))
     def get_corridor(corridor_id: str, request: Request):
         return get_or_404(request.app.state.store, corridor_id)
 
-    @app.put("/v1/corridors/{corridor_id}", response_model=CorridorRecordModel, response_model_exclude_unset=True,
+    @app.put("/v1/corridors/{corridor_id}", response_model=CorridorRecord, response_model_exclude_unset=True,
              tags=["corridors"],
              responses=_errors(404, 413, 422))
     def update_corridor(corridor_id: str, body: PlanRequest, request: Request):
