@@ -14,6 +14,7 @@ import pytest
 
 from app.client import Client, RangeplanError
 from tests.drawings import DRAWINGS
+from tests.linuxcnc import rs274
 from tests.support import ROOT, TABLE1
 from tests.test_server_process import Server, free_port
 
@@ -43,6 +44,7 @@ def test_readme_example_runs_against_a_real_server(server, tmp_path):
     program = ROOT / "table.ngc"
     try:
         assert program.read_text().startswith("(rangeplan plan: around the table")
+        rs274(program.read_text())
     finally:
         program.unlink(missing_ok=True)
 

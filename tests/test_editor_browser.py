@@ -199,3 +199,5 @@ def test_files_tab_imports_a_drawing_and_downloads_gcode(session, tmp_path):
     text = Path(download.value.path()).read_text()
     assert text == to_gcode(PlanResult.model_validate(editor.last_result), source="rangeplan editor")
     assert "G93" in text and text.rstrip().endswith("M2")
+    from tests.linuxcnc import rs274
+    rs274(text)

@@ -17,6 +17,7 @@ from app.storage import Store
 from planner.exchange import to_gcode
 from planner.schema import PARTIAL_LAYOUT, ImportResult, PlanResult
 from tests.drawings import DRAWINGS, obstacle_region
+from tests.linuxcnc import rs274
 from tests.support import TABLE1, TABLE1_PATH
 
 TABLE = DRAWINGS / "Table-dining-E.dxf"
@@ -83,6 +84,8 @@ def test_plan_formats_on_every_endpoint(client):
     strip = [line for line in gcode.splitlines() if not line.startswith("(source")]
     assert [line for line in r.text.splitlines() if not line.startswith("(source")] == strip
     assert [line for line in to_gcode(stored).splitlines() if not line.startswith("(source")] == strip
+    rs274(r.text)
+    rs274(gcode)
     joints = client.get(f"/v1/plans/{plan_id}", params={"format": "joints", "forces": "true"})
     rows = np.array([list(map(float, line.split())) for line in joints.text.splitlines() if line[0] != "#"])
     assert np.allclose(rows[:, :4], stored.drives.length * 1e3, atol=5e-7)
@@ -140,6 +143,7 @@ def test_cli_import_then_plan_to_each_machine_format(tmp_path):
         r = run("plan", str(req), "-o", str(out))
         assert r.returncode == 0, r.stderr
         assert needle in out.read_text()
+    rs274((tmp_path / "plan.ngc").read_text())
     r = run("plan", str(TABLE1_PATH), "--format", "joints", "--forces")
     assert r.returncode == 0 and "leg4_force_n" in r.stdout
     assert len([line for line in r.stdout.splitlines() if not line.startswith("#")]) == len(

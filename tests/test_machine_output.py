@@ -23,9 +23,9 @@ from planner.exchange import export, import_drawing, to_dxf, to_gcode, to_joints
 from planner.exchange.gcode import DECIMALS
 from planner.model import kinematics, load_robot
 from tests.drawings import DRAWINGS, obstacle_region
+from tests.linuxcnc import RS274, rs274
 from tests.support import PSI_TURN, TABLE1, with_settings
 
-RS274 = "/usr/bin/rs274"
 HALRUN = "/usr/bin/halrun"
 PRINTED = 0.5 * 10 ** -DECIMALS  # half the last printed digit (mm, degree)
 
@@ -45,16 +45,6 @@ def plans() -> dict:
             "drawing layout": plan(_layout_request())}
 
 
-def run_rs274(program: str, tmp: Path) -> list[str]:
-    assert Path(RS274).exists(), "LinuxCNC's rs274 is missing: `make test` installs linuxcnc-uspace"
-    (tmp / "plan.ngc").write_text(program)
-    r = subprocess.run([RS274, "-g", "plan.ngc", "plan.canon"], cwd=tmp, capture_output=True, text=True,
-                       timeout=120, stdin=subprocess.DEVNULL)
-    out = (tmp / "plan.canon").read_text() if (tmp / "plan.canon").exists() else ""
-    assert r.returncode == 0, f"rs274 failed: {r.stdout[-2000:]} {r.stderr[-2000:]}"
-    return out.splitlines()
-
-
 _CANON = re.compile(r"^\s*\d+\s+N\.+\s+([A-Z_]+)\((.*)\)\s*$")
 
 
@@ -68,11 +58,11 @@ def canonical(lines: list[str]) -> list[tuple[str, list[str]]]:
 
 
 @pytest.mark.parametrize("name", ["table1", "psi-turn constrained", "drawing layout"])
-def test_gcode_runs_in_rs274_and_reproduces_the_plan(plans, name, tmp_path):
+def test_gcode_runs_in_rs274_and_reproduces_the_plan(plans, name):
     result = plans[name]
     program = to_gcode(result, source=name)
     assert program.splitlines()[5] == "G21 G90 G17" and program.rstrip().endswith("M2")
-    canon = canonical(run_rs274(program, tmp_path))
+    canon = canonical(rs274(program))
     assert not any(c == "COMMENT" and "error" in " ".join(a).lower() for c, a in canon)
     assert ("USE_LENGTH_UNITS", ["CANON_UNITS_MM"]) in canon
     pose = np.column_stack((result.pose[:, :2] * 1e3, np.degrees(result.pose[:, 2])))  # mm, mm, degree

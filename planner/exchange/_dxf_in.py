@@ -32,7 +32,6 @@ def read_dxf(data: bytes, units: tuple[str, float] | None,
              tolerance: Callable[[float], float]) -> Drawing:
     """Read a DXF file's bytes. ``units`` (name, metres per unit) overrides ``$INSUNITS``;
     ``tolerance(metres_per_unit)`` is the flattening tolerance in drawing units."""
-    import ezdxf
     from ezdxf import recover
     from ezdxf.lldxf.const import DXFError
 
@@ -43,7 +42,6 @@ def read_dxf(data: bytes, units: tuple[str, float] | None,
                            "(ASCII or binary) from your CAD program", "drawing") from None
     except Exception as exc:  # ezdxf may raise anything on garbage; the input's fault
         raise PlannerError("invalid_drawing", f"not a readable DXF drawing ({type(exc).__name__})", "drawing") from None
-    del ezdxf
     if units is not None:
         name, mpu, source = units[0], units[1], "option"
     else:

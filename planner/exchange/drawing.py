@@ -99,7 +99,11 @@ def _layers(drawing: Drawing, opt: ImportOptions) -> list[str]:
         raise PlannerError("invalid_drawing", f"the bounds layer {opt.bounds_layer!r} has no geometry in the drawing; "
                            f"its layers: {', '.join(present) or 'none'}", "bounds_layer")
     if opt.layers is None:
-        return [name for name in present if name != opt.bounds_layer]
+        chosen = [name for name in present if name != opt.bounds_layer]
+        if not chosen:
+            raise PlannerError("invalid_drawing", f"no closed shape: the only layer with geometry is the bounds layer "
+                               f"{opt.bounds_layer!r}", "layers")
+        return chosen
     missing = [name for name in opt.layers if name not in present]
     if missing:
         raise PlannerError("invalid_drawing", f"no geometry on layer(s) {', '.join(map(repr, missing))}; the "
