@@ -9,7 +9,7 @@ export OPENBLAS_NUM_THREADS := 1
 export OMP_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 
-.PHONY: run test lint install browser bench clean
+.PHONY: run test lint install browser linuxcnc bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -29,13 +29,20 @@ browser:
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
 	  chromium chromium-driver >/dev/null; }
 
+# G-code tests run every program through LinuxCNC's own interpreter (rs274) and stream the
+# leg lengths through halstreamer: Debian's linuxcnc-uspace
+linuxcnc:
+	@test -x /usr/bin/rs274 -a -x /usr/bin/halstreamer || { echo "installing Debian linuxcnc-uspace for the G-code tests"; \
+	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
+	  linuxcnc-uspace >/dev/null; }
+
 # ruff (style and errors), pyright (types), import-linter (the layers of planner/ and app/)
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/pyright
 	$(VENV)/bin/lint-imports
 
-test: $(STAMP) browser lint
+test: $(STAMP) browser linuxcnc lint
 	$(PY) -m pytest -q
 
 bench: $(STAMP)

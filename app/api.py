@@ -4,12 +4,14 @@ Endpoints (OpenAPI at ``/docs``; SI units in every field description)::
 
     GET  /health                      liveness + pool state (answers while plans run)
     GET  /v1/robots, /v1/robots/{n}   built-in robot descriptions
-    POST /v1/plan                     plan request -> result JSON (CSV: Accept: text/csv or ?format=csv)
+    POST /v1/plan                     plan request -> result JSON (CSV: Accept: text/csv or ?format=csv;
+                                      machine output: ?format=gcode | joints | dxf)
+    POST /v1/import                   DXF/SVG drawing -> {"layout", "report"}
     POST /v1/segment                  request with a layout -> cells and corridor, no planning
     POST/GET /v1/corridors            save / list corridors (SQLite)
     GET/PUT/DELETE /v1/corridors/{id} one saved corridor
     POST /v1/corridors/{id}/plan      plan a saved corridor
-    GET  /v1/plans/{id}               a stored plan result again (JSON or CSV)
+    GET  /v1/plans/{id}               a stored plan result again (any ?format=)
     GET  /                            landing page (static/)
 
 Every 4xx/5xx has one body shape: ``{"error": {"code", "message", "field"}}``. Planning runs in
@@ -29,7 +31,7 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 from fastapi import FastAPI, Query, Request
 from fastapi.exceptions import RequestValidationError
@@ -37,11 +39,24 @@ from fastapi.responses import JSONResponse, RedirectResponse, Response
 from pydantic import BaseModel, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from app.http_exchange import (
+    FORMAT_HELP,
+    PlanFormat,
+    import_openapi,
+    import_options,
+    media_type,
+    plan_content,
+    read_drawing,
+)
 from app.storage import Store, default_data_dir
 from app.workers import JobTimeout, PlanPool, PoolBusy, WorkerCrashed
 from planner.errors import PlannerError
+from planner.exchange import EXPORT_FORMATS, export
 from planner.orchestrator import to_csv
 from planner.schema import (
+    CorridorRecord,
+    ImportOptions,
+    ImportResult,
     PlanRequest,
     PlanResult,
     RobotDescription,
@@ -50,6 +65,7 @@ from planner.schema import (
     builtin_description,
     builtin_robot_names,
     error_details,
+    planner_error,
 )
 
 VERSION = "0.1.0"
@@ -78,15 +94,6 @@ class ErrorResponse(BaseModel):
     error: ErrorDetail
 
 
-class CorridorRecordModel(BaseModel):
-    id: str = Field(description="Corridor id (uuid4 hex)")
-    name: str | None = Field(description="Corridor name")
-    created: str = Field(description="Creation time, ISO-8601 UTC")
-    updated: str = Field(description="Last update time, ISO-8601 UTC")
-    request: PlanRequest = Field(description="The plan request (same shape as the body of POST /v1/plan; "
-                                    "m, m, rad, s)")
-
-
 class HealthModel(BaseModel):
     status: str = Field(description="'ok'")
     version: str = Field(description="rangeplan version")
@@ -96,6 +103,7 @@ class HealthModel(BaseModel):
 
 def _errors(*statuses: int) -> dict:
     return {s: {"model": ErrorResponse, "description": {404: "Unknown id", 413: "Body too large",
+                                                        415: "Not a drawing's content type",
                                                         422: "Invalid input or planner error",
                                                         503: "Too many plans queued",
                                                         500: "Internal error"}.get(s, "Error")} for s in statuses}
@@ -103,7 +111,7 @@ def _errors(*statuses: int) -> dict:
 
 _PLAN_RESPONSES = {200: {"model": PlanResult, "description": "The planned trajectory (JSON, or CSV with a "
                          "header naming each column with its unit)",
-                         "content": {"text/csv": {"schema": {"type": "string"}}}},
+                         "content": plan_content()},
                    **_errors(413, 422, 503)}
 
 
@@ -124,6 +132,19 @@ def _validation_response(exc: RequestValidationError) -> JSONResponse:
     first = details[0] if details else {"code": "invalid_input", "field": None, "message": "invalid input"}
     more = [{"field": d["field"], "message": d["message"]} for d in details] if len(details) > 1 else None
     return error_response(422, first["code"], first["message"], first["field"], more)
+
+
+def _attachment(plan_id: str | None, fmt: str) -> str:
+    return f'attachment; filename="plan-{plan_id or "result"}{EXPORT_FORMATS[fmt].extension}"'
+
+
+def _stored_layout(store: Store, plan_id: str):
+    """The layout of a stored plan's request (for a DXF's obstacles), or None."""
+    info = store.plan_info(plan_id)
+    try:
+        return PlanRequest.model_validate(info["request"]).layout if info and info.get("request") else None
+    except ValueError:  # a request stored by an older version: the DXF has no obstacles then
+        return None
 
 
 # ---------------------------------------------------------------------------------------
@@ -277,6 +298,10 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
         try:
             out: Any = await loop.run_in_executor(request.app.state.threads, pool.run, job)
         except JobTimeout:
+            if job["kind"] == "import":
+                return error_response(422, "timeout", f"reading the drawing took longer than the compute limit of "
+                                      f"{pool.timeout_s:g} s and was stopped; choose fewer layers or a larger "
+                                      "flatten_tolerance", "drawing")
             return error_response(422, "timeout", f"planning took longer than the compute limit of "
                                   f"{pool.timeout_s:g} s and was stopped; use fewer segments or samples, "
                                   "a shorter settings.tail_max_s, or a larger settings.Ts")
@@ -296,22 +321,27 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
         if meta.get("plan_id"):
             headers["Location"] = f"/v1/plans/{meta['plan_id']}"
             headers["X-Plan-Id"] = meta["plan_id"]
+        fmt = job.get("format")
+        if fmt in EXPORT_FORMATS:
+            headers["Content-Disposition"] = _attachment(meta.get("plan_id"), fmt)
         return Response(payload, media_type=media_type, headers=headers)
 
-    def wants_csv(request: Request, fmt: str | None) -> bool:
+    def plan_format(request: Request, fmt: str | None) -> str:
         if fmt is not None:
-            return fmt == "csv"
+            return fmt
         accept = request.headers.get("accept", "")
-        return "text/csv" in accept and "application/json" not in accept
+        return "csv" if "text/csv" in accept and "application/json" not in accept else "json"
 
-    async def plan_response(request: Request, req: PlanRequest, fmt: str | None, corridor_id: str | None = None):
-        csv = wants_csv(request, fmt)
-        job = {"kind": "plan", "request": req, "format": "csv" if csv else "json",
+    async def plan_response(request: Request, req: PlanRequest, fmt: str | None, corridor_id: str | None = None,
+                            forces: bool = False):
+        fmt = plan_format(request, fmt)
+        job = {"kind": "plan", "request": req, "format": fmt, "forces": forces,
+               "source": f"corridor {corridor_id}" if corridor_id else "POST /v1/plan",
                "store": str(request.app.state.store.path), "corridor_id": corridor_id}
-        return await run_job(request, job, "text/csv; charset=utf-8" if csv else "application/json")
+        return await run_job(request, job, media_type(fmt))
 
-    Format = Query(None, description="Response format: 'json' (default) or 'csv' (one row per sample, "
-                   "units in the header); overrides the Accept header")
+    Format = Query(None, description=FORMAT_HELP)
+    Forces = Query(False, description="With format=joints: add one drive-force column per leg (N)")
 
     # -- service --------------------------------------------------------------------------
     @app.get("/health", response_model=HealthModel, tags=["service"])
@@ -338,11 +368,27 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
 
     # -- planning -------------------------------------------------------------------------
     @app.post("/v1/plan", tags=["planning"], response_class=Response, responses=_PLAN_RESPONSES)
-    async def plan(body: PlanRequest, request: Request,
-                   format: Literal["json", "csv"] | None = Format):
+    async def plan(body: PlanRequest, request: Request, format: PlanFormat | None = Format, forces: bool = Forces):
         """Plan a trajectory for a corridor (``segments``), a reference or a ``layout``.
         The result is stored: fetch it again at ``GET /v1/plans/{plan_id}``."""
-        return await plan_response(request, body, format)
+        return await plan_response(request, body, format, forces=forces)
+
+    @app.post("/v1/import", tags=["planning"], response_class=Response, openapi_extra=import_openapi(),
+              responses={200: {"model": ImportResult, "description": "The drawing as a layout (m, rad) and a "
+                               "report of the shapes used, holes, pieces left open and the units applied"},
+                         **_errors(413, 415, 422, 503)})
+    async def import_drawing(request: Request):
+        """Read a DXF or SVG drawing (the body, or a multipart file upload): its closed shapes
+        become a layout's obstacles, placed by the query parameters (units, layers, offset [m],
+        rotation [rad], scale, tolerances [m], margin [m], bounds_layer, start, end)."""
+        from pydantic import ValidationError
+        try:
+            options = ImportOptions.model_validate(import_options(request))
+        except ValidationError as exc:
+            raise planner_error(exc) from None
+        data, filename, content_type = await read_drawing(request)
+        return await run_job(request, {"kind": "import", "data": data, "options": options, "filename": filename,
+                                       "content_type": content_type})
 
     @app.post("/v1/segment", tags=["planning"], response_class=Response,
               responses={200: {"model": SegmentationResult, "description": "Cells and corridor"},
@@ -355,13 +401,21 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
 
     @app.get("/v1/plans/{plan_id}", tags=["planning"], response_class=Response, responses={
         200: _PLAN_RESPONSES[200], **_errors(404)})
-    def get_plan(plan_id: str, request: Request, format: Literal["json", "csv"] | None = Format):
+    def get_plan(plan_id: str, request: Request, format: PlanFormat | None = Format, forces: bool = Forces):
         """A stored plan result (the newest plans are kept; see RANGEPLAN_MAX_PLANS)."""
-        text = request.app.state.store.get_plan_json(plan_id)
+        store: Store = request.app.state.store
+        text = store.get_plan_json(plan_id)
         if text is None:
             raise StarletteHTTPException(404, f"no plan with id {plan_id!r}")
-        if wants_csv(request, format):
-            return Response(to_csv(PlanResult.model_validate_json(text)), media_type="text/csv; charset=utf-8")
+        fmt = plan_format(request, format)
+        if fmt == "csv":
+            return Response(to_csv(PlanResult.model_validate_json(text)), media_type=media_type(fmt))
+        if fmt in EXPORT_FORMATS:
+            layout = _stored_layout(store, plan_id) if fmt == "dxf" else None
+            body = export(PlanResult.model_validate_json(text), fmt, layout=layout,  # type: ignore[arg-type]
+                          forces=forces, source=f"plan {plan_id}")
+            return Response(body, media_type=media_type(fmt),
+                            headers={"Content-Disposition": _attachment(plan_id, fmt)})
         return Response(text, media_type="application/json")
 
     # -- corridors ------------------------------------------------------------------------
@@ -375,7 +429,7 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
             raise StarletteHTTPException(404, f"no corridor with id {corridor_id!r}")
         return rec
 
-    @app.post("/v1/corridors", status_code=201, response_model=CorridorRecordModel, response_model_exclude_unset=True,
+    @app.post("/v1/corridors", status_code=201, response_model=CorridorRecord, response_model_exclude_unset=True,
               tags=["corridors"],
               responses=_errors(413, 422))
     def create_corridor(body: PlanRequest, request: Request, response: Response):
@@ -384,19 +438,19 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
         response.headers["Location"] = f"/v1/corridors/{rec['id']}"
         return rec
 
-    @app.get("/v1/corridors", response_model=list[CorridorRecordModel], response_model_exclude_unset=True,
+    @app.get("/v1/corridors", response_model=list[CorridorRecord], response_model_exclude_unset=True,
              tags=["corridors"])
     def list_corridors(request: Request):
         """All saved corridors, oldest first."""
         return request.app.state.store.list_corridors()
 
-    @app.get("/v1/corridors/{corridor_id}", response_model=CorridorRecordModel, response_model_exclude_unset=True,
+    @app.get("/v1/corridors/{corridor_id}", response_model=CorridorRecord, response_model_exclude_unset=True,
              tags=["corridors"],
              responses=_errors(404))
     def get_corridor(corridor_id: str, request: Request):
         return get_or_404(request.app.state.store, corridor_id)
 
-    @app.put("/v1/corridors/{corridor_id}", response_model=CorridorRecordModel, response_model_exclude_unset=True,
+    @app.put("/v1/corridors/{corridor_id}", response_model=CorridorRecord, response_model_exclude_unset=True,
              tags=["corridors"],
              responses=_errors(404, 413, 422))
     def update_corridor(corridor_id: str, body: PlanRequest, request: Request):
@@ -415,8 +469,8 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
 
     @app.post("/v1/corridors/{corridor_id}/plan", tags=["corridors"], response_class=Response,
               responses={**_PLAN_RESPONSES, **_errors(404)})
-    async def plan_corridor(corridor_id: str, request: Request,
-                            format: Literal["json", "csv"] | None = Format):
+    async def plan_corridor(corridor_id: str, request: Request, format: PlanFormat | None = Format,
+                            forces: bool = Forces):
         """Plan a saved corridor; the result is stored with a link to the corridor."""
         store: Store = request.app.state.store
         rec = await asyncio.get_running_loop().run_in_executor(None, store.get_corridor, corridor_id)
@@ -429,7 +483,7 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
             e = error_details(exc.errors())[0]
             return error_response(422, e["code"], "the saved corridor is not a valid plan request: "
                                   + e["message"], e["field"])
-        return await plan_response(request, model, format, corridor_id)
+        return await plan_response(request, model, format, corridor_id, forces)
 
     # -- landing page ---------------------------------------------------------------------
     if STATIC_DIR.is_dir():

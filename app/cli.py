@@ -1,4 +1,5 @@
-"""Command line: ``rangeplan plan INPUT.json [-o OUT.json | OUT.csv]`` and ``rangeplan serve``.
+"""Command line: ``rangeplan plan INPUT.json [-o OUT.json | .csv | .ngc | .txt | .dxf]``,
+``rangeplan import DRAWING.dxf|.svg [options] -o request.json`` and ``rangeplan serve``.
 
 Bad input exits with status 2 and one line naming the field and the cause.
 """
@@ -43,16 +44,35 @@ def load_request(path: str):
         raise InputError(f"{path}: {format_validation_error(exc)}") from None
 
 
+OUTPUT_FORMATS = ("json", "csv", "gcode", "joints", "dxf")
+
+
+def output_format(args) -> str:
+    """``--format``, else the output file's extension (.csv, .ngc/.nc/.gcode, .txt, .dxf), else JSON."""
+    from planner.exchange import export_format_for
+
+    if args.format:
+        return args.format
+    out = (args.output or "").lower()
+    if out.endswith(".csv"):
+        return "csv"
+    return export_format_for(out) or "json"
+
+
 def cmd_plan(args) -> int:
     from planner import PlannerError, plan, to_csv
+    from planner.exchange import export
 
     request = load_request(args.input)
+    fmt = output_format(args)
     try:
         result = plan(request)
     except PlannerError as exc:
         raise InputError(f"{args.input}: {exc.code}: {exc}") from None
-    if args.output and args.output.lower().endswith(".csv"):
+    if fmt == "csv":
         text = to_csv(result)
+    elif fmt in ("gcode", "joints", "dxf"):
+        text = export(result, fmt, layout=request.layout, forces=args.forces, source=args.input)
     else:
         text = json.dumps(result.to_json_dict(), indent=None if args.compact else 1)
     if args.output and args.output != "-":
@@ -66,10 +86,72 @@ def cmd_plan(args) -> int:
     return 0
 
 
+def cmd_import(args) -> int:
+    from planner import PlannerError
+    from planner.exchange import import_drawing
+
+    try:
+        data = sys.stdin.buffer.read() if args.drawing == "-" else Path(args.drawing).read_bytes()
+    except OSError as exc:
+        raise InputError(f"{args.drawing}: cannot read: {exc.strerror or exc}") from None
+    options = {"units": args.units, "layers": args.layer, "offset": args.offset, "rotation": args.rotation,
+               "scale": args.scale, "join_tolerance": args.join_tolerance, "flatten_tolerance": args.flatten_tolerance,
+               "margin": args.margin, "bounds_layer": args.bounds_layer, "start": args.start, "end": args.end}
+    try:
+        result = import_drawing(data, {k: v for k, v in options.items() if v is not None},
+                                filename=None if args.drawing == "-" else args.drawing)
+    except PlannerError as exc:
+        raise InputError(f"{args.drawing}: {exc.code}: {exc}") from None
+    text = json.dumps(result.to_request(), indent=1)
+    if args.report:
+        Path(args.report).write_text(json.dumps(result.report.model_dump(mode="json"), indent=1) + "\n")
+    rep = result.report
+    if args.output and args.output != "-":
+        Path(args.output).write_text(text + "\n")
+        print(f"wrote {args.output}: {len(rep.shapes)} obstacle(s), {rep.holes} hole(s), {len(rep.open_chains)} open "
+              f"chain(s), units {rep.units} ({rep.units_source}), area {rep.area_m2:.6g} m^2", file=sys.stderr)
+        for c in rep.open_chains[:5]:
+            print(f"  open: layer {c.layer!r} from ({c.start[0]:.4f}, {c.start[1]:.4f}) m to ({c.end[0]:.4f}, "
+                  f"{c.end[1]:.4f}) m ({c.why})", file=sys.stderr)
+        if result.layout.start is None or result.layout.end is None:
+            print("  add the start and end poses (--start X Y PSI --end X Y PSI, or in the file) before planning",
+                  file=sys.stderr)
+    else:
+        sys.stdout.write(text + "\n")
+    return 0
+
+
 def cmd_serve(args) -> int:
     from app.server import serve
 
     return serve(host=args.host, port=args.port, editor_port=args.editor_port, editor=not args.no_editor)
+
+
+def add_import_parser(sub) -> None:
+    from planner.schema import DRAWING_UNITS, ImportOptions
+
+    def helptext(field: str) -> str:
+        return (ImportOptions.model_fields[field].description or "").replace("%", "%%")
+
+    pi = sub.add_parser("import", help="turn a DXF or SVG drawing into a plan request with a layout",
+                        description="Closed shapes of the drawing become obstacles (nested ones holes); loose LINE/ARC "
+                        "pieces are joined. Lengths in m, angles in rad (in the robot's workspace).")
+    pi.add_argument("drawing", help="DXF or SVG file ('-' for standard input)")
+    pi.add_argument("-o", "--output", help="plan request JSON to write; standard output if omitted")
+    pi.add_argument("--layer", action="append", help=helptext("layers") + " (repeat for several)")
+    pi.add_argument("--units", choices=sorted(DRAWING_UNITS), help=helptext("units"))
+    pi.add_argument("--offset", nargs=2, type=float, metavar=("X", "Y"), help=helptext("offset"))
+    pi.add_argument("--rotation", type=float, metavar="R", help=helptext("rotation"))
+    pi.add_argument("--scale", type=float, metavar="S", help=helptext("scale"))
+    pi.add_argument("--start", nargs=3, type=float, metavar=("X", "Y", "PSI"), help=helptext("start"))
+    pi.add_argument("--end", nargs=3, type=float, metavar=("X", "Y", "PSI"), help=helptext("end"))
+    pi.add_argument("--join-tolerance", type=float, metavar="M", help=helptext("join_tolerance"))
+    pi.add_argument("--flatten-tolerance", type=float, metavar="M", help=helptext("flatten_tolerance"))
+    pi.add_argument("--margin", type=float, metavar="M", help=helptext("margin"))
+    pi.add_argument("--bounds-layer", metavar="NAME", help=helptext("bounds_layer"))
+    pi.add_argument("--report", metavar="FILE", help="write the import report (shapes, holes, open chains, "
+                    "units) as JSON to FILE")
+    pi.set_defaults(func=cmd_import)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -78,9 +160,14 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
     pp = sub.add_parser("plan", help="plan a trajectory for a request file")
     pp.add_argument("input", help="plan request JSON file ('-' for standard input)")
-    pp.add_argument("-o", "--output", help="output file: .json (default) or .csv; standard output if omitted")
+    pp.add_argument("-o", "--output", help="output file: .json (default), .csv, .ngc (G-code), .txt (leg lengths "
+                    "for halstreamer) or .dxf; standard output if omitted")
+    pp.add_argument("--format", choices=OUTPUT_FORMATS, help="output format (default: from the output file's "
+                    "extension, else json)")
+    pp.add_argument("--forces", action="store_true", help="joints format: add the drive forces (N)")
     pp.add_argument("--compact", action="store_true", help="JSON without indentation")
     pp.set_defaults(func=cmd_plan)
+    add_import_parser(sub)
     ps = sub.add_parser("serve", help="serve the HTTP API and the browser editor")
     ps.add_argument("--host", default=os.environ.get("RANGEPLAN_HOST", "127.0.0.1"),
                     help="API host (env RANGEPLAN_HOST, default 127.0.0.1)")

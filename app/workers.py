@@ -5,7 +5,7 @@ give no parallelism; worker processes do, and a process that runs past the time 
 be killed and replaced without disturbing the other jobs (a thread cannot be stopped).
 
 Each worker owns one end of a pipe, imports the planner once, then serves jobs. A job is
-a plain dict (``kind``: ``"plan"`` or ``"segment"``); the worker runs the planner, serialises
+a plain dict (``kind``: ``"plan"``, ``"segment"`` or ``"import"``); the worker runs the planner, serialises
 the result to JSON itself, stores plans in the SQLite store itself (WAL, multi-process safe)
 and sends back ready-to-send bytes, so the server process only moves bytes.
 
@@ -158,8 +158,22 @@ def run_job(job: dict) -> tuple:
             if plan_id and store is not None:
                 store.save_plan_json(data.decode(), req.to_json_dict(), job.get("corridor_id"),
                                      id=plan_id)
-            payload = to_csv(result).encode() if job.get("format") == "csv" else data
+            fmt = job.get("format")
+            if fmt == "csv":
+                payload = to_csv(result).encode()
+            elif fmt in ("gcode", "joints", "dxf"):
+                from planner.exchange import export
+                payload = export(result, fmt, layout=req.layout, forces=bool(job.get("forces")),
+                                 source=job.get("source")).encode()
+            else:
+                payload = data
             return ("ok", payload, {"plan_id": plan_id})
+        if job["kind"] == "import":
+            from planner.exchange import import_drawing
+
+            res = import_drawing(job["data"], job["options"], filename=job.get("filename"),
+                                 content_type=job.get("content_type"))
+            return ("ok", _dumps(res.to_json_dict()), {})
         if job["kind"] == "segment":
             from planner import segment
 

@@ -414,7 +414,7 @@ def test_openapi_every_field_described_with_unit_models(client):
     undocumented = []
     names = [n for n in schemas if n not in ("HTTPValidationError", "ValidationError")]
     for want in ("PlanRequest", "Segment", "Settings", "PlanResult", "Metrics", "Drives", "CorridorSamples",
-                 "CorridorRecordModel", "Layout", "RobotDescription", "SegmentationResult", "Timing"):
+                 "CorridorRecord", "Layout", "RobotDescription", "SegmentationResult", "Timing"):
         assert any(n == want or n.startswith(f"{want}-") for n in names), (want, names)
     for name in names:
         for prop, sch in schemas[name].get("properties", {}).items():
@@ -571,4 +571,4 @@ def test_other_responses_validate_against_the_openapi_schema(client):
     assert r.status_code == 200 and not list(_openapi_validator(client, "RobotDescription").iter_errors(r.json()))
     assert r.json()["platform"]["mass"] > 0
     r = client.post("/v1/corridors", json=TABLE1)
-    assert r.status_code == 201 and not list(_openapi_validator(client, "CorridorRecordModel").iter_errors(r.json()))
+    assert r.status_code == 201 and not list(_openapi_validator(client, "CorridorRecord").iter_errors(r.json()))

@@ -156,3 +156,48 @@ def test_the_page_makes_no_request_outside_loopback(session):
     assert urls, "no request recorded"
     hosts = {urlparse(u).hostname for u in urls if not u.startswith(("data:", "blob:", "about:"))}
     assert hosts <= {"127.0.0.1", "localhost"}, hosts
+
+
+def _wall_drawing(path: Path) -> Path:
+    """A DXF (mm) of the editor's example wall drawn as loose lines, and two small discs
+    that stretch the extents over the start and end."""
+    import ezdxf
+
+    doc = ezdxf.new("R2010", units=4)
+    msp = doc.modelspace()
+    corners = [(-20, -120), (0, -120), (0, 40), (-20, 40)]
+    for a, b in zip(corners, corners[1:] + corners[:1]):
+        msp.add_line(a, b)
+    msp.add_circle((-130, -130), 5)
+    msp.add_circle((130, 130), 5)
+    doc.saveas(path)
+    return path
+
+
+def test_files_tab_imports_a_drawing_and_downloads_gcode(session, tmp_path):
+    """Files tab: upload a DXF through the browser's file chooser (its closed shapes become
+    the layout's obstacles and the design re-plans), then download the plan's G-code."""
+    from planner.exchange import to_gcode
+    from planner.schema import PlanResult
+
+    editor, page, _ = session
+    assert editor.wait_idle(60)
+    page.get_by_role("tab", name="Files").click()
+    done = editor.plans_done
+    with page.expect_file_chooser() as chooser:
+        page.get_by_role("button", name="Import drawing (DXF/SVG)").click()
+    chooser.value.set_files(str(_wall_drawing(tmp_path / "wall.dxf")))
+    assert wait_for(lambda: len(editor.request["layout"]["obstacles"]) == 3, 20), editor.request["layout"]
+    kinds = sorted(o["type"] for o in editor.request["layout"]["obstacles"])
+    assert kinds == ["circle", "circle", "polygon"]
+    assert np.allclose(editor.request["layout"]["bounds"]["lower"], [-0.145, -0.145])
+    assert wait_for(lambda: editor.plans_done > done) and editor.wait_idle(60)
+    assert editor.last_error is None, editor.last_error
+    with page.expect_download() as download:
+        page.get_by_role("button", name="Download G-code (LinuxCNC)").click()
+    assert download.value.suggested_filename == "trajectory.ngc"
+    text = Path(download.value.path()).read_text()
+    assert text == to_gcode(PlanResult.model_validate(editor.last_result), source="rangeplan editor")
+    assert "G93" in text and text.rstrip().endswith("M2")
+    from tests.linuxcnc import rs274
+    rs274(text)

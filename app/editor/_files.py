@@ -1,5 +1,6 @@
 """The editor's files: corridors saved to / loaded from the store, the request JSON
-imported and exported, and the planned trajectory as a CSV download.
+imported and exported, DXF/SVG drawings imported as the layout's obstacles, and the planned
+trajectory as a CSV, G-code, leg-length stream or DXF download.
 
 A corridor is saved as its plan request (the one JSON shape); whatever is loaded or
 imported is validated as a plan request first and replaces the design only when valid.
@@ -11,7 +12,7 @@ from __future__ import annotations
 import json
 from typing import TYPE_CHECKING, Any
 
-from ._planning import editable, to_csv, validate_request
+from ._planning import PlannerError, drawing_request, editable, export_result, to_csv, validate_request
 
 if TYPE_CHECKING:
     from ._editor import Editor
@@ -122,6 +123,33 @@ class EditorFiles:
             self._editor.notify("No trajectory", "plan a corridor first", color="yellow", client=client)
             return
         self._download(client, "trajectory.csv", to_csv(result).encode())
+
+    # ------------------------------------------------------------------ CAD and machine files
+    def import_drawing(self, upload, options: dict, client=None) -> bool:
+        """Replace the layout's bounds and obstacles by an uploaded DXF or SVG drawing's
+        (``options``: :class:`planner.schema.ImportOptions`, e.g. scale and offset [m]); the
+        start, end and cell settings stay. Returns whether the design changed."""
+        try:
+            req, summary = drawing_request(upload.content, upload.name, self._editor.request, options)
+        except PlannerError as exc:
+            self._editor.notify("Drawing not imported", f"{upload.name}: {exc}", client=client)
+            return False
+        self._editor.set_request(req, immediate=True)
+        self._editor.place_cameras()
+        self._editor.notify("Drawing imported", f"{upload.name}: {summary}", color="green", client=client)
+        return True
+
+    #: download file name of each machine format
+    EXPORTS = {"gcode": "trajectory.ngc", "joints": "legs.txt", "dxf": "plan.dxf"}
+
+    def download_export(self, client, fmt: str) -> None:
+        """Send the newest trajectory to ``client`` as G-code, a leg-length stream or DXF."""
+        result = self._editor.last_result
+        if result is None:
+            self._editor.notify("No trajectory", "plan a corridor first", color="yellow", client=client)
+            return
+        text = export_result(result, fmt, self._editor.request)
+        self._download(client, self.EXPORTS[fmt], text.encode())
 
     @staticmethod
     def _download(client, filename: str, content: bytes) -> None:

@@ -202,6 +202,22 @@ class EditorGui:
         upload.on_upload(lambda e: editor.files.import_upload(upload.value, client=e.client))
         gui.add_button("Export request JSON").on_click(lambda e: editor.files.export_request(e.client))
         gui.add_button("Download trajectory CSV").on_click(lambda e: editor.files.download_csv(e.client))
+        self._build_cad_files(gui)
+
+    def _build_cad_files(self, gui) -> None:
+        """Files tab: a DXF/SVG drawing as the layout's obstacles; G-code, joints, DXF downloads."""
+        editor = self._editor
+        with gui.add_folder("CAD drawing and machine files"):
+            self.drawing_scale = gui.add_number("Drawing scale", 1.0, min=1e-6, max=1e6, step=0.01,
+                                                hint="Applied after the drawing's units (mm unless it says)")
+            self.drawing_offset = gui.add_vector2("Drawing offset x, y (m)", (0.0, 0.0), step=0.001)
+            drawing = gui.add_upload_button("Import drawing (DXF/SVG)", hint="Closed shapes become obstacles")
+            drawing.on_upload(lambda e: editor.files.import_drawing(
+                drawing.value, {"scale": float(self.drawing_scale.value),
+                                "offset": [float(v) for v in self.drawing_offset.value]}, client=e.client))
+            for fmt, label in (("gcode", "Download G-code (LinuxCNC)"), ("joints", "Download leg lengths "
+                               "(halstreamer)"), ("dxf", "Download DXF (path, corridor, obstacles)")):
+                gui.add_button(label).on_click(lambda e, f=fmt: editor.files.download_export(e.client, f))
 
     # ------------------------------------------------------------------ showing values
     @contextlib.contextmanager

@@ -28,6 +28,7 @@ from pydantic import ValidationError
 from planner import PlannerError, PlanRequest, PlanResult, RobotModel, load_robot
 from planner import plan as run_plan
 from planner import to_csv as _result_csv
+from planner.exchange import export, import_drawing
 from planner.model import SINGULAR_TOL, kinematics
 from planner.schema import DEFAULT_ROBOT, MODE_DEFAULTS, Settings, builtin_robot_names, format_validation_error
 
@@ -49,6 +50,8 @@ __all__ = [
     "editable",
     "reachable_mask",
     "robot_geometry",
+    "drawing_request",
+    "export_result",
 ]
 
 log = logging.getLogger("rangeplan.editor")
@@ -117,6 +120,33 @@ def editable(req: PlanRequest) -> dict:
 def to_csv(result: dict) -> str:
     """The CSV of a plan result (as JSON types)."""
     return _result_csv(PlanResult.model_validate(result))
+
+
+def drawing_request(data: bytes, filename: str, request: dict, options: dict) -> tuple[dict, str]:
+    """``request`` with its layout's bounds and obstacles replaced by a drawing's
+    (:func:`planner.exchange.import_drawing` with ``options``); start, end, cell, clearance
+    and psi range stay. Returns the new request and a one-line summary; raises
+    :class:`PlannerError` naming the cause for a bad drawing."""
+    res = import_drawing(data, options, filename=filename)
+    layout = dict(request.get("layout") or {})
+    imported = res.to_json_dict()["layout"]
+    layout["bounds"], layout["obstacles"] = imported["bounds"], imported["obstacles"]
+    lo, hi = np.asarray(imported["bounds"]["lower"]), np.asarray(imported["bounds"]["upper"])
+    for key, corner in (("start", lo + 0.05 * (hi - lo)), ("end", hi - 0.05 * (hi - lo))):
+        layout.setdefault(key, [float(corner[0]), float(corner[1]), 0.0])  # a design without a layout: corners
+    request = {k: v for k, v in request.items() if k not in ("segments", "reference")}
+    rep = res.report
+    summary = (f"{len(rep.shapes)} obstacle(s), {rep.holes} hole(s) from layers {', '.join(rep.layers)}; units "
+               f"{rep.units} ({rep.units_source}); {len(rep.open_chains)} open chain(s) left out")
+    return {**request, "layout": layout}, summary
+
+
+def export_result(result: dict, fmt: str, request: dict) -> str:
+    """A plan result (JSON types) as ``gcode``, ``joints`` or ``dxf`` (with the obstacles of
+    ``request``'s layout when it is valid)."""
+    model, _ = validate_request(request)
+    layout = model.layout if model is not None else None
+    return export(PlanResult.model_validate(result), fmt, layout=layout, source="rangeplan editor")  # type: ignore
 
 
 class RobotCache:

@@ -57,7 +57,7 @@ class Workspace:
                 pieces.append(discs(c[None], r + self.clearance)[0])
             elif self.clearance > 0:
                 pieces.append(ob.buffer(self.clearance, quad_segs=QUAD_SEGS))
-                v = np.asarray(ob.exterior.coords)[:-1]
+                v = np.concatenate([np.asarray(ring.coords)[:-1] for ring in (ob.exterior, *ob.interiors)])
                 centres.append(v)
                 cowner.append(np.full(len(v), i))
             else:
@@ -96,7 +96,7 @@ def parse_layout(raw: Layout | dict[str, Any], path: str = "layout") -> Workspac
             obstacles.append(discs(np.asarray(o.center, float)[None], float(o.radius))[0])  # circumscribes it
             circles[i] = (np.array(o.center, dtype=float), float(o.radius))
         else:
-            obstacles.append(shapely.Polygon(o.points))
+            obstacles.append(o.shape)  # with its holes
     return Workspace(np.array(raw.bounds.lower, float), np.array(raw.bounds.upper, float), obstacles,
                      float(raw.clearance), raw.cell.shape, raw.cell.size, np.array(raw.start_pose, float),
                      np.array(raw.end_pose, float), np.array(raw.angle_range, float), circles)

@@ -109,7 +109,7 @@ def build_result(robot: RobotModel, name: str | None, st: Settings, seq: RangeSe
     corridor = CorridorSamples.model_construct(
         lower=lower, upper=upper, violation_m=ti_violation,
         segments=None if segments is None else
-        [CorridorSegment.model_construct(lower=s.lower, upper=s.upper) for s in segments])
+        [CorridorSegment.model_construct(lower=s.lower, upper=s.upper, polygon=s.polygon) for s in segments])
     return PlanResult.model_construct(
         plan_id=None, name=name, robot=robot.name, mode=st.mode,
         criterion="range-space" if segments is not None else "tracking",

@@ -5,9 +5,19 @@
   the editor's save file and storage. Validation is complete and names the field.
 - :class:`PlanResult` (with :class:`Metrics`, :class:`Timing`, :class:`Drives`,
   :class:`CorridorSamples`): the result, and :class:`SegmentationResult`.
+- :class:`ImportOptions`, :class:`ImportReport`, :class:`ImportResult`: drawing import.
 - :mod:`~planner.schema.limits`: the bounds on work and the mode defaults.
 """
 
+from .drawing import (
+                     DRAWING_UNITS,
+                     PARTIAL_LAYOUT,
+                     DrawingShape,
+                     ImportOptions,
+                     ImportReport,
+                     ImportResult,
+                     OpenChain,
+)
 from .errors import error_details, field_path, format_validation_error, planner_error
 from .layout import SQRT3_2, Bounds, Cell, Circle, Layout, Obstacle, Polygon, Rectangle, cell_count
 from .limits import (
@@ -24,6 +34,7 @@ from .limits import (
                      MIN_TS,
                      MODE_DEFAULTS,
 )
+from .records import CorridorRecord
 from .request import TIMING_FIELDS, PlanRequest, Reference, Segment, Settings, parse_request
 from .result import (
                      UNITS,
@@ -54,6 +65,8 @@ __all__ = [
     "builtin_robot_names",
     "PlanResult", "Metrics", "Timing", "Drives", "CorridorSamples", "CorridorSegment", "UNITS",
     "SegmentationResult", "SegmentationCell", "HalfPlanes", "RobotSummary",
+    "CorridorRecord", "ImportOptions", "ImportReport", "ImportResult", "DrawingShape", "OpenChain", "DRAWING_UNITS",
+    "PARTIAL_LAYOUT",
     "error_details", "field_path", "format_validation_error", "planner_error",
     "DEFAULT_ROBOT", "DEFAULT_SAMPLES_PER_SEGMENT", "MAX_CELLS", "MAX_HORIZON", "MAX_LEGS", "MAX_OBSTACLES",
     "MAX_POLYGON_POINTS", "MAX_SAMPLES_PER_SEGMENT", "MAX_SEGMENTS", "MAX_TOTAL_STEPS", "MIN_TS", "MODE_DEFAULTS",

@@ -27,12 +27,12 @@ _TOO_LARGE = {"too_long", "too_large"}
 
 def field_path(loc: Sequence[Any], extra: str | None = None) -> str | None:
     """A pydantic ``loc`` (plus a validator's relative ``extra`` path) as ``a.b[3].c``;
-    a leading ``body`` (FastAPI) and union tags (``~...``) are left out."""
+    a leading ``body`` or ``query`` (FastAPI) and union tags (``~...``) are left out."""
     out = ""
     for part in loc:
         if isinstance(part, int):
             out += f"[{part}]"
-        elif part == "body" and not out:
+        elif part in ("body", "query") and not out:  # FastAPI's location of the field
             continue
         elif isinstance(part, str) and part.startswith("~"):
             continue

@@ -14,7 +14,7 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 import shapely
-from pydantic import Discriminator, Field, Tag, field_validator, model_validator
+from pydantic import Discriminator, Field, Tag, ValidationInfo, field_validator, model_validator
 
 from ._types import Finite, Pair, Strict, Vec2, Vec3, array_of, fail
 from .limits import MAX_CELLS, MAX_OBSTACLES, MAX_POLYGON_POINTS
@@ -65,6 +65,9 @@ class Polygon(Strict):
     type: Literal["polygon"] = Field(description="Obstacle shape")
     points: Vertices = Field(
         description="Vertices [[x, y], ...] in m, in order (either orientation)")
+    holes: list[Vertices] = Field(default_factory=list, max_length=MAX_POLYGON_POINTS,
+                                  description="Holes: free areas inside the outline, each its vertices [[x, y], ...] "
+                                  "in m (e.g. a drawing's shapes nested inside another)")
 
     @field_validator("points")
     @classmethod
@@ -76,6 +79,20 @@ class Polygon(Strict):
         if not poly.area > 0:
             raise fail("degenerate polygon: zero area")
         return v
+
+    @model_validator(mode="after")
+    def _holes_inside(self) -> Polygon:
+        if self.holes:
+            poly = shapely.Polygon(self.points, [np.asarray(h) for h in self.holes])
+            if not poly.is_valid:
+                raise fail(f"invalid holes: {shapely.is_valid_reason(poly)} (each hole must lie inside the outline "
+                           "without crossing it or another hole)", "holes")
+        return self
+
+    @property
+    def shape(self) -> shapely.Polygon:
+        """The obstacle as a shapely polygon (with its holes) [m]."""
+        return shapely.Polygon(self.points, [np.asarray(h) for h in self.holes] or None)
 
 
 def _obstacle_kind(value: Any) -> str | None:
@@ -143,15 +160,18 @@ class Layout(Strict):
         return v
 
     @model_validator(mode="after")
-    def _consistent(self) -> Layout:
+    def _consistent(self, info: ValidationInfo) -> Layout:
+        partial = bool((info.context or {}).get("partial_layout"))  # an imported drawing: no start/end yet
         for key in ("start", "end"):
             pose = getattr(self, key)
-            if pose is None:
+            if pose is None and not partial:
                 raise fail(f"the {key} pose [x, y, psi] (m, m, rad) is required (in the layout or at the request's "
                            "top level)", key)
         if self.psi_range is not None:
             lo, hi = self.psi_range
             for key in ("start", "end"):
+                if getattr(self, key) is None:
+                    continue
                 angle = float(getattr(self, key)[2])
                 if not lo - 1e-12 <= angle <= hi + 1e-12:
                     raise fail(f"must contain the {key} angle {angle:g} rad, got [{lo:g}, {hi:g}]", "psi_range")

@@ -33,6 +33,8 @@ class Drives(_Out):
 class CorridorSegment(_Out):
     lower: Vec3 = Field(description="Lower range limit [x, y, psi] in m, m, rad")
     upper: Vec3 = Field(description="Upper range limit [x, y, psi] in m, m, rad")
+    polygon: Points2 | None = Field(None, description="The exact cell outline [[x, y], ...] in m when the segment "
+                                    "has one (layout cells); null: the box lower..upper")
 
 
 class CorridorSamples(_Out):

@@ -1,0 +1,99 @@
+"""HTTP edges of :mod:`planner.exchange`: the drawing upload of ``POST /v1/import`` (raw
+body or multipart), its options as query parameters (documented from
+:class:`planner.schema.ImportOptions`), and the plan output formats (``?format=``).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from fastapi import Request
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from planner.errors import PlannerError
+from planner.exchange import DRAWING_FORMATS, EXPORT_FORMATS
+from planner.schema import ImportOptions
+
+__all__ = ["PlanFormat", "FORMAT_HELP", "LIST_OPTIONS", "import_openapi", "import_options", "media_type",
+           "plan_content", "read_drawing"]
+
+PlanFormat = Literal["json", "csv", "gcode", "joints", "dxf"]
+FORMAT_HELP = ("Response format: 'json' (default), 'csv' (one row per sample, units in the header), "
+               + ", ".join(f"'{k}' ({v.what})" for k, v in EXPORT_FORMATS.items())
+               + "; overrides the Accept header")
+#: options that take several values: repeat the parameter or separate the values by commas
+LIST_OPTIONS = ("layers", "offset", "start", "end")
+_MULTIPART = "multipart/form-data"
+
+
+def media_type(fmt: str) -> str:
+    """The response media type of a plan output format."""
+    if fmt == "csv":
+        return "text/csv; charset=utf-8"
+    if fmt in EXPORT_FORMATS:
+        return EXPORT_FORMATS[fmt].media_type
+    return "application/json"
+
+
+def plan_content() -> dict[str, Any]:
+    """The OpenAPI content types of a plan response besides JSON."""
+    return {"text/csv": {"schema": {"type": "string"}}, "text/plain": {"schema": {"type": "string"}},
+            "image/vnd.dxf": {"schema": {"type": "string"}}}
+
+
+def import_openapi() -> dict[str, Any]:
+    """``openapi_extra`` of ``POST /v1/import``: the body's content types and one query
+    parameter per :class:`ImportOptions` field, with its description."""
+    props = ImportOptions.model_json_schema()["properties"]
+    params = []
+    for name, prop in props.items():
+        desc = prop.get("description", "")
+        if name in LIST_OPTIONS:
+            desc += " (repeat the parameter or separate the values by commas)"
+            schema: dict[str, Any] = {"type": "array", "items": {"type": "string" if name == "layers" else "number"}}
+        else:
+            schema = {k: v for k, v in prop.items() if k not in ("description", "title", "default")}
+        params.append({"name": name, "in": "query", "required": False, "description": desc, "schema": schema,
+                       "style": "form", "explode": True})
+    binary = {"schema": {"type": "string", "format": "binary"}}
+    return {"parameters": params, "requestBody": {"required": True, "content": {
+        **{ct: binary for ct in DRAWING_FORMATS},
+        _MULTIPART: {"schema": {"type": "object", "properties": {"file": {"type": "string", "format": "binary"}},
+                                "required": ["file"]}}}}}
+
+
+def import_options(request: Request) -> dict[str, Any]:
+    """The query parameters as :class:`ImportOptions` input (validated by the caller)."""
+    out: dict[str, Any] = {}
+    for key, value in request.query_params.multi_items():
+        if key in LIST_OPTIONS:
+            out.setdefault(key, []).extend(v.strip() for v in value.split(",") if v.strip())
+        else:
+            out[key] = value
+    return out
+
+
+async def read_drawing(request: Request) -> tuple[bytes, str | None, str | None]:
+    """The uploaded drawing: ``(bytes, file name, content type)``; 415 for a content type
+    that is not a drawing or multipart, a PlannerError (422) for an empty or missing file."""
+    ct = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if ct == _MULTIPART:
+        try:
+            form = await request.form()
+        except Exception as exc:  # a malformed multipart body
+            raise PlannerError("invalid_input", f"malformed multipart body: {exc}", "file") from None
+        upload = next((v for v in form.values() if not isinstance(v, str)), None)
+        if upload is None:
+            raise PlannerError("invalid_input", "the multipart body has no file: upload the drawing as a file "
+                               "field (e.g. -F file=@drawing.dxf)", "file")
+        data = await upload.read()
+        filename, part_type = upload.filename, upload.content_type
+    elif ct in DRAWING_FORMATS:
+        data, filename, part_type = await request.body(), None, ct
+    else:
+        raise StarletteHTTPException(415, f"content type {ct or '(none)'!r} is not a drawing: send the DXF or SVG "
+                                     f"as the body with Content-Type {', '.join(DRAWING_FORMATS)}, or as "
+                                     f"{_MULTIPART}")
+    if not data:
+        raise PlannerError("invalid_drawing", "the drawing is empty", "drawing")
+    return data, filename, part_type

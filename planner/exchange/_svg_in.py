@@ -1,0 +1,172 @@
+"""SVG drawings to pieces (svgelements): every shape (path, rect, circle, ellipse,
+polygon, polyline, line) with its transforms applied, curves flattened.
+
+Coordinates: svgelements gives CSS pixels (96 per inch) with the document's viewBox and
+physical size applied. The y axis is turned up (``y_up = height - y``, the document's
+height in px) so the drawing keeps its orientation on screen in the workspace (+y up).
+Layers are the top-level groups: their Inkscape label, else their id.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import xml.etree.ElementTree as ET
+from collections import Counter
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from ..errors import PlannerError
+from . import _flatten as fl
+from ._pieces import Drawing, Piece
+
+__all__ = ["read_svg"]
+
+PX_M = 0.0254 / 96  # metres per CSS pixel
+_LAYER_ATTR = "data-rangeplan-layer"
+_INKSCAPE_LABEL = "{http://www.inkscape.org/namespaces/inkscape}label"
+_PHYSICAL = re.compile(r"^\s*[-+]?[0-9.eE+-]+\s*(mm|cm|in|pt|pc|q|m)\s*$")
+
+
+def _tag_layers(data: bytes) -> tuple[bytes, bool]:
+    """The document with each top-level group's layer name in an attribute svgelements
+    passes down to the shapes; and whether its size is in physical units."""
+    try:
+        root = ET.fromstring(data)
+    except ET.ParseError as exc:
+        raise PlannerError("invalid_drawing", f"not an SVG drawing: not well-formed XML ({exc})", "drawing") from None
+    if not (root.tag == "svg" or root.tag.endswith("}svg")):
+        raise PlannerError("invalid_drawing", f"not an SVG drawing: the root element is <{root.tag}>, not <svg>",
+                           "drawing")
+    physical = bool(_PHYSICAL.match(root.get("width", "")) or _PHYSICAL.match(root.get("height", "")))
+    for child in root:
+        if child.tag == "g" or child.tag.endswith("}g"):
+            name = child.get(_INKSCAPE_LABEL) or child.get("id")
+            if name:
+                child.set(_LAYER_ATTR, name)
+    return ET.tostring(root), physical
+
+
+def read_svg(data: bytes, units: tuple[str, float] | None, tolerance: Callable[[float], float]) -> Drawing:
+    """Read an SVG file's bytes. ``units`` (name, metres per unit) says what one user unit
+    (a coordinate of the document, before its viewBox scaling) is; by default the document's
+    physical size, or CSS px. ``tolerance(metres_per_unit)`` is the flattening tolerance in
+    drawing units."""
+    import io
+
+    from svgelements import SVG, Path, Shape
+
+    tagged, physical = _tag_layers(data)
+    try:
+        svg = SVG.parse(io.BytesIO(tagged), reify=True, ppi=96.0)
+    except Exception as exc:  # svgelements raises many kinds on bad documents
+        raise PlannerError("invalid_drawing", f"not a readable SVG drawing ({type(exc).__name__}: {exc})",
+                           "drawing") from None
+    # px per user unit (the viewBox scaling): the override unit applies to user units
+    px_per_user = 1.0
+    vb = getattr(svg, "viewbox_transform", None)
+    if vb:
+        from svgelements import Matrix
+        m = Matrix(vb)
+        px_per_user = math.sqrt(abs(m.a * m.d - m.b * m.c)) or 1.0
+    if units is not None:  # one user unit is units[1] m: coordinates in px are divided by px_per_user below
+        name, mpu, source, per_px = units[0], units[1], "option", 1.0 / px_per_user
+    else:  # CSS px, sized by the document's physical width/height when it has them
+        name, mpu, source, per_px = "px", PX_M, ("drawing" if physical else "default"), 1.0
+    height = float(svg.height) if getattr(svg, "height", None) else 0.0
+    tol = tolerance(mpu) / per_px  # in px
+    pieces: list[Piece] = []
+    ignored: Counter[str] = Counter()
+    for el in svg.elements():
+        if not isinstance(el, Shape):
+            if type(el).__name__ in ("Text", "Image", "Use"):
+                ignored[type(el).__name__.lower()] += 1
+            continue
+        values: Any = el.values or {}
+        layer = str(values.get(_LAYER_ATTR, "(no layer)"))
+        kind = type(el).__name__.lower()
+        circle = _circle(el) if kind in ("circle", "ellipse") else None
+        try:
+            path = Path(el)
+            path.reify()  # its transform into the segments (reify=True leaves it on rotated ellipses)
+        except Exception:
+            ignored[f"{kind} (unreadable)"] += 1
+            continue
+        pieces.extend(_subpaths(path, layer, kind, circle, height, tol))
+    if per_px != 1.0:
+        for p in pieces:
+            p.points = p.points * per_px
+            if p.circle is not None:
+                p.circle = (p.circle[0] * per_px, p.circle[1] * per_px, p.circle[2] * per_px)
+    layers = sorted({p.layer for p in pieces})
+    return Drawing(pieces, layers, dict(ignored), name, mpu, source)
+
+
+def _subpaths(path, layer: str, kind: str, circle, height: float, tol: float) -> list[Piece]:
+    """The subpaths of an svgelements ``Path`` as pieces (y turned up)."""
+    from svgelements import Close, Line, Move
+
+    out: list[Piece] = []
+    current: list[np.ndarray] = []
+
+    def flush(closed: bool) -> None:
+        if current:
+            pts = np.concatenate(current)
+            pts[:, 1] = height - pts[:, 1]
+            if closed and len(pts) > 1 and np.array_equal(pts[0], pts[-1]):
+                pts = pts[:-1]
+            if len(pts) >= 2:
+                c = (circle[0], height - circle[1], circle[2]) if closed and circle is not None else None
+                out.append(Piece(pts, closed and len(pts) >= 3, layer, kind, c))
+        current.clear()
+
+    for seg in path:
+        if isinstance(seg, Move):
+            flush(False)
+        elif isinstance(seg, Close):
+            if seg.start is not None and seg.end is not None and seg.start != seg.end:
+                current.append(np.array([[seg.end.x, seg.end.y]], float))
+            flush(True)
+        elif seg.start is not None and seg.end is not None:
+            pts = _segment_points(seg, tol, Line)
+            current.append(pts if not current else pts[1:])
+    if current:
+        pts = np.concatenate(current)
+        flush(bool(len(pts) > 3 and np.array_equal(pts[0], pts[-1])))
+    return out
+
+
+def _xy(*points: Any) -> np.ndarray:
+    return np.array([[p.x, p.y] for p in points], float)
+
+
+def _segment_points(seg: Any, tol: float, line_type: Any) -> np.ndarray:
+    from svgelements import Arc, CubicBezier, QuadraticBezier
+
+    if isinstance(seg, line_type):
+        return _xy(seg.start, seg.end)
+    if isinstance(seg, QuadraticBezier):
+        return fl.bezier(_xy(seg.start, seg.control, seg.end), tol)
+    if isinstance(seg, CubicBezier):
+        return fl.bezier(_xy(seg.start, seg.control1, seg.control2, seg.end), tol)
+    if isinstance(seg, Arc):
+        arc: Any = seg
+        sweep = float(arc.sweep)
+        n = fl.chords(max(float(arc.rx), float(arc.ry)) * sweep * sweep, tol, sweep)
+        return np.asarray(arc.npoint(np.linspace(0.0, 1.0, n + 1)), float)
+    return _xy(seg.start, seg.end)
+
+
+def _circle(el) -> tuple[float, float, float] | None:
+    """(cx, cy, r) in px of a circle (or an ellipse that is one after its transform)."""
+    try:
+        rx, ry = float(el.implicit_rx), float(el.implicit_ry)
+    except (AttributeError, TypeError, ValueError):
+        return None
+    if rx > 0 and abs(rx - ry) <= 1e-9 * rx:
+        m = el.transform
+        if abs(m.b) < 1e-12 and abs(m.c) < 1e-12 or abs(abs(m.a * m.d - m.b * m.c) - (m.a ** 2 + m.b ** 2)) < 1e-9:
+            return float(el.implicit_center.x), float(el.implicit_center.y), rx
+    return None

@@ -1,0 +1,69 @@
+"""A plan as RS274NGC G-code for LinuxCNC: one ``G1`` per sample in inverse-time feed.
+
+The program (tested with LinuxCNC's own interpreter, ``rs274``)::
+
+    (rangeplan plan: NAME)            comment header: plan, robot, units, sample time, source
+    G21 G90 G17                       mm, absolute, XY plane
+    G0 X.. Y.. C..                    rapid to the first pose (the plan starts at rest there)
+    G93                               inverse-time feed: F = 1 / (minutes the move takes)
+    G1 X.. Y.. C.. F6000.000000       sample k -> k+1: takes exactly Ts (F = 60 / Ts)
+    G4 P0.010000                      a sample where the printed pose does not change: dwell Ts
+    ...
+    G94                               back to units per minute
+    M2
+
+X and Y are the tool point in mm, C the platform angle psi in degrees (a rotary axis);
+coordinates are printed with ``DECIMALS`` decimals (0.1 um, 0.0001 degree). A move whose
+printed coordinates equal the previous ones becomes a dwell of one sample time, since
+LinuxCNC does not time zero-length moves.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+
+from ..schema import PlanResult
+
+__all__ = ["DECIMALS", "to_gcode"]
+
+DECIMALS = 4  #: decimals of X, Y [mm] and C [degree]
+
+
+def _comment(text: str) -> str:
+    """``text`` as one RS274NGC comment: no parentheses or line breaks inside."""
+    return "(" + re.sub(r"[()\r\n]+", " ", text).strip() + ")"
+
+
+def to_gcode(result: PlanResult, source: str | None = None) -> str:
+    """The plan's poses as a LinuxCNC program (see the module doc); ``source`` names where
+    the plan came from (a file, a corridor id) in the header."""
+    ts = float(result.settings.Ts)
+    if not math.isfinite(ts) or ts <= 0:  # a validated result never has this; a guard for hand-made ones
+        raise ValueError("the result's sample time must be a positive number")
+    pose = np.asarray(result.pose, float)
+    xy = np.round(pose[:, :2] * 1e3, DECIMALS) + 0.0  # + 0.0: no "-0.0000"
+    c = np.round(np.degrees(pose[:, 2]), DECIMALS) + 0.0
+    fmt = f"{{:.{DECIMALS}f}}"
+    rows = [" ".join(f"{a}{fmt.format(v)}" for a, v in zip("XYC", (x, y, cc)))
+            for (x, y), cc in zip(xy.tolist(), c.tolist())]
+    feed = f"F{60.0 / ts:.6f}"
+    lines = [
+        _comment(f"rangeplan plan: {result.name or 'unnamed'}" + (f", id {result.plan_id}" if result.plan_id else "")),
+        _comment(f"robot: {result.robot}, mode {result.mode}, {len(pose)} samples, "
+                 f"duration {(len(pose) - 1) * ts:g} s"),
+        _comment("units: X Y tool point in mm, C platform angle psi in degrees; G93 inverse time: each G1 takes "
+                 "one sample time"),
+        _comment(f"sample time Ts = {ts:g} s, F = 60 / Ts = {60.0 / ts:g} per minute"),
+        _comment(f"source: {source or 'rangeplan'}"),
+        "G21 G90 G17",
+        f"G0 {rows[0]}",
+        "G93",
+    ]
+    dwell = f"G4 P{ts:.6f}"
+    for k in range(1, len(rows)):
+        lines.append(dwell if rows[k] == rows[k - 1] else f"G1 {rows[k]} {feed}")
+    lines += ["G94", "M2"]
+    return "\n".join(lines) + "\n"
