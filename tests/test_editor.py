@@ -349,7 +349,8 @@ def test_errors_become_notifications_and_the_editor_recovers(editor):
     # bad input names the field
     editor.edit(lambda r: r["settings"].__setitem__("Ts", -1.0))
     assert editor.wait_idle(60)
-    assert editor.last_error["code"] == "invalid_input" and "Ts" in editor.last_error["message"]
+    assert editor.last_error["code"] == "invalid_input" and editor.last_error["field"] == "settings.Ts"
+    assert "must be >= 0.0001, got -1" in editor.last_error["message"] and "settings.Ts" in editor.notifications[-1][1]
     # fix everything: planning works again
     editor.edit(lambda r: (r["settings"].__setitem__("Ts", 0.01), r["layout"]["obstacles"].pop()))
     assert editor.wait_idle(60)

@@ -29,26 +29,22 @@ _SCRIPT = r"""
   if (el && w.__rangeplanCursorText) { el.querySelector('.xy').textContent = w.__rangeplanCursorText; }
   if (w.__rangeplanCursor) return;
   w.__rangeplanCursor = true;
-  function view() {
-    var best = null, area = 0;
-    document.querySelectorAll('canvas').forEach(function (c) {
-      var r = c.getBoundingClientRect();
-      if (r.width * r.height > area) { area = r.width * r.height; best = r; }
-    });
-    return best;
-  }
   function f(v) { v = Math.abs(v) < 5e-5 ? 0 : v; return (v < 0 ? '\u2212' : '') + Math.abs(v).toFixed(4); }
   document.addEventListener('pointermove', function (e) {
     var el = document.getElementById('rangeplan-cursor');
     if (!el || !el.dataset.cam) return;
-    var r = view();
-    if (!r || e.clientX < r.left || e.clientX > r.right || e.clientY < r.top || e.clientY > r.bottom) return;
+    // over the 3-D view only: its canvas (or the overlay canvas of the same size on top of it),
+    // not the panel, a plot (small canvases) or a label
+    var t = e.target;
+    if (!t || t.tagName !== 'CANVAS') return;
+    var r = t.getBoundingClientRect();
+    if (r.width * r.height < 0.25 * window.innerWidth * window.innerHeight) return;
     var c = JSON.parse(el.dataset.cam), q = c.wxyz, W = q[0], X = q[1], Y = q[2], Z = q[3];
     var R = [[1 - 2 * (Y * Y + Z * Z), 2 * (X * Y - Z * W), 2 * (X * Z + Y * W)],
              [2 * (X * Y + Z * W), 1 - 2 * (X * X + Z * Z), 2 * (Y * Z - X * W)],
              [2 * (X * Z - Y * W), 2 * (Y * Z + X * W), 1 - 2 * (X * X + Y * Y)]];
-    var t = Math.tan(c.fov / 2), a = r.width / r.height;
-    var d = [(2 * (e.clientX - r.left) / r.width - 1) * t * a, (2 * (e.clientY - r.top) / r.height - 1) * t, 1];
+    var k = Math.tan(c.fov / 2), a = r.width / r.height;
+    var d = [(2 * (e.clientX - r.left) / r.width - 1) * k * a, (2 * (e.clientY - r.top) / r.height - 1) * k, 1];
     var D = [0, 1, 2].map(function (i) { return R[i][0] * d[0] + R[i][1] * d[1] + R[i][2] * d[2]; });
     if (Math.abs(D[2]) < 1e-12) return;
     var s = -c.position[2] / D[2];
@@ -63,7 +59,7 @@ _SCRIPT = r"""
     }
     w.__rangeplanCursorText = text;
     el.querySelector('.xy').textContent = text;
-  }, {passive: true});
+  }, {capture: true, passive: true});  // capture: the view stops the event from bubbling
 })();
 """
 

@@ -66,12 +66,13 @@ class Bounds:
     lt: float | None = None
     le: float | None = None
 
-    def check(self, v: float) -> str | None:
-        """The planner-style message for ``v`` outside the range, or None."""
+    def check(self, v: float, typed: str | None = None, integer: bool = False) -> str | None:
+        """The message validation gives for ``v`` (as ``typed``) outside the range (the
+        bound in the field's type, as pydantic prints it: ``must be > 0.0, got -1``), or None."""
         for bound, op, bad in ((self.gt, ">", lambda b: v <= b), (self.ge, ">=", lambda b: v < b),
                                (self.lt, "<", lambda b: v >= b), (self.le, "<=", lambda b: v > b)):
             if bound is not None and bad(bound):
-                return f"must be {op} {format_number(bound)}, got {format_number(v)}"
+                return f"must be {op} {int(bound) if integer else float(bound)}, got {typed or format_number(v)}"
         return None
 
 
@@ -110,7 +111,7 @@ def parse_number(text: str, *, integer: bool = False, bounds: Bounds = Bounds(),
             return None, f"must be finite, got {s}"
         if value == 0:
             value = 0.0  # -0 is 0
-    message = bounds.check(float(value))
+    message = bounds.check(float(value), s, integer)
     return (None, message) if message else (value, None)
 
 

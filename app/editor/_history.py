@@ -18,7 +18,7 @@ import time
 
 __all__ = ["COALESCE_S", "MAX_STEPS", "History"]
 
-COALESCE_S = 1.5  #: edits of one key closer than this [s] are one undo step
+COALESCE_S = 1.0  #: edits of one key closer than this [s] are one undo step
 MAX_STEPS = 200  #: oldest steps are dropped beyond this many
 
 

@@ -97,7 +97,7 @@ def field_bounds(model: str, field: str) -> dict[str, float]:
         for key in ("gt", "ge", "lt", "le"):
             value = getattr(meta, key, None)
             if value is not None:
-                out[key] = float(value)
+                out[key] = value  # as declared (1.0, 200): messages print it as the planner does
     return out
 
 
@@ -198,7 +198,8 @@ def compute_plan(request: dict, robots: RobotCache) -> PlanOutcome:
         req = PlanRequest.model_validate(request)
     except ValidationError as exc:  # the first failing field names the error; the message lists up to three
         first = planner_error(exc).to_dict()
-        return outcome(None, None, {**first, "message": format_validation_error(exc)})
+        message = format_validation_error(exc).removeprefix(f"{first['field']}: ")
+        return outcome(None, None, {**first, "message": message})
     seg_dict = None
     try:
         robot = robots.get(request.get("robot", DEFAULT_ROBOT))

@@ -46,16 +46,12 @@ _NO_POINTS = np.zeros((1, 3))
 _NO_VERTICES, _NO_FACES = np.zeros((3, 3)), np.array([[0, 1, 2]], np.int32)
 #: outline of the reachable workspace at the start / end angle (RGB 0-255)
 _PIVOTS_ABOVE_PLATFORM = geo.Z["pivots"] - geo.Z["robot"]  #: z of pivots and tool in the platform frame [m]
-_REACH_COLOURS = {"start": (200, 30, 30), "end": (200, 100, 0)}
+_REACH_COLOURS = {"start": (210, 20, 20), "end": (230, 110, 0)}
 
 
-def _show_lines(handle: viser.LineSegmentsHandle, segments: np.ndarray, colour=None) -> None:
-    """Show ``segments`` (M, 2, 3) [m] on a line node, or hide it when M = 0. With
-    ``colour`` (RGB 0-255) the colour is given per vertex (drawn a little lighter than
-    a node-wide colour; the caller keeps the node's colours and points in one update)."""
+def _show_lines(handle: viser.LineSegmentsHandle, segments: np.ndarray) -> None:
+    """Show ``segments`` (M, 2, 3) [m] on a line node (its one colour), or hide it when M = 0."""
     if len(segments):
-        if colour is not None:
-            handle.colors = np.tile(np.asarray(colour, np.uint8), (len(segments), 2, 1))
         handle.points = segments
     handle.visible = bool(len(segments))
 
@@ -68,9 +64,15 @@ def _show_mesh(handle: viser.MeshHandle, vertices: np.ndarray, faces: np.ndarray
 
 
 def _leg_colours(force_ratio: np.ndarray) -> np.ndarray:
-    """Per-vertex colours (n, 2, 3) of the legs: blue at no force, red at the force limit."""
+    """Per-vertex colours (n, 2, 3) of the legs: blue at no force, red at the force limit
+    (the legend's gradient, :data:`app.editor._result.LEG_GRADIENT`). viser's line material
+    treats per-vertex colours as linear and converts them to sRGB on screen (they came out
+    pale: (60, 60, 200) as (133, 133, 230)); they are sent linearised so that the legs show
+    the legend's colours."""
     r = np.clip(force_ratio, 0.0, 1.0)
-    rgb = np.column_stack((60 + 195 * r, np.full_like(r, 60.0), 200 - 160 * r)).astype(np.uint8)
+    srgb = np.column_stack((60 + 195 * r, np.full_like(r, 60.0), 200 - 160 * r)) / 255.0
+    linear = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+    rgb = np.round(255 * linear).astype(np.uint8)
     return np.repeat(rgb[:, None, :], 2, axis=1)
 
 
@@ -226,14 +228,13 @@ class EditorScene:
         _show_mesh(self.obstacles, *geo.polygon_mesh(polys, geo.Z["obstacles"]))
         _show_lines(self.obstacle_edges, geo.polygon_edges(polys, geo.Z["obstacles"]))
         psi_start, psi_end = float(layout["start"][2]), float(layout["end"][2])
-        with self._client.atomic():  # per-vertex colours and points of an outline in one update
-            _show_lines(self.reachable["start"], self._reach_outline(robot, lo, hi, psi_start),
-                        _REACH_COLOURS["start"])
-            if abs(psi_end - psi_start) < 1e-9:  # same angle: one outline is enough
-                self.reachable["end"].visible = False
-            else:
-                _show_lines(self.reachable["end"], self._reach_outline(robot, lo, hi, psi_end),
-                            _REACH_COLOURS["end"])
+        # one colour per node (per-vertex colours are drawn paler: the outline vanished on the
+        # pink unreachable cells)
+        _show_lines(self.reachable["start"], self._reach_outline(robot, lo, hi, psi_start))
+        if abs(psi_end - psi_start) < 1e-9:  # same angle: one outline is enough
+            self.reachable["end"].visible = False
+        else:
+            _show_lines(self.reachable["end"], self._reach_outline(robot, lo, hi, psi_end))
         limits = ((float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1])), (0.0, 0.0))
         for which in ("start", "end"):
             p = layout[which]

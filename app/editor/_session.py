@@ -411,6 +411,7 @@ class Session:
 
     def _show_error_on_field(self, error: dict) -> None:
         field, message = error.get("field") or "", error.get("message") or ""
+        message = message.split("; ")[0]  # the field's own message (validation may list more fields)
         if field.startswith("segments["):
             try:
                 i = int(field[len("segments["):field.index("]")])
