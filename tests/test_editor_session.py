@@ -86,6 +86,14 @@ def test_history_steps_coalesce_by_key_and_time():
     assert h.undo(states[5]) == states[4] and h.undo(states[4]) == states[3]
     assert h.undo(states[3]) == states[2] and h.undo(states[2]) == states[0]
     assert h.undo(states[0]) is None and h.depth == (0, 4)
+    # a drag: one step from begin() to seal(), however long it takes
+    h2 = History(clock=lambda: now[0])
+    h2.begin("drag:end")
+    for i in range(5):
+        now[0] += 2 * COALESCE_S
+        assert h2.record(states[i], "drag:end") == (i == 0)
+    h2.seal()
+    assert h2.record(states[5], "drag:end") and h2.depth == (2, 0)
     assert h.redo(states[0]) == states[2]
     h.record(states[2], None)  # a new edit after undo drops the redo branch
     assert not h.can_redo and h.redo(states[3]) is None

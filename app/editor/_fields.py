@@ -137,9 +137,9 @@ def parse_vector(text: str, names: Sequence[str], bounds: Sequence[Bounds] | Non
 
 
 def _error_html(uuid: str, message: str) -> str:
-    # The red border: the label of a viser input is <label for=uuid>, in the same row as
-    # the <input>; :has() finds that row.
-    return (f"<style>div:has(> div > div > label[for='{uuid}']) input {{border-color: #e03131; "
+    # The red border (also while the field has the focus): the label of a viser input is
+    # <label for=uuid> in a <p> in a <div>, beside the <div> of the <input>; :has() finds that row.
+    return (f"<style>div:has(> div > p > label[for='{uuid}']) input {{border-color: #e03131 !important; "
             f"background: #fff5f5}}</style>"
             f"<div class='rangeplan-field-error' style='color:#c92a2a;font-size:0.78em;line-height:1.25;"
             f"margin:-0.35em 0.75em 0.4em 0.75em'>&#9888; {html.escape(message)}</div>")

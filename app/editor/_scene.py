@@ -168,6 +168,15 @@ class EditorScene:
                                                    visible=False)
             self.labels[which] = scene.add_label(f"/handles/{which}/label", which, visible=False)
 
+    def set_view_span(self, span: float) -> None:
+        """Size the dots (time ticks, pivots, tool) for a design ``span`` [m] across: the
+        same on screen for a 0.3 m layout and a 0.1 m segment list."""
+        sizes = ((self.ticks, 0.011), (self.base_pivots, 0.02), (self.platform_pivots, 0.02), (self.tool, 0.03))
+        for node, fraction in sizes:
+            size = round(fraction * max(span, 1e-3), 6)
+            if node.point_size != size:
+                node.point_size = size
+
     def _gizmo_callback(self, which: str):
         # async: viser awaits it on its event loop, so start, updates and end arrive in order
         async def on_update(event) -> None:
@@ -329,7 +338,8 @@ class EditorScene:
                 continue
             _show_mesh(node, *geo.polygon_mesh([geo.rectangle(a, b)], z))
         self.seg_label.position = (xm, y1 + 1.5 * w, geo.Z["handles"])
-        psi = f"ψ {float(s['lower'][2]):g}…{float(s['upper'][2]):g} rad"
+        a, b = float(s["lower"][2]), float(s["upper"][2])
+        psi = f"ψ {a:g} rad" if a == b else f"ψ {a:g}…{b:g} rad"
         self.seg_label.text = f"segment {selected + 1}: {psi}"
         self.seg_label.visible = True
 

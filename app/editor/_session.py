@@ -118,17 +118,19 @@ class Session:
     def edit(self, fn: Callable[[dict], object], *, immediate: bool = False, key: str | None = None) -> bool:
         """Apply ``fn(request_dict)`` (in place) under the lock as one undo step (edits with
         the same ``key`` in quick succession join one step: the typing in one field, one
-        drag), redraw, and schedule a debounced re-plan (when re-planning on every edit is
-        on, or ``immediate``). An edit that changes nothing is not recorded. Returns
+        drag), schedule a debounced re-plan (when re-planning on every edit is on, or
+        ``immediate``) and redraw. An edit that changes nothing is not recorded. Returns
         whether the request changed."""
-        with self.state.lock:
+        with self.state.lock:  # the re-plan is asked for under the lock: see wait_idle
             before = self.state.request
             self.state.apply(fn)
             changed = self.state.request != before
             if changed:
                 self.history.record(before, key)
+                self._schedule(immediate)
         if changed:
-            self._after_edit(immediate)
+            self._show_drawing()
+            self.gui.show_history(self.history.can_undo, self.history.can_redo)
         return changed
 
     def set_request(self, request: dict, *, replan: bool = True, immediate: bool = False) -> None:
@@ -138,11 +140,10 @@ class Session:
             self.history.record(self.state.request)
             self.state.replace(request)
             self.selected_segment = 0
+            if replan:
+                self._schedule(immediate, always=True)
         self.scene.show_result(None)
         self._show_all()
-        if replan:
-            self._mark_outdated()
-            self.worker.schedule(immediate=immediate)
 
     def undo(self) -> bool:
         """Undo the newest edit step; returns False when there is none."""
@@ -158,15 +159,13 @@ class Session:
             if request is None:
                 return False
             self.state.replace(request)
+            self._schedule(False)
         self._show_all()
-        self._after_edit(False, show=False)
         return True
 
-    def _after_edit(self, immediate: bool, show: bool = True) -> None:
-        if show:
-            self._show_drawing()
-        self.gui.show_history(self.history.can_undo, self.history.can_redo)
-        if self.gui.auto_replan.value or immediate:
+    def _schedule(self, immediate: bool, always: bool = False) -> None:
+        """Ask for a re-plan after an edit (when re-planning on every edit is on)."""
+        if always or immediate or self.gui.auto_replan.value:
             self._mark_outdated()
             self.worker.schedule(immediate=immediate)
 
@@ -207,7 +206,7 @@ class Session:
         """Move the start or end point to (x, y) [m], snapped (what dragging its gizmo
         does; one undo step per drag, from ``phase`` "start" to "end")."""
         if phase == "start":
-            self.history.seal()
+            self.history.begin(f"drag:{which}")
         sx, sy = self.snap_xy(x, y)
         self.edit(lambda r: _state.move_point(r, which, sx, sy), key=f"drag:{which}")
         layout = self.state.request.get("layout")
@@ -312,11 +311,11 @@ class Session:
         segs = self.state.request.get("segments") or []
         if not 0 <= i < len(segs):
             return
+        key = f"drag:segments[{i}].{handle}"
         if phase == "start" or self._drag is None:
-            self.history.seal()
+            self.history.begin(key)
             self._drag = (segs[i], x, y)
         seg0, x0, y0 = self._drag
-        key = f"drag:segments[{i}].{handle}"
         if handle == "centre":
             corner = self.snap_xy(float(seg0["lower"][0]) + x - x0, float(seg0["lower"][1]) + y - y0)
             self.edit(lambda r: _state.move_segment(r, i, corner), key=key)
@@ -354,10 +353,15 @@ class Session:
             if robot is not None:
                 self.scene.show_layout(layout, robot)
             if layout is None:
+                segs = r.get("segments") or []
                 self.scene.show_segmentation(None)
-                self.scene.show_segments(r.get("segments") or [], self.selected_segment, grid)
+                self.scene.show_segments(segs, self.selected_segment, grid)
+                pts = np.array([g[k][:2] for g in segs for k in ("lower", "upper")] or [[0.0, 0.0]], float)
+                self.scene.set_view_span(max(float(np.max(pts.max(axis=0) - pts.min(axis=0))), 0.05))
             else:
                 self.scene.show_segments(None)
+                self.scene.set_view_span(float(np.max(np.subtract(layout["bounds"]["upper"],
+                                                                  layout["bounds"]["lower"]))))
 
     def show_time(self, t: float) -> None:
         """Show the robot of the newest result at time ``t`` [s] (clamped to the plan)."""
@@ -432,16 +436,19 @@ class Session:
         self._error_note, self._error_state = None, None
 
     def place_cameras(self) -> None:
-        """Frame the design (bounds or segment boxes) and the robot's base in this tab."""
+        """Frame the design in this tab: a layout's bounds and the robot's base; a segment
+        list's boxes with a margin (boxes of 2 cm next to a base of 50 cm would be too small
+        to edit; scroll out to see the whole robot)."""
         r = self.state.request
         layout = r.get("layout")
         if layout is not None:
             lo, hi = layout["bounds"]["lower"], layout["bounds"]["upper"]
+            centre, half = geo.view_extent(lo, hi, self.robots.of_request(r, fallback=True))
         else:
             segs = r.get("segments") or []
-            pts = np.array([s["lower"][:2] for s in segs] + [s["upper"][:2] for s in segs] or [[0, 0]])
+            pts = np.array([s["lower"][:2] for s in segs] + [s["upper"][:2] for s in segs] or [[0, 0]], float)
             lo, hi = pts.min(axis=0), pts.max(axis=0)
-        centre, half = geo.view_extent(lo, hi, self.robots.of_request(r, fallback=True))
+            centre, half = 0.5 * (lo + hi), max(0.8 * float(np.max(hi - lo)), 0.05)
         self.scene.place_camera(centre, half, self.client)
 
     def _on_camera(self, camera) -> None:
@@ -527,7 +534,11 @@ class Session:
 
     # ------------------------------------------------------------------ lifetime
     def wait_idle(self, timeout: float = 30.0) -> bool:
-        """Wait up to ``timeout`` [s] until no re-plan is pending or running."""
+        """Wait up to ``timeout`` [s] until every edit made before this call is planned (no
+        re-plan pending or running). An edit asks for its re-plan under the state lock, so
+        taking the lock first waits for an edit that is half-way."""
+        with self.state.lock:
+            pass
         return self.worker.wait_idle(timeout)
 
     def close(self) -> None:
