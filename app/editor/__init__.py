@@ -6,7 +6,7 @@ editor's state is a plan request in the one JSON shape. The parts:
 - :mod:`._editor`: :class:`Editor`, the viser server that gives every browser tab its own
   session, and :func:`start_editor`
 - :mod:`._session`: :class:`Session`, one tab's editing session: edits, undo, snapping,
-  the re-plan, errors
+  the re-plan, errors; :mod:`._session_segments`: its segment-list edits
 - :mod:`._state`: the edited request and the newest plan outcome (no viser)
 - :mod:`._history`: undo / redo steps (no viser)
 - :mod:`._planning`: the re-plan worker; the only editor module that imports ``planner``

@@ -34,6 +34,7 @@ from ._history import History
 from ._planning import PlanWorker, compute_plan
 from ._result import leg_legend_html
 from ._scene import EditorScene
+from ._session_segments import SegmentEdits
 
 if TYPE_CHECKING:
     from ._editor import Editor
@@ -43,7 +44,7 @@ __all__ = ["Session"]
 log = logging.getLogger("rangeplan.editor")
 
 
-class Session:
+class Session(SegmentEdits):
     """The editing session of one viser ``client`` (a browser tab) of ``editor``,
     starting from ``request`` (the one JSON shape)."""
 
@@ -253,93 +254,12 @@ class Session:
         """Start over from the default layout (keeps robot and settings)."""
         self.set_request(_state.with_new_layout(self.state.request))
 
-    # ------------------------------------------------------------------ segment-list edits
-    def segment_at(self, x: float, y: float) -> int | None:
-        """The segment box under (x, y) [m] (the smallest; a point within 2 % of the view)."""
-        segs = self.state.request.get("segments") or []
-        if not segs:
-            return None
-        lo = np.array([s["lower"][:2] for s in segs], float)
-        hi = np.array([s["upper"][:2] for s in segs], float)
-        tol = 0.02 * max(float(np.max(hi.max(axis=0) - lo.min(axis=0))), 0.02)
-        area = np.prod(hi - lo, axis=1)
-        inside = np.all((lo - tol <= (x, y)) & ((x, y) <= hi + tol), axis=1)
-        if not inside.any():
-            return None
-        idx = np.nonzero(inside)[0]
-        return int(idx[np.argmin(area[idx])])
-
-    def select_segment(self, i: int | None) -> None:
-        """Edit segment box ``i`` (fields and drag handles follow)."""
-        n = len(self.state.request.get("segments") or [])
-        if i is None or n == 0:
-            return
-        self.selected_segment = int(np.clip(i, 0, n - 1))
-        self._show_segments()
-
-    def set_segment_corner(self, which: str, value) -> None:
-        """Set the selected box's ``which`` ("lower" | "upper") corner [x, y, psi] (m, m, rad)."""
-        i = self.selected_segment
-        seg = (self.state.request.get("segments") or [None] * (i + 1))[i]
-        if seg is None:
-            return
-        lower, upper = (value, seg["upper"]) if which == "lower" else (seg["lower"], value)
-        self.edit(lambda r: _state.set_segment(r, i, lower, upper), key=f"field:segments[{i}].{which}")
-        self._show_segments()
-
-    def insert_segment(self) -> None:
-        """Insert a copy of the selected box after it and select the copy."""
-        i = self.selected_segment
-        self.edit(lambda r: _state.insert_segment(r, i))
-        self.select_segment(i + 1)
-
-    def remove_segment(self) -> None:
-        """Remove the selected box."""
-        i = self.selected_segment
-        self.edit(lambda r: _state.remove_segment(r, i))
-        self.select_segment(min(i, len(self.state.request.get("segments") or []) - 1))
-
-    def set_psi_range_all(self, lo: float, hi: float) -> None:
-        """Let every box (not the start and end points) turn within [lo, hi] [rad]."""
-        self.edit(lambda r: _state.set_psi_range(r, lo, hi))
-        self._show_segments()
-
-    def drag_segment(self, handle: str, phase: str, x: float, y: float) -> None:
-        """A drag of the selected box's ``handle`` (an edge, or "centre": the whole box) with
-        the pointer at (x, y) [m]; snapped; one undo step per drag."""
-        i = self.selected_segment
-        segs = self.state.request.get("segments") or []
-        if not 0 <= i < len(segs):
-            return
-        key = f"drag:segments[{i}].{handle}"
-        if phase == "start" or self._drag is None:
-            self.history.begin(key)
-            self._drag = (segs[i], x, y)
-        seg0, x0, y0 = self._drag
-        if handle == "centre":
-            corner = self.snap_xy(float(seg0["lower"][0]) + x - x0, float(seg0["lower"][1]) + y - y0)
-            self.edit(lambda r: _state.move_segment(r, i, corner), key=key)
-        else:
-            k = _state.EDGES[handle][0]
-            value = self.snap_xy(x, y)[k]
-            self.edit(lambda r: _state.set_segment_edge(r, i, handle, value), key=key)
-        if phase == "end":
-            self.history.seal()
-            self._drag = None
-        self._show_segments()
-
     # ------------------------------------------------------------------ showing
     def _show_all(self) -> None:
         """The request in the panel and the view, the undo buttons."""
         self.gui.show_request(self.state.request, self.selected_segment)
         self._show_drawing()
         self.gui.show_history(self.history.can_undo, self.history.can_redo)
-
-    def _show_segments(self) -> None:
-        segs = self.state.request.get("segments") or []
-        if segs and self.state.request.get("layout") is None:
-            self.gui.segments.show(segs, self.selected_segment)
-            self._show_drawing()
 
     def _show_drawing(self) -> None:
         """Redraw the layout or the segment boxes (no planning); the newest request wins
