@@ -425,6 +425,8 @@ class Session(SegmentEdits):
         robot = self.robots.of_request(request)
         seg, result, error = outcome.segmentation, outcome.result, outcome.error
         self.scene.show_segmentation(seg if request.get("layout") is not None else None)
+        grid = self.snap_grid()  # an automatic cell size is known now: the readout's grid follows
+        self.gui.cursor.set_grid(grid[0] if grid else None, grid[1] if grid else (0.0, 0.0))
         if error is not None:
             self.scene.show_result(None)
             message = error.get("message", "")
