@@ -1,6 +1,8 @@
-"""Editor tests without a browser: the geometry it draws, and the editor's server-side
-behaviour (debounced re-plan on a worker thread, stale results dropped, errors reported,
-cell toggling, save/load through the store, request round trip)."""
+"""Editor tests without a browser: the geometry it draws, and one editing session's
+server-side behaviour (debounced re-plan on a worker thread, stale results dropped, errors
+reported, cell toggling, save/load through the store, request round trip). A session
+belongs to a tab: the tests connect a headless viser client (tests/viser_client.py).
+Undo, number entry, snapping, segment lists and two tabs: tests/test_editor_session.py."""
 
 from __future__ import annotations
 
@@ -17,6 +19,7 @@ from app import editor as editor_mod
 from app.editor import _geometry as geo
 from app.editor import _planning
 from planner.model import SINGULAR_TOL, kinematics, load_robot
+from tests.viser_client import HeadlessClient
 
 
 def free_port() -> int:
@@ -238,14 +241,44 @@ class MemStore:
         return [copy.deepcopy(r) for r in self.rows.values()]
 
 
+class Tab:
+    """An editor server with one headless tab connected: ``session`` is that tab's."""
+
+    def __init__(self, store=None, **kwargs):
+        self.editor = editor_mod.start_editor("127.0.0.1", free_port(), store, **kwargs)
+        self.clients = []
+        self.session = self.connect()
+
+    def connect(self):
+        n = len(self.editor.sessions)
+        self.clients.append(HeadlessClient(self.editor.port))
+        sessions = self.editor.wait_for_sessions(n + 1, 30)
+        assert len(sessions) == n + 1, "the tab got no session"
+        return sessions[-1]
+
+    def stop(self):
+        for c in self.clients:
+            c.close()
+        deadline = time.monotonic() + 10  # the server ends the sessions as the tabs go
+        while self.editor.sessions and time.monotonic() < deadline:
+            time.sleep(0.05)
+        self.editor.stop()
+
+
 @pytest.fixture
-def editor(seg_impl):
-    h = editor_mod.start_editor("127.0.0.1", free_port(), MemStore(), debounce=0.15)
+def tab(seg_impl):
+    t = Tab(MemStore(), debounce=0.15)
     try:
-        assert h.wait_idle(60)
-        yield h
+        assert t.session.wait_idle(60)
+        yield t
     finally:
-        h.stop()
+        t.stop()
+
+
+@pytest.fixture
+def editor(tab):
+    """The session of one tab (the editing API the tests drive)."""
+    return tab.session
 
 
 # ---------------------------------------------------------------------------- editor behaviour
@@ -261,7 +294,7 @@ def test_initial_plan_reaches_the_end_inside_the_corridor(editor):
     states = {c["id"]: c["state"] for c in seg["cells"]}
     assert seg["path"] and all(states[i] == "free" for i in seg["path"])
     # the metrics panel and the slider show this result
-    assert f"{res['metrics']['duration_s']:.3f} s" in editor.gui.metrics.content
+    assert f"{res['metrics']['duration_s']:.3f} s" in editor.gui.result.metrics.content
     assert math.isclose(editor.gui.time.max, res["time"][-1])
 
 
@@ -280,7 +313,8 @@ def test_edits_are_debounced_into_one_plan(editor):
 def test_stale_result_never_overwrites_a_newer_one(seg_impl, monkeypatch):
     fake = FakeSegmentation(delay=0.8)
     monkeypatch.setattr(_planning, "segmentation_module", lambda: fake)
-    h = editor_mod.start_editor("127.0.0.1", free_port(), None, debounce=0.05)
+    t = Tab(None, debounce=0.05)
+    h = t.session
     try:
         time.sleep(0.3)  # the first (slow) plan is running now
         t0 = time.monotonic()
@@ -290,7 +324,7 @@ def test_stale_result_never_overwrites_a_newer_one(seg_impl, monkeypatch):
         assert h.stale_discarded >= 1
         assert np.linalg.norm(np.array(h.last_result["pose"][-1][:2]) - [0.02, 0.10]) < 1e-3
     finally:
-        h.stop()
+        t.stop()
 
 
 def test_errors_become_notifications_and_the_editor_recovers(editor):
@@ -315,7 +349,8 @@ def test_errors_become_notifications_and_the_editor_recovers(editor):
     # bad input names the field
     editor.edit(lambda r: r["settings"].__setitem__("Ts", -1.0))
     assert editor.wait_idle(60)
-    assert editor.last_error["code"] == "invalid_input" and "Ts" in editor.last_error["message"]
+    assert editor.last_error["code"] == "invalid_input" and editor.last_error["field"] == "settings.Ts"
+    assert "must be >= 0.0001, got -1" in editor.last_error["message"] and "settings.Ts" in editor.notifications[-1][1]
     # fix everything: planning works again
     editor.edit(lambda r: (r["settings"].__setitem__("Ts", 0.01), r["layout"]["obstacles"].pop()))
     assert editor.wait_idle(60)
@@ -342,10 +377,10 @@ def test_toggling_a_cell_blocks_it_and_toggling_again_frees_it(editor):
 
 
 def test_settings_controls_change_the_request(editor):
-    editor.gui.N.value = 30
-    editor.gui.k_u.value = 1e-4
+    editor.gui.N.text.value = "30"
+    editor.gui.k_u.text.value = "1e-4"
     editor.gui.mode.value = "paper"
-    editor.gui.cell_size.value = 0.0  # auto
+    editor.gui.cell_size.text.value = ""  # auto
     assert editor.wait_idle(60)
     r = editor.request
     assert r["settings"]["N"] == 30 and r["settings"]["k_u"] == 1e-4
@@ -360,7 +395,8 @@ def test_mode_switch_moves_untouched_penalties_to_the_mode_defaults(editor):
 
     paper, con = MODE_DEFAULTS["paper"], MODE_DEFAULTS["constrained"]
     editor.gui.mode.value = "paper"
-    editor.gui.N.value, editor.gui.k_r.value, editor.gui.k_u.value = paper["N"], paper["k_r"], 3e-4
+    for field, value in ((editor.gui.N, paper["N"]), (editor.gui.k_r, paper["k_r"]), (editor.gui.k_u, 3e-4)):
+        field.text.value = str(value)
     editor.gui.mode.value = "constrained"
     st = editor.request["settings"]
     assert (st["mode"], st["N"], st["k_r"], st["k_u"]) == ("constrained", con["N"], con["k_r"], 3e-4)
@@ -436,9 +472,10 @@ def test_playback_moves_the_robot_along_the_trajectory(editor):
 
 
 def test_scene_nodes_are_created_once_and_updated_in_place(seg_impl, monkeypatch):
-    """Every scene node is added once, when the editor starts; a re-plan, playback frames,
-    hiding (a failed plan, a request without a layout) and showing again only update the
-    kept viser handles: no node is added or removed after start."""
+    """Every scene node of a tab is added once, when its session opens (in that tab's own
+    scene); a re-plan, playback frames, hiding (a failed plan, a request without a layout),
+    segment drags and showing again only update the kept viser handles: no node is added or
+    removed after that. A second tab adds its own copy of each node, once."""
     import viser
     from viser._scene_handles import SceneNodeHandle
 
@@ -448,7 +485,7 @@ def test_scene_nodes_are_created_once_and_updated_in_place(seg_impl, monkeypatch
         method = getattr(viser.SceneApi, method_name)
 
         def add(self, name, *args, **kwargs):
-            added.append(name)
+            added.append((id(self), name))
             return method(self, name, *args, **kwargs)
         return add
 
@@ -460,12 +497,19 @@ def test_scene_nodes_are_created_once_and_updated_in_place(seg_impl, monkeypatch
                         lambda self, name: (removed.append(name), remove_by_name(self, name))[1])
     monkeypatch.setattr(SceneNodeHandle, "remove", lambda self: (removed.append(self.name), remove(self))[1])
 
-    h = editor_mod.start_editor("127.0.0.1", free_port(), MemStore(), debounce=0.05)
+    t = Tab(MemStore(), debounce=0.05)
+    h = t.session
     try:
         assert h.wait_idle(60) and h.last_error is None
         scene = h.scene
-        assert len(added) == len(set(added)), "a node was added twice while the editor started"
-        assert {"/robot/legs", "/robot/platform", "/result/trajectory", "/seg/cells_free", "/handles/end"} <= set(added)
+        server_nodes = [name for scope, name in added if scope == id(t.editor.server.scene)]
+        assert set(server_nodes) <= {"/WorldAxes"}, "the editor draws nothing every tab would share"
+        added[:] = [(scope, name) for scope, name in added if scope != id(t.editor.server.scene)]
+        assert len(added) == len(set(added)), "a node was added twice while the session opened"
+        assert {id(h.client.scene)} == {scope for scope, _ in added}, "nodes must be the tab's own"
+        names = {name for _, name in added}
+        assert {"/robot/legs", "/robot/platform", "/result/trajectory", "/seg/cells_free", "/handles/end",
+                "/segments/handle_left"} <= names
         at_start = len(added)
 
         # a re-plan updates the trajectory, cells and robot on the same handles
@@ -475,13 +519,14 @@ def test_scene_nodes_are_created_once_and_updated_in_place(seg_impl, monkeypatch
         assert h.wait_idle(60) and h.last_error is None
         assert scene.trajectory is trajectory and scene.legs is legs
         assert trajectory.visible and not np.array_equal(trajectory.points, before)
+        h.move_handle("end", 0.02, 0.06, phase="end")
         assert np.allclose(scene.gizmos["end"].position[:2], [0.02, 0.06])
 
         # N playback frames move the platform frame and the legs: nothing added per frame
         t_end = h.gui.time.max
         poses, leg_points = [], []
-        for t in np.linspace(0.0, t_end, 40):
-            h.gui.time.value = round(float(t), 2)
+        for tk in np.linspace(0.0, t_end, 40):
+            h.gui.time.value = round(float(tk), 2)
             poses.append(scene.platform.position.copy())
             leg_points.append(scene.legs.points.copy())
         assert len(added) == at_start, f"playback added nodes: {added[at_start:]}"
@@ -504,17 +549,31 @@ def test_scene_nodes_are_created_once_and_updated_in_place(seg_impl, monkeypatch
         assert h.wait_idle(60) and h.last_error is None
         assert scene.trajectory.visible and scene.robot.visible and scene.cells["free"].visible
 
-        # a request without a layout hides the layout and its gizmos; a new layout shows them
+        # a request without a layout hides the layout, its gizmos and cells and shows the boxes;
+        # dragging a box edge moves the kept handle meshes; a new layout shows the layout again
         with _table1() as f:
             h.files.load_request(json.load(f), None, "table1")
-        assert h.wait_idle(60) and h.last_error is None
         assert not scene.gizmos["start"].visible and not scene.obstacles.visible and not scene.bounds.visible
-        assert scene.corridor.visible and scene.trajectory.visible
+        assert not any(node.visible for node in scene.cells.values()), "no leftovers of the layout"
+        assert h.wait_idle(60) and h.last_error is None
+        assert scene.seg_boxes.visible and scene.trajectory.visible
+        h.select_segment(3)
+        for phase, x in (("start", -0.02), ("update", -0.01), ("end", 0.0)):
+            h.drag_segment("right", phase, x, 0.01)
+        assert h.request["segments"][3]["upper"][0] == 0.0
+        assert h.wait_idle(60)
         h.new_layout()
         assert h.wait_idle(60) and h.last_error is None
-        assert scene.gizmos["start"].visible and scene.obstacles.visible
+        assert scene.gizmos["start"].visible and scene.obstacles.visible and not scene.seg_boxes.visible
 
-        assert added[at_start:] == [], "scene nodes were added after start"
+        assert added[at_start:] == [], "scene nodes were added after the session opened"
         assert removed == [], "scene nodes were removed"
+
+        # a second tab: its own nodes, each once, in its own scene; the first tab's are untouched
+        h2 = t.connect()
+        assert h2.wait_idle(60)
+        second = added[at_start:]
+        assert {scope for scope, _ in second} == {id(h2.client.scene)}
+        assert sorted(name for _, name in second) == sorted(name for _, name in added[:at_start])
     finally:
-        h.stop()
+        t.stop()

@@ -1,14 +1,22 @@
 """The editor in a real browser: Debian's headless Chromium driven by Playwright
-(``executable_path=/usr/bin/chromium``; Playwright's own browser download is never used).
+(``executable_path=/usr/bin/chromium``; Playwright's own browser download is never used),
+with real keystrokes and mouse events.
 
-Checks: the page renders (the WebGL canvas is not blank), the Plan button re-plans on the
-server, dragging the end handle's gizmo with the mouse moves the end point and re-plans,
-editing the end point in the panel re-plans, and the page makes no request outside
-127.0.0.1. The browser is closed before the viser server stops.
+Each test opens its own tab (= its own editing session) on one editor server. Checked, as a
+person would: the page renders; typed numbers keep their sign and exponent and a bad one is
+shown on its field; two tabs are independent; a drag and an obstacle are undone and redone
+with Ctrl+Z / Ctrl+Shift+Z; drags and drawn rectangles snap to the grid and the cursor
+readout says where the mouse is; the plots' time axis reads seconds (the value uPlot renders
+in its legend while the mouse is over the plot); a Table I segment corridor is edited in
+the view and the panel and re-planned; the panel answers while a plan runs; no request
+leaves 127.0.0.1. Screenshots of each step go to ``$RANGEPLAN_SHOTS`` (default: the test's
+tmp dir) to be looked at; ``RANGEPLAN_DOCS_SCREENSHOT=docs/editor.png`` also writes the
+README's screenshot. The browser is closed before the viser server stops.
 """
 
 import base64
 import math
+import os
 import socket
 import time
 from pathlib import Path
@@ -17,17 +25,26 @@ from urllib.parse import urlparse
 import numpy as np
 import pytest
 
+from tests.support import TABLE1_PATH
+
+pytestmark = pytest.mark.browser
+
 CHROMIUM = "/usr/bin/chromium"
 FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync"]
 W, H = 1400, 900
 
 
-
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def settled(session, timeout=60.0) -> bool:
+    """The session has planned its newest edit (past the debounce)."""
+    time.sleep(0.3)
+    return session.wait_idle(timeout)
 
 
 def wait_for(cond, timeout=60.0):
@@ -40,7 +57,7 @@ def wait_for(cond, timeout=60.0):
 
 
 @pytest.fixture(scope="module")
-def session(tmp_path_factory):
+def server(tmp_path_factory):
     from playwright.sync_api import sync_playwright
 
     from app.editor import start_editor
@@ -49,25 +66,95 @@ def session(tmp_path_factory):
     assert Path(CHROMIUM).exists(), "Debian chromium is missing: `make test` installs it (apt-get install chromium)"
     store = Store(tmp_path_factory.mktemp("editor") / "rangeplan.sqlite3")
     editor = start_editor("127.0.0.1", free_port(), store, debounce=0.15)
-    assert editor.wait_idle(60) and editor.last_result is not None
     urls: list[str] = []
+    shots = Path(os.environ.get("RANGEPLAN_SHOTS") or tmp_path_factory.mktemp("shots"))
+    shots.mkdir(parents=True, exist_ok=True)
     pw = sync_playwright().start()
-    browser = pw.chromium.launch_persistent_context(  # a new, empty --user-data-dir
+    context = pw.chromium.launch_persistent_context(  # a new, empty --user-data-dir
         str(tmp_path_factory.mktemp("chromium-profile")), executable_path=CHROMIUM, args=FLAGS,
         viewport={"width": W, "height": H})
+    context.on("request", lambda r: urls.append(r.url))
     try:
-        page = browser.pages[0] if browser.pages else browser.new_page()
-        page.on("request", lambda r: urls.append(r.url))
-        page.on("websocket", lambda ws: urls.append(ws.url))
-        page.goto(editor.url)
-        page.wait_for_selector("canvas", timeout=30_000)
-        assert wait_for(lambda: len(editor.server.get_clients()) == 1, 30)
-        time.sleep(2.0)  # first frames, camera placed by the server
-        yield editor, page, urls
+        yield editor, context, urls, shots
     finally:
-        browser.close()  # before the viser server: its stop blocks while a client is connected
+        context.close()  # before the viser server: its stop blocks while a client is connected
         pw.stop()
+        wait_for(lambda: not editor.sessions, 10)
         editor.stop()
+
+
+class Tab:
+    """One browser tab of the editor and its session on the server."""
+
+    def __init__(self, editor, context, shots: Path):
+        self.editor, self.shots = editor, shots
+        known = {id(s) for s in editor.sessions}
+        self.page = context.new_page()
+        self.page.on("websocket", lambda ws: None)
+        self.page.goto(editor.url)
+        self.page.wait_for_selector("canvas", timeout=30_000)
+        assert wait_for(lambda: any(id(s) not in known for s in editor.sessions), 30), "the tab got no session"
+        self.session = next(s for s in editor.sessions if id(s) not in known)
+        assert self.session.wait_idle(60) and self.session.last_result is not None
+        time.sleep(1.5)  # first frames, camera placed by the server
+        for close in self.page.locator(".mantine-Notification-closeButton").all():  # "software WebGL" notice
+            close.click()
+
+    def shot(self, name: str) -> Path:
+        path = self.shots / f"{name}.png"
+        self.page.screenshot(path=str(path))
+        return path
+
+    def field(self, label: str):
+        """The text input of the field whose label contains ``label``."""
+        return self.page.locator(
+            f"xpath=//label[contains(normalize-space(), \"{label}\")]/ancestor::div[.//input][1]//input").first
+
+    def type_into(self, label: str, text: str) -> None:
+        """Select the field's text and type ``text`` key by key, as a person does."""
+        box = self.field(label)
+        box.click()
+        box.press("Control+a")
+        box.press_sequentially(text, delay=40)
+
+    def tab(self, name: str) -> None:
+        self.page.get_by_role("tab", name=name).click()
+        time.sleep(0.3)
+
+    def screen(self, x: float, y: float) -> tuple[float, float]:
+        """Page pixel of the plane point (x, y) [m] in this tab's top-down view."""
+        cam = self.session.client.camera
+        box = self.page.locator("canvas").first.bounding_box()
+        ppm = (box["height"] / 2) / (cam.position[2] * math.tan(cam.fov / 2))  # pixels per metre
+        return (box["x"] + box["width"] / 2 + (x - cam.position[0]) * ppm,
+                box["y"] + box["height"] / 2 - (y - cam.position[1]) * ppm)
+
+    def drag(self, start, end, steps: int = 12) -> None:
+        """A real mouse drag from page pixel ``start`` to ``end``."""
+        m = self.page.mouse
+        m.move(*start)
+        m.down()
+        for i in range(1, steps + 1):
+            m.move(start[0] + (end[0] - start[0]) * i / steps, start[1] + (end[1] - start[1]) * i / steps)
+            time.sleep(0.03)
+        m.up()
+
+    def focus_view(self) -> None:
+        """Give the page the keyboard focus without touching a field (a click on the panel's title)."""
+        self.page.get_by_text("rangeplan corridor editor").first.click()
+
+    def close(self) -> None:
+        self.page.close()
+
+
+@pytest.fixture
+def tab(server):
+    editor, context, _, shots = server
+    t = Tab(editor, context, shots)
+    try:
+        yield t
+    finally:
+        t.close()
 
 
 def canvas_pixels(page) -> np.ndarray:
@@ -83,79 +170,268 @@ def canvas_pixels(page) -> np.ndarray:
     return np.array(data, dtype=float).reshape(130, 200, 4)[..., :3]
 
 
-def test_page_renders_a_non_blank_scene(session):
-    editor, page, _ = session
-    px = canvas_pixels(page)
+# ---------------------------------------------------------------------------- the page
+def test_page_renders_a_non_blank_scene(tab):
+    px = canvas_pixels(tab.page)
     assert px.std() > 10.0, "the WebGL canvas is blank"
     colours = {tuple(c) for c in (px // 16).reshape(-1, 3).astype(int)}
     assert len(colours) >= 8, "the scene should show cells, corridor, trajectory and robot in several colours"
-    assert page.get_by_role("button", name="Plan", exact=True).count() == 1
+    assert tab.page.get_by_role("button", name="Plan", exact=True).count() == 1
+    tab.shot("01-start")
 
 
-def test_plan_button_replans_on_the_server(session):
-    editor, page, _ = session
-    done, gen = editor.plans_done, editor.last_plan_generation
-    page.get_by_role("button", name="Plan", exact=True).click()
-    assert wait_for(lambda: editor.plans_done > done and editor.last_plan_generation > gen)
-    assert editor.wait_idle(60)
-    res = editor.last_result
-    end = editor.request["layout"]["end"]
-    assert np.linalg.norm(np.array(res["pose"][-1][:2]) - end[:2]) < 1e-4
+def test_plan_button_replans_on_the_server(tab):
+    s = tab.session
+    done, gen = s.plans_done, s.last_plan_generation
+    tab.page.get_by_role("button", name="Plan", exact=True).click()
+    assert wait_for(lambda: s.plans_done > done and s.last_plan_generation > gen)
+    assert s.wait_idle(60)
+    end = s.request["layout"]["end"]
+    assert np.linalg.norm(np.array(s.last_result["pose"][-1][:2]) - end[:2]) < 1e-4
+    assert wait_for(lambda: f"plan #{s.last_plan_generation}" in tab.page.locator("body").inner_text(), 10)
 
 
-def test_dragging_the_end_handle_moves_the_end_and_replans(session):
-    """A real mouse drag on the end handle's x-arrow, at its projected screen position."""
-    editor, page, _ = session
-    assert editor.wait_idle(60)
-    cam = list(editor.server.get_clients().values())[0].camera
-    box = page.locator("canvas").first.bounding_box()
-    ppm = (box["height"] / 2) / ((cam.position[2]) * math.tan(cam.fov / 2))  # pixels per metre, top-down
+# ---------------------------------------------------------------------------- number entry
+def test_negative_and_exponent_numbers_typed_with_real_keys(tab):
+    s, page = tab.session, tab.page
+    tab.type_into("Start x, y (m)", "-0.09, 0.02, 0")
+    assert wait_for(lambda: s.request["layout"]["start"] == [-0.09, 0.02, 0.0], 10), s.request["layout"]["start"]
+    assert tab.field("Start x, y (m)").input_value() == "-0.09, 0.02, 0", "the field keeps what was typed"
+    tab.type_into("End x, y (m)", "6e-2, 4E-2, -0")
+    assert wait_for(lambda: s.request["layout"]["end"] == [0.06, 0.04, 0.0], 10)
+    assert s.wait_idle(60) and s.last_error is None
+    assert np.allclose(s.last_result["pose"][0][:2], [-0.09, 0.02], atol=1e-9)
+    tab.tab("Settings")
+    tab.type_into("k_u, force penalty", "2.5e-4")
+    assert wait_for(lambda: s.request["settings"]["k_u"] == 2.5e-4, 10)
+    assert tab.field("k_u, force penalty").input_value() == "2.5e-4"
+    tab.type_into("Sample time Ts", "-0.01")  # out of range: shown on the field, nothing changes
+    line = page.locator(".rangeplan-field-error", has_text="must be >= 0.0001, got -0.01")
+    assert wait_for(lambda: line.count() == 1 and line.first.is_visible(), 10)
+    assert s.request["settings"]["Ts"] == 0.01
+    assert "\u26a0" in page.locator("xpath=//label[contains(normalize-space(), 'Sample time Ts')]").inner_text()
+    border = tab.field("Sample time Ts").evaluate("e => getComputedStyle(e).borderTopColor")
+    assert border == "rgb(224, 49, 49)", border
+    tab.shot("02-field-error")
+    tab.type_into("Sample time Ts", "0.01")
+    assert wait_for(lambda: line.count() == 0 or not line.first.is_visible(), 10)
+    assert s.wait_idle(60) and s.last_error is None and s.last_result["settings"]["k_u"] == 2.5e-4
 
-    def screen(x, y):
-        return (box["x"] + box["width"] / 2 + (x - cam.look_at[0]) * ppm,
-                box["y"] + box["height"] / 2 - (y - cam.look_at[1]) * ppm)
 
-    lay = editor.request["layout"]
-    before = list(lay["end"])
+# ---------------------------------------------------------------------------- tabs
+def test_two_tabs_are_independent(server, tab):
+    editor, context, _, shots = server
+    other = Tab(editor, context, shots)
+    try:
+        a, b = tab.session, other.session
+        assert a is not b
+        before = b.request
+        tab.type_into("End x, y (m)", "0.02, 0.06, 0")
+        assert wait_for(lambda: a.request["layout"]["end"] == [0.02, 0.06, 0.0], 10) and a.wait_idle(60)
+        other.page.bring_to_front()
+        assert other.field("End x, y (m)").input_value() == "0.06, 0.04, 0"
+        assert b.request == before and b.last_result["pose"][-1][:2] == pytest.approx([0.06, 0.04], abs=1e-3)
+        other.type_into("Start x, y (m)", "-0.1, 0, 0")
+        assert wait_for(lambda: b.request["layout"]["start"] == [-0.1, 0.0, 0.0], 10)
+        assert a.request["layout"]["start"] == [-0.08, 0.0, 0.0]
+        other.shot("03-second-tab")
+    finally:
+        other.close()
+
+
+# ---------------------------------------------------------------------------- undo, snapping, readout
+def _drag_end_handle(tab, dx_px: float):
+    lay = tab.session.request["layout"]
     span = max(b - a for a, b in zip(lay["bounds"]["lower"], lay["bounds"]["upper"]))
-    arrow = 0.55 * 0.12 * span  # along the x-arrow of the gizmo (its scale is 0.12 x the view span)
-    sx, sy = screen(before[0] + arrow, before[1])
-    done = editor.plans_done
-    page.mouse.move(sx, sy)
-    page.mouse.down()
-    for i in range(1, 11):
-        page.mouse.move(sx - 3 * i, sy)
-        time.sleep(0.03)
-    page.mouse.up()
-    assert wait_for(lambda: editor.request["layout"]["end"][0] < before[0] - 0.005, 10), "the drag did not move the end"
-    after = editor.request["layout"]["end"]
-    assert after[1] == pytest.approx(before[1]) and after[2] == before[2]  # x-arrow: only x moves
-    assert wait_for(lambda: editor.plans_done > done) and editor.wait_idle(60)
-    assert editor.last_error is None
-    assert np.linalg.norm(np.array(editor.last_result["pose"][-1][:2]) - np.array(after[:2])) < 1e-4
+    arrow = 0.55 * 0.12 * span  # along the gizmo's x-arrow (its scale is 0.12 x the larger bounds side)
+    sx, sy = tab.screen(lay["end"][0] + arrow, lay["end"][1])
+    tab.drag((sx, sy), (sx + dx_px, sy))
 
 
-def test_editing_the_end_in_the_panel_replans(session):
-    editor, page, _ = session
-    row = page.get_by_text("End x, y", exact=False).first.locator("xpath=ancestor::div[.//input][1]")
-    inputs = row.locator("input")
-    assert inputs.count() == 3
-    done = editor.plans_done
-    inputs.nth(1).fill("0.02")
-    inputs.nth(1).press("Enter")
-    assert wait_for(lambda: editor.request["layout"]["end"][1] == pytest.approx(0.02), 10)
-    assert wait_for(lambda: editor.plans_done > done) and editor.wait_idle(60)
-    assert abs(editor.last_result["pose"][-1][1] - 0.02) < 1e-4
+def test_undo_and_redo_a_drag_and_an_obstacle_with_keys(tab):
+    s = tab.session
+    r0 = s.request
+    _drag_end_handle(tab, -40)
+    assert wait_for(lambda: s.request["layout"]["end"][0] < r0["layout"]["end"][0] - 0.01, 10), "the drag moved nothing"
+    r1 = s.request
+    x = r1["layout"]["end"][0]
+    assert abs((x + 0.16) / 0.02 - round((x + 0.16) / 0.02)) < 1e-9, f"dragged end {x} is not on the 0.02 m grid"
+    assert s.history.depth == (1, 0), "one drag is one undo step"
+    # Shift + drag on the view draws a rectangle obstacle; its corners snap to the grid
+    a, b = tab.screen(0.027, -0.094), tab.screen(0.071, -0.052)
+    tab.page.keyboard.down("Shift")
+    tab.drag(a, b)
+    tab.page.keyboard.up("Shift")
+    assert wait_for(lambda: len(s.request["layout"]["obstacles"]) == len(r0["layout"]["obstacles"]) + 1, 10)
+    r2 = s.request
+    assert r2["layout"]["obstacles"][-1] == {"type": "rectangle", "lower": [0.02, -0.1], "upper": [0.08, -0.06]}
+    tab.shot("04-drag-and-obstacle")
+    tab.focus_view()
+    tab.page.keyboard.press("Control+z")
+    assert wait_for(lambda: s.request == r1, 10), "Ctrl+Z undoes the obstacle"
+    tab.page.keyboard.press("Control+z")
+    assert wait_for(lambda: s.request == r0, 10), "Ctrl+Z undoes the drag"
+    assert wait_for(lambda: tab.field("End x, y (m)").input_value() == "0.06, 0.04, 0", 10)
+    tab.page.keyboard.press("Control+Shift+z")
+    assert wait_for(lambda: s.request == r1, 10), "Ctrl+Shift+Z redoes the drag"
+    tab.page.get_by_role("button", name="Redo", exact=True).click()
+    assert wait_for(lambda: s.request == r2, 10), "the Redo button redoes the obstacle"
+    assert settled(s) and s.last_error is None
+    assert np.allclose(s.last_result["pose"][-1][:2], r1["layout"]["end"][:2], atol=1e-4)
 
 
-def test_the_page_makes_no_request_outside_loopback(session):
-    _, page, urls = session
-    page.reload()
-    page.wait_for_selector("canvas", timeout=30_000)
+def test_snapping_and_the_cursor_readout(tab):
+    s, page = tab.session, tab.page
+    readout = page.locator("#rangeplan-cursor .xy")
+    for x, y in ((0.0312, -0.0475), (-0.1033, 0.0871)):
+        page.mouse.move(*tab.screen(x - 0.003, y))
+        page.mouse.move(*tab.screen(x, y))
+        assert wait_for(lambda: "m, y" in readout.inner_text(), 5)
+        text = readout.inner_text().replace("\u2212", "-")
+        got = [float(v) for v in text.split(" m")[0].split("x ")[1:]] + [float(text.split("y ")[1].split(" m")[0])]
+        assert got == pytest.approx([x, y], abs=1e-3), text  # a pixel is ~0.9 mm here
+        gx, gy = (-0.16 + 0.02 * round((v + 0.16) / 0.02) for v in (x, y))
+        assert f"snaps to {gx:.4f}, {gy:.4f}".replace("-", "\u2212") in readout.inner_text()
+    # snapping off: the drag lands where the mouse let go (to 0.1 mm)
+    tab.tab("Edit")
+    page.get_by_text("Snap drags to the grid").first.click()
+    assert wait_for(lambda: s.gui.snap.value is False, 5)
+    _drag_end_handle(tab, -31)
+    assert wait_for(lambda: s.request["layout"]["end"][0] < 0.05, 10)
+    x = s.request["layout"]["end"][0]
+    assert abs(x * 1e4 - round(x * 1e4)) < 1e-6, "0.1 mm resolution"
+    assert abs((x + 0.16) / 0.02 - round((x + 0.16) / 0.02)) > 1e-3, "not snapped to the cell grid"
+    assert s.wait_idle(60)
+
+
+# ---------------------------------------------------------------------------- plots
+def test_plot_time_axis_reads_seconds(tab):
+    s, page = tab.session, tab.page
+    tab.tab("Result")
+    duration = float(s.last_result["time"][-1])
+    over = page.locator(".u-over").first
+    over.scroll_into_view_if_needed()
+    bb = over.bounding_box()
+    legend = page.locator(".u-legend").first
+    for f in (0.25, 0.5, 0.9):
+        page.mouse.move(bb["x"] + f * bb["width"], bb["y"] + 0.5 * bb["height"])
+        time.sleep(0.3)
+        text = legend.inner_text()
+        assert text.startswith("t (s)"), text
+        value = text.split("t (s)")[1].split("F1")[0].strip().strip(":").strip()
+        assert float(value) == pytest.approx(f * duration, abs=0.03 * duration), text  # seconds, not a date
+    titles = page.locator(".u-title").all_inner_texts()
+    assert f"plan #{s.last_plan_generation}" in titles[0] and "limit ±150 N" in titles[0]
+    tab.shot("05-plots")
+    tab.tab("Edit")
+    tab.type_into("End x, y (m)", "0.16, 0.16, 0")  # unreachable: the plan fails, the plots empty
+    assert wait_for(lambda: s.last_error is not None and s.wait_idle(1), 30)
+    tab.tab("Result")
+    assert wait_for(lambda: "no plan" in page.locator(".u-title").first.inner_text(), 10)
+    assert "failed" in page.locator("body").inner_text()
+
+
+# ---------------------------------------------------------------------------- segment corridors
+def test_table1_segment_corridor_is_edited_and_replanned(tab):
+    s, page = tab.session, tab.page
+    tab.tab("Files")
+    page.locator("input[type=file]").first.set_input_files(str(TABLE1_PATH))
+    assert wait_for(lambda: bool(s.request.get("segments")) and s.request.get("layout") is None, 20)
+    assert s.wait_idle(60) and s.last_error is None
+    tab.tab("Edit")
+    assert page.get_by_text("12 boxes").first.is_visible()
+    s.place_cameras()
+    time.sleep(1.0)
+    # a click on box 4 (x -0.04..-0.02, y 0..0.02) picks it
+    page.mouse.click(*tab.screen(-0.03, 0.01))
+    assert wait_for(lambda: s.selected_segment == 3, 10)
+    assert wait_for(lambda: tab.field("Upper x, y (m)").input_value() == "-0.02, 0.02, 0", 10)
+    time.sleep(0.5)
+    # drag its top edge up by about one box: it lands on the grid
+    tab.drag(tab.screen(-0.03, 0.02), tab.screen(-0.03, 0.043), steps=15)
+    assert wait_for(lambda: s.request["segments"][3]["upper"][1] == 0.04, 10), s.request["segments"][3]
+    assert settled(s) and s.last_error is None
+    assert s.last_result["corridor"]["segments"][3]["upper"][1] == pytest.approx(0.04)
+    tab.shot("06-table1-edge-dragged")
+    # type the lower corner with a psi range, insert a copy and remove it
+    tab.type_into("Lower x, y (m)", "-0.04, 0, -0.1")
+    tab.type_into("Upper x, y (m)", "-0.02, 0.04, 0.1")
+    assert wait_for(lambda: s.request["segments"][3]["lower"] == [-0.04, 0.0, -0.1]
+                    and s.request["segments"][3]["upper"] == [-0.02, 0.04, 0.1], 10)
+    page.get_by_role("button", name="Insert a copy after it").click()
+    assert wait_for(lambda: len(s.request["segments"]) == 13 and s.selected_segment == 4, 10)
+    page.get_by_role("button", name="Remove this box").click()
+    assert wait_for(lambda: len(s.request["segments"]) == 12, 10)
+    assert settled(s) and s.last_error is None
+    planned = s.last_result["corridor"]["segments"]
+    assert np.allclose([p["lower"] for p in planned], [g["lower"] for g in s.request["segments"]])
+    pose = np.asarray(s.last_result["pose"])
+    assert np.linalg.norm(pose[-1, :2] - [0.06, 0.04]) < 1e-3
+    tab.shot("07-table1-replanned")
+
+
+# ---------------------------------------------------------------------------- responsiveness
+def test_the_panel_answers_while_a_plan_runs(tab):
+    """Plans of about 0.7 s (constrained mode, Ts = 2 ms, 5 mm cells) run on the session's
+    worker thread: a value typed meanwhile reaches the session within a fraction of a
+    second, while the plan is still running, and the status names the plan computed."""
+    s, page = tab.session, tab.page
+    s.edit(lambda r: (r["settings"].update(mode="constrained", Ts=0.002), r["layout"]["cell"].update(size=0.005)))
+    assert settled(s, 120) and s.last_error is None
+    received = []
+    field = s.gui.clearance
+    on_value = field._on_value
+
+    def spy(value):
+        received.append((time.monotonic(), value, s.worker.started > s.worker.finished))
+        on_value(value)
+    field._on_value = spy
+    latencies, during = [], 0
+    for k in range(3):
+        page.get_by_role("button", name="Plan", exact=True).click()
+        assert wait_for(lambda: s.worker.started > s.worker.finished, 10), "no plan started"
+        assert wait_for(lambda: "planning #" in page.locator("body").inner_text(), 2), "status shows no plan running"
+        box = tab.field("Clearance (m)")
+        box.click()
+        box.press("Control+a")
+        text = f"0.00{k + 1}"
+        box.press_sequentially(text, delay=20)
+        t0 = time.monotonic()
+        assert wait_for(lambda t=text: bool(received) and received[-1][1] == float(t), 5)
+        latencies.append(received[-1][0] - t0)
+        during += received[-1][2]
+        assert settled(s, 120)
+    assert max(latencies) < 0.3, latencies
+    assert during >= 2, "the typed values should arrive while the plans run"
+    assert s.last_error is None and s.request["layout"]["clearance"] == 0.003
+
+
+def test_the_page_makes_no_request_outside_loopback(server, tab):
+    _, _, urls, _ = server
+    tab.page.reload()
+    tab.page.wait_for_selector("canvas", timeout=30_000)
     time.sleep(2.0)
     assert urls, "no request recorded"
     hosts = {urlparse(u).hostname for u in urls if not u.startswith(("data:", "blob:", "about:"))}
     assert hosts <= {"127.0.0.1", "localhost"}, hosts
+
+
+def test_readme_screenshot_of_a_real_session(tab):
+    """A layout with obstacles, a plan and the plots, as a person sees it (written to
+    docs/editor.png when RANGEPLAN_DOCS_SCREENSHOT names that path)."""
+    s, page = tab.session, tab.page
+    s.add_rectangle([0.04, -0.12], [0.06, 0.0])
+    s.move_handle("end", 0.1, -0.06, "end")
+    assert s.wait_idle(60) and s.last_error is None, s.last_error
+    tab.tab("Result")
+    page.locator(".u-over").first.scroll_into_view_if_needed()
+    s.gui.time.value = round(0.45 * float(s.last_result["time"][-1]), 2)
+    page.mouse.move(*tab.screen(-0.06, 0.1))
+    time.sleep(1.0)
+    path = tab.shot("08-readme")
+    target = os.environ.get("RANGEPLAN_DOCS_SCREENSHOT")
+    if target:
+        Path(target).write_bytes(path.read_bytes())
 
 
 def _wall_drawing(path: Path) -> Path:
@@ -174,15 +450,15 @@ def _wall_drawing(path: Path) -> Path:
     return path
 
 
-def test_files_tab_imports_a_drawing_and_downloads_gcode(session, tmp_path):
+def test_files_tab_imports_a_drawing_and_downloads_gcode(tab, tmp_path):
     """Files tab: upload a DXF through the browser's file chooser (its closed shapes become
     the layout's obstacles and the design re-plans), then download the plan's G-code."""
     from planner.exchange import to_gcode
     from planner.schema import PlanResult
 
-    editor, page, _ = session
+    editor, page = tab.session, tab.page
     assert editor.wait_idle(60)
-    page.get_by_role("tab", name="Files").click()
+    tab.tab("Files")
     done = editor.plans_done
     with page.expect_file_chooser() as chooser:
         page.get_by_role("button", name="Import drawing (DXF/SVG)").click()

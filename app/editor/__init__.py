@@ -3,17 +3,24 @@
 A person designs a corridor in the browser and sees the robot move through it; the
 editor's state is a plan request in the one JSON shape. The parts:
 
-- :mod:`._editor`: :class:`Editor`, which ties the parts together, and :func:`start_editor`
+- :mod:`._editor`: :class:`Editor`, the viser server that gives every browser tab its own
+  session, and :func:`start_editor`
+- :mod:`._session`: :class:`Session`, one tab's editing session: edits, undo, snapping,
+  the re-plan, errors; :mod:`._session_segments`: its segment-list edits
 - :mod:`._state`: the edited request and the newest plan outcome (no viser)
+- :mod:`._history`: undo / redo steps (no viser)
 - :mod:`._planning`: the re-plan worker; the only editor module that imports ``planner``
-- :mod:`._scene`: the 3-D scene, its nodes created once and updated in place
-- :mod:`._gui`: the control panel and the playback
+- :mod:`._scene`: the 3-D scene of one tab, its nodes created once and updated in place
+- :mod:`._gui`: the control panel and the playback; :mod:`._gui_segments`: the segment
+  boxes' folder; :mod:`._fields`: number entry as text; :mod:`._result`: the Result tab's
+  plots and the leg legend; :mod:`._cursor`: the live cursor readout
 - :mod:`._files`: store, request JSON and trajectory CSV
-- :mod:`._geometry`: numpy-only geometry of what is drawn
+- :mod:`._geometry`: numpy / shapely geometry of what is drawn, snapping, clipping
 
 Entry point: :func:`start_editor` (used by ``app.server.serve``).
 """
 
 from ._editor import Editor, start_editor
+from ._session import Session
 
-__all__ = ["Editor", "start_editor"]
+__all__ = ["Editor", "Session", "start_editor"]

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 from ._planning import PlannerError, drawing_request, editable, export_result, to_csv, validate_request
 
 if TYPE_CHECKING:
-    from ._editor import Editor
+    from ._session import Session
 
 __all__ = ["EditorFiles"]
 
@@ -25,7 +25,7 @@ class EditorFiles:
     :class:`app.storage.Store` (its corridor methods), or None: saving is off. ``client``
     arguments are the viser client that asked (its notifications and downloads go to it)."""
 
-    def __init__(self, editor: Editor, store):
+    def __init__(self, editor: Session, store):
         self._editor = editor
         self.store = store
         self.stored_ids: dict[str, str] = {}  #: stored corridor id by its label in the dropdown
@@ -65,7 +65,7 @@ class EditorFiles:
             self._editor.notify("Not saved", f"{type(exc).__name__}: {exc}", client=client)
             return
         state.corridor_id = rec["id"]
-        self.refresh_stored()
+        self._editor.stored_changed()  # every tab's list
         self._editor.notify("Saved", f"corridor '{rec.get('name') or ''}' id {rec['id']}", color="green",
                             client=client)
 
@@ -104,10 +104,6 @@ class EditorFiles:
             self._editor.notify("Import failed", f"{origin}: {message}", client=client)
             return False
         req = editable(model)
-        if req.get("layout") is None:
-            self._editor.notify("No layout", f"{origin} has no layout (segments or a reference only): it is planned "
-                                "and shown, but the layout tools do nothing until you start a new layout",
-                                color="yellow", client=client)
         self._editor.set_request(req, immediate=True)
         self._editor.place_cameras()
         return True

@@ -1,6 +1,6 @@
-"""Geometry for the browser editor (numpy only: no viser, no planner import): what the
-editor draws, as arrays it can hand to the scene, and the screen <-> plane maps of a
-top-down camera.
+"""Geometry for the browser editor (numpy and shapely only: no viser, no planner import):
+what the editor draws, as arrays it can hand to the scene, clipped to the workspace bounds,
+the snapping grid, and the screen <-> plane maps of a top-down camera.
 
 Everything is in the workspace plane z = 0, SI units (m, rad, s). Kept apart from the
 scene (:mod:`app.editor._scene`) so it can be tested without a browser or a server. The
@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import shapely
 
 # Colours (RGB 0-255) of the cell states and the drawing layers.
 CELL_COLOURS = {"free": (222, 235, 247), "blocked": (90, 90, 90), "unreachable": (244, 204, 204)}
@@ -178,3 +179,66 @@ def plane_to_screen(point, cam_position, cam_wxyz, fov_rad: float, aspect: float
     c = R.T @ (p - np.asarray(cam_position, dtype=float))
     t = math.tan(fov_rad / 2)
     return np.array([(c[0] / c[2] / (t * aspect) + 1) / 2, (c[1] / c[2] / t + 1) / 2])
+
+
+# ---------------------------------------------------------------------------- snapping
+def snap(value: float, step: float | None, origin: float = 0.0, *, resolution: float = 1e-4) -> float:
+    """``value`` [m] on the grid ``origin + k * step`` (the nearest line); without a grid
+    (``step`` None or <= 0), to ``resolution`` [m] (a dragged point keeps 0.1 mm, not the
+    mouse's 17 digits). Rounded to 10 decimals so that -0.16 + 4 * 0.02 is -0.08."""
+    if step is not None and step > 0:
+        v = origin + round((value - origin) / step) * step
+    else:
+        v = round(value / resolution) * resolution
+    v = round(v, 10)
+    return 0.0 if v == 0 else v
+
+
+def snap_point(point, step: float | None, origin=(0.0, 0.0)) -> list[float]:
+    """A point (x, y) [m] snapped by :func:`snap` per coordinate."""
+    return [snap(float(point[0]), step, float(origin[0])), snap(float(point[1]), step, float(origin[1]))]
+
+
+# ---------------------------------------------------------------------------- clipping to the bounds
+def clip_polygons(polygons: list, lower, upper) -> list:
+    """Polygons [[x, y], ...] [m] cut to the rectangle [lower, upper]; those inside are
+    returned as they are, those outside are dropped (convex in, convex out)."""
+    lo, hi = np.asarray(lower, float), np.asarray(upper, float)
+    out, cut = [], []
+    for poly in polygons:
+        p = np.asarray(poly, float)
+        if len(p) < 3:
+            continue
+        if np.all(p >= lo - 1e-12) and np.all(p <= hi + 1e-12):
+            out.append(poly)
+        elif np.all(p.max(axis=0) > lo) and np.all(p.min(axis=0) < hi):
+            cut.append(p)
+    if cut:
+        box = shapely.box(lo[0], lo[1], hi[0], hi[1])
+        for g in shapely.intersection(shapely.polygons(cut), box):
+            if isinstance(g, shapely.Polygon) and not g.is_empty and g.area > 0:
+                out.append(np.asarray(g.exterior.coords)[:-1].tolist())
+    return out
+
+
+def clip_segments(segments: np.ndarray, lower, upper) -> np.ndarray:
+    """Line segments (M, 2, 3) [m] cut to the rectangle [lower, upper] in x, y
+    (Liang-Barsky); segments outside are dropped."""
+    segs = np.asarray(segments, float)
+    if not len(segs):
+        return segs.reshape(0, 2, 3)
+    lo, hi = np.asarray(lower, float), np.asarray(upper, float)
+    a, d = segs[:, 0], segs[:, 1] - segs[:, 0]
+    t0, t1 = np.zeros(len(segs)), np.ones(len(segs))
+    keep = np.ones(len(segs), bool)
+    for k in (0, 1):
+        for p, q in ((-d[:, k], a[:, k] - lo[k]), (d[:, k], hi[k] - a[:, k])):
+            parallel = np.abs(p) < 1e-15
+            keep &= ~(parallel & (q < 0))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                r = np.where(parallel, 0.0, q / np.where(parallel, 1.0, p))
+            t0 = np.where(~parallel & (p < 0), np.maximum(t0, r), t0)
+            t1 = np.where(~parallel & (p > 0), np.minimum(t1, r), t1)
+    keep &= t0 <= t1
+    out = np.stack((a + t0[:, None] * d, a + t1[:, None] * d), axis=1)[keep]
+    return out[np.linalg.norm(out[:, 1, :2] - out[:, 0, :2], axis=1) > 1e-12]

@@ -30,11 +30,22 @@ from planner import plan as run_plan
 from planner import to_csv as _result_csv
 from planner.exchange import export, import_drawing
 from planner.model import SINGULAR_TOL, kinematics
-from planner.schema import DEFAULT_ROBOT, MODE_DEFAULTS, Settings, builtin_robot_names, format_validation_error
+from planner.schema import (
+    DEFAULT_ROBOT,
+    MAX_LEGS,
+    MODE_DEFAULTS,
+    Cell,
+    Layout,
+    Settings,
+    builtin_robot_names,
+    format_validation_error,
+    planner_error,
+)
 
 __all__ = [
     "DEFAULT_ROBOT",
     "HAS_SPEED_SETTING",
+    "MAX_LEGS",
     "MODE_DEFAULTS",
     "SINGULAR_TOL",
     "PlanOutcome",
@@ -48,6 +59,7 @@ __all__ = [
     "to_csv",
     "validate_request",
     "editable",
+    "field_bounds",
     "reachable_mask",
     "robot_geometry",
     "drawing_request",
@@ -76,6 +88,20 @@ def validate_request(request: dict) -> tuple[PlanRequest | None, str | None]:
         return PlanRequest.model_validate(request), None
     except ValidationError as exc:
         return None, format_validation_error(exc)
+
+
+def field_bounds(model: str, field: str) -> dict[str, float]:
+    """The numeric bounds (``gt``, ``ge``, ``lt``, ``le``) of a field of the request schema
+    (``model`` one of "Settings", "Layout", "Cell"), so that the editor's fields check what
+    validation checks; e.g. ``field_bounds("Settings", "Ts") == {"ge": 1e-4, "le": 1.0}``."""
+    cls = {"Settings": Settings, "Layout": Layout, "Cell": Cell}[model]
+    out: dict[str, float] = {}
+    for meta in cls.model_fields[field].metadata:
+        for key in ("gt", "ge", "lt", "le"):
+            value = getattr(meta, key, None)
+            if value is not None:
+                out[key] = value  # as declared (1.0, 200): messages print it as the planner does
+    return out
 
 
 def reachable_mask(robot: RobotModel, lower, upper, psi: float, n: int = 96):
@@ -198,9 +224,12 @@ def compute_plan(request: dict, robots: RobotCache) -> PlanOutcome:
     def outcome(seg, result, error) -> PlanOutcome:
         return PlanOutcome(seg, result, error, time.perf_counter() - t0)
 
-    req, message = validate_request(request)
-    if req is None:
-        return outcome(None, None, {"code": "invalid_input", "message": message, "field": None})
+    try:
+        req = PlanRequest.model_validate(request)
+    except ValidationError as exc:  # the first failing field names the error; the message lists up to three
+        first = planner_error(exc).to_dict()
+        message = format_validation_error(exc).removeprefix(f"{first['field']}: ")
+        return outcome(None, None, {**first, "message": message})
     seg_dict = None
     try:
         robot = robots.get(request.get("robot", DEFAULT_ROBOT))

@@ -1,7 +1,8 @@
 """The editor's 3-D scene (viser): every node is created once and updated in place.
 
-:class:`EditorScene` adds all of its scene nodes in its constructor (hidden until there
-is something to show) and keeps viser's handles. Showing a new layout, segmentation,
+Each browser tab has its own scene (``client.scene``: nodes local to that client), made by
+its editing session. :class:`EditorScene` adds all of its scene nodes in its constructor
+(hidden until there is something to show) and keeps viser's handles. Showing a new layout, segmentation,
 plan or robot pose assigns the handles' properties (``points``, ``colors``,
 ``vertices``/``faces``, ``position``/``wxyz``, ``text``, ``visible``, ...): viser sends
 an update message for a changed property only, and never removes or re-adds a node.
@@ -11,7 +12,12 @@ frame. An empty layer (no obstacles, no corridor, no result) is hidden with
 
 Top-down view of the workspace plane z = 0; x right, y up; units m, rad, s, N. Each
 layer sits a little above the plane (:data:`app.editor._geometry.Z`) so later layers
-draw on top.
+draw on top. Cells and the reachable outline are clipped to the workspace bounds.
+
+A segment-list corridor (no layout) is drawn as its boxes; the selected box gets four edge
+handles and a centre handle, meshes the person drags with the mouse (viser's ``on_drag``:
+``on_segment_drag(handle, phase, x, y)`` gets ``left``/``right``/``bottom``/``top``/``centre``
+and the pointer on the plane [m]).
 """
 
 from __future__ import annotations
@@ -23,11 +29,13 @@ import numpy as np
 import viser
 
 from . import _geometry as geo
-from ._planning import Robot, reachable_mask, robot_geometry
+from ._planning import MAX_LEGS, Robot, reachable_mask, robot_geometry
 
 __all__ = ["TICK_EVERY_S", "EditorScene"]
 
 TICK_EVERY_S = 0.1  #: spacing of the time ticks on the trajectory [s]
+EDGE_HANDLE = 0.014  #: width of a segment edge handle, as a fraction of the larger view side
+SEGMENT_HANDLES = ("left", "right", "bottom", "top", "centre")
 REACH_SAMPLES = 120  #: grid samples per side of the reachable-workspace outline
 HANDLE_SCALE = 0.12  #: size of a start/end gizmo, as a fraction of the larger bounds side
 DOT_RADIUS = 0.01  #: radius of a start/end dot, as a fraction of the larger bounds side
@@ -38,16 +46,12 @@ _NO_POINTS = np.zeros((1, 3))
 _NO_VERTICES, _NO_FACES = np.zeros((3, 3)), np.array([[0, 1, 2]], np.int32)
 #: outline of the reachable workspace at the start / end angle (RGB 0-255)
 _PIVOTS_ABOVE_PLATFORM = geo.Z["pivots"] - geo.Z["robot"]  #: z of pivots and tool in the platform frame [m]
-_REACH_COLOURS = {"start": (200, 30, 30), "end": (200, 100, 0)}
+_REACH_COLOURS = {"start": (210, 20, 20), "end": (230, 110, 0)}
 
 
-def _show_lines(handle: viser.LineSegmentsHandle, segments: np.ndarray, colour=None) -> None:
-    """Show ``segments`` (M, 2, 3) [m] on a line node, or hide it when M = 0. With
-    ``colour`` (RGB 0-255) the colour is given per vertex (drawn a little lighter than
-    a node-wide colour; the caller keeps the node's colours and points in one update)."""
+def _show_lines(handle: viser.LineSegmentsHandle, segments: np.ndarray) -> None:
+    """Show ``segments`` (M, 2, 3) [m] on a line node (its one colour), or hide it when M = 0."""
     if len(segments):
-        if colour is not None:
-            handle.colors = np.tile(np.asarray(colour, np.uint8), (len(segments), 2, 1))
         handle.points = segments
     handle.visible = bool(len(segments))
 
@@ -60,31 +64,40 @@ def _show_mesh(handle: viser.MeshHandle, vertices: np.ndarray, faces: np.ndarray
 
 
 def _leg_colours(force_ratio: np.ndarray) -> np.ndarray:
-    """Per-vertex colours (n, 2, 3) of the legs: blue at no force, red at the force limit."""
+    """Per-vertex colours (n, 2, 3) of the legs: blue at no force, red at the force limit
+    (the legend's gradient, :data:`app.editor._result.LEG_GRADIENT`). viser's line material
+    treats per-vertex colours as linear and converts them to sRGB on screen (they came out
+    pale: (60, 60, 200) as (133, 133, 230)); they are sent linearised so that the legs show
+    the legend's colours."""
     r = np.clip(force_ratio, 0.0, 1.0)
-    rgb = np.column_stack((60 + 195 * r, np.full_like(r, 60.0), 200 - 160 * r)).astype(np.uint8)
+    srgb = np.column_stack((60 + 195 * r, np.full_like(r, 60.0), 200 - 160 * r)) / 255.0
+    linear = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+    rgb = np.round(255 * linear).astype(np.uint8)
     return np.repeat(rgb[:, None, :], 2, axis=1)
 
 
 class EditorScene:
-    """The scene of one editor server (shared by all its clients).
+    """The scene of one browser tab (``client``: a viser ``ClientHandle``, or the server
+    for a scene every client sees).
 
     ``on_click(event)`` and ``on_rect_select(event)`` get viser's scene click and
-    shift+drag rectangle events; ``on_handle_moved(which, x, y)`` gets the start ("start")
-    or end ("end") gizmo's new position [m] while the user drags it.
+    shift+drag rectangle events; ``on_handle_moved(which, x, y, phase)`` gets the start
+    ("start") or end ("end") gizmo's position [m] while the user drags it (``phase``
+    "start" | "update" | "end"); ``on_segment_drag(handle, phase, x, y)`` the drag of a
+    segment handle.
     """
 
-    def __init__(self, server: viser.ViserServer, *, on_click: Callable[[Any], Any],
+    def __init__(self, client, *, on_click: Callable[[Any], Any],
                  on_rect_select: Callable[[Any], Any],
-                 on_handle_moved: Callable[[str, float, float], Any]):
-        self._server = server
+                 on_handle_moved: Callable[[str, float, float, str], Any],
+                 on_segment_drag: Callable[[str, str, float, float], Any] | None = None):
+        self._client = client
         self._on_handle_moved = on_handle_moved
+        self._on_segment_drag = on_segment_drag
         self._dragging = {"start": False, "end": False}  # a gizmo the user holds
         self._reach_cache: dict[tuple, np.ndarray] = {}  # outline segments by (robot, bounds, psi)
         self._robot_drawn: Robot | None = None  # robot whose structure the robot nodes show
-        scene = server.scene
-        scene.set_up_direction("+z")
-        scene.world_axes.visible = False
+        scene = client.scene  # up direction and world axes: the server's, set by the editor
         scene.on_click()(on_click)
         scene.on_rect_select(modifier="shift")(on_rect_select)
         self._add_nodes(scene)
@@ -118,6 +131,17 @@ class EditorScene:
         # result: trajectory and its time ticks
         self.trajectory = lines("/result/trajectory", (20, 60, 220), 3.0)
         self.ticks = points("/result/ticks", (255, 140, 0), 0.0035, "circle")
+        # segment-list corridor: boxes, the selected box and its drag handles, snapping grid
+        self.seg_grid = lines("/segments/grid", (205, 205, 205), 0.5)
+        self.seg_boxes = lines("/segments/boxes", (0, 120, 0), 1.5)
+        self.seg_selected = mesh("/segments/selected", (255, 200, 120), 0.45, flat_shading=True)
+        self.seg_label = scene.add_label("/segments/label", "", visible=False)
+        self.seg_handles = {}
+        for handle in SEGMENT_HANDLES:
+            node = mesh(f"/segments/handle_{handle}", (230, 120, 0) if handle != "centre" else (200, 60, 0),
+                        0.9, flat_shading=True)
+            node.on_drag(self._segment_drag_callback(handle))
+            self.seg_handles[handle] = node
         # robot: one group; the platform is a frame moved per pose, its drawing fixed in it.
         # Pivots and tool sit a little above the legs and the platform edge (Z["pivots"]).
         self.robot = scene.add_frame("/robot", show_axes=False, visible=False)
@@ -128,6 +152,9 @@ class EditorScene:
         self.platform_fill = mesh("/robot/platform/fill", (120, 120, 220), 0.15)
         self.platform_edge = lines("/robot/platform/edge", (40, 40, 160), 2.0)
         self.platform_pivots = points("/robot/platform/pivots", (20, 20, 20), 0.008, "circle")
+        # leg numbers at the base pivots (= F1, F2, ... of the plots); one label per possible leg
+        self.leg_labels = [scene.add_label(f"/robot/leg_{i + 1}", str(i + 1), visible=False)
+                           for i in range(MAX_LEGS)]
         self.tool = scene.add_point_cloud("/robot/platform/tool", np.array([[0.0, 0.0, _PIVOTS_ABOVE_PLATFORM]]),
                                           colors=(220, 0, 0), point_size=0.01, point_shape="diamond")
         # start and end: planar gizmo (x, y only), dot and label
@@ -141,19 +168,46 @@ class EditorScene:
                                                    visible=False)
             self.labels[which] = scene.add_label(f"/handles/{which}/label", which, visible=False)
 
+    def set_view_span(self, span: float) -> None:
+        """Size the dots (time ticks, pivots, tool) for a design ``span`` [m] across: the
+        same on screen for a 0.3 m layout and a 0.1 m segment list."""
+        sizes = ((self.ticks, 0.011), (self.base_pivots, 0.02), (self.platform_pivots, 0.02), (self.tool, 0.03))
+        for node, fraction in sizes:
+            size = round(fraction * max(span, 1e-3), 6)
+            if node.point_size != size:
+                node.point_size = size
+
     def _gizmo_callback(self, which: str):
-        def on_update(event) -> None:
-            self._dragging[which] = getattr(event, "phase", "update") in ("start", "update")
+        # async: viser awaits it on its event loop, so start, updates and end arrive in order
+        async def on_update(event) -> None:
+            phase = getattr(event, "phase", "update")
+            self._dragging[which] = phase in ("start", "update")
             pos = event.target.position
-            self._on_handle_moved(which, float(pos[0]), float(pos[1]))
+            self._on_handle_moved(which, float(pos[0]), float(pos[1]), phase)
         return on_update
 
+    def _segment_drag_callback(self, handle: str):
+        async def on_drag(event) -> None:
+            if self._on_segment_drag is not None:
+                p = event.end_position
+                self._on_segment_drag(handle, event.phase, float(p[0]), float(p[1]))
+        return on_drag
+
+    def end_drag(self, which: str, x: float, y: float) -> None:
+        """Put the ``which`` gizmo at (x, y) [m] (the snapped point) after the drag ended."""
+        self._dragging[which] = False
+        self.gizmos[which].position = (float(x), float(y), geo.Z["handles"])
+
     # ------------------------------------------------------------------ camera
-    def place_camera(self, centre, half_size: float, client=None) -> None:
+    @staticmethod
+    def place_camera(centre, half_size: float, client=None, initial=None) -> None:
         """Look straight down at ``centre`` (x, y) [m] so that a square of half-size
         ``half_size`` [m] fills the view's height; for one ``client``, or the initial
-        camera of clients that connect later (None)."""
-        cam = self._server.initial_camera
+        camera of clients that connect later (``client`` None, ``initial`` the server's
+        ``initial_camera``)."""
+        cam = initial if client is None else client.camera
+        if cam is None:
+            return
         height = geo.camera_height(half_size, cam.fov)
         cx = float(centre[0]) + 0.36 * half_size  # the control panel covers the right of the page
         pos, look = (cx, float(centre[1]), height), (cx, float(centre[1]), 0.0)
@@ -179,18 +233,17 @@ class EditorScene:
         hi = np.asarray(layout["bounds"]["upper"], float)
         span = max(float(np.max(hi - lo)), 1e-3)  # > 0 even while the user types inverted bounds
         _show_lines(self.bounds, geo.polygon_edges([geo.rectangle(lo, hi)], geo.Z["grid"]))
-        polys = [geo.obstacle_polygon(ob) for ob in layout.get("obstacles", [])]
+        polys = geo.clip_polygons([geo.obstacle_polygon(ob) for ob in layout.get("obstacles", [])], lo, hi)
         _show_mesh(self.obstacles, *geo.polygon_mesh(polys, geo.Z["obstacles"]))
         _show_lines(self.obstacle_edges, geo.polygon_edges(polys, geo.Z["obstacles"]))
         psi_start, psi_end = float(layout["start"][2]), float(layout["end"][2])
-        with self._server.atomic():  # per-vertex colours and points of an outline in one update
-            _show_lines(self.reachable["start"], self._reach_outline(robot, lo, hi, psi_start),
-                        _REACH_COLOURS["start"])
-            if abs(psi_end - psi_start) < 1e-9:  # same angle: one outline is enough
-                self.reachable["end"].visible = False
-            else:
-                _show_lines(self.reachable["end"], self._reach_outline(robot, lo, hi, psi_end),
-                            _REACH_COLOURS["end"])
+        # one colour per node (per-vertex colours are drawn paler: the outline vanished on the
+        # pink unreachable cells)
+        _show_lines(self.reachable["start"], self._reach_outline(robot, lo, hi, psi_start))
+        if abs(psi_end - psi_start) < 1e-9:  # same angle: one outline is enough
+            self.reachable["end"].visible = False
+        else:
+            _show_lines(self.reachable["end"], self._reach_outline(robot, lo, hi, psi_end))
         limits = ((float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1])), (0.0, 0.0))
         for which in ("start", "end"):
             p = layout[which]
@@ -213,7 +266,7 @@ class EditorScene:
         if outline is None:
             margin = 0.05 * (hi - lo)
             xs, ys, mask = reachable_mask(robot, lo - margin, hi + margin, psi, n=REACH_SAMPLES)
-            outline = geo.mask_boundary(xs, ys, mask, geo.Z["reach"])
+            outline = geo.clip_segments(geo.mask_boundary(xs, ys, mask, geo.Z["reach"]), lo, hi)
             if len(self._reach_cache) >= 8:
                 self._reach_cache.pop(next(iter(self._reach_cache)))
             self._reach_cache[key] = outline
@@ -228,12 +281,14 @@ class EditorScene:
                 node.visible = False
             return
         cells = seg["cells"]
+        lo, hi = seg["bounds"]["lower"], seg["bounds"]["upper"]
         for state, node in self.cells.items():
-            _show_mesh(node, *geo.polygon_mesh([c["polygon"] for c in cells if c["state"] == state],
-                                               geo.Z["cells"]))
-        _show_lines(self.grid, geo.polygon_edges([c["polygon"] for c in cells], geo.Z["grid"]))
+            polys = geo.clip_polygons([c["polygon"] for c in cells if c["state"] == state], lo, hi)
+            _show_mesh(node, *geo.polygon_mesh(polys, geo.Z["cells"]))
+        _show_lines(self.grid, geo.polygon_edges(geo.clip_polygons([c["polygon"] for c in cells], lo, hi),
+                                                 geo.Z["grid"]))
         by_id = {c["id"]: c for c in cells}
-        path = [by_id[i]["polygon"] for i in seg.get("path", []) if i in by_id]
+        path = geo.clip_polygons([by_id[i]["polygon"] for i in seg.get("path", []) if i in by_id], lo, hi)
         _show_mesh(self.corridor_fill, *geo.polygon_mesh(path, geo.Z["corridor"]))
         self.show_corridor(seg.get("segments", []))
 
@@ -241,6 +296,63 @@ class EditorScene:
         """Outline the corridor's boxes (``[{lower, upper}, ...]``, [m, m, rad]) in x, y."""
         boxes = [geo.rectangle(s["lower"][:2], s["upper"][:2]) for s in segments]
         _show_lines(self.corridor, geo.polygon_edges(boxes, geo.Z["corridor"]))
+
+    # ------------------------------------------------------------------ segment-list corridor
+    def show_segments(self, segments: list[dict] | None, selected: int | None = None,
+                      grid: tuple[float, Any] | None = None) -> None:
+        """The boxes of a segment-list corridor (``[{lower, upper}, ...]``, [m, m, rad]), the
+        ``selected`` one filled with its edge and centre handles, and the snapping ``grid``
+        (step [m], origin (x, y) [m]) under them; None hides them (a layout)."""
+        nodes = (self.seg_boxes, self.seg_selected, self.seg_label, self.seg_grid, *self.seg_handles.values())
+        if not segments:
+            for node in nodes:
+                node.visible = False
+            return
+        boxes = [geo.rectangle(s["lower"][:2], s["upper"][:2]) for s in segments]
+        _show_lines(self.seg_boxes, geo.polygon_edges(boxes, geo.Z["corridor"]))
+        pts = np.array([p for b in boxes for p in b], float)
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        span = max(float(np.max(hi - lo)), 0.02)
+        self._show_snap_grid(lo - 0.1 * span, hi + 0.1 * span, grid)
+        if selected is None or not 0 <= selected < len(segments):
+            for node in (self.seg_selected, self.seg_label, *self.seg_handles.values()):
+                node.visible = False
+            return
+        s = segments[selected]
+        (x0, y0), (x1, y1) = s["lower"][:2], s["upper"][:2]
+        _show_mesh(self.seg_selected, *geo.polygon_mesh([geo.rectangle((x0, y0), (x1, y1))], geo.Z["obstacles"]))
+        w = EDGE_HANDLE * span
+        xm, ym = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+        hx, hy = max(0.5 * (x1 - x0), w), max(0.5 * (y1 - y0), w)
+        rects = {"left": ((x0 - w / 2, ym - hy), (x0 + w / 2, ym + hy)),
+                 "right": ((x1 - w / 2, ym - hy), (x1 + w / 2, ym + hy)),
+                 "bottom": ((xm - hx, y0 - w / 2), (xm + hx, y0 + w / 2)),
+                 "top": ((xm - hx, y1 - w / 2), (xm + hx, y1 + w / 2)),
+                 "centre": ((xm - 0.8 * w, ym - 0.8 * w), (xm + 0.8 * w, ym + 0.8 * w))}
+        point = x1 - x0 <= 1e-12 and y1 - y0 <= 1e-12
+        for handle, (a, b) in rects.items():
+            z = geo.Z["handles"] + (0.0005 if handle == "centre" else 0.0)
+            node = self.seg_handles[handle]
+            if point and handle != "centre":  # a start / end point: only the centre moves it
+                node.visible = False
+                continue
+            _show_mesh(node, *geo.polygon_mesh([geo.rectangle(a, b)], z))
+        self.seg_label.position = (xm, y1 + 1.5 * w, geo.Z["handles"])
+        a, b = float(s["lower"][2]), float(s["upper"][2])
+        psi = f"ψ {a:g} rad" if a == b else f"ψ {a:g}…{b:g} rad"
+        self.seg_label.text = f"segment {selected + 1}: {psi}"
+        self.seg_label.visible = True
+
+    def _show_snap_grid(self, lo, hi, grid) -> None:
+        if grid is None or grid[0] <= 0 or np.any((hi - lo) / grid[0] > 200):
+            self.seg_grid.visible = False
+            return
+        step, (ox, oy) = grid[0], grid[1]
+        xs = ox + step * np.arange(np.ceil((lo[0] - ox) / step), np.floor((hi[0] - ox) / step) + 1)
+        ys = oy + step * np.arange(np.ceil((lo[1] - oy) / step), np.floor((hi[1] - oy) / step) + 1)
+        z = geo.Z["cells"]
+        v = [[[x, lo[1], z], [x, hi[1], z]] for x in xs] + [[[lo[0], y, z], [hi[0], y, z]] for y in ys]
+        _show_lines(self.seg_grid, np.asarray(v, float).reshape(-1, 2, 3))
 
     # ------------------------------------------------------------------ result
     def show_result(self, result: dict | None) -> None:
@@ -268,7 +380,7 @@ class EditorScene:
         ``force`` (n,) [N] relative to the robot's force limit. Per call only the platform
         frame's pose and the legs' points and colours change; the robot's drawing is redone
         only when ``robot`` differs from the last one shown."""
-        with self._server.atomic():  # legs, colours and platform arrive as one update
+        with self._client.atomic():  # legs, colours and platform arrive as one update
             if robot is not self._robot_drawn:
                 self._show_robot_structure(robot)
             z = geo.Z["robot"]
@@ -292,4 +404,8 @@ class EditorScene:
         self.platform_pivots.points = np.column_stack((local, np.full(robot.n_legs, _PIVOTS_ABOVE_PLATFORM)))
         for node in (self.base_pivots, self.platform_pivots):
             node.visible = True
+        for i, label in enumerate(self.leg_labels):
+            if i < robot.n_legs:
+                label.position = (float(robot.base[i, 0]), float(robot.base[i, 1]), geo.Z["pivots"])
+            label.visible = i < robot.n_legs
         self._robot_drawn = robot

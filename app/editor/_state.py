@@ -5,7 +5,9 @@ The edited request is a plain dict in the one JSON shape of a plan request
 that changes that dict in place under the state's lock. The newest published result,
 segmentation and error sit next to it, with the bookkeeping of which re-plan generation
 produced them. The request edits the GUI makes are plain functions here, so they can be
-tested without a browser.
+tested without a browser. The request is either a layout (``layout``: bounds, obstacles,
+start, end) or a segment list (``segments``: boxes [lower, upper] in x, y, psi, e.g. the
+paper's Table I); both are edited here.
 
 Units: m, rad, s, N (as in the request).
 """
@@ -22,15 +24,22 @@ from ._planning import DEFAULT_ROBOT, MODE_DEFAULTS
 
 __all__ = [
     "DEFAULT_REQUEST",
+    "EDGES",
     "EditorState",
     "add_obstacle",
     "clear_obstacles",
+    "insert_segment",
     "mode_settings",
     "move_point",
+    "move_segment",
     "remove_last_obstacle",
+    "remove_segment",
     "set_layout_field",
     "set_name",
     "set_pose",
+    "set_psi_range",
+    "set_segment",
+    "set_segment_edge",
     "set_setting",
     "switch_mode",
     "toggle_cell_obstacle",
@@ -56,7 +65,8 @@ Edit = Callable[[dict], Any]  #: changes a request dict in place; its return val
 
 
 class EditorState:
-    """The edited request and the newest plan outcome, shared by every browser tab.
+    """The edited request and the newest plan outcome of one editing session (one
+    browser tab).
 
     ``lock`` guards all fields; :attr:`request` hands out copies, :meth:`apply` runs an
     edit on the real dict. The ``last_*`` fields are what the newest *current* re-plan
@@ -215,3 +225,84 @@ def with_new_layout(request: dict) -> dict:
     out.pop("segments", None)
     out.pop("reference", None)
     return out
+
+
+# ---------------------------------------------------------------------------- segment lists
+#: the box edges a drag can move: (index into lower/upper, which one) by edge name
+EDGES = {"left": (0, "lower"), "right": (0, "upper"), "bottom": (1, "lower"), "top": (1, "upper")}
+
+
+def _segments(request: dict) -> list[dict]:
+    return request.get("segments") or []
+
+
+def _box_changed(seg: dict) -> None:
+    # an exact cell polygon (made by a segmentation) no longer fits a box the person moved
+    seg.pop("polygon", None)
+
+
+def set_segment(request: dict, i: int, lower, upper) -> None:
+    """Set segment ``i``'s box to [lower, upper] = [x, y, psi] each (m, m, rad)."""
+    segs = _segments(request)
+    if 0 <= i < len(segs):
+        segs[i]["lower"], segs[i]["upper"] = [float(v) for v in lower], [float(v) for v in upper]
+        _box_changed(segs[i])
+
+
+def set_segment_edge(request: dict, i: int, edge: str, value: float) -> None:
+    """Move one edge (``left``/``right``/``bottom``/``top``) of segment ``i``'s box to
+    ``value`` [m]; it stops at the opposite edge (the box never turns inside out)."""
+    segs = _segments(request)
+    if not 0 <= i < len(segs):
+        return
+    k, side = EDGES[edge]
+    seg = segs[i]
+    if side == "lower":
+        seg["lower"][k] = min(float(value), float(seg["upper"][k]))
+    else:
+        seg["upper"][k] = max(float(value), float(seg["lower"][k]))
+    _box_changed(seg)
+
+
+def move_segment(request: dict, i: int, lower_xy) -> None:
+    """Move segment ``i``'s box so that its lower corner is ``lower_xy`` [m] (size and psi kept)."""
+    segs = _segments(request)
+    if not 0 <= i < len(segs):
+        return
+    seg = segs[i]
+    for k in (0, 1):
+        size = float(seg["upper"][k]) - float(seg["lower"][k])
+        seg["lower"][k] = float(lower_xy[k])
+        seg["upper"][k] = round(float(lower_xy[k]) + size, 10)
+    _box_changed(seg)
+
+
+def insert_segment(request: dict, after: int) -> int:
+    """Insert a copy of segment ``after`` behind it (to be moved by the person); returns
+    the new segment's index."""
+    segs = _segments(request)
+    if not segs:
+        return -1
+    after = min(max(after, 0), len(segs) - 1)
+    new = {"lower": list(segs[after]["lower"]), "upper": list(segs[after]["upper"])}
+    segs.insert(after + 1, new)
+    return after + 1
+
+
+def remove_segment(request: dict, i: int) -> None:
+    """Remove segment ``i`` (the planner says so if too few are left)."""
+    segs = _segments(request)
+    if 0 <= i < len(segs):
+        del segs[i]
+
+
+def set_psi_range(request: dict, lo: float, hi: float, i: int | None = None) -> None:
+    """Set the angle range [lo, hi] [rad] of segment ``i`` (None: of every segment that
+    is not a point, i.e. the start and end keep their angles)."""
+    segs = _segments(request)
+    for j, seg in enumerate(segs):
+        if i is not None and j != i:
+            continue
+        if i is None and all(float(a) == float(b) for a, b in zip(seg["lower"][:2], seg["upper"][:2])):
+            continue
+        seg["lower"][2], seg["upper"][2] = float(lo), float(hi)

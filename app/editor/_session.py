@@ -1,0 +1,473 @@
+"""One editing session: what one browser tab edits, sees and plans.
+
+Every tab that connects gets its own :class:`Session` (made by :class:`app.editor.Editor`
+when viser reports the client): its own request (:mod:`._state`), undo history
+(:mod:`._history`), re-plan worker (:mod:`._planning`), scene (``client.scene``) and panel
+(``client.gui``). Two tabs never see or change each other's design; sharing is explicit,
+by saving a corridor under a name and loading it in the other tab (the store is shared).
+
+Every edit goes through :meth:`Session.edit` (or :meth:`Session.set_request` for a
+whole new request): it is recorded for undo, the drawing is updated at once, and a
+debounced re-plan is scheduled on the session's worker thread. GUI callbacks therefore
+return at once; a stale result never overwrites a newer one. Dragged handles, box edges
+and drawn rectangles snap to the grid (default: the cell size) when snapping is on.
+Errors (no path, an unreachable end, a bad value) are one notification per error state,
+updated in place while the person types, and shown on the field they concern.
+
+Units: m, rad, s, N.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, cast
+
+import numpy as np
+
+from . import _geometry as geo
+from . import _state
+from ._files import EditorFiles
+from ._gui import EditorGui, error_body, error_title
+from ._history import History
+from ._planning import PlanWorker, compute_plan
+from ._result import leg_legend_html
+from ._scene import EditorScene
+from ._session_segments import SegmentEdits
+
+if TYPE_CHECKING:
+    from ._editor import Editor
+
+__all__ = ["Session"]
+
+log = logging.getLogger("rangeplan.editor")
+
+
+class Session(SegmentEdits):
+    """The editing session of one viser ``client`` (a browser tab) of ``editor``,
+    starting from ``request`` (the one JSON shape)."""
+
+    def __init__(self, editor: Editor, client, request: dict):
+        self.editor = editor
+        self.client = client
+        self.robots = editor.robots
+        self.state = _state.EditorState(request)
+        self.history = History()
+        self.selected_segment = 0  #: index of the segment box being edited (segment-list corridors)
+        self.notifications: list[tuple[str, str]] = []  #: every notification sent (title, body)
+        self._error_note: Any = None  # the one notification of the current plan error
+        self._error_state: tuple | None = None  # (code, field) it shows
+        self._draw_lock = threading.Lock()
+        self._drag: tuple[dict, float, float] | None = None  # segment at drag start, pointer x, y [m]
+        self._closed = False
+        self.scene = EditorScene(client, on_click=self._on_scene_click, on_rect_select=self._on_rect_select,
+                                 on_handle_moved=self.move_handle, on_segment_drag=self.drag_segment)
+        self.files = EditorFiles(self, editor.store)
+        self.gui = EditorGui(client.gui, self, has_store=editor.store is not None)
+        self.files.refresh_stored()
+        self.place_cameras()
+        self._show_all()
+        self.worker = PlanWorker(self._run_plan, self._on_plan_crash, editor.debounce)
+        self.worker.start()
+        client.camera.on_update(self._on_camera)
+        self._on_camera(client.camera)
+        self.worker.schedule(immediate=True)
+
+    # ------------------------------------------------------------------ read-only views
+    @property
+    def request(self) -> dict:
+        """A copy of the current request (the one JSON shape)."""
+        return self.state.request
+
+    @property
+    def store(self):
+        """The corridor store shared by all sessions (or None)."""
+        return self.files.store
+
+    @property
+    def plans_done(self) -> int:
+        """Number of plan results published."""
+        return self.state.plans_done
+
+    @property
+    def last_result(self) -> dict | None:
+        """Newest published plan result."""
+        return self.state.last_result
+
+    @property
+    def last_segmentation(self) -> dict | None:
+        """Newest published segmentation (``Segmentation.to_dict()``)."""
+        return self.state.last_segmentation
+
+    @property
+    def last_error(self) -> dict | None:
+        """Newest error ``{code, message, field}``, or None after a successful plan."""
+        return self.state.last_error
+
+    @property
+    def last_plan_generation(self) -> int:
+        """Re-plan generation of the newest published result (the plan number shown)."""
+        return self.state.last_plan_generation
+
+    @property
+    def stale_discarded(self) -> int:
+        """Results dropped because a newer edit arrived while they were computed."""
+        return self.state.stale_discarded
+
+    # ------------------------------------------------------------------ edits
+    def edit(self, fn: Callable[[dict], object], *, immediate: bool = False, key: str | None = None) -> bool:
+        """Apply ``fn(request_dict)`` (in place) under the lock as one undo step (edits with
+        the same ``key`` in quick succession join one step: the typing in one field, one
+        drag), schedule a debounced re-plan (when re-planning on every edit is on, or
+        ``immediate``) and redraw. An edit that changes nothing is not recorded. Returns
+        whether the request changed."""
+        with self.state.lock:  # the re-plan is asked for under the lock: see wait_idle
+            before = self.state.request
+            self.state.apply(fn)
+            changed = self.state.request != before
+            if changed:
+                self.history.record(before, key)
+                self._schedule(immediate)
+        if changed:
+            self._show_drawing()
+            self.gui.show_history(self.history.can_undo, self.history.can_redo)
+        return changed
+
+    def set_request(self, request: dict, *, replan: bool = True, immediate: bool = False) -> None:
+        """Replace the whole request (import / load / new layout) as one undo step, show it
+        (nothing of the old drawing stays) and re-plan."""
+        with self.state.lock:
+            self.history.record(self.state.request)
+            self.state.replace(request)
+            self.selected_segment = 0
+            if replan:
+                self._schedule(immediate, always=True)
+        self.scene.show_result(None)
+        self._show_all()
+
+    def undo(self) -> bool:
+        """Undo the newest edit step; returns False when there is none."""
+        return self._restore(self.history.undo)
+
+    def redo(self) -> bool:
+        """Redo the newest undone step; returns False when there is none."""
+        return self._restore(self.history.redo)
+
+    def _restore(self, step: Callable[[dict], dict | None]) -> bool:
+        with self.state.lock:
+            request = step(self.state.request)
+            if request is None:
+                return False
+            self.state.replace(request)
+            self._schedule(False)
+        self._show_all()
+        return True
+
+    def _schedule(self, immediate: bool, always: bool = False) -> None:
+        """Ask for a re-plan after an edit (when re-planning on every edit is on)."""
+        if always or immediate or self.gui.auto_replan.value:
+            self._mark_outdated()
+            self.worker.schedule(immediate=immediate)
+
+    def plan_now(self) -> int:
+        """Re-plan at once (the Plan button); returns the generation asked for."""
+        self._mark_outdated()
+        return self.worker.schedule(immediate=True)
+
+    # ------------------------------------------------------------------ layout edits
+    def snap_grid(self) -> tuple[float, tuple[float, float]] | None:
+        """The snapping grid (step [m], origin (x, y) [m]) or None when snapping is off. The
+        default step is the layout's cell size (the segmentation's when automatic) from the
+        bounds' lower corner, or for a segment list its smallest box side from (0, 0)."""
+        if not self.gui.snap.value:
+            return None
+        step = cast(float | None, self.gui.grid.value)
+        r = self.state.request
+        layout = r.get("layout")
+        if layout is not None:
+            origin = (float(layout["bounds"]["lower"][0]), float(layout["bounds"]["lower"][1]))
+            seg = self.state.last_segmentation or {}
+            step = step or (layout.get("cell") or {}).get("size") or (seg.get("cell") or {}).get("size") or 0.01
+            return float(step), origin
+        sides = [float(s["upper"][k]) - float(s["lower"][k]) for s in r.get("segments") or [] for k in (0, 1)]
+        sides = [d for d in sides if d > 1e-9]
+        return float(step or (min(sides) if sides else 0.01)), (0.0, 0.0)
+
+    def snap_xy(self, x: float, y: float) -> list[float]:
+        """(x, y) [m] on the snapping grid (to 0.1 mm when snapping is off)."""
+        grid = self.snap_grid()
+        return geo.snap_point((x, y), grid[0] if grid else None, grid[1] if grid else (0.0, 0.0))
+
+    def grid_changed(self) -> None:
+        """Snapping was switched or its grid changed: redraw the grid and the readout."""
+        self._show_drawing()
+
+    def move_handle(self, which: str, x: float, y: float, phase: str = "update") -> None:
+        """Move the start or end point to (x, y) [m], snapped (what dragging its gizmo
+        does; one undo step per drag, from ``phase`` "start" to "end")."""
+        if phase == "start":
+            self.history.begin(f"drag:{which}")
+        sx, sy = self.snap_xy(x, y)
+        self.edit(lambda r: _state.move_point(r, which, sx, sy), key=f"drag:{which}")
+        layout = self.state.request.get("layout")
+        if layout is not None:
+            self.gui.show_point(which, layout[which])
+        if phase == "end":
+            self.history.seal()
+            self.scene.end_drag(which, sx, sy)
+
+    def toggle_cell_at(self, x: float, y: float) -> bool:
+        """Toggle an obstacle on the cell under (x, y) [m] (see
+        :func:`app.editor._state.toggle_cell_obstacle`). Returns False when no cell of the
+        newest segmentation contains the point."""
+        seg = self.state.last_segmentation
+        if not seg:
+            return False
+        cell = next((c for c in seg["cells"] if geo.point_in_convex((x, y), c["polygon"])), None)
+        if cell is None:
+            return False
+        polygon = np.asarray(cell["polygon"], dtype=float)
+        self.edit(lambda r: _state.toggle_cell_obstacle(r, polygon))
+        return True
+
+    def add_rectangle(self, lower, upper) -> None:
+        """Add a rectangle obstacle with corners ``lower``, ``upper`` (x, y) [m] (any order)."""
+        lo, hi = np.minimum(lower, upper), np.maximum(lower, upper)
+        if np.any(hi - lo <= 0):
+            self.notify("Rectangle not added", "the rectangle has zero width or height (m)", color="yellow")
+            return
+        obstacle = {"type": "rectangle", "lower": [float(lo[0]), float(lo[1])], "upper": [float(hi[0]), float(hi[1])]}
+        self.edit(lambda r: _state.add_obstacle(r, obstacle))
+
+    def set_mode(self, mode: str) -> None:
+        """Switch the planner mode (see :func:`app.editor._state.switch_mode`)."""
+        self.edit(lambda r: _state.switch_mode(r, mode))
+        self.gui.show_mode_settings(_state.mode_settings(self.state.request))
+
+    def set_robot(self, name: str) -> None:
+        """Plan for the built-in robot ``name``; the view follows its workspace."""
+        self.edit(lambda r: r.__setitem__("robot", name))
+        self.place_cameras()
+
+    def new_layout(self) -> None:
+        """Start over from the default layout (keeps robot and settings)."""
+        self.set_request(_state.with_new_layout(self.state.request))
+
+    # ------------------------------------------------------------------ showing
+    def _show_all(self) -> None:
+        """The request in the panel and the view, the undo buttons."""
+        self.gui.show_request(self.state.request, self.selected_segment)
+        self._show_drawing()
+        self.gui.show_history(self.history.can_undo, self.history.can_redo)
+
+    def _show_drawing(self) -> None:
+        """Redraw the layout or the segment boxes (no planning); the newest request wins
+        when several threads draw at once."""
+        with self._draw_lock:
+            r = self.state.request
+            layout = r.get("layout")
+            grid = self.snap_grid()
+            self.gui.cursor.set_grid(grid[0] if grid else None, grid[1] if grid else (0.0, 0.0))
+            robot = self.robots.of_request(r)
+            if robot is not None:
+                self.scene.show_layout(layout, robot)
+            if layout is None:
+                segs = r.get("segments") or []
+                self.scene.show_segmentation(None)
+                self.scene.show_segments(segs, self.selected_segment, grid)
+                pts = np.array([g[k][:2] for g in segs for k in ("lower", "upper")] or [[0.0, 0.0]], float)
+                self.scene.set_view_span(max(float(np.max(pts.max(axis=0) - pts.min(axis=0))), 0.05))
+            else:
+                self.scene.show_segments(None)
+                self.scene.set_view_span(float(np.max(np.subtract(layout["bounds"]["upper"],
+                                                                  layout["bounds"]["lower"]))))
+
+    def show_time(self, t: float) -> None:
+        """Show the robot of the newest result at time ``t`` [s] (clamped to the plan)."""
+        with self.state.lock:
+            res, robot_spec = self.state.last_result, self.state.last_result_robot
+            failed = self.state.last_error is not None
+        if res is None or failed:
+            return
+        robot = self.robots.get(robot_spec)  # the robot it was planned for, even if changed since
+        time_ = np.asarray(res["time"], float)
+        pose = geo.sample_at(time_, np.asarray(res["pose"], float), t)
+        k = int(np.clip(round(t / res["settings"]["Ts"]), 0, len(time_) - 1))
+        self.scene.show_robot(robot, pose, np.asarray(res["drives"]["force"][k], float))
+
+    def _mark_outdated(self) -> None:
+        shown = self.gui.result.plan
+        if shown is not None:
+            self.gui.result.header.content = (f"**Plan #{shown}** is shown; the design has changed since — "
+                                              "re-planning…")
+        self.gui.show_status("edited — re-planning…" + (f" (plots: plan #{shown})" if shown is not None else ""))
+
+    # ------------------------------------------------------------------ notifications, camera
+    def notify(self, title: str, body: str, color: str = "red", client=None) -> None:
+        """Show a notification in this tab (``client`` is accepted for the file actions'
+        sake: it is always this tab); red ones stay until closed."""
+        del client
+        self.notifications.append((title, body))
+        try:
+            self.client.add_notification(title, body, color=cast(Any, color),
+                                         auto_close_seconds=8.0 if color != "red" else None)
+        except Exception:  # a tab that went away must not break the session
+            log.debug("notification failed", exc_info=True)
+
+    def _show_plan_error(self, error: dict) -> None:
+        """The one notification of the current plan error: updated in place while the
+        error state (code, field) stays, replaced when it changes; and on its field."""
+        self.gui.clear_plan_errors()
+        self._show_error_on_field(error)
+        title, body = error_title(error), error_body(error)
+        state = (error.get("code"), error.get("field"))
+        note = self._error_note
+        if note is not None and state == self._error_state:
+            if (note.title, note.body) != (title, body):
+                note.title, note.body = title, body
+                self.notifications.append((title, body))
+            return
+        self._clear_error_note()
+        self.notifications.append((title, body))
+        self._error_note = self.client.add_notification(title, body, color="red", with_close_button=True)
+        self._error_state = state
+
+    def _show_error_on_field(self, error: dict) -> None:
+        field, message = error.get("field") or "", error.get("message") or ""
+        message = message.split("; ")[0]  # the field's own message (validation may list more fields)
+        if field.startswith("segments["):
+            try:
+                i = int(field[len("segments["):field.index("]")])
+            except ValueError:
+                return
+            self.select_segment(i)
+            which = "upper" if field.endswith(".upper") else "lower"
+            getattr(self.gui.segments, which).show_error(message, source="plan")
+            return
+        self.gui.show_field_error(field, message)
+
+    def _clear_error_note(self) -> None:
+        if self._error_note is not None:
+            try:
+                self._error_note.remove()
+            except Exception:
+                log.debug("notification removal failed", exc_info=True)
+        self._error_note, self._error_state = None, None
+
+    def place_cameras(self) -> None:
+        """Frame the design in this tab: a layout's bounds and the robot's base; a segment
+        list's boxes with a margin (boxes of 2 cm next to a base of 50 cm would be too small
+        to edit; scroll out to see the whole robot)."""
+        r = self.state.request
+        layout = r.get("layout")
+        if layout is not None:
+            lo, hi = layout["bounds"]["lower"], layout["bounds"]["upper"]
+            centre, half = geo.view_extent(lo, hi, self.robots.of_request(r, fallback=True))
+        else:
+            segs = r.get("segments") or []
+            pts = np.array([s["lower"][:2] for s in segs] + [s["upper"][:2] for s in segs] or [[0, 0]], float)
+            lo, hi = pts.min(axis=0), pts.max(axis=0)
+            centre, half = 0.5 * (lo + hi), max(0.8 * float(np.max(hi - lo)), 0.05)
+        self.scene.place_camera(centre, half, self.client)
+
+    def _on_camera(self, camera) -> None:
+        try:
+            self.gui.cursor.set_camera(camera.position, camera.wxyz, camera.fov)
+        except Exception:  # before the first camera message there is no camera state
+            log.debug("no camera yet", exc_info=True)
+
+    def stored_changed(self) -> None:
+        """A corridor was saved: every tab's list of stored corridors is re-read."""
+        self.editor.stored_changed()
+
+    # ------------------------------------------------------------------ scene input
+    def _plane_point(self, event) -> np.ndarray | None:
+        origin, direction = np.asarray(event.ray_origin, float), np.asarray(event.ray_direction, float)
+        if abs(direction[2]) < 1e-12:
+            return None
+        s = -origin[2] / direction[2]
+        return (origin + s * direction)[:2] if s > 0 else None
+
+    def _on_scene_click(self, event) -> None:
+        """A click toggles the obstacle of the cell under it (layout), or picks the box
+        under it (segment list)."""
+        p = self._plane_point(event)
+        if p is None:
+            return
+        if self.state.request.get("layout") is None:
+            self.select_segment(self.segment_at(float(p[0]), float(p[1])))
+        elif self.gui.click_mode.value == "toggle obstacle":
+            self.toggle_cell_at(float(p[0]), float(p[1]))
+
+    def _on_rect_select(self, event) -> None:
+        """Shift + drag on the view adds the rectangle obstacle it spans (corners snapped)."""
+        cam = event.client.camera
+        aspect = cam.image_width / max(cam.image_height, 1)
+        a = geo.screen_to_plane(event.screen_min, cam.position, cam.wxyz, cam.fov, aspect)
+        b = geo.screen_to_plane(event.screen_max, cam.position, cam.wxyz, cam.fov, aspect)
+        if a is None or b is None:
+            return
+        self.add_rectangle(self.snap_xy(*np.minimum(a, b)), self.snap_xy(*np.maximum(a, b)))
+
+    # ------------------------------------------------------------------ planning
+    def _run_plan(self, gen: int) -> None:
+        """Plan generation ``gen`` (on the worker thread) and show it, unless a newer edit
+        arrived meanwhile."""
+        request = self.state.request
+        shown = self.gui.result.plan
+        self.gui.show_status(f"planning #{gen}…" + (f" (plots: plan #{shown})" if shown is not None else ""))
+        outcome = compute_plan(request, self.robots)
+        if not self.worker.is_current(gen) or self._closed:  # a newer edit arrived: drop this stale result
+            self.state.discard_stale()
+            return
+        self.state.publish(gen, request, outcome.segmentation, outcome.result, outcome.error)
+        robot = self.robots.of_request(request)
+        seg, result, error = outcome.segmentation, outcome.result, outcome.error
+        self.scene.show_segmentation(seg if request.get("layout") is not None else None)
+        grid = self.snap_grid()  # an automatic cell size is known now: the readout's grid follows
+        self.gui.cursor.set_grid(grid[0] if grid else None, grid[1] if grid else (0.0, 0.0))
+        if error is not None:
+            self.scene.show_result(None)
+            message = error.get("message", "")
+            self.gui.result.clear(f"**No plan**: plan #{gen} failed — {error_title(error)}: {message}. "
+                                  "The plots stay empty until a plan succeeds.")
+            self.gui.show_status(f"**plan #{gen} failed** ({error['code']}) — {message}")
+            self._show_plan_error(error)
+            return
+        assert result is not None  # a plan without an error has a result
+        self._clear_error_note()
+        self.gui.clear_plan_errors()
+        self.scene.show_result(result)
+        self.gui.show_time_range(float(result["time"][-1]), float(result["settings"]["Ts"]))
+        m = result["metrics"]
+        if robot is not None:
+            self.gui.result.show(result, robot, gen)
+            self.gui.leg_legend.content = leg_legend_html(robot.n_legs, float(np.min(robot.force_max)))
+        self.gui.result.header.content = (f"**Plan #{gen}** (the current design): planned in {outcome.seconds:.2f} s, "
+                                          f"duration {m['duration_s']:.2f} s")
+        self.show_time(float(result["time"][-1]))
+        what = (f"{len(seg['path'])} cells in the corridor" if seg else
+                f"{len(request.get('segments') or [])} boxes in the corridor")
+        self.gui.show_status(f"plan #{gen} in {outcome.seconds:.2f} s — duration {m['duration_s']:.2f} s, {what}")
+
+    def _on_plan_crash(self, exc: Exception) -> None:
+        self.notify("Internal error", f"{type(exc).__name__}: {exc}", color="red")
+
+    # ------------------------------------------------------------------ lifetime
+    def wait_idle(self, timeout: float = 30.0) -> bool:
+        """Wait up to ``timeout`` [s] until every edit made before this call is planned (no
+        re-plan pending or running). An edit asks for its re-plan under the state lock, so
+        taking the lock first waits for an edit that is half-way."""
+        with self.state.lock:
+            pass
+        return self.worker.wait_idle(timeout)
+
+    def close(self) -> None:
+        """The tab went away: stop the playback and the worker (the scene and panel went
+        with the client)."""
+        if self._closed:
+            return
+        self._closed = True
+        self.gui.playback.close()
+        self.worker.stop()

@@ -1,0 +1,359 @@
+"""The editor's editing sessions without a browser: number entry (parsing and checks against
+the request schema's own messages), undo / redo, snapping, clipping to the bounds, one
+session per tab, one notification per error state, segment-list corridors, the plots.
+Tabs are headless viser clients (tests/viser_client.py) that send what a browser sends."""
+
+from __future__ import annotations
+
+import copy
+import json
+import time
+
+import numpy as np
+import pytest
+import shapely
+from pydantic import ValidationError
+
+from app.editor import _geometry as geo
+from app.editor import _planning
+from app.editor._fields import Bounds, parse_number, parse_vector
+from app.editor._history import COALESCE_S, History
+from planner.schema import Settings, format_validation_error
+from tests.support import TABLE1
+from tests.test_editor import FakeSegmentation, MemStore, Tab
+
+
+def wait_for(cond, timeout=10.0) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if cond():
+            return True
+        time.sleep(0.02)
+    return False
+
+
+# ---------------------------------------------------------------------------- number entry
+@pytest.mark.parametrize("text, value", [("-0.09", -0.09), ("\u22120.09", -0.09), ("1e-5", 1e-5), ("-2.5E+3", -2500.0),
+                                         (".5", 0.5), ("5.", 5.0), ("+3", 3.0), ("-0", 0.0), ("  0.02 ", 0.02)])
+def test_numbers_keep_sign_decimals_and_exponents(text, value):
+    v, err = parse_number(text)
+    assert err is None and v == value and str(v) != "-0.0"
+
+
+@pytest.mark.parametrize("text, message", [("abc", "not a number: 'abc'"), ("-", "not a number: '-'"),
+                                           ("1e", "not a number: '1e'"), ("inf", "not a number: 'inf'"),
+                                           ("0,02", "use a point as the decimal separator"), ("", "required")])
+def test_bad_numbers_are_named(text, message):
+    v, err = parse_number(text)
+    assert v is None and err is not None and message in err
+
+
+@pytest.mark.parametrize("field, value", [("Ts", -1.0), ("Ts", 2.0), ("Ts", 5e-5), ("k_r", 0.0), ("N", 0), ("N", 500)])
+def test_field_bounds_say_what_the_request_schema_says(field, value):
+    """The editor's check of a typed setting gives the very message validation gives (an
+    independent source: pydantic with the planner's error wording)."""
+    bounds = Bounds(**_planning.field_bounds("Settings", field))
+    v, err = parse_number(str(value), integer=field == "N", bounds=bounds)
+    with pytest.raises(ValidationError) as exc:
+        Settings.model_validate({field: value})
+    assert v is None and err == format_validation_error(exc.value).removeprefix(f"{field}: ")
+
+
+def test_whole_numbers_and_vectors():
+    assert parse_number("20", integer=True) == (20, None)
+    assert parse_number("20.5", integer=True)[1] == "must be a whole number, got 20.5"
+    assert parse_number("", optional=True) == (None, None)
+    assert parse_vector("-0.08, 0.04, 0", ("x", "y", "ψ")) == ([-0.08, 0.04, 0.0], None)
+    assert parse_vector("-0.08, 0.04", ("x", "y", "ψ"))[1] == "needs 3 numbers separated by commas (x, y, ψ), got 2"
+    assert parse_vector("-0.08, zero", ("x", "y"))[1] == "y: not a number: 'zero'"
+    assert parse_vector("", ("min", "max"), optional=True) == (None, None)
+
+
+# ---------------------------------------------------------------------------- undo history
+def test_history_steps_coalesce_by_key_and_time():
+    now = [0.0]
+    h = History(clock=lambda: now[0])
+    states = [{"v": i} for i in range(6)]
+    assert h.record(states[0], "field:a")  # typing in a: one step
+    now[0] += 0.3
+    assert not h.record(states[1], "field:a")
+    now[0] += COALESCE_S + 0.1  # a pause: a new step
+    assert h.record(states[2], "field:a")
+    assert h.record(states[3], "field:b")  # another field: a new step
+    h.seal()
+    assert h.record(states[4], "field:b")  # sealed (a drag ended): a new step
+    assert h.depth == (4, 0)
+    assert h.undo(states[5]) == states[4] and h.undo(states[4]) == states[3]
+    assert h.undo(states[3]) == states[2] and h.undo(states[2]) == states[0]
+    assert h.undo(states[0]) is None and h.depth == (0, 4)
+    # a drag: one step from begin() to seal(), however long it takes
+    h2 = History(clock=lambda: now[0])
+    h2.begin("drag:end")
+    for i in range(5):
+        now[0] += 2 * COALESCE_S
+        assert h2.record(states[i], "drag:end") == (i == 0)
+    h2.seal()
+    assert h2.record(states[5], "drag:end") and h2.depth == (2, 0)
+    assert h.redo(states[0]) == states[2]
+    h.record(states[2], None)  # a new edit after undo drops the redo branch
+    assert not h.can_redo and h.redo(states[3]) is None
+
+
+# ---------------------------------------------------------------------------- snapping and clipping
+def test_snap_lands_on_the_grid_from_the_origin():
+    assert geo.snap(0.08742640253814118, 0.02, -0.16) == 0.08
+    assert geo.snap(-0.0874, 0.02, -0.15) == -0.09  # the grid runs from the origin
+    assert geo.snap(0.08742640253814118, None) == 0.0874  # no grid: 0.1 mm
+    assert geo.snap(-1e-9, 0.02) == 0.0 and str(geo.snap(-1e-9, 0.02)) == "0.0"
+    pts = np.random.default_rng(1).uniform(-0.2, 0.2, (200, 2))
+    for p in pts:
+        q = geo.snap_point(p, 0.005, (-0.16, -0.16))
+        k = (np.array(q) + 0.16) / 0.005
+        assert np.allclose(k, np.round(k), atol=1e-9) and np.all(np.abs(np.array(q) - p) <= 0.0025 + 1e-12)
+
+
+def test_triangle_cells_clipped_to_the_bounds_tile_exactly_the_bounds():
+    """The triangle grid overhangs the bounds; clipped, its cells lie inside and their areas
+    add up to the bounds' area (shapely's union as the independent check)."""
+    from planner.corridor import segment
+    from planner.schema import Layout, Settings
+
+    layout = Layout.model_validate({"bounds": {"lower": [-0.16, -0.16], "upper": [0.16, 0.16]},
+                                    "cell": {"shape": "triangle", "size": 0.02},
+                                    "start": [-0.08, 0, 0], "end": [0.06, 0.04, 0]})
+    seg = segment(layout, _planning.RobotCache().get("moving-slide"), Settings()).to_dict()
+    raw = [c["polygon"] for c in seg["cells"]]
+    assert np.max(np.abs(np.concatenate(raw))) > 0.16 + 1e-3, "the grid overhangs (else this test shows nothing)"
+    clipped = geo.clip_polygons(raw, [-0.16, -0.16], [0.16, 0.16])
+    pts = np.concatenate([np.asarray(p) for p in clipped])
+    assert np.all(np.abs(pts) <= 0.16 + 1e-12)
+    area = sum(shapely.Polygon(p).area for p in clipped)
+    assert area == pytest.approx(0.32 * 0.32, rel=1e-9)
+    assert shapely.union_all([shapely.Polygon(p) for p in clipped]).area == pytest.approx(0.32 * 0.32, rel=1e-9)
+
+
+def test_clip_segments_keeps_the_inside_part():
+    rng = np.random.default_rng(2)
+    segs = np.concatenate((rng.uniform(-1, 1, (300, 2, 2)), np.zeros((300, 2, 1))), axis=2)
+    out = geo.clip_segments(segs, [-0.5, -0.3], [0.4, 0.6])
+    assert np.all(out[..., 0] >= -0.5 - 1e-12) and np.all(out[..., 0] <= 0.4 + 1e-12)
+    assert np.all(out[..., 1] >= -0.3 - 1e-12) and np.all(out[..., 1] <= 0.6 + 1e-12)
+    box = shapely.box(-0.5, -0.3, 0.4, 0.6)
+    expected = sum(shapely.LineString(s[:, :2]).intersection(box).length for s in segs)
+    assert np.linalg.norm(out[:, 1, :2] - out[:, 0, :2], axis=1).sum() == pytest.approx(expected, rel=1e-9)
+
+
+# ---------------------------------------------------------------------------- sessions
+@pytest.fixture
+def tab():
+    t = Tab(MemStore(), debounce=0.1)
+    try:
+        assert t.session.wait_idle(60)
+        yield t
+    finally:
+        t.stop()
+
+
+def test_typed_numbers_reach_the_request_and_bad_ones_stay_on_the_field(tab):
+    s, client = tab.session, tab.clients[0]
+    client.type(s.gui.start.text, "-0.09, 0.02, 0")
+    assert wait_for(lambda: s.request["layout"]["start"] == [-0.09, 0.02, 0.0])
+    client.type(s.gui.Ts.text, "5e-3")
+    assert wait_for(lambda: s.request["settings"]["Ts"] == 0.005)
+    assert s.wait_idle(60) and s.last_error is None and s.last_result["settings"]["Ts"] == 0.005
+    done = s.plans_done
+    client.type(s.gui.cell_size.text, "-0.02")
+    assert wait_for(lambda: s.gui.cell_size.error == "must be > 0.0, got -0.02")
+    assert s.gui.cell_size.text.label.startswith("\u26a0") and s.gui.cell_size.text.value == "-0.02"
+    assert s.request["layout"]["cell"]["size"] == 0.02, "an invalid entry edits nothing"
+    time.sleep(0.4)
+    assert s.plans_done == done and s.wait_idle(10)
+    client.type(s.gui.cell_size.text, "0.0005")  # valid for the field; the planner: too many cells
+    assert wait_for(lambda: s.request["layout"]["cell"]["size"] == 0.0005) and s.wait_idle(60)
+    assert s.last_error["code"] == "too_large" and s.last_error["field"] == "layout.cell.size"
+    assert s.gui.cell_size.error and "409600 square cells" in s.gui.cell_size.error
+    client.type(s.gui.cell_size.text, "0.01")
+    assert wait_for(lambda: s.request["layout"]["cell"]["size"] == 0.01) and s.wait_idle(60)
+    assert s.last_error is None and s.gui.cell_size.error is None
+
+
+def test_two_tabs_never_change_each_other(tab):
+    a = tab.session
+    b = tab.connect()
+    assert b is not a and b.wait_idle(60) and b.last_error is None
+    before_b, plans_b = b.request, b.plans_done
+    tab.clients[0].type(a.gui.end.text, "0.02, 0.06, 0")
+    a.add_rectangle([0.04, -0.1], [0.06, -0.04])
+    assert wait_for(lambda: a.request["layout"]["end"] == [0.02, 0.06, 0.0]) and a.wait_idle(60)
+    assert b.request == before_b and b.plans_done == plans_b and b.gui.end.text.value == "0.06, 0.04, 0"
+    assert b.last_result["pose"][-1][:2] == pytest.approx([0.06, 0.04], abs=1e-3)
+    # sharing is explicit: save in one tab, load by name in the other
+    a.files.save(new=True)
+    assert wait_for(lambda: b.gui.stored.options[0] != "(none)"), "the other tab's list is refreshed"
+    b.gui.stored.value = b.gui.stored.options[0]
+    b.files.load()
+    assert b.request == a.request and b.wait_idle(60)
+
+
+def test_undo_and_redo_every_kind_of_edit(tab):
+    s = tab.session
+    r0 = s.request
+    # a drag is one step, however many moves it has
+    s.move_handle("end", 0.03, 0.05, "start")
+    for x in (0.035, 0.04, 0.045):
+        s.move_handle("end", x, 0.05)
+    s.move_handle("end", 0.045, 0.055, "end")
+    r1 = s.request
+    assert r1["layout"]["end"][:2] == [0.04, 0.06]  # snapped to the 0.02 m cell grid from -0.16
+    s.add_rectangle([0.02, -0.1], [0.04, -0.02])  # an obstacle
+    r2 = s.request
+    tab.clients[0].type(s.gui.k_u.text, "2e-3")  # a setting, typed
+    assert wait_for(lambda: s.request["settings"]["k_u"] == 2e-3)
+    r3 = s.request
+    table1 = copy.deepcopy(TABLE1)
+    s.files.load_request(table1, None, "table1")  # a load
+    r4 = s.request
+    assert r4["segments"] == table1["segments"]
+    assert s.history.depth == (4, 0) and not s.gui.undo_button.disabled and s.gui.redo_button.disabled
+    for expected in (r3, r2, r1, r0):
+        assert s.undo() and s.request == expected
+    assert not s.undo() and s.gui.undo_button.disabled
+    assert s.gui.end.text.value == "0.06, 0.04, 0" and s.gui.k_u.text.value == "0.001"
+    for expected in (r1, r2, r3, r4):
+        assert s.redo() and s.request == expected
+    assert not s.redo()
+    assert s.wait_idle(60) and s.last_error is None
+    assert s.last_result["corridor"]["segments"][3]["upper"][:2] == table1["segments"][3]["upper"][:2]
+
+
+def test_snapping_toggle_and_grid(tab):
+    s = tab.session
+    s.move_handle("end", 0.0517, 0.0391)
+    assert s.request["layout"]["end"][:2] == [0.06, 0.04]
+    s.gui.grid.text.value = "0.005"
+    s.move_handle("end", 0.0517, 0.0391)
+    assert s.request["layout"]["end"][:2] == [0.05, 0.04]
+    s.gui.snap.value = False
+    s.move_handle("end", 0.05172345, 0.03914567)
+    assert s.request["layout"]["end"][:2] == [0.0517, 0.0391]
+    assert s.wait_idle(60)
+
+
+def test_one_notification_per_error_state_updated_while_typing(tab, monkeypatch):
+    s, client = tab.session, tab.clients[0]
+    shown, updates, removed = [], [], []
+    orig = s.client.add_notification
+
+    def add(title, body, **kw):
+        note = orig(title, body, **kw)
+        shown.append(note)
+        return note
+    monkeypatch.setattr(s.client, "add_notification", add)
+    for text in ("0.5", "0.45", "0.4"):  # typed one after another: each too large for the 0.32 m bounds
+        client.type(s.gui.cell_size.text, text)
+        assert wait_for(lambda t=text: s.request["layout"]["cell"]["size"] == float(t)) and s.wait_idle(60)
+        assert s.last_error is not None and s.last_error["field"] == "layout.cell.size"
+        updates.append((s._error_note.title, s._error_note.body))
+    assert len(shown) == 1, "one notification for the one error state, its text updated"
+    assert len({b for _, b in updates}) == 3 and "0.4 m" in updates[-1][1]
+    note = shown[0]
+    monkeypatch.setattr(type(note), "remove", lambda self: removed.append(self))
+    client.type(s.gui.cell_size.text, "0.02")
+    assert wait_for(lambda: s.request["layout"]["cell"]["size"] == 0.02) and s.wait_idle(60)
+    assert s.last_error is None and removed == [note] and s._error_note is None
+
+
+def test_a_segment_list_corridor_is_edited_box_by_box(tab):
+    s = tab.session
+    s.files.load_request(copy.deepcopy(TABLE1), None, "table1")
+    assert s.wait_idle(60) and s.last_error is None
+    assert s.gui.segments.folder.visible and not s.gui.layout_folder.visible
+    assert "12 boxes" in s.gui.status.content
+    # a click in the view picks the box under it: (-0.03, 0.01) lies in box 4 (index 3)
+    assert s.segment_at(-0.03, 0.01) == 3
+    s.select_segment(3)
+    assert s.gui.segments.lower.text.value == "-0.04, 0, 0" and s.gui.segments.upper.text.value == "-0.02, 0.02, 0"
+    # drag its top edge up: snapped to the grid (the smallest box side, 0.02 m), one undo step
+    for phase, y in (("start", 0.021), ("update", 0.03), ("end", 0.0372)):
+        s.drag_segment("top", phase, -0.03, y)
+    assert s.request["segments"][3]["upper"][1] == 0.04 and s.history.depth[0] == 2
+    assert s.wait_idle(60) and s.last_error is None
+    assert s.last_result["corridor"]["segments"][3]["upper"][1] == pytest.approx(0.04)
+    # the centre moves the whole box; typed corners and the psi range of every box
+    s.drag_segment("centre", "start", -0.03, 0.02)
+    s.drag_segment("centre", "end", -0.01, 0.02)
+    moved = s.request["segments"][3]
+    assert moved["lower"][:2] == [-0.02, 0.0] and moved["upper"][:2] == [0.0, 0.04]
+    tab.clients[0].type(s.gui.segments.upper.text, "-0.02, 0.03, 0.1")
+    assert wait_for(lambda: s.request["segments"][3]["upper"] == [-0.02, 0.03, 0.1])
+    s.set_psi_range_all(-0.05, 0.05)
+    segs = s.request["segments"]
+    assert all(g["lower"][2] == -0.05 and g["upper"][2] == 0.05 for g in segs[1:-1])
+    assert segs[0]["lower"][2] == segs[0]["upper"][2] == 0.0, "start and end keep their angles"
+    n = len(segs)
+    s.insert_segment()
+    assert len(s.request["segments"]) == n + 1 and s.selected_segment == 4
+    s.remove_segment()
+    assert len(s.request["segments"]) == n
+    assert s.wait_idle(60)
+    # every edit re-planned: the plan is the request's corridor
+    assert s.last_error is None
+    planned = s.last_result["corridor"]["segments"]
+    assert np.allclose([p["upper"] for p in planned], [g["upper"] for g in s.request["segments"]])
+    assert np.allclose([p["lower"] for p in planned], [g["lower"] for g in s.request["segments"]])
+    # a box turned inside out by typing: the planner's message on that box's field
+    s.select_segment(3)
+    tab.clients[0].type(s.gui.segments.lower.text, "0.05, 0, 0")
+    assert wait_for(lambda: s.request["segments"][3]["lower"][0] == 0.05) and s.wait_idle(60)
+    assert s.last_error["field"].startswith("segments[3]")
+    assert "must be <= upper" in (s.gui.segments.lower.error or "")
+
+
+def test_plots_read_in_seconds_scaled_to_the_data_and_cleared_after_a_failure(tab):
+    s = tab.session
+    res, robot = s.last_result, s.robots.get("moving-slide")
+    panel = s.gui.result
+    force = np.asarray(res["drives"]["force"])
+    f_max = float(np.min(robot.force_max))
+    assert panel.force_plot.scales["x"]["time"] is False and panel.length_plot.scales["x"]["time"] is False
+    lo, hi = panel.force_plot.scales["y"]["range"]
+    assert lo <= force.min() and hi >= force.max()
+    assert hi - lo < 0.5 * f_max, "scaled to the forces (~10 N), not to the +-150 N limits"
+    assert np.array_equal(panel.force_plot.data[0], np.asarray(res["time"]))
+    assert f"plan #{s.last_plan_generation}" in panel.force_plot.title
+    panel.include_limits.value = True
+    lo, hi = panel.force_plot.scales["y"]["range"]
+    assert lo <= -f_max and hi >= f_max
+    s.move_handle("end", 0.16, 0.16)  # unreachable: the plan fails
+    assert s.wait_idle(60) and s.last_error is not None
+    assert all(len(d) == 0 for d in panel.force_plot.data) and panel.plan is None
+    assert "failed" in panel.header.content and "no plan" in panel.force_plot.title
+
+
+def test_the_panel_answers_while_a_plan_runs(monkeypatch):
+    """A slow segmentation (1 s) on the worker: typed values, undo and the status line are
+    handled at once meanwhile, and the status names the plan being computed."""
+    fake = FakeSegmentation(delay=1.0)
+    monkeypatch.setattr(_planning, "segmentation_module", lambda: fake)
+    t = Tab(None, debounce=0.05)
+    s, client = t.session, t.clients[0]
+    try:
+        assert wait_for(lambda: fake.calls >= 1 and "planning #" in s.gui.status.content)
+        t0 = time.monotonic()
+        client.type(s.gui.end.text, "0.02, 0.06, 0")
+        assert wait_for(lambda: s.request["layout"]["end"] == [0.02, 0.06, 0.0], 0.5), "no answer while planning"
+        assert time.monotonic() - t0 < 0.5
+        assert "re-planning" in s.gui.status.content or "planning #" in s.gui.status.content
+        assert s.undo() and s.request["layout"]["end"] == [0.06, 0.04, 0.0]
+        assert s.wait_idle(60)
+    finally:
+        t.stop()
+
+
+def test_export_is_the_edited_request(tab):
+    s = tab.session
+    sent = []
+    s.client.send_file_download = lambda name, content, **kw: sent.append((name, content))
+    s.move_handle("end", 0.02, 0.06)
+    s.files.export_request(s.client)
+    assert json.loads(sent[-1][1]) == s.request
