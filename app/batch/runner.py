@@ -27,7 +27,7 @@ from concurrent.futures import FIRST_COMPLETED, CancelledError, Future, wait
 from dataclasses import dataclass, field
 from typing import Any
 
-from .engine import plan_chunk
+from .engine import plan_chunk, unpack_chunk
 from .executors import Engine
 
 __all__ = ["Item", "Runner", "failed_outcome"]
@@ -203,7 +203,7 @@ class Runner:
     def _collect(self, fut: Future) -> None:
         items = self._inflight.pop(fut)
         try:
-            outs = fut.result()
+            outs = unpack_chunk(fut.result())
         except BaseException as exc:  # noqa: B036  (whatever a task raised: its items are reported)
             if isinstance(exc, KeyboardInterrupt):
                 raise
