@@ -443,3 +443,38 @@ def test_api_batch_survives_a_restart_and_never_takes_the_interactive_pool(tmp_p
     assert [it["item"] for it in items] == list(range(16)) and all(it["status"] == "ok" for it in items)
     ref = plan(reqs[7]).to_json_dict()
     assert_same_plan(items[7]["result"], ref)
+
+
+def test_run_batch_inline_writes_csv_or_only_the_summary(tmp_path):
+    from app.batch.cli import run_batch
+
+    study = write_jsonl(tmp_path / "s.jsonl", [variant(0), variant(1)])
+    res = run_batch([str(study)], tmp_path / "csv", fmt="csv", inline=True, progress="none")
+    assert res["ok"] == 2 and res["engine"] == "inline" and res["all_ok"]
+    rows = read_summary(tmp_path / "csv")
+    assert [r["file"] for r in rows] == ["s-000001.csv", "s-000002.csv"]
+    assert all(r["engine"] == "inline" and r["worker"].endswith(f":{os.getpid()}") for r in rows)
+    header = (tmp_path / "csv" / "s-000001.csv").read_text().splitlines()[0]
+    assert header.startswith("time_s,x_m,y_m,psi_rad")
+    res = run_batch([str(study)], tmp_path / "none", fmt="none", inline=True, progress="none")
+    assert res["ok"] == 2 and [p.name for p in (tmp_path / "none").iterdir()] == ["summary.csv"]
+    assert all(r["file"] == "" and r["status"] == "ok" for r in read_summary(tmp_path / "none"))
+
+
+def test_progress_bar_counts_done_failed_and_rate():
+    import io
+
+    from app.batch.progress import RichProgress, make_progress
+
+    buf = io.StringIO()
+    bar = make_progress("bar", 3, 1, buf)
+    assert isinstance(bar, RichProgress)
+    bar.start("test engine")
+    bar.item("a", {"status": "ok", "summary": {"duration_s": 1.0, "energy": 2.0, "max_force_ratio": 0.1,
+                                               "compute_ms": 3.0}})
+    bar.item("b", {"status": "error", "error": {"code": "unreachable", "message": "too far", "field": "segments[1]"}})
+    bar.close()
+    assert (bar.done, bar.failed) == (3, 1)
+    text = buf.getvalue()
+    assert "b error unreachable: segments[1]: too far" in text and "3/3" in text
+    assert make_progress("auto", 1, 0, io.StringIO()).__class__.__name__ == "Progress"  # not a terminal: lines

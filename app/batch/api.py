@@ -29,6 +29,7 @@ from .service import BatchService, QueueFull
 
 __all__ = ["batch_router", "BatchProgress"]
 
+_LOCK = threading.Lock()
 JSONL_TYPES = ("application/x-ndjson", "application/jsonl", "application/x-jsonlines", "application/json-lines")
 
 
@@ -66,8 +67,7 @@ def _error(status: int, code: str, message: str, field: str | None = None, heade
 def _service(app: FastAPI) -> BatchService:
     """The app's batch service (started by the lifespan, or on first use by a server that
     runs none)."""
-    lock = app.state.__dict__.setdefault("_batch_lock", threading.Lock())
-    with lock:
+    with _LOCK:
         svc = getattr(app.state, "batches", None)
         if svc is None:
             svc = app.state.batches = BatchService(app.state.store.path)

@@ -44,7 +44,12 @@ class DaskEngine(Engine):
             self.client = Client(address, timeout=f"{connect_timeout_s}s", set_as_default=False)
         except (OSError, TimeoutError) as exc:
             raise OSError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
-        self.client.register_plugin(WarmUp(), name=WarmUp.name)
+        try:
+            self.client.register_plugin(WarmUp(), name=WarmUp.name)
+        except Exception as exc:  # a worker without rangeplan cannot even load the plugin
+            self.client.close()
+            raise OSError(f"the Dask workers at {address} cannot load rangeplan ({type(exc).__name__}: {exc}); "
+                          "install the same rangeplan version on every worker") from None
         self._executor = self.client.get_executor(pure=False)
 
     @property
