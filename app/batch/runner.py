@@ -5,8 +5,9 @@ process pool and a Dask cluster).
 * **Bounded**: at most ``2 x slots`` tasks are in flight (each worker has one task queued
   behind the running one), so memory and the scheduler's queue stay small however large
   the batch, and a cancellation takes effect at once.
-* **Chunks**: small plans are grouped so one task takes ~``target_task_s`` (0.2 s): a
-  round trip to a pool or a scheduler costs ~0.1-1 ms, a Table I plan ~5 ms. Never more
+* **Chunks**: small plans are grouped so one task takes ~``target_task_s`` (0.5 s, at most
+  ``max_chunk`` = 64 plans): a task costs a Dask scheduler and its client ~1-2.5 ms of CPU
+  and its worker ~1-2 ms (docs/batch-scale.md), a Table I plan ~5 ms. Never more
   than ``remaining / (2 x slots)`` items per task, so the last tasks still spread over the
   workers. Every item keeps its own outcome and time limit.
 * **No item lost**: a worker that dies takes its tasks with it. Dask's scheduler retries
@@ -69,7 +70,7 @@ class Runner:
     error code), ``failed`` (it kept losing its worker) or ``cancelled``."""
 
     def __init__(self, engine: Engine, on_done: Callable[[Item, dict[str, Any]], None], *, fmt: str = "json",
-                 timeout_s: float | None = None, max_attempts: int = 3, target_task_s: float = 0.2,
+                 timeout_s: float | None = None, max_attempts: int = 3, target_task_s: float = 0.5,
                  max_chunk: int = 64, poll_s: float = 0.25):
         self.engine = engine
         self.on_done = on_done
