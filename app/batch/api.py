@@ -112,9 +112,13 @@ def _parse_body(body: bytes, content_type: str) -> tuple[list[str], str | None] 
 
 
 def batch_router() -> APIRouter:
+    from app.api import ErrorResponse  # the service's one error shape (app.api is loaded: it calls us)
+
     router = APIRouter(lifespan=_lifespan, tags=["batches"])
-    errs = {404: {"description": "Unknown batch id"}, 413: {"description": "Body too large"},
-            422: {"description": "Invalid batch"}, 503: {"description": "Too many batch items queued"}}
+    errs: dict[int | str, dict[str, Any]] = {
+        s: {"model": ErrorResponse, "description": d} for s, d in (
+            (404, "Unknown batch id"), (413, "Body too large"), (422, "Invalid batch or query parameter"),
+            (503, "Too many batch items queued"))}
 
     @router.post("/v1/batches", status_code=202, response_model=BatchProgress,
                  responses={k: errs[k] for k in (413, 422, 503)},
@@ -143,13 +147,13 @@ def batch_router() -> APIRouter:
                           headers={"Retry-After": "30"})
         return JSONResponse(out, status_code=202, headers={"Location": f"/v1/batches/{out['id']}"})
 
-    @router.get("/v1/batches", response_model=list[BatchProgress])
+    @router.get("/v1/batches", response_model=list[BatchProgress], responses={422: errs[422]})
     def list_batches(request: Request, limit: int = Query(100, ge=1, le=1000, description="At most this many "
                                                                                   "(count), newest first")):
         """The newest batches and their progress."""
         return _service(request.app).store.list(limit)
 
-    @router.get("/v1/batches/{batch_id}", response_model=BatchProgress, responses={404: errs[404]})
+    @router.get("/v1/batches/{batch_id}", response_model=BatchProgress, responses={404: errs[404], 422: errs[422]})
     def get_batch(batch_id: str, request: Request):
         """State and progress of a batch."""
         out = _service(request.app).store.progress(batch_id)
@@ -162,7 +166,7 @@ def batch_router() -> APIRouter:
               "worker, attempts, summary | error, result} (result: the plan result, as POST /v1/plan); or the "
               "summary CSV (one row per item; units in the column names)",
               "content": {"application/x-ndjson": {"schema": {"type": "string"}},
-                          "text/csv": {"schema": {"type": "string"}}}}, 404: errs[404]})
+                          "text/csv": {"schema": {"type": "string"}}}}, 404: errs[404], 422: errs[422]})
     def batch_results(batch_id: str, request: Request,
                       format: Literal["jsonl", "csv"] = Query("jsonl", description="'jsonl' (default) or 'csv' "
                                                               "(the summary)"),
@@ -187,7 +191,7 @@ def batch_router() -> APIRouter:
         return StreamingResponse(lines, media_type="application/x-ndjson")
 
     @router.delete("/v1/batches/{batch_id}", response_model=BatchProgress, responses={
-        204: {"description": "Deleted (purge=true)"}, 404: errs[404]})
+        204: {"description": "Deleted (purge=true)"}, 404: errs[404], 422: errs[422]})
     def cancel_batch(batch_id: str, request: Request,
                      purge: bool = Query(False, description="Also delete the batch and its stored results")):
         """Cancel a batch: no further items start; finished results are kept (``purge=true``
