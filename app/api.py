@@ -39,6 +39,7 @@ from fastapi.responses import JSONResponse, RedirectResponse, Response
 from pydantic import BaseModel, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from app.batch.api import batch_router
 from app.http_exchange import (
     FORMAT_HELP,
     PlanFormat,
@@ -268,6 +269,7 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
     app.state.pool = None
     app.state.close_pool = lambda: close_pool(app)
     app.add_middleware(BodySizeLimit, limit=max_body)
+    app.include_router(batch_router())  # /v1/batches (app/batch/): batches on their own workers
 
     @app.exception_handler(RequestValidationError)
     async def _on_validation(request: Request, exc: RequestValidationError):

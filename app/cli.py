@@ -177,6 +177,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="editor (viser) port (env RANGEPLAN_EDITOR_PORT, default 8080)")
     ps.add_argument("--no-editor", action="store_true", help="serve the API only")
     ps.set_defaults(func=cmd_serve)
+    from app.batch.cli import add_parser as add_batch_parser  # `rangeplan batch` (app/batch/)
+    add_batch_parser(sub)
     return p
 
 

@@ -1,0 +1,12 @@
+"""Batch planning: many requests on a local process pool or a Dask cluster.
+
+* :mod:`.engine`: :func:`plan_item`, the one function that plans one request wherever it
+  runs and returns a compact outcome (where it ran included); workers warm up once.
+* :mod:`.executors` / :mod:`.cluster`: the engines behind one ``concurrent.futures``
+  interface (inline, local process pool, Dask ``Client.get_executor()``).
+* :mod:`.runner`: the dispatcher (bounded, chunked, retries the items of a lost worker).
+* :mod:`.inputs`, :mod:`.summary`, :mod:`.progress`, :mod:`.cli`: ``rangeplan batch``.
+* :mod:`.store`, :mod:`.service`, :mod:`.api`: ``/v1/batches`` in the HTTP service.
+
+This package never imports the editor; the engine modules import no web framework.
+"""

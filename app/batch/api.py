@@ -1,0 +1,209 @@
+"""``/v1/batches``: plan many requests in the background, with progress and stored results.
+
+    POST   /v1/batches                 {"requests": [...], "name": ...} or JSON Lines -> 202 {id, state, ...}
+    GET    /v1/batches                 the newest batches' progress
+    GET    /v1/batches/{id}            state and progress (total, done, ok, failed, running, rate, ETA)
+    GET    /v1/batches/{id}/results    JSON Lines in item order (?wait=true: until the batch ends);
+                                       ?format=csv: the summary (the CLI's summary.csv columns)
+    DELETE /v1/batches/{id}            cancel (finished results are kept); ?purge=true: delete it
+
+:func:`batch_router` is included by :func:`app.api.create_app`; its lifespan starts the
+:class:`~app.batch.service.BatchService` (resuming unfinished batches) beside the app's
+planning pool and stops it at shutdown.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from contextlib import asynccontextmanager
+from typing import Any, Literal
+
+import orjson
+from fastapi import APIRouter, FastAPI, Query, Request
+from fastapi.responses import JSONResponse, Response, StreamingResponse
+from pydantic import BaseModel, Field
+from starlette.exceptions import HTTPException
+
+from .service import BatchService, QueueFull
+
+__all__ = ["batch_router", "BatchProgress"]
+
+_LOCK = threading.Lock()
+JSONL_TYPES = ("application/x-ndjson", "application/jsonl", "application/x-jsonlines", "application/json-lines")
+
+
+class BatchProgress(BaseModel):
+    id: str = Field(description="Batch id (uuid4 hex)")
+    name: str | None = Field(description="Batch name")
+    state: Literal["queued", "running", "done", "cancelled"] = Field(description="Batch state")
+    created: str = Field(description="Creation time, ISO-8601 UTC")
+    format: str = Field(description="Result format ('json')")
+    total: int = Field(description="Items in the batch (count)")
+    done: int = Field(description="Items finished, whatever the outcome (count)")
+    ok: int = Field(description="Items planned (count)")
+    failed: int = Field(description="Items that failed: a planner error (code in the results) or a lost worker "
+                        "(count)")
+    cancelled: int = Field(description="Items cancelled before they finished (count)")
+    running: int = Field(description="Items being planned now (count)")
+    pending: int = Field(description="Items waiting (count)")
+    rate_per_s: float | None = Field(description="Items finished per second since the batch started or resumed, 1/s")
+    eta_s: float | None = Field(description="Estimated time to finish at that rate, s")
+    elapsed_s: float | None = Field(description="Time since the batch started or resumed, s")
+
+
+class BatchCreate(BaseModel):
+    requests: list[dict[str, Any]] = Field(description="Plan requests, each the body of POST /v1/plan "
+                                           "(m, m, rad, s); each is validated on its own, an invalid one is "
+                                           "that item's error")
+    name: str | None = Field(None, description="Batch name")
+
+
+def _error(status: int, code: str, message: str, field: str | None = None, headers: dict | None = None):
+    return JSONResponse({"error": {"code": code, "message": message, "field": field}}, status_code=status,
+                        headers=headers)
+
+
+def _service(app: FastAPI) -> BatchService:
+    """The app's batch service (started by the lifespan, or on first use by a server that
+    runs none)."""
+    with _LOCK:
+        svc = getattr(app.state, "batches", None)
+        if svc is None:
+            svc = app.state.batches = BatchService(app.state.store.path)
+            svc.start()
+        return svc
+
+
+@asynccontextmanager
+async def _lifespan(app: FastAPI):
+    await asyncio.get_running_loop().run_in_executor(None, _service, app)
+    try:
+        yield
+    finally:
+        svc = getattr(app.state, "batches", None)
+        app.state.batches = None
+        if svc is not None:
+            await asyncio.get_running_loop().run_in_executor(None, svc.close)
+
+
+def _parse_body(body: bytes, content_type: str) -> tuple[list[str], str | None] | JSONResponse:
+    """The requests as JSON texts (each validated later, by the worker that plans it)."""
+    if content_type in JSONL_TYPES:
+        reqs = [ln.decode("utf-8", "replace") for ln in body.splitlines() if ln.strip()]
+        if not reqs:
+            return _error(422, "invalid_input", "the JSON Lines body holds no request", "requests")
+        return reqs, None
+    try:
+        doc = orjson.loads(body)
+    except orjson.JSONDecodeError as exc:
+        return _error(422, "invalid_input", f"body is not valid JSON: {exc}")
+    if not isinstance(doc, dict):
+        return _error(422, "invalid_input", "a batch is a JSON object {\"requests\": [...], \"name\": ...}")
+    unknown = sorted(set(doc) - {"requests", "name"})
+    if unknown:
+        return _error(422, "invalid_input", "unknown field: not a field of this object", unknown[0])
+    reqs, name = doc.get("requests"), doc.get("name")
+    if not isinstance(reqs, list) or not reqs:
+        return _error(422, "invalid_input", "must be a non-empty list of plan requests", "requests")
+    if name is not None and not isinstance(name, str):
+        return _error(422, "invalid_input", "must be a string", "name")
+    return [orjson.dumps(r).decode() for r in reqs], name
+
+
+def batch_router() -> APIRouter:
+    from app.api import ErrorResponse  # the service's one error shape (app.api is loaded: it calls us)
+
+    router = APIRouter(lifespan=_lifespan, tags=["batches"])
+    errs: dict[int | str, dict[str, Any]] = {
+        s: {"model": ErrorResponse, "description": d} for s, d in (
+            (404, "Unknown batch id"), (413, "Body too large"), (422, "Invalid batch or query parameter"),
+            (503, "Too many batch items queued"))}
+
+    @router.post("/v1/batches", status_code=202, response_model=BatchProgress,
+                 responses={k: errs[k] for k in (413, 422, 503)},
+                 openapi_extra={"requestBody": {"required": True, "content": {
+                     "application/json": {"schema": BatchCreate.model_json_schema()},
+                     "application/x-ndjson": {"schema": {"type": "string", "description": "One plan request per "
+                                                         "line (JSON Lines)"}}}}})
+    async def create_batch(request: Request, name: str | None = Query(None, description="Batch name (JSON Lines "
+                                                                             "bodies; a JSON body has its own)")):
+        """Queue a batch of plan requests; answers 202 at once with its id (``Location``).
+        Each item is validated and planned on its own: a bad item is reported in the results
+        with its code, the others are planned."""
+        svc = _service(request.app)
+        ctype = request.headers.get("content-type", "application/json").split(";")[0].strip().lower()
+        parsed = _parse_body(await request.body(), ctype)
+        if isinstance(parsed, JSONResponse):
+            return parsed
+        reqs, body_name = parsed
+        if len(reqs) > svc.max_items:
+            return _error(422, "too_large", f"{len(reqs)} requests; a batch holds at most {svc.max_items} "
+                          "(RANGEPLAN_MAX_BATCH_ITEMS)", "requests")
+        try:
+            out = await asyncio.get_running_loop().run_in_executor(None, svc.create, reqs, body_name or name)
+        except QueueFull as exc:
+            return _error(503, "busy", f"too many batch items queued ({exc}); retry later",
+                          headers={"Retry-After": "30"})
+        return JSONResponse(out, status_code=202, headers={"Location": f"/v1/batches/{out['id']}"})
+
+    @router.get("/v1/batches", response_model=list[BatchProgress], responses={422: errs[422]})
+    def list_batches(request: Request, limit: int = Query(100, ge=1, le=1000, description="At most this many "
+                                                                                  "(count), newest first")):
+        """The newest batches and their progress."""
+        return _service(request.app).store.list(limit)
+
+    @router.get("/v1/batches/{batch_id}", response_model=BatchProgress, responses={404: errs[404], 422: errs[422]})
+    def get_batch(batch_id: str, request: Request):
+        """State and progress of a batch."""
+        out = _service(request.app).store.progress(batch_id)
+        if out is None:
+            raise HTTPException(404, f"no batch with id {batch_id!r}")
+        return out
+
+    @router.get("/v1/batches/{batch_id}/results", response_class=Response, responses={
+        200: {"description": "JSON Lines, one object per item in item order: {item, status, name, engine, "
+              "worker, attempts, summary | error, result} (result: the plan result, as POST /v1/plan); or the "
+              "summary CSV (one row per item; units in the column names)",
+              "content": {"application/x-ndjson": {"schema": {"type": "string"}},
+                          "text/csv": {"schema": {"type": "string"}}}}, 404: errs[404], 422: errs[422]})
+    def batch_results(batch_id: str, request: Request,
+                      format: Literal["jsonl", "csv"] = Query("jsonl", description="'jsonl' (default) or 'csv' "
+                                                              "(the summary)"),
+                      wait: bool = Query(False, description="Stream every item as it finishes, until the batch "
+                                         "ends (default: the items finished so far)")):
+        """The batch's results, streamed in item order."""
+        svc = _service(request.app)
+        if format == "csv":
+            rows = svc.summary_rows(batch_id)
+            if rows is None:
+                raise HTTPException(404, f"no batch with id {batch_id!r}")
+            from .summary import header_line, row_line
+
+            def csv_lines():
+                yield header_line()
+                for r in rows:
+                    yield row_line(r)
+            return StreamingResponse(csv_lines(), media_type="text/csv; charset=utf-8")
+        lines = svc.results(batch_id, wait=wait)
+        if lines is None:
+            raise HTTPException(404, f"no batch with id {batch_id!r}")
+        return StreamingResponse(lines, media_type="application/x-ndjson")
+
+    @router.delete("/v1/batches/{batch_id}", response_model=BatchProgress, responses={
+        204: {"description": "Deleted (purge=true)"}, 404: errs[404], 422: errs[422]})
+    def cancel_batch(batch_id: str, request: Request,
+                     purge: bool = Query(False, description="Also delete the batch and its stored results")):
+        """Cancel a batch: no further items start; finished results are kept (``purge=true``
+        deletes the batch and its results)."""
+        svc = _service(request.app)
+        if purge:
+            if not svc.delete(batch_id):
+                raise HTTPException(404, f"no batch with id {batch_id!r}")
+            return Response(status_code=204)
+        out = svc.cancel(batch_id)
+        if out is None:
+            raise HTTPException(404, f"no batch with id {batch_id!r}")
+        return out
+
+    return router

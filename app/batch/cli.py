@@ -1,0 +1,181 @@
+"""``rangeplan batch INPUT... -o OUTDIR``: plan many requests on a local process pool or a
+Dask cluster, with progress, one result file per item and ``summary.csv``.
+
+Exit status: 0 every item planned; 1 some items failed (``summary.csv`` says which and why);
+2 a usage error (a missing input, an unreachable scheduler); 130 interrupted (Ctrl-C: every
+finished result and the summary of what finished are kept; the same command resumes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from .config import FORMAT_NAMES, SCHEDULER_ENV, env_float
+
+__all__ = ["add_parser", "cmd_batch", "run_batch"]
+
+SUMMARY = "summary.csv"
+
+
+def add_parser(sub: Any) -> None:
+    """Register the ``batch`` sub-command on the ``rangeplan`` parser's sub-parsers."""
+    pb = sub.add_parser(
+        "batch", help="plan many requests: a local process pool, or a Dask cluster with --scheduler",
+        description="Plan every request in INPUT (request files, directories of them, JSON Lines files with one "
+                    "request per line). Writes OUTDIR/<key>.<format> per item and OUTDIR/summary.csv. A failing "
+                    "item never stops the batch; re-running with the same OUTDIR skips items already done.")
+    pb.add_argument("inputs", nargs="+", metavar="INPUT", help="request .json file, directory, or .jsonl file")
+    pb.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="output directory (created)")
+    pb.add_argument("--workers", type=int, help="local worker processes (default: the CPU count)")
+    pb.add_argument("--scheduler", default=os.environ.get(SCHEDULER_ENV) or None, metavar="ADDRESS",
+                    help=f"Dask scheduler, e.g. tcp://10.0.0.5:8786 (env {SCHEDULER_ENV}); default: a local pool")
+    pb.add_argument("--format", choices=list(FORMAT_NAMES), default="json",
+                    help="result file format (none: summary.csv only)")
+    pb.add_argument("--resume", action=argparse.BooleanOptionalAction, default=True,
+                    help="skip items already done in OUTDIR (default: on)")
+    pb.add_argument("--progress", choices=["auto", "bar", "lines", "none"], default="auto",
+                    help="progress bar on a terminal, a line per item otherwise (default: auto)")
+    pb.add_argument("--timeout", type=float, default=env_float("RANGEPLAN_PLAN_TIMEOUT_S", 0.0), metavar="SECONDS",
+                    help="compute limit per item, s (env RANGEPLAN_PLAN_TIMEOUT_S; default 0: none)")
+    pb.add_argument("--inline", action="store_true", help="plan in this process, one item at a time (no pool)")
+    pb.set_defaults(func=cmd_batch)
+
+
+class _Usage(Exception):
+    pass
+
+
+def run_batch(inputs: list[str], outdir: str | Path, *, workers: int | None = None, scheduler: str | None = None,
+              fmt: str = "json", resume: bool = True, progress: str = "auto", timeout_s: float = 0.0,
+              inline: bool = False, engine: Any = None, stream: Any = None) -> dict[str, Any]:
+    """The batch command as a function (the CLI, tests and benchmarks call it). Returns
+    ``{"ok", "failed", "skipped", "total", "interrupted", "elapsed_s", "engine", ...}``;
+    raises :class:`app.batch.inputs.InputError` or ``OSError`` (scheduler) for usage errors.
+    ``engine``: an already open engine to use (not closed here)."""
+    from .engine import FORMATS
+    from .executors import open_engine
+    from .inputs import count_items, iter_items, resolve_inputs
+    from .progress import make_progress
+    from .runner import Item, Runner
+    from .summary import header_line, read_summary, row_line, summary_row, write_summary
+
+    files = resolve_inputs(inputs)
+    total = count_items(files)
+    out = Path(outdir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise _Usage(f"{out}: cannot create the output directory: {exc.strerror or exc}") from None
+    ext = FORMATS[fmt][0]
+    summary_path = out / SUMMARY
+    previous = read_summary(summary_path) if resume else {}
+    lines: dict[str, tuple[int, str]] = {}
+    statuses: dict[str, str] = {}
+    shas: dict[int, str] = {}
+    counts = {"ok": 0, "error": 0, "failed": 0, "cancelled": 0, "skipped": 0}
+    prog = make_progress(progress, total, 0, stream)
+
+    def done_before(item: Item, sha: str) -> bool:
+        row = previous.get(item.key)
+        if row is None or row.get("request_sha") != sha or row["status"] not in ("ok", "error"):
+            return False
+        if row["status"] == "ok" and ext is not None and not (out / f"{item.key}{ext}").is_file():
+            return False
+        return True
+
+    def todo():
+        for item, sha in iter_items(files):
+            if sha and done_before(item, sha):
+                row = dict(previous[item.key], item=str(item.index))
+                lines[item.key] = (item.index, row_line(row))
+                statuses[item.key] = row["status"]
+                counts["skipped"] += 1
+                prog.done += 1
+                continue
+            shas[item.index] = sha
+            yield item
+
+    journal = open(summary_path, "a" if previous else "w", newline="")
+    if not previous:
+        journal.write(header_line())
+
+    def on_done(item: Item, outcome: dict[str, Any]) -> None:
+        file = ""
+        if outcome["status"] == "ok" and ext is not None and outcome.get("payload") is not None:
+            file = f"{item.key}{ext}"
+            tmp = out / (file + ".tmp")
+            tmp.write_bytes(outcome["payload"])
+            os.replace(tmp, out / file)
+        line = row_line(summary_row(item.index, item.key, outcome, shas.pop(item.index, ""), file))
+        lines[item.key] = (item.index, line)
+        statuses[item.key] = outcome["status"]
+        journal.write(line)
+        journal.flush()
+        counts[outcome["status"]] = counts.get(outcome["status"], 0) + 1
+        prog.item(item.key, outcome)
+
+    own_engine = engine is None
+    try:
+        if own_engine:
+            engine = open_engine(workers, scheduler, inline=inline)
+    except BaseException:
+        journal.close()
+        raise
+    interrupted = False
+    t0 = time.perf_counter()
+    runner = Runner(engine, on_done, fmt=fmt, timeout_s=timeout_s or None)
+    try:
+        prog.start(engine.describe())
+        consumed = todo()
+        runner.run(consumed, remaining=lambda: max(0, total - prog.done - runner.running))
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        elapsed = time.perf_counter() - t0
+        prog.close()
+        if own_engine:
+            engine.close(cancel=interrupted)
+        journal.close()
+        write_summary(summary_path, lines.values())
+    failed = counts["error"] + counts["failed"]
+    return {"ok": counts["ok"], "failed": failed, "skipped": counts["skipped"], "total": total,
+            "finished": len(lines), "interrupted": interrupted, "elapsed_s": elapsed,
+            "rate": (counts["ok"] + failed) / elapsed if elapsed > 0 else 0.0, "engine": engine.name,
+            "summary": str(summary_path), "lost_workers": runner.stats.lost_workers,
+            "resubmitted": runner.stats.resubmitted_items,
+            "all_ok": not interrupted and len(statuses) == total and all(v == "ok" for v in statuses.values())}
+
+
+def cmd_batch(args: argparse.Namespace) -> int:
+    from .inputs import InputError
+
+    def usage(msg: str) -> int:
+        print(f"rangeplan: error: {msg}", file=sys.stderr)
+        return 2
+
+    if args.workers is not None and args.workers < 1:
+        return usage(f"--workers must be >= 1, got {args.workers}")
+    if args.workers is not None and args.scheduler:
+        return usage("--workers sets the local pool; a Dask cluster's size is set by its workers (drop one of "
+                     "--workers and --scheduler)")
+    if args.timeout < 0:
+        return usage(f"--timeout must be >= 0 s, got {args.timeout:g}")
+    try:
+        res = run_batch(args.inputs, args.output, workers=args.workers, scheduler=args.scheduler, fmt=args.format,
+                        resume=args.resume, progress=args.progress, timeout_s=args.timeout, inline=args.inline)
+    except (InputError, _Usage, OSError) as exc:
+        return usage(str(exc))
+    done = res["ok"] + res["failed"]
+    tail = f" ({res['skipped']} already done)" if res["skipped"] else ""
+    print(f"rangeplan: {res['ok']} ok, {res['failed']} failed of {res['total']}{tail} in {res['elapsed_s']:.1f} s "
+          f"({res['rate']:.1f} plans/s); summary: {res['summary']}", file=sys.stderr)
+    if res["interrupted"]:
+        print(f"rangeplan: interrupted: {done} finished results kept ({res['finished']} of {res['total']} in the "
+              "summary); run the same command again to resume", file=sys.stderr)
+        return 130
+    return 0 if res["all_ok"] else 1

@@ -1,0 +1,211 @@
+"""The batch engine's one function: plan one request wherever it runs and return a compact,
+picklable outcome (plain types and the result's bytes in the requested format).
+
+:func:`plan_item` is what every engine runs: the calling process (``inline``), a local
+process pool (``local``) or a Dask worker (``dask``). It never raises for a request's
+fault: a planner error comes back as ``{"status": "error", "error": {code, message,
+field}}``, like the HTTP API's 422 body. :func:`plan_chunk` plans several requests in one
+task (fewer round trips to a pool or a scheduler per plan; each item still has its own time
+limit and outcome).
+
+Workers import this module once and load the compiled kernels once
+(:func:`warm_worker`: a process pool's initializer, or the Dask worker plugin in
+:mod:`app.batch.cluster`); nothing is imported or compiled per item.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import socket
+import sys
+import threading
+import time
+from typing import Any
+
+from planner import PlannerError, plan, to_csv, warm_up
+from planner.schema import PlanRequest, PlanResult, error_details
+
+__all__ = ["FORMATS", "plan_item", "plan_chunk", "unpack_chunk", "warm_worker", "where", "ItemTimeout"]
+
+#: output formats: file extension and the function writing a result's bytes (``none``: the
+#: summary only, no result file; what a million-corridor study keeps, see docs/batch-scale.md)
+FORMATS: dict[str, tuple[str | None, Any]] = {
+    "json": (".json", lambda r: r.to_json()),
+    "csv": (".csv", lambda r: to_csv(r).encode()),
+    "none": (None, None),
+}
+
+#: set in a worker by :func:`warm_worker` (``local``); Dask workers are recognised by
+#: ``distributed.get_worker()``; anything else is the calling process (``inline``)
+_ENGINE = {"name": "inline"}
+
+
+class ItemTimeout(BaseException):
+    """Raised inside the planning thread when an item passes its time limit (a
+    BaseException so that no ``except Exception`` in the planner swallows it)."""
+
+
+def where() -> dict[str, Any]:
+    """Where this call runs: ``{"engine", "worker", "host", "pid"}``; ``worker`` is the Dask
+    worker's address, else ``host:pid``."""
+    host, pid = socket.gethostname(), os.getpid()
+    if "distributed" in sys.modules:  # only a Dask worker (or client) has imported it
+        try:
+            from distributed import get_worker
+
+            return {"engine": "dask", "worker": get_worker().address, "host": host, "pid": pid}
+        except (ImportError, ValueError):  # ValueError: not inside a Dask task
+            pass
+    return {"engine": _ENGINE["name"], "worker": f"{host}:{pid}", "host": host, "pid": pid}
+
+
+def warm_worker(engine: str = "local", nice: int = 0) -> float:
+    """Load the compiled kernels (``planner.warm_up``) and mark this process as ``engine``;
+    ``nice`` > 0 lowers its CPU priority (the service's batch workers yield to interactive
+    plans). Runs once per worker process, never per item. Returns the seconds taken."""
+    import signal
+
+    _ENGINE["name"] = engine
+    if threading.current_thread() is threading.main_thread() and engine == "local":
+        # Ctrl-C reaches the whole process group: the parent decides what stops
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if nice > 0:
+        try:
+            os.nice(nice)
+        except OSError:
+            pass
+    try:
+        return warm_up()
+    except Exception:  # the first plan compiles instead
+        return 0.0
+
+
+class _Deadline:
+    """Raise :class:`ItemTimeout` in the calling thread after ``seconds`` (at the next Python
+    bytecode: a single compiled kernel call is not interrupted, the request bounds keep those
+    short). Works in any thread (Dask runs tasks in a thread pool), unlike ``SIGALRM``."""
+
+    def __init__(self, seconds: float | None):
+        self.seconds = seconds
+        self._lock = threading.Lock()
+        self._armed = False
+        self._fired = False
+        self._timer: threading.Timer | None = None
+
+    def _fire(self) -> None:
+        with self._lock:
+            if self._armed:
+                self._fired = True
+                ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(self._tid), ctypes.py_object(ItemTimeout))
+
+    def __enter__(self):
+        if self.seconds and self.seconds > 0:
+            self._tid = threading.get_ident()
+            self._armed = True
+            self._timer = threading.Timer(self.seconds, self._fire)
+            self._timer.daemon = True
+            self._timer.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._timer is None:
+            return
+        with self._lock:
+            self._armed = False
+            self._timer.cancel()
+            if self._fired:  # fired but maybe not yet delivered: withdraw it
+                ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(self._tid), None)
+
+
+def _summary(result: PlanResult) -> dict[str, Any]:
+    m = result.metrics
+    return {"duration_s": m.duration_s, "energy": m.energy, "max_force_ratio": m.max_force_ratio,
+            "contained": m.contained, "settled": m.settled, "end_error_m": m.end_error_m,
+            "max_corridor_violation_m": m.max_corridor_violation_m, "steps": m.steps, "compute_ms": m.compute_ms}
+
+
+def _degenerate(exc: Exception, request: Any) -> dict[str, Any]:
+    # the HTTP workers' wording (app.workers): a singular model is the input's fault
+    custom = not isinstance(getattr(request, "robot", "moving-slide"), str)
+    return {"code": "singular", "field": "robot" if custom else None,
+            "message": f"the robot model is degenerate here ({type(exc).__name__}: {exc}); check that the "
+                       "robot's pivots are distinct, its legs have positive length, masses and inertias "
+                       "are positive, and the corridor avoids singular poses"}
+
+
+def plan_item(request: str | bytes | dict | PlanRequest, fmt: str = "json",
+              timeout_s: float | None = None) -> dict[str, Any]:
+    """Plan one request (JSON text, a dict or a :class:`PlanRequest`) and return
+    ``{"status": "ok" | "error", "name", "payload": bytes | None, "summary": {...} | None,
+    "error": {code, message, field} | None, "wall_ms", **where()}``. ``payload`` is the result
+    in ``fmt`` (:data:`FORMATS`). ``timeout_s`` bounds the planning time (code ``timeout``)."""
+    import numpy as np
+    from pydantic import ValidationError
+
+    t0 = time.perf_counter()
+    out: dict[str, Any] = {"status": "error", "name": None, "payload": None, "summary": None, "error": None}
+    req: Any = request
+    try:
+        if fmt not in FORMATS:
+            raise PlannerError("invalid_input", f"unknown format {fmt!r}; one of {', '.join(FORMATS)}", "format")
+        with _Deadline(timeout_s):
+            if isinstance(request, (str, bytes)):
+                req = PlanRequest.model_validate_json(request)
+            elif isinstance(request, dict):
+                req = PlanRequest.model_validate(request)
+            out["name"] = req.name
+            result = plan(req)
+            writer = FORMATS[fmt][1]
+            out["payload"] = writer(result) if writer is not None else None
+        out.update(status="ok", summary=_summary(result))
+    except ItemTimeout:
+        out["error"] = {"code": "timeout", "field": None,
+                        "message": f"planning took longer than the compute limit of {timeout_s:g} s and was "
+                                   "stopped; use fewer segments or samples, a shorter settings.tail_max_s, "
+                                   "or a larger settings.Ts"}
+    except PlannerError as exc:
+        out["error"] = exc.to_dict()
+    except ValidationError as exc:
+        details = error_details(exc.errors())
+        first = details[0] if details else {"code": "invalid_input", "field": None, "message": "invalid input"}
+        msg = first["message"].replace("body is not valid JSON", "not valid JSON", 1)
+        out["error"] = {"code": first["code"], "message": msg, "field": first["field"]}
+    except (ArithmeticError, np.linalg.LinAlgError) as exc:
+        out["error"] = _degenerate(exc, req)
+    except MemoryError:
+        out["error"] = {"code": "internal_error", "message": "the planner ran out of memory", "field": None}
+    except Exception as exc:  # a planner bug: this item fails, the batch goes on
+        out["error"] = {"code": "internal_error", "field": None,
+                        "message": f"the planner failed unexpectedly: {type(exc).__name__}: {exc}"}
+    out["wall_ms"] = (time.perf_counter() - t0) * 1e3
+    out.update(where())
+    return out
+
+
+def plan_chunk(requests: list, fmt: str = "json", timeout_s: float | None = None) -> dict[str, Any]:
+    """:func:`plan_item` for each request, in order (one task for several small plans),
+    packed for the trip back: ``{"outcomes": [...], "blob": bytes}``, each outcome's payload
+    replaced by its ``size`` in the one ``blob`` (a Dask transfer of one 6 MB buffer costs
+    about half the CPU of forty 145 kB ones). :func:`unpack_chunk` restores the payloads."""
+    outcomes = [plan_item(r, fmt, timeout_s) for r in requests]
+    parts = []
+    for oc in outcomes:
+        payload = oc.pop("payload")
+        oc["size"] = None if payload is None else len(payload)
+        if payload is not None:
+            parts.append(payload)
+    return {"outcomes": outcomes, "blob": b"".join(parts)}
+
+
+def unpack_chunk(packed: dict[str, Any]) -> list[dict[str, Any]]:
+    """The outcomes of :func:`plan_chunk` with their ``payload`` again (views of the blob)."""
+    view = memoryview(packed["blob"])
+    at = 0
+    out = []
+    for oc in packed["outcomes"]:
+        size = oc.pop("size", None)
+        oc["payload"] = None if size is None else view[at:at + size]
+        at += size or 0
+        out.append(oc)
+    return out

@@ -1,0 +1,154 @@
+"""Where a batch runs: one ``concurrent.futures.Executor`` interface over three engines.
+
+* :class:`InlineEngine`: the calling process, one item after another (the 1-process
+  baseline of ``benchmarks/bench_batch.py``; no parallelism).
+* :class:`LocalEngine`: a local process pool (``ProcessPoolExecutor``, ``spawn``: a fresh
+  interpreter per worker, safe beside the server's threads); each worker loads the compiled
+  kernels once in its initializer. A worker that dies breaks a ``ProcessPoolExecutor``;
+  :meth:`LocalEngine.restart` starts a new pool and the runner resubmits what was in flight.
+* :class:`app.batch.cluster.DaskEngine`: a Dask distributed cluster through
+  ``Client.get_executor()`` (imported only when a scheduler address is given).
+
+:func:`open_engine` picks one: a scheduler address (argument or ``RANGEPLAN_DASK_SCHEDULER``)
+means Dask, else a local pool of ``workers`` (default: the CPU count).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+from concurrent.futures import Executor, Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+
+from .config import SCHEDULER_ENV
+from .engine import warm_worker
+
+__all__ = ["Engine", "InlineEngine", "LocalEngine", "open_engine", "SCHEDULER_ENV"]
+
+
+class Engine:
+    """What the runner needs of an engine: an executor, how many tasks it runs at once, and
+    what to do when it loses a worker."""
+
+    name = "engine"
+    #: True if the engine itself retries the tasks of a lost worker and knows which task
+    #: killed it (Dask's scheduler); False if the runner must (a broken process pool)
+    attributes_failures = False
+
+    @property
+    def executor(self) -> Executor:
+        raise NotImplementedError
+
+    @property
+    def slots(self) -> int:
+        """Tasks that run at once (workers x threads)."""
+        return 1
+
+    def is_lost_worker(self, exc: BaseException) -> bool:
+        """Whether ``exc`` (a future's exception) means the worker died, not the item failed."""
+        return False
+
+    def restart(self) -> None:
+        """Make the executor usable again after a lost worker."""
+
+    def describe(self) -> str:
+        return self.name
+
+    def close(self, cancel: bool = False) -> None:
+        """Stop the workers (``cancel``: now, dropping running tasks)."""
+
+
+class _InlineExecutor(Executor):
+    """Runs each call at submit, in the calling thread."""
+
+    def submit(self, fn, /, *args, **kwargs):  # type: ignore[override]
+        fut: Future = Future()
+        fut.set_running_or_notify_cancel()
+        try:
+            fut.set_result(fn(*args, **kwargs))
+        except BaseException as exc:  # noqa: B036  (a Future carries any exception)
+            if isinstance(exc, KeyboardInterrupt):
+                raise
+            fut.set_exception(exc)
+        return fut
+
+
+class InlineEngine(Engine):
+    name = "inline"
+
+    def __init__(self):
+        self._executor = _InlineExecutor()
+
+    @property
+    def executor(self) -> Executor:
+        return self._executor
+
+    def describe(self) -> str:
+        return "inline: this process, one item at a time"
+
+
+class LocalEngine(Engine):
+    """``workers`` local processes (``nice``: their CPU priority offset, > 0 yields to the
+    interactive planning pool)."""
+
+    name = "local"
+
+    def __init__(self, workers: int | None = None, nice: int = 0):
+        self.workers = max(1, int(workers or os.cpu_count() or 1))
+        self.nice = nice
+        self._pool = self._start()
+
+    def _start(self) -> ProcessPoolExecutor:
+        return ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=warm_worker, initargs=("local", self.nice))
+
+    @property
+    def executor(self) -> Executor:
+        return self._pool
+
+    @property
+    def slots(self) -> int:
+        return self.workers
+
+    def is_lost_worker(self, exc: BaseException) -> bool:
+        return isinstance(exc, BrokenProcessPool)
+
+    def restart(self) -> None:
+        self._shutdown(self._pool, cancel=True)
+        self._pool = self._start()
+
+    def pids(self) -> list[int]:
+        """The worker processes' ids (started lazily: empty before the first task)."""
+        return [p.pid for p in (self._pool._processes or {}).values() if p.pid is not None]
+
+    @staticmethod
+    def _shutdown(pool: ProcessPoolExecutor, cancel: bool) -> None:
+        procs = list((pool._processes or {}).values())
+        pool.shutdown(wait=not cancel, cancel_futures=cancel)
+        if cancel:
+            for p in procs:  # running tasks are not stopped by shutdown(): stop their processes
+                if p.is_alive():
+                    p.kill()
+            for p in procs:
+                p.join(5)
+
+    def describe(self) -> str:
+        return f"local: {self.workers} worker process{'es' if self.workers > 1 else ''}"
+
+    def close(self, cancel: bool = False) -> None:
+        self._shutdown(self._pool, cancel)
+
+
+def open_engine(workers: int | None = None, scheduler: str | None = None, *, nice: int = 0,
+                inline: bool = False, connect_timeout_s: float = 10.0) -> Engine:
+    """The engine for these settings: ``inline``; a Dask cluster at ``scheduler`` (or
+    ``$RANGEPLAN_DASK_SCHEDULER``); else a local pool of ``workers``. Raises ``OSError``
+    when the scheduler cannot be reached within ``connect_timeout_s``."""
+    if inline:
+        return InlineEngine()
+    scheduler = scheduler or os.environ.get(SCHEDULER_ENV) or None
+    if scheduler:
+        from .cluster import DaskEngine
+
+        return DaskEngine(scheduler, connect_timeout_s=connect_timeout_s)
+    return LocalEngine(workers, nice=nice)

@@ -1,0 +1,70 @@
+"""Helpers of the batch tests: corridor variants, reading a batch's outputs, comparing with
+single plans."""
+
+from __future__ import annotations
+
+import copy
+import csv
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tests.support import ROOT, TABLE1
+
+CLI = [sys.executable, "-m", "app.cli"]
+BAD_RANGE = {"segments": [{"lower": [0, 0, 0], "upper": [-1, 0, 0]}, {"lower": [0, 0, 0], "upper": [0, 0, 0]}]}
+UNREACHABLE = {"segments": [{"lower": [0, 0, 0], "upper": [0, 0, 0]}, {"lower": [0.3, 0, 0], "upper": [0.3, 0, 0]}]}
+
+
+def env() -> dict[str, str]:
+    """Subprocess environment: this tree first on the path, single-threaded BLAS."""
+    return {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+
+
+def variant(i: int, mode: str = "paper") -> dict[str, Any]:
+    """Table I shifted by 1 mm per ``i`` along x (a design study's corridor variants)."""
+    r = copy.deepcopy(TABLE1)
+    r["name"] = f"variant {i} {mode}"
+    for s in r["segments"]:
+        for k in ("lower", "upper"):
+            s[k][0] += 0.001 * i
+    if mode != "paper":
+        r["settings"] = {"mode": mode}
+    return r
+
+
+def write_jsonl(path: Path, requests: list[Any]) -> Path:
+    path.write_text("".join((r if isinstance(r, str) else json.dumps(r)) + "\n" for r in requests))
+    return path
+
+
+def read_summary(outdir: Path) -> list[dict[str, str]]:
+    with open(outdir / "summary.csv", newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def single_plan(request: dict[str, Any], tmp: Path) -> dict[str, Any]:
+    """``rangeplan plan`` on ``request`` (a separate process), its JSON result."""
+    src, out = tmp / "single-in.json", tmp / "single-out.json"
+    src.write_text(json.dumps(request))
+    r = subprocess.run([*CLI, "plan", str(src), "-o", str(out)], capture_output=True, text=True, env=env(),
+                       timeout=300)
+    assert r.returncode == 0, r.stderr
+    return json.loads(out.read_text())
+
+
+def assert_same_plan(a: dict[str, Any], b: dict[str, Any], tol: float = 1e-9) -> None:
+    """Same trajectory and forces to ``tol`` (m, N)."""
+    for key in ("pose", "velocity"):
+        pa, pb = np.asarray(a[key]), np.asarray(b[key])
+        assert pa.shape == pb.shape
+        assert np.max(np.abs(pa - pb)) <= tol, key
+    fa, fb = np.asarray(a["drives"]["force"]), np.asarray(b["drives"]["force"])
+    assert np.max(np.abs(fa - fb)) <= tol
+    assert a["metrics"]["energy"] == b["metrics"]["energy"] or abs(a["metrics"]["energy"] - b["metrics"]["energy"]) \
+        <= tol * max(1.0, abs(a["metrics"]["energy"]))

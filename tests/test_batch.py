@@ -1,0 +1,482 @@
+"""Batches on a local process pool: the engine function, the dispatcher's retries, the
+``rangeplan batch`` CLI (results equal ``rangeplan plan``, bad items reported with their
+code, progress, summary.csv, resume, Ctrl-C) and ``/v1/batches`` (202, progress, JSON Lines
+in item order, CSV summary, cancel, restart, a separate low-priority pool)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import threading
+import time
+from concurrent.futures import Executor, Future
+from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
+
+import pytest
+from fastapi.testclient import TestClient
+
+from app.api import create_app
+from app.batch.config import FORMAT_NAMES
+from app.batch.engine import FORMATS, plan_item
+from app.batch.executors import Engine
+from app.batch.runner import Item, Runner
+from app.storage import Store
+from planner import plan
+from tests.batch_support import (
+    BAD_RANGE,
+    CLI,
+    UNREACHABLE,
+    assert_same_plan,
+    env,
+    read_summary,
+    single_plan,
+    variant,
+    write_jsonl,
+)
+from tests.support import TABLE1
+
+# ---------------------------------------------------------------------------------------
+# the engine function and the dispatcher
+
+def test_formats_named_in_config_are_the_engines():
+    assert tuple(FORMATS) == FORMAT_NAMES
+
+
+def test_plan_item_returns_the_plans_bytes_and_where_it_ran():
+    out = plan_item(json.dumps(TABLE1), "json")
+    assert out["status"] == "ok" and out["engine"] == "inline" and out["pid"] == os.getpid()
+    ref = plan(TABLE1).to_json_dict()
+    got = json.loads(out["payload"])
+    assert_same_plan(got, ref, tol=0.0)
+    assert out["summary"]["energy"] == ref["metrics"]["energy"]
+    assert out["summary"]["duration_s"] == ref["metrics"]["duration_s"]
+    csv_out = plan_item(TABLE1, "csv")
+    assert csv_out["payload"].decode().splitlines()[0].startswith("time_s,x_m,y_m,psi_rad")
+    assert plan_item(TABLE1, "none")["payload"] is None
+
+
+@pytest.mark.parametrize("request_, code, field", [
+    (json.dumps(BAD_RANGE), "invalid_input", "segments[0].lower"),
+    (json.dumps(UNREACHABLE), "unreachable", "segments[1]"),
+    ("{not json", "invalid_input", None),
+    ('{"segments": [], "bogus": 1}', "invalid_input", None),
+])
+def test_plan_item_reports_the_requests_fault_with_its_code(request_, code, field):
+    out = plan_item(request_)
+    assert out["status"] == "error" and out["payload"] is None
+    assert out["error"]["code"] == code
+    if field is not None:
+        assert out["error"]["field"] == field
+    assert out["error"]["message"]
+
+
+def test_plan_item_stops_at_the_compute_limit():
+    # the constrained mode steps in Python: the limit interrupts it within a step
+    req = variant(0, "constrained")
+    t0 = time.perf_counter()
+    out = plan_item(req, timeout_s=0.02)
+    assert out["status"] == "error" and out["error"]["code"] == "timeout"
+    assert time.perf_counter() - t0 < 5.0
+    assert plan_item(req, timeout_s=60)["status"] == "ok"  # the limit is withdrawn after the plan
+
+
+class _PoisonEngine(Engine):
+    """Runs tasks inline; a task holding the poison request 'crashes its worker' (raises
+    BrokenProcessPool like a process pool whose worker died), and so does every other task
+    in flight with it, as a real broken pool does."""
+
+    name = "poison"
+
+    def __init__(self):
+        self.restarts = 0
+        outer = self
+
+        class Ex(Executor):
+            def submit(self, fn, /, *args, **kwargs):
+                f: Future = Future()
+                requests = args[0]
+                if any(r == "POISON" for r in requests):
+                    f.set_exception(BrokenProcessPool("a worker died"))
+                else:
+                    f.set_result(fn(*args, **kwargs))
+                outer.submitted.append(list(requests))
+                return f
+        self.submitted: list[list] = []
+        self._ex = Ex()
+
+    @property
+    def executor(self):
+        return self._ex
+
+    @property
+    def slots(self):
+        return 2
+
+    def is_lost_worker(self, exc):
+        return isinstance(exc, BrokenProcessPool)
+
+    def restart(self):
+        self.restarts += 1
+
+
+def test_runner_finds_the_item_that_kills_its_worker_and_charges_no_other():
+    engine = _PoisonEngine()
+    reqs = [json.dumps(variant(i)) for i in range(6)]
+    reqs.insert(2, "POISON")
+    outcomes: dict[int, dict] = {}
+    Runner(engine, lambda it, oc: outcomes.__setitem__(it.index, oc), max_attempts=3).run(
+        [Item(i, str(i), request=r) for i, r in enumerate(reqs)])
+    assert sorted(outcomes) == list(range(7))
+    assert outcomes[2]["status"] == "failed" and outcomes[2]["error"]["code"] == "worker_died"
+    assert outcomes[2]["attempts"] == 3
+    for i, oc in outcomes.items():
+        if i != 2:
+            assert oc["status"] == "ok", oc
+            assert oc["attempts"] <= 2  # charged at most the one shared crash
+    assert engine.restarts == 3
+
+
+# ---------------------------------------------------------------------------------------
+# the CLI
+
+@pytest.fixture(scope="module")
+def cli_batch(tmp_path_factory):
+    """A directory with two request files and a JSON Lines file of variants and bad items,
+    planned by `rangeplan batch` on a 2-process pool."""
+    tmp = tmp_path_factory.mktemp("batch")
+    inputs = tmp / "in"
+    inputs.mkdir()
+    (inputs / "a-paper.json").write_text(json.dumps(variant(3)))
+    (inputs / "b-constrained.json").write_text(json.dumps(variant(-2, "constrained")))
+    (inputs / "notes.txt").write_text("ignored: not a request file")
+    study = write_jsonl(tmp / "study.jsonl", [variant(1), BAD_RANGE, "{oops", variant(2, "constrained"),
+                                              UNREACHABLE, variant(4)])
+    out = tmp / "out"
+    r = subprocess.run([*CLI, "batch", str(inputs), str(study), "-o", str(out), "--workers", "2"],
+                       capture_output=True, text=True, env=env(), timeout=600)
+    return {"tmp": tmp, "inputs": inputs, "study": study, "out": out, "run": r}
+
+
+def test_cli_batch_plans_every_item_and_reports_the_bad_ones(cli_batch):
+    r, out = cli_batch["run"], cli_batch["out"]
+    assert r.returncode == 1, r.stderr  # some items failed: exit 1, and the rest are planned
+    assert "Traceback" not in r.stderr
+    rows = read_summary(out)
+    assert [row["key"] for row in rows] == ["a-paper", "b-constrained", "study-000001", "study-000002",
+                                           "study-000003", "study-000004", "study-000005", "study-000006"]
+    assert [row["item"] for row in rows] == [str(i) for i in range(8)]
+    by = {row["key"]: row for row in rows}
+    assert by["study-000002"]["status"] == "error" and by["study-000002"]["error_code"] == "invalid_input"
+    assert by["study-000002"]["error_field"] == "segments[0].lower"
+    assert by["study-000003"]["error_code"] == "invalid_input" and "not valid JSON" in by["study-000003"][
+        "error_message"]
+    assert by["study-000005"]["error_code"] == "unreachable"
+    ok = [row for row in rows if row["status"] == "ok"]
+    assert len(ok) == 5
+    for row in ok:
+        assert row["engine"] == "local" and row["worker"] and int(row["attempts"]) == 1
+        assert (out / row["file"]).is_file() and row["file"] == f"{row['key']}.json"
+        result = json.loads((out / row["file"]).read_text())
+        assert float(row["energy_n2_s"]) == result["metrics"]["energy"]
+        assert float(row["duration_s"]) == result["metrics"]["duration_s"]
+        assert row["name"] == result["name"]
+    assert by["b-constrained"]["contained"] == "true"
+    assert len(list(out.glob("*.json"))) == 5
+    # a plain line per item (stderr is not a terminal), then the totals
+    item_lines = [ln for ln in r.stderr.splitlines() if ln.startswith("[")]
+    assert len(item_lines) == 8
+    assert "5 ok, 3 failed of 8" in r.stderr
+
+
+def test_cli_batch_results_equal_single_plans(cli_batch, tmp_path):
+    out = cli_batch["out"]
+    for key, request in (("a-paper", variant(3)), ("b-constrained", variant(-2, "constrained")),
+                         ("study-000004", variant(2, "constrained"))):
+        assert_same_plan(json.loads((out / f"{key}.json").read_text()), single_plan(request, tmp_path))
+
+
+def test_cli_batch_resume_skips_what_is_done(cli_batch):
+    tmp, out = cli_batch["tmp"], cli_batch["out"]
+    before = {p.name: p.stat().st_mtime_ns for p in out.glob("*.json")}
+    r = subprocess.run([*CLI, "batch", str(cli_batch["inputs"]), str(cli_batch["study"]), "-o", str(out),
+                        "--workers", "1"], capture_output=True, text=True, env=env(), timeout=300)
+    assert r.returncode == 1 and "(8 already done)" in r.stderr, r.stderr
+    assert {p.name: p.stat().st_mtime_ns for p in out.glob("*.json")} == before
+    # a changed request and a deleted result are planned again; nothing else
+    (cli_batch["inputs"] / "a-paper.json").write_text(json.dumps(variant(5)))
+    (out / "study-000006.json").unlink()
+    r = subprocess.run([*CLI, "batch", str(cli_batch["inputs"]), str(cli_batch["study"]), "-o", str(out),
+                        "--workers", "1", "--progress", "lines"], capture_output=True, text=True, env=env(),
+                       timeout=300)
+    planned = [ln.split()[1] for ln in r.stderr.splitlines() if ln.startswith("[")]
+    assert sorted(planned) == ["a-paper", "study-000006"], r.stderr
+    assert json.loads((out / "a-paper.json").read_text())["name"] == "variant 5 paper"
+    rows = read_summary(out)
+    assert len(rows) == 8 and sum(r_["status"] == "ok" for r_ in rows) == 5
+    del tmp
+
+
+def test_cli_batch_usage_errors_exit_2(tmp_path):
+    for args, needle in ((["/nonexistent/x.json"], "no such file"),
+                         ([str(tmp_path)], "no *.json"),
+                         ([str(TABLE1_FILE), "--workers", "0"], "--workers must be >= 1"),
+                         ([str(TABLE1_FILE), "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "drop one"),
+                         ([str(TABLE1_FILE), "--scheduler", "tcp://127.0.0.1:1"], "cannot reach the Dask scheduler")):
+        r = subprocess.run([*CLI, "batch", *args, "-o", str(tmp_path / "o")], capture_output=True, text=True,
+                           env=env(), timeout=120)
+        assert r.returncode == 2, (args, r.stderr)
+        assert needle in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+TABLE1_FILE = Path(__file__).resolve().parents[1] / "static" / "examples" / "table1.json"
+
+
+@pytest.mark.slow
+def test_cli_batch_ctrl_c_keeps_finished_results_and_resumes(tmp_path):
+    study = write_jsonl(tmp_path / "s.jsonl", [variant(i % 5, "constrained") for i in range(40)])
+    out = tmp_path / "out"
+    proc = subprocess.Popen([*CLI, "batch", str(study), "-o", str(out), "--workers", "2", "--progress", "lines"],
+                            stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=env(),
+                            start_new_session=True)
+    seen = 0
+    assert proc.stderr is not None
+    for line in proc.stderr:
+        if line.startswith("["):
+            seen += 1
+            if seen == 4:
+                break
+    os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C on a terminal does: the whole process group
+    rest = proc.stderr.read()
+    assert proc.wait(60) == 130, rest
+    assert "interrupted" in rest and "Traceback" not in rest
+    rows = read_summary(out)
+    assert 4 <= len(rows) < 40
+    assert all(r["status"] == "ok" and (out / r["file"]).is_file() for r in rows)
+    assert len(list(out.glob("*.json"))) == len(rows)  # no partial result file left behind
+    r = subprocess.run([*CLI, "batch", str(study), "-o", str(out), "--workers", "2", "--progress", "lines"],
+                       capture_output=True, text=True, env=env(), timeout=600)
+    assert r.returncode == 0, r.stderr
+    planned = [ln for ln in r.stderr.splitlines() if ln.startswith("[")]
+    assert len(planned) == 40 - len(rows)
+    assert len(read_summary(out)) == 40
+
+
+@pytest.mark.slow
+def test_local_worker_killed_mid_batch_loses_no_item(tmp_path):
+    from app.batch.cli import run_batch
+    from app.batch.executors import LocalEngine
+
+    study = write_jsonl(tmp_path / "s.jsonl", [variant(i % 7, "constrained") for i in range(24)])
+    engine = LocalEngine(2)
+    killed: list[int] = []
+
+    def killer():
+        while not killed:
+            rows = (tmp_path / "out" / "summary.csv")
+            if rows.exists() and len(rows.read_text().splitlines()) >= 4 and engine.pids():
+                pid = engine.pids()[0]
+                os.kill(pid, signal.SIGKILL)
+                killed.append(pid)
+            time.sleep(0.05)
+
+    t = threading.Thread(target=killer, daemon=True)
+    t.start()
+    try:
+        res = run_batch([str(study)], tmp_path / "out", engine=engine, progress="none")
+    finally:
+        engine.close()
+    assert killed and res["lost_workers"] >= 1 and res["resubmitted"] >= 1
+    rows = read_summary(tmp_path / "out")
+    assert len(rows) == 24 and all(r["status"] == "ok" for r in rows)
+    assert any(r["attempts"] == "2" for r in rows)
+    assert killed[0] not in {int(r["worker"].rsplit(":", 1)[1]) for r in rows if r["attempts"] == "2"}
+    ref = plan(variant(3, "constrained")).to_json_dict()
+    assert_same_plan(json.loads((tmp_path / "out" / "s-000004.json").read_text()), ref)
+
+
+# ---------------------------------------------------------------------------------------
+# the HTTP API
+
+@pytest.fixture(scope="module")
+def api(tmp_path_factory):
+    store = Store(tmp_path_factory.mktemp("data"))
+    app = create_app(store, workers=1, timeout_s=120)
+    with TestClient(app) as c:
+        yield c
+
+
+def wait_done(client, batch_id: str, timeout: float = 300) -> dict:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        p = client.get(f"/v1/batches/{batch_id}").json()
+        if p["state"] in ("done", "cancelled"):
+            return p
+        time.sleep(0.2)
+    raise AssertionError(f"batch {batch_id} did not finish: {p}")
+
+
+def test_api_batch_runs_in_the_background_and_streams_results_in_order(api):
+    reqs = [variant(0), BAD_RANGE, variant(1, "constrained"), UNREACHABLE, variant(2)]
+    r = api.post("/v1/batches", json={"requests": reqs, "name": "study"})
+    assert r.status_code == 202, r.text
+    body = r.json()
+    assert r.headers["location"] == f"/v1/batches/{body['id']}"
+    assert body["total"] == 5 and body["state"] in ("queued", "running") and body["name"] == "study"
+    p = wait_done(api, body["id"])
+    assert p["state"] == "done" and p["done"] == 5 and p["ok"] == 3 and p["failed"] == 2
+    assert p["running"] == 0 and p["pending"] == 0 and p["rate_per_s"] > 0
+    lines = api.get(f"/v1/batches/{body['id']}/results")
+    assert lines.headers["content-type"].startswith("application/x-ndjson")
+    items = [json.loads(ln) for ln in lines.text.splitlines()]
+    assert [it["item"] for it in items] == [0, 1, 2, 3, 4]
+    assert [it["status"] for it in items] == ["ok", "error", "ok", "error", "ok"]
+    assert items[1]["error"]["code"] == "invalid_input" and items[1]["error"]["field"] == "segments[0].lower"
+    assert items[3]["error"]["code"] == "unreachable"
+    for i, req in ((0, variant(0)), (2, variant(1, "constrained")), (4, variant(2))):
+        single = api.post("/v1/plan", json=req)
+        assert single.status_code == 200
+        assert_same_plan(items[i]["result"], single.json())
+        assert items[i]["engine"] == "local" and items[i]["summary"]["energy"] == single.json()["metrics"]["energy"]
+    csv_text = api.get(f"/v1/batches/{body['id']}/results?format=csv").text.splitlines()
+    assert csv_text[0].startswith("item,key,name,status,error_code")
+    assert [ln.split(",")[3] for ln in csv_text[1:]] == ["ok", "error", "ok", "error", "ok"]
+    assert any(b["id"] == body["id"] for b in api.get("/v1/batches").json())
+
+
+def test_api_batch_accepts_json_lines_and_waits_on_request(api):
+    text = "\n".join(json.dumps(variant(i)) for i in range(3)) + "\n"
+    r = api.post("/v1/batches?name=lines", content=text, headers={"Content-Type": "application/x-ndjson"})
+    assert r.status_code == 202 and r.json()["total"] == 3 and r.json()["name"] == "lines"
+    items = [json.loads(ln) for ln in api.get(f"/v1/batches/{r.json()['id']}/results?wait=true").text.splitlines()]
+    assert [it["status"] for it in items] == ["ok"] * 3
+
+
+@pytest.mark.parametrize("kwargs, status, code, field", [
+    ({"content": b"{not json", "headers": {"Content-Type": "application/json"}}, 422, "invalid_input", None),
+    ({"json": {"name": "x"}}, 422, "invalid_input", "requests"),
+    ({"json": {"requests": []}}, 422, "invalid_input", "requests"),
+    ({"json": [TABLE1]}, 422, "invalid_input", None),
+    ({"json": {"requests": [TABLE1], "extra": 1}}, 422, "invalid_input", "extra"),
+    ({"json": {"requests": [TABLE1], "name": 5}}, 422, "invalid_input", "name"),
+    ({"content": b"\n\n", "headers": {"Content-Type": "application/x-ndjson"}}, 422, "invalid_input", "requests"),
+])
+def test_api_bad_batch_is_a_clear_422(api, kwargs, status, code, field):
+    r = api.post("/v1/batches", **kwargs)
+    assert r.status_code == status, r.text
+    err = r.json()["error"]
+    assert err["code"] == code and err["field"] == field and err["message"]
+
+
+def test_api_unknown_batch_is_404(api):
+    for method, path in (("get", "/v1/batches/nope"), ("get", "/v1/batches/nope/results"),
+                         ("get", "/v1/batches/nope/results?format=csv"), ("delete", "/v1/batches/nope")):
+        r = getattr(api, method)(path)
+        assert r.status_code == 404 and r.json()["error"]["code"] == "not_found"
+
+
+def test_api_batch_limits(tmp_path):
+    app = create_app(Store(tmp_path), workers=1)
+    with TestClient(app) as c:
+        svc = app.state.batches
+        svc.max_items, svc.max_queue = 3, 5
+        r = c.post("/v1/batches", json={"requests": [TABLE1] * 4})
+        assert r.status_code == 422 and r.json()["error"]["code"] == "too_large"
+        assert r.json()["error"]["field"] == "requests"
+        svc._stop.set()  # the dispatcher stops: what is queued now stays queued
+        svc._wake.set()
+        svc._thread.join(10)
+        svc.store.create([json.dumps(TABLE1)] * 3)
+        svc.max_queue = 4
+        r = c.post("/v1/batches", json={"requests": [TABLE1] * 2})
+        assert r.status_code == 503 and r.json()["error"]["code"] == "busy" and r.headers["retry-after"]
+        assert c.post("/v1/batches", json={"requests": [TABLE1]}).status_code == 202  # 3 + 1 <= 4
+
+
+@pytest.mark.slow
+def test_api_cancel_keeps_finished_results_and_purge_deletes(api):
+    r = api.post("/v1/batches", json={"requests": [variant(i % 5, "constrained") for i in range(30)]})
+    bid = r.json()["id"]
+    deadline = time.monotonic() + 120
+    while api.get(f"/v1/batches/{bid}").json()["ok"] < 2 and time.monotonic() < deadline:
+        time.sleep(0.1)
+    p = api.delete(f"/v1/batches/{bid}").json()
+    assert p["state"] == "cancelled" and p["cancelled"] > 0 and p["ok"] >= 2
+    time.sleep(1.0)
+    after = api.get(f"/v1/batches/{bid}").json()
+    assert after["ok"] == p["ok"] and after["running"] == 0 and after["pending"] == 0  # nothing more ran
+    items = [json.loads(ln) for ln in api.get(f"/v1/batches/{bid}/results").text.splitlines()]
+    assert len(items) == 30 and sum(it["status"] == "ok" for it in items) == p["ok"]
+    assert {it["status"] for it in items} <= {"ok", "cancelled"}
+    assert api.delete(f"/v1/batches/{bid}?purge=true").status_code == 204
+    assert api.get(f"/v1/batches/{bid}").status_code == 404
+
+
+@pytest.mark.slow
+def test_api_batch_survives_a_restart_and_never_takes_the_interactive_pool(tmp_path):
+    store_dir = tmp_path / "data"
+    reqs = [variant(i % 5, "constrained") for i in range(16)]
+    app = create_app(Store(store_dir), workers=1)
+    with TestClient(app) as c:
+        bid = c.post("/v1/batches", json={"requests": reqs}).json()["id"]
+        deadline = time.monotonic() + 120
+        while c.get(f"/v1/batches/{bid}").json()["ok"] < 2 and time.monotonic() < deadline:
+            time.sleep(0.1)
+        # a single plan meanwhile: served by the interactive pool, not queued behind the batch
+        t0 = time.perf_counter()
+        single = c.post("/v1/plan", json=TABLE1)
+        assert single.status_code == 200 and time.perf_counter() - t0 < 30
+        svc = app.state.batches
+        batch_pids = svc.engine.pids()
+        assert batch_pids and all(os.getpriority(os.PRIO_PROCESS, pid) >= 10 for pid in batch_pids)
+        pool_pids = [w.proc.pid for w in app.state.pool._workers]
+        assert not set(batch_pids) & set(pool_pids)
+        assert all(os.getpriority(os.PRIO_PROCESS, pid) == os.getpriority(os.PRIO_PROCESS, 0) for pid in pool_pids)
+        before = c.get(f"/v1/batches/{bid}").json()
+    assert before["state"] == "running" and before["done"] < 16
+    # the server stopped mid-batch; a new one on the same store finishes it
+    app2 = create_app(Store(store_dir), workers=1)
+    with TestClient(app2) as c:
+        p = wait_done(c, bid)
+        assert p["state"] == "done" and p["ok"] == 16
+        items = [json.loads(ln) for ln in c.get(f"/v1/batches/{bid}/results").text.splitlines()]
+    assert [it["item"] for it in items] == list(range(16)) and all(it["status"] == "ok" for it in items)
+    ref = plan(reqs[7]).to_json_dict()
+    assert_same_plan(items[7]["result"], ref)
+
+
+def test_run_batch_inline_writes_csv_or_only_the_summary(tmp_path):
+    from app.batch.cli import run_batch
+
+    study = write_jsonl(tmp_path / "s.jsonl", [variant(0), variant(1)])
+    res = run_batch([str(study)], tmp_path / "csv", fmt="csv", inline=True, progress="none")
+    assert res["ok"] == 2 and res["engine"] == "inline" and res["all_ok"]
+    rows = read_summary(tmp_path / "csv")
+    assert [r["file"] for r in rows] == ["s-000001.csv", "s-000002.csv"]
+    assert all(r["engine"] == "inline" and r["worker"].endswith(f":{os.getpid()}") for r in rows)
+    header = (tmp_path / "csv" / "s-000001.csv").read_text().splitlines()[0]
+    assert header.startswith("time_s,x_m,y_m,psi_rad")
+    res = run_batch([str(study)], tmp_path / "none", fmt="none", inline=True, progress="none")
+    assert res["ok"] == 2 and [p.name for p in (tmp_path / "none").iterdir()] == ["summary.csv"]
+    assert all(r["file"] == "" and r["status"] == "ok" for r in read_summary(tmp_path / "none"))
+
+
+def test_progress_bar_counts_done_failed_and_rate():
+    import io
+
+    from app.batch.progress import RichProgress, make_progress
+
+    buf = io.StringIO()
+    bar = make_progress("bar", 3, 1, buf)
+    assert isinstance(bar, RichProgress)
+    bar.start("test engine")
+    bar.item("a", {"status": "ok", "summary": {"duration_s": 1.0, "energy": 2.0, "max_force_ratio": 0.1,
+                                               "compute_ms": 3.0}})
+    bar.item("b", {"status": "error", "error": {"code": "unreachable", "message": "too far", "field": "segments[1]"}})
+    bar.close()
+    assert (bar.done, bar.failed) == (3, 1)
+    text = buf.getvalue()
+    assert "b error unreachable: segments[1]: too far" in text and "3/3" in text
+    assert make_progress("auto", 1, 0, io.StringIO()).__class__.__name__ == "Progress"  # not a terminal: lines

@@ -1,0 +1,218 @@
+"""Batches on Dask: a real ``distributed.LocalCluster`` (2 worker processes) and a scheduler
+and 2 workers started with the ``dask`` command line in separate processes on loopback. The
+CLI and the HTTP API run on them; results equal ``rangeplan plan``; a worker killed
+mid-batch loses no item; a bad item is reported with its code and the rest finish."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import pytest
+from fastapi.testclient import TestClient
+
+from app.api import create_app
+from app.storage import Store
+from tests.batch_support import (
+    BAD_RANGE,
+    CLI,
+    UNREACHABLE,
+    assert_same_plan,
+    env,
+    read_summary,
+    single_plan,
+    variant,
+    write_jsonl,
+)
+
+distributed = pytest.importorskip("distributed")
+
+pytestmark = pytest.mark.slow
+
+
+def _dask_cmd() -> list[str]:
+    import shutil
+    import sys
+
+    exe = Path(sys.executable).parent / "dask"
+    if exe.exists():
+        return [str(exe)]
+    found = shutil.which("dask")
+    assert found, "the dask command line (package distributed) is not installed"
+    return [found]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def worker_pids(address: str) -> dict[str, int]:
+    with distributed.Client(address, timeout="20s") as c:
+        return c.run(os.getpid)
+
+
+def kill_one_worker_after(outdir: Path, address: str, n_done: int, killed: list) -> threading.Thread:
+    """A thread that SIGKILLs one worker process once ``n_done`` rows are in the summary;
+    ``killed`` gets ``(address, pid, rows finished at that moment)``."""
+
+    def run():
+        deadline = time.monotonic() + 300
+        while time.monotonic() < deadline:
+            s = outdir / "summary.csv"
+            if s.exists() and len(s.read_text().splitlines()) > n_done:
+                addr, pid = sorted(worker_pids(address).items())[0]
+                os.kill(pid, signal.SIGKILL)
+                killed.append((addr, pid, len(s.read_text().splitlines()) - 1))
+                return
+            time.sleep(0.05)
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    return t
+
+
+def check_batch(outdir: Path, n: int, bad: dict[str, str], tmp: Path, compare: dict[str, dict]) -> list[dict]:
+    rows = read_summary(outdir)
+    assert len(rows) == n
+    for row in rows:
+        if row["key"] in bad:
+            assert row["status"] == "error" and row["error_code"] == bad[row["key"]], row
+        else:
+            assert row["status"] == "ok", row
+            assert row["engine"] == "dask" and row["worker"].startswith("tcp://127.0.0.1:")
+    for key, request in compare.items():
+        assert_same_plan(json.loads((outdir / f"{key}.json").read_text()), single_plan(request, tmp))
+    return rows
+
+
+# ---------------------------------------------------------------------------------------
+# a LocalCluster
+
+@pytest.fixture(scope="module")
+def local_cluster():
+    from distributed import LocalCluster
+
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                           dashboard_address=None, env={"PYTHONPATH": env()["PYTHONPATH"],
+                                                        "OPENBLAS_NUM_THREADS": "1"})
+    try:
+        yield cluster
+    finally:
+        cluster.close()
+
+
+def test_cli_on_a_local_cluster_with_a_worker_killed_mid_batch(local_cluster, tmp_path):
+    address = local_cluster.scheduler_address
+    reqs = [variant(i % 6, "constrained") for i in range(20)]
+    reqs[5], reqs[11] = BAD_RANGE, UNREACHABLE
+    study = write_jsonl(tmp_path / "s.jsonl", reqs)
+    out = tmp_path / "out"
+    killed: list = []
+    t = kill_one_worker_after(out, address, 4, killed)
+    r = subprocess.run([*CLI, "batch", str(study), "-o", str(out), "--scheduler", address, "--progress", "lines"],
+                       capture_output=True, text=True, env=env(), timeout=600)
+    t.join(5)
+    assert r.returncode == 1, r.stderr  # the two bad items
+    assert killed and killed[0][2] < 20, killed  # killed while items were still to come
+    rows = check_batch(out, 20, {"s-000006": "invalid_input", "s-000012": "unreachable"}, tmp_path,
+                       {"s-000001": reqs[0], "s-000003": reqs[2]})
+    assert {r_["worker"] for r_ in rows if r_["status"] == "ok"} >= {killed[0][0]} or len(
+        {r_["worker"] for r_ in rows}) >= 2
+    assert "on dask: " in r.stderr
+
+
+def test_api_on_a_local_cluster(local_cluster, tmp_path, monkeypatch):
+    monkeypatch.setenv("RANGEPLAN_DASK_SCHEDULER", local_cluster.scheduler_address)
+    app = create_app(Store(tmp_path), workers=1)
+    reqs = [variant(0), BAD_RANGE, variant(1, "constrained"), variant(2)]
+    with TestClient(app) as c:
+        bid = c.post("/v1/batches", json={"requests": reqs}).json()["id"]
+        items = [json.loads(ln) for ln in c.get(f"/v1/batches/{bid}/results?wait=true").text.splitlines()]
+        p = c.get(f"/v1/batches/{bid}").json()
+    assert p["state"] == "done" and p["ok"] == 3 and p["failed"] == 1
+    assert [it["status"] for it in items] == ["ok", "error", "ok", "ok"]
+    assert items[1]["error"]["code"] == "invalid_input" and items[1]["error"]["field"] == "segments[0].lower"
+    workers = set(local_cluster.scheduler_info["workers"])
+    assert all(it["engine"] == "dask" and it["worker"] in workers for it in items if it["status"] == "ok")
+    assert_same_plan(items[2]["result"], single_plan(reqs[2], tmp_path))
+
+
+# ---------------------------------------------------------------------------------------
+# a scheduler and workers started with the dask command line
+
+@pytest.fixture(scope="module")
+def dask_cli_cluster(tmp_path_factory):
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    log = tmp_path_factory.mktemp("dask")
+    e = env()
+    procs = [subprocess.Popen([*_dask_cmd(), "scheduler", "--host", "127.0.0.1", "--port", str(port),
+                               "--no-dashboard"], env=e, stdout=subprocess.DEVNULL,
+                              stderr=open(log / "scheduler.log", "w"))]
+    procs.append(subprocess.Popen([*_dask_cmd(), "worker", address, "--nworkers", "2", "--nthreads", "1",
+                                   "--host", "127.0.0.1", "--no-dashboard", "--memory-limit", "0"],
+                                  env=e, stdout=subprocess.DEVNULL, stderr=open(log / "workers.log", "w")))
+    try:
+        deadline = time.monotonic() + 120
+        while True:
+            try:
+                with distributed.Client(address, timeout="5s") as c:
+                    c.wait_for_workers(2, timeout=max(1, deadline - time.monotonic()))
+                break
+            except (OSError, TimeoutError):
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.5)
+        yield address
+    finally:
+        for p in reversed(procs):
+            p.send_signal(signal.SIGINT)
+        for p in reversed(procs):
+            try:
+                p.wait(20)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+
+
+def test_cli_on_dask_cli_processes_with_a_worker_killed_mid_batch(dask_cli_cluster, tmp_path):
+    reqs = [variant(i % 6, "constrained" if i % 2 else "paper") for i in range(24)]
+    reqs[3] = UNREACHABLE
+    study = write_jsonl(tmp_path / "s.jsonl", reqs)
+    out = tmp_path / "out"
+    killed: list = []
+    t = kill_one_worker_after(out, dask_cli_cluster, 3, killed)
+    r = subprocess.run([*CLI, "batch", str(study), "-o", str(out), "--progress", "lines"], capture_output=True,
+                       text=True, env={**env(), "RANGEPLAN_DASK_SCHEDULER": dask_cli_cluster}, timeout=600)
+    t.join(5)
+    assert r.returncode == 1, r.stderr
+    assert killed and killed[0][2] < 24, killed
+    check_batch(out, 24, {"s-000004": "unreachable"}, tmp_path, {"s-000001": reqs[0], "s-000002": reqs[1]})
+    # the nanny restarted the killed worker: the cluster is whole again, and warm
+    with distributed.Client(dask_cli_cluster, timeout="20s") as c:
+        c.wait_for_workers(2, timeout=60)
+        assert killed[0][1] not in c.run(os.getpid).values()
+
+
+def test_api_on_dask_cli_processes(dask_cli_cluster, tmp_path, monkeypatch):
+    monkeypatch.setenv("RANGEPLAN_DASK_SCHEDULER", dask_cli_cluster)
+    app = create_app(Store(tmp_path), workers=1)
+    reqs = [variant(i) for i in range(6)]
+    with TestClient(app) as c:
+        r = c.post("/v1/batches", content="".join(json.dumps(q) + "\n" for q in reqs),
+                   headers={"Content-Type": "application/x-ndjson"})
+        assert r.status_code == 202
+        items = [json.loads(ln) for ln in c.get(f"/v1/batches/{r.json()['id']}/results?wait=true").text.splitlines()]
+        health = c.get("/health").json()
+    assert [it["item"] for it in items] == list(range(6)) and all(it["status"] == "ok" for it in items)
+    assert all(it["engine"] == "dask" for it in items)
+    assert health["pool"]["in_flight"] == 0
+    assert_same_plan(items[4]["result"], single_plan(reqs[4], tmp_path))
