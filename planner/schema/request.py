@@ -22,7 +22,16 @@ import math
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import Discriminator, Field, StrictBool, Tag, ValidationError, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    Discriminator,
+    Field,
+    StrictBool,
+    Tag,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from ..errors import PlannerError
 from ._types import Finite, Pair, Strict, Triple, Vec3, array_of, fail
@@ -58,24 +67,27 @@ Poses = Annotated[np.ndarray, array_of(list[Triple], min_length=2, max_length=MA
 PerDrive = Annotated[np.ndarray, array_of(list[Finite], min_length=1)]
 
 
+def _nonnegative(v: np.ndarray) -> np.ndarray:
+    if np.any(v < 0):
+        raise fail("must be >= 0")
+    return v
+
+
+#: the diagonal of a range penalty ``Q_ra`` or ``Q_rb`` (1/m, 1/m, 1/rad), each entry >= 0
+Penalty3 = Annotated[Vec3, AfterValidator(_nonnegative)]
+
+
 class Segment(Strict):
     """One range of the corridor (paper Section V.B): ``r_a = lower``, ``r_b = upper``."""
 
     lower: Vec3 = Field(description="Lower range limit r_a = [x_a, y_a, psi_a] (m, m, rad)")
     upper: Vec3 = Field(description="Upper range limit r_b = [x_b, y_b, psi_b] (m, m, rad)")
-    q_ra: Vec3 | None = Field(None, description="Diagonal of Q_ra for this segment's samples (1/m, 1/m, 1/rad), "
+    q_ra: Penalty3 | None = Field(None, description="Diagonal of Q_ra for this segment's samples (1/m, 1/m, 1/rad), "
                               ">= 0")
-    q_rb: Vec3 | None = Field(None, description="Diagonal of Q_rb for this segment's samples (1/m, 1/m, 1/rad), "
+    q_rb: Penalty3 | None = Field(None, description="Diagonal of Q_rb for this segment's samples (1/m, 1/m, 1/rad), "
                               ">= 0")
     polygon: CellVertices | None = Field(None, description="Exact convex cell (e.g. a triangle) inside "
                                     "the box, vertices [[x, y], ...] in m; used by the constrained mode")
-
-    @field_validator("q_ra", "q_rb")
-    @classmethod
-    def _nonneg(cls, v: np.ndarray | None) -> np.ndarray | None:
-        if v is not None and np.any(v < 0):
-            raise fail("must be >= 0")
-        return v
 
     @model_validator(mode="after")
     def _box(self) -> Segment:
@@ -123,8 +135,8 @@ class Settings(Strict):
     k_u: Finite = Field(MODE_DECIDES, gt=0, le=1e12, description="Drive-force penalty: Q_u = k_u I (1/N); default "
                         f"{MODE_DEFAULTS['paper']['k_u']:g} in paper mode, "
                         f"{MODE_DEFAULTS['constrained']['k_u']:g} in constrained mode")
-    q_ra: Vec3 | None = Field(None, description="Diagonal of Q_ra (1/m, 1/m, 1/rad), >= 0; overrides k_r")
-    q_rb: Vec3 | None = Field(None, description="Diagonal of Q_rb (1/m, 1/m, 1/rad), >= 0; overrides k_r")
+    q_ra: Penalty3 | None = Field(None, description="Diagonal of Q_ra (1/m, 1/m, 1/rad), >= 0; overrides k_r")
+    q_rb: Penalty3 | None = Field(None, description="Diagonal of Q_rb (1/m, 1/m, 1/rad), >= 0; overrides k_r")
     q_u: PerDrive | None = Field(None, description="Diagonal of Q_u, one positive number per "
                                    "drive (1/N); overrides k_u")
     taper: StrictBool = Field(True, description="Spread the range out of the start point and narrow it onto the end "
@@ -167,13 +179,6 @@ class Settings(Strict):
     def _positive(cls, v: np.ndarray | None) -> np.ndarray | None:
         if v is not None and np.any(v <= 0):
             raise fail("must be a list with one positive number per drive")
-        return v
-
-    @field_validator("q_ra", "q_rb")
-    @classmethod
-    def _nonneg(cls, v: np.ndarray | None) -> np.ndarray | None:
-        if v is not None and np.any(v < 0):
-            raise fail("must be >= 0")
         return v
 
     @model_validator(mode="after")
