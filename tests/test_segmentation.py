@@ -633,6 +633,15 @@ def test_error_too_many_cells():
     _err(base_layout(cell={"shape": "triangle", "size": 2e-4}), "too_large", "layout.cell.size")
 
 
+def test_error_bounds_near_the_float_range_are_too_large_not_an_overflow():
+    # found by the API fuzzing: (upper - lower) / size overflowed to infinity in cell_count
+    lay = base_layout(bounds={"lower": [0.0, -8.98846567431158e307], "upper": [1.0, 0.0]},
+                      cell={"shape": "square", "size": 0.5})
+    _err(lay, "too_large", "layout.cell.size", "limit")
+    lay["cell"] = {"shape": "triangle", "size": 0.5}
+    _err(lay, "too_large", "layout.cell.size", "limit")
+
+
 def test_error_cell_larger_than_the_bounds():
     _err(base_layout(cell={"shape": "square", "size": 0.2}), "invalid_input", "layout.cell.size", "does not fit")
 

@@ -126,10 +126,16 @@ def cell_count(lower: np.ndarray, upper: np.ndarray, shape: str, size: float) ->
     columns, rows)``; for triangles the columns are triangles per row."""
     W, H = (np.asarray(upper, float) - np.asarray(lower, float)).tolist()
     if shape == "square":
-        nx, ny = math.ceil(W / size - 1e-9), math.ceil(H / size - 1e-9)
+        nx, ny = _ceil(W / size - 1e-9), _ceil(H / size - 1e-9)
         return nx * ny, nx, ny
-    T, ny = math.ceil(2.0 * W / size - 1e-9) + 1, math.ceil(H / (size * SQRT3_2) - 1e-9)
+    T, ny = _ceil(2.0 * W / size - 1e-9) + 1, _ceil(H / (size * SQRT3_2) - 1e-9)
     return T * ny, T, ny
+
+
+def _ceil(x: float) -> int:
+    # bounds near the float range (1e308 m) overflow the ratio to infinity: far more cells
+    # than any limit (the callers answer too_large), not an OverflowError
+    return math.ceil(x) if math.isfinite(x) else 2**62
 
 
 class Layout(Strict):
