@@ -13,19 +13,17 @@ from __future__ import annotations
 
 import json
 import sqlite3
-import threading
 import time
 import uuid
-from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from app.storage import DB_NAME, Connections
+
 __all__ = ["BatchStore", "FINAL", "DB_NAME"]
 
-DB_NAME = "rangeplan.sqlite3"  # app.storage's file
-BUSY_TIMEOUT_S = 30.0
 #: item states that are final
 FINAL = ("ok", "error", "failed", "cancelled")
 
@@ -73,42 +71,21 @@ class BatchStore:
         path.parent.mkdir(parents=True, exist_ok=True)
         self.path = path
         self.keep = max(1, int(keep))
-        self._local = threading.local()
-        self._all: list[sqlite3.Connection] = []
-        self._all_lock = threading.Lock()
+        self._db = Connections(path)
         con = self._con()
         con.execute("PRAGMA journal_mode=WAL")
         con.executescript(_SCHEMA)
 
     # -- plumbing ---------------------------------------------------------------------------
     def _con(self) -> sqlite3.Connection:
-        con = getattr(self._local, "con", None)
-        if con is None:
-            con = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, isolation_level=None, check_same_thread=False)
-            con.execute(f"PRAGMA busy_timeout = {int(BUSY_TIMEOUT_S * 1000)}")
-            con.execute("PRAGMA synchronous = NORMAL")  # results are recomputable (as app.storage's plans)
-            self._local.con = con
-            with self._all_lock:
-                self._all.append(con)
-        return con
+        # results are recomputable (as app.storage's plans): synchronous NORMAL
+        return self._db.get("NORMAL")
 
-    @contextmanager
-    def _write(self) -> Iterator[sqlite3.Connection]:
-        con = self._con()
-        con.execute("BEGIN IMMEDIATE")
-        try:
-            yield con
-        except BaseException:
-            con.execute("ROLLBACK")
-            raise
-        con.execute("COMMIT")
+    def _write(self) -> AbstractContextManager[sqlite3.Connection]:
+        return self._db.write("NORMAL")
 
     def close(self) -> None:
-        with self._all_lock:
-            cons, self._all = self._all, []
-        for con in cons:
-            con.close()
-        self._local = threading.local()
+        self._db.close()
 
     # -- batches ----------------------------------------------------------------------------
     def create(self, requests: list[str], name: str | None = None, fmt: str = "json") -> dict[str, Any]:
