@@ -18,6 +18,7 @@ import base64
 import math
 import os
 import socket
+import threading
 import time
 from pathlib import Path
 from urllib.parse import urlparse
@@ -25,6 +26,7 @@ from urllib.parse import urlparse
 import numpy as np
 import pytest
 
+import app.editor._session as session_module
 from tests.support import TABLE1_PATH
 
 pytestmark = pytest.mark.browser
@@ -371,23 +373,35 @@ def test_table1_segment_corridor_is_edited_and_replanned(tab):
 
 
 # ---------------------------------------------------------------------------- responsiveness
-def test_the_panel_answers_while_a_plan_runs(tab):
-    """Plans of about 0.7 s (constrained mode, Ts = 2 ms, 5 mm cells) run on the session's
-    worker thread: a value typed meanwhile reaches the session while the plan is still
-    running, and the status names the plan computed."""
+def test_the_panel_answers_while_a_plan_runs(tab, monkeypatch):
+    """Plans run on the session's worker thread, so the panel answers meanwhile: each plan
+    here is held on the worker until the value typed during it has reached the session (or
+    10 s pass), then computed for real (constrained mode, Ts = 2 ms, 5 mm cells). Were the
+    plan run on the thread that handles the panel, the typed value could not arrive while the
+    plan is held. The latency is measured by benchmarks/bench_editor.py, not asserted here."""
     s, page = tab.session, tab.page
     s.edit(lambda r: (r["settings"].update(mode="constrained", Ts=0.002), r["layout"]["cell"].update(size=0.005)))
     assert settled(s, 120) and s.last_error is None
-    received = []
+    arrived = threading.Event()
+    real_compute = session_module.compute_plan
+
+    def held_compute(request, robots):
+        arrived.wait(10.0)
+        return real_compute(request, robots)
+    monkeypatch.setattr(session_module, "compute_plan", held_compute)
+    received, expected = [], [None]
     field = s.gui.clearance
     on_value = field._on_value
 
     def spy(value):
-        received.append((time.monotonic(), value, s.worker.started > s.worker.finished))
+        received.append((value, s.worker.started > s.worker.finished))
         on_value(value)
+        if value == expected[0]:  # not a partial value such as "0.0" on the way
+            arrived.set()
     field._on_value = spy
-    latencies, during = [], 0
     for k in range(3):
+        arrived.clear()
+        expected[0] = None
         page.get_by_role("button", name="Plan", exact=True).click()
         assert wait_for(lambda: s.worker.started > s.worker.finished, 10), "no plan started"
         assert wait_for(lambda: "planning #" in page.locator("body").inner_text(), 2), "status shows no plan running"
@@ -395,15 +409,11 @@ def test_the_panel_answers_while_a_plan_runs(tab):
         box.click()
         box.press("Control+a")
         text = f"0.00{k + 1}"
+        expected[0] = float(text)
         box.press_sequentially(text, delay=20)
-        t0 = time.monotonic()
-        assert wait_for(lambda t=text: bool(received) and received[-1][1] == float(t), 5)
-        latencies.append(received[-1][0] - t0)
-        during += received[-1][2]
+        assert wait_for(lambda t=text: bool(received) and received[-1][0] == float(t), 5), "no typed value"
+        assert received[-1][1], "the typed value arrived only after the plan ended"
         assert settled(s, 120)
-    # the property: the values arrive while the plans still run (timings are measured by
-    # benchmarks/bench_editor.py, not asserted here: a loaded machine stretches them)
-    assert during >= 2, ("the typed values should arrive while the plans run", latencies)
     assert s.last_error is None and s.request["layout"]["clearance"] == 0.003
 
 
