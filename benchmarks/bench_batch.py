@@ -44,7 +44,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 TABLE1 = json.loads((ROOT / "static" / "examples" / "table1.json").read_text())
+#: the engines of the goal table, and the same with every result sent back to the main process
+#: (``--no-worker-writes``: what every run did before workers wrote their own result files)
 ENGINES = ("1 process", "local pool", "dask")
+SENT = ("local pool, results sent", "dask, results sent")
 
 
 def corridors(n: int, mode: str) -> list[dict]:
@@ -88,6 +91,8 @@ def child(engine: str, workers: int, jsonl: str, out: str, warm_jsonl: str) -> d
     from app.batch.executors import InlineEngine, LocalEngine
 
     cluster = None
+    writes = not engine.endswith(", results sent")
+    engine = engine.removesuffix(", results sent")
     if engine == "1 process":
         eng = InlineEngine()
         from planner import warm_up
@@ -99,15 +104,19 @@ def child(engine: str, workers: int, jsonl: str, out: str, warm_jsonl: str) -> d
 
         from app.batch.cluster import DaskEngine
 
+        if os.environ.get("BENCH_DASK_CONFIG"):  # --dask-config: the workers get it from their nannies
+            import dask
+
+            dask.config.set(json.loads(os.environ["BENCH_DASK_CONFIG"]))
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                                dashboard_address=None, env={"OPENBLAS_NUM_THREADS": "1",
                                                             "PYTHONPATH": str(ROOT)})
         eng = DaskEngine(cluster.scheduler_address)
     # warm: workers started, kernels loaded, a first small batch through the whole path
-    run_batch([warm_jsonl], Path(out) / "warm", engine=eng, progress="none", resume=False)
+    run_batch([warm_jsonl], Path(out) / "warm", engine=eng, progress="none", resume=False, worker_writes=writes)
     w0 = worker_cpu(eng)
     t0, cpu0 = time.perf_counter(), time.process_time()
-    res = run_batch([jsonl], Path(out) / "run", engine=eng, progress="none", resume=False)
+    res = run_batch([jsonl], Path(out) / "run", engine=eng, progress="none", resume=False, worker_writes=writes)
     wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     wcpu = worker_cpu(eng) - w0
     worker_rss = 0.0
@@ -134,6 +143,10 @@ def child(engine: str, workers: int, jsonl: str, out: str, warm_jsonl: str) -> d
             "energy_sum": energy, "lost": res["lost_workers"]}
 
 
+def _all_cpu(run: dict) -> float:
+    return run["main_cpu_ms"] + run["worker_cpu_ms"]
+
+
 def run_child(engine: str, workers: int, jsonl: Path, warm: Path) -> dict:
     out = Path(tempfile.mkdtemp(prefix="bench-batch-"))
     try:
@@ -154,16 +167,25 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--modes", nargs="+", default=["paper", "constrained"])
+    ap.add_argument("--engines", nargs="+", default=list(ENGINES), choices=[*ENGINES, *SENT],
+                    help="engines to run (default: the goal table's three; add the 'results sent' ones to see "
+                         "what the workers' own result files save)")
+    ap.add_argument("--dask-config", metavar="JSON", help="Dask settings for the LocalCluster, e.g. "
+                    "'{\"distributed.worker.profile.enabled\": false}' (default: Dask's defaults)")
     ap.add_argument("--child")
     ap.add_argument("--jsonl")
     ap.add_argument("--warm")
     ap.add_argument("--out")
     args = ap.parse_args()
+    if args.dask_config:
+        os.environ["BENCH_DASK_CONFIG"] = json.dumps(json.loads(args.dask_config))
     if args.child:
         print(json.dumps(child(args.child, args.workers, args.jsonl, args.out, args.warm)))
         return
     tmp = Path(tempfile.mkdtemp(prefix="bench-batch-in-"))
     print(f"# {os.cpu_count()} CPUs; load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    if args.dask_config:
+        print(f"# Dask settings of the LocalCluster: {args.dask_config}")
     results: dict[str, dict[str, list[dict]]] = {}
     t_start = time.time()
     try:
@@ -171,9 +193,10 @@ def main() -> None:
             jsonl, warm = tmp / f"{mode}.jsonl", tmp / f"{mode}-warm.jsonl"
             jsonl.write_text("".join(json.dumps(r) + "\n" for r in corridors(args.items, mode)))
             warm.write_text("".join(json.dumps(r) + "\n" for r in corridors(4 * args.workers, mode)))
-            results[mode] = {e: [] for e in ENGINES}
+            engines = [e for e in (*ENGINES, *SENT) if e in args.engines or e == "1 process"]
+            results[mode] = {e: [] for e in engines}
             for rnd in range(args.rounds):
-                for engine in ENGINES:
+                for engine in engines:
                     r = run_child(engine, args.workers, jsonl, warm)
                     results[mode][engine].append(r)
                     print(f"# {mode} round {rnd + 1} {engine}: {r['wall_s']:.2f} s, {args.items / r['wall_s']:.1f} "
@@ -186,29 +209,30 @@ def main() -> None:
     print(f"{args.items} corridors per run, {args.workers} workers, median over {args.rounds} interleaved rounds; "
           "ratios: median of each round's ratio")
     print()
-    print("| mode | engine | wall [s] | plans/s | vs 1 process | Dask overhead vs local pool | main CPU per plan [ms] "
-          "| all CPU per plan [ms] | speed-up bound from CPU | main peak RSS [MB] | worker peak RSS [MB] "
-          "| ok / failed |")
-    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("| mode | engine | wall [s] | plans/s | vs 1 process | Dask overhead vs local pool: wall | Dask overhead "
+          "vs local pool: CPU | main CPU per plan [ms] | all CPU per plan [ms] | speed-up bound from CPU "
+          "| main peak RSS [MB] | worker peak RSS [MB] | ok / failed |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for mode, by in results.items():
         one = [r["wall_s"] for r in by["1 process"]]
-        energies = {e: by[e][0]["energy_sum"] for e in ENGINES}
+        energies = {e: runs[0]["energy_sum"] for e, runs in by.items()}
         assert max(energies.values()) - min(energies.values()) <= 1e-6 * max(energies.values()), energies
         cpu1 = statistics.median(r["main_cpu_ms"] for r in by["1 process"])
-        for engine in ENGINES:
-            runs = by[engine]
+        for engine, runs in by.items():
             wall = statistics.median(r["wall_s"] for r in runs)
             main_cpu = statistics.median(r["main_cpu_ms"] for r in runs)
             wk_cpu = statistics.median(r["worker_cpu_ms"] for r in runs)
             bound = 1.0 if engine == "1 process" else min(
                 (os.cpu_count() or 1) * cpu1 / (main_cpu + wk_cpu), args.workers * cpu1 / max(wk_cpu, 1e-9))
             eff = statistics.median(o / r["wall_s"] for o, r in zip(one, runs))
-            over = ""
-            if engine == "dask":
-                extra = statistics.median(r["wall_s"] / lp["wall_s"] - 1 for r, lp in zip(runs, by["local pool"]))
-                over = f"{100 * extra:+.1f} %"
-            print(f"| {mode} | {engine} | {wall:.2f} | {args.items / wall:.1f} | {eff:.2f}x | {over} | "
-                  f"{main_cpu:.2f} | {main_cpu + wk_cpu:.2f} | {bound:.2f}x | "
+            over_wall = over_cpu = ""
+            pool = engine.replace("dask", "local pool")
+            if engine.startswith("dask") and pool in by:
+                extra = statistics.median(r["wall_s"] / lp["wall_s"] - 1 for r, lp in zip(runs, by[pool]))
+                cpu = statistics.median(_all_cpu(r) / _all_cpu(lp) - 1 for r, lp in zip(runs, by[pool]))
+                over_wall, over_cpu = f"{100 * extra:+.1f} %", f"{100 * cpu:+.1f} %"
+            print(f"| {mode} | {engine} | {wall:.2f} | {args.items / wall:.1f} | {eff:.2f}x | {over_wall} | "
+                  f"{over_cpu} | {main_cpu:.2f} | {main_cpu + wk_cpu:.2f} | {bound:.2f}x | "
                   f"{max(r['main_rss_mb'] for r in runs):.0f} | "
                   f"{max(r['worker_rss_mb'] for r in runs) if engine != '1 process' else 0:.0f} | "
                   f"{runs[0]['ok']} / {runs[0]['failed']} |")

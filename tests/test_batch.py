@@ -140,6 +140,161 @@ def test_runner_finds_the_item_that_kills_its_worker_and_charges_no_other():
 
 
 # ---------------------------------------------------------------------------------------
+# results written by the workers (a staging directory in OUTDIR, renamed into place)
+
+def _files(outdir: Path) -> list[str]:
+    """Everything in ``outdir``, hidden entries included (a staging directory left behind)."""
+    return sorted(p.name for p in outdir.iterdir())
+
+
+def test_plan_chunk_writes_where_it_sees_the_staging_directory_and_sends_back_otherwise(tmp_path):
+    from app.batch.engine import plan_chunk, unpack_chunk
+
+    stage = tmp_path / ".rangeplan-staging-test"
+    stage.mkdir()
+    reqs = [json.dumps(variant(0)), json.dumps(BAD_RANGE), json.dumps(variant(1))]
+    written = unpack_chunk(plan_chunk(reqs, "json", None, str(stage)))
+    assert [o["status"] for o in written] == ["ok", "error", "ok"]
+    assert all(o["payload"] is None for o in written) and written[1].get("staged") is None
+    files = sorted(p.name for p in stage.iterdir())
+    assert sorted(o["staged"] for o in written if o["status"] == "ok") == files
+    for o, i in ((written[0], 0), (written[2], 1)):
+        data = (stage / o["staged"]).read_bytes()
+        assert o["bytes"] == len(data)
+        assert_same_plan(json.loads(data), plan(variant(i)).to_json_dict(), tol=0.0)
+    # a worker that does not see the directory (another host, no shared filesystem): the results travel
+    packed = plan_chunk(reqs, "json", None, str(tmp_path / ".rangeplan-staging-elsewhere"))
+    sent = unpack_chunk(packed)
+    assert all("staged" not in o for o in sent)
+    assert len(packed["blob"]) == sum(len(o["payload"]) for o in sent if o["payload"] is not None)
+    for o, w in zip(sent, written):
+        if o["status"] == "ok":
+            assert json.loads(bytes(o["payload"]))["pose"] == json.loads((stage / w["staged"]).read_bytes())["pose"]
+
+
+def test_worker_written_results_equal_the_returned_ones(tmp_path):
+    from app.batch.cli import run_batch
+    from app.batch.executors import LocalEngine
+
+    reqs = [variant(0), BAD_RANGE, variant(1, "constrained"), variant(2), UNREACHABLE, variant(3)]
+    study = write_jsonl(tmp_path / "s.jsonl", reqs)
+    engine = LocalEngine(2)
+    try:
+        wrote = run_batch([str(study)], tmp_path / "wrote", engine=engine, progress="none")
+        sent = run_batch([str(study)], tmp_path / "sent", engine=engine, progress="none", worker_writes=False)
+    finally:
+        engine.close()
+    assert wrote["ok"] == sent["ok"] == 4 and wrote["failed"] == sent["failed"] == 2
+    assert wrote["worker_written"] == 4 and sent["worker_written"] == 0
+    same = ("item", "key", "name", "status", "error_code", "error_field", "duration_s", "energy_n2_s",
+            "max_force_ratio", "contained", "end_error_m", "engine", "attempts", "request_sha", "file")
+    rows_w, rows_s = read_summary(tmp_path / "wrote"), read_summary(tmp_path / "sent")
+    assert [[r[c] for c in same] for r in rows_w] == [[r[c] for c in same] for r in rows_s]
+    # nothing else in OUTDIR: no staging directory, no partial file
+    expected = sorted(["summary.csv"] + [r["file"] for r in rows_w if r["file"]])
+    assert _files(tmp_path / "wrote") == _files(tmp_path / "sent") == expected
+    for row in rows_w:
+        if row["file"]:
+            a = json.loads((tmp_path / "wrote" / row["file"]).read_bytes())
+            assert_same_plan(a, json.loads((tmp_path / "sent" / row["file"]).read_bytes()), tol=0.0)
+            assert_same_plan(a, plan(reqs[int(row["item"])]).to_json_dict())
+
+
+class _InlineEngine(Engine):
+    """Runs each task in this process at submit; ``hook(fn, args)`` decides its outcome."""
+
+    name = "local"
+
+    def __init__(self, hook):
+        class Ex(Executor):
+            def submit(self, fn, /, *args, **kwargs):
+                f: Future = Future()
+                try:
+                    f.set_result(hook(fn, args))
+                except BrokenProcessPool as exc:
+                    f.set_exception(exc)
+                return f
+        self._ex = Ex()
+        self.restarts = 0
+
+    @property
+    def executor(self):
+        return self._ex
+
+    @property
+    def slots(self):
+        return 2
+
+    def is_lost_worker(self, exc):
+        return isinstance(exc, BrokenProcessPool)
+
+    def restart(self):
+        self.restarts += 1
+
+
+def test_a_worker_that_dies_while_writing_leaves_no_result_behind(tmp_path):
+    """The first task holding item 2 writes its results to the staging directory, then its
+    worker dies with the files cut short (what SIGKILL in the middle of a write leaves): those
+    files are never reported, the items run again and their results are whole."""
+    from app.batch.cli import run_batch
+
+    reqs = [variant(i) for i in range(6)]
+    victim = json.dumps(reqs[2])
+    study = write_jsonl(tmp_path / "s.jsonl", reqs)
+    cut: list[str] = []
+
+    def hook(fn, args):
+        requests, stage = args[0], args[3]
+        before = set(os.listdir(stage))
+        packed = fn(*args)
+        if victim in (r.strip() for r in requests) and not cut:
+            for name in sorted(set(os.listdir(stage)) - before):
+                path = Path(stage, name)
+                path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+                cut.append(name)
+            # at the moment of the crash every result in OUTDIR is whole
+            for f in (tmp_path / "out").glob("*.json"):
+                assert json.loads(f.read_bytes())["metrics"]["steps"] > 0
+            raise BrokenProcessPool("a worker died while writing its results")
+        return packed
+
+    engine = _InlineEngine(hook)
+    res = run_batch([str(study)], tmp_path / "out", engine=engine, progress="none")
+    assert cut and engine.restarts == 1 and res["lost_workers"] == 1
+    assert res["ok"] == 6 and res["worker_written"] == 6 and res["all_ok"]
+    rows = read_summary(tmp_path / "out")
+    assert any(r["attempts"] == "2" for r in rows)
+    assert _files(tmp_path / "out") == sorted(["summary.csv"] + [r["file"] for r in rows])
+    for r in rows:
+        assert_same_plan(json.loads((tmp_path / "out" / r["file"]).read_bytes()),
+                         plan(reqs[int(r["item"])]).to_json_dict(), tol=0.0)
+
+
+def test_workers_without_the_output_directory_send_their_results_back(tmp_path):
+    """A cluster where only some workers share OUTDIR: every other task runs where the
+    staging directory does not exist; those results travel back and are written here."""
+    from app.batch.cli import run_batch
+
+    reqs = [variant(i) for i in range(8)]
+    study = write_jsonl(tmp_path / "s.jsonl", reqs)
+    calls = [0]
+
+    def hook(fn, args):
+        calls[0] += 1
+        if calls[0] % 2 == 0:
+            args = (*args[:3], args[3] + "-not-on-this-host")
+        return fn(*args)
+
+    res = run_batch([str(study)], tmp_path / "out", engine=_InlineEngine(hook), progress="none")
+    assert res["ok"] == 8 and calls[0] >= 2 and 0 < res["worker_written"] < 8
+    rows = read_summary(tmp_path / "out")
+    assert _files(tmp_path / "out") == sorted(["summary.csv"] + [r["file"] for r in rows])
+    for r in rows:
+        assert_same_plan(json.loads((tmp_path / "out" / r["file"]).read_bytes()),
+                         plan(reqs[int(r["item"])]).to_json_dict(), tol=0.0)
+
+
+# ---------------------------------------------------------------------------------------
 # the CLI
 
 @pytest.fixture(scope="module")
@@ -184,7 +339,7 @@ def test_cli_batch_plans_every_item_and_reports_the_bad_ones(cli_batch):
         assert float(row["duration_s"]) == result["metrics"]["duration_s"]
         assert row["name"] == result["name"]
     assert by["b-constrained"]["contained"] == "true"
-    assert len(list(out.glob("*.json"))) == 5
+    assert _files(out) == sorted(["summary.csv"] + [row["file"] for row in ok])  # and no staging directory left
     # a plain line per item (stderr is not a terminal), then the totals
     item_lines = [ln for ln in r.stderr.splitlines() if ln.startswith("[")]
     assert len(item_lines) == 8
@@ -209,13 +364,14 @@ def test_cli_batch_resume_skips_what_is_done(cli_batch):
     (cli_batch["inputs"] / "a-paper.json").write_text(json.dumps(variant(5)))
     (out / "study-000006.json").unlink()
     r = subprocess.run([*CLI, "batch", str(cli_batch["inputs"]), str(cli_batch["study"]), "-o", str(out),
-                        "--workers", "1", "--progress", "lines"], capture_output=True, text=True, env=env(),
-                       timeout=300)
+                        "--workers", "1", "--progress", "lines", "--no-worker-writes"], capture_output=True, text=True,
+                       env=env(), timeout=300)
     planned = [ln.split()[1] for ln in r.stderr.splitlines() if ln.startswith("[")]
     assert sorted(planned) == ["a-paper", "study-000006"], r.stderr
     assert json.loads((out / "a-paper.json").read_text())["name"] == "variant 5 paper"
     rows = read_summary(out)
     assert len(rows) == 8 and sum(r_["status"] == "ok" for r_ in rows) == 5
+    assert _files(out) == sorted(["summary.csv"] + [r_["file"] for r_ in rows if r_["file"]])
     del tmp
 
 
@@ -256,6 +412,7 @@ def test_cli_batch_ctrl_c_keeps_finished_results_and_resumes(tmp_path):
     assert 4 <= len(rows) < 40
     assert all(r["status"] == "ok" and (out / r["file"]).is_file() for r in rows)
     assert len(list(out.glob("*.json"))) == len(rows)  # no partial result file left behind
+    assert not list(out.glob(".rangeplan-staging-*"))  # nor what the killed workers had staged
     r = subprocess.run([*CLI, "batch", str(study), "-o", str(out), "--workers", "2", "--progress", "lines"],
                        capture_output=True, text=True, env=env(), timeout=600)
     assert r.returncode == 0, r.stderr
@@ -295,6 +452,12 @@ def test_local_worker_killed_mid_batch_loses_no_item(tmp_path):
     assert killed[0] not in {int(r["worker"].rsplit(":", 1)[1]) for r in rows if r["attempts"] == "2"}
     ref = plan(variant(3, "constrained")).to_json_dict()
     assert_same_plan(json.loads((tmp_path / "out" / "s-000004.json").read_text()), ref)
+    # the workers wrote the results; whatever the killed one had staged is gone, every file is whole
+    assert res["worker_written"] == 24
+    assert _files(tmp_path / "out") == sorted(["summary.csv"] + [r["file"] for r in rows])
+    for r in rows:
+        req = variant(int(r["item"]) % 7, "constrained")
+        assert json.loads((tmp_path / "out" / r["file"]).read_bytes())["name"] == req["name"]
 
 
 # ---------------------------------------------------------------------------------------

@@ -127,6 +127,9 @@ def test_cli_on_a_local_cluster_with_a_worker_killed_mid_batch(local_cluster, tm
     assert {r_["worker"] for r_ in rows if r_["status"] == "ok"} >= {killed[0][0]} or len(
         {r_["worker"] for r_ in rows}) >= 2
     assert "on dask: " in r.stderr
+    # the workers share this host's filesystem: they wrote every result themselves
+    assert "18 result files written by the Dask workers" in r.stderr and "0 sent back" in r.stderr, r.stderr
+    assert not list(out.glob(".rangeplan-staging-*"))
 
 
 def test_api_on_a_local_cluster(local_cluster, tmp_path, monkeypatch):
@@ -196,6 +199,7 @@ def test_cli_on_dask_cli_processes_with_a_worker_killed_mid_batch(dask_cli_clust
     assert r.returncode == 1, r.stderr
     assert killed and killed[0][2] < 24, killed
     check_batch(out, 24, {"s-000004": "unreachable"}, tmp_path, {"s-000001": reqs[0], "s-000002": reqs[1]})
+    assert "23 result files written by the Dask workers" in r.stderr and "0 sent back" in r.stderr, r.stderr
     # the nanny restarted the killed worker: the cluster is whole again, and warm
     with distributed.Client(dask_cli_cluster, timeout="20s") as c:
         c.wait_for_workers(2, timeout=60)

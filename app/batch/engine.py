@@ -6,7 +6,9 @@ process pool (``local``) or a Dask worker (``dask``). It never raises for a requ
 fault: a planner error comes back as ``{"status": "error", "error": {code, message,
 field}}``, like the HTTP API's 422 body. :func:`plan_chunk` plans several requests in one
 task (fewer round trips to a pool or a scheduler per plan; each item still has its own time
-limit and outcome).
+limit and outcome) and, where the worker sees the caller's output directory, writes each
+result there itself so that only a summary travels back (the task-attempt files of an output
+committer: written under a temporary name, renamed into place by the caller).
 
 Workers import this module once and load the compiled kernels once
 (:func:`warm_worker`: a process pool's initializer, or the Dask worker plugin in
@@ -26,7 +28,8 @@ from typing import Any
 from planner import PlannerError, plan, to_csv, warm_up
 from planner.schema import PlanRequest, PlanResult, error_details
 
-__all__ = ["FORMATS", "plan_item", "plan_chunk", "unpack_chunk", "warm_worker", "where", "ItemTimeout"]
+__all__ = ["FORMATS", "STAGING_PREFIX", "plan_item", "plan_chunk", "unpack_chunk", "warm_worker", "where",
+           "ItemTimeout"]
 
 #: output formats: file extension and the function writing a result's bytes (``none``: the
 #: summary only, no result file; what a million-corridor study keeps, see docs/batch-scale.md)
@@ -183,23 +186,78 @@ def plan_item(request: str | bytes | dict | PlanRequest, fmt: str = "json",
     return out
 
 
-def plan_chunk(requests: list, fmt: str = "json", timeout_s: float | None = None) -> dict[str, Any]:
+#: name prefix of the staging directory a run makes in its output directory (one per run:
+#: ``<prefix><random token>``); workers write results there, the caller renames them into place
+STAGING_PREFIX = ".rangeplan-staging-"
+
+_STAGE_SEEN: dict[str, bool] = {}
+
+
+def _stage_visible(stage: str) -> bool:
+    """Whether this process sees the staging directory ``stage`` (cached per directory). Its
+    name holds a random token, so a worker on another host that has a directory of the same
+    path but not the same (shared) filesystem does not find it and sends results back."""
+    seen = _STAGE_SEEN.get(stage)
+    if seen is None:
+        if len(_STAGE_SEEN) > 64:
+            _STAGE_SEEN.clear()
+        seen = _STAGE_SEEN[stage] = os.path.isdir(stage)
+    return seen
+
+
+def _stage_write(stage: str, payload: bytes) -> str | None:
+    """Write ``payload`` to a new file in ``stage``; its name, or None if it cannot be written
+    (the directory is gone, the disk is full: the result then travels back instead). A file
+    cut short by a dying worker stays under this temporary name, never the result's."""
+    name = f"{os.getpid()}-{os.urandom(8).hex()}.part"
+    path = os.path.join(stage, name)
+    try:
+        with open(path, "wb") as f:
+            f.write(payload)
+    except OSError:
+        _STAGE_SEEN[stage] = False
+        try:
+            os.unlink(path)
+        except OSError:
+            pass
+        return None
+    return name
+
+
+def plan_chunk(requests: list, fmt: str = "json", timeout_s: float | None = None,
+               stage: str | None = None) -> dict[str, Any]:
     """:func:`plan_item` for each request, in order (one task for several small plans),
-    packed for the trip back: ``{"outcomes": [...], "blob": bytes}``, each outcome's payload
-    replaced by its ``size`` in the one ``blob`` (a Dask transfer of one 6 MB buffer costs
-    about half the CPU of forty 145 kB ones). :func:`unpack_chunk` restores the payloads."""
-    outcomes = [plan_item(r, fmt, timeout_s) for r in requests]
+    packed for the trip back: ``{"outcomes": [...], "blob": bytes}``.
+
+    ``stage``: a directory the caller made for this run (see :data:`STAGING_PREFIX`). If this
+    process sees it, each result is written there as it is planned and only its file name
+    (``staged``) and ``bytes`` travel back: the caller renames the file into place, so the
+    result never crosses a pipe or the network and a half-written file never has its final
+    name. Otherwise (no ``stage``, or a Dask worker without the shared directory) the
+    results travel: each outcome's payload is replaced by its ``size`` in the one ``blob``
+    (a Dask transfer of one 6 MB buffer costs about half the CPU of forty 145 kB ones);
+    :func:`unpack_chunk` restores the payloads."""
+    staging = stage is not None and _stage_visible(stage)
+    outcomes = []
     parts = []
-    for oc in outcomes:
+    for r in requests:
+        oc = plan_item(r, fmt, timeout_s)
         payload = oc.pop("payload")
-        oc["size"] = None if payload is None else len(payload)
+        oc["size"] = None
         if payload is not None:
-            parts.append(payload)
+            name = _stage_write(stage, payload) if staging and stage is not None else None
+            if name is not None:
+                oc["staged"], oc["bytes"] = name, len(payload)
+            else:
+                oc["size"] = len(payload)
+                parts.append(payload)
+        outcomes.append(oc)
     return {"outcomes": outcomes, "blob": b"".join(parts)}
 
 
 def unpack_chunk(packed: dict[str, Any]) -> list[dict[str, Any]]:
-    """The outcomes of :func:`plan_chunk` with their ``payload`` again (views of the blob)."""
+    """The outcomes of :func:`plan_chunk` with their ``payload`` again (views of the blob;
+    None for a result written to the staging directory: its outcome has ``staged``)."""
     view = memoryview(packed["blob"])
     at = 0
     out = []

@@ -67,12 +67,18 @@ class Runner:
     """Runs items on ``engine`` and calls ``on_done(item, outcome)`` for each (in the
     thread that calls :meth:`run`). ``outcome`` is :func:`app.batch.engine.plan_item`'s
     dict plus ``attempts``; ``status`` is ``ok``, ``error`` (the request's fault: a planner
-    error code), ``failed`` (it kept losing its worker) or ``cancelled``."""
+    error code), ``failed`` (it kept losing its worker) or ``cancelled``. With ``stage`` (a
+    staging directory, see :func:`app.batch.engine.plan_chunk`), a worker that sees it writes
+    each result there and the outcome has ``staged`` (the file's name in ``stage``) and
+    ``bytes`` instead of ``payload``; ``on_done`` moves the file into place. A staged file
+    whose outcome never arrives (its worker died, its item was cancelled) is never reported:
+    the caller removes the staging directory at the end."""
 
     def __init__(self, engine: Engine, on_done: Callable[[Item, dict[str, Any]], None], *, fmt: str = "json",
                  timeout_s: float | None = None, max_attempts: int = 3, target_task_s: float = 0.5,
-                 max_chunk: int = 64, poll_s: float = 0.25):
+                 max_chunk: int = 64, poll_s: float = 0.25, stage: str | None = None):
         self.engine = engine
+        self.stage = stage
         self.on_done = on_done
         self.fmt = fmt
         self.timeout_s = timeout_s
@@ -197,7 +203,8 @@ class Runner:
     def _submit(self, items: list[Item]) -> None:
         for it in items:
             it.attempts += 1
-        fut = self.engine.executor.submit(plan_chunk, [it.request for it in items], self.fmt, self.timeout_s)
+        fut = self.engine.executor.submit(plan_chunk, [it.request for it in items], self.fmt, self.timeout_s,
+                                          self.stage)
         self.stats.submitted_tasks += 1
         self._inflight[fut] = items
 
