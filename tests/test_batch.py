@@ -9,6 +9,7 @@ import json
 import os
 import signal
 import subprocess
+import sys
 import threading
 import time
 from concurrent.futures import Executor, Future
@@ -292,6 +293,40 @@ def test_workers_without_the_output_directory_send_their_results_back(tmp_path):
     for r in rows:
         assert_same_plan(json.loads((tmp_path / "out" / r["file"]).read_bytes()),
                          plan(reqs[int(r["item"])]).to_json_dict(), tol=0.0)
+
+
+_MALLOC_PROBE = """
+import ctypes, os, sys
+from app.batch.cluster import relax_malloc_trim
+relaxed = relax_malloc_trim() if sys.argv[1] == "relax" else False
+libc = ctypes.CDLL("libc.so.6")
+libc.malloc.restype = ctypes.c_void_p
+libc.free.argtypes = [ctypes.c_void_p]
+def rss():
+    return int(open("/proc/self/statm").read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+before = rss()
+block = libc.malloc(16 << 20)
+ctypes.memset(block, 1, 16 << 20)
+libc.free(block)
+print(relaxed, rss() - before)
+"""
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/statm"), reason="Linux only")
+def test_relaxed_malloc_trim_keeps_freed_memory_for_reuse():
+    """With MALLOC_TRIM_THRESHOLD_=65536 (what Dask's nanny sets) a freed 16 MB block goes
+    back to the system at once; after relax_malloc_trim it stays in the heap for the next
+    allocation (the planner's per-step arrays)."""
+    pytest.importorskip("distributed")
+    out = {}
+    for how in ("keep", "relax"):
+        r = subprocess.run([sys.executable, "-c", _MALLOC_PROBE, how], capture_output=True, text=True,
+                           env={**env(), "MALLOC_TRIM_THRESHOLD_": "65536"}, timeout=120)
+        assert r.returncode == 0, r.stderr
+        relaxed, grown = r.stdout.split()
+        out[how] = (relaxed == "True", int(grown))
+    assert not out["keep"][0] and out["keep"][1] < 4 << 20  # returned to the system
+    assert out["relax"][0] and out["relax"][1] >= 15 << 20  # kept for reuse
 
 
 # ---------------------------------------------------------------------------------------

@@ -52,6 +52,19 @@ class Progress:
         pass
 
 
+class QuietProgress(Progress):
+    """Counts only (``--progress none``): nothing is formatted or kept per item."""
+
+    def start(self, description: str) -> None:
+        pass
+
+    def item(self, key: str, outcome: dict[str, Any]) -> None:
+        self.done += 1
+        self.new += 1
+        if outcome.get("status") != "ok":
+            self.failed += 1
+
+
 class RichProgress(Progress):
     """A rich progress bar; failed items are also printed above it."""
 
@@ -93,6 +106,5 @@ def make_progress(kind: str, total: int, skipped: int = 0, stream: TextIO | None
     if kind == "bar":
         return RichProgress(total, skipped, stream)
     if kind == "none":
-        import io
-        return Progress(total, skipped, io.StringIO())
+        return QuietProgress(total, skipped, stream)
     return Progress(total, skipped, stream)
