@@ -11,20 +11,27 @@ directory, exactly as ``rangeplan batch`` does. Engines:
 * ``1 process``: the calling process plans the items one after another (``--inline``);
 * ``local pool``: ``--workers`` processes (``ProcessPoolExecutor``, default 2);
 * ``dask``: a ``distributed.LocalCluster`` of ``--workers`` worker processes x 1 thread
-  (its scheduler in the child process, as with a scheduler on the client's host).
+  (its scheduler in the child process, as with a scheduler on the client's host);
+* with ``--engines``, also ``local pool, results sent`` and ``dask, results sent``: the same
+  with ``--no-worker-writes`` (every result travels back to the main process, which writes
+  it: what every run did before the workers wrote their own result files).
 
 Prints, per mode, the median over rounds of: throughput (plans/s), efficiency against one
 process (throughput ratio; the goal with 2 workers on 2 cores is >= 1.8), Dask's overhead
-against the local pool (its extra wall time; goal <= 15 %), CPU per plan of the main process
-(client, and for Dask its scheduler) and of all processes together, and peak resident memory
-of the main process and of the largest worker. Ratios are the median of each round's ratio.
-Also the load average before and after: on a shared machine wall-clock ratios move with
-the other jobs, so the table also gives the speed-up the CPU figures allow on idle cores,
-``min(cores x cpu_1 / cpu_all, workers x cpu_1 / cpu_worker)`` where ``cpu_1`` is one
-process's CPU per plan (a bound that no other job's load changes).
+against the local pool in wall time (goal <= 15 %) and in CPU (all processes' CPU per plan),
+CPU per plan of the main process (client, and for Dask its scheduler) and of all processes
+together, and peak resident memory of the main process and of the largest worker. Ratios are
+the median of each round's ratio. Also the load average before and after: on a shared
+machine wall-clock ratios move with the other jobs, so the table also gives the speed-up the
+CPU figures allow on idle cores, ``min(cores x cpu_1 / cpu_all, workers x cpu_1 /
+cpu_worker)`` where ``cpu_1`` is one process's CPU per plan (a bound that no other job's load
+changes much; CPU time per plan still grows by a few per cent when other jobs share the
+caches).
 
-    .venv/bin/python benchmarks/bench_batch.py                    # 1000 corridors, 2 rounds
-    .venv/bin/python benchmarks/bench_batch.py --items 200 --rounds 1 --modes paper
+    .venv/bin/python benchmarks/bench_batch.py --rounds 3         # the goal table: 1000 corridors, both modes
+    .venv/bin/python benchmarks/bench_batch.py --items 400 --rounds 3 --modes paper \
+        --engines "1 process" "local pool" dask "local pool, results sent" "dask, results sent"
+    .venv/bin/python benchmarks/bench_batch.py --dask-config '{"distributed.worker.profile.enabled": false}'
 """
 
 from __future__ import annotations

@@ -15,6 +15,12 @@ Items use the same request model and bounds as single plans, and the same comput
 plan (``RANGEPLAN_PLAN_TIMEOUT_S``). A batch holds at most ``RANGEPLAN_MAX_BATCH_ITEMS``
 (10 000) items; at most ``RANGEPLAN_MAX_BATCH_QUEUE`` (100 000) items wait in all batches
 together (more: ``503 busy``).
+
+Results travel back from the workers to this process (the CLI's workers write their result
+files themselves, :func:`app.batch.engine.plan_chunk`): here a result is stored in the
+SQLite file with its item's status in one transaction, where ``GET .../results`` reads it,
+retention prunes it with its batch and a restart finds it; a Dask cluster seldom shares the
+server's data directory.
 """
 
 from __future__ import annotations
