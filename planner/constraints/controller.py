@@ -27,10 +27,13 @@ the actual samples inside. Metrics are always computed on the actual (nonlinear)
 ``contained`` is true only if its corridor violation is at most :data:`CONTAIN_TOL_M`.
 
 Backends. ``settings.backend`` picks, once at construction, the assembly that forms and
-solves each step's QP: :class:`~planner.constraints.compiled.CompiledAssembly` (compiled
-kernels, equalities eliminated, rows screened: :mod:`~planner.constraints.step`; Table I in
-~75 ms against IPOPT's ~10 s) or :class:`~planner.constraints.reference.ReferenceAssembly`
-(numpy, the QP in ``z`` with every row). Both have the interface :class:`Assembly`.
+solves each step's QP: :class:`~planner.constraints.compiled.CompiledAssembly` (each step in
+one compiled call: rows, offset, the stage-wise dual active-set solve of
+:mod:`~planner.constraints.stagewise` and the refinement; a step that call does not finish is
+done on the Python path below with DAQP) or
+:class:`~planner.constraints.reference.ReferenceAssembly` (numpy, the QP in ``z`` with every
+row, DAQP). Both have the interface :class:`Assembly`; the Python path of a step (build,
+solve, refine, finish) is written once, here.
 
 Infeasibility. If the hard QP has no solution, the step is solved again with the rows
 softened by slack variables (:meth:`~planner.constraints.qp.DenseQP.solve_slack`; forces stay
@@ -53,19 +56,23 @@ import numpy as np
 from ..corridor import RangeSequence
 from ..errors import PlannerError
 from ..model import RobotModel
-from ..schema import Segment, Settings
+from ..schema import DEFAULT_FORCE_RISE_S, Segment, Settings
 from .compiled import CompiledAssembly
-from .corridor import CorridorConstraint, EndApproachConstraint
-from .drives import DriveForceConstraint, LegSpeedConstraint, LegStrokeConstraint
+from .corridor import ArrivalConstraint, CorridorConstraint, EndApproachConstraint
+from .drives import DriveForceConstraint, DriveForceRateConstraint, LegSpeedConstraint, LegStrokeConstraint
 from .qp import DenseQP, QPSolution
 from .reference import ReferenceAssembly
 from .rows import ROW_UNIT_M, RowConstraint
+from .stagewise import SOLVED, shifted
 
-__all__ = ["CONTAIN_TOL_M", "REFINE_MAX", "REFINE_TOL_M", "REFINE_TOL_RAD", "Assembly", "ConstrainedController",
-           "Constraints", "ControllerStats"]
+__all__ = ["CONTAIN_TOL_M", "CONTAIN_TOL_RAD", "REFINE_MAX", "REFINE_TOL_M", "REFINE_TOL_RAD", "Assembly",
+           "ConstrainedController", "Constraints", "ControllerStats", "force_rate"]
 
-#: a plan is "contained" when its actual corridor violation is at most this [m]
+#: a plan is "contained" when its actual corridor violation is at most this [m] ...
 CONTAIN_TOL_M = 1e-9
+#: ... and its angle at most this outside the psi ranges [rad] (a zero-width psi range is
+#: kept to the one-step mismatch the refinement leaves, ~1e-8 rad)
+CONTAIN_TOL_RAD = 1e-7
 #: re-solve while the plant's next pose under the solution's first move lands farther than
 #: this from the QP's prediction of it (position [m], angle [rad]): 1e-3 and 1e-2 of the margins
 REFINE_TOL_M = 1e-9
@@ -80,21 +87,34 @@ class Constraints(NamedTuple):
     forces: DriveForceConstraint
     corridor: CorridorConstraint
     approach: EndApproachConstraint
+    arrival: ArrivalConstraint
     leg_speed: LegSpeedConstraint
+    rate: DriveForceRateConstraint
     stroke: LegStrokeConstraint
 
     @classmethod
     def of(cls, model: RobotModel, seq: RangeSequence, segments: Sequence[Segment] | None,
-           samples_per_segment: int) -> Constraints:
-        """The constraints of a plan."""
-        return cls(DriveForceConstraint(model), CorridorConstraint(seq, segments),
-                   EndApproachConstraint(seq, segments, samples_per_segment), LegSpeedConstraint(model),
-                   LegStrokeConstraint(model))
+           st: Settings) -> Constraints:
+        """The constraints of a plan (``st``: the force-rate limit and the sample time)."""
+        return cls(DriveForceConstraint(model), CorridorConstraint(seq, segments), EndApproachConstraint(seq, segments),
+                   ArrivalConstraint(seq, segments), LegSpeedConstraint(model),
+                   DriveForceRateConstraint(model, force_rate(model, st), st.Ts), LegStrokeConstraint(model))
 
     @property
     def rows(self) -> tuple[RowConstraint, ...]:
         """The constraints that give rows, in row order (hard ones first)."""
-        return self.corridor, self.approach, self.leg_speed, self.stroke
+        return self.corridor, self.approach, self.arrival, self.leg_speed, self.rate, self.stroke
+
+
+def force_rate(model: RobotModel, st: Settings) -> np.ndarray | None:
+    """The drive-force rate limit [N/s] per drive of ``settings.force_rate_n_s`` (None: no limit):
+    by default each drive's ``force_max`` per :data:`~planner.schema.limits.DEFAULT_FORCE_RISE_S`."""
+    rate = st.force_rate_n_s
+    if isinstance(rate, str):  # "off"
+        return None
+    if rate is None:
+        return np.asarray(model.force_max, float) / DEFAULT_FORCE_RISE_S
+    return np.broadcast_to(np.asarray(rate, float), (model.n_legs,)).copy()
 
 
 class Assembly(Protocol):
@@ -102,7 +122,7 @@ class Assembly(Protocol):
     :class:`ReferenceAssembly`, each with its own step data (``qp``)."""
 
     def build(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, y_nom: np.ndarray | None,
-              u0: np.ndarray) -> Any: ...
+              u_prev: np.ndarray, u0: np.ndarray) -> Any: ...
 
     def set_offset(self, qp: Any, u: np.ndarray, x1: np.ndarray) -> None: ...
 
@@ -121,7 +141,9 @@ class Assembly(Protocol):
 class ControllerStats:
     """What the controller counts over a plan (reported by :meth:`ConstrainedController.report`)."""
 
-    iterations: list[int] = field(default_factory=list)  #: DAQP iterations per step
+    iterations: list[int] = field(default_factory=list)  #: solver iterations per step
+    fallbacks: int = 0  #: steps the stage-wise solver handed to DAQP
+    relaxed: int = 0  #: steps solved with the rows widened by ``RELAX_M`` (compiled backend)
     solve_s: float = 0.0  #: time in the controller [s]
     failures: int = 0  #: steps whose slack problem failed too
     refinements: int = 0  #: re-solves at a refined offset
@@ -143,15 +165,21 @@ class ConstrainedController:
                  segments: Sequence[Segment] | None = None):
         self.model, self.seq, self.st = model, seq, st
         self.N, self.n_legs = st.N, model.n_legs
-        self.constraints = Constraints.of(model, seq, segments, st.samples_per_segment)
+        self.constraints = Constraints.of(model, seq, segments, st)
+        #: the ranges the criterion reads (the stop boxes at the end: ``criterion_sequence``)
+        self.criterion = self.constraints.corridor.criterion_sequence(seq)
         #: the strategy that forms and solves each step's QP, by ``settings.backend``
         self.assembly: Assembly = (CompiledAssembly if st.backend == "compiled" else ReferenceAssembly)(
-            model, seq, st, self.constraints)
+            model, self.criterion, st, self.constraints)
         #: previous solution (scaled moves, N n_legs), None before the first step
         self.z_prev: np.ndarray | None = None
         #: nominal poses (N, 3) of the leg linearisation: the previous prediction, shifted
         self.y_nom: np.ndarray | None = None
         self._x1_pred: np.ndarray | None = None
+        #: the previous step's solution ``(X, z)`` of the stage-wise solve (its warm start), or None
+        self._solution: np.ndarray | None = None
+        #: the forces applied over the previous sample [N] (zero before the start: at rest)
+        self.u_prev = np.zeros(self.n_legs)
         self.stats = ControllerStats()
 
     def guess(self) -> np.ndarray:
@@ -177,7 +205,22 @@ class ConstrainedController:
             p = self._x1_pred
             stats.mismatch_m = max(stats.mismatch_m, math.hypot(x[0] - p[0], x[1] - p[1]))
             stats.mismatch_rad = max(stats.mismatch_rad, abs(float(x[2] - p[2])))
-        qp = asm.build(k, x, Ad, Bd, self.y_nom, self.guess())
+        if isinstance(asm, CompiledAssembly):  # the whole step in one compiled call
+            warm = None if self._solution is None else shifted(self._solution, self.N, self.n_legs)
+            out = asm.step(k, x, Ad, Bd, self.y_nom, self.u_prev, self.guess(), warm, (REFINE_TOL_M, REFINE_TOL_RAD),
+                           REFINE_MAX)
+            self._solution = out.Y if out.status == SOLVED else None
+            if out.status == SOLVED:
+                stats.iterations.append(out.iterations)
+                stats.refinements += out.refinements
+                stats.relaxed += out.relaxed
+                stats.violation_max_m = max(stats.violation_max_m, out.violation * ROW_UNIT_M)
+                self.z_prev, self._x1_pred, self.y_nom = out.z, out.X[0], out.y_nom
+                self.u_prev = out.z[:self.n_legs] * self.constraints.forces.umax
+                stats.solve_s += time.perf_counter() - t0
+                return self.u_prev
+            stats.fallbacks += 1
+        qp = asm.build(k, x, Ad, Bd, self.y_nom, self.u_prev, self.guess())
         sol = asm.solve(qp, self.warm_start())
         iterations = sol.iterations
         # while the plant under the solution's first move lands farther from the prediction
@@ -205,8 +248,9 @@ class ConstrainedController:
         z, Xp, self.y_nom = asm.finish(qp, z, hard)
         self.z_prev = z
         self._x1_pred = Xp[0]
+        self.u_prev = z[:self.n_legs] * self.constraints.forces.umax
         stats.solve_s += time.perf_counter() - t0
-        return z[:self.n_legs] * self.constraints.forces.umax
+        return self.u_prev
 
     def _slack_step(self, k: int, dense: DenseQP) -> tuple[np.ndarray, int]:
         """The step's moves from the slack problem and its iterations; counts the step and its
@@ -237,7 +281,9 @@ class ConstrainedController:
         s = self.stats
         it = np.array(s.iterations) if s.iterations else np.zeros(1)
         return {
-            "qp_solver": "daqp",
+            "qp_solver": "stagewise" if isinstance(self.assembly, CompiledAssembly) else "daqp",
+            "qp_fallbacks": s.fallbacks,
+            "qp_relaxed_steps": s.relaxed,
             "qp_iterations_median": float(np.median(it)),
             "qp_iterations_max": int(it.max()),
             "qp_time_ms": s.solve_s * 1e3,

@@ -93,8 +93,8 @@ class DenseQP:
     def solve_slack(self) -> QPSolution:
         """Every row (corridor, speed and stroke) softened by three slacks ``s >= 0`` (row
         units: corridor m and rad, stroke m, speed m/s, by :class:`RowKind`), penalised by
-        ``SLACK_RHO2 |s|^2 / 2 + SLACK_RHO1 sum(s)``; forces stay hard. The solution is
-        ``(z, s)``."""
+        ``SLACK_RHO2 |s|^2 / 2 + SLACK_RHO1 sum(s)``; forces and force rates stay hard. The
+        solution is ``(z, s)``."""
         nz, kinds = len(self.f), self.kinds
         ns = 3
         Hs = np.zeros((nz + ns, nz + ns))
@@ -102,7 +102,8 @@ class DenseQP:
         Hs[nz:, nz:] = np.eye(ns) * SLACK_RHO2
         fs = np.concatenate((self.f, np.full(ns, SLACK_RHO1)))
         S = np.zeros((len(kinds), ns))
-        S[np.arange(len(kinds)), kinds] = 1.0
+        soft = kinds < ns  # the rate rows (kind 3) are never softened
+        S[np.nonzero(soft)[0], kinds[soft]] = 1.0
         # two one-sided rows per two-sided row: A z - s <= bu ; bl <= A z + s
         As = np.vstack((np.hstack((self.A, -S)), np.hstack((self.A, S))))
         bu = np.concatenate((self.upper, np.full(len(kinds), np.inf)))

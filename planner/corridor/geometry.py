@@ -8,7 +8,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["halfplanes", "box_distance", "polygon_distance", "corridor_violation", "polygon_violation"]
+__all__ = ["APPROACH_MIN_M", "approach_direction", "halfplanes", "box_distance", "polygon_distance",
+           "corridor_violation", "polygon_violation"]
+
+#: a segment centre closer than this to the end point gives no approach direction [m]
+APPROACH_MIN_M = 1e-9
 
 
 def halfplanes(polygon: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -69,3 +73,18 @@ def polygon_violation(points: np.ndarray, segments: Sequence) -> np.ndarray:
             d = polygon_distance(points, np.asarray(poly, float))
         best = np.minimum(best, d)
     return best
+
+
+def approach_direction(segments: Sequence) -> np.ndarray | None:
+    """The unit direction (2,) in which a corridor reaches its end point (the last segment's
+    centre): from the centre of the last segment before it whose centre is not the end point
+    (farther than :data:`APPROACH_MIN_M`), usually the last cell's; where the end point is that
+    cell's centre, the cell before it. None if every centre is the end point. The
+    constrained mode's no-overshoot rows and the ``overshoot_m`` metric both use it."""
+    end = np.asarray(segments[-1].centre[:2], float)
+    for seg in reversed(segments[:-1]):
+        d = end - np.asarray(seg.centre[:2], float)
+        n = float(np.hypot(d[0], d[1]))
+        if n > APPROACH_MIN_M:
+            return d / n
+    return None

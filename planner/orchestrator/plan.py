@@ -13,6 +13,8 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
+
 from ..constraints import ConstrainedController
 from ..corridor import RangeSequence, Segmentation, range_sequence, reference_sequence
 from ..corridor import segment as segment_layout
@@ -32,6 +34,10 @@ def _robot(req: PlanRequest, robot: RobotModel | None) -> RobotModel:
     st = req.settings
     if st.q_u is not None and len(st.q_u) != model.n_legs:
         raise invalid("settings.q_u", f"must have one entry per drive ({model.n_legs}), got {len(st.q_u)}")
+    rate = st.force_rate_n_s
+    if isinstance(rate, np.ndarray) and len(rate) != model.n_legs:
+        raise invalid("settings.force_rate_n_s", f"must be one number or one per drive ({model.n_legs}), "
+                      f"got {len(rate)}")
     return model
 
 

@@ -11,6 +11,7 @@
 from .errors import error_details, field_path, format_validation_error, planner_error
 from .layout import SQRT3_2, Bounds, Cell, Circle, Layout, Obstacle, Polygon, Rectangle, cell_count
 from .limits import (
+                     DEFAULT_FORCE_RISE_S,
                      DEFAULT_ROBOT,
                      DEFAULT_SAMPLES_PER_SEGMENT,
                      MAX_CELLS,
@@ -55,6 +56,7 @@ __all__ = [
     "PlanResult", "Metrics", "Timing", "Drives", "CorridorSamples", "CorridorSegment", "UNITS",
     "SegmentationResult", "SegmentationCell", "HalfPlanes", "RobotSummary",
     "error_details", "field_path", "format_validation_error", "planner_error",
-    "DEFAULT_ROBOT", "DEFAULT_SAMPLES_PER_SEGMENT", "MAX_CELLS", "MAX_HORIZON", "MAX_LEGS", "MAX_OBSTACLES",
+    "DEFAULT_FORCE_RISE_S", "DEFAULT_ROBOT", "DEFAULT_SAMPLES_PER_SEGMENT", "MAX_CELLS", "MAX_HORIZON", "MAX_LEGS",
+    "MAX_OBSTACLES",
     "MAX_POLYGON_POINTS", "MAX_SAMPLES_PER_SEGMENT", "MAX_SEGMENTS", "MAX_TOTAL_STEPS", "MIN_TS", "MODE_DEFAULTS",
 ]

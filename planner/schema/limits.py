@@ -9,7 +9,7 @@ from __future__ import annotations
 __all__ = [
     "MAX_HORIZON", "MAX_SAMPLES_PER_SEGMENT", "MAX_SEGMENTS", "MAX_TOTAL_STEPS", "MAX_CELLS",
     "MAX_OBSTACLES", "MAX_POLYGON_POINTS", "MAX_LEGS", "MIN_TS", "MODE_DEFAULTS",
-    "DEFAULT_SAMPLES_PER_SEGMENT", "DEFAULT_ROBOT",
+    "DEFAULT_SAMPLES_PER_SEGMENT", "DEFAULT_ROBOT", "DEFAULT_FORCE_RISE_S",
 ]
 
 #: longest prediction horizon N [samples]
@@ -42,3 +42,6 @@ MODE_DEFAULTS: dict[str, dict[str, float]] = {"paper": {"N": 20, "k_r": 1.0, "k_
 DEFAULT_SAMPLES_PER_SEGMENT = 20
 #: the robot a request without ``robot`` plans for
 DEFAULT_ROBOT = "moving-slide"
+#: the constrained mode's default drive-force rate limit: each drive may go from zero to its
+#: force_max in this time [s] (settings.force_rate_n_s)
+DEFAULT_FORCE_RISE_S = 0.1

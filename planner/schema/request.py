@@ -29,6 +29,7 @@ from ._types import Finite, Pair, Strict, Triple, Vec3, array_of, fail
 from .errors import planner_error
 from .layout import Layout
 from .limits import (
+    DEFAULT_FORCE_RISE_S,
     DEFAULT_ROBOT,
     DEFAULT_SAMPLES_PER_SEGMENT,
     MAX_HORIZON,
@@ -152,6 +153,10 @@ class Settings(Strict):
                                      "in m/s; sets samples_per_segment (exclusive with it, total_time_s, fastest)")
     total_time_s: Finite | None = Field(None, gt=0, le=3600, description="Time in s the corridor's range sequence "
                                         "takes; sets samples_per_segment")
+    force_rate_n_s: Finite | PerDrive | Literal["off"] | None = Field(
+        None, description="Constrained mode: largest rate of change of each drive force, N/s: one number for every "
+        "drive or one per drive; null (default): each drive's force_max per "
+        f"{DEFAULT_FORCE_RISE_S:g} s; 'off': no limit")
     fastest: StrictBool = Field(False, description="Constrained mode: the shortest timing (samples_per_segment) whose "
                           "plan keeps the corridor and the drive force, stroke and speed limits")
 
@@ -167,6 +172,13 @@ class Settings(Strict):
     def _positive(cls, v: np.ndarray | None) -> np.ndarray | None:
         if v is not None and np.any(v <= 0):
             raise fail("must be a list with one positive number per drive")
+        return v
+
+    @field_validator("force_rate_n_s")
+    @classmethod
+    def _rate(cls, v: Any) -> Any:
+        if v is not None and not isinstance(v, str) and np.any(np.asarray(v) <= 0):
+            raise fail("must be > 0 (one number, or one per drive), 'off' or null")
         return v
 
     @field_validator("q_ra", "q_rb")
@@ -263,6 +275,9 @@ class PlanRequest(Strict):
         n_legs = self.robot_description.n_legs
         if st.q_u is not None and len(st.q_u) != n_legs:
             raise fail(f"must have one entry per drive ({n_legs}), got {len(st.q_u)}", "settings.q_u")
+        rate = st.force_rate_n_s
+        if isinstance(rate, np.ndarray) and len(rate) != n_legs:
+            raise fail(f"must be one number or one per drive ({n_legs}), got {len(rate)}", "settings.force_rate_n_s")
         if self.segments is not None:
             steps = len(self.segments) * st.samples_per_segment
             if steps > MAX_TOTAL_STEPS:

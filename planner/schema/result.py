@@ -86,8 +86,16 @@ class Metrics(_Out):
     model_mismatch_max_m: float | None = Field(None, description="Constrained mode: largest distance between "
                                                "the predicted and the actual next position, m")
     model_mismatch_max_rad: float | None = Field(None, description="Constrained mode: the same for the angle, rad")
-    qp_solver: str | None = Field(None, description="Constrained mode: the QP solver ('daqp')")
-    qp_iterations_median: float | None = Field(None, description="Constrained mode: median QP iterations per step")
+    qp_solver: str | None = Field(None, description="Constrained mode: the QP solver: 'stagewise' (the compiled "
+                                  "backend's dual active-set method on the stage-wise problem, DAQP where it does not "
+                                  "finish a step) or 'daqp' (the reference backend)")
+    qp_fallbacks: int | None = Field(None, description="Constrained mode, compiled backend: steps the stage-wise "
+                                     "solver handed to DAQP (count)")
+    qp_relaxed_steps: int | None = Field(None, description="Constrained mode, compiled backend: steps whose QP was "
+                                         "infeasible by less than 1e-8 (m, m/s, rad or N) and was solved with its rows "
+                                         "widened by that much, 100 times inside the 1e-6 m corridor margin (count)")
+    qp_iterations_median: float | None = Field(None, description="Constrained mode: median QP iterations per step "
+                                               "(active-set changes)")
     qp_iterations_max: int | None = Field(None, description="Constrained mode: most QP iterations in one step")
     qp_time_ms: float | None = Field(None, description="Constrained mode: time in the controller (assembly and "
                                      "solves), ms")
