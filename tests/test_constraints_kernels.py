@@ -68,6 +68,7 @@ def record_steps(req: dict, every: int) -> list[Step]:
 
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(ConstrainedController, "__call__", spy)
+        mp.setattr(ConstrainedController, "compiled_loop", False)  # every step through __call__
         plan(req)
     return steps
 

@@ -33,9 +33,10 @@ __all__ = ["KERNEL_SECTIONS", "MAX_ITERATIONS", "RELAX_M", "AssemblyInputs", "Co
 
 #: most active-set changes of one stage-wise solve before the step goes to DAQP
 MAX_ITERATIONS = 400
-#: a QP found infeasible is solved again with its rows widened by this [m, m/s, rad, N]: far
-#: inside the corridor margin (MARGIN_M), so the actual corridor is still kept
-RELAX_M = 5e-7
+#: a QP found infeasible is solved again with its rows widened by this [m, m/s, rad, N]:
+#: inside the corridor margin (MARGIN_M, MARGIN_RAD: 0.2 um is left, 200 times the one-step
+#: mismatch), so the actual corridor is still kept; the leg-speed margin is 5e-6 m/s
+RELAX_M = 8e-7
 
 #: the row constraints :func:`kernels.assemble` fuses, in its (the row) order
 KERNEL_SECTIONS = (CorridorConstraint, EndApproachConstraint, ArrivalConstraint, LegSpeedConstraint,
@@ -109,6 +110,8 @@ class CompiledAssembly:
         self.Ts, self.substeps = st.Ts, st.plant_substeps
         self.packed = model.packed
         self.umax = constraints.forces.umax
+        #: the bounds of the scaled moves (1, and 1 - FORCE_RECOURSE after the first move)
+        self.zmax = constraints.forces.bounds(self.N)
         #: move weight per drive ``(q_u force_max)^2``, and per move of the horizon
         self.du = np.ascontiguousarray((np.asarray(seq.qu, float) * self.umax) ** 2)
         self.du_moves = np.tile(self.du, self.N)
@@ -122,6 +125,12 @@ class CompiledAssembly:
         self._V = np.empty((nz + 1, 6 * self.N + nz))
         self._Lm = np.empty((nz + 1, nz + 1))
 
+    def step_constants(self, refine_tol: tuple[float, float], refine_max: int) -> tuple:
+        """The arguments of :func:`~planner.constraints.step_kernels.constrained_step` from
+        ``umax`` on (the same for every step of a plan)."""
+        return (self.umax, self.zmax, self.du, ROW_UNIT_M, self.N, refine_tol[0], refine_tol[1], refine_max, SOLVE_TOL,
+                DEPENDENT_TOL, WARM_TOL, RELAX_M / ROW_UNIT_M, MAX_ITERATIONS, self._V, self._Lm, self._kernel_inputs)
+
     def step(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, y_nom: np.ndarray | None,
              u_prev: np.ndarray, u0: np.ndarray, warm: np.ndarray | None, refine_tol: tuple[float, float],
              refine_max: int) -> StepOutcome:
@@ -133,10 +142,7 @@ class CompiledAssembly:
         out = constrained_step(k, np.ascontiguousarray(x, dtype=float), Ad, Bd,
                                y_nom if y_nom is not None else self._no_poses, u_prev,
                                np.ascontiguousarray(u0, dtype=float), warm if warm is not None else self._no_warm,
-                               self.packed, self.Ts, self.substeps, self.umax, self.du, ROW_UNIT_M, self.N,
-                               refine_tol[0], refine_tol[1], refine_max, SOLVE_TOL, DEPENDENT_TOL, WARM_TOL,
-                               RELAX_M / ROW_UNIT_M, MAX_ITERATIONS,
-                               self._V, self._Lm, self._kernel_inputs)
+                               self.packed, self.Ts, self.substeps, *self.step_constants(refine_tol, refine_max))
         status, Y, z, X, y_next, iterations, refinements, worst, relaxed = out
         return StepOutcome(int(status), Y, z, X, y_next, int(iterations), int(refinements), float(worst),
                            bool(relaxed))
@@ -172,7 +178,7 @@ class CompiledAssembly:
     def solve(self, qp: StepQP, start: np.ndarray | None) -> QPSolution:
         """The hard QP from the warm start ``start`` (scaled moves), every row given to DAQP
         (the Python path of a step)."""
-        return self.full(qp).solve(qp.rows, start)
+        return self.full(qp).solve(qp.rows, self.zmax, start)
 
     def one_step_error(self, qp: StepQP, u: np.ndarray) -> tuple[np.ndarray, float, float]:
         """The plant's next state under ``u`` [N] and how far it lands from the prediction
@@ -181,7 +187,7 @@ class CompiledAssembly:
 
     def dense(self, qp: StepQP) -> DenseQP:
         """Every row formed (the slack problem)."""
-        return self.full(qp).dense(qp.rows)
+        return self.full(qp).dense(qp.rows, self.zmax)
 
     def violation(self, qp: StepQP, sol: QPSolution) -> float:
         """Largest hard-row violation of a hard solution [row units] (checked by the solve)."""

@@ -49,7 +49,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple, Protocol
+from typing import Any, ClassVar, NamedTuple, Protocol
 
 import numpy as np
 
@@ -66,7 +66,7 @@ from .rows import ROW_UNIT_M, RowConstraint
 from .stagewise import SOLVED, shifted
 
 __all__ = ["CONTAIN_TOL_M", "CONTAIN_TOL_RAD", "REFINE_MAX", "REFINE_TOL_M", "REFINE_TOL_RAD", "Assembly",
-           "ConstrainedController", "Constraints", "ControllerStats", "force_rate"]
+           "ConstrainedController", "Constraints", "ControllerStats", "LoopRecord", "Memory", "force_rate"]
 
 #: a plan is "contained" when its actual corridor violation is at most this [m] ...
 CONTAIN_TOL_M = 1e-9
@@ -155,11 +155,65 @@ class ControllerStats:
     mismatch_rad: float = 0.0  #: and of its angle [rad]
 
 
+@dataclass(slots=True, eq=False)
+class Memory:
+    """What the controller carries from one step to the next, as arrays that the Python step
+    and the compiled loop (:func:`planner.orchestrator.kernels.simulate_constrained`) update
+    in place. ``flags[HAVE_PREV]``: ``z_prev`` and ``y_nom`` hold a previous step's;
+    ``flags[HAVE_WARM]``: ``warm`` holds a warm start; ``flags[HAVE_PRED]``: ``x1_pred`` holds a
+    prediction of the current state."""
+
+    HAVE_PREV: ClassVar[int] = 0
+    HAVE_WARM: ClassVar[int] = 1
+    HAVE_PRED: ClassVar[int] = 2
+
+    z_prev: np.ndarray  #: (N m,) the previous step's moves (scaled)
+    y_nom: np.ndarray  #: (N, 3) nominal poses of the leg linearisation (the previous prediction, shifted)
+    u_prev: np.ndarray  #: (n_legs,) the forces applied over the previous sample [N]
+    warm: np.ndarray  #: (6N + N m,) the previous solution ``(X, z)`` shifted by one sample
+    x1_pred: np.ndarray  #: (6,) the prediction of the current state
+    flags: np.ndarray  #: (3,) int64, see the class docstring
+
+    @classmethod
+    def empty(cls, N: int, m: int) -> Memory:
+        """Before the first step: nothing remembered, at rest (zero force)."""
+        return cls(np.zeros(N * m), np.zeros((N, 3)), np.zeros(m), np.zeros(6 * N + N * m), np.zeros(6),
+                   np.zeros(3, np.int64))
+
+    def remember(self, z: np.ndarray, X: np.ndarray, y_nom: np.ndarray, umax: np.ndarray,
+                 Y: np.ndarray | None = None) -> None:
+        """After a step with moves ``z`` (scaled), predicted states ``X`` (N, 6), next nominal
+        poses ``y_nom`` and (if solved stage-wise) its solution ``Y = (X, z)``."""
+        N, m = y_nom.shape[0], len(umax)
+        self.z_prev[:] = z
+        self.y_nom[:] = y_nom
+        self.u_prev[:] = z[:m] * umax
+        self.x1_pred[:] = X[0]
+        self.warm[:] = shifted(Y if Y is not None else np.concatenate((np.ravel(X), z)), N, m)
+        self.flags[:] = 1
+
+
+@dataclass(slots=True, eq=False)
+class LoopRecord:
+    """What the compiled loop counts, in place (:meth:`ConstrainedController.absorb` adds it
+    to the statistics)."""
+
+    iterations: np.ndarray  #: (max_steps,) int64, per step
+    counts: np.ndarray  #: (2,) int64: refinements, relaxed steps
+    worst: np.ndarray  #: (3,): largest row violation [m, m/s, rad], one-step mismatch [m], [rad]
+
+
 class ConstrainedController:
     """Receding-horizon controller with hard constraints (see the module docstring).
 
     Called as ``controller(k, x, Ad, Bd) -> u`` [N] by
-    :func:`planner.orchestrator.simulate.simulate`; :meth:`report` returns its metrics."""
+    :func:`planner.orchestrator.simulate.simulate`; :meth:`report` returns its metrics. With
+    the compiled backend, ``simulate`` runs stretches of steps in its compiled loop instead
+    (:meth:`loop_arguments`), calling the controller only for a step that loop does not
+    finish."""
+
+    #: let ``simulate`` run the compiled loop (tests that record every step switch it off)
+    compiled_loop: ClassVar[bool] = True
 
     def __init__(self, model: RobotModel, seq: RangeSequence, st: Settings,
                  segments: Sequence[Segment] | None = None):
@@ -171,16 +225,24 @@ class ConstrainedController:
         #: the strategy that forms and solves each step's QP, by ``settings.backend``
         self.assembly: Assembly = (CompiledAssembly if st.backend == "compiled" else ReferenceAssembly)(
             model, self.criterion, st, self.constraints)
-        #: previous solution (scaled moves, N n_legs), None before the first step
-        self.z_prev: np.ndarray | None = None
-        #: nominal poses (N, 3) of the leg linearisation: the previous prediction, shifted
-        self.y_nom: np.ndarray | None = None
-        self._x1_pred: np.ndarray | None = None
-        #: the previous step's solution ``(X, z)`` of the stage-wise solve (its warm start), or None
-        self._solution: np.ndarray | None = None
-        #: the forces applied over the previous sample [N] (zero before the start: at rest)
-        self.u_prev = np.zeros(self.n_legs)
+        #: what the controller carries from one step to the next (the compiled loop updates it too)
+        self.memory = Memory.empty(self.N, self.n_legs)
         self.stats = ControllerStats()
+
+    @property
+    def z_prev(self) -> np.ndarray | None:
+        """The previous step's moves (scaled, N n_legs), None before the first step."""
+        return self.memory.z_prev if self.memory.flags[Memory.HAVE_PREV] else None
+
+    @property
+    def y_nom(self) -> np.ndarray | None:
+        """Nominal poses (N, 3) of the leg linearisation (the previous prediction, shifted), or None."""
+        return self.memory.y_nom if self.memory.flags[Memory.HAVE_PREV] else None
+
+    @property
+    def u_prev(self) -> np.ndarray:
+        """The forces applied over the previous sample [N] (zero before the start: at rest)."""
+        return self.memory.u_prev
 
     def guess(self) -> np.ndarray:
         """The guessed move of the offset [N]: the previous solution's move of sample 1 (its
@@ -192,33 +254,29 @@ class ConstrainedController:
         return self.z_prev[b * m:(b + 1) * m] * self.constraints.forces.umax
 
     def warm_start(self) -> np.ndarray | None:
-        """The previous solution shifted by one sample (the last move repeated), or None."""
-        if self.z_prev is None:
-            return None
-        m = self.n_legs
-        return np.concatenate((self.z_prev[m:], self.z_prev[-m:]))
+        """The previous solution's moves shifted by one sample (the last move repeated), or None."""
+        mem = self.memory
+        return mem.warm[6 * self.N:].copy() if mem.flags[Memory.HAVE_WARM] else None
 
     def __call__(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray) -> np.ndarray:
         t0 = time.perf_counter()
-        stats, asm = self.stats, self.assembly
-        if self._x1_pred is not None:  # how far the plant landed from the prediction
-            p = self._x1_pred
+        stats, asm, mem = self.stats, self.assembly, self.memory
+        if mem.flags[Memory.HAVE_PRED]:  # how far the plant landed from the prediction
+            p = mem.x1_pred
             stats.mismatch_m = max(stats.mismatch_m, math.hypot(x[0] - p[0], x[1] - p[1]))
             stats.mismatch_rad = max(stats.mismatch_rad, abs(float(x[2] - p[2])))
         if isinstance(asm, CompiledAssembly):  # the whole step in one compiled call
-            warm = None if self._solution is None else shifted(self._solution, self.N, self.n_legs)
+            warm = mem.warm if mem.flags[Memory.HAVE_WARM] else None
             out = asm.step(k, x, Ad, Bd, self.y_nom, self.u_prev, self.guess(), warm, (REFINE_TOL_M, REFINE_TOL_RAD),
                            REFINE_MAX)
-            self._solution = out.Y if out.status == SOLVED else None
             if out.status == SOLVED:
                 stats.iterations.append(out.iterations)
                 stats.refinements += out.refinements
                 stats.relaxed += out.relaxed
                 stats.violation_max_m = max(stats.violation_max_m, out.violation * ROW_UNIT_M)
-                self.z_prev, self._x1_pred, self.y_nom = out.z, out.X[0], out.y_nom
-                self.u_prev = out.z[:self.n_legs] * self.constraints.forces.umax
+                mem.remember(out.z, out.X, out.y_nom, self.constraints.forces.umax, out.Y)
                 stats.solve_s += time.perf_counter() - t0
-                return self.u_prev
+                return mem.u_prev
             stats.fallbacks += 1
         qp = asm.build(k, x, Ad, Bd, self.y_nom, self.u_prev, self.guess())
         sol = asm.solve(qp, self.warm_start())
@@ -245,12 +303,46 @@ class ConstrainedController:
             hard = None
             iterations += slack_iterations
         stats.iterations.append(iterations)
-        z, Xp, self.y_nom = asm.finish(qp, z, hard)
-        self.z_prev = z
-        self._x1_pred = Xp[0]
-        self.u_prev = z[:self.n_legs] * self.constraints.forces.umax
+        z, Xp, y_nom = asm.finish(qp, z, hard)
+        mem.remember(z, Xp, y_nom, self.constraints.forces.umax)
         stats.solve_s += time.perf_counter() - t0
-        return self.u_prev
+        return mem.u_prev
+
+    def loop_arguments(self, max_steps: int) -> tuple[tuple, LoopRecord] | None:
+        """For :func:`planner.orchestrator.kernels.simulate_constrained`: its arguments from
+        ``z_prev`` on (the memory, the record, the step's constants) and the record, or None
+        (reference backend, or switched off)."""
+        asm = self.assembly
+        if not (self.compiled_loop and isinstance(asm, CompiledAssembly)):
+            return None
+        mem, stats = self.memory, self.stats
+        record = LoopRecord(np.zeros(max_steps, np.int64), np.zeros(2, np.int64),
+                            np.array([stats.violation_max_m, stats.mismatch_m, stats.mismatch_rad]))
+        args = (mem.z_prev, mem.y_nom, mem.u_prev, mem.warm, mem.x1_pred, mem.flags, record.iterations,
+                record.counts, record.worst, *asm.step_constants((REFINE_TOL_M, REFINE_TOL_RAD), REFINE_MAX))
+        return args, record
+
+    def absorb(self, record: LoopRecord, k0: int, k1: int, seconds: float) -> None:
+        """Add the compiled loop's steps ``k0..k1-1`` (and its time) to the statistics."""
+        stats = self.stats
+        stats.iterations.extend(int(i) for i in record.iterations[k0:k1])
+        stats.refinements += int(record.counts[0])
+        stats.relaxed += int(record.counts[1])
+        record.counts[:] = 0
+        stats.violation_max_m, stats.mismatch_m, stats.mismatch_rad = (float(v) for v in record.worst)
+        stats.solve_s += seconds
+
+    def _previous_plan(self, zmax: np.ndarray) -> np.ndarray:
+        """The previous step's moves shifted by one sample (zero before the first), the first
+        kept within the force-rate limit of the force just applied and all within ``zmax``:
+        what a step applies when not even its slack problem could be solved."""
+        mem, m = self.memory, self.n_legs
+        z = mem.warm[6 * self.N:].copy() if mem.flags[Memory.HAVE_WARM] else np.zeros(len(zmax))
+        rate = self.constraints.rate.step
+        if rate is not None:
+            z0 = mem.u_prev / self.constraints.forces.umax
+            z[:m] = np.clip(z[:m], z0 - rate / self.constraints.forces.umax, z0 + rate / self.constraints.forces.umax)
+        return np.clip(z, -zmax, zmax)
 
     def _slack_step(self, k: int, dense: DenseQP) -> tuple[np.ndarray, int]:
         """The step's moves from the slack problem and its iterations; counts the step and its
@@ -258,9 +350,10 @@ class ConstrainedController:
         nz = len(dense.f)
         sol = dense.solve_slack()
         zs = sol.z
-        if not sol.ok:
+        if not sol.ok:  # even the slack problem failed: go on with the previous plan's moves
             self.stats.failures += 1
             zs = np.zeros(nz + 3)
+            zs[:nz] = self._previous_plan(dense.zmax)
         sl = zs[nz:] * ROW_UNIT_M  # corridor [m], stroke [m], leg speed [m/s]
         slack = float(max(sl[0], sl[1]))
         self.stats.slack_max_m = max(self.stats.slack_max_m, slack)

@@ -30,18 +30,21 @@ import numpy as np
 from ..model import RobotModel
 from .rows import ROW_UNIT_M, RowBlock, RowConstraint, RowKind, Rows, StepContext
 
-__all__ = ["RATE_RECOURSE", "SPEED_MARGIN", "DriveForceConstraint", "DriveForceRateConstraint", "LegSpeedConstraint",
+__all__ = ["FORCE_RECOURSE", "RATE_RECOURSE", "SPEED_MARGIN", "DriveForceConstraint", "DriveForceRateConstraint", "LegSpeedConstraint",
            "LegStrokeConstraint"]
 
 #: relative margin on the leg speed limit [-]
 SPEED_MARGIN = 1e-5
 #: the force-rate rows of the moves after the first are this fraction tighter [-]
 RATE_RECOURSE = 0.02
+#: the force bounds of the moves after the first are this fraction tighter [-]
+FORCE_RECOURSE = 0.01
 
 
 class DriveForceConstraint:
     """``|u_i| <= force_max_i`` [N]: the QP's variables are the scaled moves
-    ``z = u / force_max``, so the limit is the bound ``|z| <= 1``: simple bounds of the QP in
+    ``z = u / force_max``, so the limit is the bound ``|z| <= 1`` (``1 - FORCE_RECOURSE`` after
+    the horizon's first move: :meth:`bounds`): simple bounds of the QP in
     ``z`` (:class:`~planner.constraints.qp.DenseQP`), constraints of the stage-wise dual
     method (:func:`planner.constraints.stagewise.dual_solve`, after the rows), and the
     solution is clipped to it."""
@@ -50,13 +53,24 @@ class DriveForceConstraint:
         #: force_max per drive (n_legs,) [N]
         self.umax = np.asarray(model.force_max, float)
 
+    def bounds(self, N: int) -> np.ndarray:
+        """The bounds ``zmax`` (N m,) of the scaled moves: 1 for the first move, ``1 -
+        FORCE_RECOURSE`` for the later ones (recourse, as for the rates: a plan braking at full
+        force in every future move would leave the next step none to absorb the prediction
+        error)."""
+        m = len(self.umax)
+        zmax = np.full(N * m, 1.0 - FORCE_RECOURSE)
+        zmax[:m] = 1.0
+        return zmax
+
     def forces(self, z: np.ndarray) -> np.ndarray:
         """The drive forces [N] of the first ``n_legs`` scaled moves of ``z``."""
         return z[:len(self.umax)] * self.umax
 
 
 class DriveForceRateConstraint(RowConstraint):
-    """``-rate_i Ts <= u_i(j) - u_i(j-1) <= rate_i Ts`` [N] per move ``j`` and drive ``i`` of the
+    """``-rate_i Ts <= u_i(j) - u_i(j-1) <= rate_i Ts`` [N] (as rows on the scaled moves: divided
+    by ``force_max_i``) per move ``j`` and drive ``i`` of the
     horizon (``1 - RATE_RECOURSE`` of it for ``j >= 1``), ``u(-1)`` the force applied over the
     previous sample (:attr:`StepContext.u_prev`),
     as rows on the moves ``z`` (``u = force_max z``). No rows where ``rate`` is None (no limit).
@@ -76,11 +90,11 @@ class DriveForceRateConstraint(RowConstraint):
             return RowBlock(np.zeros((0, 2), int), np.zeros((0, 2)), np.zeros(0), np.zeros(0), self.kind)
         q = 6 * N + np.arange(N * m)  # the move of sample j, drive i
         col = np.column_stack((q, np.where(q >= 6 * N + m, q - m, -1)))
-        val = np.column_stack((np.tile(self.umax, N), np.where(col[:, 1] >= 0, -np.tile(self.umax, N), 0.0)))
-        lim = np.tile(self.step, N)
+        val = np.column_stack((np.ones(N * m), np.where(col[:, 1] >= 0, -1.0, 0.0)))
+        lim = np.tile(self.step / self.umax, N)  # in the scaled moves (force / force_max)
         lim[m:] *= 1.0 - RATE_RECOURSE
-        first = np.concatenate((step.u_prev, np.zeros((N - 1) * m)))
-        return RowBlock(col, val, first - lim, first + lim, self.kind)
+        first = np.concatenate((step.u_prev / self.umax, np.zeros((N - 1) * m)))
+        return RowBlock(col, val, first - lim, first + lim, self.kind, unit=1.0)
 
     @property
     def kernel_args(self) -> tuple:

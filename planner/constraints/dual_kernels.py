@@ -21,7 +21,7 @@ __all__ = ["INFEASIBLE", "ITERATION_LIMIT", "SOLVED", "dual_solve"]
 SOLVED, INFEASIBLE, ITERATION_LIMIT = 1, -1, -2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _value(i, col, val, n_hard, nx, Y):
     """Constraint ``i`` at ``Y``: row ``i``, or (``i >= n_hard``) the move ``i - n_hard``."""
     if i >= n_hard:
@@ -34,7 +34,7 @@ def _value(i, col, val, n_hard, nx, Y):
     return acc
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _normal_terms(i, sign, col, val, n_hard, nx, L, Z, q, r):
     """The linear terms whose substitution is ``H^-1 n`` for constraint ``i`` with ``sign``
     (``stagewise._normal_terms``), added into the zeroed ``q``, ``r``; returns the highest
@@ -66,20 +66,40 @@ def _normal_terms(i, sign, col, val, n_hard, nx, L, Z, q, r):
 
 
 @njit(cache=True)
-def _violation(i, col, val, lower, upper, n_hard, nx, Y):
-    """Violation of constraint ``i`` at ``Y`` and the violated side (+1 lower, -1 upper)."""
-    v = _value(i, col, val, n_hard, nx, Y)
-    lo, hi = (-1.0, 1.0) if i >= n_hard else (lower[i], upper[i])
-    if lo - v >= v - hi:
-        return lo - v, 1
-    return v - hi, -1
+def _most_violated(col, val, lower, upper, zmax, n_hard, elim, nx, Y, tol):
+    """The constraint violated most beyond ``tol`` at ``Y``: ``(i, side, violation)``, ``i = -1``
+    if none (then ``violation`` is the largest one, possibly negative). Rows (not eliminated),
+    then the force bounds ``|z| <= zmax``."""
+    best, p, side = tol, -1, 1
+    largest = -np.inf
+    for i in range(n_hard):
+        if elim[i]:
+            continue
+        v = 0.0
+        for t in range(col.shape[1]):
+            cc = col[i, t]
+            if cc >= 0:
+                v += val[i, t] * Y[cc]
+        e_lo, e_hi = lower[i] - v, v - upper[i]
+        e = max(e_lo, e_hi)
+        largest = max(largest, e)
+        if e > best:
+            best, p, side = e, i, (1 if e_lo >= e_hi else -1)
+    for q in range(nx, Y.shape[0]):
+        e_lo, e_hi = -zmax[q - nx] - Y[q], Y[q] - zmax[q - nx]
+        e = max(e_lo, e_hi)
+        largest = max(largest, e)
+        if e > best:
+            best, p, side = e, n_hard + q - nx, (1 if e_lo >= e_hi else -1)
+    return p, side, (best if p >= 0 else largest)
 
 
 @njit(cache=True)
-def dual_solve(ecnt, eax, ceq, elim, Kp, Z, L, A, B, S, P, K, C, Bu, du, x, d, tgt, col, val, lower, upper, n_hard,
-               tol, dep_tol, warm_tol, max_iter, warm, V, Lm, Y):
+def dual_solve(ecnt, eax, ceq, elim, Kp, Z, L, A, B, S, P, K, C, Bu, du, x, d, tgt, col, val, lower, upper, zmax,
+               n_hard, tol, dep_tol, warm_tol, max_iter, warm, V, Lm, Y):
     """``stagewise.dual_solve``: the step's QP by the dual active-set method on the
-    factorised stage-wise problem; the solution ``Y = (X, z)`` into ``Y``; ``warm`` the
+    factorised stage-wise problem, force bounds ``|z| <= zmax`` (N m,); the solution
+    ``Y = (X, z)`` into ``Y``; ``warm`` the
     previous solution shifted (``stagewise.shifted``; empty: no warm start); ``V`` (N m + 1,
     6N + N m) and ``Lm`` (N m + 1, N m + 1) are work space (allocated once per plan). Returns
     ``(status, iterations, n_active, worst)`` (status 1 solved, -1 infeasible, -2 iteration
@@ -94,7 +114,7 @@ def dual_solve(ecnt, eax, ceq, elim, Kp, Z, L, A, B, S, P, K, C, Bu, du, x, d, t
     q = np.empty((N, 6))
     r = np.empty((N, m))
     affine(x, d, tgt, ecnt, eax, ceq, Kp, Z, L, S, Bu, du, c, k0, q, r)
-    substitute(A, B, P, K, C, L, Z, q, r, c, k0, x, N - 1, True, Y)
+    substitute(A, B, P, K, C, L, Z, ecnt, q, r, c, k0, x, N - 1, True, Y)
     Y0 = Y.copy()
     qmax = V.shape[0]
     act = np.empty(qmax, np.int64)
@@ -115,7 +135,7 @@ def dual_solve(ecnt, eax, ceq, elim, Kp, Z, L, A, B, S, P, K, C, Bu, du, x, d, t
             if i < n_hard and elim[i]:
                 continue
             v = _value(i, col, val, n_hard, nx, warm)
-            lo, hi = (-1.0, 1.0) if i >= n_hard else (lower[i], upper[i])
+            lo, hi = (-zmax[i - n_hard], zmax[i - n_hard]) if i >= n_hard else (lower[i], upper[i])
             side = 0
             if abs(v - lo) <= warm_tol:
                 side = 1
@@ -127,7 +147,7 @@ def dual_solve(ecnt, eax, ceq, elim, Kp, Z, L, A, B, S, P, K, C, Bu, du, x, d, t
             q[:, :] = 0.0
             r[:, :] = 0.0
             smax = _normal_terms(i, float(side), col, val, n_hard, nx, L, Z, q, r)
-            substitute(A, B, P, K, C, L, Z, q, r, c, k0, zero6, smax, False, Yv)
+            substitute(A, B, P, K, C, L, Z, ecnt, q, r, c, k0, zero6, smax, False, Yv)
             ll = 0.0
             for j in range(n_act):
                 acc = sgn[j] * _value(act[j], col, val, n_hard, nx, Yv)
@@ -149,7 +169,7 @@ def dual_solve(ecnt, eax, ceq, elim, Kp, Z, L, A, B, S, P, K, C, Bu, du, x, d, t
             n_act += 1
         # multipliers of the working set as equalities, M lam = -s(Y0); drop the most negative
         while n_act > 0:
-            _on_working_set(n_act, act, sgn, u, V, Lm, lvec, col, val, lower, upper, n_hard, nx, Y0, Y)
+            _on_working_set(n_act, act, sgn, u, V, Lm, lvec, col, val, lower, upper, zmax, n_hard, nx, Y0, Y)
             worst = 0
             for j in range(1, n_act):
                 if u[j] < u[worst]:
@@ -161,18 +181,11 @@ def dual_solve(ecnt, eax, ceq, elim, Kp, Z, L, A, B, S, P, K, C, Bu, du, x, d, t
             _drop(worst, n_act, act, sgn, u, V, Lm)
             n_act -= 1
     while True:
-        # the most violated constraint
-        best, p, sp_ = tol, -1, 1
-        for i in range(ncons):
-            if i < n_hard and elim[i]:
-                continue
-            e, side = _violation(i, col, val, lower, upper, n_hard, nx, Y)
-            if e > best:
-                best, p, sp_ = e, i, side
+        p, sp_, best = _most_violated(col, val, lower, upper, zmax, n_hard, elim, nx, Y, tol)
         if p < 0:
             break
         if p >= n_hard:
-            bound = -1.0  # -1 <= z (side +1) and -z >= -1 (side -1)
+            bound = -zmax[p - n_hard]  # -zmax <= z (side +1) and -z >= -zmax (side -1)
         else:
             bound = lower[p] if sp_ == 1 else -upper[p]
         u_plus = 0.0
@@ -185,7 +198,7 @@ def dual_solve(ecnt, eax, ceq, elim, Kp, Z, L, A, B, S, P, K, C, Bu, du, x, d, t
             q[:, :] = 0.0
             r[:, :] = 0.0
             smax = _normal_terms(p, float(sp_), col, val, n_hard, nx, L, Z, q, r)
-            substitute(A, B, P, K, C, L, Z, q, r, c, k0, zero6, smax, False, Yv)
+            substitute(A, B, P, K, C, L, Z, ecnt, q, r, c, k0, zero6, smax, False, Yv)
             # c = N_A' H^-1 n, l = Lm^-1 c, r = Lm^-T l
             for j in range(n_act):
                 cvec[j] = sgn[j] * _value(act[j], col, val, n_hard, nx, Yv)
@@ -251,18 +264,13 @@ def dual_solve(ecnt, eax, ceq, elim, Kp, Z, L, A, B, S, P, K, C, Bu, du, x, d, t
             break
     if status == SOLVED and n_act > 0:
         # polish: the minimiser on the final working set afresh from Y0 (``stagewise.dual_solve``)
-        _on_working_set(n_act, act, sgn, u, V, Lm, lvec, col, val, lower, upper, n_hard, nx, Y0, Y)
-    worst = 0.0
-    for i in range(ncons):
-        if i < n_hard and elim[i]:
-            continue
-        e, side = _violation(i, col, val, lower, upper, n_hard, nx, Y)
-        worst = max(worst, e)
-    return status, iterations, n_act, worst
+        _on_working_set(n_act, act, sgn, u, V, Lm, lvec, col, val, lower, upper, zmax, n_hard, nx, Y0, Y)
+    p, sp_, worst = _most_violated(col, val, lower, upper, zmax, n_hard, elim, nx, Y, 0.0)
+    return status, iterations, n_act, max(worst, 0.0)
 
 
 @njit(cache=True)
-def _on_working_set(n, act, sgn, u, V, Lm, lvec, col, val, lower, upper, n_hard, nx, Y0, Y):
+def _on_working_set(n, act, sgn, u, V, Lm, lvec, col, val, lower, upper, zmax, n_hard, nx, Y0, Y):
     """The minimiser with the ``n`` active constraints as equalities, ``Y = Y0 + V lam`` with
     ``M lam = -s(Y0)`` (``M = Lm Lm'``, ``s`` their slacks at the unconstrained minimiser
     ``Y0``); the multipliers ``lam`` into ``u``."""
@@ -270,7 +278,7 @@ def _on_working_set(n, act, sgn, u, V, Lm, lvec, col, val, lower, upper, n_hard,
     for j in range(n):
         i = act[j]
         if i >= n_hard:
-            b = -1.0
+            b = -zmax[i - n_hard]
         else:
             b = lower[i] if sgn[j] > 0 else -upper[i]
         acc = -(sgn[j] * _value(i, col, val, n_hard, nx, Y0) - b)

@@ -170,22 +170,23 @@ def arrival_fill(idx, unit, arr_from, arr_lim, col, val, b0l, b0u, kinds, r):
 def rate_fill(N, u_prev, unit, rate_on, umax, rate_step, recourse, col, val, b0l, b0u, kinds, r):
     """:class:`~planner.constraints.drives.DriveForceRateConstraint`: ``|u(j) - u(j-1)| <=
     rate_step`` (``(1 - recourse) rate_step`` for ``j >= 1``) per move and drive, on the
-    moves (``Y[6N + m j + i]``; ``u(-1) = u_prev``)."""
+    moves (``Y[6N + m j + i]``; ``u(-1) = u_prev``), in the scaled moves' unit (divided by
+    ``umax``; ``unit`` is not used)."""
     if not rate_on:
         return r
     m = umax.shape[0]
     for j in range(N):
         for i in range(m):
             col[r, 0] = 6 * N + m * j + i
-            val[r, 0] = umax[i] / unit
+            val[r, 0] = 1.0
             if j > 0:
                 col[r, 1] = 6 * N + m * (j - 1) + i
-                val[r, 1] = -umax[i] / unit
-                b0l[r] = -(1.0 - recourse) * rate_step[i] / unit
-                b0u[r] = (1.0 - recourse) * rate_step[i] / unit
+                val[r, 1] = -1.0
+                b0l[r] = -(1.0 - recourse) * rate_step[i] / umax[i]
+                b0u[r] = (1.0 - recourse) * rate_step[i] / umax[i]
             else:
-                b0l[r] = (u_prev[i] - rate_step[i]) / unit
-                b0u[r] = (u_prev[i] + rate_step[i]) / unit
+                b0l[r] = (u_prev[i] - rate_step[i]) / umax[i]
+                b0u[r] = (u_prev[i] + rate_step[i]) / umax[i]
             kinds[r] = KIND_RATE
             r += 1
     return r

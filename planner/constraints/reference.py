@@ -61,7 +61,7 @@ class ReferenceAssembly:
               u_prev: np.ndarray, u0: np.ndarray) -> ReferenceQP:
         """The condensed QP of step ``k`` in the scaled inputs ``z = u / force_max``::
 
-            min 0.5 z'Hz + f'z   s.t.  -1 <= z <= 1,  bl <= A z <= bu  (rows with bl == bu: equal)
+            min 0.5 z'Hz + f'z   s.t.  |z| <= zmax,  bl <= A z <= bu  (rows with bl == bu: equal)
 
         Every row is a linear function ``Sel`` of the predicted states ``X = free + Gx z``
         (eq. 11) and the moves, so ``A = Sel_X Gx + Sel_z`` and the bounds are ``b0 - Sel_X
@@ -114,7 +114,7 @@ class ReferenceAssembly:
         SX, Sz = Sel[:, :6 * N], Sel[:, 6 * N:]
         sf = SX @ qp.free
         qp.dense = DenseQP(qp.H, f, SX @ qp.Gx + Sz, qp.rows.lower - sf, qp.rows.upper - sf, qp.rows.kinds,
-                           qp.rows.n_hard)
+                           qp.rows.n_hard, self.constraints.forces.bounds(N))
 
     def dense(self, qp: ReferenceQP) -> DenseQP:
         """Every row formed (the slack problem)."""

@@ -10,8 +10,10 @@ with ``Y = (X, z)`` (an index below ``6N`` is a state, from ``6N`` on a move), i
 selection ``Sel`` of the states and moves. With the prediction ``X = free + Gx z`` (eq. 11 in
 the scaled moves ``z``) a row becomes ``lower - Sel_X free <= (Sel_X Gx + Sel_z) z <= upper -
 Sel_X free``. Rows are scaled so that one unit is :data:`ROW_UNIT_M` of its unit (m of pose,
-m/s of leg speed, m of stroke, rad of angle, N of drive force), which keeps the solver's
-tolerances meaningful in every kind.
+m/s of leg speed, m of stroke, rad of angle), which keeps the solver's tolerances
+meaningful in every kind; the force-rate rows are in the scaled moves' unit (``force_max``),
+like the force bounds, so that their coefficients are 1 (in newtons they were 1e4 times the
+other rows' and the slack problem's DAQP solve failed on it).
 
 A constraint object (:class:`RowConstraint`) gives its :class:`RowBlock` for a step from a
 :class:`StepContext` (its numpy reference), and the arrays its compiled twin in
@@ -67,6 +69,7 @@ class RowBlock:
     upper: np.ndarray  #: (r,) upper bounds
     kind: RowKind
     legs: bool = False  #: rows of the legs (speed, stroke), one per sample and leg: sample 0's are relinearised
+    unit: float = ROW_UNIT_M  #: what one row unit is (the force-rate rows: in the moves' own unit, 1)
 
 
 @dataclass(slots=True, eq=False)
@@ -101,8 +104,9 @@ class Rows:
         def first(kind: RowKind) -> int:  # the first leg row of that kind (sample 0's), -1 if none
             return next((int(r) for b, r in zip(blocks, starts) if b.kind == kind and b.legs), -1)
 
-        return cls(col, val / ROW_UNIT_M, np.concatenate([b.lower for b in blocks]) / ROW_UNIT_M,
-                   np.concatenate([b.upper for b in blocks]) / ROW_UNIT_M, kinds,
+        unit = np.concatenate([np.full(nb, b.unit) for b, nb in zip(blocks, n)])
+        return cls(col, val / unit[:, None], np.concatenate([b.lower for b in blocks]) / unit,
+                   np.concatenate([b.upper for b in blocks]) / unit, kinds,
                    sum(nb for nb, h in zip(n, hard) if h), first(RowKind.SPEED), first(RowKind.STROKE))
 
     @property

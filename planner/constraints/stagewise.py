@@ -215,9 +215,10 @@ class DualResult:
     violation: float  #: largest violation of a row at ``Y`` (row units)
 
 
-def _constraints(sp: StageProblem, rows: Rows) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray, np.ndarray]:
+def _constraints(sp: StageProblem, rows: Rows,
+                 zmax: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray, np.ndarray]:
     """The inequality constraints the dual method sees, as index lists into ``Y``, values and
-    bounds: the hard rows not eliminated, then the force bounds ``-1 <= z <= 1``."""
+    bounds: the hard rows not eliminated, then the force bounds ``-zmax <= z <= zmax``."""
     nx = 6 * sp.N
     cols, vals, lo, hi = [], [], [], []
     for r in range(rows.n_hard):
@@ -231,8 +232,8 @@ def _constraints(sp: StageProblem, rows: Rows) -> tuple[list[np.ndarray], list[n
     for q in range(sp.N * sp.m):
         cols.append(np.array([nx + q]))
         vals.append(np.array([1.0]))
-        lo.append(-1.0)
-        hi.append(1.0)
+        lo.append(-zmax[q])
+        hi.append(zmax[q])
     return cols, vals, np.array(lo), np.array(hi)
 
 
@@ -260,13 +261,14 @@ def shifted(Y: np.ndarray, N: int, m: int) -> np.ndarray:
     return np.concatenate((np.vstack((X[1:], X[-1:])).ravel(), np.vstack((z[1:], z[-1:])).ravel()))
 
 
-def dual_solve(sp: StageProblem, rows: Rows, x: np.ndarray, d: np.ndarray, tgt: np.ndarray,
+def dual_solve(sp: StageProblem, rows: Rows, zmax: np.ndarray, x: np.ndarray, d: np.ndarray, tgt: np.ndarray,
                warm: np.ndarray | None = None, tol: float = SOLVE_TOL, max_iter: int = 1000) -> DualResult:
     """The step's QP by the dual active-set method of Goldfarb and Idnani (module docstring):
     from the unconstrained minimiser, add the most violated constraint; the step direction
     ``H^-1 n - V r`` (``V`` the substitutions of the active rows, ``r = M^-1 N_A' H^-1 n``)
     moves to the constraint or, first, drops an active constraint whose multiplier reaches
-    zero. Exact: it ends on the active rows (as DAQP).
+    zero. Exact: it ends on the active rows (as DAQP). ``zmax`` (N m,): the force bounds of
+    the scaled moves.
 
     Warm start (``warm``: the previous step's solution :func:`shifted`): the constraints within
     :data:`WARM_TOL` of a bound there form the first working set (the linearly independent
@@ -274,7 +276,7 @@ def dual_solve(sp: StageProblem, rows: Rows, x: np.ndarray, d: np.ndarray, tgt: 
     (``s`` their slacks at the unconstrained minimiser ``Y0``); while a multiplier is negative
     the most negative one is dropped. That point is optimal for its working set with
     multipliers >= 0, which is all the method needs to start from."""
-    cols, vals, lo, hi = _constraints(sp, rows)
+    cols, vals, lo, hi = _constraints(sp, rows, zmax)
     c, k0, q, r = affine_terms(sp, x, d, tgt)
     Y0 = substitute(sp, q, r, c, k0, x)
     Y = Y0

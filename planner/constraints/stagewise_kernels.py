@@ -306,9 +306,10 @@ def affine(x, d, tgt, ecnt, eax, ceq, Kp, Z, L, S, Bu, du, c, k0, q, r):
 
 
 @njit(cache=True)
-def substitute(A, B, P, K, C, L, Z, q, r, c, k0, x0, smax, affine, Y):
+def substitute(A, B, P, K, C, L, Z, ecnt, q, r, c, k0, x0, smax, affine, Y):
     """``stagewise.substitute`` into ``Y``: backward from stage ``smax`` (the linear terms above
-    it are zero), forward over all stages; ``affine`` False: ``c``, ``k0``, ``x0`` are zero."""
+    it are zero), forward over all stages; ``affine`` False: ``c``, ``k0``, ``x0`` are zero.
+    A stage without equalities (``ecnt`` 0) has ``z = w`` (``L = 0``, ``Z = I``)."""
     N = A.shape[0]
     m = B.shape[2]
     k = np.zeros((N, m))
@@ -360,13 +361,17 @@ def substitute(A, B, P, K, C, L, Z, q, r, c, k0, x0, smax, affine, Y):
             for t in range(6):
                 acc -= K[s, j, t] * xs[t]
             w[j] = acc
-        for lg in range(m):
-            acc = k0[s, lg] if affine else 0.0
-            for t in range(6):
-                acc += L[s, lg, t] * xs[t]
-            for j in range(m):
-                acc += Z[s, lg, j] * w[j]
-            Y[nx + m * s + lg] = acc
+        if ecnt[s] == 0:
+            for lg in range(m):
+                Y[nx + m * s + lg] = w[lg]
+        else:
+            for lg in range(m):
+                acc = k0[s, lg] if affine else 0.0
+                for t in range(6):
+                    acc += L[s, lg, t] * xs[t]
+                for j in range(m):
+                    acc += Z[s, lg, j] * w[j]
+                Y[nx + m * s + lg] = acc
         for a in range(6):
             acc = c[s, a] if affine else 0.0
             for t in range(6):

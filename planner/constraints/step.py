@@ -65,17 +65,18 @@ class FullQP:
         ck.predict(self.Gx, self.free, z, X)
         return X
 
-    def dense(self, rows: Rows) -> DenseQP:
-        """Every row formed: ``A = Sel Gx`` (``kernels.constraint_matrix``)."""
+    def dense(self, rows: Rows, zmax: np.ndarray) -> DenseQP:
+        """Every row formed: ``A = Sel_X Gx + Sel_z`` (``kernels.constraint_matrix``); the
+        moves' bounds ``|z| <= zmax``."""
         A = np.empty((rows.n_rows, self.Gx.shape[1]))
         ck.constraint_matrix(rows.col, rows.val, self.Gx, A)
-        return DenseQP(self.H, self.f, A, self.lower, self.upper, rows.kinds, rows.n_hard)
+        return DenseQP(self.H, self.f, A, self.lower, self.upper, rows.kinds, rows.n_hard, zmax)
 
-    def solve(self, rows: Rows, start: np.ndarray | None) -> QPSolution:
+    def solve(self, rows: Rows, zmax: np.ndarray, start: np.ndarray | None) -> QPSolution:
         """The hard QP, every hard row given to DAQP, from the warm start ``start``; the
         predicted states at its solution in ``states``, its largest row violation in
         ``violation``."""
-        dense = self.dense(rows)
+        dense = self.dense(rows, zmax)
         sol = dense.solve_hard(start)
         if sol.ok:
             sol.states = self.predict(sol.z)

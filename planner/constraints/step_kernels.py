@@ -28,11 +28,12 @@ NOT_ELIMINATED = -3
 
 
 @njit(cache=True)
-def constrained_step(k, x, Ad, Bd, y_prev, u_prev, u0, warm, packed, Ts, substeps, umax, du, unit, N, refine_tol_m,
-                     refine_tol_rad, refine_max, tol, dep_tol, warm_tol, relax, max_iter, V, Lm, inputs):
+def constrained_step(k, x, Ad, Bd, y_prev, u_prev, u0, warm, packed, Ts, substeps, umax, zmax, du, unit, N,
+                     refine_tol_m, refine_tol_rad, refine_max, tol, dep_tol, warm_tol, relax, max_iter, V, Lm, inputs):
     """Step ``k`` at state ``x`` with the model ``Ad, Bd`` (eq. 9): the rows and criterion
     (``kernels.assemble`` with ``inputs`` = its arguments from ``K`` on), the legs linearised at
-    ``y_prev`` (or at ``x``: empty), the forces applied over the previous sample ``u_prev``
+    ``y_prev`` (or at ``x``: empty), the force bounds ``|z| <= zmax`` (N m,) of the scaled
+    moves, the forces applied over the previous sample ``u_prev``
     [N] (the rate rows), the warm start ``warm`` (the previous solution shifted: the rows
     at a bound there start in the working set; empty: none), the offset under the guessed move ``u0`` [N], the
     stage-wise problem factorised and solved, and the offset refined at the solution's first
@@ -65,8 +66,8 @@ def constrained_step(k, x, Ad, Bd, y_prev, u_prev, u0, warm, packed, Ts, substep
     u1 = np.empty(m)
     while True:
         status, it, n_act, worst = dual_solve(ecnt, eax, ceq, elim, Kp, Z, L, A, B, S, P, K, C, Bu, du, x, d, tgt, col,
-                                              val, lower, upper, n_hard, tol, dep_tol, warm_tol, max_iter, warm, V,
-                                              Lm, Y)
+                                              val, lower, upper, zmax, n_hard, tol, dep_tol, warm_tol, max_iter,
+                                              warm, V, Lm, Y)
         iterations += it
         if status != SOLVED and not relaxed:
             relaxed = True

@@ -16,11 +16,13 @@ stage on its numpy implementation. Both give the same trajectory (tests: 1e-9 m)
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 
+from ..constraints import ConstrainedController
 from ..corridor import RangeSequence
 from ..errors import PlannerError
 from ..horizon import SOLVERS
@@ -114,7 +116,10 @@ def _simulate_compiled(robot: RobotModel, seq: RangeSequence, st: Settings) -> S
 
 
 def simulate(robot: RobotModel, seq: RangeSequence, st: Settings, controller: Controller | None = None) -> Simulation:
-    """Run the receding-horizon loop with ``controller`` (default: the paper's)."""
+    """Run the receding-horizon loop with ``controller`` (default: the paper's). With the
+    compiled backend the constrained controller's steps run in the compiled loop
+    (:func:`planner.orchestrator.kernels.simulate_constrained`), and here only the steps that
+    loop hands back (those its stage-wise solve did not finish)."""
     reference = st.backend == "reference"
     if controller is None:
         if not reference:
@@ -125,12 +130,30 @@ def simulate(robot: RobotModel, seq: RangeSequence, st: Settings, controller: Co
     X = np.empty((max_steps + 1, 6))
     U = np.zeros((max_steps + 1, robot.n_legs))
     ACC = np.empty((max_steps + 1, 3))
-    x = np.concatenate((seq.start, np.zeros(3)))
-    X[0] = x
+    X[0] = np.concatenate((seq.start, np.zeros(3)))
     settled = False
-    k = 0
     packed = robot.packed
-    for k in range(max_steps):
+    loop = None
+    if not reference and isinstance(controller, ConstrainedController):
+        loop = controller.loop_arguments(max_steps)
+    settle = np.array([st.settle_position_m, st.settle_angle_rad, st.settle_speed_m_s, st.settle_rate_rad_s])
+    end = np.asarray(seq.end, dtype=float)
+    k = 0
+    while k < max_steps:
+        if loop is not None and isinstance(controller, ConstrainedController):
+            args, record = loop
+            t0 = time.perf_counter()
+            status, k_end, settled = loop_kernels.simulate_constrained(
+                packed, k, max_steps, seq.K, Ts, st.plant_substeps, end, settle, X, U, ACC, *args)
+            controller.absorb(record, k, k_end, time.perf_counter() - t0)
+            if status == loop_kernels.DIVERGED:
+                raise _diverged(k_end, Ts)
+            if status == loop_kernels.SINGULAR:
+                raise _singular(k_end * Ts, X[k_end])
+            k = k_end
+            if settled or k >= max_steps:
+                break
+        x = X[k]  # one step here: the paper's or reference controller, or a step the compiled loop handed back
         if reference:
             A22, B2 = dynamics.factorised_blocks(robot, x)  # eq. (8)
             Ad, Bd = zoh_factorised(A22, B2, Ts)  # eq. (9)
@@ -149,9 +172,10 @@ def simulate(robot: RobotModel, seq: RangeSequence, st: Settings, controller: Co
         X[k + 1] = x
         if not np.all(np.isfinite(x)) or abs(x[0]) + abs(x[1]) > 1e3:
             raise _diverged(k, Ts)
-        if k + 1 >= seq.K and _settled(x, seq.end, st):
+        k += 1
+        if k >= seq.K and _settled(x, seq.end, st):
             settled = True
             break
-    steps = k + 1
+    steps = k
     ACC[steps] = dynamics.acceleration(robot, X[steps, :3], X[steps, 3:], U[steps])
     return Simulation(X[:steps + 1], U[:steps + 1], ACC[:steps + 1], steps, settled)

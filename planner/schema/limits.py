@@ -44,4 +44,4 @@ DEFAULT_SAMPLES_PER_SEGMENT = 20
 DEFAULT_ROBOT = "moving-slide"
 #: the constrained mode's default drive-force rate limit: each drive may go from zero to its
 #: force_max in this time [s] (settings.force_rate_n_s)
-DEFAULT_FORCE_RISE_S = 0.1
+DEFAULT_FORCE_RISE_S = 0.05

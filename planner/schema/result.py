@@ -92,8 +92,8 @@ class Metrics(_Out):
     qp_fallbacks: int | None = Field(None, description="Constrained mode, compiled backend: steps the stage-wise "
                                      "solver handed to DAQP (count)")
     qp_relaxed_steps: int | None = Field(None, description="Constrained mode, compiled backend: steps whose QP was "
-                                         "infeasible by less than 1e-8 (m, m/s, rad or N) and was solved with its rows "
-                                         "widened by that much, 100 times inside the 1e-6 m corridor margin (count)")
+                                         "infeasible by less than 8e-7 (m, m/s, rad or N) and was solved with its rows "
+                                         "widened by that much, inside the 1e-6 m corridor margin (count)")
     qp_iterations_median: float | None = Field(None, description="Constrained mode: median QP iterations per step "
                                                "(active-set changes)")
     qp_iterations_max: int | None = Field(None, description="Constrained mode: most QP iterations in one step")
