@@ -30,8 +30,8 @@ import numpy as np
 from ..model import RobotModel
 from .rows import ROW_UNIT_M, RowBlock, RowConstraint, RowKind, Rows, StepContext
 
-__all__ = ["FORCE_RECOURSE", "RATE_RECOURSE", "SPEED_MARGIN", "DriveForceConstraint", "DriveForceRateConstraint", "LegSpeedConstraint",
-           "LegStrokeConstraint"]
+__all__ = ["FORCE_RECOURSE", "RATE_RECOURSE", "SPEED_MARGIN", "DriveForceConstraint", "DriveForceRateConstraint",
+           "LegSpeedConstraint", "LegStrokeConstraint"]
 
 #: relative margin on the leg speed limit [-]
 SPEED_MARGIN = 1e-5

@@ -83,7 +83,7 @@ class DenseQP:
 
     def solve_hard(self, start: np.ndarray | None = None) -> QPSolution:
         """The hard QP with every hard row given to DAQP (the numpy reference's solve)."""
-        nz, nh = len(self.f), self.n_hard
+        nh = self.n_hard
         bu = np.concatenate((self.zmax, self.upper[:nh]))
         bl = np.concatenate((-self.zmax, self.lower[:nh]))
         sense = np.zeros(len(bu), dtype=np.int32)
