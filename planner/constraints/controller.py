@@ -54,11 +54,12 @@ from typing import Any, ClassVar, NamedTuple, Protocol
 import numpy as np
 
 from ..corridor import RangeSequence
+from ..corridor.geometry import corridor_gaps
 from ..errors import PlannerError
 from ..model import RobotModel
 from ..schema import DEFAULT_FORCE_RISE_S, Segment, Settings
 from .compiled import CompiledAssembly
-from .corridor import ArrivalConstraint, CorridorConstraint, EndApproachConstraint
+from .corridor import MARGIN_M, MARGIN_RAD, ArrivalConstraint, CorridorConstraint, EndApproachConstraint
 from .drives import DriveForceConstraint, DriveForceRateConstraint, LegSpeedConstraint, LegStrokeConstraint
 from .qp import DenseQP, QPSolution
 from .reference import ReferenceAssembly
@@ -219,6 +220,9 @@ class ConstrainedController:
                  segments: Sequence[Segment] | None = None):
         self.model, self.seq, self.st = model, seq, st
         self.N, self.n_legs = st.N, model.n_legs
+        #: consecutive segments that do not touch (the margins allowed): the geometric cause of
+        #: an infeasible plan, if any
+        self.gaps = corridor_gaps(segments, 2 * MARGIN_M, 2 * MARGIN_RAD) if segments is not None else []
         self.constraints = Constraints.of(model, seq, segments, st)
         #: the ranges the criterion reads (the stop boxes at the end: ``criterion_sequence``)
         self.criterion = self.constraints.corridor.criterion_sequence(seq)
@@ -332,6 +336,20 @@ class ConstrainedController:
         stats.violation_max_m, stats.mismatch_m, stats.mismatch_rad = (float(v) for v in record.worst)
         stats.solve_s += seconds
 
+    def infeasible_error(self, what: str, also: str = "") -> PlannerError:
+        """``PlannerError("infeasible")`` saying ``what`` and the remedy: where consecutive
+        segments do not touch (:func:`~planner.corridor.geometry.corridor_gaps`) that is the
+        cause, which more time does not cure, and the error names the segment; otherwise more
+        time or a wider corridor. ``also``: a further remedy."""
+        gaps = self.gaps
+        if gaps:
+            g = gaps[0]
+            return PlannerError("infeasible", f"{what}: {g.describe()}; the robot would have to jump between them "
+                                "within one sample, which no timing allows: connect or widen the segments"
+                                + (f", or {also}" if also else ""), f"segments[{g.index + 1}]")
+        return PlannerError("infeasible", f"{what}; give it more time (samples_per_segment, speed_m_s, "
+                            "total_time_s) or widen the corridor" + (f", or {also}" if also else ""), "settings")
+
     def _previous_plan(self, zmax: np.ndarray) -> np.ndarray:
         """The previous step's moves shifted by one sample (zero before the first), the first
         kept within the force-rate limit of the force just applied and all within ``zmax``:
@@ -360,13 +378,10 @@ class ConstrainedController:
         self.stats.speed_slack_max_m_s = max(self.stats.speed_slack_max_m_s, float(sl[2]))
         self.stats.infeasible += 1
         if self.st.require_settled:  # strict: stop at the first step that cannot keep the corridor
-            raise PlannerError(
-                "infeasible",
-                f"at t = {k * self.st.Ts:.3f} s the robot cannot keep the corridor within its drive "
-                f"limits (the corridor needs {slack * 1e3:.4f} mm of slack, the leg speeds "
-                f"{sl[2] * 1e3:.4f} mm/s); give it more time "
-                "(samples_per_segment, speed_m_s, total_time_s), widen the corridor, or set "
-                "require_settled to false to get the plan with its violations reported", "settings")
+            raise self.infeasible_error(
+                f"at t = {k * self.st.Ts:.3f} s the robot cannot keep the corridor within its drive limits (the "
+                f"corridor needs {slack * 1e3:.4f} mm of slack, the leg speeds {sl[2] * 1e3:.4f} mm/s)",
+                "set require_settled to false to get the plan with its violations reported")
         return zs[:nz], sol.iterations
 
     def report(self) -> dict:

@@ -23,7 +23,7 @@ from ..model import RobotModel, load_robot
 from ..model.reach import check_pose, check_segments
 from ..schema import PlanRequest, PlanResult, Segment, Settings, parse_request
 from .result import build_result
-from .simulate import Controller, simulate
+from .simulate import simulate
 from .timing import resolve_timing, search_fastest, timing_info
 
 __all__ = ["plan", "segment", "warm_up"]
@@ -92,20 +92,18 @@ def _plan_once(name: str | None, model: RobotModel, st: Settings, segments: Sequ
             check_pose(model, pose, f"reference.pose[{i}]")
         seq = reference_sequence(req.reference.pose, st, model.n_legs)
     check_pose(model, seq.start, "segments[0]" if segments is not None else "reference.pose[0]")
-    controller: Controller | None = None
+    controller: ConstrainedController | None = None
     if st.mode == "constrained":
         controller = ConstrainedController(model, seq, st, segments)
     sim = simulate(model, seq, st, controller)
     report = controller.report() if controller is not None else {}
     result = build_result(model, name, st, seq, segments, sim, report, timing_info(st, segments, **timing))
     mt = result.metrics
-    if st.mode == "constrained" and (mt.infeasible_steps or 0) > 0 and st.require_settled:
-        raise PlannerError(
-            "infeasible",
+    if controller is not None and (mt.infeasible_steps or 0) > 0 and st.require_settled:
+        raise controller.infeasible_error(
             f"the constrained plan cannot keep the robot in the corridor within the drive limits: "
             f"{mt.infeasible_steps} of {mt.steps} steps needed slack (up to "
-            f"{(mt.constraint_slack_max_m or 0.0) * 1e3:.4f} mm); give the robot more time "
-            "(samples_per_segment, speed_m_s, total_time_s) or widen the corridor", "settings")
+            f"{(mt.constraint_slack_max_m or 0.0) * 1e3:.4f} mm)")
     return result
 
 

@@ -54,12 +54,20 @@ class Metrics(_Out):
     end_error_m: float = Field(description="Final distance of (x, y) from the end point, m")
     end_error_rad: float = Field(description="Final angle error, rad")
     end_speed_m_s: float = Field(description="Final tool speed, m/s")
-    overshoot_m: float = Field(description="How far the robot passes the end point along the final approach, m")
+    overshoot_m: float = Field(description="How far the robot passes the end point, measured along the approach "
+                               "direction (from the last cell's centre to the end point, or from the cell before it "
+                               "where the end point is the last cell's centre), over the samples from the last cell "
+                               "on, m")
     max_corridor_violation_m: float = Field(description="Largest distance of (x, y) outside the union of the "
                                             "segments, m")
-    max_corridor_violation_rad: float = Field(description="Largest angle outside the corridor's psi range, rad")
+    max_corridor_violation_rad: float = Field(description="Largest angle outside the psi ranges of the segments the "
+                                              "sample's (x, y) lies in (of the nearest ones where it lies in none), "
+                                              "rad")
     time_indexed_violation_m: float = Field(description="Largest distance of (x, y) outside that sample's range, m")
+    time_indexed_violation_rad: float = Field(description="Largest angle outside that sample's psi range, rad")
     max_drive_force_n: float = Field(description="Largest drive force magnitude, N")
+    max_force_rate_n_s: float = Field(description="Largest change of a drive force from one sample to the next "
+                                      "(from zero before the start) divided by Ts, N/s")
     force_limit_n: float = Field(description="Smallest drive force limit of the robot, N")
     max_force_ratio: float = Field(description="Largest |force| / force limit (dimensionless)")
     max_drive_speed_m_s: float = Field(description="Largest leg sliding speed, m/s")
@@ -72,7 +80,8 @@ class Metrics(_Out):
     compute_ms: float = Field(description="Planner compute time of the whole plan() call, ms")
     # constrained mode
     contained: bool | None = Field(None, description="Constrained mode: no step needed slack and the actual "
-                                   "trajectory lies in the corridor to 1e-9 m")
+                                   "trajectory lies in the corridor: (x, y) in the union of the segments (and of the "
+                                   "exact cells) to 1e-9 m, psi in the psi ranges of the segments it is in to 1e-7 rad")
     within_limits: bool | None = Field(None, description="Constrained mode: drive forces, leg speeds and strokes "
                                        "within their limits on the actual trajectory")
     max_polygon_violation_m: float | None = Field(None, description="Constrained mode, corridors with exact cell "
