@@ -47,9 +47,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from planner import plan
-from planner.constraints import CorridorConstraint, EndApproachConstraint
+from planner.constraints import ArrivalConstraint, CorridorConstraint, EndApproachConstraint
+from planner.constraints.controller import force_rate
 from planner.corridor import range_sequence
-from planner.corridor.geometry import corridor_violation
+from planner.corridor.geometry import approach_direction, corridor_violation
 from planner.model import dynamics, load_robot
 from planner.model.plant import rk4_sample
 from planner.orchestrator.result import overshoot
@@ -121,8 +122,13 @@ def check_dynamics(robot, f, trials: int = 200) -> float:
     return worst
 
 
-def solve_optimum(req: dict, K: int, robot, verbose=False) -> dict:
-    """The whole-horizon minimum-energy plan (module docstring) for ``K`` steps."""
+def solve_optimum(req: dict, K: int, robot, verbose=False, minimum_time: bool = False,
+                  guess: tuple[np.ndarray, np.ndarray] | None = None) -> dict:
+    """The whole-horizon optimum (module docstring) over ``K`` samples: minimum energy at the
+    request's sample time, or (``minimum_time``) the minimum time ``K h`` with the sample time
+    ``h`` a decision variable (the same samples, so the same per-sample boxes; the force-rate
+    limit then ``rate h`` per sample). ``guess``: initial states (K+1, 6) and forces (K, m)
+    instead of the range centres and zero forces."""
     import casadi as ca
 
     pr = parse_request(req)
@@ -130,23 +136,28 @@ def solve_optimum(req: dict, K: int, robot, verbose=False) -> dict:
     segs = pr.segments
     seq = range_sequence(segs, st, robot.n_legs)
     sets = CorridorConstraint(seq, segs)
-    approach = EndApproachConstraint(seq, segs, st.samples_per_segment)
+    approach = EndApproachConstraint(seq, segs)
+    arrival = ArrivalConstraint(seq, segs)
+    rate = force_rate(robot, st) if st.mode == "constrained" else None
     f = casadi_dynamics(robot)
     Ts, sub, m = st.Ts, st.plant_substeps, robot.n_legs
-    xs, us = ca.SX.sym("x", 6), ca.SX.sym("u", m)
-    xk, h = xs, Ts / sub
+    xs, us, hs = ca.SX.sym("x", 6), ca.SX.sym("u", m), ca.SX.sym("h")
+    xk, h = xs, hs / sub
     for _ in range(sub):
         k1 = f(xk, us)
         k2 = f(xk + 0.5 * h * k1, us)
         k3 = f(xk + 0.5 * h * k2, us)
         k4 = f(xk + h * k3, us)
         xk = xk + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-    F = ca.Function("F", [xs, us], [xk])
+    F = ca.Function("F", [xs, us, hs], [xk])
 
     opti = ca.Opti()
     X = opti.variable(6, K + 1)
     U = opti.variable(m, K)
-    opti.subject_to(X[:, 1:] == F.map(K)(X[:, :-1], U))
+    hT = opti.variable() if minimum_time else Ts
+    if minimum_time:
+        opti.subject_to(opti.bounded(0.2 * Ts, hT, 2.0 * Ts))
+    opti.subject_to(X[:, 1:] == F.map(K)(X[:, :-1], U, ca.repmat(hT, 1, K)))
     start = np.concatenate((seq.start, np.zeros(3)))
     opti.subject_to(X[:, 0] == start)
     # at rest at the end: velocity zero, and the pose in the same end box as the constrained
@@ -171,6 +182,14 @@ def solve_optimum(req: dict, K: int, robot, verbose=False) -> dict:
         sel = [q for q in range(K) if idx[q] >= approach.start_index]
         if sel:
             opti.subject_to(d[0] * P[0, sel] + d[1] * P[1, sel] <= b)
+    rest = [q for q in range(K) if idx[q] >= arrival.start_index]  # at rest from the arrival on
+    if rest:
+        lim = arrival.limit.reshape(-1, 1)
+        opti.subject_to(opti.bounded(-lim, X[3:, 1:][:, rest], lim))
+    if rate is not None:  # force rates, from zero before the start
+        dU = ca.horzcat(U[:, :1], U[:, 1:] - U[:, :-1])
+        step = rate.reshape(-1, 1) * hT
+        opti.subject_to(opti.bounded(-ca.repmat(step, 1, K), dU, ca.repmat(step, 1, K)))
     # leg speeds, exact
     y, v = ca.SX.sym("y", 3), ca.SX.sym("v", 3)
     c_, s_ = ca.cos(y[2]), ca.sin(y[2])
@@ -184,13 +203,20 @@ def solve_optimum(req: dict, K: int, robot, verbose=False) -> dict:
     LD = ca.Function("ld", [y, v], [ca.vertcat(*ld)]).map(K)
     vmax = robot.speed_max.reshape(-1, 1)
     opti.subject_to(opti.bounded(-vmax, LD(X[:3, 1:], X[3:, 1:]), vmax))
-    energy = ca.sumsqr(U) * Ts
-    opti.minimize(energy + 1e-9 * ca.sumsqr(X[:, 1:] - X[:, :-1]))
-    # initial guess: centres of the per-sample ranges
-    cen = np.vstack((seq.start, 0.5 * (seq.lower[idx] + seq.upper[idx])))
-    vel = np.vstack((np.diff(cen, axis=0) / Ts, np.zeros((1, 3))))
-    opti.set_initial(X, np.hstack((cen, vel)).T)
-    opti.set_initial(U, 0.0)
+    energy = ca.sumsqr(U) * hT
+    if minimum_time:
+        opti.minimize(K * hT + 1e-7 * energy)
+        opti.set_initial(hT, Ts)
+    else:
+        opti.minimize(energy + 1e-9 * ca.sumsqr(X[:, 1:] - X[:, :-1]))
+    if guess is not None:
+        opti.set_initial(X, guess[0].T)
+        opti.set_initial(U, guess[1].T)
+    else:  # centres of the per-sample ranges
+        cen = np.vstack((seq.start, 0.5 * (seq.lower[idx] + seq.upper[idx])))
+        vel = np.vstack((np.diff(cen, axis=0) / Ts, np.zeros((1, 3))))
+        opti.set_initial(X, np.hstack((cen, vel)).T)
+        opti.set_initial(U, 0.0)
     opti.solver("ipopt", {"print_time": False, "ipopt.print_level": 5 if verbose else 0, "ipopt.sb": "yes",
                           "ipopt.tol": 1e-8, "ipopt.constr_viol_tol": 1e-10, "ipopt.max_iter": 3000,
                           "ipopt.acceptable_iter": 0, "ipopt.linear_solver": "mumps"})
@@ -200,7 +226,8 @@ def solve_optimum(req: dict, K: int, robot, verbose=False) -> dict:
     Xs, Us = np.array(sol.value(X)).T, np.array(sol.value(U)).T
     stats = sol.stats()
     return {"X": Xs, "U": Us, "time_s": dt, "iterations": stats.get("iter_count"),
-            "status": stats.get("return_status"), "segments": segs, "seq": seq, "F": F}
+            "status": stats.get("return_status"), "segments": segs, "seq": seq, "F": F,
+            "h": float(sol.value(hT)) if minimum_time else Ts}
 
 
 def main(argv=None) -> int:
@@ -263,8 +290,8 @@ def main(argv=None) -> int:
     for k in range(K):
         x = rk4_sample(robot, x, U[k], Ts, st.plant_substeps)
         replay = max(replay, float(np.max(np.abs(x[:3] - X[k + 1, :3]))))
-    over = overshoot(X[:, :3], opt["segments"], opt["seq"].end,
-                     max((len(opt["segments"]) - 2) * st.samples_per_segment, 0))
+    over = overshoot(X[:, :3], approach_direction(opt["segments"]), opt["seq"].end,
+                     int(np.argmax(opt["seq"].segment >= len(opt["segments"]) - 2)) + 1)
     rows.append(("IPOPT optimum", statistics.median(times), float(np.sum(U * U) * Ts), viol, end_err, over,
                  float(np.max(np.abs(U) / robot.force_max)), K * Ts))
     print(f"IPOPT: {opt['status']}, {opt['iterations']} iterations, {K} intervals, {X.size + U.size} variables; "

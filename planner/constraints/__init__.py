@@ -20,13 +20,27 @@ Modules, by concept:
 ==============  ==========================================================================
 """
 
-from .controller import CONTAIN_TOL_M, CONTAIN_TOL_RAD, ConstrainedController, Constraints
-from .corridor import END_TOL_M, END_TOL_RAD, MARGIN_M, MARGIN_RAD, CorridorConstraint, EndApproachConstraint
-from .drives import SPEED_MARGIN, DriveForceConstraint, LegSpeedConstraint, LegStrokeConstraint
+from .controller import CONTAIN_TOL_M, CONTAIN_TOL_RAD, ConstrainedController, Constraints, ControllerStats, Memory
+from .corridor import (
+    END_TOL_M,
+    END_TOL_RAD,
+    MARGIN_M,
+    MARGIN_RAD,
+    ArrivalConstraint,
+    CorridorConstraint,
+    EndApproachConstraint,
+)
+from .drives import (
+    SPEED_MARGIN,
+    DriveForceConstraint,
+    DriveForceRateConstraint,
+    LegSpeedConstraint,
+    LegStrokeConstraint,
+)
 from .qp import DenseQP, QPSolution
 from .rows import ROW_UNIT_M, RowKind, Rows
 
 __all__ = ["CONTAIN_TOL_M", "CONTAIN_TOL_RAD", "END_TOL_M", "END_TOL_RAD", "MARGIN_M", "MARGIN_RAD", "ROW_UNIT_M",
-           "SPEED_MARGIN", "ConstrainedController", "Constraints", "CorridorConstraint", "DenseQP",
-           "DriveForceConstraint", "EndApproachConstraint", "LegSpeedConstraint", "LegStrokeConstraint",
-           "QPSolution", "RowKind", "Rows"]
+           "SPEED_MARGIN", "ArrivalConstraint", "ConstrainedController", "Constraints", "ControllerStats", "Memory",
+           "CorridorConstraint", "DenseQP", "DriveForceConstraint", "DriveForceRateConstraint",
+           "EndApproachConstraint", "LegSpeedConstraint", "LegStrokeConstraint", "QPSolution", "RowKind", "Rows"]

@@ -17,14 +17,15 @@ offset ``d = Phi(x, u0) - Ad x - Bd u0`` (an RK4 step of the plant under the gue
 ``u0``, the previous solution's; ``build`` and ``set_offset`` of the assembly), which leaves
 the one-step error ``(dPhi/du - Bd)(u - u0)``. After each solve the plant is stepped under the
 solution's move ``u``; while it lands farther than :data:`REFINE_TOL_M` /
-:data:`REFINE_TOL_RAD` (1e-3 and 1e-2 of the margins) from the prediction, the offset is
-recomputed at ``u`` and the QP solved again (at most :data:`REFINE_MAX` times; 8 re-solves in
-240 steps on Table I with the mode's defaults, 38 with the paper mode's penalties). The
-remaining one-step mismatch (metric ``model_mismatch_max_m``, printed by
-``benchmarks/bench_qp.py``) is below 1e-9 m and 1e-8 rad on Table I, far inside the
-1 micrometre margin (:data:`~planner.constraints.corridor.MARGIN_M`), which therefore keeps
-the actual samples inside. Metrics are always computed on the actual (nonlinear) trajectory;
-``contained`` is true only if its corridor violation is at most :data:`CONTAIN_TOL_M`.
+:data:`REFINE_TOL_RAD` (1e-2 of the corridor margin; 0.3 of :data:`CONTAIN_TOL_RAD`, which a
+zero-width psi range is kept to) from the prediction, the offset is recomputed at ``u`` and
+the QP solved again (at most :data:`REFINE_MAX` times; 8 re-solves in 240 steps on Table I
+with the mode's defaults). The remaining one-step mismatch (metric ``model_mismatch_max_m``)
+is below 1e-9 m and 1e-8 rad on Table I, and at most the tolerances at the fastest timings,
+far inside the 1 micrometre margin (:data:`~planner.constraints.corridor.MARGIN_M`; 0.2 um of
+it is left when a step's rows were relaxed), which therefore keeps the actual samples inside.
+Metrics are always computed on the actual (nonlinear) trajectory; ``contained`` is true only
+if its corridor violation is at most :data:`CONTAIN_TOL_M` and :data:`CONTAIN_TOL_RAD`.
 
 Backends. ``settings.backend`` picks, once at construction, the assembly that forms and
 solves each step's QP: :class:`~planner.constraints.compiled.CompiledAssembly` (each step in
@@ -45,6 +46,7 @@ counted (``infeasible_steps``), its slack reported (``constraint_slack_max_m``,
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Sequence
@@ -75,9 +77,10 @@ CONTAIN_TOL_M = 1e-9
 #: kept to the one-step mismatch the refinement leaves, ~1e-8 rad)
 CONTAIN_TOL_RAD = 1e-7
 #: re-solve while the plant's next pose under the solution's first move lands farther than
-#: this from the QP's prediction of it (position [m], angle [rad]): 1e-3 and 1e-2 of the margins
-REFINE_TOL_M = 1e-9
-REFINE_TOL_RAD = 1e-8
+#: this from the QP's prediction of it (position [m], angle [rad]): 1e-2 of the corridor margin,
+#: and 0.3 of the angle that ``contained`` allows (zero-width psi ranges are kept to it)
+REFINE_TOL_M = 1e-8
+REFINE_TOL_RAD = 3e-8
 REFINE_MAX = 3
 
 
@@ -217,8 +220,11 @@ class ConstrainedController:
     compiled_loop: ClassVar[bool] = True
 
     def __init__(self, model: RobotModel, seq: RangeSequence, st: Settings,
-                 segments: Sequence[Segment] | None = None):
+                 segments: Sequence[Segment] | None = None, abandon: bool = False):
         self.model, self.seq, self.st = model, seq, st
+        #: raise ``infeasible`` at the first step the compiled solve finds infeasible, without the
+        #: DAQP fallback and the slack problem (a ``fastest`` candidate needs only the verdict)
+        self.abandon = abandon
         self.N, self.n_legs = st.N, model.n_legs
         #: consecutive segments that do not touch (the margins allowed): the geometric cause of
         #: an infeasible plan, if any
@@ -281,6 +287,8 @@ class ConstrainedController:
                 mem.remember(out.z, out.X, out.y_nom, self.constraints.forces.umax, out.Y)
                 stats.solve_s += time.perf_counter() - t0
                 return mem.u_prev
+            if self.abandon:
+                raise self.infeasible_error(f"at t = {k * self.st.Ts:.3f} s the step's QP is infeasible")
             stats.fallbacks += 1
         qp = asm.build(k, x, Ad, Bd, self.y_nom, self.u_prev, self.guess())
         sol = asm.solve(qp, self.warm_start())
@@ -311,6 +319,20 @@ class ConstrainedController:
         mem.remember(z, Xp, y_nom, self.constraints.forces.umax)
         stats.solve_s += time.perf_counter() - t0
         return mem.u_prev
+
+    def snapshot(self) -> tuple[Memory, ControllerStats]:
+        """Copies of the memory and the statistics (to resume from, :meth:`restore`)."""
+        mem = self.memory
+        copy = Memory(mem.z_prev.copy(), mem.y_nom.copy(), mem.u_prev.copy(), mem.warm.copy(), mem.x1_pred.copy(),
+                      mem.flags.copy())
+        return copy, dataclasses.replace(self.stats, iterations=list(self.stats.iterations))
+
+    def restore(self, memory: Memory, stats: ControllerStats) -> None:
+        """Continue from a :meth:`snapshot` (into this controller's own arrays)."""
+        mem = self.memory
+        for name in ("z_prev", "y_nom", "u_prev", "warm", "x1_pred", "flags"):
+            getattr(mem, name)[...] = getattr(memory, name)
+        self.stats = dataclasses.replace(stats, iterations=list(stats.iterations))
 
     def loop_arguments(self, max_steps: int) -> tuple[tuple, LoopRecord] | None:
         """For :func:`planner.orchestrator.kernels.simulate_constrained`: its arguments from

@@ -38,7 +38,8 @@ def constrained_step(k, x, Ad, Bd, y_prev, u_prev, u0, warm, packed, Ts, substep
     at a bound there start in the working set; empty: none), the offset under the guessed move ``u0`` [N], the
     stage-wise problem factorised and solved, and the offset refined at the solution's first
     move while the plant lands farther than ``refine_tol_m`` / ``refine_tol_rad`` from the
-    prediction (at most ``refine_max`` times). A QP found infeasible is solved once more
+    prediction (at most ``refine_max`` times; each re-solve warm-started from the solution
+    before it). A QP found infeasible is solved once more
     with every row widened by ``relax`` (row units): a plan that sat on a vertex of its rows
     can leave the next step's QP infeasible by the prediction error of a re-linearised model,
     a fraction of a nanometre; within ``relax`` that is accepted (``relaxed`` in the return).
@@ -64,10 +65,11 @@ def constrained_step(k, x, Ad, Bd, y_prev, u_prev, u0, warm, packed, Ts, substep
     refinements = 0
     relaxed = False
     u1 = np.empty(m)
+    start = warm
     while True:
         status, it, n_act, worst = dual_solve(ecnt, eax, ceq, elim, Kp, Z, L, A, B, S, P, K, C, Bu, du, x, d, tgt, col,
                                               val, lower, upper, zmax, n_hard, tol, dep_tol, warm_tol, max_iter,
-                                              warm, V, Lm, Y)
+                                              start, V, Lm, Y)
         iterations += it
         if status != SOLVED and not relaxed:
             relaxed = True
@@ -87,5 +89,6 @@ def constrained_step(k, x, Ad, Bd, y_prev, u_prev, u0, warm, packed, Ts, substep
         d = e
         first_legs(x1, r0, base, lmin, lmax, unit, speed0, stroke0, val, lower, upper)
         refinements += 1
+        start = Y.copy()  # the re-solve starts from this solution: the offset moved a little
     zc, Xr, y_nom = finish(Y[6 * N:], Y[:6 * N])
     return status, Y, zc, Xr, y_nom, iterations, refinements, worst, relaxed

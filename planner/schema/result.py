@@ -114,17 +114,21 @@ class Metrics(_Out):
 
 
 class Timing(_Out):
-    method: Literal["samples_per_segment", "speed_m_s", "total_time_s", "fastest"] = Field(
+    method: Literal["samples_per_segment", "segment_samples", "speed_m_s", "total_time_s", "fastest"] = Field(
         description="How the timing was chosen")
-    samples_per_segment: int = Field(description="Samples each segment is held (count)")
+    samples_per_segment: int = Field(description="Samples each segment is held (count); with per-segment counts the "
+                                     "largest")
+    segment_samples: list[int] | None = Field(None, description="Samples each segment is held, per segment (count); "
+                                              "null when they are all samples_per_segment")
     sequence_time_s: float | None = Field(description="Time the range sequence takes (all segments), s; null for "
                                           "a tracking request")
     moving_time_s: float | None = Field(description="Time between the start and the end point segments, s")
     path_length_m: float | None = Field(description="Length of the polyline through the segment centres, m")
-    evaluations: int | None = Field(None, description="fastest: full plans evaluated (count)")
+    evaluations: int | None = Field(None, description="fastest: candidate timings planned, whole or from a "
+                                    "remembered step on (count)")
     feasible: bool | None = Field(None, description="fastest: whether a feasible timing was found")
-    one_fewer_sample_infeasible: bool | None = Field(None, description="fastest: one sample fewer per segment "
-                                                     "was planned and is infeasible")
+    one_fewer_sample_infeasible: bool | None = Field(None, description="fastest: one sample fewer in any moving "
+                                                     "segment was planned and is infeasible")
 
 
 #: the unit of each output array
