@@ -188,8 +188,9 @@ def solve_optimum(req: dict, K: int, robot, verbose=False, minimum_time: bool = 
         opti.subject_to(opti.bounded(-lim, X[3:, 1:][:, rest], lim))
     if rate is not None:  # force rates, from zero before the start
         dU = ca.horzcat(U[:, :1], U[:, 1:] - U[:, :-1])
-        step = rate.reshape(-1, 1) * hT
-        opti.subject_to(opti.bounded(-ca.repmat(step, 1, K), dU, ca.repmat(step, 1, K)))
+        step = ca.repmat(ca.DM(rate.reshape(-1, 1)) * hT, 1, K)
+        opti.subject_to(ca.vec(dU - step) <= 0)
+        opti.subject_to(ca.vec(-dU - step) <= 0)
     # leg speeds, exact
     y, v = ca.SX.sym("y", 3), ca.SX.sym("v", 3)
     c_, s_ = ca.cos(y[2]), ca.sin(y[2])
