@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit
 
 from .dual_kernels import SOLVED, dual_solve
-from .kernels import assemble, finish, first_legs, offset, plant_step
+from .kernels import KIND_RATE, assemble, finish, first_legs, offset, plant_step
 from .stagewise_kernels import stage_setup
 
 __all__ = ["NOT_ELIMINATED", "constrained_step"]
@@ -40,7 +40,8 @@ def constrained_step(k, x, Ad, Bd, y_prev, u_prev, u0, warm, packed, Ts, substep
     move while the plant lands farther than ``refine_tol_m`` / ``refine_tol_rad`` from the
     prediction (at most ``refine_max`` times; each re-solve warm-started from the solution
     before it). A QP found infeasible is solved once more
-    with every row widened by ``relax`` (row units): a plan that sat on a vertex of its rows
+    with every row widened by ``relax`` (row units; ``relax * unit`` of force_max for the
+    force-rate rows): a plan that sat on a vertex of its rows
     can leave the next step's QP infeasible by the prediction error of a re-linearised model,
     a fraction of a nanometre; within ``relax`` that is accepted (``relaxed`` in the return).
 
@@ -74,9 +75,10 @@ def constrained_step(k, x, Ad, Bd, y_prev, u_prev, u0, warm, packed, Ts, substep
         if status != SOLVED and not relaxed:
             relaxed = True
             for i in range(n_hard):
-                if not elim[i]:
-                    lower[i] -= relax
-                    upper[i] += relax
+                if not elim[i]:  # the rate rows are in force_max, not in row units
+                    r_i = relax * unit if kinds[i] == KIND_RATE else relax
+                    lower[i] -= r_i
+                    upper[i] += r_i
             continue
         if status != SOLVED or refinements >= refine_max:
             break

@@ -182,6 +182,15 @@ class Settings(Strict):
             raise fail("must be a list with one positive number per drive")
         return v
 
+    @field_validator("force_rate_n_s", mode="before")
+    @classmethod
+    def _rate_shape(cls, v: Any) -> Any:
+        ok = (v is None or v == "off" or (isinstance(v, int | float) and not isinstance(v, bool))
+              or (isinstance(v, list) and v and all(isinstance(x, int | float) and not isinstance(x, bool) for x in v)))
+        if not ok:
+            raise fail("must be a number of N/s, a list with one per drive, 'off' or null")
+        return v
+
     @field_validator("force_rate_n_s")
     @classmethod
     def _rate(cls, v: Any) -> Any:
