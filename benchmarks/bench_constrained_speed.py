@@ -51,6 +51,8 @@ from planner import plan  # noqa: E402
 from planner.model import load_robot  # noqa: E402
 
 TABLE1 = json.loads((ROOT / "static" / "examples" / "table1.json").read_text())
+#: the samples per segment f0e9b8a's fastest (one count for all segments, no rate limit) found
+OLD_S = 6
 
 # a child process plans one corridor size and reports time per sample and memory
 SCALE_CHILD = r"""
@@ -173,6 +175,9 @@ def ipopt_rows(fast_res, fast_off, default_res) -> dict:
     out: dict = {"dynamics_check": err}
     out["min_time"] = minimum_time(fast_res, robot, solve_optimum)
     out["min_time_off"] = minimum_time(fast_off, robot, solve_optimum)
+    # the old method's samples: uniform S = 6 (f0e9b8a's fastest), no rate limit
+    req = {**TABLE1, "settings": {"mode": "constrained", "samples_per_segment": OLD_S, "force_rate_n_s": "off"}}
+    out["min_time_old"] = solve_optimum(req, OLD_S * len(TABLE1["segments"]), robot, minimum_time=True)
     # minimum energy at the default plan's schedule
     req = {**TABLE1, "settings": {"mode": "constrained"}}
     out["min_energy"] = solve_optimum(req, default_res.metrics.steps, robot)
@@ -238,6 +243,12 @@ def main(argv=None) -> int:
             ratio = res.metrics.duration_s / t_min
             rows.append((f"fastest duration / IPOPT minimum time{label}", "", f"{ratio:.3f}x ({t_min:.3f} s, h = "
                          f"{ipopt[key]['h'] * 1e3:.2f} ms)", "<= 1.05x", ratio <= 1.05))
+    if ipopt is not None and ipopt.get("min_time_old") is not None:
+        t_old = ipopt["min_time_old"]["h"] * OLD_S * len(TABLE1["segments"])
+        base_fast = "" if base is None else f"{base['fastest']['duration_s'] / t_old:.2f}x"
+        rows.append((f"fastest duration / IPOPT minimum time over uniform S = {OLD_S} (no rate limit)", base_fast,
+                     f"{fast_off.metrics.duration_s / t_old:.2f}x without the rate limit, "
+                     f"{fast.metrics.duration_s / t_old:.2f}x with ({t_old:.3f} s)", "", None))
     for mode in ("paper", "constrained"):
         per = {n: scale[(mode, n)]["wall_s"] / scale[(mode, n)]["steps"] * 1e6 for n in (10, 100, 1000, 2000)}
         spread = max(per.values()) / min(per.values())
@@ -285,7 +296,7 @@ def main(argv=None) -> int:
         print()
         print(f"CasADi dynamics vs the planner's at 200 random states: max relative difference "
               f"{ipopt['dynamics_check']:.1e}")
-        for key in ("min_time", "min_time_off", "min_energy"):
+        for key in ("min_time", "min_time_off", "min_time_old", "min_energy"):
             o = ipopt[key]
             if o is not None:
                 print(f"IPOPT {key.replace('_', ' ')}: {o['status']}, {o['iterations']} iterations, "

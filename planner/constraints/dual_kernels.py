@@ -13,7 +13,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .stagewise_kernels import affine, substitute
+from .stagewise_kernels import affine, substitute, substitute_many
 
 __all__ = ["INFEASIBLE", "ITERATION_LIMIT", "SOLVED", "dual_solve"]
 
@@ -130,7 +130,11 @@ def dual_solve(ecnt, eax, ceq, elim, Kp, Z, L, A, B, S, P, K, C, Bu, du, x, d, t
     status = SOLVED
     zero6 = np.zeros(6)
     if warm.shape[0] == nY:
-        # the first working set: constraints at a bound of the warm start, linearly independent
+        # the first working set: constraints at a bound of the warm start, their responses
+        # substituted in one batch, kept where linearly independent of those before them
+        cand = np.empty(ncons, np.int64)
+        cside = np.empty(ncons)
+        nc = 0
         for i in range(ncons):
             if i < n_hard and elim[i]:
                 continue
@@ -141,32 +145,39 @@ def dual_solve(ecnt, eax, ceq, elim, Kp, Z, L, A, B, S, P, K, C, Bu, du, x, d, t
                 side = 1
             elif abs(hi - v) <= warm_tol:
                 side = -1
-            if side == 0 or n_act == qmax:
-                continue
-            iterations += 1
-            q[:, :] = 0.0
-            r[:, :] = 0.0
-            smax = _normal_terms(i, float(side), col, val, n_hard, nx, L, Z, q, r)
-            substitute(A, B, P, K, C, L, Z, ecnt, q, r, c, k0, zero6, smax, False, Yv)
-            ll = 0.0
-            for j in range(n_act):
-                acc = sgn[j] * _value(act[j], col, val, n_hard, nx, Yv)
-                for t in range(j):
-                    acc -= Lm[j, t] * lvec[t]
-                lvec[j] = acc / Lm[j, j]
-                ll += lvec[j] * lvec[j]
-            Mpp = side * _value(i, col, val, n_hard, nx, Yv)
-            delta2 = Mpp - ll
-            if not delta2 > dep_tol * Mpp:
-                continue
-            act[n_act] = i
-            sgn[n_act] = side
-            for a in range(nY):
-                V[n_act, a] = Yv[a]
-            for t in range(n_act):
-                Lm[n_act, t] = lvec[t]
-            Lm[n_act, n_act] = math.sqrt(delta2)
-            n_act += 1
+            if side != 0 and nc < qmax:
+                cand[nc] = i
+                cside[nc] = side
+                nc += 1
+        if nc > 0:
+            qb = np.zeros((nc, N, 6))
+            rb = np.zeros((nc, N, m))
+            for jc in range(nc):
+                _normal_terms(cand[jc], cside[jc], col, val, n_hard, nx, L, Z, qb[jc], rb[jc])
+            Vb = np.empty((nc, nY))
+            substitute_many(A, B, P, K, C, L, Z, ecnt, qb, rb, Vb)
+            iterations += nc
+            for jc in range(nc):
+                i, side = cand[jc], cside[jc]
+                ll = 0.0
+                for j in range(n_act):
+                    acc = sgn[j] * _value(act[j], col, val, n_hard, nx, Vb[jc])
+                    for t in range(j):
+                        acc -= Lm[j, t] * lvec[t]
+                    lvec[j] = acc / Lm[j, j]
+                    ll += lvec[j] * lvec[j]
+                Mpp = side * _value(i, col, val, n_hard, nx, Vb[jc])
+                delta2 = Mpp - ll
+                if not delta2 > dep_tol * Mpp:
+                    continue
+                act[n_act] = i
+                sgn[n_act] = side
+                for a in range(nY):
+                    V[n_act, a] = Vb[jc, a]
+                for t in range(n_act):
+                    Lm[n_act, t] = lvec[t]
+                Lm[n_act, n_act] = math.sqrt(delta2)
+                n_act += 1
         # multipliers of the working set as equalities, M lam = -s(Y0); drop the most negative
         while n_act > 0:
             _on_working_set(n_act, act, sgn, u, V, Lm, lvec, col, val, lower, upper, zmax, n_hard, nx, Y0, Y)

@@ -17,7 +17,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["affine", "predict_states", "stage_setup", "substitute"]
+__all__ = ["affine", "predict_states", "stage_setup", "substitute", "substitute_many"]
 
 
 @njit(cache=True)
@@ -403,3 +403,112 @@ def predict_states(Ad, Bd, umax, x, d, z, X):
         for a in range(6):
             xs[a] = xn[a]
             X[6 * s + a] = xn[a]
+
+
+@njit(cache=True)
+def substitute_many(A, B, P, K, C, L, Z, ecnt, q, r, Yout):
+    """:func:`substitute` of the homogeneous problem for ``nc`` sets of linear terms at once
+    (``q`` (nc, N, 6), ``r`` (nc, N, m)), the responses into ``Yout`` (nc, 6N + N m): the same
+    arithmetic per right-hand side, with the right-hand sides innermost so that the loops
+    vectorise (the warm start substitutes every constraint of its working set)."""
+    nc = q.shape[0]
+    N = A.shape[0]
+    m = B.shape[2]
+    nx = 6 * N
+    k = np.zeros((N, m, nc))
+    p = np.empty((6, nc))
+    pn = np.empty((6, nc))
+    g = np.empty((m, nc))
+    for a in range(6):
+        for c in range(nc):
+            p[a, c] = q[c, N - 1, a]
+    for s in range(N - 1, -1, -1):
+        for j in range(m):
+            for c in range(nc):
+                g[j, c] = r[c, s, j]
+        for t in range(6):
+            for j in range(m):
+                btj = B[s, t, j]
+                for c in range(nc):
+                    g[j, c] += btj * p[t, c]
+        for j in range(m):  # k = C^-T C^-1 g
+            for c in range(nc):
+                k[s, j, c] = g[j, c]
+            for t in range(j):
+                cjt = C[s, j, t]
+                for c in range(nc):
+                    k[s, j, c] -= cjt * k[s, t, c]
+            inv = 1.0 / C[s, j, j]
+            for c in range(nc):
+                k[s, j, c] *= inv
+        for j in range(m - 1, -1, -1):
+            for t in range(j + 1, m):
+                ctj = C[s, t, j]
+                for c in range(nc):
+                    k[s, j, c] -= ctj * k[s, t, c]
+            inv = 1.0 / C[s, j, j]
+            for c in range(nc):
+                k[s, j, c] *= inv
+        if s > 0:
+            for a in range(6):
+                for c in range(nc):
+                    pn[a, c] = q[c, s - 1, a]
+            for t in range(6):
+                for a in range(6):
+                    ata = A[s, t, a]
+                    for c in range(nc):
+                        pn[a, c] += ata * p[t, c]
+            for j in range(m):
+                for a in range(6):
+                    kja = K[s, j, a]
+                    for c in range(nc):
+                        pn[a, c] -= kja * g[j, c]
+            for a in range(6):
+                for c in range(nc):
+                    p[a, c] = pn[a, c]
+    xs = np.zeros((6, nc))
+    xn = np.empty((6, nc))
+    w = np.empty((m, nc))
+    zz = np.empty((m, nc))
+    for s in range(N):
+        for j in range(m):
+            for c in range(nc):
+                w[j, c] = -k[s, j, c]
+            for t in range(6):
+                kjt = K[s, j, t]
+                for c in range(nc):
+                    w[j, c] -= kjt * xs[t, c]
+        if ecnt[s] == 0:
+            for lg in range(m):
+                for c in range(nc):
+                    zz[lg, c] = w[lg, c]
+        else:
+            for lg in range(m):
+                for c in range(nc):
+                    zz[lg, c] = 0.0
+                for t in range(6):
+                    lt = L[s, lg, t]
+                    for c in range(nc):
+                        zz[lg, c] += lt * xs[t, c]
+                for j in range(m):
+                    zj = Z[s, lg, j]
+                    for c in range(nc):
+                        zz[lg, c] += zj * w[j, c]
+        for a in range(6):
+            for c in range(nc):
+                xn[a, c] = 0.0
+            for t in range(6):
+                at = A[s, a, t]
+                for c in range(nc):
+                    xn[a, c] += at * xs[t, c]
+            for j in range(m):
+                bj = B[s, a, j]
+                for c in range(nc):
+                    xn[a, c] += bj * w[j, c]
+        for a in range(6):
+            for c in range(nc):
+                xs[a, c] = xn[a, c]
+                Yout[c, 6 * s + a] = xn[a, c]
+        for lg in range(m):
+            for c in range(nc):
+                Yout[c, nx + m * s + lg] = zz[lg, c]
