@@ -9,11 +9,12 @@ Prints one table, every row measured in this run (goals from the issue):
   decision variable, the same samples (so the same per-sample boxes), the same force,
   leg-speed and force-rate limits, start at rest, end at rest in the stop box - goal
   <= 1.05x;
-* per-sample cost (wall time of ``plan()`` / samples, median) of serpentine corridors of
-  10 / 100 / 1000 / 2000 segments (2 mm cells, 20 samples each), both modes, and the peak
-  memory of a fresh process planning it (peak RSS; and the peak of the Python/numpy
-  allocations of the plan itself, tracemalloc) - goal: flat within 1.3x, 2000 segments in
-  < 3 s and < 300 MB;
+* per-sample cost (wall time of ``plan()`` / samples) of serpentine corridors of 10 / 100 /
+  1000 / 2000 segments (2 mm cells, 20 samples each), both modes, measured in interleaved
+  rounds (a fresh process per size and round; the median over rounds), and the peak memory of
+  a fresh process planning it (peak RSS; and the peak of the Python/numpy allocations of the
+  plan itself, tracemalloc) - goal: flat within 1.3x, 2000 segments in paper mode in < 3 s
+  and < 300 MB;
 * constrained energy over the IPOPT minimum-energy plan at the same schedule - goal <= 1.15x;
 * the force-rate limit's effect: Table I (default timing and fastest) with the default
   limit (force_max per 0.05 s), with force_max per 0.1 s and without: energy, duration,
@@ -208,7 +209,8 @@ def minimum_time(fast_res, robot, solve_optimum) -> dict | None:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=7, help="plans per Table I figure (median)")
-    ap.add_argument("--scale-runs", type=int, default=3, help="plans per corridor size (median)")
+    ap.add_argument("--scale-runs", type=int, default=3, help="plans per corridor size and round (median)")
+    ap.add_argument("--scale-rounds", type=int, default=3, help="interleaved rounds over the corridor sizes")
     ap.add_argument("--base", default=None, help="also plan Table I with this git revision (side by side)")
     ap.add_argument("--base-rounds", type=int, default=3)
     ap.add_argument("--no-ipopt", action="store_true")
@@ -222,8 +224,15 @@ def main(argv=None) -> int:
     _, fast_s, fast = median_plan(with_settings(mode="constrained", fastest=True), max(args.repeat // 2, 3))
     _, fast_off_s, fast_off = median_plan(with_settings(mode="constrained", fastest=True, force_rate_n_s="off"),
                                           max(args.repeat // 2, 3))
-    scale = {(mode, n): run_scale(mode, n, args.scale_runs) for n in (10, 100, 1000, 2000)
-             for mode in ("paper", "constrained")}
+    # interleaved: every round plans every size once (a fresh process each), medians over rounds
+    rounds: dict[tuple[str, int], list[dict]] = {}
+    for _ in range(args.scale_rounds):
+        for n in (10, 100, 1000, 2000):
+            for mode in ("paper", "constrained"):
+                rounds.setdefault((mode, n), []).append(run_scale(mode, n, args.scale_runs))
+    scale = {key: {"steps": rs[0]["steps"], "wall_s": statistics.median(r["wall_s"] for r in rs),
+                   "rss_mb": max(r["rss_mb"] for r in rs), "traced_mb": max(r["traced_mb"] for r in rs),
+                   "violation_m": max(r["violation_m"] for r in rs)} for key, rs in rounds.items()}
     ipopt = None if args.no_ipopt else ipopt_rows(fast, fast_off, cons)
 
     def b(key, field, fmt):
@@ -275,8 +284,9 @@ def main(argv=None) -> int:
         met = "" if r[4] is None else ("yes" if r[4] else "NO")
         print(" | ".join(str(c).ljust(w) for c, w in zip(r[:4], width)) + " | " + met)
     print()
-    print("Corridor sizes (serpentines of 2 mm cells, 20 samples per segment; per-sample cost = plan() wall time "
-          "/ samples, median of a fresh process's plans):")
+    print(f"Corridor sizes (serpentines of 2 mm cells, 20 samples per segment; per-sample cost = plan() wall time "
+          f"/ samples: median over {args.scale_rounds} interleaved rounds of a fresh process's median of "
+          f"{args.scale_runs} plans; memory: the largest):")
     print(f"{'mode':12s} {'segments':>8s} {'samples':>8s} {'plan s':>8s} {'us/sample':>9s} {'peak RSS MB':>11s} "
           f"{'traced MB':>9s} {'violation m':>11s}")
     for (mode, n), r in scale.items():
