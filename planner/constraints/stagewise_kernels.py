@@ -17,7 +17,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["affine", "predict_states", "stage_setup", "substitute", "substitute_many"]
+__all__ = ["affine", "stage_setup", "substitute", "substitute_many"]
 
 
 @njit(cache=True)
@@ -382,27 +382,6 @@ def substitute(A, B, P, K, C, L, Z, ecnt, q, r, c, k0, x0, smax, affine, Y):
         for a in range(6):
             xs[a] = xn[a]
             Y[6 * s + a] = xn[a]
-
-
-@njit(cache=True)
-def predict_states(Ad, Bd, umax, x, d, z, X):
-    """The states ``X`` (6N,) of the moves ``z`` (N m,) by the step's model
-    ``x_{s+1} = Ad x_s + Bd diag(umax) z_s (+ d at s = 0)``."""
-    N = X.shape[0] // 6
-    m = Bd.shape[1]
-    xs = x.copy()
-    xn = np.empty(6)
-    for s in range(N):
-        for a in range(6):
-            acc = d[a] if s == 0 else 0.0
-            for t in range(6):
-                acc += Ad[a, t] * xs[t]
-            for lg in range(m):
-                acc += Bd[a, lg] * umax[lg] * z[m * s + lg]
-            xn[a] = acc
-        for a in range(6):
-            xs[a] = xn[a]
-            X[6 * s + a] = xn[a]
 
 
 @njit(cache=True)
