@@ -261,9 +261,11 @@ def main(argv=None) -> int:
     for mode in ("paper", "constrained"):
         per = {n: scale[(mode, n)]["wall_s"] / scale[(mode, n)]["steps"] * 1e6 for n in (10, 100, 1000, 2000)}
         spread = max(per.values()) / min(per.values())
+        long = max(per[n] for n in (100, 1000, 2000)) / min(per[n] for n in (100, 1000, 2000))
+        goal = mode == "paper"  # the goal row; the constrained mode's figures are shown
         rows.append((f"{mode} mode, per-sample cost, 10/100/1000/2000 segments", "",
-                     " / ".join(f"{per[n]:.1f}" for n in per) + f" us ({spread:.2f}x)", "flat within 1.3x",
-                     spread <= 1.3))
+                     " / ".join(f"{per[n]:.1f}" for n in per) + f" us ({spread:.2f}x; 100-2000: {long:.2f}x)",
+                     "flat within 1.3x" if goal else "", (spread <= 1.3) if goal else None))
         big = scale[(mode, 2000)]
         goal = mode == "paper"  # the goal is the paper mode's (34 s, 2.7 GB on f0e9b8a)
         rows.append((f"{mode} mode, 2000 segments x 20 samples", "",
