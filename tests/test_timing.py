@@ -96,7 +96,7 @@ def test_fastest_respects_limits_and_one_faster_does_not():
     ({"samples_per_segment": 10, "speed_m_s": 0.1}, "settings.speed_m_s"),
     ({"speed_m_s": 0.1, "total_time_s": 2.0}, "settings.total_time_s"),
     ({"mode": "constrained", "total_time_s": 2.0, "fastest": True}, "settings.fastest"),
-    ({"fastest": True}, "settings.fastest"),  # paper mode does not keep limits
+    ({"fastest": True, "mode": "paper"}, "settings.fastest"),  # paper mode does not keep limits
     ({"speed_m_s": 0}, "settings.speed_m_s"),
     ({"total_time_s": -1}, "settings.total_time_s"),
     ({"fastest": "yes", "mode": "constrained"}, "settings.fastest"),
