@@ -22,11 +22,11 @@ from ..corridor.geometry import corridor_gaps
 from ..errors import PlannerError, invalid
 from ..model import RobotModel, load_robot
 from ..model.reach import check_pose, check_segments
-from ..schema import PlanRequest, PlanResult, Segment, Settings, parse_request
+from ..schema import PlanRequest, PlanResult, Reference, Segment, Settings, parse_request
 from .fastest import search as search_fastest
 from .result import build_result
 from .simulate import Resume, Simulation, simulate
-from .timing import resolve_timing, timing_info
+from .timing import method_of, resolve_timing, timing_info
 
 __all__ = ["plan", "segment", "warm_up"]
 
@@ -69,8 +69,9 @@ def plan(request: Any, *, robot: RobotModel | None = None, segments: Sequence[Se
             result = _fastest(req.name, model, st, segments)
             result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3
             return result
+    method = method_of(st)
     st = resolve_timing(st, segments)  # speed_m_s / total_time_s -> samples_per_segment
-    result = _plan_once(req.name, model, st, segments, req)
+    result = _plan_once(req.name, model, st, segments, req.reference, method=method)
     result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3  # everything, result arrays included
     mt = result.metrics
     if not mt.settled and st.require_settled:
@@ -82,13 +83,14 @@ def plan(request: Any, *, robot: RobotModel | None = None, segments: Sequence[Se
 
 
 def _plan_once(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment] | None,
-               req: PlanRequest, **timing: object) -> PlanResult:
+               reference: Reference | None, **timing: object) -> PlanResult:
     """One run of the loop at fixed timing; raises ``infeasible`` for a constrained plan that
     needed slack when ``require_settled`` asks for a guaranteed plan."""
-    return _run(name, model, st, segments, req, timing=timing)[0]
+    return _run(name, model, st, segments, reference, timing=timing)[0]
 
 
-def _run(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment] | None, req: PlanRequest,
+def _run(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment] | None,
+         reference: Reference | None,
          resume: Resume | None = None, keep: Sequence[int] = (), timing: dict | None = None,
          abandon: bool = False) -> tuple[PlanResult, Simulation]:
     """:func:`_plan_once` from ``resume`` (or the start), remembering the states at ``keep``;
@@ -98,10 +100,10 @@ def _run(name: str | None, model: RobotModel, st: Settings, segments: Sequence[S
     if segments is not None:
         seq = range_sequence(list(segments), st, model.n_legs)
     else:
-        assert req.reference is not None
-        for i, pose in enumerate(req.reference.pose):
+        assert reference is not None
+        for i, pose in enumerate(reference.pose):
             check_pose(model, pose, f"reference.pose[{i}]")
-        seq = reference_sequence(req.reference.pose, st, model.n_legs)
+        seq = reference_sequence(reference.pose, st, model.n_legs)
     check_pose(model, seq.start, "segments[0]" if segments is not None else "reference.pose[0]")
     controller: ConstrainedController | None = None
     if st.mode == "constrained":
@@ -120,14 +122,13 @@ def _run(name: str | None, model: RobotModel, st: Settings, segments: Sequence[S
 
 def _fastest(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment]) -> PlanResult:
     """The plan at the fastest feasible timing (:mod:`.fastest`)."""
-    req = PlanRequest.model_construct(segments=list(segments), reference=None)
     gaps = corridor_gaps(segments, 2 * MARGIN_M, 2 * MARGIN_RAD)
 
     def plan_at(counts: np.ndarray, resume: Resume | None, keep: Sequence[int]) -> tuple[PlanResult, Simulation]:
         # require_settled: a candidate is abandoned at its first infeasible step
         sub = st.model_copy(update={"fastest": False, "segment_samples": [int(c) for c in counts],
                                     "samples_per_segment": int(counts.max()), "require_settled": True})
-        return _run(name, model, sub, segments, req, resume, keep, abandon=True)
+        return _run(name, model, sub, segments, None, resume, keep, abandon=True)
 
     best, evaluations = search_fastest(plan_at, st, segments)
     if best is None or best.result is None:

@@ -38,6 +38,11 @@ __all__ = ["Controller", "PaperController", "Resume", "Simulation", "simulate", 
 #: the output matrix of eq. (9): the pose is the first three states
 C_POSE = np.eye(3, 6)
 
+#: the constrained mode's compiled loop hands control back to Python at least every this many
+#: steps (~0.1 s), so that an exception raised asynchronously in the planning thread (a batch
+#: item's compute limit, Ctrl-C) is delivered during a long plan, not after it
+RETURN_EVERY = 2048
+
 
 class Controller(Protocol):
     """Chooses the move of sample ``k`` from the state and the discretised model."""
@@ -177,7 +182,7 @@ def simulate(robot: RobotModel, seq: RangeSequence, st: Settings, controller: Co
                 remember(k)
         if loop is not None and constrained is not None:
             args, record = loop
-            stop = marks[0] if marks else max_steps
+            stop = min(marks[0] if marks else max_steps, k + RETURN_EVERY)
             t0 = time.perf_counter()
             status, k_end, settled = loop_kernels.simulate_constrained(
                 packed, k, stop, seq.K, Ts, st.plant_substeps, end, settle, X, U, ACC, *args)
@@ -189,7 +194,7 @@ def simulate(robot: RobotModel, seq: RangeSequence, st: Settings, controller: Co
             k = k_end
             if settled or k >= max_steps:
                 break
-            if status == loop_kernels.OK:  # stopped at a step to remember
+            if status == loop_kernels.OK:  # stopped at a step to remember, or to hand back control
                 continue
         x = X[k]  # one step here: the paper's or reference controller, or a step the compiled loop handed back
         if reference:

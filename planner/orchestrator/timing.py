@@ -59,9 +59,11 @@ def method_of(st: Settings) -> str:
 
 
 def resolve_timing(st: Settings, segments: Sequence[Segment] | None) -> Settings:
-    """Settings with ``samples_per_segment`` set from ``speed_m_s`` or ``total_time_s``
-    (unchanged otherwise). ``segments`` is ``None`` for a reference trajectory, which has
-    its own timing (one pose per sample): then these settings are an error."""
+    """Settings with ``samples_per_segment`` set from ``speed_m_s`` or ``total_time_s``, which
+    are cleared: the settings a plan ran with, which planned again give the same plan (the
+    result's ``timing.method`` says how the count was chosen). Unchanged otherwise.
+    ``segments`` is ``None`` for a reference trajectory, which has its own timing (one pose
+    per sample): then these settings are an error."""
     method = method_of(st)
     if method == "samples_per_segment":
         return st
@@ -80,10 +82,10 @@ def resolve_timing(st: Settings, segments: Sequence[Segment] | None) -> Settings
             raise invalid(field, "the corridor's centre path has zero length; give samples_per_segment "
                           "or total_time_s instead")
         S = max(1, int(round(L / (st.speed_m_s * st.Ts * moving_segments(n)))))
-        return st.model_copy(update={"samples_per_segment": _check_size(S, n, field)})
+        return st.model_copy(update={"samples_per_segment": _check_size(S, n, field), "speed_m_s": None})
     if st.total_time_s is not None:
         S = max(1, int(round(st.total_time_s / (n * st.Ts))))
-        return st.model_copy(update={"samples_per_segment": _check_size(S, n, field)})
+        return st.model_copy(update={"samples_per_segment": _check_size(S, n, field), "total_time_s": None})
     return st
 
 
