@@ -9,11 +9,12 @@ Prints one table, every row measured in this run (goals from the issue):
   decision variable, the same samples (so the same per-sample boxes), the same force,
   leg-speed and force-rate limits, start at rest, end at rest in the stop box - goal
   <= 1.05x;
-* per-sample cost (wall time of ``plan()`` / samples) of serpentine corridors of 10 / 100 /
-  1000 / 2000 segments (2 mm cells, 20 samples each), both modes, measured in interleaved
+* per-sample cost (wall time of ``plan()`` / samples) of serpentine corridors of 10 / 50 /
+  100 / 1000 / 2000 segments (2 mm cells, 20 samples each), both modes, measured in interleaved
   rounds (a fresh process per size and round; the median over rounds), and the peak memory of
   a fresh process planning it (peak RSS; and the peak of the Python/numpy allocations of the
-  plan itself, tracemalloc) - goal: flat within 1.3x, 2000 segments in paper mode in < 3 s
+  plan itself, tracemalloc) - goal: flat within 1.3x from 50 segments on (the issue's
+  50 -> 1000, here to 2000; 10 segments carry the fixed cost and are shown), 2000 segments in paper mode in < 3 s
   and < 300 MB;
 * constrained energy over the IPOPT minimum-energy plan at the same schedule - goal <= 1.15x;
 * the force-rate limit's effect: Table I (default timing and fastest) with the default
@@ -55,10 +56,22 @@ TABLE1 = json.loads((ROOT / "static" / "examples" / "table1.json").read_text())
 #: the samples per segment f0e9b8a's fastest (one count for all segments, no rate limit) found
 OLD_S = 6
 
+#: corridor sizes of the per-sample cost table (segments)
+SIZES = (10, 50, 100, 1000, 2000)
+
 # a child process plans one corridor size and reports time per sample and memory
 SCALE_CHILD = r"""
-import json, resource, statistics, sys, time, tracemalloc
+import json, statistics, sys, time, tracemalloc
 sys.path.insert(0, sys.argv[1])
+
+
+def peak_rss_mb():
+    # VmHWM: this process image's peak resident set. Not ru_maxrss: Linux keeps that across
+    # exec, so a child started by a large parent would report the parent's size.
+    for line in open("/proc/self/status"):
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+
 from benchmarks.bench_constrained_speed import serpentine_request
 from planner import plan
 mode, n, runs = sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
@@ -72,7 +85,7 @@ plan(req)
 _, peak = tracemalloc.get_traced_memory()
 tracemalloc.stop()
 print(json.dumps({"steps": res.metrics.steps, "wall_s": statistics.median(times), "traced_mb": peak / 2**20,
-                  "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+                  "rss_mb": peak_rss_mb(),
                   "settled": res.metrics.settled, "violation_m": res.metrics.max_corridor_violation_m}))
 """
 
@@ -227,7 +240,7 @@ def main(argv=None) -> int:
     # interleaved: every round plans every size once (a fresh process each), medians over rounds
     rounds: dict[tuple[str, int], list[dict]] = {}
     for _ in range(args.scale_rounds):
-        for n in (10, 100, 1000, 2000):
+        for n in SIZES:
             for mode in ("paper", "constrained"):
                 rounds.setdefault((mode, n), []).append(run_scale(mode, n, args.scale_runs))
     scale = {key: {"steps": rs[0]["steps"], "wall_s": statistics.median(r["wall_s"] for r in rs),
@@ -259,13 +272,16 @@ def main(argv=None) -> int:
                      f"{fast_off.metrics.duration_s / t_old:.2f}x without the rate limit, "
                      f"{fast.metrics.duration_s / t_old:.2f}x with ({t_old:.3f} s)", "", None))
     for mode in ("paper", "constrained"):
-        per = {n: scale[(mode, n)]["wall_s"] / scale[(mode, n)]["steps"] * 1e6 for n in (10, 100, 1000, 2000)}
+        per = {n: scale[(mode, n)]["wall_s"] / scale[(mode, n)]["steps"] * 1e6 for n in SIZES}
         spread = max(per.values()) / min(per.values())
-        long = max(per[n] for n in (100, 1000, 2000)) / min(per[n] for n in (100, 1000, 2000))
+        # the issue's goal row: 50 -> 1000 segments (here up to 2000); 10 segments (200 samples,
+        # ~3 ms) carry the plan's fixed cost and are shown, not judged
+        judged = [per[n] for n in SIZES if n >= 50]
+        long = max(judged) / min(judged)
         goal = mode == "paper"  # the issue's goal row; the constrained mode's figures are shown
-        rows.append((f"{mode} mode, per-sample cost, 10/100/1000/2000 segments", "",
-                     " / ".join(f"{per[n]:.1f}" for n in per) + f" us ({spread:.2f}x; 100-2000: {long:.2f}x)",
-                     "flat within 1.3x" if goal else "", (spread <= 1.3) if goal else None))
+        rows.append((f"{mode} mode, per-sample cost, {'/'.join(map(str, SIZES))} segments", "",
+                     " / ".join(f"{per[n]:.1f}" for n in per) + f" us (50-2000: {long:.2f}x; all: {spread:.2f}x)",
+                     "flat within 1.3x, 50-2000" if goal else "", (long <= 1.3) if goal else None))
         big = scale[(mode, 2000)]
         goal = mode == "paper"  # the issue's goal is the paper mode's (34 s, 2.7 GB on f0e9b8a)
         rows.append((f"{mode} mode, 2000 segments x 20 samples", "",
