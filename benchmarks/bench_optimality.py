@@ -25,6 +25,12 @@ Initial guess: poses at the centres of the per-sample ranges, velocities from th
 differences, forces 0 (the planner's solution is not used). One table:
 mode | compute time | energy | max violation | end error (and more).
 
+Minimum time (issue 17): the planner's ``fastest`` plan against IPOPT over the same samples
+(its per-segment counts, so the same per-sample boxes) with the sample time ``h`` a decision
+variable, minimising ``K h``: the same force, leg-speed and force-rate limits (the rate limit
+``rate h`` per sample), start at rest, end at rest in the stop box; started from the plan
+(feasible for ``h = Ts``).
+
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_optimality.py [--repeat 3] [--samples 20]
 
 Needs the bench extra: ``pip install -e '.[bench]'`` (casadi).
@@ -47,9 +53,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from planner import plan
-from planner.constraints import CorridorConstraint, EndApproachConstraint
+from planner.constraints import ArrivalConstraint, CorridorConstraint, EndApproachConstraint
+from planner.constraints.controller import force_rate
 from planner.corridor import range_sequence
-from planner.corridor.geometry import corridor_violation
+from planner.corridor.geometry import approach_direction, corridor_violation
 from planner.model import dynamics, load_robot
 from planner.model.plant import rk4_sample
 from planner.orchestrator.result import overshoot
@@ -121,8 +128,13 @@ def check_dynamics(robot, f, trials: int = 200) -> float:
     return worst
 
 
-def solve_optimum(req: dict, K: int, robot, verbose=False) -> dict:
-    """The whole-horizon minimum-energy plan (module docstring) for ``K`` steps."""
+def solve_optimum(req: dict, K: int, robot, verbose=False, minimum_time: bool = False,
+                  guess: tuple[np.ndarray, np.ndarray] | None = None) -> dict:
+    """The whole-horizon optimum (module docstring) over ``K`` samples: minimum energy at the
+    request's sample time, or (``minimum_time``) the minimum time ``K h`` with the sample time
+    ``h`` a decision variable (the same samples, so the same per-sample boxes; the force-rate
+    limit then ``rate h`` per sample). ``guess``: initial states (K+1, 6) and forces (K, m)
+    instead of the range centres and zero forces."""
     import casadi as ca
 
     pr = parse_request(req)
@@ -130,23 +142,28 @@ def solve_optimum(req: dict, K: int, robot, verbose=False) -> dict:
     segs = pr.segments
     seq = range_sequence(segs, st, robot.n_legs)
     sets = CorridorConstraint(seq, segs)
-    approach = EndApproachConstraint(seq, segs, st.samples_per_segment)
+    approach = EndApproachConstraint(seq, segs)
+    arrival = ArrivalConstraint(seq, segs)
+    rate = force_rate(robot, st) if st.mode == "constrained" else None
     f = casadi_dynamics(robot)
     Ts, sub, m = st.Ts, st.plant_substeps, robot.n_legs
-    xs, us = ca.SX.sym("x", 6), ca.SX.sym("u", m)
-    xk, h = xs, Ts / sub
+    xs, us, hs = ca.SX.sym("x", 6), ca.SX.sym("u", m), ca.SX.sym("h")
+    xk, h = xs, hs / sub
     for _ in range(sub):
         k1 = f(xk, us)
         k2 = f(xk + 0.5 * h * k1, us)
         k3 = f(xk + 0.5 * h * k2, us)
         k4 = f(xk + h * k3, us)
         xk = xk + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-    F = ca.Function("F", [xs, us], [xk])
+    F = ca.Function("F", [xs, us, hs], [xk])
 
     opti = ca.Opti()
     X = opti.variable(6, K + 1)
     U = opti.variable(m, K)
-    opti.subject_to(X[:, 1:] == F.map(K)(X[:, :-1], U))
+    hT = opti.variable() if minimum_time else Ts
+    if minimum_time:
+        opti.subject_to(opti.bounded(0.2 * Ts, hT, 2.0 * Ts))
+    opti.subject_to(X[:, 1:] == F.map(K)(X[:, :-1], U, ca.repmat(hT, 1, K)))
     start = np.concatenate((seq.start, np.zeros(3)))
     opti.subject_to(X[:, 0] == start)
     # at rest at the end: velocity zero, and the pose in the same end box as the constrained
@@ -171,6 +188,15 @@ def solve_optimum(req: dict, K: int, robot, verbose=False) -> dict:
         sel = [q for q in range(K) if idx[q] >= approach.start_index]
         if sel:
             opti.subject_to(d[0] * P[0, sel] + d[1] * P[1, sel] <= b)
+    rest = [q for q in range(K) if idx[q] >= arrival.start_index]  # at rest from the arrival on
+    if rest:
+        lim = arrival.limit.reshape(-1, 1)
+        opti.subject_to(opti.bounded(-lim, X[3:, 1:][:, rest], lim))
+    if rate is not None:  # force rates, from zero before the start
+        dU = ca.horzcat(U[:, :1], U[:, 1:] - U[:, :-1])
+        step = ca.repmat(ca.DM(rate.reshape(-1, 1)) * hT, 1, K)
+        opti.subject_to(ca.vec(dU - step) <= 0)
+        opti.subject_to(ca.vec(-dU - step) <= 0)
     # leg speeds, exact
     y, v = ca.SX.sym("y", 3), ca.SX.sym("v", 3)
     c_, s_ = ca.cos(y[2]), ca.sin(y[2])
@@ -184,13 +210,20 @@ def solve_optimum(req: dict, K: int, robot, verbose=False) -> dict:
     LD = ca.Function("ld", [y, v], [ca.vertcat(*ld)]).map(K)
     vmax = robot.speed_max.reshape(-1, 1)
     opti.subject_to(opti.bounded(-vmax, LD(X[:3, 1:], X[3:, 1:]), vmax))
-    energy = ca.sumsqr(U) * Ts
-    opti.minimize(energy + 1e-9 * ca.sumsqr(X[:, 1:] - X[:, :-1]))
-    # initial guess: centres of the per-sample ranges
-    cen = np.vstack((seq.start, 0.5 * (seq.lower[idx] + seq.upper[idx])))
-    vel = np.vstack((np.diff(cen, axis=0) / Ts, np.zeros((1, 3))))
-    opti.set_initial(X, np.hstack((cen, vel)).T)
-    opti.set_initial(U, 0.0)
+    energy = ca.sumsqr(U) * hT
+    if minimum_time:
+        opti.minimize(K * hT + 1e-7 * energy)
+        opti.set_initial(hT, Ts)
+    else:
+        opti.minimize(energy + 1e-9 * ca.sumsqr(X[:, 1:] - X[:, :-1]))
+    if guess is not None:
+        opti.set_initial(X, guess[0].T)
+        opti.set_initial(U, guess[1].T)
+    else:  # centres of the per-sample ranges
+        cen = np.vstack((seq.start, 0.5 * (seq.lower[idx] + seq.upper[idx])))
+        vel = np.vstack((np.diff(cen, axis=0) / Ts, np.zeros((1, 3))))
+        opti.set_initial(X, np.hstack((cen, vel)).T)
+        opti.set_initial(U, 0.0)
     opti.solver("ipopt", {"print_time": False, "ipopt.print_level": 5 if verbose else 0, "ipopt.sb": "yes",
                           "ipopt.tol": 1e-8, "ipopt.constr_viol_tol": 1e-10, "ipopt.max_iter": 3000,
                           "ipopt.acceptable_iter": 0, "ipopt.linear_solver": "mumps"})
@@ -200,7 +233,8 @@ def solve_optimum(req: dict, K: int, robot, verbose=False) -> dict:
     Xs, Us = np.array(sol.value(X)).T, np.array(sol.value(U)).T
     stats = sol.stats()
     return {"X": Xs, "U": Us, "time_s": dt, "iterations": stats.get("iter_count"),
-            "status": stats.get("return_status"), "segments": segs, "seq": seq, "F": F}
+            "status": stats.get("return_status"), "segments": segs, "seq": seq, "F": F,
+            "h": float(sol.value(hT)) if minimum_time else Ts}
 
 
 def main(argv=None) -> int:
@@ -263,8 +297,8 @@ def main(argv=None) -> int:
     for k in range(K):
         x = rk4_sample(robot, x, U[k], Ts, st.plant_substeps)
         replay = max(replay, float(np.max(np.abs(x[:3] - X[k + 1, :3]))))
-    over = overshoot(X[:, :3], opt["segments"], opt["seq"].end,
-                     max((len(opt["segments"]) - 2) * st.samples_per_segment, 0))
+    over = overshoot(X[:, :3], approach_direction(opt["segments"]), opt["seq"].end,
+                     int(np.argmax(opt["seq"].segment >= len(opt["segments"]) - 2)) + 1)
     rows.append(("IPOPT optimum", statistics.median(times), float(np.sum(U * U) * Ts), viol, end_err, over,
                  float(np.max(np.abs(U) / robot.force_max)), K * Ts))
     print(f"IPOPT: {opt['status']}, {opt['iterations']} iterations, {K} intervals, {X.size + U.size} variables; "
@@ -279,8 +313,29 @@ def main(argv=None) -> int:
               f"{r[7]:10.2f}")
     print()
     for r in rows[1:3]:
-        print(f"{r[0]}: energy / IPOPT's {r[2] / rows[3][2]:.3f} (goal <= 1.2); "
+        print(f"{r[0]}: energy / IPOPT's {r[2] / rows[3][2]:.3f} (goal <= 1.15); "
               f"IPOPT time / its time {rows[3][1] / r[1]:.1f}x (goal >= 50x)")
+    # minimum time: the planner's fastest timing against IPOPT over the same samples (the
+    # same per-sample boxes) with the sample time a decision variable
+    req = copy.deepcopy(base)
+    req["settings"] = {"mode": "constrained", "fastest": True}
+    t0 = time.perf_counter()
+    fast = plan(req)
+    search_s = time.perf_counter() - t0
+    st_fast = fast.settings.model_dump(mode="json", exclude_none=True)
+    st_fast.pop("fastest", None)
+    st_fast.pop("samples_per_segment", None)
+    req = {**base, "settings": st_fast}
+    guess = (np.hstack((fast.pose, fast.velocity)), fast.drives.force[:-1])
+    opt = solve_optimum(req, fast.metrics.steps, robot, args.verbose, minimum_time=True, guess=guess)
+    t_min = opt["h"] * fast.metrics.steps
+    print()
+    print(f"{'minimum time':22s} {'compute s':>11s} {'duration s':>11s} {'sample time ms':>15s}")
+    print(f"{'planner fastest':22s} {search_s:11.2f} {fast.metrics.duration_s:11.3f} {fast.settings.Ts * 1e3:15.2f}")
+    print(f"{'IPOPT minimum time':22s} {opt['time_s']:11.2f} {t_min:11.3f} {opt['h'] * 1e3:15.2f}")
+    print(f"fastest / IPOPT minimum time over the same {fast.metrics.steps} samples: "
+          f"{fast.metrics.duration_s / t_min:.3f} (goal <= 1.05); IPOPT {opt['status']}, {opt['iterations']} "
+          f"iterations; timing {fast.timing.segment_samples}")
     return 0
 
 

@@ -4,7 +4,7 @@
 Layers, each importing only those below it (enforced by import-linter)::
 
     orchestrator   plan(): validate -> model -> corridor -> controller -> simulate -> result
-    constraints    the constrained mode: constraint rows, QP per sample (DAQP)
+    constraints    the constrained mode: constraint rows, QP per sample (stage-wise dual active set)
     corridor       segmentation of layouts into cells, range sequences      | horizon: eqs. 10-23
     model          the robot: kinematics, reach, dynamics (eqs. 1-8), hold (eq. 9), plant
     schema         the request and result models (pydantic), bounds and defaults

@@ -65,6 +65,7 @@ def table1_http(client):
 def strip_volatile(result: dict) -> dict:
     out = copy.deepcopy(result)
     out["metrics"].pop("compute_ms", None)
+    out["metrics"].pop("qp_time_ms", None)  # measured too (constrained mode, the default)
     out.pop("plan_id", None)
     return out
 
@@ -179,8 +180,8 @@ def _bad_cases():
         ("unknown robot", {**t, "robot": "no-such-robot"}, "invalid_input", "robot"),
         ("negative k_u", {**t, "settings": {"k_u": -1}}, "invalid_input", "settings.k_u"),
         ("unreachable", {"segments": [P0, seg([0.3, 0, 0], [0.3, 0, 0])]}, "unreachable", "segments[1]"),
-        ("not settled", {**t, "settings": {"tail_max_s": 0.0, "samples_per_segment": 1}}, "not_settled",
-         "settings.tail_max_s"),
+        ("not settled", {**t, "settings": {"mode": "paper", "tail_max_s": 0.0, "samples_per_segment": 1}},
+         "not_settled", "settings.tail_max_s"),
     ]
 
 
@@ -559,7 +560,7 @@ def test_real_results_validate_against_the_openapi_schema(client, case):
     _assert_closed(validator.schema, spec["components"]["schemas"], set())
     res = r.json()
     if case in ("constrained", "fastest"):
-        assert res["metrics"]["contained"] is True and res["metrics"]["qp_solver"] == "daqp"
+        assert res["metrics"]["contained"] is True and res["metrics"]["qp_solver"] == "stagewise"
     assert res["timing"]["samples_per_segment"] == res["settings"]["samples_per_segment"]
 
 

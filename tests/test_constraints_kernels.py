@@ -1,6 +1,7 @@
-"""The constrained mode's compiled path (planner/constraints/kernels.py, CompiledAssembly)
-equals the numpy reference (ReferenceAssembly): the leg rows, every step's QP, its
-minimiser (equalities eliminated and rows screened, or not) and the whole plan.
+"""The constrained mode's compiled path (planner/constraints/kernels.py, dense_kernels.py,
+CompiledAssembly) equals the numpy reference (ReferenceAssembly): the leg rows, every step's
+QP, its minimiser and the whole plan (the stage-wise solver against DAQP:
+tests/test_stagewise.py).
 
 The step QPs are recorded from compiled plans: the controller's state at a step (state,
 model, nominal poses, guessed move, warm start) is replayed through both assemblies.
@@ -48,6 +49,7 @@ class Step:
     Ad: np.ndarray
     Bd: np.ndarray
     y_nom: np.ndarray | None
+    u_prev: np.ndarray
     u0: np.ndarray
     start: np.ndarray | None
 
@@ -60,11 +62,13 @@ def record_steps(req: dict, every: int) -> list[Step]:
     def spy(self, k, x, Ad, Bd):
         if k % every == 0:
             y_nom = None if self.y_nom is None else self.y_nom.copy()
-            steps.append(Step(self, k, x.copy(), Ad.copy(), Bd.copy(), y_nom, self.guess(), self.warm_start()))
+            steps.append(Step(self, k, x.copy(), Ad.copy(), Bd.copy(), y_nom, self.u_prev.copy(), self.guess(),
+                              self.warm_start()))
         return orig(self, k, x, Ad, Bd)
 
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(ConstrainedController, "__call__", spy)
+        mp.setattr(ConstrainedController, "compiled_loop", False)  # every step through __call__
         plan(req)
     return steps
 
@@ -85,10 +89,10 @@ def both(step: Step):
     """The step's QP from the compiled and from the reference assembly, offsets set."""
     c = step.controller
     assert c.st.backend == "compiled"
-    ref = ReferenceAssembly(c.model, c.seq, c.st, c.constraints)
+    ref = ReferenceAssembly(c.model, c.criterion, c.st, c.constraints)
     out = []
     for asm in (c.assembly, ref):
-        out.append((asm, asm.build(step.k, step.x, step.Ad, step.Bd, step.y_nom, step.u0)))
+        out.append((asm, asm.build(step.k, step.x, step.Ad, step.Bd, step.y_nom, step.u_prev, step.u0)))
     return out
 
 
@@ -142,37 +146,18 @@ def test_compiled_assembly_equals_numpy_assembly(case, recorded):
             assert _close(getattr(dc, key), getattr(dn, key)), (step.k, key)
         assert _close(dc.f, dn.f, 1e-9), step.k  # a difference of nearly equal terms
         assert np.array_equal(dc.kinds, dn.kinds) and dc.n_hard == dn.n_hard
-        checked.append("hp" if np.any(np.count_nonzero(rn.selection(qn.Gx.shape[0]), axis=1) == 2) else "box")
+        nx = qn.Gx.shape[0]
+        two = np.count_nonzero(rn.selection(nx + qn.Gx.shape[1])[:, :nx], axis=1) == 2
+        checked.append("hp" if np.any(two) else "box")
     assert len(checked) >= 5
     if case == "triangle":
         assert "hp" in checked  # half-plane rows were compared
 
 
-@pytest.mark.parametrize("q_u", [None, [1e-3, 3e-3, 5e-4, 1.5e-3]])
-def test_eliminated_equalities_give_the_same_minimiser(q_u):
-    """Table I fixes psi = 0: one equality row per sample. The compiled path eliminates them
-    (and gives DAQP only the rows near a bound); its moves equal those of DAQP on the whole
-    QP in z, every row given, equalities as equalities. Unequal drive weights ``q_u`` make
-    the reduced Hessian's coupling terms between moves non-zero."""
-    req = with_settings(TABLE1, mode="constrained", **({"q_u": q_u} if q_u else {}))
-    diffs = []
-    for step in record_steps(req, 10):
-        asm = step.controller.assembly
-        qp = asm.build(step.k, step.x, step.Ad, step.Bd, step.y_nom, step.u0)
-        assert qp.reduced is not None  # the elimination is in use
-        assert qp.reduced.n_w < len(qp.W) // 3 * step.controller.n_legs
-        red = asm.solve(qp, step.start)
-        full = asm.dense(qp).solve_hard(step.start)
-        assert red.flag == 1 and full.flag == 1
-        diffs.append(float(np.abs(red.z - full.z).max()))
-    assert len(diffs) >= 20
-    assert max(diffs) < 1e-7  # scaled moves (force / force_max)
-
-
 @pytest.mark.parametrize("case", ["table1", "triangle", "psi"])
 def test_backends_give_the_same_minimiser(case, recorded):
-    """Every 10th step's QP solved by the compiled backend (reduced or in z, screened) and by
-    the reference (numpy assembly, every hard row given to DAQP): the same moves."""
+    """Every 10th step's QP on the Python path of both backends (the compiled assembly's dense
+    QP and the numpy assembly's, every hard row given to DAQP): the same moves."""
     diffs = []
     for step in recorded(case):
         (casm, qc), (rasm, qn) = both(step)
@@ -185,8 +170,9 @@ def test_backends_give_the_same_minimiser(case, recorded):
 
 @pytest.mark.parametrize("case", ["table1", "psi"])
 def test_compiled_plan_equals_numpy_plan(case):
-    """The whole plan: compiled path (equalities eliminated on Table I, the QP in z on the
-    turning corridor) against the numpy reference with every row given to the solver."""
+    """The whole plan: the compiled path (one compiled call per step, the stage-wise solver;
+    equalities eliminated on Table I, none on the turning corridor) against the numpy
+    reference (every row given to DAQP)."""
     req = CASES[case]()
     fast = plan_json(req)
     ref = plan_json(with_settings(req, backend="reference"))

@@ -377,9 +377,9 @@ def test_toggling_a_cell_blocks_it_and_toggling_again_frees_it(editor):
 
 
 def test_settings_controls_change_the_request(editor):
+    editor.gui.mode.value = "paper"  # first: a mode switch moves N, k_r, k_u still at the old mode's defaults
     editor.gui.N.text.value = "30"
     editor.gui.k_u.text.value = "1e-4"
-    editor.gui.mode.value = "paper"
     editor.gui.cell_size.text.value = ""  # auto
     assert editor.wait_idle(60)
     r = editor.request

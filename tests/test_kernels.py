@@ -121,8 +121,8 @@ def _with(req, **settings):
     return {**req, "settings": {**req.get("settings", {}), **settings}}
 
 
-@pytest.mark.parametrize("settings", [{}, {"N": 10, "k_u": 2e-4},
-                                      {"plant_substeps": 2, "Ts": 0.005, "require_settled": False}])
+@pytest.mark.parametrize("settings", [{"mode": "paper"}, {"mode": "paper", "N": 10, "k_u": 2e-4},
+                                      {"mode": "paper", "plant_substeps": 2, "Ts": 0.005, "require_settled": False}])
 def test_compiled_plan_equals_the_reference_loop(settings):
     a = plan(_with(TABLE1, **settings))
     b = plan(_with(TABLE1, solver="structured", **settings))
@@ -135,7 +135,7 @@ def test_compiled_plan_equals_the_reference_loop(settings):
 
 
 def test_compiled_plan_of_a_three_leg_robot_equals_the_reference_loop():
-    req = {"robot": "tri-slide", "segments": [
+    req = {"robot": "tri-slide", "settings": {"mode": "paper"}, "segments": [
         {"lower": [-0.04, -0.02, 0.0], "upper": [-0.04, -0.02, 0.0]},
         {"lower": [-0.04, -0.02, 0.0], "upper": [-0.02, 0.0, 0.0]},
         {"lower": [0.02, 0.0, 0.0], "upper": [0.02, 0.0, 0.0]},
@@ -155,7 +155,7 @@ def test_compiled_loop_reports_a_degenerate_model_with_the_field():
     packed[kernels._FRIC * n:(kernels._FRIC + 1) * n] = -2e4  # N s/m
     object.__setattr__(robot, "packed", packed)
     with pytest.raises(PlannerError) as exc:
-        plan(TABLE1, robot=robot)
+        plan(_with(TABLE1, mode="paper"), robot=robot)
     assert exc.value.code == "singular" and exc.value.field == "robot"
     assert "t = 0.000 s, pose (-0.0800 m, 0.0000 m, 0.0000 rad)" in str(exc.value)
 

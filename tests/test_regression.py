@@ -1,6 +1,10 @@
-"""Trajectories recorded before the redesign (tests/data/regression/trajectories.json, on
-f0e9b8a): every case planned now gives the same number of steps and the same poses to
-1e-9 m (the redesign moves code, not numbers)."""
+"""Recorded trajectories (tests/data/regression/trajectories.json): every case planned now
+gives the same number of steps and the same poses to 1e-9 m. The paper-mode cases were
+recorded on f0e9b8a, before the redesign (which moves code, not numbers); their requests
+give the settings that were the defaults then (mode paper; the layout's samples per
+segment) now that the defaults changed. The constrained cases were re-recorded for issue 17,
+which changes their trajectories on purpose: arrival at rest, the drive-force rate limit,
+the recourse margins and the stop box as the criterion's end range."""
 
 from __future__ import annotations
 

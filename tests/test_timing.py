@@ -96,7 +96,7 @@ def test_fastest_respects_limits_and_one_faster_does_not():
     ({"samples_per_segment": 10, "speed_m_s": 0.1}, "settings.speed_m_s"),
     ({"speed_m_s": 0.1, "total_time_s": 2.0}, "settings.total_time_s"),
     ({"mode": "constrained", "total_time_s": 2.0, "fastest": True}, "settings.fastest"),
-    ({"fastest": True}, "settings.fastest"),  # paper mode does not keep limits
+    ({"fastest": True, "mode": "paper"}, "settings.fastest"),  # paper mode does not keep limits
     ({"speed_m_s": 0}, "settings.speed_m_s"),
     ({"total_time_s": -1}, "settings.total_time_s"),
     ({"fastest": "yes", "mode": "constrained"}, "settings.fastest"),
@@ -124,3 +124,22 @@ def test_schema_accepts_timing_fields():
     body = with_settings(table1(), mode="constrained", speed_m_s=0.1)
     d = parse_request(body).to_json_dict()  # what storage keeps, read back
     assert parse_request(d).settings.speed_m_s == 0.1
+
+
+@pytest.mark.parametrize("timing", [{"speed_m_s": 0.1}, {"total_time_s": 1.5}, {}])
+def test_result_settings_plan_the_same_trajectory_again(timing):
+    """A result's settings are the ones the plan ran with: they validate as a request's
+    settings (a client reads the result back) and, planned again, give the same trajectory;
+    a speed or total time is resolved to a sample count, and timing.method keeps how."""
+    req = with_settings(table1(), **timing)
+    if not timing:  # a layout with no timing setting: the default tool speed
+        req = {"layout": {"bounds": {"lower": [-0.08, -0.04], "upper": [0.08, 0.06]}, "obstacles": [],
+                          "cell": {"shape": "square", "size": 0.02},
+                          "start": [-0.06, -0.02, 0.0], "end": [0.06, 0.04, 0.0]}}
+    res = plan(req)
+    PlanResult.model_validate(res)  # the JSON result reads back
+    assert res["timing"]["method"] == (next(iter(timing)) if timing else "speed_m_s")
+    again = plan({**req, "settings": res["settings"]})
+    assert again["timing"]["method"] == "samples_per_segment"
+    assert again["settings"] == res["settings"]
+    np.testing.assert_array_equal(np.array(again["pose"]), np.array(res["pose"]))

@@ -26,7 +26,15 @@ from . import _state
 from ._cursor import CursorReadout
 from ._fields import Bounds, NumberField, VectorField, syncing
 from ._gui_segments import SegmentsPanel
-from ._planning import DEFAULT_ROBOT, HAS_SPEED_SETTING, MODE_DEFAULTS, builtin_robot_names, field_bounds
+from ._planning import (
+    DEFAULT_LAYOUT_SPEED_M_S,
+    DEFAULT_MODE,
+    DEFAULT_ROBOT,
+    HAS_SPEED_SETTING,
+    MODE_DEFAULTS,
+    builtin_robot_names,
+    field_bounds,
+)
 from ._result import ResultPanel, leg_legend_html
 
 if TYPE_CHECKING:
@@ -209,21 +217,22 @@ class EditorGui:
         session = self._session
         self.robot = gui.add_dropdown("Robot", tuple(builtin_robot_names()), initial_value=DEFAULT_ROBOT)
         self._on_input(self.robot, lambda: session.set_robot(self.robot.value))
-        self.mode = gui.add_dropdown("Mode", ("paper", "constrained"), initial_value="paper",
-                                     hint="paper: soft range criterion; constrained: hard corridor and drive limits")
+        self.mode = gui.add_dropdown("Mode", ("constrained", "paper"), initial_value=DEFAULT_MODE,
+                                     hint="constrained: hard corridor and drive limits; paper: the seed's soft range "
+                                     "criterion")
         self._on_input(self.mode, lambda: session.set_mode(self.mode.value))
-        paper = MODE_DEFAULTS["paper"]
+        defaults = MODE_DEFAULTS[DEFAULT_MODE]
 
         def setting(key: str, label: str, value, **kw) -> NumberField:
             return NumberField(gui, label, value, self._edit(key, lambda r, v: _state.set_setting(r, key, v)),
                                bounds=_bounds("Settings", key), **kw)
 
         self.Ts = setting("Ts", "Sample time Ts (s)", 0.01)
-        self.N = setting("N", "Horizon N (samples)", paper["N"], integer=True)
-        self.k_r = setting("k_r", "k_r, range penalty (1/m)", paper["k_r"])
-        self.k_u = setting("k_u", "k_u, force penalty (1/N)", paper["k_u"])
-        self.speed = setting("speed_m_s", "Speed (m/s), empty = from N", None, optional=True) \
-            if HAS_SPEED_SETTING else None
+        self.N = setting("N", "Horizon N (samples)", defaults["N"], integer=True)
+        self.k_r = setting("k_r", "k_r, range penalty (1/m)", defaults["k_r"])
+        self.k_u = setting("k_u", "k_u, force penalty (1/N)", defaults["k_u"])
+        speed_label = f"Speed (m/s), empty: {DEFAULT_LAYOUT_SPEED_M_S:g} on a layout"
+        self.speed = setting("speed_m_s", speed_label, None, optional=True) if HAS_SPEED_SETTING else None
 
     def _build_files_tab(self, gui, has_store: bool) -> None:
         editor = self._session
@@ -287,7 +296,7 @@ class EditorGui:
             robot = request.get("robot", DEFAULT_ROBOT)
             if isinstance(robot, str) and robot in builtin_robot_names():
                 self.robot.value = robot
-            self.mode.value = settings.get("mode", "paper")
+            self.mode.value = settings.get("mode", DEFAULT_MODE)
             self.Ts.show(float(settings.get("Ts", 0.01)))
             self.show_mode_settings(_state.mode_settings(request))
             if self.speed is not None:

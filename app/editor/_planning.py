@@ -31,6 +31,8 @@ from planner import to_csv as _result_csv
 from planner.exchange import export, import_drawing
 from planner.model import SINGULAR_TOL, kinematics
 from planner.schema import (
+    DEFAULT_LAYOUT_SPEED_M_S,
+    DEFAULT_MODE,
     DEFAULT_ROBOT,
     MAX_LEGS,
     MODE_DEFAULTS,
@@ -43,6 +45,8 @@ from planner.schema import (
 )
 
 __all__ = [
+    "DEFAULT_LAYOUT_SPEED_M_S",
+    "DEFAULT_MODE",
     "DEFAULT_ROBOT",
     "HAS_SPEED_SETTING",
     "MAX_LEGS",

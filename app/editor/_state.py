@@ -20,7 +20,7 @@ from collections.abc import Callable
 from typing import Any
 
 from . import _geometry as geo
-from ._planning import DEFAULT_ROBOT, MODE_DEFAULTS
+from ._planning import DEFAULT_MODE, DEFAULT_ROBOT, MODE_DEFAULTS
 
 __all__ = [
     "DEFAULT_REQUEST",
@@ -58,7 +58,7 @@ DEFAULT_REQUEST: dict[str, Any] = {
         "start": [-0.08, 0.0, 0.0],
         "end": [0.06, 0.04, 0.0],
     },
-    "settings": {"mode": "paper", "Ts": 0.01, **MODE_DEFAULTS["paper"]},
+    "settings": {"mode": DEFAULT_MODE, "Ts": 0.01, **MODE_DEFAULTS[DEFAULT_MODE]},
 }
 
 Edit = Callable[[dict], Any]  #: changes a request dict in place; its return value is ignored
@@ -162,7 +162,7 @@ def switch_mode(request: dict, mode: str) -> None:
     """Switch ``settings.mode``; N, k_r and k_u still at the old mode's defaults follow to
     the new mode's defaults (``MODE_DEFAULTS``), values the user changed stay."""
     settings = request.setdefault("settings", {})
-    old = MODE_DEFAULTS.get(settings.get("mode", "paper"), MODE_DEFAULTS["paper"])
+    old = MODE_DEFAULTS.get(settings.get("mode", DEFAULT_MODE), MODE_DEFAULTS[DEFAULT_MODE])
     settings["mode"] = mode
     for key, value in MODE_DEFAULTS[mode].items():
         if settings.get(key, old[key]) == old[key]:
@@ -172,7 +172,7 @@ def switch_mode(request: dict, mode: str) -> None:
 def mode_settings(request: dict) -> dict:
     """The request's N, k_r and k_u, each its mode's default where the request has none."""
     settings = request.get("settings", {})
-    defaults = MODE_DEFAULTS.get(settings.get("mode", "paper"), MODE_DEFAULTS["paper"])
+    defaults = MODE_DEFAULTS.get(settings.get("mode", DEFAULT_MODE), MODE_DEFAULTS[DEFAULT_MODE])
     return {key: settings.get(key, value) for key, value in defaults.items()}
 
 

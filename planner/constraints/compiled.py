@@ -1,8 +1,10 @@
-"""The compiled assembly (``settings.backend = "compiled"``): each step's QP assembled by the
-kernels of :mod:`planner.constraints.kernels`, with the equalities eliminated and the rows
-screened (:mod:`planner.constraints.step`). Same interface as
-:class:`~planner.constraints.reference.ReferenceAssembly`, the numpy reference; the
-controller picks one of the two at construction.
+"""The compiled assembly (``settings.backend = "compiled"``): each step in one compiled call
+(:func:`planner.constraints.step_kernels.constrained_step`: the rows by the kernels of
+:mod:`planner.constraints.kernels`, the QP solved by the stage-wise dual active-set method of
+:mod:`planner.constraints.stagewise`), and the same step on the Python path (the dense QP,
+every row given to DAQP: :mod:`planner.constraints.step`) where that call does not finish
+it. Same interface as :class:`~planner.constraints.reference.ReferenceAssembly`, the numpy
+reference; the controller picks one of the two at construction.
 """
 
 from __future__ import annotations
@@ -16,19 +18,29 @@ from ..corridor import RangeSequence
 from ..model import RobotModel
 from ..schema import Settings
 from . import kernels as ck
-from .corridor import CorridorConstraint, EndApproachConstraint
-from .drives import LegSpeedConstraint, LegStrokeConstraint
+from .corridor import ArrivalConstraint, CorridorConstraint, EndApproachConstraint
+from .drives import DriveForceRateConstraint, LegSpeedConstraint, LegStrokeConstraint
 from .qp import DenseQP, QPSolution
 from .rows import ROW_UNIT_M, Rows
-from .step import FullQP, ReducedQP, StepQP
+from .stagewise import DEPENDENT_TOL, SOLVE_TOL, WARM_TOL
+from .step import FullQP, StepQP
+from .step_kernels import constrained_step
 
 if TYPE_CHECKING:
     from .controller import Constraints
 
-__all__ = ["KERNEL_SECTIONS", "AssemblyInputs", "CompiledAssembly"]
+__all__ = ["KERNEL_SECTIONS", "MAX_ITERATIONS", "RELAX_M", "AssemblyInputs", "CompiledAssembly", "StepOutcome"]
+
+#: most active-set changes of one stage-wise solve before the step goes to DAQP
+MAX_ITERATIONS = 400
+#: a QP found infeasible is solved again with its rows widened by this [m, m/s, rad, N]:
+#: inside the corridor margin (MARGIN_M, MARGIN_RAD: 0.2 um is left, 200 times the one-step
+#: mismatch), so the actual corridor is still kept; the leg-speed margin is 5e-6 m/s
+RELAX_M = 8e-7
 
 #: the row constraints :func:`kernels.assemble` fuses, in its (the row) order
-KERNEL_SECTIONS = (CorridorConstraint, EndApproachConstraint, LegSpeedConstraint, LegStrokeConstraint)
+KERNEL_SECTIONS = (CorridorConstraint, EndApproachConstraint, ArrivalConstraint, LegSpeedConstraint,
+                   DriveForceRateConstraint, LegStrokeConstraint)
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,13 +72,34 @@ class AssemblyInputs:
         return cls(N, seq.K, pad(seq.lower), pad(seq.upper), pad(seq.qa), pad(seq.qb),
                    np.ascontiguousarray(model.r0, dtype=float), np.ascontiguousarray(model.base, dtype=float), args)
 
-    def assemble(self, k: int, x: np.ndarray, y_prev: np.ndarray) -> tuple[np.ndarray, np.ndarray, Rows]:
+    @property
+    def kernel_inputs(self) -> tuple:
+        """The arguments of :func:`kernels.assemble` from ``K`` on."""
+        return (self.K, self.lower, self.upper, self.qa, self.qb, self.r0, self.base, *self.constraint_args)
+
+    def assemble(self, k: int, x: np.ndarray, y_prev: np.ndarray,
+                 u_prev: np.ndarray) -> tuple[np.ndarray, np.ndarray, Rows]:
         """The criterion's weights and targets (3N,) and the rows of step ``k`` at state ``x``,
-        the legs linearised at ``y_prev`` (N, 3) (or at ``x``: ``y_prev`` empty)."""
+        the legs linearised at ``y_prev`` (N, 3) (or at ``x``: ``y_prev`` empty), the forces
+        applied over the previous sample ``u_prev`` [N]."""
         W, tgt, col, val, lower, upper, kinds, n_hard, speed0, stroke0 = ck.assemble(
-            k, self.N, x, y_prev, ROW_UNIT_M, self.K, self.lower, self.upper, self.qa, self.qb, self.r0, self.base,
-            *self.constraint_args)
+            k, self.N, x, y_prev, u_prev, ROW_UNIT_M, *self.kernel_inputs)
         return W, tgt, Rows(col, val, lower, upper, kinds, int(n_hard), int(speed0), int(stroke0))
+
+
+@dataclass(slots=True, eq=False)
+class StepOutcome:
+    """A step done by :meth:`CompiledAssembly.step`."""
+
+    status: int  #: 1 solved; otherwise the step is to be done on the Python path
+    Y: np.ndarray  #: (6N + N m,) the solution ``(X, z)`` as solved
+    z: np.ndarray  #: (N m,) scaled moves, clipped to the force bounds
+    X: np.ndarray  #: (N, 6) predicted states
+    y_nom: np.ndarray  #: (N, 3) nominal poses of the next step
+    iterations: int  #: active-set changes
+    refinements: int  #: re-solves at a refined offset
+    violation: float  #: largest row violation at the solution [row units]
+    relaxed: bool  #: solved with the rows widened by RELAX_M
 
 
 class CompiledAssembly:
@@ -77,25 +110,54 @@ class CompiledAssembly:
         self.Ts, self.substeps = st.Ts, st.plant_substeps
         self.packed = model.packed
         self.umax = constraints.forces.umax
+        #: the bounds of the scaled moves (1, and 1 - FORCE_RECOURSE after the first move)
+        self.zmax = constraints.forces.bounds(self.N)
         #: move weight per drive ``(q_u force_max)^2``, and per move of the horizon
         self.du = np.ascontiguousarray((np.asarray(seq.qu, float) * self.umax) ** 2)
         self.du_moves = np.tile(self.du, self.N)
         self.inputs = AssemblyInputs.of(model, seq, self.N, constraints)
         self._legs = (self.inputs.r0, self.inputs.base, constraints.stroke.lmin, constraints.stroke.lmax)
         self._no_poses = np.zeros((0, 3))
+        self._no_warm = np.zeros(0)
+        self._kernel_inputs = self.inputs.kernel_inputs
+        nz = self.N * model.n_legs
+        #: the dual method's work space: a response per active row, and the Cholesky factor
+        self._V = np.empty((nz + 1, 6 * self.N + nz))
+        self._Lm = np.empty((nz + 1, nz + 1))
+
+    def step_constants(self, refine_tol: tuple[float, float], refine_max: int) -> tuple:
+        """The arguments of :func:`~planner.constraints.step_kernels.constrained_step` from
+        ``umax`` on (the same for every step of a plan)."""
+        return (self.umax, self.zmax, self.du, ROW_UNIT_M, self.N, refine_tol[0], refine_tol[1], refine_max, SOLVE_TOL,
+                DEPENDENT_TOL, WARM_TOL, RELAX_M / ROW_UNIT_M, MAX_ITERATIONS, self._V, self._Lm, self._kernel_inputs)
+
+    def step(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, y_nom: np.ndarray | None,
+             u_prev: np.ndarray, u0: np.ndarray, warm: np.ndarray | None, refine_tol: tuple[float, float],
+             refine_max: int) -> StepOutcome:
+        """Step ``k`` in one compiled call (module docstring): rows at the nominal poses
+        ``y_nom`` (or at ``x``) and after the forces ``u_prev`` [N] of the previous sample,
+        warm-started from ``warm`` (the previous solution shifted, or None), offset under the
+        guessed move ``u0`` [N], refined while the plant lands farther than ``refine_tol``
+        (m, rad) from the prediction."""
+        out = constrained_step(k, np.ascontiguousarray(x, dtype=float), Ad, Bd,
+                               y_nom if y_nom is not None else self._no_poses, u_prev,
+                               np.ascontiguousarray(u0, dtype=float), warm if warm is not None else self._no_warm,
+                               self.packed, self.Ts, self.substeps, *self.step_constants(refine_tol, refine_max))
+        status, Y, z, X, y_next, iterations, refinements, worst, relaxed = out
+        return StepOutcome(int(status), Y, z, X, y_next, int(iterations), int(refinements), float(worst),
+                           bool(relaxed))
 
     def build(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, y_nom: np.ndarray | None,
-              u0: np.ndarray) -> StepQP:
+              u_prev: np.ndarray, u0: np.ndarray) -> StepQP:
         """The QP of step ``k`` at state ``x`` and model ``Ad, Bd``: the rows and criterion
         (legs linearised at ``y_nom``, or at ``x``), the one-step offset under the guessed move
-        ``u0`` [N] (:meth:`set_offset`), and the reduced QP where the rows have equalities."""
+        ``u0`` [N] (:meth:`set_offset`)."""
         x = np.ascontiguousarray(x, dtype=float)
-        W, tgt, rows = self.inputs.assemble(k, x, y_nom if y_nom is not None else self._no_poses)
+        W, tgt, rows = self.inputs.assemble(k, x, y_nom if y_nom is not None else self._no_poses, u_prev)
         x1 = ck.plant_step(self.packed, x, np.ascontiguousarray(u0, dtype=float), self.Ts, self.substeps)
         d = ck.offset(x1, x, u0, Ad, Bd)
         rows.relinearise_first_legs(x1, *self._legs)
-        reduced = ReducedQP.setup(Ad, Bd, self.umax, self.du, x, d, W, tgt, rows)
-        return StepQP(x, Ad, Bd, W, tgt, rows, d, x1, reduced)
+        return StepQP(x, Ad, Bd, W, tgt, rows, d, x1)
 
     def set_offset(self, qp: StepQP, u: np.ndarray, x1: np.ndarray) -> None:
         """The one-step offset ``d = Phi(x, u) - Ad x - Bd u`` (``x1 = Phi(x, u)``: the plant's
@@ -104,8 +166,6 @@ class CompiledAssembly:
         qp.x1 = x1
         qp.d = ck.offset(x1, qp.x, u, qp.Ad, qp.Bd)
         qp.rows.relinearise_first_legs(x1, *self._legs)
-        if qp.reduced is not None:
-            qp.reduced.set_free(qp.x, qp.d, qp.Ad, qp.W, qp.tgt, self.du, qp.rows)
         if qp.full is not None:
             qp.full.set_free(qp.x, qp.d, qp.W, qp.tgt, qp.rows)
 
@@ -116,11 +176,9 @@ class CompiledAssembly:
         return qp.full
 
     def solve(self, qp: StepQP, start: np.ndarray | None) -> QPSolution:
-        """The hard QP from the warm start ``start`` (scaled moves): reduced where the
-        equalities are eliminated, else in ``z``; screened and checked."""
-        if qp.reduced is not None:
-            return qp.reduced.solve(qp.x, qp.d, qp.Ad, qp.rows, start)
-        return self.full(qp).solve(qp.rows, start)
+        """The hard QP from the warm start ``start`` (scaled moves), every row given to DAQP
+        (the Python path of a step)."""
+        return self.full(qp).solve(qp.rows, self.zmax, start)
 
     def one_step_error(self, qp: StepQP, u: np.ndarray) -> tuple[np.ndarray, float, float]:
         """The plant's next state under ``u`` [N] and how far it lands from the prediction
@@ -129,7 +187,7 @@ class CompiledAssembly:
 
     def dense(self, qp: StepQP) -> DenseQP:
         """Every row formed (the slack problem)."""
-        return self.full(qp).dense(qp.rows)
+        return self.full(qp).dense(qp.rows, self.zmax)
 
     def violation(self, qp: StepQP, sol: QPSolution) -> float:
         """Largest hard-row violation of a hard solution [row units] (checked by the solve)."""
@@ -137,10 +195,6 @@ class CompiledAssembly:
 
     def finish(self, qp: StepQP, z: np.ndarray, hard: QPSolution | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The moves ``z`` clipped to the force bounds, the predicted states (N, 6) and the
-        nominal poses of the next step; ``hard``: the hard solution if ``z`` is its moves (a
-        reduced solve has formed their prediction), None after the slack problem."""
-        if hard is not None and qp.reduced is not None:
-            X = hard.states
-        else:
-            X = self.full(qp).predict(np.clip(z, -1.0, 1.0))
+        nominal poses of the next step."""
+        X = self.full(qp).predict(np.clip(z, -1.0, 1.0))
         return ck.finish(z, X)

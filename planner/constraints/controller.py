@@ -17,20 +17,24 @@ offset ``d = Phi(x, u0) - Ad x - Bd u0`` (an RK4 step of the plant under the gue
 ``u0``, the previous solution's; ``build`` and ``set_offset`` of the assembly), which leaves
 the one-step error ``(dPhi/du - Bd)(u - u0)``. After each solve the plant is stepped under the
 solution's move ``u``; while it lands farther than :data:`REFINE_TOL_M` /
-:data:`REFINE_TOL_RAD` (1e-3 and 1e-2 of the margins) from the prediction, the offset is
-recomputed at ``u`` and the QP solved again (at most :data:`REFINE_MAX` times; 8 re-solves in
-240 steps on Table I with the mode's defaults, 38 with the paper mode's penalties). The
-remaining one-step mismatch (metric ``model_mismatch_max_m``, printed by
-``benchmarks/bench_qp.py``) is below 1e-9 m and 1e-8 rad on Table I, far inside the
-1 micrometre margin (:data:`~planner.constraints.corridor.MARGIN_M`), which therefore keeps
-the actual samples inside. Metrics are always computed on the actual (nonlinear) trajectory;
-``contained`` is true only if its corridor violation is at most :data:`CONTAIN_TOL_M`.
+:data:`REFINE_TOL_RAD` (1e-2 of the corridor margin; 0.3 of :data:`CONTAIN_TOL_RAD`, which a
+zero-width psi range is kept to) from the prediction, the offset is recomputed at ``u`` and
+the QP solved again (at most :data:`REFINE_MAX` times; 8 re-solves in 240 steps on Table I
+with the mode's defaults). The remaining one-step mismatch (metric ``model_mismatch_max_m``)
+is below 1e-9 m and 1e-8 rad on Table I, and at most the tolerances at the fastest timings,
+far inside the 1 micrometre margin (:data:`~planner.constraints.corridor.MARGIN_M`; 0.2 um of
+it is left when a step's rows were relaxed), which therefore keeps the actual samples inside.
+Metrics are always computed on the actual (nonlinear) trajectory; ``contained`` is true only
+if its corridor violation is at most :data:`CONTAIN_TOL_M` and :data:`CONTAIN_TOL_RAD`.
 
 Backends. ``settings.backend`` picks, once at construction, the assembly that forms and
-solves each step's QP: :class:`~planner.constraints.compiled.CompiledAssembly` (compiled
-kernels, equalities eliminated, rows screened: :mod:`~planner.constraints.step`; Table I in
-~75 ms against IPOPT's ~10 s) or :class:`~planner.constraints.reference.ReferenceAssembly`
-(numpy, the QP in ``z`` with every row). Both have the interface :class:`Assembly`.
+solves each step's QP: :class:`~planner.constraints.compiled.CompiledAssembly` (each step in
+one compiled call: rows, offset, the stage-wise dual active-set solve of
+:mod:`~planner.constraints.stagewise` and the refinement; a step that call does not finish is
+done on the Python path below with DAQP) or
+:class:`~planner.constraints.reference.ReferenceAssembly` (numpy, the QP in ``z`` with every
+row, DAQP). Both have the interface :class:`Assembly`; the Python path of a step (build,
+solve, refine, finish) is written once, here.
 
 Infeasibility. If the hard QP has no solution, the step is solved again with the rows
 softened by slack variables (:meth:`~planner.constraints.qp.DenseQP.solve_slack`; forces stay
@@ -42,34 +46,41 @@ counted (``infeasible_steps``), its slack reported (``constraint_slack_max_m``,
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple, Protocol
+from typing import Any, ClassVar, NamedTuple, Protocol
 
 import numpy as np
 
 from ..corridor import RangeSequence
+from ..corridor.geometry import corridor_gaps
 from ..errors import PlannerError
 from ..model import RobotModel
-from ..schema import Segment, Settings
+from ..schema import DEFAULT_FORCE_RISE_S, Segment, Settings
 from .compiled import CompiledAssembly
-from .corridor import CorridorConstraint, EndApproachConstraint
-from .drives import DriveForceConstraint, LegSpeedConstraint, LegStrokeConstraint
+from .corridor import MARGIN_M, MARGIN_RAD, ArrivalConstraint, CorridorConstraint, EndApproachConstraint
+from .drives import DriveForceConstraint, DriveForceRateConstraint, LegSpeedConstraint, LegStrokeConstraint
 from .qp import DenseQP, QPSolution
 from .reference import ReferenceAssembly
 from .rows import ROW_UNIT_M, RowConstraint
+from .stagewise import SOLVED, shifted
 
-__all__ = ["CONTAIN_TOL_M", "REFINE_MAX", "REFINE_TOL_M", "REFINE_TOL_RAD", "Assembly", "ConstrainedController",
-           "Constraints", "ControllerStats"]
+__all__ = ["CONTAIN_TOL_M", "CONTAIN_TOL_RAD", "REFINE_MAX", "REFINE_TOL_M", "REFINE_TOL_RAD", "Assembly",
+           "ConstrainedController", "Constraints", "ControllerStats", "LoopRecord", "Memory", "force_rate"]
 
-#: a plan is "contained" when its actual corridor violation is at most this [m]
+#: a plan is "contained" when its actual corridor violation is at most this [m] ...
 CONTAIN_TOL_M = 1e-9
+#: ... and its angle at most this outside the psi ranges [rad] (a zero-width psi range is
+#: kept to the one-step mismatch the refinement leaves, ~1e-8 rad)
+CONTAIN_TOL_RAD = 1e-7
 #: re-solve while the plant's next pose under the solution's first move lands farther than
-#: this from the QP's prediction of it (position [m], angle [rad]): 1e-3 and 1e-2 of the margins
-REFINE_TOL_M = 1e-9
-REFINE_TOL_RAD = 1e-8
+#: this from the QP's prediction of it (position [m], angle [rad]): 1e-2 of the corridor margin,
+#: and 0.3 of the angle that ``contained`` allows (zero-width psi ranges are kept to it)
+REFINE_TOL_M = 1e-8
+REFINE_TOL_RAD = 3e-8
 REFINE_MAX = 3
 
 
@@ -80,21 +91,34 @@ class Constraints(NamedTuple):
     forces: DriveForceConstraint
     corridor: CorridorConstraint
     approach: EndApproachConstraint
+    arrival: ArrivalConstraint
     leg_speed: LegSpeedConstraint
+    rate: DriveForceRateConstraint
     stroke: LegStrokeConstraint
 
     @classmethod
     def of(cls, model: RobotModel, seq: RangeSequence, segments: Sequence[Segment] | None,
-           samples_per_segment: int) -> Constraints:
-        """The constraints of a plan."""
-        return cls(DriveForceConstraint(model), CorridorConstraint(seq, segments),
-                   EndApproachConstraint(seq, segments, samples_per_segment), LegSpeedConstraint(model),
-                   LegStrokeConstraint(model))
+           st: Settings) -> Constraints:
+        """The constraints of a plan (``st``: the force-rate limit and the sample time)."""
+        return cls(DriveForceConstraint(model), CorridorConstraint(seq, segments), EndApproachConstraint(seq, segments),
+                   ArrivalConstraint(seq, segments), LegSpeedConstraint(model),
+                   DriveForceRateConstraint(model, force_rate(model, st), st.Ts), LegStrokeConstraint(model))
 
     @property
     def rows(self) -> tuple[RowConstraint, ...]:
         """The constraints that give rows, in row order (hard ones first)."""
-        return self.corridor, self.approach, self.leg_speed, self.stroke
+        return self.corridor, self.approach, self.arrival, self.leg_speed, self.rate, self.stroke
+
+
+def force_rate(model: RobotModel, st: Settings) -> np.ndarray | None:
+    """The drive-force rate limit [N/s] per drive of ``settings.force_rate_n_s`` (None: no limit):
+    by default each drive's ``force_max`` per :data:`~planner.schema.limits.DEFAULT_FORCE_RISE_S`."""
+    rate = st.force_rate_n_s
+    if isinstance(rate, str):  # "off"
+        return None
+    if rate is None:
+        return np.asarray(model.force_max, float) / DEFAULT_FORCE_RISE_S
+    return np.broadcast_to(np.asarray(rate, float), (model.n_legs,)).copy()
 
 
 class Assembly(Protocol):
@@ -102,7 +126,7 @@ class Assembly(Protocol):
     :class:`ReferenceAssembly`, each with its own step data (``qp``)."""
 
     def build(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, y_nom: np.ndarray | None,
-              u0: np.ndarray) -> Any: ...
+              u_prev: np.ndarray, u0: np.ndarray) -> Any: ...
 
     def set_offset(self, qp: Any, u: np.ndarray, x1: np.ndarray) -> None: ...
 
@@ -121,7 +145,9 @@ class Assembly(Protocol):
 class ControllerStats:
     """What the controller counts over a plan (reported by :meth:`ConstrainedController.report`)."""
 
-    iterations: list[int] = field(default_factory=list)  #: DAQP iterations per step
+    iterations: list[int] = field(default_factory=list)  #: solver iterations per step
+    fallbacks: int = 0  #: steps the stage-wise solver handed to DAQP
+    relaxed: int = 0  #: steps solved with the rows widened by ``RELAX_M`` (compiled backend)
     solve_s: float = 0.0  #: time in the controller [s]
     failures: int = 0  #: steps whose slack problem failed too
     refinements: int = 0  #: re-solves at a refined offset
@@ -133,26 +159,100 @@ class ControllerStats:
     mismatch_rad: float = 0.0  #: and of its angle [rad]
 
 
+@dataclass(slots=True, eq=False)
+class Memory:
+    """What the controller carries from one step to the next, as arrays that the Python step
+    and the compiled loop (:func:`planner.orchestrator.kernels.simulate_constrained`) update
+    in place. ``flags[HAVE_PREV]``: ``z_prev`` and ``y_nom`` hold a previous step's;
+    ``flags[HAVE_WARM]``: ``warm`` holds a warm start; ``flags[HAVE_PRED]``: ``x1_pred`` holds a
+    prediction of the current state."""
+
+    HAVE_PREV: ClassVar[int] = 0
+    HAVE_WARM: ClassVar[int] = 1
+    HAVE_PRED: ClassVar[int] = 2
+
+    z_prev: np.ndarray  #: (N m,) the previous step's moves (scaled)
+    y_nom: np.ndarray  #: (N, 3) nominal poses of the leg linearisation (the previous prediction, shifted)
+    u_prev: np.ndarray  #: (n_legs,) the forces applied over the previous sample [N]
+    warm: np.ndarray  #: (6N + N m,) the previous solution ``(X, z)`` shifted by one sample
+    x1_pred: np.ndarray  #: (6,) the prediction of the current state
+    flags: np.ndarray  #: (3,) int64, see the class docstring
+
+    @classmethod
+    def empty(cls, N: int, m: int) -> Memory:
+        """Before the first step: nothing remembered, at rest (zero force)."""
+        return cls(np.zeros(N * m), np.zeros((N, 3)), np.zeros(m), np.zeros(6 * N + N * m), np.zeros(6),
+                   np.zeros(3, np.int64))
+
+    def remember(self, z: np.ndarray, X: np.ndarray, y_nom: np.ndarray, umax: np.ndarray,
+                 Y: np.ndarray | None = None) -> None:
+        """After a step with moves ``z`` (scaled), predicted states ``X`` (N, 6), next nominal
+        poses ``y_nom`` and (if solved stage-wise) its solution ``Y = (X, z)``."""
+        N, m = y_nom.shape[0], len(umax)
+        self.z_prev[:] = z
+        self.y_nom[:] = y_nom
+        self.u_prev[:] = z[:m] * umax
+        self.x1_pred[:] = X[0]
+        self.warm[:] = shifted(Y if Y is not None else np.concatenate((np.ravel(X), z)), N, m)
+        self.flags[:] = 1
+
+
+@dataclass(slots=True, eq=False)
+class LoopRecord:
+    """What the compiled loop counts, in place (:meth:`ConstrainedController.absorb` adds it
+    to the statistics)."""
+
+    iterations: np.ndarray  #: (max_steps,) int64, per step
+    counts: np.ndarray  #: (2,) int64: refinements, relaxed steps
+    worst: np.ndarray  #: (3,): largest row violation [m, m/s, rad], one-step mismatch [m], [rad]
+
+
 class ConstrainedController:
     """Receding-horizon controller with hard constraints (see the module docstring).
 
     Called as ``controller(k, x, Ad, Bd) -> u`` [N] by
-    :func:`planner.orchestrator.simulate.simulate`; :meth:`report` returns its metrics."""
+    :func:`planner.orchestrator.simulate.simulate`; :meth:`report` returns its metrics. With
+    the compiled backend, ``simulate`` runs stretches of steps in its compiled loop instead
+    (:meth:`loop_arguments`), calling the controller only for a step that loop does not
+    finish."""
+
+    #: let ``simulate`` run the compiled loop (tests that record every step switch it off)
+    compiled_loop: ClassVar[bool] = True
 
     def __init__(self, model: RobotModel, seq: RangeSequence, st: Settings,
-                 segments: Sequence[Segment] | None = None):
+                 segments: Sequence[Segment] | None = None, abandon: bool = False):
         self.model, self.seq, self.st = model, seq, st
+        #: raise ``infeasible`` at the first step the compiled solve finds infeasible, without the
+        #: DAQP fallback and the slack problem (a ``fastest`` candidate needs only the verdict)
+        self.abandon = abandon
         self.N, self.n_legs = st.N, model.n_legs
-        self.constraints = Constraints.of(model, seq, segments, st.samples_per_segment)
+        #: consecutive segments that do not touch (the margins allowed): the geometric cause of
+        #: an infeasible plan, if any
+        self.gaps = corridor_gaps(segments, 2 * MARGIN_M, 2 * MARGIN_RAD) if segments is not None else []
+        self.constraints = Constraints.of(model, seq, segments, st)
+        #: the ranges the criterion reads (the stop boxes at the end: ``criterion_sequence``)
+        self.criterion = self.constraints.corridor.criterion_sequence(seq)
         #: the strategy that forms and solves each step's QP, by ``settings.backend``
         self.assembly: Assembly = (CompiledAssembly if st.backend == "compiled" else ReferenceAssembly)(
-            model, seq, st, self.constraints)
-        #: previous solution (scaled moves, N n_legs), None before the first step
-        self.z_prev: np.ndarray | None = None
-        #: nominal poses (N, 3) of the leg linearisation: the previous prediction, shifted
-        self.y_nom: np.ndarray | None = None
-        self._x1_pred: np.ndarray | None = None
+            model, self.criterion, st, self.constraints)
+        #: what the controller carries from one step to the next (the compiled loop updates it too)
+        self.memory = Memory.empty(self.N, self.n_legs)
         self.stats = ControllerStats()
+
+    @property
+    def z_prev(self) -> np.ndarray | None:
+        """The previous step's moves (scaled, N n_legs), None before the first step."""
+        return self.memory.z_prev if self.memory.flags[Memory.HAVE_PREV] else None
+
+    @property
+    def y_nom(self) -> np.ndarray | None:
+        """Nominal poses (N, 3) of the leg linearisation (the previous prediction, shifted), or None."""
+        return self.memory.y_nom if self.memory.flags[Memory.HAVE_PREV] else None
+
+    @property
+    def u_prev(self) -> np.ndarray:
+        """The forces applied over the previous sample [N] (zero before the start: at rest)."""
+        return self.memory.u_prev
 
     def guess(self) -> np.ndarray:
         """The guessed move of the offset [N]: the previous solution's move of sample 1 (its
@@ -164,20 +264,33 @@ class ConstrainedController:
         return self.z_prev[b * m:(b + 1) * m] * self.constraints.forces.umax
 
     def warm_start(self) -> np.ndarray | None:
-        """The previous solution shifted by one sample (the last move repeated), or None."""
-        if self.z_prev is None:
-            return None
-        m = self.n_legs
-        return np.concatenate((self.z_prev[m:], self.z_prev[-m:]))
+        """The previous solution's moves shifted by one sample (the last move repeated), or None."""
+        mem = self.memory
+        return mem.warm[6 * self.N:].copy() if mem.flags[Memory.HAVE_WARM] else None
 
     def __call__(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray) -> np.ndarray:
         t0 = time.perf_counter()
-        stats, asm = self.stats, self.assembly
-        if self._x1_pred is not None:  # how far the plant landed from the prediction
-            p = self._x1_pred
+        stats, asm, mem = self.stats, self.assembly, self.memory
+        if mem.flags[Memory.HAVE_PRED]:  # how far the plant landed from the prediction
+            p = mem.x1_pred
             stats.mismatch_m = max(stats.mismatch_m, math.hypot(x[0] - p[0], x[1] - p[1]))
             stats.mismatch_rad = max(stats.mismatch_rad, abs(float(x[2] - p[2])))
-        qp = asm.build(k, x, Ad, Bd, self.y_nom, self.guess())
+        if isinstance(asm, CompiledAssembly):  # the whole step in one compiled call
+            warm = mem.warm if mem.flags[Memory.HAVE_WARM] else None
+            out = asm.step(k, x, Ad, Bd, self.y_nom, self.u_prev, self.guess(), warm, (REFINE_TOL_M, REFINE_TOL_RAD),
+                           REFINE_MAX)
+            if out.status == SOLVED:
+                stats.iterations.append(out.iterations)
+                stats.refinements += out.refinements
+                stats.relaxed += out.relaxed
+                stats.violation_max_m = max(stats.violation_max_m, out.violation * ROW_UNIT_M)
+                mem.remember(out.z, out.X, out.y_nom, self.constraints.forces.umax, out.Y)
+                stats.solve_s += time.perf_counter() - t0
+                return mem.u_prev
+            if self.abandon:
+                raise self.infeasible_error(f"at t = {k * self.st.Ts:.3f} s the step's QP is infeasible")
+            stats.fallbacks += 1
+        qp = asm.build(k, x, Ad, Bd, self.y_nom, self.u_prev, self.guess())
         sol = asm.solve(qp, self.warm_start())
         iterations = sol.iterations
         # while the plant under the solution's first move lands farther from the prediction
@@ -202,11 +315,74 @@ class ConstrainedController:
             hard = None
             iterations += slack_iterations
         stats.iterations.append(iterations)
-        z, Xp, self.y_nom = asm.finish(qp, z, hard)
-        self.z_prev = z
-        self._x1_pred = Xp[0]
+        z, Xp, y_nom = asm.finish(qp, z, hard)
+        mem.remember(z, Xp, y_nom, self.constraints.forces.umax)
         stats.solve_s += time.perf_counter() - t0
-        return z[:self.n_legs] * self.constraints.forces.umax
+        return mem.u_prev
+
+    def snapshot(self) -> tuple[Memory, ControllerStats]:
+        """Copies of the memory and the statistics (to resume from, :meth:`restore`)."""
+        mem = self.memory
+        copy = Memory(mem.z_prev.copy(), mem.y_nom.copy(), mem.u_prev.copy(), mem.warm.copy(), mem.x1_pred.copy(),
+                      mem.flags.copy())
+        return copy, dataclasses.replace(self.stats, iterations=list(self.stats.iterations))
+
+    def restore(self, memory: Memory, stats: ControllerStats) -> None:
+        """Continue from a :meth:`snapshot` (into this controller's own arrays)."""
+        mem = self.memory
+        for name in ("z_prev", "y_nom", "u_prev", "warm", "x1_pred", "flags"):
+            getattr(mem, name)[...] = getattr(memory, name)
+        self.stats = dataclasses.replace(stats, iterations=list(stats.iterations))
+
+    def loop_arguments(self, max_steps: int) -> tuple[tuple, LoopRecord] | None:
+        """For :func:`planner.orchestrator.kernels.simulate_constrained`: its arguments from
+        ``z_prev`` on (the memory, the record, the step's constants) and the record, or None
+        (reference backend, or switched off)."""
+        asm = self.assembly
+        if not (self.compiled_loop and isinstance(asm, CompiledAssembly)):
+            return None
+        mem, stats = self.memory, self.stats
+        record = LoopRecord(np.zeros(max_steps, np.int64), np.zeros(2, np.int64),
+                            np.array([stats.violation_max_m, stats.mismatch_m, stats.mismatch_rad]))
+        args = (mem.z_prev, mem.y_nom, mem.u_prev, mem.warm, mem.x1_pred, mem.flags, record.iterations,
+                record.counts, record.worst, *asm.step_constants((REFINE_TOL_M, REFINE_TOL_RAD), REFINE_MAX))
+        return args, record
+
+    def absorb(self, record: LoopRecord, k0: int, k1: int, seconds: float) -> None:
+        """Add the compiled loop's steps ``k0..k1-1`` (and its time) to the statistics."""
+        stats = self.stats
+        stats.iterations.extend(int(i) for i in record.iterations[k0:k1])
+        stats.refinements += int(record.counts[0])
+        stats.relaxed += int(record.counts[1])
+        record.counts[:] = 0
+        stats.violation_max_m, stats.mismatch_m, stats.mismatch_rad = (float(v) for v in record.worst)
+        stats.solve_s += seconds
+
+    def infeasible_error(self, what: str, also: str = "") -> PlannerError:
+        """``PlannerError("infeasible")`` saying ``what`` and the remedy: where consecutive
+        segments do not touch (:func:`~planner.corridor.geometry.corridor_gaps`) that is the
+        cause, which more time does not cure, and the error names the segment; otherwise more
+        time or a wider corridor. ``also``: a further remedy."""
+        gaps = self.gaps
+        if gaps:
+            g = gaps[0]
+            return PlannerError("infeasible", f"{what}: {g.describe()}; the robot would have to jump between them "
+                                "within one sample, which no timing allows: connect or widen the segments"
+                                + (f", or {also}" if also else ""), f"segments[{g.index + 1}]")
+        return PlannerError("infeasible", f"{what}; give it more time (samples_per_segment, speed_m_s, "
+                            "total_time_s) or widen the corridor" + (f", or {also}" if also else ""), "settings")
+
+    def _previous_plan(self, zmax: np.ndarray) -> np.ndarray:
+        """The previous step's moves shifted by one sample (zero before the first), the first
+        kept within the force-rate limit of the force just applied and all within ``zmax``:
+        what a step applies when not even its slack problem could be solved."""
+        mem, m = self.memory, self.n_legs
+        z = mem.warm[6 * self.N:].copy() if mem.flags[Memory.HAVE_WARM] else np.zeros(len(zmax))
+        rate = self.constraints.rate.step
+        if rate is not None:
+            z0 = mem.u_prev / self.constraints.forces.umax
+            z[:m] = np.clip(z[:m], z0 - rate / self.constraints.forces.umax, z0 + rate / self.constraints.forces.umax)
+        return np.clip(z, -zmax, zmax)
 
     def _slack_step(self, k: int, dense: DenseQP) -> tuple[np.ndarray, int]:
         """The step's moves from the slack problem and its iterations; counts the step and its
@@ -214,22 +390,20 @@ class ConstrainedController:
         nz = len(dense.f)
         sol = dense.solve_slack()
         zs = sol.z
-        if not sol.ok:
+        if not sol.ok:  # even the slack problem failed: go on with the previous plan's moves
             self.stats.failures += 1
             zs = np.zeros(nz + 3)
+            zs[:nz] = self._previous_plan(dense.zmax)
         sl = zs[nz:] * ROW_UNIT_M  # corridor [m], stroke [m], leg speed [m/s]
         slack = float(max(sl[0], sl[1]))
         self.stats.slack_max_m = max(self.stats.slack_max_m, slack)
         self.stats.speed_slack_max_m_s = max(self.stats.speed_slack_max_m_s, float(sl[2]))
         self.stats.infeasible += 1
         if self.st.require_settled:  # strict: stop at the first step that cannot keep the corridor
-            raise PlannerError(
-                "infeasible",
-                f"at t = {k * self.st.Ts:.3f} s the robot cannot keep the corridor within its drive "
-                f"limits (the corridor needs {slack * 1e3:.4f} mm of slack, the leg speeds "
-                f"{sl[2] * 1e3:.4f} mm/s); give it more time "
-                "(samples_per_segment, speed_m_s, total_time_s), widen the corridor, or set "
-                "require_settled to false to get the plan with its violations reported", "settings")
+            raise self.infeasible_error(
+                f"at t = {k * self.st.Ts:.3f} s the robot cannot keep the corridor within its drive limits (the "
+                f"corridor needs {slack * 1e3:.4f} mm of slack, the leg speeds {sl[2] * 1e3:.4f} mm/s)",
+                "set require_settled to false to get the plan with its violations reported")
         return zs[:nz], sol.iterations
 
     def report(self) -> dict:
@@ -237,7 +411,9 @@ class ConstrainedController:
         s = self.stats
         it = np.array(s.iterations) if s.iterations else np.zeros(1)
         return {
-            "qp_solver": "daqp",
+            "qp_solver": "stagewise" if isinstance(self.assembly, CompiledAssembly) else "daqp",
+            "qp_fallbacks": s.fallbacks,
+            "qp_relaxed_steps": s.relaxed,
             "qp_iterations_median": float(np.median(it)),
             "qp_iterations_max": int(it.max()),
             "qp_time_ms": s.solve_s * 1e3,

@@ -21,24 +21,46 @@ by the margin: the robot stops within a few micrometres of the end point, inside
 Margins: the constraints hold for the linear prediction, the plant is the nonlinear model;
 the one-step mismatch left after the refinement (:mod:`planner.constraints.controller`) is
 below 1e-9 m on Table I, far inside the 1 micrometre margin, which therefore keeps the
-actual samples inside.
+actual samples inside. The rows of the samples after the first are :data:`RECOURSE_M` /
+:data:`RECOURSE_RAD` tighter still (where the range is wide enough): the model is
+re-linearised every step, so a sample predicted two or more steps ahead moves by up to
+~1e-7 m when it becomes the next step's first sample, and a plan that used a range to its
+edge there (a vertex of its rows: on arrival, the stop box with the arrival speed) would
+leave the next step's QP infeasible. The tighter rows leave that room (recourse).
 
 **No overshoot** (:class:`EndApproachConstraint`): from the last segment before the end point
-on, the predicted position never passes the end point along the approach direction.
+on, the predicted position never passes the end point along the approach direction
+(:func:`planner.corridor.geometry.approach_direction`: from the last cell's centre, or the
+cell's before it where the end point is the last cell's centre).
+
+**Arrival at rest** (:class:`ArrivalConstraint`): from the sample after the first whose range
+is the end point on, the predicted velocity is at most :data:`ARRIVAL_SPEED_M_S` (x, y) and
+:data:`ARRIVAL_RATE_RAD_S` (psi). Not from that first sample itself: there the position
+(micrometre box) and the velocity would both be pinned, which leaves the last move no
+freedom, and the two-step prediction error (the model is re-linearised every step; about
+2 micrometres at arrival on Table I) made the next step's QP infeasible. One sample later,
+each condition is met with a step of recourse. Without it the robot could enter the micrometre stop box
+still moving at a few mm/s and then have to reverse within a sample, which made the forces
+spike and alternate in sign on arrival. The criterion aims at the stop box's centre there
+(:meth:`CorridorConstraint.criterion_sequence`), not at the end point itself, which lies on
+the box's edge or, at a cell corner, a margin outside it.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
 from ..corridor import RangeSequence
-from ..corridor.geometry import halfplanes
+from ..corridor.geometry import approach_direction, halfplanes
 from ..schema import Segment
 from .rows import RowBlock, RowConstraint, RowKind, StepContext
 
-__all__ = ["END_TOL_M", "END_TOL_RAD", "MARGIN_M", "MARGIN_RAD", "CorridorConstraint", "EndApproachConstraint"]
+__all__ = ["ARRIVAL_RATE_RAD_S", "ARRIVAL_SPEED_M_S", "END_TOL_M", "END_TOL_RAD", "MARGIN_M", "MARGIN_RAD",
+           "RECOURSE_M", "RECOURSE_RAD",
+           "ArrivalConstraint", "CorridorConstraint", "EndApproachConstraint"]
 
 #: corridor margin [m]: constraints use each range shrunk by this on every side
 MARGIN_M = 1e-6
@@ -48,6 +70,14 @@ MARGIN_RAD = 1e-6
 END_TOL_M = 3e-6
 #: half-size of the angle box about a point angle range at the end [rad]
 END_TOL_RAD = 3e-6
+#: the rows of the horizon's samples after the first are this much tighter [m] ...
+RECOURSE_M = 2e-7
+#: ... and [rad]
+RECOURSE_RAD = 2e-7
+#: largest speed of the tool point (per axis) once the range is the end point [m/s]
+ARRIVAL_SPEED_M_S = 1e-4
+#: largest angular speed there [rad/s]
+ARRIVAL_RATE_RAD_S = 1e-3
 
 
 class CorridorConstraint(RowConstraint):
@@ -55,9 +85,11 @@ class CorridorConstraint(RowConstraint):
     angle row of the box) for every sample ``j`` of the horizon, ``s`` its sequence index:
     the pose sets (see the module docstring). Compiled twin: ``kernels.corridor_fill``.
 
-    ``lo``/``hi`` (K, 3): the shrunk box per sample 1..K [m, m, rad]; ``hp[s]``:
-    ``(A (h, 2), b (h,))`` or ``None``, half-planes replacing the x/y box rows of sequence
-    index ``s`` [m]."""
+    ``lo``/``hi`` (K, 3): the shrunk box per sample 1..K [m, m, rad], for the horizon's first
+    sample; ``lo_deep``/``hi_deep`` the same shrunk by :data:`RECOURSE_M` / :data:`RECOURSE_RAD`
+    more (at most to the centre), for the later samples; ``hp[s]``: ``(A (h, 2), b (h,))`` or
+    ``None``, half-planes replacing the x/y box rows of sequence index ``s`` [m] (``b``
+    lowered by :data:`RECOURSE_M` for the later samples)."""
 
     kind = RowKind.CORRIDOR
 
@@ -70,6 +102,8 @@ class CorridorConstraint(RowConstraint):
         lo += shrink
         hi -= shrink
         self.hp: list[tuple[np.ndarray, np.ndarray] | None] = [None] * K
+        #: the samples whose point range became the stop box
+        self.stop = np.zeros(K, bool)
         if segments is not None:
             n = len(segments)
             boxes = [(s.lower[:2], s.upper[:2]) for s in segments]
@@ -85,6 +119,7 @@ class CorridorConstraint(RowConstraint):
                             if np.all(blo - END_TOL_M <= p) and np.all(p <= bhi + END_TOL_M):
                                 lo[j, :2] = np.maximum(p - END_TOL_M, blo)
                                 hi[j, :2] = np.minimum(p + END_TOL_M, bhi)
+                                self.stop[j] = True
                                 # a point angle too: an equality on psi at every sample
                                 # cannot damp a residual rotation (with one constant move per
                                 # sample the rate only flips sign), so give it the same kind
@@ -106,6 +141,8 @@ class CorridorConstraint(RowConstraint):
                         A, b = halfplanes(V)
                         self.hp[j] = (A, b - MARGIN_M)
         self.lo, self.hi = lo, hi
+        extra = np.minimum(np.array([RECOURSE_M, RECOURSE_M, RECOURSE_RAD]), 0.5 * (hi - lo))
+        self.lo_deep, self.hi_deep = lo + extra, hi - extra
         self.has_hp = np.array([h is not None for h in self.hp], bool)
         # the half-planes flattened for the compiled rows: those of sequence index s are
         # hp_A[hp_ptr[s]:hp_ptr[s + 1]]
@@ -115,12 +152,23 @@ class CorridorConstraint(RowConstraint):
                                          dtype=float)
         self.hp_b = np.concatenate([h[1] for h in self.hp if h is not None] or [np.zeros(0)]).astype(float)
 
+    def criterion_sequence(self, seq: RangeSequence) -> RangeSequence:
+        """The range sequence the criterion reads: ``seq`` with each stop box (module
+        docstring) as the range of its sample, so that the criterion's target there (the
+        range's centre) lies inside the box."""
+        if not self.stop.any():
+            return seq
+        lower, upper = seq.lower.copy(), seq.upper.copy()
+        lower[self.stop], upper[self.stop] = self.lo[self.stop], self.hi[self.stop]
+        return replace(seq, lower=lower, upper=upper)
+
     def rows(self, step: StepContext) -> RowBlock:
         """Box rows sorted by axis, then sample (x and y only where the sample has no
         half-planes), then the half-planes sample by sample."""
         idx = step.idx
         samples = np.arange(len(idx))
-        lo, hi, has_hp = self.lo[idx], self.hi[idx], self.has_hp[idx]
+        lo, hi, has_hp = self.lo_deep[idx], self.hi_deep[idx], self.has_hp[idx]
+        lo[0], hi[0] = self.lo[idx[0]], self.hi[idx[0]]
         cols, vals, lower, upper = [], [], [], []
         for ax in range(3):
             sel = samples if ax == 2 else samples[~has_hp]
@@ -133,7 +181,7 @@ class CorridorConstraint(RowConstraint):
             cols.append(6 * j + np.tile(np.arange(2), (len(b), 1)))
             vals.append(A)
             lower.append(np.full(len(b), -np.inf))
-            upper.append(b)
+            upper.append(b - (RECOURSE_M if j > 0 else 0.0))
         return RowBlock(np.vstack(cols), np.vstack(vals), np.concatenate(lower), np.concatenate(upper), self.kind)
 
     def _halfplanes(self, s: int) -> tuple[np.ndarray, np.ndarray]:
@@ -143,37 +191,36 @@ class CorridorConstraint(RowConstraint):
 
     @property
     def kernel_args(self) -> tuple:
-        return self.lo, self.hi, self.has_hp, self.hp_ptr, self.hp_A, self.hp_b
+        return self.lo, self.hi, self.lo_deep, self.hi_deep, self.has_hp, self.hp_ptr, self.hp_A, self.hp_b, RECOURSE_M
 
 
 class EndApproachConstraint(RowConstraint):
-    """No overshoot: ``d . (x, y)_j <= d . end`` [m] with ``d`` the unit direction from the
-    last cell's centre to the end point, for the samples from sequence index
-    :attr:`start_index` on (the last segment before the end point). Only for corridors of at
-    least three segments that end in a point. Compiled twin: ``kernels.approach_fill``."""
+    """No overshoot: ``d . (x, y)_j <= d . end`` [m] (:data:`RECOURSE_M` less after the horizon's
+    first sample) with ``d`` the approach direction
+    (:func:`~planner.corridor.geometry.approach_direction`), for the samples from sequence
+    index :attr:`start_index` on (the sample before the last segment before the end point).
+    Only for corridors that end in a point. Compiled twin: ``kernels.approach_fill``."""
 
     kind = RowKind.CORRIDOR
 
-    def __init__(self, seq: RangeSequence, segments: Sequence[Segment] | None, samples_per_segment: int):
+    def __init__(self, seq: RangeSequence, segments: Sequence[Segment] | None):
         #: approach direction (2,) and bound [m], or None (no rows)
         self.half_plane: tuple[np.ndarray, float] | None = None
         #: first sequence index with the row
         self.start_index = seq.K
         n = 0 if segments is None else len(segments)
-        if segments is not None and n >= 3 and segments[-1].is_point:
-            d = segments[-1].centre[:2] - segments[-2].centre[:2]
-            nd = float(np.hypot(*d))
-            if nd > 1e-12:
-                d = d / nd
+        if segments is not None and n >= 2 and segments[-1].is_point:
+            d = approach_direction(segments)
+            if d is not None:
                 self.half_plane = (d, float(d @ segments[-1].centre[:2]))
-                self.start_index = max((n - 2) * samples_per_segment - 1, 0)
+                self.start_index = max(int(np.argmax(seq.segment >= n - 2)) - 1, 0)
 
     def rows(self, step: StepContext) -> RowBlock:
         """One row per sample from :attr:`start_index` on (none without the half-plane)."""
         sel = np.zeros(0, int) if self.half_plane is None else np.nonzero(step.idx >= self.start_index)[0]
         d, b = self._half_plane()
         return RowBlock(6 * sel[:, None] + np.arange(2), np.tile(d, (sel.size, 1)), np.full(sel.size, -np.inf),
-                        np.full(sel.size, b), self.kind)
+                        b - np.where(sel > 0, RECOURSE_M, 0.0), self.kind)
 
     def _half_plane(self) -> tuple[np.ndarray, float]:
         return self.half_plane if self.half_plane is not None else (np.zeros(2), 0.0)
@@ -182,3 +229,35 @@ class EndApproachConstraint(RowConstraint):
     def kernel_args(self) -> tuple:
         d, b = self._half_plane()
         return self.half_plane is not None, np.asarray(d, dtype=float), float(b), int(self.start_index)
+
+
+class ArrivalConstraint(RowConstraint):
+    """Arrival at rest: ``|x_dot_j|, |y_dot_j| <= ARRIVAL_SPEED_M_S`` and ``|psi_dot_j| <=
+    ARRIVAL_RATE_RAD_S`` for the samples from sequence index :attr:`start_index` on: the one
+    after the first whose x/y range is the end point (the end of the taper). Only for corridors that
+    end in a point. Compiled twin: ``kernels.arrival_fill``."""
+
+    kind = RowKind.SPEED
+
+    def __init__(self, seq: RangeSequence, segments: Sequence[Segment] | None):
+        #: first sequence index with the rows (``K``: none)
+        self.start_index = seq.K
+        #: the bounds [m/s, m/s, rad/s]
+        self.limit = np.array([ARRIVAL_SPEED_M_S, ARRIVAL_SPEED_M_S, ARRIVAL_RATE_RAD_S])
+        n = 0 if segments is None else len(segments)
+        if segments is not None and n >= 2 and segments[-1].is_point:
+            w = seq.upper[:, :2] - seq.lower[:, :2]
+            at_end = (seq.segment >= n - 2) & np.all(w <= 2 * MARGIN_M, axis=1)
+            if at_end.any():
+                self.start_index = min(int(np.argmax(at_end)) + 1, seq.K - 1)
+
+    def rows(self, step: StepContext) -> RowBlock:
+        """Three rows (x, y, psi rates) per sample from :attr:`start_index` on."""
+        sel = np.nonzero(step.idx >= self.start_index)[0]
+        cols = (6 * sel[:, None] + 3 + np.arange(3)).reshape(-1, 1)
+        lim = np.tile(self.limit, sel.size)
+        return RowBlock(cols, np.ones((cols.shape[0], 1)), -lim, lim, self.kind)
+
+    @property
+    def kernel_args(self) -> tuple:
+        return int(self.start_index), self.limit

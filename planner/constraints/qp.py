@@ -18,10 +18,13 @@ from dataclasses import dataclass
 import daqp
 import numpy as np
 
-__all__ = ["DAQP_SETTINGS", "SLACK_RHO1", "SLACK_RHO2", "DenseQP", "QPSolution", "solve_qp"]
+__all__ = ["DAQP_SETTINGS", "SLACK_ITER_LIMIT", "SLACK_RHO1", "SLACK_RHO2", "DenseQP", "QPSolution", "solve_qp"]
 
 #: DAQP's tolerances (rows in row units: 1e-9 of a millimetre) and iteration limit
 DAQP_SETTINGS = {"primal_tol": 1e-9, "dual_tol": 1e-12, "iter_limit": 2000}
+#: the slack problem's iteration limit: far outside the corridor hundreds of rows are
+#: violated and DAQP needs thousands of iterations (2000-9000 measured)
+SLACK_ITER_LIMIT = 20000
 #: penalty weights of the slack variables (relative to the scaled criterion, which is O(1))
 SLACK_RHO2 = 1e8
 SLACK_RHO1 = 1e6
@@ -46,12 +49,14 @@ class QPSolution:
 
 
 def solve_qp(H: np.ndarray, f: np.ndarray, A: np.ndarray, upper: np.ndarray, lower: np.ndarray,
-             sense: np.ndarray, start: np.ndarray | None = None) -> QPSolution:
+             sense: np.ndarray, start: np.ndarray | None = None, iter_limit: int | None = None) -> QPSolution:
     """``min 0.5 x'Hx + f'x`` s.t. ``lower <= (x_bounds, A x) <= upper`` by DAQP with
     :data:`DAQP_SETTINGS`: the first ``len(upper) - len(A)`` entries of the bounds are simple
     bounds on ``x``, the rest bound the rows of ``A``; ``sense`` per bound (0, or
-    :data:`EQUALITY`); ``start``: a primal warm start."""
+    :data:`EQUALITY`); ``start``: a primal warm start; ``iter_limit``: instead of the setting's."""
     kw = dict(DAQP_SETTINGS)
+    if iter_limit is not None:
+        kw["iter_limit"] = iter_limit
     if start is not None:
         kw["primal_start"] = start
     x, _, flag, info = daqp.solve(H, f, A, upper, lower, sense, **kw)
@@ -62,7 +67,7 @@ def solve_qp(H: np.ndarray, f: np.ndarray, A: np.ndarray, upper: np.ndarray, low
 class DenseQP:
     """The step's QP in the scaled moves ``z = u / force_max``, every row formed::
 
-        min 0.5 z'Hz + f'z   s.t.  -1 <= z <= 1,  lower <= A z <= upper  (lower == upper: equality)
+        min 0.5 z'Hz + f'z   s.t.  -zmax <= z <= zmax,  lower <= A z <= upper  (lower == upper: equality)
 
     The first :attr:`n_hard` rows are hard; the rest (leg strokes) enter only the slack
     problem. Rows in row units (``ROW_UNIT_M``)."""
@@ -74,12 +79,13 @@ class DenseQP:
     upper: np.ndarray  #: (nrow,)
     kinds: np.ndarray  #: (nrow,) :class:`~planner.constraints.rows.RowKind`
     n_hard: int
+    zmax: np.ndarray  #: (nz,) bounds of the scaled moves, ``|z| <= zmax`` (the drive forces)
 
     def solve_hard(self, start: np.ndarray | None = None) -> QPSolution:
         """The hard QP with every hard row given to DAQP (the numpy reference's solve)."""
-        nz, nh = len(self.f), self.n_hard
-        bu = np.concatenate((np.ones(nz), self.upper[:nh]))
-        bl = np.concatenate((-np.ones(nz), self.lower[:nh]))
+        nh = self.n_hard
+        bu = np.concatenate((self.zmax, self.upper[:nh]))
+        bl = np.concatenate((-self.zmax, self.lower[:nh]))
         sense = np.zeros(len(bu), dtype=np.int32)
         sense[bu - bl <= 0] = EQUALITY
         return solve_qp(self.H, self.f, self.A[:nh], bu, bl, sense, start)
@@ -93,8 +99,8 @@ class DenseQP:
     def solve_slack(self) -> QPSolution:
         """Every row (corridor, speed and stroke) softened by three slacks ``s >= 0`` (row
         units: corridor m and rad, stroke m, speed m/s, by :class:`RowKind`), penalised by
-        ``SLACK_RHO2 |s|^2 / 2 + SLACK_RHO1 sum(s)``; forces stay hard. The solution is
-        ``(z, s)``."""
+        ``SLACK_RHO2 |s|^2 / 2 + SLACK_RHO1 sum(s)``; forces and force rates stay hard. The
+        solution is ``(z, s)``."""
         nz, kinds = len(self.f), self.kinds
         ns = 3
         Hs = np.zeros((nz + ns, nz + ns))
@@ -102,13 +108,14 @@ class DenseQP:
         Hs[nz:, nz:] = np.eye(ns) * SLACK_RHO2
         fs = np.concatenate((self.f, np.full(ns, SLACK_RHO1)))
         S = np.zeros((len(kinds), ns))
-        S[np.arange(len(kinds)), kinds] = 1.0
+        soft = kinds < ns  # the rate rows (kind 3) are never softened
+        S[np.nonzero(soft)[0], kinds[soft]] = 1.0
         # two one-sided rows per two-sided row: A z - s <= bu ; bl <= A z + s
         As = np.vstack((np.hstack((self.A, -S)), np.hstack((self.A, S))))
         bu = np.concatenate((self.upper, np.full(len(kinds), np.inf)))
         bl = np.concatenate((np.full(len(kinds), -np.inf), self.lower))
         keep = np.isfinite(bu) | np.isfinite(bl)
         As, bu, bl = As[keep], np.where(np.isfinite(bu), bu, 1e30)[keep], np.where(np.isfinite(bl), bl, -1e30)[keep]
-        ub = np.concatenate((np.ones(nz), np.full(ns, 1e30), bu))
-        lb = np.concatenate((-np.ones(nz), np.zeros(ns), bl))
-        return solve_qp(Hs, fs, As, ub, lb, np.zeros(len(ub), dtype=np.int32))
+        ub = np.concatenate((self.zmax, np.full(ns, 1e30), bu))
+        lb = np.concatenate((-self.zmax, np.zeros(ns), bl))
+        return solve_qp(Hs, fs, As, ub, lb, np.zeros(len(ub), dtype=np.int32), iter_limit=SLACK_ITER_LIMIT)

@@ -58,13 +58,14 @@ class ReferenceAssembly:
         self._lag = np.where(i >= j, i - j, self.N)
 
     def build(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, y_nom: np.ndarray | None,
-              u0: np.ndarray) -> ReferenceQP:
+              u_prev: np.ndarray, u0: np.ndarray) -> ReferenceQP:
         """The condensed QP of step ``k`` in the scaled inputs ``z = u / force_max``::
 
-            min 0.5 z'Hz + f'z   s.t.  -1 <= z <= 1,  bl <= A z <= bu  (rows with bl == bu: equal)
+            min 0.5 z'Hz + f'z   s.t.  |z| <= zmax,  bl <= A z <= bu  (rows with bl == bu: equal)
 
         Every row is a linear function ``Sel`` of the predicted states ``X = free + Gx z``
-        (eq. 11), so ``A = Sel Gx`` and the bounds are ``b0 - Sel free``; the one-step offset
+        (eq. 11) and the moves, so ``A = Sel_X Gx + Sel_z`` and the bounds are ``b0 - Sel_X
+        free``; ``u_prev`` [N] are the forces of the previous sample (the rate rows); the one-step offset
         under the guessed move ``u0`` [N] (:meth:`set_offset`) changes ``free`` and sample 0's
         leg rows. The criterion (22)-(23) in ``z``: ``H = Gp2' W Gp2 + diag(du)``,
         ``f = Gp2' (W free_pose - tgt)``, both scaled so that ``H``'s largest diagonal entry is
@@ -87,7 +88,7 @@ class ReferenceAssembly:
         H *= scale
         if y_nom is None:
             y_nom = np.tile(x[:3], (N, 1))
-        step = StepContext(np.minimum(np.arange(k, k + N), seq.K - 1), y_nom,
+        step = StepContext(np.minimum(np.arange(k, k + N), seq.K - 1), np.asarray(u_prev, float), y_nom,
                            kinematics.leg_jacobians(self.model, y_nom), kinematics.leg_lengths(self.model, y_nom))
         rows = Rows.stack([c.rows(step) for c in self.constraints.rows], [c.hard for c in self.constraints.rows])
         qp = ReferenceQP(x, Ad, Bd, rows, P, Gx, Gp2, W, (qa * qa * lo + qb * qb * hi).ravel(), H, scale)
@@ -109,10 +110,11 @@ class ReferenceAssembly:
         free += qp.P[:N] @ qp.d
         qp.free = free.ravel()
         f = (qp.Gp2.T @ (qp.W * free[:, :3].ravel() - qp.tgt)) * qp.scale
-        Sel = qp.rows.selection(6 * N)
-        sf = Sel @ qp.free
-        qp.dense = DenseQP(qp.H, f, Sel @ qp.Gx, qp.rows.lower - sf, qp.rows.upper - sf, qp.rows.kinds,
-                           qp.rows.n_hard)
+        Sel = qp.rows.selection(6 * N + qp.Gx.shape[1])
+        SX, Sz = Sel[:, :6 * N], Sel[:, 6 * N:]
+        sf = SX @ qp.free
+        qp.dense = DenseQP(qp.H, f, SX @ qp.Gx + Sz, qp.rows.lower - sf, qp.rows.upper - sf, qp.rows.kinds,
+                           qp.rows.n_hard, self.constraints.forces.bounds(N))
 
     def dense(self, qp: ReferenceQP) -> DenseQP:
         """Every row formed (the slack problem)."""

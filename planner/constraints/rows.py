@@ -1,15 +1,19 @@
 """Constraint rows: what every constraint object gives, and the rows of one step.
 
 Every constraint of the QP except the drive-force bounds is a *row*: a linear function of
-the predicted states ``X`` (6N: pose and velocity of samples 1..N) between two bounds,
+the predicted states ``X`` (6N: pose and velocity of samples 1..N) and the scaled moves ``z``
+(N m) between two bounds,
 
-    lower[r] <= sum_k val[r, k] X[col[r, k]] <= upper[r]      (at most 3 entries per row),
+    lower[r] <= sum_k val[r, k] Y[col[r, k]] <= upper[r]      (at most 3 entries per row),
 
-i.e. a sparse selection ``Sel`` of the states: ``Sel X`` in ``[lower, upper]``. With the
-prediction ``X = free + Gx z`` (eq. 11 in the scaled moves ``z``) a row becomes
-``lower - Sel free <= (Sel Gx) z <= upper - Sel free``. Rows are scaled so that one unit is
-:data:`ROW_UNIT_M` metres (m of pose, m/s of leg speed, m of stroke, rad of angle), which
-keeps the solver's tolerances meaningful in every kind.
+with ``Y = (X, z)`` (an index below ``6N`` is a state, from ``6N`` on a move), i.e. a sparse
+selection ``Sel`` of the states and moves. With the prediction ``X = free + Gx z`` (eq. 11 in
+the scaled moves ``z``) a row becomes ``lower - Sel_X free <= (Sel_X Gx + Sel_z) z <= upper -
+Sel_X free``. Rows are scaled so that one unit is :data:`ROW_UNIT_M` of its unit (m of pose,
+m/s of leg speed, m of stroke, rad of angle), which keeps the solver's tolerances
+meaningful in every kind; the force-rate rows are in the scaled moves' unit (``force_max``),
+like the force bounds, so that their coefficients are 1 (in newtons they were 1e4 times the
+other rows' and the slack problem's DAQP solve failed on it).
 
 A constraint object (:class:`RowConstraint`) gives its :class:`RowBlock` for a step from a
 :class:`StepContext` (its numpy reference), and the arrays its compiled twin in
@@ -36,11 +40,12 @@ ROW_UNIT_M = 1e-3
 
 class RowKind(IntEnum):
     """What a row bounds; the index of the slack variable that softens it in the slack
-    problem and of its screening distance (:data:`planner.constraints.step.SCREEN_ROWS`)."""
+    problem."""
 
     CORRIDOR = ck.KIND_CORRIDOR  #: a pose coordinate or a half-plane [m, rad]
     STROKE = ck.KIND_STROKE  #: a leg length [m]
-    SPEED = ck.KIND_SPEED  #: a leg speed [m/s]
+    SPEED = ck.KIND_SPEED  #: a leg speed, or the tool's speed on arrival [m/s, rad/s]
+    RATE = ck.KIND_RATE  #: a drive force's change over one sample [N]; never softened
 
 
 @dataclass(slots=True, eq=False)
@@ -48,6 +53,7 @@ class StepContext:
     """What a constraint needs to give its rows of one step (``N`` samples, ``n_legs`` legs)."""
 
     idx: np.ndarray  #: (N,) sequence index of each sample (``min(k + j, K - 1)``)
+    u_prev: np.ndarray  #: (n_legs,) the drive forces applied over the previous sample [N]
     y_nom: np.ndarray  #: (N, 3) nominal poses of the leg linearisation [m, m, rad]
     J: np.ndarray  #: (N, n_legs, 3) leg Jacobians ``J_l`` at ``y_nom``
     L: np.ndarray  #: (N, n_legs) leg lengths at ``y_nom`` [m]
@@ -62,6 +68,8 @@ class RowBlock:
     lower: np.ndarray  #: (r,) lower bounds (``-inf``: none)
     upper: np.ndarray  #: (r,) upper bounds
     kind: RowKind
+    legs: bool = False  #: rows of the legs (speed, stroke), one per sample and leg: sample 0's are relinearised
+    unit: float = ROW_UNIT_M  #: what one row unit is (the force-rate rows: in the moves' own unit, 1)
 
 
 @dataclass(slots=True, eq=False)
@@ -93,11 +101,12 @@ class Rows:
             val[r:r + nb, :b.col.shape[1]] = b.val
         kinds = np.concatenate([np.full(nb, int(b.kind), np.int64) for b, nb in zip(blocks, n)])
 
-        def first(kind: RowKind) -> int:  # the first row of that kind (sample 0's), -1 if none
-            return next((int(r) for b, r in zip(blocks, starts) if b.kind == kind), -1)
+        def first(kind: RowKind) -> int:  # the first leg row of that kind (sample 0's), -1 if none
+            return next((int(r) for b, r in zip(blocks, starts) if b.kind == kind and b.legs), -1)
 
-        return cls(col, val / ROW_UNIT_M, np.concatenate([b.lower for b in blocks]) / ROW_UNIT_M,
-                   np.concatenate([b.upper for b in blocks]) / ROW_UNIT_M, kinds,
+        unit = np.concatenate([np.full(nb, b.unit) for b, nb in zip(blocks, n)])
+        return cls(col, val / unit[:, None], np.concatenate([b.lower for b in blocks]) / unit,
+                   np.concatenate([b.upper for b in blocks]) / unit, kinds,
                    sum(nb for nb, h in zip(n, hard) if h), first(RowKind.SPEED), first(RowKind.STROKE))
 
     @property
@@ -105,25 +114,13 @@ class Rows:
         """Number of rows, hard and slack-only."""
         return len(self.lower)
 
-    def selection(self, n_states: int) -> np.ndarray:
-        """The dense selection ``Sel`` (nrow, n_states) (the numpy reference's form)."""
-        Sel = np.zeros((self.n_rows, n_states))
+    def selection(self, n_entries: int) -> np.ndarray:
+        """The dense selection ``Sel`` (nrow, 6N + N m) of the states and moves (the numpy
+        reference's form)."""
+        Sel = np.zeros((self.n_rows, n_entries))
         r, k = np.nonzero(self.col >= 0)
         Sel[r, self.col[r, k]] = self.val[r, k]
         return Sel
-
-    # ---- compiled (kernels.py): the rows at predicted states --------------------------------
-    def screen(self, X: np.ndarray, delta: np.ndarray) -> np.ndarray:
-        """The hard rows the solver is given: the equalities and every row within
-        ``delta[kind]`` (row units) of a bound at the predicted states ``X`` (``kernels.screen``)."""
-        keep = np.zeros(self.n_hard, bool)
-        ck.screen(self.col, self.val, self.lower, self.upper, self.kinds, self.n_hard, X, delta, keep)
-        return keep
-
-    def check(self, X: np.ndarray, keep: np.ndarray, tol: float) -> tuple[float, int]:
-        """Largest violation of the hard rows at ``X`` (row units); rows violated by more
-        than ``tol`` and not in ``keep`` are added to it. Returns ``(worst, added)``."""
-        return ck.check_rows(self.col, self.val, self.lower, self.upper, self.n_hard, X, keep, tol)
 
     def relinearise_first_legs(self, x1: np.ndarray, r0: np.ndarray, base: np.ndarray, lmin: np.ndarray,
                                lmax: np.ndarray) -> None:

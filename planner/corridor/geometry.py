@@ -5,10 +5,18 @@ the constrained mode's corridor rows and the result's metrics."""
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["halfplanes", "box_distance", "polygon_distance", "corridor_violation", "polygon_violation"]
+from . import kernels as gk
+
+__all__ = ["APPROACH_MIN_M", "CorridorDistances", "Gap", "approach_direction", "box_distance", "corridor_distances",
+           "corridor_gaps",
+           "corridor_violation", "halfplanes", "polygon_distance", "polygon_violation", "psi_violation"]
+
+#: a segment centre closer than this to the end point gives no approach direction [m]
+APPROACH_MIN_M = 1e-9
 
 
 def halfplanes(polygon: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -44,7 +52,9 @@ def polygon_distance(p: np.ndarray, V: np.ndarray) -> np.ndarray:
 
 
 def corridor_violation(poses: np.ndarray, segments: Sequence) -> np.ndarray:
-    """Distance [m] of each pose's (x, y) outside the union of the segments' boxes.
+    """Distance [m] of each pose's (x, y) outside the union of the segments' boxes, against
+    every segment (the reference of :func:`corridor_distances`, which is linear in the
+    samples).
 
     The same numbers as ``box_distance(poses[:, None, :2], lo, hi).min(axis=1)`` (the norm
     is the same sum of squares; the square root, being monotone, is taken after the minimum),
@@ -59,7 +69,8 @@ def corridor_violation(poses: np.ndarray, segments: Sequence) -> np.ndarray:
 
 def polygon_violation(points: np.ndarray, segments: Sequence) -> np.ndarray:
     """Distance [m] of each point (k, 2) outside the union of the segments' exact cells (the
-    ``polygon`` where a segment has one, else its x/y box)."""
+    ``polygon`` where a segment has one, else its x/y box), against every segment (the
+    reference of :func:`corridor_distances`)."""
     best = np.full(len(points), np.inf)
     for seg in segments:
         poly = getattr(seg, "polygon", None)
@@ -69,3 +80,93 @@ def polygon_violation(points: np.ndarray, segments: Sequence) -> np.ndarray:
             d = polygon_distance(points, np.asarray(poly, float))
         best = np.minimum(best, d)
     return best
+
+
+def approach_direction(segments: Sequence) -> np.ndarray | None:
+    """The unit direction (2,) in which a corridor reaches its end point (the last segment's
+    centre): from the centre of the last segment before it whose centre is not the end point
+    (farther than :data:`APPROACH_MIN_M`), usually the last cell's; where the end point is that
+    cell's centre, the cell before it. None if every centre is the end point. The
+    constrained mode's no-overshoot rows and the ``overshoot_m`` metric both use it."""
+    end = np.asarray(segments[-1].centre[:2], float)
+    for seg in reversed(segments[:-1]):
+        d = end - np.asarray(seg.centre[:2], float)
+        n = float(np.hypot(d[0], d[1]))
+        if n > APPROACH_MIN_M:
+            return d / n
+    return None
+
+
+def psi_violation(poses: np.ndarray, segments: Sequence) -> np.ndarray:
+    """Angle [rad] of each pose outside the psi ranges of the segments whose box contains its
+    (x, y), or of the nearest ones if none does (ties within 1e-12 m), against every
+    segment (the reference of :func:`corridor_distances`)."""
+    lo = np.array([s.lower for s in segments])
+    hi = np.array([s.upper for s in segments])
+    d = box_distance(poses[:, None, :2], lo[None, :, :2], hi[None, :, :2])
+    e = np.maximum(np.maximum(lo[None, :, 2] - poses[:, None, 2], 0.0), poses[:, None, 2] - hi[None, :, 2])
+    nearest = d <= d.min(axis=1, keepdims=True) + gk.TIE_M
+    return np.where(nearest, e, np.inf).min(axis=1)
+
+
+@dataclass(frozen=True)
+class CorridorDistances:
+    """How far each sample is outside the corridor (one value per sample)."""
+
+    xy: np.ndarray  #: distance of (x, y) outside the union of the segments' boxes [m]
+    psi: np.ndarray  #: angle outside the psi ranges of the segments the sample is in (or nearest to) [rad]
+    polygon: np.ndarray | None  #: distance outside the union of the exact cells [m] (None: no polygons)
+    evaluated: int  #: box and polygon distances computed (linear in the samples)
+
+
+def corridor_distances(poses: np.ndarray, segment_of: np.ndarray, segments: Sequence) -> CorridorDistances:
+    """The corridor distances of the poses (K, 3), each sample's segment ``segment_of`` (K,)
+    known: linear in the samples (:mod:`planner.corridor.kernels`; the same numbers as
+    :func:`corridor_violation`, :func:`psi_violation` and :func:`polygon_violation`)."""
+    lo = np.ascontiguousarray([s.lower for s in segments], dtype=float)
+    hi = np.ascontiguousarray([s.upper for s in segments], dtype=float)
+    polys = [getattr(s, "polygon", None) for s in segments]
+    if any(p is not None for p in polys):
+        counts = [0 if p is None else len(p) for p in polys]
+        ptr = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
+        V = np.ascontiguousarray(np.vstack([np.asarray(p, float) for p in polys if p is not None]))
+    else:
+        ptr, V = np.zeros(0, np.int64), np.zeros((0, 2))
+    origin, h, nx, ny, start, boxes = gk.build_grid(np.ascontiguousarray(lo[:, :2]), np.ascontiguousarray(hi[:, :2]))
+    K = len(poses)
+    xy, psi, poly = np.empty(K), np.empty(K), np.empty(K)
+    evaluated = gk.union_distances(np.ascontiguousarray(poses, dtype=float), np.ascontiguousarray(segment_of, np.int64),
+                                   np.ascontiguousarray(lo[:, :2]), np.ascontiguousarray(hi[:, :2]),
+                                   np.ascontiguousarray(lo[:, 2]), np.ascontiguousarray(hi[:, 2]), ptr, V, origin, h,
+                                   nx, ny, start, boxes, xy, psi, poly)
+    return CorridorDistances(xy, psi, poly if len(ptr) else None, int(evaluated))
+
+
+@dataclass(frozen=True)
+class Gap:
+    """Two consecutive segments that do not touch."""
+
+    index: int  #: the first of the two (``segments[index]`` and ``segments[index + 1]``)
+    xy_m: float  #: distance between their (x, y) boxes [m] (0: they touch)
+    psi_rad: float  #: distance between their psi ranges [rad] (0: they overlap)
+
+    def describe(self) -> str:
+        """``segments[i] and segments[i+1] do not touch (...)``."""
+        parts = ([f"{self.xy_m * 1e3:.3f} mm apart in x/y"] if self.xy_m > 0 else []) + \
+                ([f"their psi ranges {self.psi_rad:.4g} rad apart"] if self.psi_rad > 0 else [])
+        return f"segments[{self.index}] and segments[{self.index + 1}] do not touch ({', '.join(parts)})"
+
+
+def corridor_gaps(segments: Sequence, tol_m: float = 0.0, tol_rad: float = 0.0) -> list[Gap]:
+    """Consecutive segments whose boxes are farther apart than ``tol_m`` in (x, y) or whose
+    psi ranges are farther apart than ``tol_rad``. The range sequence holds one segment's
+    range until the next one's: across such a gap the robot would have to jump (or turn)
+    within one sample, which no timing makes possible."""
+    gaps = []
+    for i in range(len(segments) - 1):
+        a, b = segments[i], segments[i + 1]
+        d = np.maximum(np.maximum(a.lower - b.upper, b.lower - a.upper), 0.0)
+        xy, psi = float(np.hypot(d[0], d[1])), float(d[2])
+        if xy > tol_m or psi > tol_rad:
+            gaps.append(Gap(i, xy, psi))
+    return gaps

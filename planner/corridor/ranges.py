@@ -1,8 +1,9 @@
 """Segments to a per-sample range sequence (paper Section V.B, Table I, Fig. 4).
 
 Each segment's range ``[r_a, r_b]`` is held for ``S`` samples (default ``N``: "the all
-values are repeated in number equal length of horizon N"). Sample ``j = 1..K``
-(``K = segments x S``) belongs to segment ``(j - 1) // S``; sample 0 is the start. With
+values are repeated in number equal length of horizon N"), or for its own count
+(``settings.segment_samples``). Sample ``j = 1..K`` (``K`` = the counts' sum) belongs to
+segment ``RangeSequence.segment[j - 1]``; sample 0 is the start. With
 ``taper`` (default), a segment that follows a point (the start) spreads linearly out of
 that point over its samples, and a segment followed by a point (the end) narrows linearly
 onto it (Fig. 4 a, c). Past sample ``K`` the end point is held. At each step the criterion
@@ -60,28 +61,39 @@ def _penalties(settings: Settings, n_drives: int) -> tuple[np.ndarray, np.ndarra
     return qa, qb, qu
 
 
+def segment_counts(settings: Settings, n_segments: int) -> np.ndarray:
+    """Samples each segment is held (n,): ``settings.segment_samples``, or
+    ``samples_per_segment`` for every segment."""
+    if settings.segment_samples is not None:
+        return np.asarray(settings.segment_samples, dtype=np.int64)
+    return np.full(n_segments, settings.samples_per_segment, dtype=np.int64)
+
+
 def range_sequence(segments: list[Segment], settings: Settings, n_drives: int) -> RangeSequence:
-    """Section V.B: expand the corridor's segments into per-sample ranges."""
-    S = settings.samples_per_segment
+    """Section V.B: expand the corridor's segments into per-sample ranges, segment ``i`` held
+    for its count of :func:`segment_counts` samples (its taper over its own samples)."""
     n = len(segments)
-    lo = np.repeat(np.array([s.lower for s in segments]), S, axis=0)
-    hi = np.repeat(np.array([s.upper for s in segments]), S, axis=0)
+    counts = segment_counts(settings, n)
+    starts = np.concatenate(([0], np.cumsum(counts)))
+    lo = np.repeat(np.array([s.lower for s in segments]), counts, axis=0)
+    hi = np.repeat(np.array([s.upper for s in segments]), counts, axis=0)
     qa0, qb0, qu = _penalties(settings, n_drives)
-    qa = np.repeat(np.array([s.q_ra if s.q_ra is not None else qa0 for s in segments]), S, axis=0)
-    qb = np.repeat(np.array([s.q_rb if s.q_rb is not None else qb0 for s in segments]), S, axis=0)
-    seg = np.repeat(np.arange(n), S)
+    qa = np.repeat(np.array([s.q_ra if s.q_ra is not None else qa0 for s in segments]), counts, axis=0)
+    qb = np.repeat(np.array([s.q_rb if s.q_rb is not None else qb0 for s in segments]), counts, axis=0)
+    seg = np.repeat(np.arange(n), counts)
     if settings.taper:
-        alpha = (np.arange(1, S + 1) / S)[:, None]
         for i in range(1, n):
             if segments[i - 1].is_point and not segments[i].is_point:  # spread out of a point
                 p = segments[i - 1].centre
-                sl = slice(i * S, (i + 1) * S)
+                sl = slice(starts[i], starts[i + 1])
+                alpha = (np.arange(1, counts[i] + 1) / counts[i])[:, None]
                 lo[sl] = p + (segments[i].lower - p) * alpha
                 hi[sl] = p + (segments[i].upper - p) * alpha
         for i in range(n - 1):
             if segments[i + 1].is_point and not segments[i].is_point:  # narrow onto a point
                 p = segments[i + 1].centre
-                sl = slice(i * S, (i + 1) * S)
+                sl = slice(starts[i], starts[i + 1])
+                alpha = (np.arange(1, counts[i] + 1) / counts[i])[:, None]
                 if i > 0 and segments[i - 1].is_point:  # a single segment between two points
                     lo[sl] = lo[sl] + (p - lo[sl]) * alpha
                     hi[sl] = hi[sl] + (p - hi[sl]) * alpha

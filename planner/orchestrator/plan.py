@@ -13,16 +13,20 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-from ..constraints import ConstrainedController
+import numpy as np
+
+from ..constraints import MARGIN_M, MARGIN_RAD, ConstrainedController
 from ..corridor import RangeSequence, Segmentation, range_sequence, reference_sequence
 from ..corridor import segment as segment_layout
+from ..corridor.geometry import corridor_gaps
 from ..errors import PlannerError, invalid
 from ..model import RobotModel, load_robot
 from ..model.reach import check_pose, check_segments
-from ..schema import PlanRequest, PlanResult, Segment, Settings, parse_request
+from ..schema import PlanRequest, PlanResult, Reference, Segment, Settings, parse_request
+from .fastest import search as search_fastest
 from .result import build_result
-from .simulate import Controller, simulate
-from .timing import resolve_timing, search_fastest, timing_info
+from .simulate import Resume, Simulation, simulate
+from .timing import method_of, resolve_timing, timing_info
 
 __all__ = ["plan", "segment", "warm_up"]
 
@@ -32,6 +36,10 @@ def _robot(req: PlanRequest, robot: RobotModel | None) -> RobotModel:
     st = req.settings
     if st.q_u is not None and len(st.q_u) != model.n_legs:
         raise invalid("settings.q_u", f"must have one entry per drive ({model.n_legs}), got {len(st.q_u)}")
+    rate = st.force_rate_n_s
+    if isinstance(rate, np.ndarray) and len(rate) != model.n_legs:
+        raise invalid("settings.force_rate_n_s", f"must be one number or one per drive ({model.n_legs}), "
+                      f"got {len(rate)}")
     return model
 
 
@@ -61,8 +69,9 @@ def plan(request: Any, *, robot: RobotModel | None = None, segments: Sequence[Se
             result = _fastest(req.name, model, st, segments)
             result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3
             return result
+    method = method_of(st)
     st = resolve_timing(st, segments)  # speed_m_s / total_time_s -> samples_per_segment
-    result = _plan_once(req.name, model, st, segments, req)
+    result = _plan_once(req.name, model, st, segments, req.reference, method=method)
     result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3  # everything, result arrays included
     mt = result.metrics
     if not mt.settled and st.require_settled:
@@ -74,59 +83,65 @@ def plan(request: Any, *, robot: RobotModel | None = None, segments: Sequence[Se
 
 
 def _plan_once(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment] | None,
-               req: PlanRequest, **timing: object) -> PlanResult:
+               reference: Reference | None, **timing: object) -> PlanResult:
     """One run of the loop at fixed timing; raises ``infeasible`` for a constrained plan that
     needed slack when ``require_settled`` asks for a guaranteed plan."""
+    return _run(name, model, st, segments, reference, timing=timing)[0]
+
+
+def _run(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment] | None,
+         reference: Reference | None,
+         resume: Resume | None = None, keep: Sequence[int] = (), timing: dict | None = None,
+         abandon: bool = False) -> tuple[PlanResult, Simulation]:
+    """:func:`_plan_once` from ``resume`` (or the start), remembering the states at ``keep``;
+    returns the simulation too. ``abandon``: stop at the first infeasible step (a candidate
+    of the ``fastest`` search)."""
     seq: RangeSequence
     if segments is not None:
         seq = range_sequence(list(segments), st, model.n_legs)
     else:
-        assert req.reference is not None
-        for i, pose in enumerate(req.reference.pose):
+        assert reference is not None
+        for i, pose in enumerate(reference.pose):
             check_pose(model, pose, f"reference.pose[{i}]")
-        seq = reference_sequence(req.reference.pose, st, model.n_legs)
+        seq = reference_sequence(reference.pose, st, model.n_legs)
     check_pose(model, seq.start, "segments[0]" if segments is not None else "reference.pose[0]")
-    controller: Controller | None = None
+    controller: ConstrainedController | None = None
     if st.mode == "constrained":
-        controller = ConstrainedController(model, seq, st, segments)
-    sim = simulate(model, seq, st, controller)
+        controller = ConstrainedController(model, seq, st, segments, abandon=abandon)
+    sim = simulate(model, seq, st, controller, resume, keep)
     report = controller.report() if controller is not None else {}
-    result = build_result(model, name, st, seq, segments, sim, report, timing_info(st, segments, **timing))
+    result = build_result(model, name, st, seq, segments, sim, report, timing_info(st, segments, **(timing or {})))
     mt = result.metrics
-    if st.mode == "constrained" and (mt.infeasible_steps or 0) > 0 and st.require_settled:
-        raise PlannerError(
-            "infeasible",
+    if controller is not None and (mt.infeasible_steps or 0) > 0 and st.require_settled:
+        raise controller.infeasible_error(
             f"the constrained plan cannot keep the robot in the corridor within the drive limits: "
             f"{mt.infeasible_steps} of {mt.steps} steps needed slack (up to "
-            f"{(mt.constraint_slack_max_m or 0.0) * 1e3:.4f} mm); give the robot more time "
-            "(samples_per_segment, speed_m_s, total_time_s) or widen the corridor", "settings")
-    return result
+            f"{(mt.constraint_slack_max_m or 0.0) * 1e3:.4f} mm)")
+    return result, sim
 
 
 def _fastest(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment]) -> PlanResult:
-    """The plan at the smallest feasible ``samples_per_segment`` (:mod:`.timing`)."""
-    req = PlanRequest.model_construct(segments=list(segments), reference=None)
+    """The plan at the fastest feasible timing (:mod:`.fastest`)."""
+    gaps = corridor_gaps(segments, 2 * MARGIN_M, 2 * MARGIN_RAD)
 
-    def plan_at(S: int) -> PlanResult:
-        sub = st.model_copy(update={"fastest": False, "samples_per_segment": S, "require_settled": False})
-        return _plan_once(name, model, sub, segments, req)
+    def plan_at(counts: np.ndarray, resume: Resume | None, keep: Sequence[int]) -> tuple[PlanResult, Simulation]:
+        # require_settled: a candidate is abandoned at its first infeasible step
+        sub = st.model_copy(update={"fastest": False, "segment_samples": [int(c) for c in counts],
+                                    "samples_per_segment": int(counts.max()), "require_settled": True})
+        return _run(name, model, sub, segments, None, resume, keep, abandon=True)
 
-    best, cache = search_fastest(plan_at, st, len(segments))
-    if best == 0:
-        largest = max(cache)
-        res = cache[largest][1]
-        if st.require_settled or res is None:
-            raise PlannerError("infeasible", f"no timing up to {largest} samples per segment keeps the corridor "
-                               "within the drive limits", "settings.fastest")
-        res.timing = timing_info(st.model_copy(update={"samples_per_segment": largest}), segments,
-                                 evaluations=len(cache), feasible=False)
-        return res
-    res = cache[best][1]
-    assert res is not None
-    final = st.model_copy(update={"samples_per_segment": best})
+    best, evaluations = search_fastest(plan_at, st, segments)
+    if best is None or best.result is None:
+        why = (f"{gaps[0].describe()}; the robot would have to jump between them within one sample, which no "
+               "timing allows: connect or widen the segments") if gaps else \
+            "no timing up to the limits keeps the corridor within the drive limits"
+        raise PlannerError("infeasible", why, f"segments[{gaps[0].index + 1}]" if gaps else "settings.fastest")
+    res = best.result
+    counts = [int(c) for c in best.counts]
+    final = st.model_copy(update={"fastest": False, "segment_samples": counts, "samples_per_segment": max(counts)})
     res.settings = final
-    res.timing = timing_info(final, segments, evaluations=len(cache), feasible=True,
-                             one_fewer_sample_infeasible=bool(best == 1 or not cache[best - 1][0]))
+    res.timing = timing_info(final, segments, method="fastest", evaluations=evaluations, feasible=True,
+                             one_fewer_sample_infeasible=True)
     return res
 
 

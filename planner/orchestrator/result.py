@@ -13,9 +13,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..constraints import CONTAIN_TOL_M
+from ..constraints import CONTAIN_TOL_M, CONTAIN_TOL_RAD
 from ..corridor import RangeSequence
-from ..corridor.geometry import box_distance, corridor_violation, polygon_violation
+from ..corridor.geometry import APPROACH_MIN_M, approach_direction, box_distance, corridor_distances
 from ..errors import PlannerError
 from ..model import RobotModel, kinematics
 from ..schema import UNITS, CorridorSamples, CorridorSegment, Drives, Metrics, PlanResult, Segment, Settings, Timing
@@ -24,19 +24,21 @@ from .simulate import Simulation
 __all__ = ["build_result", "overshoot", "to_csv", "csv_columns"]
 
 
-def overshoot(poses: np.ndarray, segments: Sequence[Segment] | None, end: np.ndarray, first_sample: int) -> float:
-    """How far [m] the robot passes the end point along its final approach direction
-    (from the centre of the segment before the end segment to the end point), over the
-    samples from ``first_sample`` on. 0 when it never passes it."""
-    if segments is None or len(segments) < 2:
-        d = end[:2] - poses[max(first_sample - 1, 0), :2]
-    else:
-        d = end[:2] - segments[-2].centre[:2]
-    norm = np.linalg.norm(d)
-    if norm < 1e-12:
+def overshoot(poses: np.ndarray, direction: np.ndarray | None, end: np.ndarray, first_sample: int) -> float:
+    """How far [m] the robot passes the end point along the approach ``direction`` (unit,
+    (2,); :func:`planner.corridor.geometry.approach_direction`), over the samples from
+    ``first_sample`` on. 0 when it never passes it (or there is no direction)."""
+    if direction is None:
         return 0.0
-    past = (poses[first_sample:, :2] - end[:2]) @ (d / norm)
+    past = (poses[first_sample:, :2] - end[:2]) @ direction
     return float(max(0.0, past.max(initial=0.0)))
+
+
+def _trajectory_direction(poses: np.ndarray, end: np.ndarray, first_sample: int) -> np.ndarray | None:
+    """For a tracked reference (no segments): from the pose at ``first_sample - 1`` to the end."""
+    d = end[:2] - poses[max(first_sample - 1, 0), :2]
+    n = float(np.hypot(d[0], d[1]))
+    return d / n if n > APPROACH_MIN_M else None
 
 
 def _check_finite(**arrays: np.ndarray) -> None:
@@ -57,22 +59,30 @@ def build_result(robot: RobotModel, name: str | None, st: Settings, seq: RangeSe
     poses, vel = X[:, :3], X[:, 3:]
     lengths = kinematics.leg_lengths(robot, poses)
     leg_vel = np.einsum("kij,kj->ki", kinematics.leg_jacobians(robot, poses), vel)
-    # per-sample ranges used by the criterion (sample 0: the start point)
+    # per-sample ranges used by the criterion (sample 0: the start point); every figure below
+    # is O(1) per sample: each sample knows its range and its segment
     idx = np.minimum(np.arange(K) - 1, seq.K - 1)
     lower = seq.lower[idx].copy()
     upper = seq.upper[idx].copy()
     lower[0] = upper[0] = seq.start
     ti_violation = box_distance(poses[:, :2], lower[:, :2], upper[:, :2])
+    ti_violation_rad = np.maximum(np.maximum(lower[:, 2] - poses[:, 2], 0.0), poses[:, 2] - upper[:, 2])
+    poly_violation = None
     if segments is not None:
-        union_violation = corridor_violation(poses, segments)
-        psi_lo = min(float(s.lower[2]) for s in segments)
-        psi_hi = max(float(s.upper[2]) for s in segments)
-        psi_violation = float(np.max(np.maximum(np.maximum(psi_lo - poses[:, 2], 0), poses[:, 2] - psi_hi)))
-        first = max((len(segments) - 2) * st.samples_per_segment, 0)
+        segment_of = seq.segment[np.maximum(idx, 0)]
+        segment_of[0] = 0
+        dist = corridor_distances(poses, segment_of, segments)
+        union_violation, psi_violation, poly_violation = dist.xy, dist.psi, dist.polygon
+        n = len(segments)
+        first = int(np.argmax(seq.segment >= n - 2)) + 1 if n >= 2 else 0  # the last cell's samples on
+        direction = approach_direction(segments)
     else:
-        union_violation = ti_violation
-        psi_violation = float(np.max(np.abs(poses[:, 2] - np.concatenate(([seq.start[2]], seq.upper[idx[1:], 2])))))
+        union_violation, psi_violation = ti_violation, ti_violation_rad
         first = max(seq.K - st.N, 0)
+        direction = _trajectory_direction(poses, seq.end, first)
+    # drive-force rates: the force steps at each sample (from zero before the start) over Ts;
+    # the last row is the zero of the plan's end, not a force applied
+    dU = np.diff(np.vstack((np.zeros((1, U.shape[1])), U[:-1])), axis=0) if K > 1 else np.zeros((0, U.shape[1]))
     stroke = float(np.max(np.maximum(np.maximum(robot.length_min - lengths, 0), lengths - robot.length_max)))
     metrics = {
         "duration_s": float(t[-1]),
@@ -81,11 +91,13 @@ def build_result(robot: RobotModel, name: str | None, st: Settings, seq: RangeSe
         "end_error_m": float(np.hypot(*(poses[-1, :2] - seq.end[:2]))),
         "end_error_rad": float(abs(poses[-1, 2] - seq.end[2])),
         "end_speed_m_s": float(np.hypot(vel[-1, 0], vel[-1, 1])),
-        "overshoot_m": overshoot(poses, segments, seq.end, first),
+        "overshoot_m": overshoot(poses, direction, seq.end, first),
         "max_corridor_violation_m": float(union_violation.max()),
-        "max_corridor_violation_rad": psi_violation,
+        "max_corridor_violation_rad": float(psi_violation.max()),
         "time_indexed_violation_m": float(ti_violation.max()),
+        "time_indexed_violation_rad": float(ti_violation_rad.max()),
         "max_drive_force_n": float(np.abs(U).max()),
+        "max_force_rate_n_s": float(np.abs(dU).max(initial=0.0) / st.Ts),
         "force_limit_n": float(robot.force_max.min()),
         "max_force_ratio": float((np.abs(U) / robot.force_max).max()),
         "max_drive_speed_m_s": float(np.abs(leg_vel).max()),
@@ -99,11 +111,12 @@ def build_result(robot: RobotModel, name: str | None, st: Settings, seq: RangeSe
     }
     if st.mode == "constrained":  # containment judged on the actual (nonlinear) trajectory
         union = metrics["max_corridor_violation_m"]
-        if segments is not None and any(s.polygon is not None for s in segments):
-            pv = float(polygon_violation(poses[:, :2], segments).max())
+        if poly_violation is not None:
+            pv = float(poly_violation.max())
             metrics["max_polygon_violation_m"] = pv
             union = max(union, pv)
-        metrics["contained"] = bool(metrics.get("infeasible_steps", 0) == 0 and union <= CONTAIN_TOL_M)
+        metrics["contained"] = bool(metrics.get("infeasible_steps", 0) == 0 and union <= CONTAIN_TOL_M
+                                    and metrics["max_corridor_violation_rad"] <= CONTAIN_TOL_RAD)
         metrics["within_limits"] = bool(metrics["max_force_ratio"] <= 1.0 + 1e-12 and metrics["max_speed_ratio"] <= 1.0
                                         and stroke <= CONTAIN_TOL_M)
     corridor = CorridorSamples.model_construct(

@@ -16,11 +16,14 @@ stage on its numpy implementation. Both give the same trajectory (tests: 1e-9 m)
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
 
+from ..constraints import ConstrainedController, ControllerStats, Memory
 from ..corridor import RangeSequence
 from ..errors import PlannerError
 from ..horizon import SOLVERS
@@ -30,10 +33,15 @@ from ..model.plant import rk4_sample
 from ..schema import Settings
 from . import kernels as loop_kernels
 
-__all__ = ["Controller", "PaperController", "Simulation", "simulate", "C_POSE"]
+__all__ = ["Controller", "PaperController", "Resume", "Simulation", "simulate", "C_POSE"]
 
 #: the output matrix of eq. (9): the pose is the first three states
 C_POSE = np.eye(3, 6)
+
+#: the constrained mode's compiled loop hands control back to Python at least every this many
+#: steps (~0.1 s), so that an exception raised asynchronously in the planning thread (a batch
+#: item's compute limit, Ctrl-C) is delivered during a long plan, not after it
+RETURN_EVERY = 2048
 
 
 class Controller(Protocol):
@@ -45,6 +53,20 @@ class Controller(Protocol):
 
 
 @dataclass
+class Resume:
+    """The loop at the start of step ``k``: the trajectory so far and the constrained
+    controller's memory and statistics (a run can start here instead of at step 0: the
+    ``fastest`` search re-plans only from the step a changed timing first shows)."""
+
+    k: int
+    X: np.ndarray  #: (>= k + 1, 6) states, rows 0..k used
+    U: np.ndarray  #: (>= k, n) forces, rows 0..k-1 used
+    ACC: np.ndarray  #: (>= k, 3) accelerations, rows 0..k-1 used
+    memory: Memory | None  #: the controller's memory (a copy), None for the paper's controller
+    stats: ControllerStats | None  #: and its statistics (a copy)
+
+
+@dataclass
 class Simulation:
     """The sampled trajectory of one run of the loop (SI units)."""
 
@@ -53,6 +75,7 @@ class Simulation:
     ACC: np.ndarray  #: (steps + 1, 3) accelerations under that sample's force
     steps: int  #: samples simulated
     settled: bool  #: whether the robot settled at the end point
+    resumes: dict[int, Resume] = field(default_factory=dict)  #: the states remembered (``simulate(keep=...)``)
 
 
 class PaperController:
@@ -113,11 +136,17 @@ def _simulate_compiled(robot: RobotModel, seq: RangeSequence, st: Settings) -> S
     return Simulation(X, U, ACC, int(steps), bool(settled))
 
 
-def simulate(robot: RobotModel, seq: RangeSequence, st: Settings, controller: Controller | None = None) -> Simulation:
-    """Run the receding-horizon loop with ``controller`` (default: the paper's)."""
+def simulate(robot: RobotModel, seq: RangeSequence, st: Settings, controller: Controller | None = None,
+             resume: Resume | None = None, keep: Sequence[int] = ()) -> Simulation:
+    """Run the receding-horizon loop with ``controller`` (default: the paper's). With the
+    compiled backend the constrained controller's steps run in the compiled loop
+    (:func:`planner.orchestrator.kernels.simulate_constrained`), and here only the steps that
+    loop hands back (those its stage-wise solve did not finish). ``resume``: start there
+    instead of at step 0 (the constrained controller's memory and statistics restored);
+    ``keep``: the steps whose state to remember (:attr:`Simulation.resumes`)."""
     reference = st.backend == "reference"
     if controller is None:
-        if not reference:
+        if not reference and resume is None and not keep:
             return _simulate_compiled(robot, seq, st)
         controller = PaperController(seq, st)
     Ts = st.Ts
@@ -125,12 +154,49 @@ def simulate(robot: RobotModel, seq: RangeSequence, st: Settings, controller: Co
     X = np.empty((max_steps + 1, 6))
     U = np.zeros((max_steps + 1, robot.n_legs))
     ACC = np.empty((max_steps + 1, 3))
-    x = np.concatenate((seq.start, np.zeros(3)))
-    X[0] = x
-    settled = False
     k = 0
+    X[0] = np.concatenate((seq.start, np.zeros(3)))
+    constrained = controller if isinstance(controller, ConstrainedController) else None
+    if resume is not None:
+        k = min(resume.k, max_steps)
+        X[:k + 1], U[:k], ACC[:k] = resume.X[:k + 1], resume.U[:k], resume.ACC[:k]
+        if constrained is not None and resume.memory is not None and resume.stats is not None:
+            constrained.restore(resume.memory, resume.stats)
+    marks = sorted({j for j in keep if k <= j < max_steps})
+    resumes: dict[int, Resume] = {}
+
+    def remember(j: int) -> None:
+        mem, stats = constrained.snapshot() if constrained is not None else (None, None)
+        resumes[j] = Resume(j, X, U, ACC, mem, stats)
+
+    settled = False
     packed = robot.packed
-    for k in range(max_steps):
+    loop = None
+    if not reference and constrained is not None:
+        loop = constrained.loop_arguments(max_steps)
+    settle = np.array([st.settle_position_m, st.settle_angle_rad, st.settle_speed_m_s, st.settle_rate_rad_s])
+    end = np.asarray(seq.end, dtype=float)
+    while k < max_steps:
+        while marks and marks[0] <= k:
+            if marks.pop(0) == k:
+                remember(k)
+        if loop is not None and constrained is not None:
+            args, record = loop
+            stop = min(marks[0] if marks else max_steps, k + RETURN_EVERY)
+            t0 = time.perf_counter()
+            status, k_end, settled = loop_kernels.simulate_constrained(
+                packed, k, stop, seq.K, Ts, st.plant_substeps, end, settle, X, U, ACC, *args)
+            constrained.absorb(record, k, k_end, time.perf_counter() - t0)
+            if status == loop_kernels.DIVERGED:
+                raise _diverged(k_end, Ts)
+            if status == loop_kernels.SINGULAR:
+                raise _singular(k_end * Ts, X[k_end])
+            k = k_end
+            if settled or k >= max_steps:
+                break
+            if status == loop_kernels.OK:  # stopped at a step to remember, or to hand back control
+                continue
+        x = X[k]  # one step here: the paper's or reference controller, or a step the compiled loop handed back
         if reference:
             A22, B2 = dynamics.factorised_blocks(robot, x)  # eq. (8)
             Ad, Bd = zoh_factorised(A22, B2, Ts)  # eq. (9)
@@ -149,9 +215,11 @@ def simulate(robot: RobotModel, seq: RangeSequence, st: Settings, controller: Co
         X[k + 1] = x
         if not np.all(np.isfinite(x)) or abs(x[0]) + abs(x[1]) > 1e3:
             raise _diverged(k, Ts)
-        if k + 1 >= seq.K and _settled(x, seq.end, st):
+        k += 1
+        if k >= seq.K and _settled(x, seq.end, st):
             settled = True
             break
-    steps = k + 1
+    steps = k
+    U[steps] = 0.0
     ACC[steps] = dynamics.acceleration(robot, X[steps, :3], X[steps, 3:], U[steps])
-    return Simulation(X[:steps + 1], U[:steps + 1], ACC[:steps + 1], steps, settled)
+    return Simulation(X[:steps + 1], U[:steps + 1], ACC[:steps + 1], steps, settled, resumes)

@@ -21,6 +21,9 @@ from .drawing import (
 from .errors import error_details, field_path, format_validation_error, planner_error
 from .layout import SQRT3_2, Bounds, Cell, Circle, Layout, Obstacle, Polygon, Rectangle, cell_count
 from .limits import (
+                     DEFAULT_FORCE_RISE_S,
+                     DEFAULT_LAYOUT_SPEED_M_S,
+                     DEFAULT_MODE,
                      DEFAULT_ROBOT,
                      DEFAULT_SAMPLES_PER_SEGMENT,
                      MAX_CELLS,
@@ -59,15 +62,15 @@ from .robot import (
 )
 
 __all__ = [
-    "PlanRequest", "Segment", "Reference", "Settings", "parse_request", "TIMING_FIELDS",
-    "Layout", "Bounds", "Cell", "Circle", "Obstacle", "Polygon", "Rectangle", "cell_count", "SQRT3_2",
-    "RobotDescription", "LegDescription", "BodyDescription", "PlatformDescription", "builtin_description",
-    "builtin_robot_names",
+    "PlanRequest", "Segment", "Reference", "Settings", "parse_request", "TIMING_FIELDS", "Layout", "Bounds",
+    "Cell", "Circle", "Obstacle", "Polygon", "Rectangle", "cell_count", "SQRT3_2", "RobotDescription",
+    "LegDescription", "BodyDescription", "PlatformDescription", "builtin_description", "builtin_robot_names",
     "PlanResult", "Metrics", "Timing", "Drives", "CorridorSamples", "CorridorSegment", "UNITS",
     "SegmentationResult", "SegmentationCell", "HalfPlanes", "RobotSummary",
     "CorridorRecord", "ImportOptions", "ImportReport", "ImportResult", "DrawingShape", "OpenChain", "DRAWING_UNITS",
     "PARTIAL_LAYOUT",
     "error_details", "field_path", "format_validation_error", "planner_error",
+    "DEFAULT_FORCE_RISE_S", "DEFAULT_LAYOUT_SPEED_M_S", "DEFAULT_MODE",
     "DEFAULT_ROBOT", "DEFAULT_SAMPLES_PER_SEGMENT", "MAX_CELLS", "MAX_HORIZON", "MAX_LEGS", "MAX_OBSTACLES",
     "MAX_POLYGON_POINTS", "MAX_SAMPLES_PER_SEGMENT", "MAX_SEGMENTS", "MAX_TOTAL_STEPS", "MIN_TS", "MODE_DEFAULTS",
 ]

@@ -9,7 +9,8 @@ from __future__ import annotations
 __all__ = [
     "MAX_HORIZON", "MAX_SAMPLES_PER_SEGMENT", "MAX_SEGMENTS", "MAX_TOTAL_STEPS", "MAX_CELLS",
     "MAX_OBSTACLES", "MAX_POLYGON_POINTS", "MAX_LEGS", "MIN_TS", "MODE_DEFAULTS",
-    "DEFAULT_SAMPLES_PER_SEGMENT", "DEFAULT_ROBOT",
+    "DEFAULT_SAMPLES_PER_SEGMENT", "DEFAULT_ROBOT", "DEFAULT_FORCE_RISE_S", "DEFAULT_LAYOUT_SPEED_M_S",
+    "DEFAULT_MODE",
 ]
 
 #: longest prediction horizon N [samples]
@@ -42,3 +43,14 @@ MODE_DEFAULTS: dict[str, dict[str, float]] = {"paper": {"N": 20, "k_r": 1.0, "k_
 DEFAULT_SAMPLES_PER_SEGMENT = 20
 #: the robot a request without ``robot`` plans for
 DEFAULT_ROBOT = "moving-slide"
+#: the constrained mode's default drive-force rate limit: each drive may go from zero to its
+#: force_max in this time [s] (settings.force_rate_n_s)
+DEFAULT_FORCE_RISE_S = 0.05
+#: the mode of a request that does not choose one: the constrained mode keeps the corridor,
+#: the drive limits and the end point; the paper's soft criterion is ``mode: "paper"``
+DEFAULT_MODE = "constrained"
+#: a layout's corridor without a timing setting is timed at this mean tool speed along its
+#: cells' centre path [m/s], so that the duration does not depend on how finely the free
+#: space is cut (with a fixed count per segment, 2 mm cells made a move 6x longer than 20 mm
+#: cells); constrained plans at it were contained for 2-20 mm square and triangle cells
+DEFAULT_LAYOUT_SPEED_M_S = 0.05

@@ -38,6 +38,9 @@ from ._types import Finite, Pair, Strict, Triple, Vec3, array_of, fail
 from .errors import planner_error
 from .layout import Layout
 from .limits import (
+    DEFAULT_FORCE_RISE_S,
+    DEFAULT_LAYOUT_SPEED_M_S,
+    DEFAULT_MODE,
     DEFAULT_ROBOT,
     DEFAULT_SAMPLES_PER_SEGMENT,
     MAX_HORIZON,
@@ -52,7 +55,7 @@ from .robot import RobotDescription, builtin_description, builtin_robot_names
 __all__ = ["PlanRequest", "Reference", "Segment", "Settings", "parse_request", "TIMING_FIELDS"]
 
 #: the settings that choose the timing of a corridor; at most one per request
-TIMING_FIELDS = ("samples_per_segment", "speed_m_s", "total_time_s", "fastest")
+TIMING_FIELDS = ("samples_per_segment", "segment_samples", "speed_m_s", "total_time_s", "fastest")
 _MODE_FIELDS = ("N", "k_r", "k_u", "samples_per_segment")
 #: the default of a setting the mode decides: replaced by a number in :meth:`Settings._resolve`
 #: (typed ``Any`` so that the field keeps its number type for the code that reads it)
@@ -107,8 +110,10 @@ class Segment(Strict):
 
     @property
     def is_point(self) -> bool:
-        """A range of zero size (a start or end point)."""
-        return bool(np.all(self.upper - self.lower <= 1e-12))
+        """A range of zero size (a start or end point). (On the three numbers as Python
+        floats: numpy's per-call cost made this a tenth of a small plan's fixed cost.)"""
+        lo, hi = self.lower, self.upper
+        return bool(hi[0] - lo[0] <= 1e-12 and hi[1] - lo[1] <= 1e-12 and hi[2] - lo[2] <= 1e-12)
 
 
 class Reference(Strict):
@@ -129,6 +134,10 @@ class Settings(Strict):
     samples_per_segment: int = Field(MODE_DECIDES, ge=1, le=MAX_SAMPLES_PER_SEGMENT,
                                      description="Samples each segment is held (count); default N if N is given, "
                                      f"else {DEFAULT_SAMPLES_PER_SEGMENT}")
+    segment_samples: Annotated[list[Annotated[int, Field(ge=1, le=MAX_SAMPLES_PER_SEGMENT)]],
+                               Field(min_length=2, max_length=MAX_SEGMENTS)] | None = Field(
+        None, description="Samples each segment is held, one count per segment (a corridor's own timing, e.g. the "
+        "one fastest found); instead of samples_per_segment, which it overrides")
     k_r: Finite = Field(MODE_DECIDES, gt=0, le=1e12, description="Range penalty: Q_ra = Q_rb = k_r I (1/m, 1/rad); "
                         f"default {MODE_DEFAULTS['paper']['k_r']:g} in paper mode, "
                         f"{MODE_DEFAULTS['constrained']['k_r']:g} in constrained mode")
@@ -142,7 +151,8 @@ class Settings(Strict):
     taper: StrictBool = Field(True, description="Spread the range out of the start point and narrow it onto the end "
                               "point")
     mode: Literal["paper", "constrained"] = Field(
-        "paper", description="'paper': the seed's soft range criterion; 'constrained': hard corridor and drive limits")
+        DEFAULT_MODE, description="'constrained' (default): the range criterion with hard corridor, drive limits and "
+        "no overshoot; 'paper': the seed's method, the paper's soft range criterion (nothing keeps the robot inside)")
     solver: Literal["riccati", "structured", "qr"] = Field(
         "riccati", description="How the paper mode's horizon problem is solved (same minimiser): 'riccati' "
         "(backward Riccati recursion, O(N)), 'structured' (banded KKT, O(N)) or 'qr' (the paper's Householder "
@@ -161,9 +171,14 @@ class Settings(Strict):
     require_settled: StrictBool = Field(True, description="Fail with code not_settled instead of returning an "
                                         "unsettled plan")
     speed_m_s: Finite | None = Field(None, gt=0, le=100, description="Target mean tool speed along the corridor "
-                                     "in m/s; sets samples_per_segment (exclusive with it, total_time_s, fastest)")
+                                     "in m/s; sets samples_per_segment (exclusive with it, total_time_s, fastest); a "
+                                     f"layout without a timing setting is timed at {DEFAULT_LAYOUT_SPEED_M_S:g} m/s")
     total_time_s: Finite | None = Field(None, gt=0, le=3600, description="Time in s the corridor's range sequence "
                                         "takes; sets samples_per_segment")
+    force_rate_n_s: Finite | PerDrive | Literal["off"] | None = Field(
+        None, description="Constrained mode: largest rate of change of each drive force, N/s: one number for every "
+        "drive or one per drive; null (default): each drive's force_max per "
+        f"{DEFAULT_FORCE_RISE_S:g} s; 'off': no limit")
     fastest: StrictBool = Field(False, description="Constrained mode: the shortest timing (samples_per_segment) whose "
                           "plan keeps the corridor and the drive force, stroke and speed limits")
 
@@ -181,11 +196,27 @@ class Settings(Strict):
             raise fail("must be a list with one positive number per drive")
         return v
 
+    @field_validator("force_rate_n_s", mode="before")
+    @classmethod
+    def _rate_shape(cls, v: Any) -> Any:
+        ok = (v is None or v == "off" or (isinstance(v, int | float) and not isinstance(v, bool))
+              or (isinstance(v, list) and v and all(isinstance(x, int | float) and not isinstance(x, bool) for x in v)))
+        if not ok:
+            raise fail("must be a number of N/s, a list with one per drive, 'off' or null")
+        return v
+
+    @field_validator("force_rate_n_s")
+    @classmethod
+    def _rate(cls, v: Any) -> Any:
+        if v is not None and not isinstance(v, str) and np.any(np.asarray(v) <= 0):
+            raise fail("must be > 0 (one number, or one per drive), 'off' or null")
+        return v
+
     @model_validator(mode="after")
     def _resolve(self) -> Settings:
         given = [k for k in TIMING_FIELDS if k in self.model_fields_set and getattr(self, k) not in (None, False)]
         if len(given) > 1:
-            raise fail(f"give only one of samples_per_segment, speed_m_s, total_time_s, fastest; got "
+            raise fail(f"give only one of samples_per_segment, segment_samples, speed_m_s, total_time_s, fastest; got "
                        f"{', '.join(given)}",
                        given[1])
         if self.fastest and self.mode != "constrained":
@@ -268,11 +299,27 @@ class PlanRequest(Strict):
         n_legs = self.robot_description.n_legs
         if st.q_u is not None and len(st.q_u) != n_legs:
             raise fail(f"must have one entry per drive ({n_legs}), got {len(st.q_u)}", "settings.q_u")
+        rate = st.force_rate_n_s
+        if isinstance(rate, np.ndarray) and len(rate) != n_legs:
+            raise fail(f"must be one number or one per drive ({n_legs}), got {len(rate)}", "settings.force_rate_n_s")
         if self.segments is not None:
+            if st.segment_samples is not None:
+                if len(st.segment_samples) != len(self.segments):
+                    raise fail(f"must have one count per segment ({len(self.segments)}), got "
+                               f"{len(st.segment_samples)}", "settings.segment_samples")
+                steps = sum(st.segment_samples)
+                if steps > MAX_TOTAL_STEPS:
+                    raise fail(f"{steps} samples in all exceeds the limit of {MAX_TOTAL_STEPS}",
+                               "settings.segment_samples", code="too_large")
             steps = len(self.segments) * st.samples_per_segment
-            if steps > MAX_TOTAL_STEPS:
+            if st.segment_samples is None and steps > MAX_TOTAL_STEPS:
                 raise fail(f"{len(self.segments)} segments x {st.samples_per_segment} samples = {steps} steps exceeds "
                            f"the limit of {MAX_TOTAL_STEPS}", "settings.samples_per_segment", code="too_large")
+        if self.layout is not None and not any(k in st.model_fields_set and getattr(st, k) not in (None, False)
+                                               for k in TIMING_FIELDS):
+            # a layout without a timing: a tool speed (limits.DEFAULT_LAYOUT_SPEED_M_S), kept out
+            # of model_fields_set like the mode's defaults
+            object.__setattr__(st, "speed_m_s", DEFAULT_LAYOUT_SPEED_M_S)
         if st.tail_steps > MAX_TOTAL_STEPS:
             raise fail(f"a settling tail of {st.tail_max_s:g} s at Ts = {st.Ts:g} s is {st.tail_steps} samples, more "
                        f"than the limit of {MAX_TOTAL_STEPS}; raise settings.Ts or lower settings.tail_max_s",

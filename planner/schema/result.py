@@ -56,12 +56,20 @@ class Metrics(_Out):
     end_error_m: float = Field(description="Final distance of (x, y) from the end point, m")
     end_error_rad: float = Field(description="Final angle error, rad")
     end_speed_m_s: float = Field(description="Final tool speed, m/s")
-    overshoot_m: float = Field(description="How far the robot passes the end point along the final approach, m")
+    overshoot_m: float = Field(description="How far the robot passes the end point, measured along the approach "
+                               "direction (from the last cell's centre to the end point, or from the cell before it "
+                               "where the end point is the last cell's centre), over the samples from the last cell "
+                               "on, m")
     max_corridor_violation_m: float = Field(description="Largest distance of (x, y) outside the union of the "
                                             "segments, m")
-    max_corridor_violation_rad: float = Field(description="Largest angle outside the corridor's psi range, rad")
+    max_corridor_violation_rad: float = Field(description="Largest angle outside the psi ranges of the segments the "
+                                              "sample's (x, y) lies in (of the nearest ones where it lies in none), "
+                                              "rad")
     time_indexed_violation_m: float = Field(description="Largest distance of (x, y) outside that sample's range, m")
+    time_indexed_violation_rad: float = Field(description="Largest angle outside that sample's psi range, rad")
     max_drive_force_n: float = Field(description="Largest drive force magnitude, N")
+    max_force_rate_n_s: float = Field(description="Largest change of a drive force from one sample to the next "
+                                      "(from zero before the start) divided by Ts, N/s")
     force_limit_n: float = Field(description="Smallest drive force limit of the robot, N")
     max_force_ratio: float = Field(description="Largest |force| / force limit (dimensionless)")
     max_drive_speed_m_s: float = Field(description="Largest leg sliding speed, m/s")
@@ -74,7 +82,8 @@ class Metrics(_Out):
     compute_ms: float = Field(description="Planner compute time of the whole plan() call, ms")
     # constrained mode
     contained: bool | None = Field(None, description="Constrained mode: no step needed slack and the actual "
-                                   "trajectory lies in the corridor to 1e-9 m")
+                                   "trajectory lies in the corridor: (x, y) in the union of the segments (and of the "
+                                   "exact cells) to 1e-9 m, psi in the psi ranges of the segments it is in to 1e-7 rad")
     within_limits: bool | None = Field(None, description="Constrained mode: drive forces, leg speeds and strokes "
                                        "within their limits on the actual trajectory")
     max_polygon_violation_m: float | None = Field(None, description="Constrained mode, corridors with exact cell "
@@ -88,8 +97,16 @@ class Metrics(_Out):
     model_mismatch_max_m: float | None = Field(None, description="Constrained mode: largest distance between "
                                                "the predicted and the actual next position, m")
     model_mismatch_max_rad: float | None = Field(None, description="Constrained mode: the same for the angle, rad")
-    qp_solver: str | None = Field(None, description="Constrained mode: the QP solver ('daqp')")
-    qp_iterations_median: float | None = Field(None, description="Constrained mode: median QP iterations per step")
+    qp_solver: str | None = Field(None, description="Constrained mode: the QP solver: 'stagewise' (the compiled "
+                                  "backend's dual active-set method on the stage-wise problem, DAQP where it does not "
+                                  "finish a step) or 'daqp' (the reference backend)")
+    qp_fallbacks: int | None = Field(None, description="Constrained mode, compiled backend: steps the stage-wise "
+                                     "solver handed to DAQP (count)")
+    qp_relaxed_steps: int | None = Field(None, description="Constrained mode, compiled backend: steps whose QP was "
+                                         "infeasible by less than 8e-7 (m, m/s, rad or N) and was solved with its rows "
+                                         "widened by that much, inside the 1e-6 m corridor margin (count)")
+    qp_iterations_median: float | None = Field(None, description="Constrained mode: median QP iterations per step "
+                                               "(active-set changes)")
     qp_iterations_max: int | None = Field(None, description="Constrained mode: most QP iterations in one step")
     qp_time_ms: float | None = Field(None, description="Constrained mode: time in the controller (assembly and "
                                      "solves), ms")
@@ -99,17 +116,21 @@ class Metrics(_Out):
 
 
 class Timing(_Out):
-    method: Literal["samples_per_segment", "speed_m_s", "total_time_s", "fastest"] = Field(
+    method: Literal["samples_per_segment", "segment_samples", "speed_m_s", "total_time_s", "fastest"] = Field(
         description="How the timing was chosen")
-    samples_per_segment: int = Field(description="Samples each segment is held (count)")
+    samples_per_segment: int = Field(description="Samples each segment is held (count); with per-segment counts the "
+                                     "largest")
+    segment_samples: list[int] | None = Field(None, description="Samples each segment is held, per segment (count); "
+                                              "null when they are all samples_per_segment")
     sequence_time_s: float | None = Field(description="Time the range sequence takes (all segments), s; null for "
                                           "a tracking request")
     moving_time_s: float | None = Field(description="Time between the start and the end point segments, s")
     path_length_m: float | None = Field(description="Length of the polyline through the segment centres, m")
-    evaluations: int | None = Field(None, description="fastest: full plans evaluated (count)")
+    evaluations: int | None = Field(None, description="fastest: candidate timings planned, whole or from a "
+                                    "remembered step on (count)")
     feasible: bool | None = Field(None, description="fastest: whether a feasible timing was found")
-    one_fewer_sample_infeasible: bool | None = Field(None, description="fastest: one sample fewer per segment "
-                                                     "was planned and is infeasible")
+    one_fewer_sample_infeasible: bool | None = Field(None, description="fastest: one sample fewer in any moving "
+                                                     "segment was planned and is infeasible")
 
 
 #: the unit of each output array

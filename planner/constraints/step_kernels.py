@@ -1,0 +1,96 @@
+"""One step of the constrained controller in one compiled call (numba): the compiled twin of
+:meth:`planner.constraints.controller.ConstrainedController.__call__` on the compiled
+assembly with the stage-wise solver (the rows, the one-step offset, the factorisation, the
+dual active-set solve and the refinement of the offset).
+
+Why one call: each step is a few dozen small kernels; called one by one from Python their
+call overhead (and the wrappers' dataclasses) cost as much as their arithmetic. When the
+solve does not succeed (infeasible, iteration limit, an equality that cannot be
+eliminated) the kernel says so and the controller does the step on the Python path (DAQP,
+then the slack problem), which is also the reference this kernel is tested against.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .dual_kernels import SOLVED, dual_solve
+from .kernels import KIND_RATE, assemble, finish, first_legs, offset, plant_step
+from .stagewise_kernels import stage_setup
+
+__all__ = ["NOT_ELIMINATED", "constrained_step"]
+
+#: status of a step whose equalities could not be eliminated (else ``stagewise_kernels``' codes)
+NOT_ELIMINATED = -3
+
+
+@njit(cache=True)
+def constrained_step(k, x, Ad, Bd, y_prev, u_prev, u0, warm, packed, Ts, substeps, umax, zmax, du, unit, N,
+                     refine_tol_m, refine_tol_rad, refine_max, tol, dep_tol, warm_tol, relax, max_iter, V, Lm, inputs):
+    """Step ``k`` at state ``x`` with the model ``Ad, Bd`` (eq. 9): the rows and criterion
+    (``kernels.assemble`` with ``inputs`` = its arguments from ``K`` on), the legs linearised at
+    ``y_prev`` (or at ``x``: empty), the force bounds ``|z| <= zmax`` (N m,) of the scaled
+    moves, the forces applied over the previous sample ``u_prev``
+    [N] (the rate rows), the warm start ``warm`` (the previous solution shifted: the rows
+    at a bound there start in the working set; empty: none), the offset under the guessed move ``u0`` [N], the
+    stage-wise problem factorised and solved, and the offset refined at the solution's first
+    move while the plant lands farther than ``refine_tol_m`` / ``refine_tol_rad`` from the
+    prediction (at most ``refine_max`` times; each re-solve warm-started from the solution
+    before it). A QP found infeasible is solved once more
+    with every row widened by ``relax`` (row units; ``relax * unit`` of force_max for the
+    force-rate rows): a plan that sat on a vertex of its rows
+    can leave the next step's QP infeasible by the prediction error of a re-linearised model,
+    a fraction of a nanometre; within ``relax`` that is accepted (``relaxed`` in the return).
+
+    Returns ``(status, Y, z, X, y_nom, iterations, refinements, worst, relaxed)``: 1 solved (else the
+    solver's code or :data:`NOT_ELIMINATED`), the solution ``(X, z)`` as solved (6N + N m,),
+    the moves clipped to the force bounds (N m,),
+    the predicted states (N, 6), the next step's nominal poses (N, 3), the active-set changes,
+    the re-solves and the largest row violation at the solution (row units)."""
+    m = Bd.shape[1]
+    W, tgt, col, val, lower, upper, kinds, n_hard, speed0, stroke0 = assemble(k, N, x, y_prev, u_prev, unit, *inputs)
+    r0, base, lmin, lmax = inputs[5], inputs[6], inputs[-2], inputs[-1]
+    x1 = plant_step(packed, x, u0, Ts, substeps)
+    d = offset(x1, x, u0, Ad, Bd)
+    first_legs(x1, r0, base, lmin, lmax, unit, speed0, stroke0, val, lower, upper)
+    ok, ecnt, eax, ceq, elim, Kp, Z, L, A, B, S, P, K, C, Bu = stage_setup(Ad, Bd, umax, du, W, col, val, lower, upper,
+                                                                          n_hard)
+    Y = np.empty(6 * N + N * m)
+    if not ok:
+        zc, Xr, y_nom = finish(Y[6 * N:], Y[:6 * N])
+        return NOT_ELIMINATED, Y, zc, Xr, y_nom, 0, 0, 0.0, False
+    iterations = 0
+    refinements = 0
+    relaxed = False
+    u1 = np.empty(m)
+    start = warm
+    while True:
+        status, it, n_act, worst = dual_solve(ecnt, eax, ceq, elim, Kp, Z, L, A, B, S, P, K, C, Bu, du, x, d, tgt, col,
+                                              val, lower, upper, zmax, n_hard, tol, dep_tol, warm_tol, max_iter,
+                                              start, V, Lm, Y)
+        iterations += it
+        if status != SOLVED and not relaxed:
+            relaxed = True
+            for i in range(n_hard):
+                if not elim[i]:  # the rate rows are in force_max, not in row units
+                    r_i = relax * unit if kinds[i] == KIND_RATE else relax
+                    lower[i] -= r_i
+                    upper[i] += r_i
+            continue
+        if status != SOLVED or refinements >= refine_max:
+            break
+        for lg in range(m):
+            u1[lg] = Y[6 * N + lg] * umax[lg]
+        x1 = plant_step(packed, x, u1, Ts, substeps)
+        e = offset(x1, x, u1, Ad, Bd)
+        if math.hypot(e[0] - d[0], e[1] - d[1]) <= refine_tol_m and abs(e[2] - d[2]) <= refine_tol_rad:
+            break
+        d = e
+        first_legs(x1, r0, base, lmin, lmax, unit, speed0, stroke0, val, lower, upper)
+        refinements += 1
+        start = Y.copy()  # the re-solve starts from this solution: the offset moved a little
+    zc, Xr, y_nom = finish(Y[6 * N:], Y[:6 * N])
+    return status, Y, zc, Xr, y_nom, iterations, refinements, worst, relaxed
