@@ -71,8 +71,7 @@ def corridors(n: int, mode: str) -> list[dict]:
             for key, sign in (("lower", -1), ("upper", 1)):
                 s[key][0] += dx + (sign * grow if free and k % 2 else 0.0)
                 s[key][1] += dy
-        if mode != "paper":
-            r["settings"] = {"mode": mode}
+        r["settings"] = {"mode": mode}  # named: the default mode is constrained since issue 17
         out.append(r)
     return out
 

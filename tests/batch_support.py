@@ -33,8 +33,7 @@ def variant(i: int, mode: str = "paper") -> dict[str, Any]:
     for s in r["segments"]:
         for k in ("lower", "upper"):
             s[k][0] += 0.001 * i
-    if mode != "paper":
-        r["settings"] = {"mode": mode}
+    r["settings"] = {"mode": mode}  # named: the default mode is constrained
     return r
 
 
