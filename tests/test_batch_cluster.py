@@ -134,7 +134,8 @@ def test_cli_on_a_local_cluster_with_a_worker_killed_mid_batch(local_cluster, tm
 
 def test_warm_up_plugin_relaxes_the_nannys_malloc_trim(local_cluster):
     """Dask's nanny starts workers with MALLOC_TRIM_THRESHOLD_=65536; the plugin raises glibc's
-    thresholds there (a constrained plan: 93 ms of CPU before, 80 ms after, as in a pool)."""
+    thresholds there (a ~80 ms constrained plan took 93 ms of CPU before, 80 ms after, as in a
+    pool; benchmarks/README.md)."""
     from app.batch import cluster as cl
 
     engine = cl.DaskEngine(local_cluster.scheduler_address)

@@ -13,7 +13,8 @@ and gives up with ``KilledWorker`` on a task that killed that many workers.
 as soon as 64 kB are free at its top, and with the variable set its thresholds no longer
 adapt. The planner allocates and frees arrays at every step, so the pages are returned and
 faulted in again all the time: a constrained Table I plan took 93 ms of CPU in a Dask worker
-against 80 ms in a pool worker (benchmarks/README.md). :class:`WarmUp` therefore sets, in
+against 80 ms in a pool worker before issue 17 (2-5 % more since the constrained loop is
+compiled; benchmarks/README.md). :class:`WarmUp` therefore sets, in
 each worker it warms and only where a lower trim threshold is set, glibc's own adaptive
 limits (trim 64 MiB, mmap 32 MiB: what a process without the variable reaches); memory above
 that is still returned. ``RANGEPLAN_DASK_MALLOC=keep`` leaves the workers' settings alone.
