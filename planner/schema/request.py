@@ -25,16 +25,19 @@ import numpy as np
 from pydantic import Discriminator, Field, StrictBool, Tag, ValidationError, field_validator, model_validator
 
 from ..errors import PlannerError
-from ._types import Finite, Pair, Strict, Triple, Vec3, array_of, fail
+from ._types import Coordinate, Finite, Penalty3, PointPair, Pose3, PoseTriple, Strict, array_of, fail
 from .errors import planner_error
 from .layout import Layout
 from .limits import (
     DEFAULT_ROBOT,
     DEFAULT_SAMPLES_PER_SEGMENT,
     MAX_HORIZON,
+    MAX_PENALTY,
+    MAX_PENALTY_RATIO,
     MAX_SAMPLES_PER_SEGMENT,
     MAX_SEGMENTS,
     MAX_TOTAL_STEPS,
+    MIN_SPEED,
     MIN_TS,
     MODE_DEFAULTS,
 )
@@ -51,31 +54,25 @@ MODE_DECIDES: Any = None
 
 
 #: a convex cell's vertices [[x, y], ...] in m
-CellVertices = Annotated[np.ndarray, array_of(list[Pair], min_length=3)]
+CellVertices = Annotated[np.ndarray, array_of(list[PointPair], min_length=3)]
 #: one pose per sample [[x, y, psi], ...]
-Poses = Annotated[np.ndarray, array_of(list[Triple], min_length=2, max_length=MAX_TOTAL_STEPS)]
-#: one positive number per drive
-PerDrive = Annotated[np.ndarray, array_of(list[Finite], min_length=1)]
+Poses = Annotated[np.ndarray, array_of(list[PoseTriple], min_length=2, max_length=MAX_TOTAL_STEPS)]
+#: one positive number per drive, at most MAX_PENALTY
+PerDrive = Annotated[np.ndarray, array_of(list[Annotated[float, Field(allow_inf_nan=False, le=MAX_PENALTY)]],
+                                          min_length=1)]
 
 
 class Segment(Strict):
     """One range of the corridor (paper Section V.B): ``r_a = lower``, ``r_b = upper``."""
 
-    lower: Vec3 = Field(description="Lower range limit r_a = [x_a, y_a, psi_a] (m, m, rad)")
-    upper: Vec3 = Field(description="Upper range limit r_b = [x_b, y_b, psi_b] (m, m, rad)")
-    q_ra: Vec3 | None = Field(None, description="Diagonal of Q_ra for this segment's samples (1/m, 1/m, 1/rad), "
+    lower: Pose3 = Field(description="Lower range limit r_a = [x_a, y_a, psi_a] (m, m, rad)")
+    upper: Pose3 = Field(description="Upper range limit r_b = [x_b, y_b, psi_b] (m, m, rad)")
+    q_ra: Penalty3 | None = Field(None, description="Diagonal of Q_ra for this segment's samples (1/m, 1/m, 1/rad), "
                               ">= 0")
-    q_rb: Vec3 | None = Field(None, description="Diagonal of Q_rb for this segment's samples (1/m, 1/m, 1/rad), "
+    q_rb: Penalty3 | None = Field(None, description="Diagonal of Q_rb for this segment's samples (1/m, 1/m, 1/rad), "
                               ">= 0")
     polygon: CellVertices | None = Field(None, description="Exact convex cell (e.g. a triangle) inside "
                                     "the box, vertices [[x, y], ...] in m; used by the constrained mode")
-
-    @field_validator("q_ra", "q_rb")
-    @classmethod
-    def _nonneg(cls, v: np.ndarray | None) -> np.ndarray | None:
-        if v is not None and np.any(v < 0):
-            raise fail("must be >= 0")
-        return v
 
     @model_validator(mode="after")
     def _box(self) -> Segment:
@@ -117,14 +114,16 @@ class Settings(Strict):
     samples_per_segment: int = Field(MODE_DECIDES, ge=1, le=MAX_SAMPLES_PER_SEGMENT,
                                      description="Samples each segment is held (count); default N if N is given, "
                                      f"else {DEFAULT_SAMPLES_PER_SEGMENT}")
-    k_r: Finite = Field(MODE_DECIDES, gt=0, le=1e12, description="Range penalty: Q_ra = Q_rb = k_r I (1/m, 1/rad); "
+    k_r: Finite = Field(MODE_DECIDES, gt=0, le=MAX_PENALTY,
+                        description="Range penalty: Q_ra = Q_rb = k_r I (1/m, 1/rad); "
                         f"default {MODE_DEFAULTS['paper']['k_r']:g} in paper mode, "
                         f"{MODE_DEFAULTS['constrained']['k_r']:g} in constrained mode")
-    k_u: Finite = Field(MODE_DECIDES, gt=0, le=1e12, description="Drive-force penalty: Q_u = k_u I (1/N); default "
+    k_u: Finite = Field(MODE_DECIDES, gt=0, le=MAX_PENALTY,
+                        description="Drive-force penalty: Q_u = k_u I (1/N); default "
                         f"{MODE_DEFAULTS['paper']['k_u']:g} in paper mode, "
                         f"{MODE_DEFAULTS['constrained']['k_u']:g} in constrained mode")
-    q_ra: Vec3 | None = Field(None, description="Diagonal of Q_ra (1/m, 1/m, 1/rad), >= 0; overrides k_r")
-    q_rb: Vec3 | None = Field(None, description="Diagonal of Q_rb (1/m, 1/m, 1/rad), >= 0; overrides k_r")
+    q_ra: Penalty3 | None = Field(None, description="Diagonal of Q_ra (1/m, 1/m, 1/rad), >= 0; overrides k_r")
+    q_rb: Penalty3 | None = Field(None, description="Diagonal of Q_rb (1/m, 1/m, 1/rad), >= 0; overrides k_r")
     q_u: PerDrive | None = Field(None, description="Diagonal of Q_u, one positive number per "
                                    "drive (1/N); overrides k_u")
     taper: StrictBool = Field(True, description="Spread the range out of the start point and narrow it onto the end "
@@ -148,7 +147,8 @@ class Settings(Strict):
     plant_substeps: int = Field(1, ge=1, le=50, description="RK4 steps of the nonlinear model per sample (count)")
     require_settled: StrictBool = Field(True, description="Fail with code not_settled instead of returning an "
                                         "unsettled plan")
-    speed_m_s: Finite | None = Field(None, gt=0, le=100, description="Target mean tool speed along the corridor "
+    speed_m_s: Finite | None = Field(None, ge=MIN_SPEED, le=100,
+                                     description="Target mean tool speed along the corridor "
                                      "in m/s; sets samples_per_segment (exclusive with it, total_time_s, fastest)")
     total_time_s: Finite | None = Field(None, gt=0, le=3600, description="Time in s the corridor's range sequence "
                                         "takes; sets samples_per_segment")
@@ -167,13 +167,6 @@ class Settings(Strict):
     def _positive(cls, v: np.ndarray | None) -> np.ndarray | None:
         if v is not None and np.any(v <= 0):
             raise fail("must be a list with one positive number per drive")
-        return v
-
-    @field_validator("q_ra", "q_rb")
-    @classmethod
-    def _nonneg(cls, v: np.ndarray | None) -> np.ndarray | None:
-        if v is not None and np.any(v < 0):
-            raise fail("must be >= 0")
         return v
 
     @model_validator(mode="after")
@@ -197,7 +190,28 @@ class Settings(Strict):
             filled["backend"] = "compiled" if self.solver == "riccati" else "reference"
         for key, value in filled.items():
             object.__setattr__(self, key, value)
+        if self.mode == "paper":
+            self._check_conditioning()
         return self
+
+    def _check_conditioning(self) -> None:
+        """Paper mode: the largest range penalty over the smallest force penalty must be at
+        most MAX_PENALTY_RATIO (beyond, the horizon problem is too ill-conditioned to solve)."""
+        given = [(float(np.max(q)), name) for name, q in (("q_ra", self.q_ra), ("q_rb", self.q_rb)) if q is not None]
+        top, name = max(given) if given else (self.k_r, "k_r")
+        message = self.conditioning_error(top)
+        if message:
+            raise fail(message, name)
+
+    def conditioning_error(self, range_penalty: float) -> str | None:
+        """Why ``range_penalty`` over these settings' smallest force penalty is too large a
+        ratio (paper mode), or None."""
+        low, low_name = (float(np.min(self.q_u)), "q_u") if self.q_u is not None else (self.k_u, "k_u")
+        if self.mode != "paper" or range_penalty <= MAX_PENALTY_RATIO * low:
+            return None
+        return (f"the range penalty {range_penalty:g} over the force penalty {low_name} = {low:g} is "
+                f"{range_penalty / low:.3g}, more than {MAX_PENALTY_RATIO:g}: the paper mode's horizon problem is "
+                f"then too ill-conditioned to solve; lower the range penalty or raise settings.{low_name}")
 
     @property
     def tail_steps(self) -> int:
@@ -230,9 +244,9 @@ class PlanRequest(Strict):
     layout: Layout | None = Field(None, description="Instead of segments: a workspace with obstacles to "
                                   "segment into a corridor (Section V.B)")
     settings: Settings = Field(default_factory=lambda: Settings.model_validate({}), description="Planner settings")
-    start: Vec3 | None = Field(None, description="Shorthand for layout.start: start pose [x, y, psi] in m, m, rad")
-    end: Vec3 | None = Field(None, description="Shorthand for layout.end: end pose [x, y, psi] in m, m, rad")
-    psi_range: Annotated[list[Finite], Field(min_length=2, max_length=2)] | None = Field(
+    start: Pose3 | None = Field(None, description="Shorthand for layout.start: start pose [x, y, psi] in m, m, rad")
+    end: Pose3 | None = Field(None, description="Shorthand for layout.end: end pose [x, y, psi] in m, m, rad")
+    psi_range: Annotated[list[Coordinate], Field(min_length=2, max_length=2)] | None = Field(
         None, description="Shorthand for layout.psi_range: allowed platform angle [min, max] in rad")
 
     @model_validator(mode="before")
@@ -264,6 +278,12 @@ class PlanRequest(Strict):
         if st.q_u is not None and len(st.q_u) != n_legs:
             raise fail(f"must have one entry per drive ({n_legs}), got {len(st.q_u)}", "settings.q_u")
         if self.segments is not None:
+            for i, seg in enumerate(self.segments):
+                for name in ("q_ra", "q_rb"):
+                    q = getattr(seg, name)
+                    message = None if q is None else st.conditioning_error(float(np.max(q)))
+                    if message:
+                        raise fail(message, f"segments[{i}].{name}")
             steps = len(self.segments) * st.samples_per_segment
             if steps > MAX_TOTAL_STEPS:
                 raise fail(f"{len(self.segments)} segments x {st.samples_per_segment} samples = {steps} steps exceeds "
