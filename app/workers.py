@@ -9,9 +9,24 @@ a plain dict (``kind``: ``"plan"`` or ``"segment"``); the worker runs the planne
 the result to JSON itself, stores plans in the SQLite store itself (WAL, multi-process safe)
 and sends back ready-to-send bytes, so the server process only moves bytes.
 
-The pool is used from threads (``run`` blocks); the API calls it through a thread pool.
-``mode="thread"`` runs jobs in the calling thread instead (no parallelism under the GIL, no
-way to stop a runaway job; kept to measure the difference, see benchmarks/bench_http.py).
+The pool is used from threads (``run`` blocks); the API and the editor call it through
+thread pools. ``mode="thread"`` runs jobs in the calling thread instead (no parallelism under
+the GIL, no way to stop a runaway job; kept to measure the difference, see
+benchmarks/bench_http.py, and for an editor run without a server).
+
+Bounds on each job (issue 15), the same for the API and the editor:
+
+* before a job is queued, the planner's work estimate (:func:`planner.estimate_work`) is
+  compared with the time limit: :class:`TooMuchWork` in microseconds instead of a worker
+  held until the limit;
+* the time limit itself (:class:`JobTimeout`; the worker is killed and replaced);
+* an address-space limit per worker process (``memory_mb``, ``RLIMIT_AS``): a job that needs
+  more fails with ``too_much_memory`` and the worker is replaced.
+
+Workers run at a lower CPU priority (``nice`` 5) than the server, so that health checks and
+storage requests are answered while every worker plans. A worker is *ready* once it has
+imported the planner and loaded (or compiled) the kernels by planning tiny corridors
+(:meth:`PlanPool.ready`; the server's ``/ready``).
 """
 
 from __future__ import annotations
@@ -46,6 +61,21 @@ class PoolBusy(Exception):
 
 class WorkerCrashed(Exception):
     """The worker process died while running the job."""
+
+
+class TooMuchWork(Exception):
+    """The job's estimated compute time exceeds the pool's time limit (not run)."""
+
+    def __init__(self, estimate, limit_s: float):
+        super().__init__(estimate.message(limit_s))
+        self.estimate, self.limit_s = estimate, limit_s
+
+
+#: default address-space limit of a worker process [MiB] (the interpreter with the planner
+#: loaded takes ~0.5 GiB of it; the largest plan within the request bounds peaked at 0.8 GiB)
+DEFAULT_MEMORY_MB = 2048
+#: CPU priority of the workers relative to the server process
+WORKER_NICE = 5
 
 
 # ---------------------------------------------------------------------------------------
@@ -155,15 +185,18 @@ def run_job(job: dict) -> tuple:
             result.plan_id = plan_id
             data = result.to_json()
             store = _store(job.get("store"))
-            if plan_id and store is not None:
-                store.save_plan_json(data.decode(), req.to_json_dict(), job.get("corridor_id"),
-                                     id=plan_id)
+            if plan_id and store is not None and store.save_plan_json(
+                    data.decode(), req.to_json_dict(), job.get("corridor_id"), id=plan_id) is None:
+                plan_id = result.plan_id = None  # too large to keep (storage quotas): sent, not stored
+                data = result.to_json()
             payload = to_csv(result).encode() if job.get("format") == "csv" else data
             return ("ok", payload, {"plan_id": plan_id})
         if job["kind"] == "segment":
             from planner import segment
 
             return ("ok", _dumps(segment(job["request"]).to_dict()), {})
+        if job["kind"] == "editor":
+            return ("ok", _editor_plan(job["request"]), {})
         if job["kind"] == "sleep":  # for tests of the time limit
             time.sleep(float(job["seconds"]))
             return ("ok", b"{}", {})
@@ -181,6 +214,30 @@ def run_job(job: dict) -> tuple:
         raise
 
 
+def _editor_plan(req) -> bytes:
+    """The editor's re-plan: the segmentation of a layout (kept when the plan then fails)
+    and the plan, as JSON ``{"segmentation", "result", "error"}`` (each may be null)."""
+    from planner import PlannerError, plan, segment
+
+    seg = None
+    try:
+        segments = None
+        if req.layout is not None:
+            seg = segment(req)
+            segments = seg.segments
+        result = plan(req, segments=segments).to_json_dict()
+        return _dumps({"segmentation": seg.to_dict() if seg else None, "result": result, "error": None})
+    except PlannerError as exc:
+        return _dumps({"segmentation": seg.to_dict() if seg else None, "result": None, "error": exc.to_dict()})
+
+
+def _memory_error(memory_mb: int | None) -> dict:
+    limit = f"the planning process's memory limit of {memory_mb} MiB" if memory_mb else "the memory available"
+    return {"code": "too_much_memory", "field": None,
+            "message": f"planning this request needed more than {limit} (RANGEPLAN_WORKER_MEMORY_MB) and was "
+                       "stopped; use fewer segments or samples per segment, or a larger settings.Ts"}
+
+
 def _degenerate(exc: Exception, job: dict) -> dict:
     custom = not isinstance(getattr(job.get("request"), "robot", None), str)
     return {"code": "singular", "field": "robot" if custom else None,
@@ -189,18 +246,34 @@ def _degenerate(exc: Exception, job: dict) -> dict:
                        "are positive, and the corridor avoids singular poses"}
 
 
-def _worker_main(conn) -> None:
+def _limit_memory(memory_mb: int | None) -> None:
+    if memory_mb:
+        import resource
+
+        limit = int(memory_mb) * 1024 * 1024
+        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+
+
+def _worker_main(conn, memory_mb: int | None = None) -> None:
+    try:
+        os.nice(WORKER_NICE)
+    except OSError:
+        pass
     # import the planner and load its compiled kernels before the first job, not during it
     import app.storage  # noqa: F401  (imported before the first job, not during it)
     import planner
+    status: tuple = ("ready", None)
     try:
-        planner.warm_up()  # ~0.3 s from numba's on-disk cache; the first plan paid it before
-    except Exception:
-        pass
+        planner.warm_up()  # ~0.3 s from numba's on-disk cache; compiles after an install
+    except Exception as exc:  # the worker cannot plan: say why (the pool reports it, /ready stays 503)
+        status = ("failed", f"{type(exc).__name__}: {exc}")
     try:
-        conn.send("ready")  # the job clock starts only after this
+        conn.send(status)  # the job clock starts only after this
     except (OSError, ValueError):
         return
+    if status[0] != "ready":
+        return
+    _limit_memory(memory_mb)  # after the warm-up: the limit bounds what a job may add
     while True:
         try:
             job = conn.recv()
@@ -208,15 +281,18 @@ def _worker_main(conn) -> None:
             return
         if job is None:
             return
+        out_of_memory = False
         try:
             out = run_job(job)
         except MemoryError:
-            out = ("crash", "the planner ran out of memory")
+            out, out_of_memory = ("error", _memory_error(memory_mb)), True
         except Exception as exc:  # a planner bug: report it, keep serving
             out = ("crash", f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=8)}")
         try:
             conn.send(out)
         except (OSError, ValueError):
+            return
+        if out_of_memory:  # the heap may be fragmented or half-built: start afresh
             return
 
 
@@ -227,26 +303,42 @@ STARTUP_TIMEOUT_S = 120.0
 
 
 class _Worker:
-    """A worker process started as ``python -m app.workers FD`` (a fresh interpreter that
-    never re-imports the server's ``__main__``), talking over a socket pair."""
+    """A worker process started as ``python -m app.workers FD [MEMORY_MB]`` (a fresh
+    interpreter that never re-imports the server's ``__main__``), talking over a socket
+    pair. A thread waits for its first message (ready, or failed with a reason)."""
 
-    def __init__(self):
+    def __init__(self, memory_mb: int | None = None):
         parent, child = socket.socketpair()
         try:
-            self.proc = subprocess.Popen([sys.executable, "-m", "app.workers", str(child.fileno())],
+            self.proc = subprocess.Popen([sys.executable, "-m", "app.workers", str(child.fileno()),
+                                          str(int(memory_mb or 0))],
                                          pass_fds=(child.fileno(),), stdin=subprocess.DEVNULL,
                                          close_fds=True)
         finally:
             child.close()
         self.conn = Connection(parent.detach())
+        self.started = threading.Event()  #: the worker reported (ready or failed)
         self.ready = False
+        self.failure: str | None = None
+        threading.Thread(target=self._wait_ready, name="rangeplan-worker-start", daemon=True).start()
+
+    def _wait_ready(self) -> None:
+        try:
+            if not self.conn.poll(STARTUP_TIMEOUT_S):
+                self.failure = f"did not load the planner within {STARTUP_TIMEOUT_S:g} s"
+            else:
+                status, reason = self.conn.recv()
+                self.ready, self.failure = status == "ready", reason
+        except (EOFError, OSError, ValueError, TypeError) as exc:
+            self.failure = f"exited while starting ({type(exc).__name__}; status {self.proc.poll()})"
+        finally:
+            self.started.set()
 
     def call(self, job: dict, timeout: float):
         try:
-            if not self.ready:  # interpreter start and imports do not count against the job
-                if not self.conn.poll(STARTUP_TIMEOUT_S) or self.conn.recv() != "ready":
-                    raise WorkerCrashed("worker did not start")
-                self.ready = True
+            # interpreter start and imports do not count against the job
+            if not self.started.wait(STARTUP_TIMEOUT_S + 1) or not self.ready:
+                raise WorkerCrashed(f"the planning process could not start: {self.failure or 'no answer'}")
             self.conn.send(job)
             if not self.conn.poll(timeout):
                 raise JobTimeout
@@ -281,17 +373,20 @@ class _Worker:
 
 class PlanPool:
     """``workers`` planning processes (``mode="process"``) or inline execution
-    (``mode="thread"``); ``timeout_s`` bounds each job's compute time; at most ``max_queue``
-    jobs wait for a worker (more: :class:`PoolBusy`)."""
+    (``mode="thread"``); ``timeout_s`` bounds each job's compute time (and, through the work
+    estimate, what is accepted); at most ``max_queue`` jobs wait for a worker (more:
+    :class:`PoolBusy`); ``memory_mb`` is each worker's address-space limit [MiB] (0: none)."""
 
     def __init__(self, workers: int | None = None, timeout_s: float = 30.0, max_queue: int = 64,
-                 mode: str = "process"):
+                 mode: str = "process", memory_mb: int | None = DEFAULT_MEMORY_MB):
         if mode not in ("process", "thread"):
             raise ValueError("mode must be 'process' or 'thread'")
         self.mode = mode
         self.n = max(1, int(workers or os.cpu_count() or 1))
         self.timeout_s = float(timeout_s)
         self.max_queue = int(max_queue)
+        self.memory_mb = int(memory_mb or 0)
+        self._thread_ready: bool | None = None  # thread mode: warm-up done (True) / failed (False)
         self._lock = threading.Lock()
         self._inflight = 0
         self._idle: queue.Queue = queue.Queue()
@@ -300,25 +395,60 @@ class PlanPool:
         self.replaced = 0
         if mode == "process":
             for _ in range(self.n):
-                w = _Worker()
+                w = _Worker(self.memory_mb)
                 self._workers.append(w)
                 self._idle.put(w)
         else:
             self._sem = threading.Semaphore(self.n)
+            threading.Thread(target=self._warm_up_inline, name="rangeplan-warm-up", daemon=True).start()
 
     @property
     def capacity(self) -> int:
         """Jobs accepted at once (running + waiting)."""
         return self.n + self.max_queue
 
+    def _warm_up_inline(self) -> None:
+        try:
+            import planner
+            planner.warm_up()
+            self._thread_ready = True
+        except Exception:
+            self._thread_ready = False
+
     def stats(self) -> dict:
         return {"mode": self.mode, "workers": self.n, "in_flight": self._inflight,
-                "timeout_s": self.timeout_s, "replaced_workers": self.replaced}
+                "timeout_s": self.timeout_s, "replaced_workers": self.replaced, "memory_mb": self.memory_mb}
+
+    def readiness(self) -> dict:
+        """``{"ready", "workers_ready", "workers", "failures"}``: ready when at least one
+        worker has loaded the planner's kernels and none is known to be unable to plan."""
+        if self.mode == "thread":
+            ok = bool(self._thread_ready)
+            return {"ready": ok and not self._closed, "workers_ready": self.n if ok else 0, "workers": self.n,
+                    "failures": ["the planner's warm-up failed"] if self._thread_ready is False else []}
+        with self._lock:
+            workers = list(self._workers)
+        ready = [w for w in workers if w.ready and w.alive()]
+        failures = sorted({w.failure for w in workers if w.failure})
+        return {"ready": bool(ready) and not failures and not self._closed, "workers_ready": len(ready),
+                "workers": self.n, "failures": failures}
+
+    def check_work(self, job: dict) -> None:
+        """Raise :class:`TooMuchWork` if a plan job's estimated compute time exceeds the time
+        limit (the estimate takes microseconds)."""
+        if job.get("kind") not in ("plan", "editor") or job.get("request") is None:
+            return
+        from planner import estimate_work
+
+        est = estimate_work(job["request"])
+        if est.seconds > self.timeout_s:
+            raise TooMuchWork(est, self.timeout_s)
 
     def run(self, job: dict):
         """Run a job (blocking); returns what :func:`run_job` returns (or ``("crash", text)``
         for an unexpected exception in the planner), or raises :class:`JobTimeout`,
-        :class:`PoolBusy` or :class:`WorkerCrashed` (the process died)."""
+        :class:`PoolBusy`, :class:`TooMuchWork` or :class:`WorkerCrashed` (the process died)."""
+        self.check_work(job)
         with self._lock:
             if self._closed:
                 raise PoolBusy("the server is shutting down")
@@ -331,6 +461,8 @@ class PlanPool:
                     t0 = time.perf_counter()
                     try:
                         out = run_job(job)
+                    except MemoryError:
+                        out = ("error", _memory_error(None))
                     except Exception as exc:
                         out = ("crash", f"{type(exc).__name__}: {exc}")
                     if time.perf_counter() - t0 > self.timeout_s:
@@ -342,7 +474,12 @@ class PlanPool:
                 if not w.alive():
                     w.kill()
                     replacement = w = self._replace(w)
-                return w.call(job, self.timeout_s)  # ("ok", ...), ("error", ...) or ("crash", text)
+                out = w.call(job, self.timeout_s)  # ("ok", ...), ("error", ...) or ("crash", text)
+                if out[0] == "error" and out[1].get("code") == "too_much_memory":
+                    w.proc.wait(5)  # it exits after a memory error: replace it now
+                    w.kill()
+                    replacement = self._replace(w)
+                return out
             except (JobTimeout, WorkerCrashed, OSError) as exc:
                 w.kill()
                 replacement = self._replace(w)
@@ -356,7 +493,7 @@ class PlanPool:
                 self._inflight -= 1
 
     def _replace(self, old: _Worker) -> _Worker:
-        new = _Worker()
+        new = _Worker(self.memory_mb)
         with self._lock:
             self.replaced += 1
             self._workers = [new if w is old else w for w in self._workers]
@@ -371,4 +508,4 @@ class PlanPool:
 
 
 if __name__ == "__main__":
-    _worker_main(Connection(int(sys.argv[1])))
+    _worker_main(Connection(int(sys.argv[1])), int(sys.argv[2]) if len(sys.argv) > 2 else None)
