@@ -23,10 +23,10 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from planner.errors import PlannerError  # noqa: E402
-from planner.plan import plan, warm_up  # noqa: E402
-from planner.request import MODE_DEFAULTS  # noqa: E402
-from planner.robot import builtin_description  # noqa: E402
+from planner.errors import PlannerError
+from planner.plan import plan, warm_up
+from planner.request import MODE_DEFAULTS
+from planner.robot import builtin_description
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "static" / "examples"
 TABLE1 = json.loads((EXAMPLES / "table1.json").read_text())

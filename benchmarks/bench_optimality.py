@@ -43,15 +43,15 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from planner.constrained import PoseSets  # noqa: E402
-from planner.plan import plan, rk4_sample  # noqa: E402
-from planner.ranges import range_sequence  # noqa: E402
-from planner.request import MODE_DEFAULTS, parse_request  # noqa: E402
-from planner.robot import load_robot  # noqa: E402
-from planner.trajectory import corridor_violation  # noqa: E402
+from planner.constrained import PoseSets
+from planner.plan import plan, rk4_sample
+from planner.ranges import range_sequence
+from planner.request import MODE_DEFAULTS, parse_request
+from planner.robot import load_robot
+from planner.trajectory import corridor_violation
 
 TABLE1 = Path(__file__).resolve().parents[1] / "static" / "examples" / "table1.json"
 #: the paper mode's penalties and horizon, run in constrained mode for comparison with the
@@ -189,7 +189,8 @@ def solve_optimum(req: dict, K: int, robot, verbose=False) -> dict:
     opti.set_initial(X, np.hstack((cen, vel)).T)
     opti.set_initial(U, 0.0)
     opti.solver("ipopt", {"print_time": False, "ipopt.print_level": 5 if verbose else 0, "ipopt.sb": "yes",
-                          "ipopt.tol": 1e-8, "ipopt.constr_viol_tol": 1e-10, "ipopt.max_iter": 3000, "ipopt.acceptable_iter": 0,
+                          "ipopt.tol": 1e-8, "ipopt.constr_viol_tol": 1e-10, "ipopt.max_iter": 3000,
+                          "ipopt.acceptable_iter": 0,
                           "ipopt.linear_solver": "mumps"})
     t0 = time.perf_counter()
     sol = opti.solve()
@@ -272,7 +273,8 @@ def main(argv=None) -> int:
     print(hdr)
     print("-" * len(hdr))
     for r in rows:
-        print(f"{r[0]:22s} {r[1] * 1e3:11.1f} {r[2]:13.2f} {r[3]:11.1e} {r[4]:10.1e} {r[5]:11.1e} {r[6]:7.3f} {r[7]:10.2f}")
+        print(f"{r[0]:22s} {r[1] * 1e3:11.1f} {r[2]:13.2f} {r[3]:11.1e} {r[4]:10.1e} {r[5]:11.1e} {r[6]:7.3f} "
+              f"{r[7]:10.2f}")
     print()
     for r in rows[1:3]:
         print(f"{r[0]}: energy / IPOPT's {r[2] / rows[3][2]:.3f} (goal <= 1.2); "

@@ -30,11 +30,11 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from planner import constrained as C  # noqa: E402
-from planner.plan import plan  # noqa: E402
+from planner import constrained as C
+from planner.plan import plan
 
 ROOT = Path(__file__).resolve().parents[1]
 TABLE1 = ROOT / "static" / "examples" / "table1.json"
@@ -187,7 +187,8 @@ def main(argv=None) -> int:
     probs = probs[::args.every]
     mt = res["metrics"]
     print(f"Table I, constrained, samples_per_segment={res['settings']['samples_per_segment']}: "
-          f"{len(probs)} QPs ({probs[0]['nz']} variables, {len(probs[0]['bu'])}-{max(len(p['bu']) for p in probs)} rows)")
+          f"{len(probs)} QPs ({probs[0]['nz']} variables, "
+          f"{len(probs[0]['bu'])}-{max(len(p['bu']) for p in probs)} rows)")
     print(f"one-step plant vs prediction mismatch: {mt['model_mismatch_max_m']:.2e} m, "
           f"{mt['model_mismatch_max_rad']:.2e} rad; actual corridor violation {mt['max_corridor_violation_m']:.1e} m")
     print("Rows below: each candidate on the whole QP in z (every hard row, equalities as equalities).")

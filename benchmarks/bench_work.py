@@ -106,7 +106,8 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="leave out the three slowest requests")
     args = ap.parse_args()
     plan(TABLE1)  # load the kernels
-    print("| request | steps (est.) | estimate [s] | measured [s] | measured / estimate | outcome | estimate took [us] |")
+    print("| request | steps (est.) | estimate [s] | measured [s] | measured / estimate | outcome "
+          "| estimate took [us] |")
     print("|---|---:|---:|---:|---:|---|---:|")
     ratios = []
     for name, req in suite(args.quick):

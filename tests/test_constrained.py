@@ -337,7 +337,7 @@ def test_compiled_assembly_equals_numpy_assembly(case, monkeypatch):
                 assert _close(qc[key], qn[key]), (k, key)
             assert _close(qc["f"], qn["f"], 1e-9), k  # a difference of nearly equal terms
             assert np.array_equal(qc["kinds"], qn["kinds"]) and qc["n_hard"] == qn["n_hard"]
-            checked.append(("hp" if np.any(np.count_nonzero(qn["Sel"], axis=1) == 2) else "box"))
+            checked.append("hp" if np.any(np.count_nonzero(qn["Sel"], axis=1) == 2) else "box")
         return orig(self, k, x, Ad, Bd)
 
     monkeypatch.setattr(C.ConstrainedController, "__call__", spy)
