@@ -76,6 +76,7 @@ from __future__ import annotations
 
 import math
 import time
+from typing import Any
 
 import daqp
 import numpy as np
@@ -496,6 +497,7 @@ class ConstrainedController:
 
     def _shifted_moves(self) -> np.ndarray:
         """The previous solution's moves per sample (scaled), shifted by one sample (N, m)."""
+        assert self._z_prev is not None
         U = self._z_prev.reshape(-1, self.m)[self._block_of]
         return np.vstack((U[1:], U[-1:]))
 
@@ -543,7 +545,7 @@ class ConstrainedController:
             keep = np.zeros(nh, bool)
             ck.screen(qp["col"], qp["val"], qp["b0l"], qp["b0u"], qp["kinds"], nh, X, self._screen, keep)
             qp["keep"] = keep
-        kw = dict(DAQP_SETTINGS)
+        kw: dict[str, Any] = dict(DAQP_SETTINGS)
         iters = 0
         while True:
             A, bu, bl, sense = ck.solver_problem(keep, qp["col"], qp["val"], qp["Gx"], self._ncol, qp["bl"],
@@ -586,7 +588,7 @@ class ConstrainedController:
                              SCREEN_FORCE, keep, keepf)
             qp["rkeep"], qp["rkeepf"] = keep, keepf
             z, X = np.empty(N * m), np.empty(6 * N)
-        kw = dict(DAQP_SETTINGS)
+        kw: dict[str, Any] = dict(DAQP_SETTINGS)
         iters = 0
         while True:
             A, bu, bl, sense = ck.reduce_problem(keep, keepf, qp["col"], qp["val"], G, off, L, Z, ecnt, qp["rzf"],
@@ -615,7 +617,7 @@ class ConstrainedController:
         bl = np.concatenate((-np.ones(nz), qp["bl"][:nh]))
         sense = np.zeros(len(bu), dtype=np.int32)
         sense[bu - bl <= 0] = 5
-        kw = dict(DAQP_SETTINGS)
+        kw: dict[str, Any] = dict(DAQP_SETTINGS)
         if z_start is not None:
             kw["primal_start"] = z_start
         elif self._z_prev is not None:
