@@ -57,7 +57,15 @@ from app.storage import (
     TooLarge,
     default_data_dir,
 )
-from app.workers import DEFAULT_MEMORY_MB, JobTimeout, PlanPool, PoolBusy, TooMuchWork, WorkerCrashed
+from app.workers import (
+    DEFAULT_MEMORY_MB,
+    JobTimeout,
+    PlanPool,
+    PoolBusy,
+    TooMuchWork,
+    WorkerCrashed,
+    describe_failure,
+)
 from planner.errors import PlannerError
 from planner.orchestrator import to_csv
 from planner.schema import (
@@ -245,17 +253,10 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
         loop = asyncio.get_running_loop()
         try:
             out: Any = await loop.run_in_executor(request.app.state.threads, pool.run, job)
-        except JobTimeout:
-            return error_response(422, "timeout", f"planning took longer than the compute limit of "
-                                  f"{pool.timeout_s:g} s and was stopped; use fewer segments or samples, "
-                                  "a shorter settings.tail_max_s, or a larger settings.Ts")
-        except TooMuchWork as exc:
-            return error_response(422, "too_much_work", str(exc), exc.estimate.field)
-        except PoolBusy as exc:
-            return error_response(503, "busy", f"too many plans in progress ({exc}); retry shortly",
-                                  headers={"Retry-After": "1"})
-        except WorkerCrashed as exc:
-            return error_response(500, "internal_error", f"the planning process died: {exc}")
+        except (JobTimeout, TooMuchWork, PoolBusy, WorkerCrashed) as exc:
+            status, e = describe_failure(exc, pool)
+            return error_response(status, e["code"], e["message"], e["field"],
+                                  headers={"Retry-After": "1"} if status == 503 else None)
         if out[0] == "error":
             e = out[1]
             return error_response(422, e["code"], e["message"], e.get("field"))

@@ -69,7 +69,8 @@ def cmd_plan(args) -> int:
 def cmd_serve(args) -> int:
     from app.server import serve
 
-    return serve(host=args.host, port=args.port, editor_port=args.editor_port, editor=not args.no_editor)
+    return serve(host=args.host, port=args.port, editor_port=args.editor_port, editor=not args.no_editor,
+                 allow_unauthenticated=args.allow_unauthenticated)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -89,6 +90,8 @@ def build_parser() -> argparse.ArgumentParser:
     ps.add_argument("--editor-port", type=int, default=int(os.environ.get("RANGEPLAN_EDITOR_PORT", "8080")),
                     help="editor (viser) port (env RANGEPLAN_EDITOR_PORT, default 8080)")
     ps.add_argument("--no-editor", action="store_true", help="serve the API only")
+    ps.add_argument("--allow-unauthenticated", action="store_true",
+                    help="serve on a non-loopback address without a token (RANGEPLAN_API_TOKEN); refused otherwise")
     ps.set_defaults(func=cmd_serve)
     return p
 

@@ -504,7 +504,7 @@ def _same_json_values(a, b) -> bool:
 
 
 def test_result_encoding_has_the_stdlib_numbers():
-    from app.workers import _dumps
+    from app.jobs import _dumps
     rng = np.random.default_rng(7)
     rows = (rng.normal(size=(50, 3)) * 10.0 ** rng.integers(-300, 300, size=(50, 3))).tolist()
     result = {"name": "coin\u00e7on \u2013 \u00b5m", "plan_id": None, "steps": 3, "settled": True,
@@ -527,7 +527,7 @@ def test_result_encoding_has_the_stdlib_numbers():
     ("result.drives.force[0][2]", lambda r: r["drives"]["force"][0].__setitem__(2, float("nan"))),
 ])
 def test_non_finite_result_is_diverged_naming_the_number(where, put):
-    from app.workers import _dumps
+    from app.jobs import _dumps
     from planner.errors import PlannerError
     result = {"time": [0.01 * k for k in range(20)], "pose": [[0.1, 0.2, 0.0]] * 20,
               "metrics": {"energy": 1.0, "steps": 19}, "pair": (1.0, 2.0),

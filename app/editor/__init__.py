@@ -10,10 +10,13 @@ editor's state is a plan request in the one JSON shape. The parts:
 - :mod:`._gui`: the control panel and the playback
 - :mod:`._files`: store, request JSON and trajectory CSV
 - :mod:`._geometry`: numpy-only geometry of what is drawn
+- :mod:`._gate`: the access rules (:mod:`app.security`) on the editor's port
 
 Entry point: :func:`start_editor` (used by ``app.server.serve``).
 """
 
 from ._editor import Editor, start_editor
+from ._gate import start_guarded
+from ._planning import use_pool
 
-__all__ = ["Editor", "start_editor"]
+__all__ = ["Editor", "start_editor", "start_guarded", "use_pool"]
