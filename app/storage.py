@@ -331,10 +331,11 @@ class Store:
         size = len(text.encode())
         ts = now_iso()
         with self._write() as con:
-            old = con.execute("SELECT size FROM corridors WHERE id = ?", (id,)).fetchone()
+            old = con.execute("SELECT size, name FROM corridors WHERE id = ?", (id,)).fetchone()
             if old is None:
                 return None
-            self._check_name(con, name, id)
+            if name != old[1]:  # a name held twice from before the rule may stay as it is
+                self._check_name(con, name, id)
             self._check_room(con, size, freed=old[0])
             con.execute("UPDATE corridors SET request = ?, name = coalesce(?, name), updated = ?, size = ? "
                         "WHERE id = ?", (text, name, ts, size, id))

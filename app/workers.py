@@ -60,6 +60,11 @@ class WorkerCrashed(Exception):
     """The worker process died while running the job."""
 
 
+class WorkerOutOfMemory(WorkerCrashed):
+    """The worker process was ended by a failed allocation (an abort, as Rust code such as
+    the JSON encoder does, or the kernel's OOM killer) while it had a memory limit."""
+
+
 class TooMuchWork(Exception):
     """The job's estimated compute time exceeds the pool's time limit (not run)."""
 
@@ -73,6 +78,8 @@ def describe_failure(exc: Exception, pool: PlanPool) -> tuple[int, dict]:
     end (the API's and the editor's one wording)."""
     if isinstance(exc, TooMuchWork):
         return 422, {"code": "too_much_work", "message": str(exc), "field": exc.estimate.field}
+    if isinstance(exc, WorkerOutOfMemory):
+        return 422, {"code": "too_much_memory", "message": str(exc), "field": None}
     if isinstance(exc, JobTimeout):
         return 422, {"code": "timeout", "field": None,
                      "message": f"planning took longer than the compute limit of {pool.timeout_s:g} s and was "
@@ -217,6 +224,18 @@ class _Worker:
         self.conn.close()
 
 
+#: exit statuses of a worker ended by a failed allocation: SIGABRT (Rust's allocation error
+#: handler, e.g. orjson growing its buffer) and SIGKILL (the kernel's OOM killer)
+_ALLOCATION_FAILURE = (-6, -9)
+
+
+def _exit_status(w: _Worker) -> int | None:
+    try:
+        return w.proc.wait(2)
+    except subprocess.TimeoutExpired:
+        return None
+
+
 class PlanPool:
     """``workers`` planning processes (``mode="process"``) or inline execution
     (``mode="thread"``); ``timeout_s`` bounds each job's compute time (and, through the work
@@ -340,8 +359,11 @@ class PlanPool:
                     replacement = self._replace(w)
                 return out
             except (JobTimeout, WorkerCrashed, OSError) as exc:
+                status = _exit_status(w) if not isinstance(exc, JobTimeout) else None
                 w.kill()
                 replacement = self._replace(w)
+                if self.memory_mb and status in _ALLOCATION_FAILURE:
+                    raise WorkerOutOfMemory(memory_error(self.memory_mb)["message"]) from None
                 if isinstance(exc, OSError):
                     raise WorkerCrashed(str(exc)) from None
                 raise
