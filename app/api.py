@@ -47,6 +47,7 @@ from app.errors import CODES_BY_STATUS, error_response, errors_doc, validation_r
 from app.middleware import BodySizeLimit
 from app.security import AccessPolicy, install_access_control
 from app.storage import (
+    CURSOR_PATTERN,
     DEFAULT_PAGE_SIZE,
     MAX_PAGE_SIZE,
     BadCursor,
@@ -80,6 +81,7 @@ from planner.schema import (
 )
 
 VERSION = "0.1.0"
+#: the landing page (``RANGEPLAN_STATIC_DIR`` overrides: an installed package has no ``static/``)
 STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
 DEFAULT_MAX_BODY = 2 * 1024 * 1024
 DEFAULT_TIMEOUT_S = 30.0
@@ -227,9 +229,15 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
             return error_response(422, "invalid_input", "body is not valid JSON (it must be UTF-8 text)")
         code = CODES_BY_STATUS.get(exc.status_code, "http_error")
         msg = exc.detail if isinstance(exc.detail, str) else json.dumps(exc.detail)
+        headers = getattr(exc, "headers", None)
+        if exc.status_code == 405:  # every method of the path, not only those of the first route that matched it
+            allowed = sorted({m for r in request.app.routes if getattr(r, "methods", None)
+                              and r.path_regex.match(request.url.path) for m in r.methods})
+            headers = {**(headers or {}), "Allow": ", ".join(allowed)}
+            msg = f"{request.method} is not allowed on {request.url.path}; allowed: {', '.join(allowed)}"
         if exc.status_code == 404 and msg == "Not Found":
             msg = f"no such resource: {request.url.path}"
-        return error_response(exc.status_code, code, msg, headers=getattr(exc, "headers", None))
+        return error_response(exc.status_code, code, msg, headers=headers)
 
     @app.exception_handler(QuotaError)
     async def _on_quota(request: Request, exc: QuotaError):
@@ -377,7 +385,8 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
                         **errors_doc(422)})
     def list_corridors(request: Request,
                        limit: int = Query(DEFAULT_PAGE_SIZE, ge=1, le=MAX_PAGE_SIZE, description="Corridors per page"),
-                       cursor: str | None = Query(None, max_length=64, description="next_cursor of the previous page")):
+                       cursor: str | None = Query(None, pattern=CURSOR_PATTERN,
+                                                  description="next_cursor of the previous page")):
         """Saved corridors a page at a time, oldest first, as summaries."""
         try:
             items, nxt = request.app.state.store.corridor_page(limit, cursor)
@@ -426,9 +435,22 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
 
     # -- documentation (offline) and landing page -------------------------------------------
     install_docs(app)
-    if STATIC_DIR.is_dir():
+    # the landing page's files as routes of their own and the examples under /examples (no
+    # catch-all mount at "/": it answered every unknown method and path, preflights included, with 405)
+    static_dir = Path(os.environ.get("RANGEPLAN_STATIC_DIR") or STATIC_DIR)
+    if (static_dir / "index.html").is_file():
+        from fastapi.responses import FileResponse
         from fastapi.staticfiles import StaticFiles
-        app.mount("/", StaticFiles(directory=STATIC_DIR, html=True), name="static")
+
+        def serve_file(path: Path):
+            return lambda: FileResponse(path)
+
+        for f in sorted(static_dir.iterdir()):
+            if f.is_file():
+                app.add_api_route("/" if f.name == "index.html" else f"/{f.name}", serve_file(f), methods=["GET"],
+                                  include_in_schema=False)
+        if (static_dir / "examples").is_dir():
+            app.mount("/examples", StaticFiles(directory=static_dir / "examples"), name="examples")
     else:
         @app.get("/", include_in_schema=False)
         def root():

@@ -110,10 +110,9 @@ def test_memory_cap_stops_a_plan_with_a_clear_error_and_the_worker_is_replaced()
     """A worker limited to 700 MiB of address space (~0.5 GiB is the interpreter with the
     planner) runs the largest corridor the schema accepts (200 000 steps; ~0.8 GiB): it
     answers too_much_memory, the worker is replaced, the next plan succeeds."""
-    from tests.test_api import long_corridor
-
     from app.workers import WorkerOutOfMemory, describe_failure
     from planner import PlanRequest
+    from tests.test_api import long_corridor
 
     pool = PlanPool(workers=1, timeout_s=120, memory_mb=700)
     try:

@@ -22,10 +22,19 @@ import math
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import Discriminator, Field, StrictBool, Tag, ValidationError, field_validator, model_validator
+from pydantic import (
+    ConfigDict,
+    Discriminator,
+    Field,
+    StrictBool,
+    Tag,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from ..errors import PlannerError
-from ._types import Coordinate, Finite, Penalty3, PointPair, Pose3, PoseTriple, Strict, array_of, fail
+from ._types import Coordinate, Count, Finite, Penalty3, PointPair, Pose3, PoseTriple, Strict, array_of, fail
 from .errors import planner_error
 from .layout import Layout
 from .limits import (
@@ -43,7 +52,7 @@ from .limits import (
 )
 from .robot import RobotDescription, builtin_description, builtin_robot_names
 
-__all__ = ["PlanRequest", "Reference", "Segment", "Settings", "parse_request", "TIMING_FIELDS"]
+__all__ = ["PlanRequest", "Reference", "Segment", "Settings", "parse_request", "TIMING_FIELDS", "EXAMPLE_REQUEST"]
 
 #: the settings that choose the timing of a corridor; at most one per request
 TIMING_FIELDS = ("samples_per_segment", "speed_m_s", "total_time_s", "fastest")
@@ -58,7 +67,8 @@ CellVertices = Annotated[np.ndarray, array_of(list[PointPair], min_length=3)]
 #: one pose per sample [[x, y, psi], ...]
 Poses = Annotated[np.ndarray, array_of(list[PoseTriple], min_length=2, max_length=MAX_TOTAL_STEPS)]
 #: one positive number per drive, at most MAX_PENALTY
-PerDrive = Annotated[np.ndarray, array_of(list[Annotated[float, Field(allow_inf_nan=False, le=MAX_PENALTY)]],
+PerDrive = Annotated[np.ndarray, array_of(list[Annotated[float, Field(allow_inf_nan=False, strict=True,
+                                                                         le=MAX_PENALTY)]],
                                           min_length=1)]
 
 
@@ -108,10 +118,10 @@ class Settings(Strict):
     (or null) take the mode's defaults; after validation they always hold numbers."""
 
     Ts: Finite = Field(0.01, ge=MIN_TS, le=1.0, description="Sample time in s")
-    N: int = Field(MODE_DECIDES, ge=1, le=MAX_HORIZON, description="Prediction horizon in samples; default "
+    N: Count = Field(MODE_DECIDES, ge=1, le=MAX_HORIZON, description="Prediction horizon in samples; default "
                    f"{MODE_DEFAULTS['paper']['N']:g} in paper mode, {MODE_DEFAULTS['constrained']['N']:g} in "
                    "constrained mode")
-    samples_per_segment: int = Field(MODE_DECIDES, ge=1, le=MAX_SAMPLES_PER_SEGMENT,
+    samples_per_segment: Count = Field(MODE_DECIDES, ge=1, le=MAX_SAMPLES_PER_SEGMENT,
                                      description="Samples each segment is held (count); default N if N is given, "
                                      f"else {DEFAULT_SAMPLES_PER_SEGMENT}")
     k_r: Finite = Field(MODE_DECIDES, gt=0, le=MAX_PENALTY,
@@ -144,7 +154,7 @@ class Settings(Strict):
     settle_angle_rad: Finite = Field(1e-4, gt=0, le=1, description="End-point angle tolerance in rad")
     settle_rate_rad_s: Finite = Field(1e-3, gt=0, le=1, description="Angular speed that counts as stopped in rad/s")
     tail_max_s: Finite = Field(3.0, ge=0, le=600, description="Longest time in s the end point is held for settling")
-    plant_substeps: int = Field(1, ge=1, le=50, description="RK4 steps of the nonlinear model per sample (count)")
+    plant_substeps: Count = Field(1, ge=1, le=50, description="RK4 steps of the nonlinear model per sample (count)")
     require_settled: StrictBool = Field(True, description="Fail with code not_settled instead of returning an "
                                         "unsettled plan")
     speed_m_s: Finite | None = Field(None, ge=MIN_SPEED, le=100,
@@ -229,9 +239,24 @@ RobotSpec = Annotated[
 ]
 
 
+#: a small corridor that plans (the OpenAPI document's example request: Swagger UI's "Try it
+#: out" and the API fuzz tests start from it): the start point, two 0.02 m boxes, the end point
+EXAMPLE_REQUEST: dict[str, Any] = {
+    "name": "example: two cells of Table I",
+    "robot": DEFAULT_ROBOT,
+    "segments": [{"lower": [-0.08, 0.0, 0.0], "upper": [-0.08, 0.0, 0.0]},
+                 {"lower": [-0.08, 0.0, 0.0], "upper": [-0.06, 0.02, 0.0]},
+                 {"lower": [-0.06, 0.02, 0.0], "upper": [-0.04, 0.04, 0.0]},
+                 {"lower": [-0.04, 0.04, 0.0], "upper": [-0.04, 0.04, 0.0]}],
+    "settings": {"Ts": 0.01, "N": 20},
+}
+
+
 class PlanRequest(Strict):
     """A plan request: a robot, and a corridor (``segments``), a trajectory to track
     (``reference``) or a workspace to segment (``layout``), with settings."""
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [EXAMPLE_REQUEST]})
 
     name: str | None = Field(None, max_length=200, description="Free-text name of the corridor")
     robot: RobotSpec = Field(DEFAULT_ROBOT, description="Built-in robot name (GET /v1/robots) or a robot "
