@@ -83,12 +83,14 @@ def _schemathesis(url: str, cwd: Path, report_dir: Path, *args: str) -> subproce
         cwd=cwd, capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
 
 
-def _start_server(tmpdir: Path, timeout_s: float, workers: int):
+def _start_server(tmpdir: Path, timeout_s: float, workers: int, token: str | None = TOKEN):
+    """A `rangeplan serve` (no editor) on a free loopback port, once /ready: (process, log, url)."""
     port = _free_port()
     env = {k: v for k, v in os.environ.items() if not k.startswith("RANGEPLAN_")}
-    env.update({"RANGEPLAN_DATA_DIR": str(tmpdir / "data"), "RANGEPLAN_API_TOKEN": TOKEN,
-                "RANGEPLAN_WORKERS": str(workers), "RANGEPLAN_PLAN_TIMEOUT_S": str(timeout_s),
-                "RANGEPLAN_ACCESS_LOG": "1", "PYTHONPATH": str(ROOT)})
+    env.update({"RANGEPLAN_DATA_DIR": str(tmpdir / "data"), "RANGEPLAN_WORKERS": str(workers),
+                "RANGEPLAN_PLAN_TIMEOUT_S": str(timeout_s), "RANGEPLAN_ACCESS_LOG": "1", "PYTHONPATH": str(ROOT)})
+    if token:
+        env["RANGEPLAN_API_TOKEN"] = token
     log = open(tmpdir / "server.log", "w+")
     server = subprocess.Popen([sys.executable, "-m", "app.cli", "serve", "--port", str(port), "--no-editor"],
                               env=env, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
