@@ -105,6 +105,8 @@ def serve(host: str = "127.0.0.1", port: int = 8000, editor_port: int = 8080, ed
                 handle.stop()
             except Exception as exc:  # the editor's shutdown must not hide the API's exit status
                 _log(f"editor shutdown: {exc}")
+            from app.editor import use_pool
+            use_pool(None)
         pool.close()
 
 
