@@ -8,6 +8,12 @@ ENGINE=${CONTAINER_ENGINE:-podman}
 BASE=${BASE_IMAGE:-python:3.11-slim}
 IMAGE=${IMAGE:-localhost/rangeplan:test}
 cd "$(dirname "$0")/.."
+# a short name (python:3.11-slim) means Docker Hub's image: podman would otherwise resolve it
+# to a local stand-in of the same name
+case "$BASE" in
+    */*) ;;
+    *) BASE=docker.io/library/$BASE ;;
+esac
 if "$ENGINE" image inspect "$BASE" >/dev/null 2>&1 || timeout 60 "$ENGINE" pull -q "$BASE" >/dev/null 2>&1; then
     echo "container: base image $BASE"
 else
