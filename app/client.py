@@ -139,9 +139,18 @@ class Client:
             r = self._call("PUT", f"/v1/corridors/{corridor_id}", json=body)
         return CorridorRecord.model_validate_json(r.content)
 
-    def list(self) -> list[CorridorRecord]:
-        """All saved corridors, oldest first."""
-        return [CorridorRecord.model_validate(x) for x in self._call("GET", "/v1/corridors").json()]
+    def list(self) -> list[dict[str, Any]]:
+        """Summaries ``{id, name, created, updated, bytes}`` of all saved corridors, oldest
+        first, read page by page (``fetch`` gives one with its request)."""
+        out: list[dict[str, Any]] = []
+        cursor: str | None = None
+        while True:
+            params: dict[str, Any] = {"limit": 200, **({"cursor": cursor} if cursor else {})}
+            page = self._call("GET", "/v1/corridors", params=params).json()
+            out += page["items"]
+            cursor = page.get("next_cursor")
+            if not cursor:
+                return out
 
     def fetch(self, corridor_id: str) -> CorridorRecord:
         """One saved corridor."""

@@ -56,7 +56,7 @@ def test_every_method_returns_the_planner_models(server):
         again = rp.fetch_plan(result.plan_id)
         assert np.array_equal(again.pose, result.pose)
         rec = rp.save(TABLE1)
-        assert rec.request.segments is not None and rec.id in [r.id for r in rp.list()]
+        assert rec.request.segments is not None and rec.id in [r["id"] for r in rp.list()]
         renamed = rp.save({**TABLE1, "name": "renamed"}, rec.id)
         assert renamed.id == rec.id and rp.fetch(rec.id).name == "renamed"
         planned = rp.plan_corridor(rec.id)
@@ -69,7 +69,7 @@ def test_every_method_returns_the_planner_models(server):
         svg = b"<svg xmlns='http://www.w3.org/2000/svg' width='10mm' height='10mm'><circle cx='5' cy='5' r='2'/></svg>"
         assert rp.import_drawing(svg, format="svg").layout.obstacles[0].type == "circle"
         rp.delete(rec.id)
-        assert rec.id not in [r.id for r in rp.list()]
+        assert rec.id not in [r["id"] for r in rp.list()]
 
 
 def test_errors_are_one_exception_type(server):

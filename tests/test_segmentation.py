@@ -685,7 +685,7 @@ def test_error_non_finite_numbers(mutate, field):
     (base_layout(bounds={"lower": [0.1, -0.06], "upper": [0.08, 0.06]}), "layout.bounds.upper", "greater"),
     (base_layout(clearance=-0.001), "layout.clearance", ">= 0"),
     (base_layout(cell={"shape": "hexagon", "size": 0.01}), "layout.cell.shape", "square"),
-    (base_layout(cell={"shape": "square", "size": 0.0}), "layout.cell.size", "> 0"),
+    (base_layout(cell={"shape": "square", "size": 0.0}), "layout.cell.size", ">= 1e-06"),
     (base_layout(psi_range=[0.1, -0.1]), "layout.psi_range", "min <= max"),
     (base_layout(psi_range=[0.05, 0.1]), "layout.psi_range", "start angle"),
     (base_layout(colour="red"), "layout.colour", "unknown"),

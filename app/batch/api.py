@@ -112,7 +112,7 @@ def _parse_body(body: bytes, content_type: str) -> tuple[list[str], str | None] 
 
 
 def batch_router() -> APIRouter:
-    from app.api import ErrorResponse  # the service's one error shape (app.api is loaded: it calls us)
+    from app.errors import ErrorResponse  # the service's one error shape
 
     router = APIRouter(lifespan=_lifespan, tags=["batches"])
     errs: dict[int | str, dict[str, Any]] = {

@@ -10,12 +10,19 @@ Re-plans run on :class:`PlanWorker`, a thread with a debounce and a generation c
 ``schedule()`` returns at once (GUI callbacks never wait for a plan), the worker computes
 only the newest generation, and the caller drops a result whose generation is no longer
 current (a stale result never overwrites a newer one).
+
+Where a plan is computed (issue 15): under ``rangeplan serve`` the editor plans on the API's
+worker pool (:func:`use_pool`): the same worker processes, work estimate, time limit,
+memory limit and error codes as ``POST /v1/plan``, never in the server process. Without a
+pool (an editor started on its own, tests) it plans on its worker thread, after the same
+work estimate against ``RANGEPLAN_PLAN_TIMEOUT_S``.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -25,7 +32,7 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
-from planner import PlannerError, PlanRequest, PlanResult, RobotModel, load_robot
+from planner import PlannerError, PlanRequest, PlanResult, RobotModel, estimate_work, load_robot
 from planner import plan as run_plan
 from planner import to_csv as _result_csv
 from planner.exchange import export, import_drawing
@@ -57,6 +64,7 @@ __all__ = [
     "compute_plan",
     "segmentation_module",
     "to_csv",
+    "use_pool",
     "validate_request",
     "editable",
     "field_bounds",
@@ -67,6 +75,17 @@ __all__ = [
 ]
 
 log = logging.getLogger("rangeplan.editor")
+
+#: the planning pool (an :class:`app.workers.PlanPool`) re-plans run on, or None: inline
+_pool: Any = None
+_DEFAULT_TIMEOUT_S = 30.0
+
+
+def use_pool(pool: Any) -> None:
+    """Plan on ``pool`` (an :class:`app.workers.PlanPool`, shared with the API) from now on;
+    None: plan inline on the editor's worker thread."""
+    global _pool
+    _pool = pool
 
 Robot = RobotModel
 #: whether this planner's settings have a travel speed ``speed_m_s`` [m/s]
@@ -217,8 +236,8 @@ class PlanOutcome:
 
 def compute_plan(request: dict, robots: RobotCache) -> PlanOutcome:
     """Validate, segment (when the request has a layout) and plan ``request`` (the one
-    JSON shape). Never raises for a bad request or an impossible plan: those become
-    ``PlanOutcome.error``."""
+    JSON shape), on the pool of :func:`use_pool` or inline. Never raises for a bad request,
+    an impossible plan or too much work: those become ``PlanOutcome.error``."""
     t0 = time.perf_counter()
 
     def outcome(seg, result, error) -> PlanOutcome:
@@ -230,6 +249,13 @@ def compute_plan(request: dict, robots: RobotCache) -> PlanOutcome:
         first = planner_error(exc).to_dict()
         message = format_validation_error(exc).removeprefix(f"{first['field']}: ")
         return outcome(None, None, {**first, "message": message})
+    pool = _pool
+    if pool is not None:
+        return outcome(*_on_pool(pool, req))
+    limit = float(os.environ.get("RANGEPLAN_PLAN_TIMEOUT_S", _DEFAULT_TIMEOUT_S) or _DEFAULT_TIMEOUT_S)
+    est = estimate_work(req)
+    if est.seconds > limit:
+        return outcome(None, None, {"code": "too_much_work", "message": est.message(limit), "field": est.field})
     seg_dict = None
     try:
         robot = robots.get(request.get("robot", DEFAULT_ROBOT))
@@ -244,6 +270,23 @@ def compute_plan(request: dict, robots: RobotCache) -> PlanOutcome:
     except ImportError as exc:
         return outcome(None, None, {"code": "unavailable", "message": f"segmentation is not available: {exc}",
                                     "field": "layout"})
+
+
+def _on_pool(pool: Any, req: PlanRequest) -> tuple[dict | None, dict | None, dict | None]:
+    """(segmentation, result, error) of the editor's job on ``pool``."""
+    from app.workers import describe_failure
+
+    try:
+        out = pool.run({"kind": "editor", "request": req})
+    except Exception as exc:  # too much work, time limit, busy, a worker died
+        return None, None, describe_failure(exc, pool)[1]
+    if out[0] == "ok":
+        body = json.loads(out[1])
+        return body["segmentation"], body["result"], body["error"]
+    if out[0] == "error":
+        return None, None, out[1]
+    return None, None, {"code": "internal_error", "message": "the planner failed unexpectedly: "
+                        + str(out[1]).splitlines()[0], "field": None}
 
 
 class PlanWorker(threading.Thread):

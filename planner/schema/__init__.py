@@ -24,15 +24,22 @@ from .limits import (
                      DEFAULT_ROBOT,
                      DEFAULT_SAMPLES_PER_SEGMENT,
                      MAX_CELLS,
+                     MAX_COORDINATE,
                      MAX_HORIZON,
                      MAX_LEGS,
                      MAX_OBSTACLES,
+                     MAX_PENALTY,
+                     MAX_PENALTY_RATIO,
+                     MAX_PHYSICAL,
                      MAX_POLYGON_POINTS,
                      MAX_SAMPLES_PER_SEGMENT,
                      MAX_SEGMENTS,
                      MAX_TOTAL_STEPS,
+                     MIN_CELL_SIZE,
+                     MIN_SPEED,
                      MIN_TS,
                      MODE_DEFAULTS,
+                     WORK_COSTS,
 )
 from .records import CorridorRecord
 from .request import TIMING_FIELDS, PlanRequest, Reference, Segment, Settings, parse_request
@@ -70,4 +77,5 @@ __all__ = [
     "error_details", "field_path", "format_validation_error", "planner_error",
     "DEFAULT_ROBOT", "DEFAULT_SAMPLES_PER_SEGMENT", "MAX_CELLS", "MAX_HORIZON", "MAX_LEGS", "MAX_OBSTACLES",
     "MAX_POLYGON_POINTS", "MAX_SAMPLES_PER_SEGMENT", "MAX_SEGMENTS", "MAX_TOTAL_STEPS", "MIN_TS", "MODE_DEFAULTS",
+    "MAX_COORDINATE", "MAX_PENALTY", "MAX_PENALTY_RATIO", "MAX_PHYSICAL", "MIN_CELL_SIZE", "MIN_SPEED", "WORK_COSTS",
 ]
