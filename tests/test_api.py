@@ -17,13 +17,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fastapi.testclient import TestClient
 
 from app.api import create_app
 from app.storage import Store
 from planner.errors import PlannerError
 from planner.schema import field_path
-from tests.support import robot_description
+from tests.support import api_client, robot_description
 
 ROOT = Path(__file__).resolve().parent.parent
 TABLE1_PATH = ROOT / "static" / "examples" / "table1.json"
@@ -52,7 +51,7 @@ def store(tmp_path_factory):
 @pytest.fixture(scope="module")
 def client(store):
     app = create_app(store, workers=2, timeout_s=60, max_body_bytes=256 * 1024)
-    with TestClient(app, base_url="http://localhost") as c:
+    with api_client(app) as c:
         yield c
 
 
@@ -304,7 +303,7 @@ def test_compute_limit_stops_runaway_plan(store):
     """A plan longer than the limit answers 422 `timeout` promptly; the killed worker is
     replaced and the next plan succeeds; /health answered meanwhile."""
     app = create_app(store, workers=1, timeout_s=1.0)
-    with TestClient(app, base_url="http://localhost") as c:
+    with api_client(app) as c:
         done = {}
 
         def slow():
@@ -327,7 +326,7 @@ def test_too_much_work_is_refused_in_well_under_a_second(store):
     with too_much_work naming the estimate, the limit and the field, before any worker is
     busy (the pool stays idle and plans Table I at once)."""
     app = create_app(store, workers=1, timeout_s=1.0)
-    with TestClient(app, base_url="http://localhost") as c:
+    with api_client(app) as c:
         assert c.post("/v1/plan", json=TABLE1).status_code == 200
         t0 = time.perf_counter()
         r = c.post("/v1/plan", json=long_corridor())

@@ -16,7 +16,6 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 import pytest
-from fastapi.testclient import TestClient
 
 from app.api import create_app
 from app.batch.config import FORMAT_NAMES
@@ -36,7 +35,7 @@ from tests.batch_support import (
     variant,
     write_jsonl,
 )
-from tests.support import TABLE1
+from tests.support import TABLE1, api_client
 
 # ---------------------------------------------------------------------------------------
 # the engine function and the dispatcher
@@ -304,7 +303,7 @@ def test_local_worker_killed_mid_batch_loses_no_item(tmp_path):
 def api(tmp_path_factory):
     store = Store(tmp_path_factory.mktemp("data"))
     app = create_app(store, workers=1, timeout_s=120)
-    with TestClient(app) as c:
+    with api_client(app) as c:
         yield c
 
 
@@ -379,7 +378,7 @@ def test_api_unknown_batch_is_404(api):
 
 def test_api_batch_limits(tmp_path):
     app = create_app(Store(tmp_path), workers=1)
-    with TestClient(app) as c:
+    with api_client(app) as c:
         svc = app.state.batches
         svc.max_items, svc.max_queue = 3, 5
         r = c.post("/v1/batches", json={"requests": [TABLE1] * 4})
@@ -419,7 +418,7 @@ def test_api_batch_survives_a_restart_and_never_takes_the_interactive_pool(tmp_p
     store_dir = tmp_path / "data"
     reqs = [variant(i % 5, "constrained") for i in range(16)]
     app = create_app(Store(store_dir), workers=1)
-    with TestClient(app) as c:
+    with api_client(app) as c:
         bid = c.post("/v1/batches", json={"requests": reqs}).json()["id"]
         deadline = time.monotonic() + 120
         while c.get(f"/v1/batches/{bid}").json()["ok"] < 2 and time.monotonic() < deadline:
@@ -438,7 +437,7 @@ def test_api_batch_survives_a_restart_and_never_takes_the_interactive_pool(tmp_p
     assert before["state"] == "running" and before["done"] < 16
     # the server stopped mid-batch; a new one on the same store finishes it
     app2 = create_app(Store(store_dir), workers=1)
-    with TestClient(app2) as c:
+    with api_client(app2) as c:
         p = wait_done(c, bid)
         assert p["state"] == "done" and p["ok"] == 16
         items = [json.loads(ln) for ln in c.get(f"/v1/batches/{bid}/results").text.splitlines()]

@@ -10,7 +10,6 @@ import sys
 
 import numpy as np
 import pytest
-from fastapi.testclient import TestClient
 
 from app.api import create_app
 from app.storage import Store
@@ -18,7 +17,7 @@ from planner.exchange import to_gcode
 from planner.schema import PARTIAL_LAYOUT, ImportResult, PlanResult
 from tests.drawings import DRAWINGS, obstacle_region
 from tests.linuxcnc import rs274
-from tests.support import TABLE1, TABLE1_PATH
+from tests.support import TABLE1, TABLE1_PATH, api_client
 
 TABLE = DRAWINGS / "Table-dining-E.dxf"
 CLI = [sys.executable, "-m", "app.cli"]
@@ -28,7 +27,7 @@ PLACE = {"scale": "0.05", "offset": "0,0.0225", "margin": "0.03", "start": "-0.0
 @pytest.fixture(scope="module")
 def client(tmp_path_factory):
     app = create_app(Store(tmp_path_factory.mktemp("exchange")), workers=1, timeout_s=60, executor="thread")
-    with TestClient(app) as c:
+    with api_client(app) as c:
         yield c
 
 

@@ -15,7 +15,6 @@ from pathlib import Path
 import httpx
 import pytest
 import viser
-from fastapi.testclient import TestClient
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
@@ -23,6 +22,7 @@ from app.api import create_app
 from app.editor import start_editor, start_guarded
 from app.security import TOKEN_COOKIE, AccessPolicy, ConfigError, host_name, is_loopback
 from app.storage import Store
+from tests.support import api_client
 
 ROOT = Path(__file__).resolve().parent.parent
 TABLE1 = json.loads((ROOT / "static" / "examples" / "table1.json").read_text())
@@ -73,7 +73,7 @@ def secured(tmp_path_factory):
     policy = AccessPolicy(token=TOKEN, allowed_hosts=frozenset({"localhost", "127.0.0.1", "::1", "cad.local"}),
                           cors_origins=("http://cad.local:3000",))
     app = create_app(Store(tmp_path_factory.mktemp("sec")), workers=1, timeout_s=30, access=policy)
-    with TestClient(app, base_url="http://localhost") as c:
+    with api_client(app) as c:
         yield c
 
 
@@ -129,7 +129,7 @@ def test_cors_preflight_and_headers_for_allowed_origins_only(secured):
 
 def test_no_cors_by_default(tmp_path):
     app = create_app(Store(tmp_path), workers=1, executor="thread", access=AccessPolicy())
-    with TestClient(app, base_url="http://localhost") as c:
+    with api_client(app) as c:
         r = c.get("/v1/robots", headers={"Origin": "http://cad.local:3000"})
         assert r.status_code == 200 and "access-control-allow-origin" not in r.headers
         r = c.options("/v1/plan", headers={"Origin": "http://cad.local:3000", "Access-Control-Request-Method": "POST"})
@@ -160,7 +160,7 @@ def test_openapi_declares_the_bearer_scheme_when_a_token_is_set(secured, tmp_pat
             if path.startswith("/v1"):
                 assert "401" in op["responses"]
     app = create_app(Store(tmp_path), workers=1, executor="thread", access=AccessPolicy())
-    with TestClient(app, base_url="http://localhost") as c:
+    with api_client(app) as c:
         assert "securitySchemes" not in c.get("/openapi.json").json().get("components", {})
 
 

@@ -16,13 +16,14 @@ from app.api import create_app
 from app.security import AccessPolicy
 from app.storage import Store
 from app.workers import PlanPool
+from tests.support import api_client
 
 ROOT = Path(__file__).resolve().parent.parent
 TABLE1 = json.loads((ROOT / "static" / "examples" / "table1.json").read_text())
 
 
 def client_for(app) -> TestClient:
-    return TestClient(app, base_url="http://localhost")
+    return api_client(app)
 
 
 def test_ready_only_once_the_workers_can_plan(tmp_path):
