@@ -35,7 +35,8 @@ RUN python -m venv --without-pip /opt/venv \
            -exec strip --strip-unneeded {} + ; \
        else echo "binutils not available: libraries left unstripped (image ~60 MB larger)"; fi \
     && /opt/venv/bin/python -c "import numpy, scipy.linalg, scipy.sparse.csgraph, numba, llvmlite.binding, \
-shapely, daqp, PIL.Image, zstandard, orjson, msgspec, pydantic_core, websockets, viser, uvicorn, fastapi"
+shapely, daqp, PIL.Image, zstandard, orjson, msgspec, pydantic_core, websockets, viser, uvicorn, fastapi, \
+ezdxf, svgelements, python_multipart, msgpack, psutil, tornado, yaml, dask, distributed"
 
 # ---------------------------------------------------------------------------------------
 FROM ${BASE_IMAGE} AS app
