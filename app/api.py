@@ -446,7 +446,7 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
         try:
             items, nxt = request.app.state.store.corridor_page(limit, cursor)
         except BadCursor as exc:
-            return error_response(422, "invalid_input", str(exc), "query.cursor")
+            return error_response(422, "invalid_input", str(exc), "cursor")
         return {"items": items, "next_cursor": nxt}
 
     @app.get("/v1/corridors/{corridor_id}", response_model=CorridorRecord, response_model_exclude_unset=True,

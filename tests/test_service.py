@@ -101,9 +101,9 @@ def test_list_pages_over_http(tmp_path):
         assert [x["id"] for x in page3["items"]] == ids[6:] and page3["next_cursor"] is None
         assert len(c.get("/v1/corridors").json()["items"]) == 7  # default page of 50
         r = c.get("/v1/corridors", params={"cursor": "not-a-cursor"})
-        assert r.status_code == 422 and r.json()["error"]["field"] == "query.cursor"
+        assert r.status_code == 422 and r.json()["error"]["field"] == "cursor"
         r = c.get("/v1/corridors", params={"limit": 201})
-        assert r.status_code == 422 and r.json()["error"]["field"] == "query.limit"
+        assert r.status_code == 422 and r.json()["error"]["field"] == "limit"
 
 
 @pytest.mark.slow
