@@ -30,7 +30,15 @@ from planner.errors import PlannerError
 from planner.model import SINGULAR_TOL, load_robot
 from planner.model.kinematics import leg_lengths, singularity_measure, singularity_measure_grid
 from planner.model.reach import check_pose
-from planner.schema import MAX_CELLS, PlanRequest, SegmentationResult, Settings, parse_request
+from planner.schema import (
+    MAX_CELLS,
+    MAX_COORDINATE,
+    PlanRequest,
+    SegmentationResult,
+    Settings,
+    cell_count,
+    parse_request,
+)
 from tests.support import plan_json
 
 ROBOT = load_robot("moving-slide")
@@ -633,13 +641,19 @@ def test_error_too_many_cells():
     _err(base_layout(cell={"shape": "triangle", "size": 2e-4}), "too_large", "layout.cell.size")
 
 
-def test_error_bounds_near_the_float_range_are_too_large_not_an_overflow():
-    # found by the API fuzzing: (upper - lower) / size overflowed to infinity in cell_count
+def test_error_bounds_near_the_float_range_are_refused_not_an_overflow():
+    # found by the API fuzzing: (upper - lower) / size overflowed to infinity in cell_count.
+    # A request's coordinates are bounded (|value| <= MAX_COORDINATE): such bounds are refused
+    # up front, naming the coordinate and the bound
     lay = base_layout(bounds={"lower": [0.0, -8.98846567431158e307], "upper": [1.0, 0.0]},
                       cell={"shape": "square", "size": 0.5})
-    _err(lay, "too_large", "layout.cell.size", "limit")
+    _err(lay, "invalid_input", "layout.bounds.lower[1]", f"{MAX_COORDINATE:g}")
     lay["cell"] = {"shape": "triangle", "size": 0.5}
-    _err(lay, "too_large", "layout.cell.size", "limit")
+    _err(lay, "invalid_input", "layout.bounds.lower[1]", f"{MAX_COORDINATE:g}")
+    # and the cell count itself saturates instead of overflowing: far more cells than any limit
+    for shape in ("square", "triangle"):
+        n, cols, rows = cell_count(np.array([0.0, -8.98846567431158e307]), np.array([1.0, 0.0]), shape, 0.5)
+        assert n > MAX_CELLS and rows > MAX_CELLS and cols >= 1
 
 
 def test_error_cell_larger_than_the_bounds():
