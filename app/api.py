@@ -235,6 +235,9 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
     app.state.editor_port = editor_port
     app.state.pool = None
     app.state.close_pool = lambda: close_pool(app)
+    # the bounds of one plan, also those of each batch item (app.batch: its own workers)
+    app.state.plan_limits = {"timeout_s": shared_pool.timeout_s if shared_pool else timeout_s,
+                             "memory_mb": shared_pool.memory_mb if shared_pool else memory_mb}
     app.add_middleware(BodySizeLimit, limit=max_body)
     app.include_router(batch_router())  # /v1/batches (app/batch/): batches on their own workers
     install_access_control(app, access)  # outside the body limit: refused before the body is read

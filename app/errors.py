@@ -39,9 +39,11 @@ class ErrorResponse(BaseModel):
     error: ErrorDetail
 
 
-def errors_doc(*statuses: int) -> dict:
-    """OpenAPI ``responses`` entries for these error statuses."""
-    return {s: {"model": ErrorResponse, "description": _DESCRIPTIONS.get(s, "Error")} for s in statuses}
+def errors_doc(*statuses: int, descriptions: dict[int, str] | None = None) -> dict:
+    """OpenAPI ``responses`` entries for these error statuses (``descriptions``: what a status
+    means on these operations, where it says more than the service-wide text)."""
+    texts = {**_DESCRIPTIONS, **(descriptions or {})}
+    return {s: {"model": ErrorResponse, "description": texts.get(s, "Error")} for s in statuses}
 
 
 def error_response(status: int, code: str, message: str, field: str | None = None,

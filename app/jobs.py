@@ -13,7 +13,9 @@ from itertools import chain
 
 import orjson
 
-__all__ = ["run_job", "memory_error"]
+from app.failures import degenerate
+
+__all__ = ["run_job"]
 
 _stores: dict = {}
 
@@ -179,18 +181,5 @@ def _editor_plan(req) -> bytes:
         return _dumps({"segmentation": seg.to_dict() if seg else None, "result": None, "error": exc.to_dict()})
 
 
-def memory_error(memory_mb: int | None) -> dict:
-    limit = f"the planning process's memory limit of {memory_mb} MiB" if memory_mb else "the memory available"
-    return {"code": "too_much_memory", "field": None,
-            "message": f"planning this request needed more than {limit} (RANGEPLAN_WORKER_MEMORY_MB) and was "
-                       "stopped; use fewer segments or samples per segment, or a larger settings.Ts"}
-
-
 def _degenerate(exc: Exception, job: dict) -> dict:
-    custom = not isinstance(getattr(job.get("request"), "robot", None), str)
-    return {"code": "singular", "field": "robot" if custom else None,
-            "message": f"the robot model is degenerate here ({type(exc).__name__}: {exc}); check that the "
-                       "robot's pivots are distinct, its legs have positive length, masses and inertias "
-                       "are positive, and the corridor avoids singular poses"}
-
-
+    return degenerate(exc, custom_robot=not isinstance(getattr(job.get("request"), "robot", None), str))

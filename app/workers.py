@@ -45,7 +45,8 @@ import time  # noqa: E402
 import traceback  # noqa: E402
 from multiprocessing.connection import Connection  # noqa: E402
 
-from app.jobs import memory_error, run_job  # noqa: E402
+from app.failures import limit_memory, out_of_memory, timeout, too_much_work  # noqa: E402
+from app.jobs import run_job  # noqa: E402
 
 
 class JobTimeout(Exception):
@@ -77,14 +78,11 @@ def describe_failure(exc: Exception, pool: PlanPool) -> tuple[int, dict]:
     """The HTTP status and ``{code, message, field}`` of a job the pool did not run to the
     end (the API's and the editor's one wording)."""
     if isinstance(exc, TooMuchWork):
-        return 422, {"code": "too_much_work", "message": str(exc), "field": exc.estimate.field}
+        return 422, too_much_work(exc.estimate, exc.limit_s)
     if isinstance(exc, WorkerOutOfMemory):
         return 422, {"code": "too_much_memory", "message": str(exc), "field": None}
     if isinstance(exc, JobTimeout):
-        return 422, {"code": "timeout", "field": None,
-                     "message": f"planning took longer than the compute limit of {pool.timeout_s:g} s and was "
-                                "stopped; use fewer segments or samples, a shorter settings.tail_max_s, or a larger "
-                                "settings.Ts"}
+        return 422, timeout(pool.timeout_s)
     if isinstance(exc, PoolBusy):
         return 503, {"code": "busy", "message": f"too many plans in progress ({exc}); retry shortly", "field": None}
     if isinstance(exc, WorkerCrashed):
@@ -97,14 +95,6 @@ def describe_failure(exc: Exception, pool: PlanPool) -> tuple[int, dict]:
 DEFAULT_MEMORY_MB = 2048
 #: CPU priority of the workers relative to the server process
 WORKER_NICE = 5
-
-
-def _limit_memory(memory_mb: int | None) -> None:
-    if memory_mb:
-        import resource
-
-        limit = int(memory_mb) * 1024 * 1024
-        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
 
 
 def _worker_main(conn, memory_mb: int | None = None) -> None:
@@ -126,7 +116,7 @@ def _worker_main(conn, memory_mb: int | None = None) -> None:
         return
     if status[0] != "ready":
         return
-    _limit_memory(memory_mb)  # after the warm-up: the limit bounds what a job may add
+    limit_memory(memory_mb)  # after the warm-up: the limit bounds what a job may add
     while True:
         try:
             job = conn.recv()
@@ -134,18 +124,18 @@ def _worker_main(conn, memory_mb: int | None = None) -> None:
             return
         if job is None:
             return
-        out_of_memory = False
+        ran_out = False
         try:
             out = run_job(job)
         except MemoryError:
-            out, out_of_memory = ("error", memory_error(memory_mb)), True
+            out, ran_out = ("error", out_of_memory(memory_mb)), True
         except Exception as exc:  # a planner bug: report it, keep serving
             out = ("crash", f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=8)}")
         try:
             conn.send(out)
         except (OSError, ValueError):
             return
-        if out_of_memory:  # the heap may be fragmented or half-built: start afresh
+        if ran_out:  # the heap may be fragmented or half-built: start afresh
             return
 
 
@@ -340,7 +330,7 @@ class PlanPool:
                     try:
                         out = run_job(job)
                     except MemoryError:
-                        out = ("error", memory_error(None))
+                        out = ("error", out_of_memory(None))
                     except Exception as exc:
                         out = ("crash", f"{type(exc).__name__}: {exc}")
                     if time.perf_counter() - t0 > self.timeout_s:
@@ -363,7 +353,7 @@ class PlanPool:
                 w.kill()
                 replacement = self._replace(w)
                 if self.memory_mb and status in _ALLOCATION_FAILURE:
-                    raise WorkerOutOfMemory(memory_error(self.memory_mb)["message"]) from None
+                    raise WorkerOutOfMemory(out_of_memory(self.memory_mb)["message"]) from None
                 if isinstance(exc, OSError):
                     raise WorkerCrashed(str(exc)) from None
                 raise

@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
+from app.failures import too_much_work
 from planner import PlannerError, PlanRequest, PlanResult, RobotModel, estimate_work, load_robot
 from planner import plan as run_plan
 from planner import to_csv as _result_csv
@@ -255,7 +256,7 @@ def compute_plan(request: dict, robots: RobotCache) -> PlanOutcome:
     limit = float(os.environ.get("RANGEPLAN_PLAN_TIMEOUT_S", _DEFAULT_TIMEOUT_S) or _DEFAULT_TIMEOUT_S)
     est = estimate_work(req)
     if est.seconds > limit:
-        return outcome(None, None, {"code": "too_much_work", "message": est.message(limit), "field": est.field})
+        return outcome(None, None, too_much_work(est, limit))
     seg_dict = None
     try:
         robot = robots.get(request.get("robot", DEFAULT_ROBOT))
