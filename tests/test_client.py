@@ -19,7 +19,6 @@ from tests.linuxcnc import rs274
 from tests.support import ROOT, TABLE1
 from tests.test_server_process import Server, free_port
 
-
 TOKEN = "client-test-token-0123456789"
 
 

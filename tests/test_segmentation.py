@@ -33,6 +33,8 @@ from planner.model.reach import check_pose
 from planner.schema import (
     MAX_CELLS,
     MAX_COORDINATE,
+    MAX_HOLES,
+    MAX_POLYGON_POINTS,
     PlanRequest,
     SegmentationResult,
     Settings,
@@ -654,6 +656,27 @@ def test_error_bounds_near_the_float_range_are_refused_not_an_overflow():
     for shape in ("square", "triangle"):
         n, cols, rows = cell_count(np.array([0.0, -8.98846567431158e307]), np.array([1.0, 0.0]), shape, 0.5)
         assert n > MAX_CELLS and rows > MAX_CELLS and cols >= 1
+
+
+def _plate(holes: int, hole_vertices: int) -> dict:
+    """A square plate (0.04 m, in the workspace's upper half) with ``holes`` small regular
+    polygons of ``hole_vertices`` vertices in a row, each inside it and apart."""
+    r = 0.015 / max(holes, 1)
+    holes_xy = [[[-0.015 + (2 * k + 1) * r + 0.5 * r * math.cos(t), 0.03 + 0.5 * r * math.sin(t)]
+                 for t in np.linspace(0.0, 2 * math.pi, hole_vertices, endpoint=False)] for k in range(holes)]
+    return {"type": "polygon", "points": [[-0.02, 0.01], [0.02, 0.01], [0.02, 0.05], [-0.02, 0.05]],
+            "holes": holes_xy}
+
+
+def test_error_polygon_holes_are_bounded():
+    # within the bounds: a plate with holes is an obstacle like any other
+    lay = base_layout(obstacles=[_plate(MAX_HOLES, 3)])
+    assert segment(lay, ROBOT).segments
+    # more holes than MAX_HOLES, or more vertices in the outline and holes than a polygon may have
+    _err(base_layout(obstacles=[_plate(MAX_HOLES + 1, 3)]), "too_large", "layout.obstacles[0].holes")
+    per_hole = MAX_POLYGON_POINTS // 4
+    e = _err(base_layout(obstacles=[_plate(4, per_hole)]), "too_large", "layout.obstacles[0].holes")
+    assert str(MAX_POLYGON_POINTS) in e.message and str(4 + 4 * per_hole) in e.message
 
 
 def test_error_cell_larger_than_the_bounds():

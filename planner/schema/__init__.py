@@ -25,6 +25,7 @@ from .limits import (
                      DEFAULT_SAMPLES_PER_SEGMENT,
                      MAX_CELLS,
                      MAX_COORDINATE,
+                     MAX_HOLES,
                      MAX_HORIZON,
                      MAX_LEGS,
                      MAX_OBSTACLES,
@@ -76,6 +77,7 @@ __all__ = [
     "PARTIAL_LAYOUT",
     "error_details", "field_path", "format_validation_error", "planner_error",
     "DEFAULT_ROBOT", "DEFAULT_SAMPLES_PER_SEGMENT", "MAX_CELLS", "MAX_HORIZON", "MAX_LEGS", "MAX_OBSTACLES",
-    "MAX_POLYGON_POINTS", "MAX_SAMPLES_PER_SEGMENT", "MAX_SEGMENTS", "MAX_TOTAL_STEPS", "MIN_TS", "MODE_DEFAULTS",
+    "MAX_HOLES", "MAX_POLYGON_POINTS", "MAX_SAMPLES_PER_SEGMENT", "MAX_SEGMENTS", "MAX_TOTAL_STEPS", "MIN_TS",
+    "MODE_DEFAULTS",
     "MAX_COORDINATE", "MAX_PENALTY", "MAX_PENALTY_RATIO", "MAX_PHYSICAL", "MIN_CELL_SIZE", "MIN_SPEED", "WORK_COSTS",
 ]

@@ -17,7 +17,7 @@ import shapely
 from pydantic import Discriminator, Field, Tag, ValidationInfo, field_validator, model_validator
 
 from ._types import Finite, Point2, PointPair, Pose3, Strict, array_of, fail
-from .limits import MAX_CELLS, MAX_COORDINATE, MAX_OBSTACLES, MAX_POLYGON_POINTS, MIN_CELL_SIZE
+from .limits import MAX_CELLS, MAX_COORDINATE, MAX_HOLES, MAX_OBSTACLES, MAX_POLYGON_POINTS, MIN_CELL_SIZE
 
 __all__ = ["Bounds", "Cell", "Circle", "Layout", "Obstacle", "Polygon", "Rectangle", "cell_count", "SQRT3_2"]
 
@@ -65,9 +65,10 @@ class Polygon(Strict):
     type: Literal["polygon"] = Field(description="Obstacle shape")
     points: Vertices = Field(
         description="Vertices [[x, y], ...] in m, in order (either orientation)")
-    holes: list[Vertices] = Field(default_factory=list, max_length=MAX_POLYGON_POINTS,
+    holes: list[Vertices] = Field(default_factory=list, max_length=MAX_HOLES,
                                   description="Holes: free areas inside the outline, each its vertices [[x, y], ...] "
-                                  "in m (e.g. a drawing's shapes nested inside another)")
+                                  f"in m (e.g. a drawing's shapes nested inside another); at most {MAX_HOLES}, and "
+                                  f"at most {MAX_POLYGON_POINTS} vertices in the outline and the holes together")
 
     @field_validator("points")
     @classmethod
@@ -82,6 +83,10 @@ class Polygon(Strict):
 
     @model_validator(mode="after")
     def _holes_inside(self) -> Polygon:
+        n = len(self.points) + sum(len(h) for h in self.holes)
+        if n > MAX_POLYGON_POINTS:
+            raise fail(f"the polygon has {n} vertices in its outline and holes, more than the limit of "
+                       f"{MAX_POLYGON_POINTS}", "holes", code="too_large")
         if self.holes:
             poly = shapely.Polygon(self.points, [np.asarray(h) for h in self.holes])
             if not poly.is_valid:

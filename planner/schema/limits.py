@@ -8,7 +8,7 @@ from __future__ import annotations
 
 __all__ = [
     "MAX_HORIZON", "MAX_SAMPLES_PER_SEGMENT", "MAX_SEGMENTS", "MAX_TOTAL_STEPS", "MAX_CELLS",
-    "MAX_OBSTACLES", "MAX_POLYGON_POINTS", "MAX_LEGS", "MIN_TS", "MAX_COORDINATE", "MIN_CELL_SIZE",
+    "MAX_OBSTACLES", "MAX_POLYGON_POINTS", "MAX_HOLES", "MAX_LEGS", "MIN_TS", "MAX_COORDINATE", "MIN_CELL_SIZE",
     "MIN_SPEED", "MAX_PENALTY", "MAX_PENALTY_RATIO", "MAX_PHYSICAL", "MODE_DEFAULTS",
     "DEFAULT_SAMPLES_PER_SEGMENT", "DEFAULT_ROBOT", "WORK_COSTS",
 ]
@@ -25,8 +25,10 @@ MAX_TOTAL_STEPS = 200_000
 MAX_CELLS = 40_000
 #: most obstacles in a layout
 MAX_OBSTACLES = 2_000
-#: most vertices of one obstacle polygon
+#: most vertices of one obstacle polygon, its outline and holes together
 MAX_POLYGON_POINTS = 10_000
+#: most holes of one obstacle polygon
+MAX_HOLES = 200
 #: most legs of a robot description
 MAX_LEGS = 16
 #: shortest sample time [s]
