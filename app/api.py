@@ -287,11 +287,7 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
         try:
             out: Any = await loop.run_in_executor(request.app.state.threads, pool.run, job)
         except (JobTimeout, TooMuchWork, PoolBusy, WorkerCrashed) as exc:
-            if isinstance(exc, JobTimeout) and job["kind"] == "import":
-                return error_response(422, "timeout", f"reading the drawing took longer than the compute limit "
-                                      f"of {pool.timeout_s:g} s and was stopped; choose fewer layers or a larger "
-                                      "flatten_tolerance", "drawing")
-            status, e = describe_failure(exc, pool)
+            status, e = describe_failure(exc, pool, job["kind"])
             return error_response(status, e["code"], e["message"], e["field"],
                                   headers={"Retry-After": "1"} if status == 503 else None)
         if out[0] == "error":

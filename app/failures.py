@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["degenerate", "limit_memory", "out_of_memory", "timeout", "too_much_work"]
+__all__ = ["degenerate", "import_timeout", "limit_memory", "out_of_memory", "timeout", "too_much_work"]
 
 
 def limit_memory(memory_mb: int | None) -> None:
@@ -34,6 +34,13 @@ def timeout(limit_s: float) -> dict[str, Any]:
     return {"code": "timeout", "field": None,
             "message": f"planning took longer than the compute limit of {limit_s:g} s and was stopped; use fewer "
                        "segments or samples, a shorter settings.tail_max_s, or a larger settings.Ts"}
+
+
+def import_timeout(limit_s: float) -> dict[str, Any]:
+    """A drawing whose reading was stopped at the compute limit ``limit_s`` [s]."""
+    return {"code": "timeout", "field": "drawing",
+            "message": f"reading the drawing took longer than the compute limit of {limit_s:g} s and was stopped; "
+                       "choose fewer layers or a larger flatten_tolerance"}
 
 
 def out_of_memory(memory_mb: int | None) -> dict[str, Any]:

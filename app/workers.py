@@ -45,7 +45,7 @@ import time  # noqa: E402
 import traceback  # noqa: E402
 from multiprocessing.connection import Connection  # noqa: E402
 
-from app.failures import limit_memory, out_of_memory, timeout, too_much_work  # noqa: E402
+from app.failures import import_timeout, limit_memory, out_of_memory, timeout, too_much_work  # noqa: E402
 from app.jobs import run_job  # noqa: E402
 
 
@@ -74,15 +74,15 @@ class TooMuchWork(Exception):
         self.estimate, self.limit_s = estimate, limit_s
 
 
-def describe_failure(exc: Exception, pool: PlanPool) -> tuple[int, dict]:
-    """The HTTP status and ``{code, message, field}`` of a job the pool did not run to the
-    end (the API's and the editor's one wording)."""
+def describe_failure(exc: Exception, pool: PlanPool, kind: str = "plan") -> tuple[int, dict]:
+    """The HTTP status and ``{code, message, field}`` of a job of ``kind`` the pool did not
+    run to the end (the API's and the editor's one wording)."""
     if isinstance(exc, TooMuchWork):
         return 422, too_much_work(exc.estimate, exc.limit_s)
     if isinstance(exc, WorkerOutOfMemory):
         return 422, {"code": "too_much_memory", "message": str(exc), "field": None}
     if isinstance(exc, JobTimeout):
-        return 422, timeout(pool.timeout_s)
+        return 422, import_timeout(pool.timeout_s) if kind == "import" else timeout(pool.timeout_s)
     if isinstance(exc, PoolBusy):
         return 503, {"code": "busy", "message": f"too many plans in progress ({exc}); retry shortly", "field": None}
     if isinstance(exc, WorkerCrashed):

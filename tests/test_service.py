@@ -133,6 +133,34 @@ def test_memory_cap_stops_a_plan_with_a_clear_error_and_the_worker_is_replaced()
         pool.close()
 
 
+def test_editor_reads_drawings_on_the_pool_under_the_same_limits():
+    """Under `rangeplan serve` the editor's Files tab reads a drawing on the API's workers
+    (their compute limit and memory cap), with the answer it gets in-process and the same
+    errors (a curve too fine for a shape: too_large naming flatten_tolerance)."""
+    from app.editor import _planning
+    from planner.errors import PlannerError
+    from tests.drawings import DRAWINGS
+
+    data = (DRAWINGS / "Table-dining-E.dxf").read_bytes()
+    options = {"scale": 0.05, "offset": [0.0, 0.0225], "margin": 0.03}
+    inline, _ = _planning.drawing_request(data, "table.dxf", TABLE1, options)
+    pool = PlanPool(workers=1, timeout_s=30.0)
+    _planning.use_pool(pool)
+    try:
+        pooled, summary = _planning.drawing_request(data, "table.dxf", TABLE1, options)
+        assert pool.jobs_run == 1 and pooled == inline and "1 obstacle(s)" in summary
+        with pytest.raises(PlannerError) as e:
+            _planning.drawing_request(data, "table.dxf", TABLE1, {**options, "flatten_tolerance": 1e-9,
+                                                                  "scale": 100.0})
+        assert (e.value.code, e.value.field) == ("too_large", "flatten_tolerance") and pool.jobs_run == 2
+        with pytest.raises(PlannerError) as e:  # options are validated before a job is queued
+            _planning.drawing_request(data, "table.dxf", TABLE1, {"scale": -1})
+        assert (e.value.code, e.value.field) == ("invalid_input", "scale") and pool.jobs_run == 2
+    finally:
+        _planning.use_pool(None)
+        pool.close()
+
+
 def test_editor_plans_on_the_pool_under_the_same_limits():
     """With a pool (as under `rangeplan serve`) the editor's re-plans are jobs of that pool:
     a plan arrives, the pool counts the job, and too much work is the API's too_much_work."""

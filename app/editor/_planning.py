@@ -42,7 +42,10 @@ from planner.schema import (
     DEFAULT_ROBOT,
     MAX_LEGS,
     MODE_DEFAULTS,
+    PARTIAL_LAYOUT,
     Cell,
+    ImportOptions,
+    ImportResult,
     Layout,
     Settings,
     builtin_robot_names,
@@ -170,10 +173,11 @@ def to_csv(result: dict) -> str:
 
 def drawing_request(data: bytes, filename: str, request: dict, options: dict) -> tuple[dict, str]:
     """``request`` with its layout's bounds and obstacles replaced by a drawing's
-    (:func:`planner.exchange.import_drawing` with ``options``); start, end, cell, clearance
-    and psi range stay. Returns the new request and a one-line summary; raises
-    :class:`PlannerError` naming the cause for a bad drawing."""
-    res = import_drawing(data, options, filename=filename)
+    (:func:`planner.exchange.import_drawing` with ``options``, on the pool of :func:`use_pool`
+    when there is one: the API's workers, compute limit and memory cap); start, end, cell,
+    clearance and psi range stay. Returns the new request and a one-line summary; raises
+    :class:`PlannerError` naming the cause for a bad drawing (or too much work)."""
+    res = _read_drawing(data, filename, options)
     layout = dict(request.get("layout") or {})
     imported = res.to_json_dict()["layout"]
     layout["bounds"], layout["obstacles"] = imported["bounds"], imported["obstacles"]
@@ -185,6 +189,29 @@ def drawing_request(data: bytes, filename: str, request: dict, options: dict) ->
     summary = (f"{len(rep.shapes)} obstacle(s), {rep.holes} hole(s) from layers {', '.join(rep.layers)}; units "
                f"{rep.units} ({rep.units_source}); {len(rep.open_chains)} open chain(s) left out")
     return {**request, "layout": layout}, summary
+
+
+def _read_drawing(data: bytes, filename: str, options: dict) -> ImportResult:
+    pool = _pool
+    if pool is None:
+        return import_drawing(data, options, filename=filename)
+    from app.workers import describe_failure
+
+    try:
+        opts = ImportOptions.model_validate(options)
+    except ValidationError as exc:
+        raise planner_error(exc) from None
+    job = {"kind": "import", "data": data, "options": opts, "filename": filename, "content_type": None}
+    try:
+        out = pool.run(job)
+    except Exception as exc:  # time limit, busy, a worker died
+        e = describe_failure(exc, pool, "import")[1]
+        raise PlannerError(e["code"], e["message"], e["field"]) from None
+    if out[0] == "ok":
+        return ImportResult.model_validate_json(out[1], context=PARTIAL_LAYOUT)
+    if out[0] == "error":
+        raise PlannerError(out[1]["code"], out[1]["message"], out[1].get("field"))
+    raise PlannerError("internal_error", "reading the drawing failed unexpectedly: " + str(out[1]).splitlines()[0])
 
 
 def export_result(result: dict, fmt: str, request: dict) -> str:
