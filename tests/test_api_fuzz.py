@@ -16,7 +16,9 @@ from tests.fuzz.runner import run
 VARIED = ["POST /v1/plan", "POST /v1/segment", "POST /v1/corridors", "GET /v1/corridors",
           "PUT /v1/corridors/{corridor_id}", "GET /v1/corridors/{corridor_id}",
           "DELETE /v1/corridors/{corridor_id}", "POST /v1/corridors/{corridor_id}/plan",
-          "GET /v1/plans/{plan_id}", "GET /v1/robots/{name}"]
+          "GET /v1/plans/{plan_id}", "GET /v1/robots/{name}", "POST /v1/import", "POST /v1/batches",
+          "GET /v1/batches", "GET /v1/batches/{batch_id}", "GET /v1/batches/{batch_id}/results",
+          "POST /v1/batches/{batch_id}/cancel", "DELETE /v1/batches/{batch_id}"]
 
 
 @pytest.mark.slow
