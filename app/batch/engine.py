@@ -41,6 +41,25 @@ FORMATS: dict[str, tuple[str | None, Any]] = {
 #: ``distributed.get_worker()``; anything else is the calling process (``inline``).
 #: ``memory_mb``: this process's memory cap (:func:`warm_worker`), named by a memory error
 _ENGINE: dict[str, Any] = {"name": "inline", "memory_mb": None}
+#: whether this process has loaded the compiled kernels (:func:`_load_kernels`)
+_KERNELS = {"loaded": False}
+_KERNELS_LOCK = threading.Lock()
+
+
+def _load_kernels() -> float:
+    """Load (or compile) the planner's kernels once per process; returns the seconds taken.
+    Done before the first compute limit is armed: the limit raises its exception in the
+    planning thread at the next bytecode, and raised inside numba while it loads a kernel
+    from its cache it crashed the process (a segmentation fault in ``set_env``)."""
+    with _KERNELS_LOCK:
+        if _KERNELS["loaded"]:
+            return 0.0
+        try:
+            return warm_up()
+        except Exception:  # the first plan compiles instead
+            return 0.0
+        finally:
+            _KERNELS["loaded"] = True
 
 
 class ItemTimeout(BaseException):
@@ -79,10 +98,7 @@ def warm_worker(engine: str = "local", nice: int = 0, memory_mb: int | None = No
             os.nice(nice)
         except OSError:
             pass
-    try:
-        seconds = warm_up()
-    except Exception:  # the first plan compiles instead
-        seconds = 0.0
+    seconds = _load_kernels()
     if memory_mb:
         limit_memory(memory_mb)
         _ENGINE["memory_mb"] = int(memory_mb)
@@ -150,6 +166,8 @@ def plan_item(request: str | bytes | dict | PlanRequest, fmt: str = "json",
     try:
         if fmt not in FORMATS:
             raise PlannerError("invalid_input", f"unknown format {fmt!r}; one of {', '.join(FORMATS)}", "format")
+        if timeout_s:
+            _load_kernels()  # never under the limit (see there)
         with _Deadline(timeout_s):
             if isinstance(request, (str, bytes)):
                 req = PlanRequest.model_validate_json(request)
