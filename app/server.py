@@ -71,7 +71,6 @@ def serve(host: str = "127.0.0.1", port: int = 8000, editor_port: int = 8080, ed
     if seeded:
         _log(seeded)
 
-
     from app.api import create_app
     from app.storage import Store, default_data_dir
     from app.workers import PlanPool
