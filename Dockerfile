@@ -16,9 +16,12 @@ ARG BASE_IMAGE=python:3.11-slim
 FROM ${BASE_IMAGE} AS deps
 ENV PIP_NO_CACHE_DIR=1 PIP_DISABLE_PIP_VERSION_CHECK=1 PYTHONDONTWRITEBYTECODE=1
 COPY container/requirements.lock /tmp/requirements.lock
-# a venv without pip (the base's pip installs into it); hashes checked; the test suites of
-# numpy, scipy, numba, llvmlite and shapely and viser's client sources (the built client
-# stays) dropped (90 MB, never imported); the symbol tables of the packages' compiled
+# a venv without pip (the base's pip installs into it); hashes checked; dropped, never
+# imported (~130 MB): every package's test suite, the C, C++ and Cython sources, headers
+# and type stubs shipped in the wheels, viser's client sources (the built client stays),
+# dask's collections (dask.dataframe needs pandas, which is not installed; batches use only
+# distributed's executor) and pygments (rich's syntax highlighting; the batch progress bar
+# does not use it); the symbol tables of the packages' compiled
 # modules stripped (57 MB; binutils only in this stage, skipped if the Debian mirror cannot be
 # reached; not the vendored *.libs, which patchelf has rewritten), then every compiled
 # dependency imported once so that a broken library fails the build, not the service
@@ -26,8 +29,10 @@ RUN python -m venv --without-pip /opt/venv \
     && python -m pip --python /opt/venv/bin/python install --quiet --no-deps --require-hashes \
        -r /tmp/requirements.lock \
     && cd /opt/venv/lib/python3.11/site-packages \
-    && find numpy scipy numba llvmlite shapely -depth -type d -name tests -exec rm -rf {} + \
-    && rm -rf viser/client/src && cd / \
+    && find . -depth -type d \( -name tests -o -name test \) -exec rm -rf {} + \
+    && find . -type f \( -name "*.c" -o -name "*.cpp" -o -name "*.h" -o -name "*.hpp" -o -name "*.pyx" \
+       -o -name "*.pxd" -o -name "*.pyi" \) -delete \
+    && rm -rf viser/client/src dask/dataframe dask/array dask/bag pygments && cd / \
     && rm /tmp/requirements.lock \
     && if command -v strip >/dev/null || { apt-get update -qq && DEBIAN_FRONTEND=noninteractive \
           apt-get install -y -qq --no-install-recommends binutils >/dev/null; }; then \
@@ -36,7 +41,7 @@ RUN python -m venv --without-pip /opt/venv \
        else echo "binutils not available: libraries left unstripped (image ~60 MB larger)"; fi \
     && /opt/venv/bin/python -c "import numpy, scipy.linalg, scipy.sparse.csgraph, numba, llvmlite.binding, \
 shapely, daqp, PIL.Image, zstandard, orjson, msgspec, pydantic_core, websockets, viser, uvicorn, fastapi, \
-ezdxf, svgelements, python_multipart, msgpack, psutil, tornado, yaml, dask, distributed"
+ezdxf, svgelements, python_multipart, msgpack, psutil, tornado, yaml, dask, distributed, rich.progress"
 
 # ---------------------------------------------------------------------------------------
 FROM ${BASE_IMAGE} AS app

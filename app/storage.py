@@ -39,6 +39,7 @@ from __future__ import annotations
 import json
 import os
 import sqlite3
+import stat
 import threading
 import uuid
 from collections.abc import Iterator
@@ -153,6 +154,30 @@ def new_id() -> str:
     return uuid.uuid4().hex
 
 
+def _share_with_group(path: Path) -> None:
+    """In a directory its group may write (a container's ``/data``: group 0, any uid), make
+    the database file writable by that group too, whoever creates it: a service run under
+    another uid of the group (Kubernetes ``runAsUser``, OpenShift) must write what an earlier
+    one made (SQLite gives the ``-wal`` and ``-shm`` files the database's permissions). A
+    file made before, by this uid, gets the group's write bit; elsewhere the umask rules."""
+    try:
+        if not os.stat(path.parent).st_mode & stat.S_IWGRP:
+            return
+        try:
+            fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o660)
+        except FileExistsError:
+            st = os.stat(path)
+            if st.st_uid == os.getuid() and not st.st_mode & stat.S_IWGRP:
+                os.chmod(path, stat.S_IMODE(st.st_mode) | stat.S_IRGRP | stat.S_IWGRP)
+            return
+        try:
+            os.fchmod(fd, 0o660)  # not narrowed by the umask
+        finally:
+            os.close(fd)
+    except OSError:  # not ours to change: SQLite says what it cannot do
+        pass
+
+
 class Connections:
     """Per-thread connections to one SQLite file, opened on first use and kept (closing the
     last connection to a WAL database checkpoints it, which made every call ~15x slower),
@@ -160,6 +185,7 @@ class Connections:
 
     def __init__(self, path: Path):
         self.path = path
+        _share_with_group(path)
         self._local = threading.local()
         self._all: list[sqlite3.Connection] = []
         self._all_lock = threading.Lock()

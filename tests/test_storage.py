@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import sqlite3
 import threading
 from datetime import datetime
@@ -253,3 +254,35 @@ def test_file_from_before_the_quotas_gets_sizes(tmp_path):
     assert st.usage()["corridors"] == 2 * len(text.encode())
     assert [r["bytes"] for r in st.corridor_page()[0]] == [len(text.encode())] * 2
     assert st.update_corridor(f"{0:032x}", TABLE1, name="dup")["name"] == "dup"  # keeps its old name
+
+
+def test_database_in_a_group_writable_directory_is_group_writable(tmp_path):
+    """A container's /data is writable by group 0 for any uid (Kubernetes runAsUser,
+    OpenShift): the database (and SQLite's -wal and -shm beside it) made by one uid must be
+    writable by another of the group, whatever the umask; elsewhere the umask rules."""
+    import stat
+
+    shared, private = tmp_path / "shared", tmp_path / "private"
+    shared.mkdir(mode=0o2775)
+    shared.chmod(0o2775)
+    private.mkdir(mode=0o755)
+    private.chmod(0o755)
+    old = os.umask(0o022)
+    try:
+        s = Store(shared)
+        s.create_corridor({"segments": []}, name="a")
+        modes = {p.name: stat.S_IMODE(p.stat().st_mode) for p in shared.iterdir()}
+        assert "rangeplan.sqlite3-wal" in modes, modes
+        assert all(m & 0o060 == 0o060 for m in modes.values()), {k: oct(m) for k, m in modes.items()}
+        assert all(m & 0o007 == 0 for m in modes.values()), "not readable by others"
+        s.close()
+        p = Store(private)
+        p.create_corridor({"segments": []}, name="a")
+        assert stat.S_IMODE((private / "rangeplan.sqlite3").stat().st_mode) == 0o644  # the umask's
+        p.close()
+        # a file made before (without the group's write bit) gets it when its owner opens it
+        (private / "rangeplan.sqlite3").rename(shared / "old.sqlite3")
+        Store(shared / "old.sqlite3").close()
+        assert stat.S_IMODE((shared / "old.sqlite3").stat().st_mode) & 0o060 == 0o060
+    finally:
+        os.umask(old)
