@@ -9,11 +9,14 @@ export OPENBLAS_NUM_THREADS := 1
 export OMP_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 
-.PHONY: run test lint install browser linuxcnc bench clean
+.PHONY: run test lint install browser linuxcnc bench clean lock container-test
 
-$(STAMP): pyproject.toml
+# the runtime dependencies from the lock first (the versions the container image runs), then
+# rangeplan and its test tools around them
+$(STAMP): pyproject.toml container/requirements.lock
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet --require-hashes -r container/requirements.lock
 	$(PY) -m pip install --quiet -e '.[test]'
 	$(PY) -m planner
 	touch $(STAMP)
@@ -47,6 +50,26 @@ test: $(STAMP) browser linuxcnc lint
 
 bench: $(STAMP)
 	$(PY) benchmarks/bench_planner.py
+
+# re-pin the runtime dependencies of pyproject.toml (with hashes) for the image and `make install`
+lock: $(STAMP)
+	$(PY) -m pip install --quiet "pip-tools>=7.4"
+	$(VENV)/bin/pip-compile --quiet --generate-hashes --strip-extras --allow-unsafe --no-emit-index-url \
+	  --no-emit-find-links --output-file container/requirements.lock pyproject.toml
+
+# Opt-in (root, podman or docker; not part of `make test`): build the image and run it as a
+# deployment would (tests/test_container.py). Without access to a registry the base image is
+# a stand-in built from Debian packages (container/stand-in-base.sh); the output says so.
+CONTAINER_ENGINE ?= $(shell command -v podman >/dev/null 2>&1 && echo podman || echo docker)
+BASE_IMAGE ?= python:3.11-slim
+IMAGE ?= localhost/rangeplan:test
+container-test: $(STAMP)
+	@command -v $(CONTAINER_ENGINE) >/dev/null 2>&1 || { echo "installing podman from Debian"; \
+	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
+	  podman runc buildah fuse-overlayfs uidmap debootstrap >/dev/null; }
+	CONTAINER_ENGINE=$(CONTAINER_ENGINE) BASE_IMAGE=$(BASE_IMAGE) IMAGE=$(IMAGE) container/build.sh
+	RANGEPLAN_CONTAINER_IMAGE=$(IMAGE) CONTAINER_ENGINE=$(CONTAINER_ENGINE) $(PY) -m pytest -q -p no:cacheprovider \
+	  -m container tests/test_container.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -1,25 +1,30 @@
 """The HTTP planning service (FastAPI): POST a corridor, get a trajectory.
 
-Endpoints (OpenAPI at ``/docs``; SI units in every field description)::
+Endpoints (OpenAPI at ``/docs``, ReDoc at ``/redoc``, both served offline; SI units in every
+field description)::
 
-    GET  /health                      liveness + pool state (answers while plans run)
+    GET  /health                      liveness (answers while plans run; no data)
+    GET  /ready                       200 once the workers have loaded the kernels and can plan, else 503
     GET  /v1/robots, /v1/robots/{n}   built-in robot descriptions
     POST /v1/plan                     plan request -> result JSON (CSV: Accept: text/csv or ?format=csv;
                                       machine output: ?format=gcode | joints | dxf)
     POST /v1/import                   DXF/SVG drawing -> {"layout", "report"}
     POST /v1/segment                  request with a layout -> cells and corridor, no planning
-    POST/GET /v1/corridors            save / list corridors (SQLite)
+    POST/GET /v1/corridors            save / list corridors (SQLite; lists by page, ?limit=&cursor=)
     GET/PUT/DELETE /v1/corridors/{id} one saved corridor
     POST /v1/corridors/{id}/plan      plan a saved corridor
     GET  /v1/plans/{id}               a stored plan result again (any ?format=)
     GET  /                            landing page (static/)
 
-Every 4xx/5xx has one body shape: ``{"error": {"code", "message", "field"}}``. Planning runs in
-worker processes (:mod:`app.workers`) with a per-request compute limit; request bodies are
-limited in size before parsing. Configuration by environment: ``RANGEPLAN_DATA_DIR``,
-``RANGEPLAN_WORKERS`` (default: CPU count), ``RANGEPLAN_PLAN_TIMEOUT_S`` (30),
-``RANGEPLAN_MAX_BODY_BYTES`` (2 MiB), ``RANGEPLAN_MAX_QUEUE`` (64), ``RANGEPLAN_EXECUTOR``
-(``process`` | ``thread``).
+Every 4xx/5xx has one body shape: ``{"error": {"code", "message", "field"}}`` (:mod:`app.errors`).
+Planning runs in worker processes (:mod:`app.workers`) with a per-request compute limit, a
+work estimate checked before a job is queued and a memory limit per worker; request bodies
+are limited in size before parsing (:mod:`app.middleware`); the token, Host, origin and CORS
+rules are :mod:`app.security`; storage quotas and the duplicate-name rule :mod:`app.storage`.
+Configuration by environment: ``RANGEPLAN_DATA_DIR``, ``RANGEPLAN_WORKERS`` (default: CPU
+count), ``RANGEPLAN_PLAN_TIMEOUT_S`` (30), ``RANGEPLAN_MAX_BODY_BYTES`` (2 MiB),
+``RANGEPLAN_MAX_QUEUE`` (64), ``RANGEPLAN_EXECUTOR`` (``process`` | ``thread``),
+``RANGEPLAN_WORKER_MEMORY_MB`` (2048), and those of :mod:`app.security` and :mod:`app.storage`.
 """
 
 from __future__ import annotations
@@ -40,6 +45,8 @@ from pydantic import BaseModel, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from app.batch.api import batch_router
+from app.docs import install_docs
+from app.errors import CODES_BY_STATUS, error_response, errors_doc, validation_response
 from app.http_exchange import (
     FORMAT_HELP,
     PlanFormat,
@@ -49,8 +56,29 @@ from app.http_exchange import (
     plan_content,
     read_drawing,
 )
-from app.storage import Store, default_data_dir
-from app.workers import JobTimeout, PlanPool, PoolBusy, WorkerCrashed
+from app.middleware import BodySizeLimit
+from app.security import AccessPolicy, install_access_control
+from app.storage import (
+    CURSOR_PATTERN,
+    DEFAULT_PAGE_SIZE,
+    MAX_PAGE_SIZE,
+    BadCursor,
+    NameTaken,
+    QuotaError,
+    Store,
+    StoreFull,
+    TooLarge,
+    default_data_dir,
+)
+from app.workers import (
+    DEFAULT_MEMORY_MB,
+    JobTimeout,
+    PlanPool,
+    PoolBusy,
+    TooMuchWork,
+    WorkerCrashed,
+    describe_failure,
+)
 from planner.errors import PlannerError
 from planner.exchange import EXPORT_FORMATS, export
 from planner.orchestrator import to_csv
@@ -70,69 +98,55 @@ from planner.schema import (
 )
 
 VERSION = "0.1.0"
+#: the landing page (``RANGEPLAN_STATIC_DIR`` overrides: an installed package has no ``static/``)
 STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
 DEFAULT_MAX_BODY = 2 * 1024 * 1024
 DEFAULT_TIMEOUT_S = 30.0
 
-_CODES_BY_STATUS = {400: "bad_request", 404: "not_found", 405: "method_not_allowed", 406: "not_acceptable",
-                    413: "too_large", 415: "unsupported_media_type", 422: "invalid_input", 503: "busy"}
-
-
 # ---------------------------------------------------------------------------------------
 # response models (OpenAPI documentation; results are sent as pre-serialised JSON)
 
-class ErrorDetail(BaseModel):
-    code: str = Field(description="Stable machine-readable cause: invalid_input, unreachable, singular, "
-                      "not_settled, diverged, no_path, infeasible, too_large, timeout, not_found, busy, "
-                      "unavailable, internal_error, ...")
-    message: str = Field(description="Plain-language explanation")
-    field: str | None = Field(None, description="Path of the request field at fault, e.g. 'segments[3].lower'")
-    details: list[dict[str, Any]] | None = Field(None, description="All validation failures "
-                                                 "[{field, message}] when there are several")
+class CorridorSummaryModel(BaseModel):
+    id: str = Field(description="Corridor id (uuid4 hex)")
+    name: str | None = Field(description="Corridor name (unique among corridors)")
+    created: str = Field(description="Creation time, ISO-8601 UTC")
+    updated: str = Field(description="Last update time, ISO-8601 UTC")
+    bytes: int = Field(description="Size of the stored request JSON in bytes")
 
 
-class ErrorResponse(BaseModel):
-    error: ErrorDetail
+class CorridorPageModel(BaseModel):
+    items: list[CorridorSummaryModel] = Field(description="Corridors of this page, oldest first (no requests: "
+                                              "GET /v1/corridors/{id} for one)")
+    next_cursor: str | None = Field(description="Pass as ?cursor= for the next page; null on the last page")
 
 
 class HealthModel(BaseModel):
-    status: str = Field(description="'ok'")
+    status: str = Field(description="'ok': the server process answers (see /ready for planning)")
     version: str = Field(description="rangeplan version")
-    pool: dict[str, Any] = Field(description="Planning pool: mode, workers, jobs in flight, time limit (s)")
+    pool: dict[str, Any] = Field(description="Planning pool: mode, workers, jobs in flight, time limit (s), memory "
+                                 "limit per worker (MiB)")
     editor_port: int | None = Field(description="TCP port of the browser editor, if it runs")
 
 
-def _errors(*statuses: int) -> dict:
-    return {s: {"model": ErrorResponse, "description": {404: "Unknown id", 413: "Body too large",
-                                                        415: "Not a drawing's content type",
-                                                        422: "Invalid input or planner error",
-                                                        503: "Too many plans queued",
-                                                        500: "Internal error"}.get(s, "Error")} for s in statuses}
+class ReadyModel(BaseModel):
+    status: str = Field(description="'ready', 'starting' (workers still loading the planner) or 'failed'")
+    workers_ready: int = Field(description="Planning workers that have loaded the kernels (count)")
+    workers: int = Field(description="Planning workers (count)")
+    failures: list[str] = Field(description="Why workers cannot plan, if any")
 
 
+_PLAN_HEADERS = {"Location": {"description": "GET this to fetch the result again (absent if not stored)",
+                              "schema": {"type": "string"}},
+                 "X-Plan-Id": {"description": "The plan's id (absent if not stored)", "schema": {"type": "string"}}}
 _PLAN_RESPONSES = {200: {"model": PlanResult, "description": "The planned trajectory (JSON, or CSV with a "
                          "header naming each column with its unit)",
-                         "content": plan_content()},
-                   **_errors(413, 422, 503)}
-
-
-# ---------------------------------------------------------------------------------------
-# errors
-
-def error_response(status: int, code: str, message: str, field: str | None = None,
-                   details: list | None = None, headers: dict | None = None) -> JSONResponse:
-    err = {"code": code, "message": message, "field": field}
-    if details:
-        err["details"] = details
-    return JSONResponse({"error": err}, status_code=status, headers=headers)
-
-
-def _validation_response(exc: RequestValidationError) -> JSONResponse:
-    """422 with the first failing field (planner.schema's paths: ``segments[3].lower``)."""
-    details = error_details(exc.errors())
-    first = details[0] if details else {"code": "invalid_input", "field": None, "message": "invalid input"}
-    more = [{"field": d["field"], "message": d["message"]} for d in details] if len(details) > 1 else None
-    return error_response(422, first["code"], first["message"], first["field"], more)
+                         "content": plan_content(), "headers": _PLAN_HEADERS,
+                         "links": {"GetPlan": {"operationId": "get_plan",
+                                               "parameters": {"plan_id": "$response.header.X-Plan-Id"}}}},
+                   **errors_doc(413, 422, 503)}
+_CORRIDOR_LINKS = {name: {"operationId": op, "parameters": {"corridor_id": "$response.body#/id"}}
+                   for name, op in (("GetCorridor", "get_corridor"), ("UpdateCorridor", "update_corridor"),
+                                    ("DeleteCorridor", "delete_corridor"), ("PlanCorridor", "plan_corridor"))}
 
 
 def _attachment(plan_id: str | None, fmt: str) -> str:
@@ -149,63 +163,6 @@ def _stored_layout(store: Store, plan_id: str):
 
 
 # ---------------------------------------------------------------------------------------
-# body size limit (before parsing)
-
-class _TooLarge(StarletteHTTPException):
-    def __init__(self, limit: int):
-        super().__init__(413, f"request body larger than the limit of {limit} bytes")
-
-
-class BodySizeLimit:
-    """Reject bodies over ``limit`` bytes with 413: by Content-Length up front, and by
-    counting the streamed bytes (chunked bodies, lying headers)."""
-
-    def __init__(self, app, limit: int):
-        self.app, self.limit = app, limit
-
-    async def __call__(self, scope, receive, send):
-        if scope["type"] != "http":
-            return await self.app(scope, receive, send)
-        for k, v in scope.get("headers", ()):
-            if k == b"content-length":
-                try:
-                    n = int(v)
-                except ValueError:
-                    n = -1
-                if n < 0:
-                    return await error_response(400, "bad_request", "invalid Content-Length header")(
-                        scope, receive, send)
-                if n > self.limit:
-                    return await error_response(413, "too_large", f"request body of {n} bytes is larger "
-                                                f"than the limit of {self.limit} bytes")(scope, receive, send)
-        seen = 0
-        limit = self.limit
-
-        async def limited():
-            nonlocal seen
-            msg = await receive()
-            if msg["type"] == "http.request":
-                seen += len(msg.get("body", b""))
-                if seen > limit:
-                    raise _TooLarge(limit)
-            return msg
-
-        started = False
-
-        async def tracking_send(msg):
-            nonlocal started
-            if msg["type"] == "http.response.start":
-                started = True
-            await send(msg)
-
-        try:
-            await self.app(scope, limited, tracking_send)
-        except _TooLarge as exc:
-            if not started:
-                await error_response(413, "too_large", exc.detail)(scope, receive, send)
-
-
-# ---------------------------------------------------------------------------------------
 # the app
 
 def _env_float(name: str, default: float) -> float:
@@ -217,15 +174,22 @@ def _env_float(name: str, default: float) -> float:
 
 def create_app(store: Store | None = None, *, workers: int | None = None, timeout_s: float | None = None,
                max_body_bytes: int | None = None, max_queue: int | None = None, executor: str | None = None,
-               editor_port: int | None = None) -> FastAPI:
+               editor_port: int | None = None, access: AccessPolicy | None = None, pool: PlanPool | None = None,
+               memory_mb: int | None = None) -> FastAPI:
     """The FastAPI app. ``store`` defaults to the SQLite file in :func:`default_data_dir`;
-    other arguments default to the ``RANGEPLAN_*`` environment variables."""
+    ``access`` to :meth:`AccessPolicy.from_env`; other arguments to the ``RANGEPLAN_*``
+    environment variables. ``pool``: a planning pool shared with the editor (the caller
+    closes it); by default the app starts and closes its own."""
     store = store if store is not None else Store(default_data_dir())
     workers = workers or int(_env_float("RANGEPLAN_WORKERS", os.cpu_count() or 1))
     timeout_s = timeout_s or _env_float("RANGEPLAN_PLAN_TIMEOUT_S", DEFAULT_TIMEOUT_S)
     max_body = max_body_bytes or int(_env_float("RANGEPLAN_MAX_BODY_BYTES", DEFAULT_MAX_BODY))
     max_queue = max_queue if max_queue is not None else int(_env_float("RANGEPLAN_MAX_QUEUE", 64))
     executor = executor or os.environ.get("RANGEPLAN_EXECUTOR", "process")
+    memory_mb = memory_mb if memory_mb is not None else int(_env_float("RANGEPLAN_WORKER_MEMORY_MB",
+                                                                       DEFAULT_MEMORY_MB))
+    access = access if access is not None else AccessPolicy.from_env()
+    shared_pool = pool
 
     start_lock = threading.Lock()
 
@@ -234,7 +198,7 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
         lifespan, e.g. some ASGI test transports)."""
         with start_lock:
             if getattr(app.state, "pool", None) is None:
-                pool = PlanPool(workers, timeout_s, max_queue, mode=executor)
+                pool = shared_pool or PlanPool(workers, timeout_s, max_queue, mode=executor, memory_mb=memory_mb)
                 app.state.threads = ThreadPoolExecutor(max_workers=pool.capacity + 4,
                                                        thread_name_prefix="rangeplan-wait")
                 app.state.pool = pool
@@ -244,7 +208,8 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
         with start_lock:
             pool, app.state.pool = getattr(app.state, "pool", None), None
             if pool is not None:
-                pool.close()
+                if pool is not shared_pool:
+                    pool.close()
                 app.state.threads.shutdown(wait=False, cancel_futures=True)
 
     @asynccontextmanager
@@ -263,28 +228,50 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
                     "drive-force-aware trajectory for the full robot dynamics. SI units throughout: m, rad, "
                     "s, N. Errors: `{\"error\": {\"code\", \"message\", \"field\"}}`.",
         lifespan=lifespan,
+        docs_url=None,
+        redoc_url=None,  # served offline by app.docs
     )
     app.state.store = store
     app.state.editor_port = editor_port
     app.state.pool = None
     app.state.close_pool = lambda: close_pool(app)
+    # the bounds of one plan, also those of each batch item (app.batch: its own workers)
+    app.state.plan_limits = {"timeout_s": shared_pool.timeout_s if shared_pool else timeout_s,
+                             "memory_mb": shared_pool.memory_mb if shared_pool else memory_mb}
     app.add_middleware(BodySizeLimit, limit=max_body)
     app.include_router(batch_router())  # /v1/batches (app/batch/): batches on their own workers
+    install_access_control(app, access)  # outside the body limit: refused before the body is read
+    app.state.access = access
 
     @app.exception_handler(RequestValidationError)
     async def _on_validation(request: Request, exc: RequestValidationError):
-        return _validation_response(exc)
+        return validation_response(exc)
 
     @app.exception_handler(StarletteHTTPException)
     async def _on_http(request: Request, exc: StarletteHTTPException):
         if exc.status_code == 400 and exc.detail == "There was an error parsing the body":
             # FastAPI's answer to a body that is not UTF-8: invalid JSON like any other
             return error_response(422, "invalid_input", "body is not valid JSON (it must be UTF-8 text)")
-        code = _CODES_BY_STATUS.get(exc.status_code, "http_error")
+        code = CODES_BY_STATUS.get(exc.status_code, "http_error")
         msg = exc.detail if isinstance(exc.detail, str) else json.dumps(exc.detail)
+        headers = getattr(exc, "headers", None)
+        if exc.status_code == 405:  # every method of the path, not only those of the first route that matched it
+            allowed = sorted({m for r in request.app.routes if getattr(r, "methods", None)
+                              and r.path_regex.match(request.url.path) for m in r.methods})
+            headers = {**(headers or {}), "Allow": ", ".join(allowed)}
+            msg = f"{request.method} is not allowed on {request.url.path}; allowed: {', '.join(allowed)}"
         if exc.status_code == 404 and msg == "Not Found":
             msg = f"no such resource: {request.url.path}"
-        return error_response(exc.status_code, code, msg, headers=getattr(exc, "headers", None))
+        return error_response(exc.status_code, code, msg, headers=headers)
+
+    @app.exception_handler(QuotaError)
+    async def _on_quota(request: Request, exc: QuotaError):
+        if isinstance(exc, NameTaken):
+            return error_response(409, "name_taken", str(exc), "name")
+        if isinstance(exc, TooLarge):
+            return error_response(413, "too_large", str(exc))
+        assert isinstance(exc, StoreFull)
+        return error_response(507, "storage_full", str(exc))
 
     @app.exception_handler(PlannerError)
     async def _on_planner(request: Request, exc: PlannerError):
@@ -299,19 +286,10 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
         loop = asyncio.get_running_loop()
         try:
             out: Any = await loop.run_in_executor(request.app.state.threads, pool.run, job)
-        except JobTimeout:
-            if job["kind"] == "import":
-                return error_response(422, "timeout", f"reading the drawing took longer than the compute limit of "
-                                      f"{pool.timeout_s:g} s and was stopped; choose fewer layers or a larger "
-                                      "flatten_tolerance", "drawing")
-            return error_response(422, "timeout", f"planning took longer than the compute limit of "
-                                  f"{pool.timeout_s:g} s and was stopped; use fewer segments or samples, "
-                                  "a shorter settings.tail_max_s, or a larger settings.Ts")
-        except PoolBusy as exc:
-            return error_response(503, "busy", f"too many plans in progress ({exc}); retry shortly",
-                                  headers={"Retry-After": "1"})
-        except WorkerCrashed as exc:
-            return error_response(500, "internal_error", f"the planning process died: {exc}")
+        except (JobTimeout, TooMuchWork, PoolBusy, WorkerCrashed) as exc:
+            status, e = describe_failure(exc, pool, job["kind"])
+            return error_response(status, e["code"], e["message"], e["field"],
+                                  headers={"Retry-After": "1"} if status == 503 else None)
         if out[0] == "error":
             e = out[1]
             return error_response(422, e["code"], e["message"], e.get("field"))
@@ -348,10 +326,21 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
     # -- service --------------------------------------------------------------------------
     @app.get("/health", response_model=HealthModel, tags=["service"])
     async def health(request: Request):
-        """Liveness: answers immediately, also while plans run."""
+        """Liveness: answers immediately, also while plans run (no data; for planning see /ready)."""
         pool = getattr(request.app.state, "pool", None)
         return {"status": "ok", "version": VERSION, "pool": pool.stats() if pool else {},
                 "editor_port": request.app.state.editor_port}
+
+    @app.get("/ready", response_model=ReadyModel, tags=["service"],
+             responses={503: {"model": ReadyModel, "description": "Not ready: the workers are loading the planner "
+                              "or cannot plan"}})
+    async def ready(request: Request):
+        """Readiness: 200 once at least one worker has loaded the planner's kernels and none
+        has failed to; 503 before (or when they cannot plan). The container's health check."""
+        state = ensure_pool(request.app).readiness()
+        body = {"status": "ready" if state["ready"] else "failed" if state["failures"] else "starting",
+                "workers_ready": state["workers_ready"], "workers": state["workers"], "failures": state["failures"]}
+        return JSONResponse(body, status_code=200 if state["ready"] else 503)
 
     @app.get("/v1/robots", response_model=list[RobotSummary], tags=["robots"])
     def robots() -> list[RobotSummary]:
@@ -359,7 +348,7 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
         return [RobotSummary(name=name, description=builtin_description(name).description,
                              legs=builtin_description(name).n_legs) for name in builtin_robot_names()]
 
-    @app.get("/v1/robots/{name}", response_model=RobotDescription, tags=["robots"], responses=_errors(404))
+    @app.get("/v1/robots/{name}", response_model=RobotDescription, tags=["robots"], responses=errors_doc(404))
     def robot(name: str) -> RobotDescription:
         """A built-in robot's full description (pivots in m, masses in kg, inertias in kg m^2,
         limits in m, N, m/s); the same object a request may give as ``robot``."""
@@ -378,7 +367,7 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
     @app.post("/v1/import", tags=["planning"], response_class=Response, openapi_extra=import_openapi(),
               responses={200: {"model": ImportResult, "description": "The drawing as a layout (m, rad) and a "
                                "report of the shapes used, holes, pieces left open and the units applied"},
-                         **_errors(413, 415, 422, 503)})
+                         **errors_doc(413, 415, 422, 503)})
     async def import_drawing(request: Request):
         """Read a DXF or SVG drawing (the body, or a multipart file upload): its closed shapes
         become a layout's obstacles, placed by the query parameters (units, layers, offset [m],
@@ -394,15 +383,15 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
 
     @app.post("/v1/segment", tags=["planning"], response_class=Response,
               responses={200: {"model": SegmentationResult, "description": "Cells and corridor"},
-                         **_errors(413, 422, 503)})
+                         **errors_doc(413, 422, 503)})
     async def segment(body: PlanRequest, request: Request):
         """Segment a ``layout`` (workspace with obstacles) into cells and a corridor, without planning."""
         if body.layout is None:
             return error_response(422, "invalid_input", "a segmentation request needs a layout", "layout")
         return await run_job(request, {"kind": "segment", "request": body})
 
-    @app.get("/v1/plans/{plan_id}", tags=["planning"], response_class=Response, responses={
-        200: _PLAN_RESPONSES[200], **_errors(404)})
+    @app.get("/v1/plans/{plan_id}", tags=["planning"], response_class=Response, operation_id="get_plan", responses={
+        200: {k: v for k, v in _PLAN_RESPONSES[200].items() if k not in ("links", "headers")}, **errors_doc(404)})
     def get_plan(plan_id: str, request: Request, format: PlanFormat | None = Format, forces: bool = Forces):
         """A stored plan result (the newest plans are kept; see RANGEPLAN_MAX_PLANS)."""
         store: Store = request.app.state.store
@@ -432,45 +421,56 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
         return rec
 
     @app.post("/v1/corridors", status_code=201, response_model=CorridorRecord, response_model_exclude_unset=True,
-              tags=["corridors"],
-              responses=_errors(413, 422))
+              tags=["corridors"], operation_id="create_corridor",
+              responses={201: {"description": "The saved corridor", "links": _CORRIDOR_LINKS,
+                               "headers": {"Location": {"description": "The corridor's address",
+                                                        "schema": {"type": "string"}}}},
+                         **errors_doc(409, 413, 422, 507)})
     def create_corridor(body: PlanRequest, request: Request, response: Response):
-        """Save a plan request as a corridor; its name is the request's ``name``."""
+        """Save a plan request as a corridor; its name is the request's ``name``, unique among
+        corridors (409 if another has it: replace that one with PUT)."""
         rec = request.app.state.store.create_corridor(saved(body), body.name)
         response.headers["Location"] = f"/v1/corridors/{rec['id']}"
         return rec
 
-    @app.get("/v1/corridors", response_model=list[CorridorRecord], response_model_exclude_unset=True,
-             tags=["corridors"])
-    def list_corridors(request: Request):
-        """All saved corridors, oldest first."""
-        return request.app.state.store.list_corridors()
+    @app.get("/v1/corridors", response_model=CorridorPageModel, tags=["corridors"], operation_id="list_corridors",
+             responses={200: {"description": "A page of corridors", "links": {"NextPage": {
+                 "operationId": "list_corridors", "parameters": {"cursor": "$response.body#/next_cursor"}}}},
+                        **errors_doc(422)})
+    def list_corridors(request: Request,
+                       limit: int = Query(DEFAULT_PAGE_SIZE, ge=1, le=MAX_PAGE_SIZE, description="Corridors per page"),
+                       cursor: str | None = Query(None, pattern=CURSOR_PATTERN,
+                                                  description="next_cursor of the previous page")):
+        """Saved corridors a page at a time, oldest first, as summaries."""
+        try:
+            items, nxt = request.app.state.store.corridor_page(limit, cursor)
+        except BadCursor as exc:
+            return error_response(422, "invalid_input", str(exc), "cursor")
+        return {"items": items, "next_cursor": nxt}
 
     @app.get("/v1/corridors/{corridor_id}", response_model=CorridorRecord, response_model_exclude_unset=True,
-             tags=["corridors"],
-             responses=_errors(404))
+             tags=["corridors"], operation_id="get_corridor", responses=errors_doc(404))
     def get_corridor(corridor_id: str, request: Request):
         return get_or_404(request.app.state.store, corridor_id)
 
     @app.put("/v1/corridors/{corridor_id}", response_model=CorridorRecord, response_model_exclude_unset=True,
-             tags=["corridors"],
-             responses=_errors(404, 413, 422))
+             tags=["corridors"], operation_id="update_corridor", responses=errors_doc(404, 409, 413, 422, 507))
     def update_corridor(corridor_id: str, body: PlanRequest, request: Request):
-        """Replace a saved corridor's request (and name)."""
+        """Replace a saved corridor's request (and name: 409 if another corridor has it)."""
         rec = request.app.state.store.update_corridor(corridor_id, saved(body), body.name)
         if rec is None:
             raise StarletteHTTPException(404, f"no corridor with id {corridor_id!r}")
         return rec
 
     @app.delete("/v1/corridors/{corridor_id}", status_code=204, response_class=Response, tags=["corridors"],
-                responses=_errors(404))
+                operation_id="delete_corridor", responses=errors_doc(404))
     def delete_corridor(corridor_id: str, request: Request):
         if not request.app.state.store.delete_corridor(corridor_id):
             raise StarletteHTTPException(404, f"no corridor with id {corridor_id!r}")
         return Response(status_code=204)
 
     @app.post("/v1/corridors/{corridor_id}/plan", tags=["corridors"], response_class=Response,
-              responses={**_PLAN_RESPONSES, **_errors(404)})
+              operation_id="plan_corridor", responses={**_PLAN_RESPONSES, **errors_doc(404)})
     async def plan_corridor(corridor_id: str, request: Request, format: PlanFormat | None = Format,
                             forces: bool = Forces):
         """Plan a saved corridor; the result is stored with a link to the corridor."""
@@ -487,10 +487,24 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
                                   + e["message"], e["field"])
         return await plan_response(request, model, format, corridor_id, forces)
 
-    # -- landing page ---------------------------------------------------------------------
-    if STATIC_DIR.is_dir():
+    # -- documentation (offline) and landing page -------------------------------------------
+    install_docs(app)
+    # the landing page's files as routes of their own and the examples under /examples (no
+    # catch-all mount at "/": it answered every unknown method and path, preflights included, with 405)
+    static_dir = Path(os.environ.get("RANGEPLAN_STATIC_DIR") or STATIC_DIR)
+    if (static_dir / "index.html").is_file():
+        from fastapi.responses import FileResponse
         from fastapi.staticfiles import StaticFiles
-        app.mount("/", StaticFiles(directory=STATIC_DIR, html=True), name="static")
+
+        def serve_file(path: Path):
+            return lambda: FileResponse(path)
+
+        for f in sorted(static_dir.iterdir()):
+            if f.is_file():
+                app.add_api_route("/" if f.name == "index.html" else f"/{f.name}", serve_file(f), methods=["GET"],
+                                  include_in_schema=False)
+        if (static_dir / "examples").is_dir():
+            app.mount("/examples", StaticFiles(directory=static_dir / "examples"), name="examples")
     else:
         @app.get("/", include_in_schema=False)
         def root():

@@ -124,7 +124,8 @@ def cmd_import(args) -> int:
 def cmd_serve(args) -> int:
     from app.server import serve
 
-    return serve(host=args.host, port=args.port, editor_port=args.editor_port, editor=not args.no_editor)
+    return serve(host=args.host, port=args.port, editor_port=args.editor_port, editor=not args.no_editor,
+                 allow_unauthenticated=args.allow_unauthenticated)
 
 
 def add_import_parser(sub) -> None:
@@ -176,6 +177,8 @@ def build_parser() -> argparse.ArgumentParser:
     ps.add_argument("--editor-port", type=int, default=int(os.environ.get("RANGEPLAN_EDITOR_PORT", "8080")),
                     help="editor (viser) port (env RANGEPLAN_EDITOR_PORT, default 8080)")
     ps.add_argument("--no-editor", action="store_true", help="serve the API only")
+    ps.add_argument("--allow-unauthenticated", action="store_true",
+                    help="serve on a non-loopback address without a token (RANGEPLAN_API_TOKEN); refused otherwise")
     ps.set_defaults(func=cmd_serve)
     from app.batch.cli import add_parser as add_batch_parser  # `rangeplan batch` (app/batch/)
     add_batch_parser(sub)

@@ -11,11 +11,13 @@ Requests and results are the planner's own pydantic models (:mod:`planner.schema
 what the client sends is validated exactly as the server validates it. Every error the
 service answers (4xx, 5xx) is raised as :class:`RangeplanError` with its ``code``,
 ``message``, ``field`` and HTTP ``status``; so are transport failures (code
-``unavailable``).
+``unavailable``). A server with a token (``RANGEPLAN_API_TOKEN``) needs it on every call:
+``Client(url, token=...)``, by default the ``RANGEPLAN_API_TOKEN`` of the environment.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
@@ -52,11 +54,15 @@ def _body(request: Request) -> dict[str, Any]:
 
 
 class Client:
-    """The rangeplan service at ``base_url`` (``timeout`` in s per call)."""
+    """The rangeplan service at ``base_url`` (``timeout`` in s per call). ``token``: the
+    server's token, sent as ``Authorization: Bearer`` (default: ``$RANGEPLAN_API_TOKEN``;
+    none for a server without one)."""
 
-    def __init__(self, base_url: str = "http://127.0.0.1:8000", *, timeout: float = 120.0,
+    def __init__(self, base_url: str = "http://127.0.0.1:8000", *, token: str | None = None, timeout: float = 120.0,
                  transport: httpx.BaseTransport | None = None):
-        self._http = httpx.Client(base_url=base_url, timeout=timeout, transport=transport)
+        token = token if token is not None else os.environ.get("RANGEPLAN_API_TOKEN") or None
+        headers = {"Authorization": f"Bearer {token}"} if token else None
+        self._http = httpx.Client(base_url=base_url, timeout=timeout, transport=transport, headers=headers)
 
     def close(self) -> None:
         self._http.close()
@@ -139,9 +145,18 @@ class Client:
             r = self._call("PUT", f"/v1/corridors/{corridor_id}", json=body)
         return CorridorRecord.model_validate_json(r.content)
 
-    def list(self) -> list[CorridorRecord]:
-        """All saved corridors, oldest first."""
-        return [CorridorRecord.model_validate(x) for x in self._call("GET", "/v1/corridors").json()]
+    def list(self) -> list[dict[str, Any]]:
+        """Summaries ``{id, name, created, updated, bytes}`` of all saved corridors, oldest
+        first, read page by page (``fetch`` gives one with its request)."""
+        out: list[dict[str, Any]] = []
+        cursor: str | None = None
+        while True:
+            params: dict[str, Any] = {"limit": 200, **({"cursor": cursor} if cursor else {})}
+            page = self._call("GET", "/v1/corridors", params=params).json()
+            out += page["items"]
+            cursor = page.get("next_cursor")
+            if not cursor:
+                return out
 
     def fetch(self, corridor_id: str) -> CorridorRecord:
         """One saved corridor."""

@@ -62,14 +62,44 @@ def import_openapi() -> dict[str, Any]:
                                 "required": ["file"]}}}}}
 
 
+def _numeric_options() -> frozenset[str]:
+    """The :class:`ImportOptions` fields that hold numbers (or lists of numbers)."""
+
+    def numeric(schema: dict[str, Any]) -> bool:
+        if schema.get("type") == "number" or schema.get("type") == "integer":
+            return True
+        if schema.get("type") == "array":
+            return numeric(schema.get("items", {}))
+        return any(numeric(s) for s in schema.get("anyOf", ()))
+
+    return frozenset(k for k, v in ImportOptions.model_json_schema()["properties"].items() if numeric(v))
+
+
+_NUMERIC_OPTIONS = _numeric_options()
+
+
+def _number(text: str) -> Any:
+    """A query parameter's text as the number it spells (``"0.05"``, ``"-1e-3"``), else the
+    text itself, which validation then refuses naming the field (the request models take
+    JSON numbers only; a query string has none)."""
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
 def import_options(request: Request) -> dict[str, Any]:
-    """The query parameters as :class:`ImportOptions` input (validated by the caller)."""
+    """The query parameters as :class:`ImportOptions` input (validated by the caller):
+    list options split at commas, numbers read from their text."""
     out: dict[str, Any] = {}
     for key, value in request.query_params.multi_items():
         if key in LIST_OPTIONS:
             out.setdefault(key, []).extend(v.strip() for v in value.split(",") if v.strip())
         else:
             out[key] = value
+    for key in _NUMERIC_OPTIONS & out.keys():
+        value = out[key]
+        out[key] = [_number(v) for v in value] if isinstance(value, list) else _number(value)
     return out
 
 

@@ -2,7 +2,11 @@
 
 The API binds 127.0.0.1:8000 by default (``--host``/``--port`` or ``RANGEPLAN_HOST`` /
 ``RANGEPLAN_PORT``); the editor listens on ``--editor-port`` (``RANGEPLAN_EDITOR_PORT``, 8080).
-Both share the SQLite store in ``RANGEPLAN_DATA_DIR`` (default: a per-user data directory).
+Both share the SQLite store in ``RANGEPLAN_DATA_DIR`` (default: a per-user data directory),
+the planning pool (the editor plans on the API's workers) and the access rules of
+:mod:`app.security`. It refuses to start (exit status 2) with a bad security setting, or
+bound to a non-loopback address without a token unless ``allow_unauthenticated``; and
+(exit status 1) when either port is taken.
 """
 
 from __future__ import annotations
@@ -44,31 +48,70 @@ class _StopSignal(Exception):
             signal.signal(signal.SIGTERM, self.previous)
 
 
-def serve(host: str = "127.0.0.1", port: int = 8000, editor_port: int = 8080, editor: bool = True) -> int:
+def serve(host: str = "127.0.0.1", port: int = 8000, editor_port: int = 8080, editor: bool = True,
+          allow_unauthenticated: bool = False) -> int:
     """Run the API until interrupted (and the editor, when ``editor`` and available).
     Returns the process exit status."""
-    import uvicorn
+    from app.kernel_cache import seed_kernel_cache
+    from app.security import AccessPolicy, ConfigError, is_loopback
+
+    try:
+        policy = AccessPolicy.from_env(bind_host=host)
+    except ConfigError as exc:
+        _log(f"error: {exc}")
+        return 2
+    if not policy.auth_required and not is_loopback(host):
+        if not allow_unauthenticated:
+            _log(f"error: refusing to serve on {host} (reachable from other machines) without a token: set "
+                 "RANGEPLAN_API_TOKEN or RANGEPLAN_API_TOKEN_FILE, or pass --allow-unauthenticated")
+            return 2
+        _log(f"warning: serving on {host} without a token (--allow-unauthenticated): anyone who can reach this "
+             "port can read, change and delete every corridor")
+    seeded = seed_kernel_cache()  # before the planner is imported (numba resolves its cache at import)
+    if seeded:
+        _log(seeded)
 
     from app.api import create_app
     from app.storage import Store, default_data_dir
+    from app.workers import PlanPool
 
     store = Store(default_data_dir())
     _log(f"data: {store.path}")
+    _log(f"access: {'token required' if policy.auth_required else 'no token'}; hosts "
+         f"{', '.join(sorted(policy.allowed_hosts))}; CORS {', '.join(policy.cors_origins) or 'off'}")
+    pool = PlanPool.from_env()
     handle = None
-    if editor:
-        try:
-            from app.editor import start_editor
-        except ImportError as exc:
-            _log(f"editor unavailable ({exc}); serving the API only")
-        else:
+    try:
+        if editor:
             try:
-                handle = start_editor(host, editor_port, store)
-                _log(f"editor: http://{host}:{editor_port}")
-            except OSError as exc:
-                _log(f"editor could not start on {host}:{editor_port} ({exc}); serving the API only")
-                handle = None
-    app = create_app(store, editor_port=editor_port if handle is not None else None)
-    _log(f"API: http://{host}:{port} (OpenAPI at /docs)")
+                from app.editor import start_editor, start_guarded, use_pool
+            except ImportError as exc:
+                _log(f"editor unavailable ({exc}); serving the API only")
+            else:
+                use_pool(pool)  # the editor plans on the API's workers, under the same limits
+                handle = start_guarded(policy, lambda: start_editor(host, editor_port, store))
+                if editor_port and handle.port != editor_port:
+                    _log(f"error: the editor port {editor_port} is taken; choose another with --editor-port "
+                         "(RANGEPLAN_EDITOR_PORT) or run without the editor (--no-editor)")
+                    return 1
+                _log(f"editor: http://{host}:{handle.port}")
+        app = create_app(store, editor_port=handle.port if handle is not None else None, access=policy, pool=pool)
+        _log(f"API: http://{host}:{port} (OpenAPI at /docs)")
+        return _run_api(app, host, port)
+    finally:
+        if handle is not None:
+            try:
+                handle.stop()
+            except Exception as exc:  # the editor's shutdown must not hide the API's exit status
+                _log(f"editor shutdown: {exc}")
+            from app.editor import use_pool
+            use_pool(None)
+        pool.close()
+
+
+def _run_api(app, host: str, port: int) -> int:
+    import uvicorn
+
     stop_signal = _StopSignal.install()
     try:
         config = uvicorn.Config(app, host=host, port=port, log_level=os.environ.get("RANGEPLAN_LOG_LEVEL", "info"),
@@ -82,8 +125,3 @@ def serve(host: str = "127.0.0.1", port: int = 8000, editor_port: int = 8080, ed
         return 0
     finally:
         stop_signal.restore()
-        if handle is not None:
-            try:
-                handle.stop()
-            except Exception as exc:  # the editor's shutdown must not hide the API's exit status
-                _log(f"editor shutdown: {exc}")

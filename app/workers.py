@@ -9,9 +9,24 @@ a plain dict (``kind``: ``"plan"``, ``"segment"`` or ``"import"``); the worker r
 the result to JSON itself, stores plans in the SQLite store itself (WAL, multi-process safe)
 and sends back ready-to-send bytes, so the server process only moves bytes.
 
-The pool is used from threads (``run`` blocks); the API calls it through a thread pool.
-``mode="thread"`` runs jobs in the calling thread instead (no parallelism under the GIL, no
-way to stop a runaway job; kept to measure the difference, see benchmarks/bench_http.py).
+The pool is used from threads (``run`` blocks); the API and the editor call it through
+thread pools. ``mode="thread"`` runs jobs in the calling thread instead (no parallelism under
+the GIL, no way to stop a runaway job; kept to measure the difference, see
+benchmarks/bench_http.py, and for an editor run without a server).
+
+Bounds on each job (issue 15), the same for the API and the editor:
+
+* before a job is queued, the planner's work estimate (:func:`planner.estimate_work`) is
+  compared with the time limit: :class:`TooMuchWork` in microseconds instead of a worker
+  held until the limit;
+* the time limit itself (:class:`JobTimeout`; the worker is killed and replaced);
+* an address-space limit per worker process (``memory_mb``, ``RLIMIT_AS``): a job that needs
+  more fails with ``too_much_memory`` and the worker is replaced.
+
+Workers run at a lower CPU priority (``nice`` 5) than the server, so that health checks and
+storage requests are answered while every worker plans. A worker is *ready* once it has
+imported the planner and loaded (or compiled) the kernels by planning tiny corridors
+(:meth:`PlanPool.ready`; the server's ``/ready``).
 """
 
 from __future__ import annotations
@@ -21,8 +36,6 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-import json  # noqa: E402
-import math  # noqa: E402
 import queue  # noqa: E402
 import socket  # noqa: E402
 import subprocess  # noqa: E402
@@ -30,10 +43,10 @@ import sys  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
 import traceback  # noqa: E402
-from itertools import chain  # noqa: E402
 from multiprocessing.connection import Connection  # noqa: E402
 
-import orjson  # noqa: E402
+from app.failures import import_timeout, limit_memory, out_of_memory, timeout, too_much_work  # noqa: E402
+from app.jobs import run_job  # noqa: E402
 
 
 class JobTimeout(Exception):
@@ -48,173 +61,62 @@ class WorkerCrashed(Exception):
     """The worker process died while running the job."""
 
 
-# ---------------------------------------------------------------------------------------
-# the job itself (runs in the worker process, or in a thread in "thread" mode)
-
-_stores: dict = {}
-
-
-def _store(path):
-    if path is None:
-        return None
-    st = _stores.get(path)
-    if st is None:
-        from app.storage import Store
-        st = _stores[path] = Store(path)
-    return st
+class WorkerOutOfMemory(WorkerCrashed):
+    """The worker process was ended by a failed allocation (an abort, as Rust code such as
+    the JSON encoder does, or the kernel's OOM killer) while it had a memory limit."""
 
 
-def _check_finite(obj, path="result"):
-    """json.dumps(allow_nan=False) says only *that* a value is not finite; say where."""
-    if isinstance(obj, float):
-        if not math.isfinite(obj):
-            return path
-    elif isinstance(obj, dict):
-        for k, v in obj.items():
-            p = _check_finite(v, f"{path}.{k}")
-            if p:
-                return p
-    elif isinstance(obj, (list, tuple)):
-        for i, v in enumerate(obj):
-            p = _check_finite(v, f"{path}[{i}]")
-            if p:
-                return p
-    return None
+class TooMuchWork(Exception):
+    """The job's estimated compute time exceeds the pool's time limit (not run)."""
+
+    def __init__(self, estimate, limit_s: float):
+        super().__init__(estimate.message(limit_s))
+        self.estimate, self.limit_s = estimate, limit_s
 
 
-def _all_finite(obj) -> bool:
-    """Quick test that ``obj`` holds no NaN or infinity (the JSON encoder would write them as
-    null): each flat list of numbers, and each list of such rows, is summed in C, and a NaN
-    or infinity makes the sum non-finite. May answer False for finite numbers whose sum
-    overflows; :func:`_check_finite` then decides. ~20x cheaper than walking every float."""
-    if isinstance(obj, float):
-        return math.isfinite(obj)
-    if isinstance(obj, dict):
-        return all(map(_all_finite, obj.values()))
-    if isinstance(obj, (list, tuple)):
-        try:
-            return math.isfinite(sum(obj))
-        except TypeError:  # not a flat list of numbers
-            pass
-        except OverflowError:  # an int too large for a float
-            return all(map(_all_finite, obj))
-        try:  # rows of numbers, e.g. a pose per sample
-            # (a row that is a dict sums its keys, not its values; but a dict with number
-            # keys is not orjson's to encode: _dumps then checks with the stdlib encoder)
-            return math.isfinite(sum(chain.from_iterable(obj)))
-        except (TypeError, OverflowError):
-            return all(map(_all_finite, obj))
-    return True
+def describe_failure(exc: Exception, pool: PlanPool, kind: str = "plan") -> tuple[int, dict]:
+    """The HTTP status and ``{code, message, field}`` of a job of ``kind`` the pool did not
+    run to the end (the API's and the editor's one wording)."""
+    if isinstance(exc, TooMuchWork):
+        return 422, too_much_work(exc.estimate, exc.limit_s)
+    if isinstance(exc, WorkerOutOfMemory):
+        return 422, {"code": "too_much_memory", "message": str(exc), "field": None}
+    if isinstance(exc, JobTimeout):
+        return 422, import_timeout(pool.timeout_s) if kind == "import" else timeout(pool.timeout_s)
+    if isinstance(exc, PoolBusy):
+        return 503, {"code": "busy", "message": f"too many plans in progress ({exc}); retry shortly", "field": None}
+    if isinstance(exc, WorkerCrashed):
+        return 500, {"code": "internal_error", "message": f"the planning process died: {exc}", "field": None}
+    raise exc
 
 
-# orjson writes a Table I result (~145 kB, ~8000 floats) in ~0.3 ms against ~4.5 ms for the
-# stdlib encoder; the numbers are the same (shortest round-trip form; only the exponent
-# spelling differs: 1e-7 vs 1e-07). Anything orjson would encode differently from the stdlib
-# (dataclasses, datetimes, subclasses of dict/str/int, non-str keys, huge ints) makes it
-# raise TypeError, and the stdlib encodes that result as before.
-_ORJSON_OPT = (orjson.OPT_PASSTHROUGH_DATACLASS | orjson.OPT_PASSTHROUGH_DATETIME
-               | orjson.OPT_PASSTHROUGH_SUBCLASS)
+#: default address-space limit of a worker process [MiB] (the interpreter with the planner
+#: loaded takes ~0.5 GiB of it; the largest plan within the request bounds peaked at 0.8 GiB)
+DEFAULT_MEMORY_MB = 2048
+#: CPU priority of the workers relative to the server process
+WORKER_NICE = 5
 
 
-def _float_subclass(obj):
-    if isinstance(obj, float):  # e.g. numpy.float64: the same number as a float
-        return float(obj)
-    raise TypeError
-
-
-def _dumps(result: dict) -> bytes:
-    """``result`` as compact UTF-8 JSON; a NaN or infinity anywhere is a ``diverged``
-    PlannerError naming where it is."""
-    if _all_finite(result):
-        try:
-            return orjson.dumps(result, default=_float_subclass, option=_ORJSON_OPT)
-        except TypeError:
-            pass
+def _worker_main(conn, memory_mb: int | None = None) -> None:
     try:
-        return json.dumps(result, allow_nan=False, separators=(",", ":")).encode()
-    except ValueError:
-        from planner.errors import PlannerError
-        raise PlannerError("diverged", f"the planner produced a non-finite number at {_check_finite(result)}; "
-                           "try a smaller sample time or larger k_u", "settings") from None
-
-
-def run_job(job: dict) -> tuple:
-    """Run one job; returns ``("ok", payload: bytes, meta: dict)`` or
-    ``("error", PlannerError.to_dict())``. ``job["request"]`` is a validated
-    :class:`planner.schema.PlanRequest`."""
-    from planner.errors import PlannerError
-
-    try:
-        if job["kind"] == "plan":
-            from app.storage import new_id
-            from planner import plan, to_csv
-
-            req = job["request"]
-            result = plan(req)
-            plan_id = new_id() if job.get("store") else None
-            result.plan_id = plan_id
-            data = result.to_json()
-            store = _store(job.get("store"))
-            if plan_id and store is not None:
-                store.save_plan_json(data.decode(), req.to_json_dict(), job.get("corridor_id"),
-                                     id=plan_id)
-            fmt = job.get("format")
-            if fmt == "csv":
-                payload = to_csv(result).encode()
-            elif fmt in ("gcode", "joints", "dxf"):
-                from planner.exchange import export
-                payload = export(result, fmt, layout=req.layout, forces=bool(job.get("forces")),
-                                 source=job.get("source")).encode()
-            else:
-                payload = data
-            return ("ok", payload, {"plan_id": plan_id})
-        if job["kind"] == "import":
-            from planner.exchange import import_drawing
-
-            res = import_drawing(job["data"], job["options"], filename=job.get("filename"),
-                                 content_type=job.get("content_type"))
-            return ("ok", _dumps(res.to_json_dict()), {})
-        if job["kind"] == "segment":
-            from planner import segment
-
-            return ("ok", _dumps(segment(job["request"]).to_dict()), {})
-        if job["kind"] == "sleep":  # for tests of the time limit
-            time.sleep(float(job["seconds"]))
-            return ("ok", b"{}", {})
-        raise ValueError(f"unknown job kind {job['kind']!r}")
-    except PlannerError as exc:
-        return ("error", exc.to_dict())
-    except ArithmeticError as exc:  # numpy LinAlgError is a ValueError; see below
-        return ("error", _degenerate(exc, job))
-    except ValueError as exc:
-        import numpy as np
-        if isinstance(exc, np.linalg.LinAlgError):
-            # singular or non-finite model matrices: a degenerate robot description or pose
-            # the planner's own checks let through; the input's fault, not the server's
-            return ("error", _degenerate(exc, job))
-        raise
-
-
-def _degenerate(exc: Exception, job: dict) -> dict:
-    custom = not isinstance(getattr(job.get("request"), "robot", None), str)
-    return {"code": "singular", "field": "robot" if custom else None,
-            "message": f"the robot model is degenerate here ({type(exc).__name__}: {exc}); check that the "
-                       "robot's pivots are distinct, its legs have positive length, masses and inertias "
-                       "are positive, and the corridor avoids singular poses"}
-
-
-def _worker_main(conn) -> None:
+        os.nice(WORKER_NICE)
+    except OSError:
+        pass
     # import the planner and load its compiled kernels before the first job, not during it
     import app.storage  # noqa: F401  (imported before the first job, not during it)
     import planner
+    status: tuple = ("ready", None)
     try:
-        planner.warm_up()  # ~0.3 s from numba's on-disk cache; the first plan paid it before
-    except Exception:
-        pass
+        planner.warm_up()  # ~0.3 s from numba's on-disk cache; compiles after an install
+    except Exception as exc:  # the worker cannot plan: say why (the pool reports it, /ready stays 503)
+        status = ("failed", f"{type(exc).__name__}: {exc}")
     try:
-        conn.send("ready")  # the job clock starts only after this
+        conn.send(status)  # the job clock starts only after this
     except (OSError, ValueError):
         return
+    if status[0] != "ready":
+        return
+    limit_memory(memory_mb)  # after the warm-up: the limit bounds what a job may add
     while True:
         try:
             job = conn.recv()
@@ -222,15 +124,18 @@ def _worker_main(conn) -> None:
             return
         if job is None:
             return
+        ran_out = False
         try:
             out = run_job(job)
         except MemoryError:
-            out = ("crash", "the planner ran out of memory")
+            out, ran_out = ("error", out_of_memory(memory_mb)), True
         except Exception as exc:  # a planner bug: report it, keep serving
             out = ("crash", f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=8)}")
         try:
             conn.send(out)
         except (OSError, ValueError):
+            return
+        if ran_out:  # the heap may be fragmented or half-built: start afresh
             return
 
 
@@ -241,26 +146,42 @@ STARTUP_TIMEOUT_S = 120.0
 
 
 class _Worker:
-    """A worker process started as ``python -m app.workers FD`` (a fresh interpreter that
-    never re-imports the server's ``__main__``), talking over a socket pair."""
+    """A worker process started as ``python -m app.workers FD [MEMORY_MB]`` (a fresh
+    interpreter that never re-imports the server's ``__main__``), talking over a socket
+    pair. A thread waits for its first message (ready, or failed with a reason)."""
 
-    def __init__(self):
+    def __init__(self, memory_mb: int | None = None):
         parent, child = socket.socketpair()
         try:
-            self.proc = subprocess.Popen([sys.executable, "-m", "app.workers", str(child.fileno())],
+            self.proc = subprocess.Popen([sys.executable, "-m", "app.workers", str(child.fileno()),
+                                          str(int(memory_mb or 0))],
                                          pass_fds=(child.fileno(),), stdin=subprocess.DEVNULL,
                                          close_fds=True)
         finally:
             child.close()
         self.conn = Connection(parent.detach())
+        self.started = threading.Event()  #: the worker reported (ready or failed)
         self.ready = False
+        self.failure: str | None = None
+        threading.Thread(target=self._wait_ready, name="rangeplan-worker-start", daemon=True).start()
+
+    def _wait_ready(self) -> None:
+        try:
+            if not self.conn.poll(STARTUP_TIMEOUT_S):
+                self.failure = f"did not load the planner within {STARTUP_TIMEOUT_S:g} s"
+            else:
+                status, reason = self.conn.recv()
+                self.ready, self.failure = status == "ready", reason
+        except (EOFError, OSError, ValueError, TypeError) as exc:
+            self.failure = f"exited while starting ({type(exc).__name__}; status {self.proc.poll()})"
+        finally:
+            self.started.set()
 
     def call(self, job: dict, timeout: float):
         try:
-            if not self.ready:  # interpreter start and imports do not count against the job
-                if not self.conn.poll(STARTUP_TIMEOUT_S) or self.conn.recv() != "ready":
-                    raise WorkerCrashed("worker did not start")
-                self.ready = True
+            # interpreter start and imports do not count against the job
+            if not self.started.wait(STARTUP_TIMEOUT_S + 1) or not self.ready:
+                raise WorkerCrashed(f"the planning process could not start: {self.failure or 'no answer'}")
             self.conn.send(job)
             if not self.conn.poll(timeout):
                 raise JobTimeout
@@ -293,58 +214,123 @@ class _Worker:
         self.conn.close()
 
 
+#: exit statuses of a worker ended by a failed allocation: SIGABRT (Rust's allocation error
+#: handler, e.g. orjson growing its buffer) and SIGKILL (the kernel's OOM killer)
+_ALLOCATION_FAILURE = (-6, -9)
+
+
+def _exit_status(w: _Worker) -> int | None:
+    try:
+        return w.proc.wait(2)
+    except subprocess.TimeoutExpired:
+        return None
+
+
 class PlanPool:
     """``workers`` planning processes (``mode="process"``) or inline execution
-    (``mode="thread"``); ``timeout_s`` bounds each job's compute time; at most ``max_queue``
-    jobs wait for a worker (more: :class:`PoolBusy`)."""
+    (``mode="thread"``); ``timeout_s`` bounds each job's compute time (and, through the work
+    estimate, what is accepted); at most ``max_queue`` jobs wait for a worker (more:
+    :class:`PoolBusy`); ``memory_mb`` is each worker's address-space limit [MiB] (0: none)."""
 
     def __init__(self, workers: int | None = None, timeout_s: float = 30.0, max_queue: int = 64,
-                 mode: str = "process"):
+                 mode: str = "process", memory_mb: int | None = DEFAULT_MEMORY_MB):
         if mode not in ("process", "thread"):
             raise ValueError("mode must be 'process' or 'thread'")
         self.mode = mode
         self.n = max(1, int(workers or os.cpu_count() or 1))
         self.timeout_s = float(timeout_s)
         self.max_queue = int(max_queue)
+        self.memory_mb = int(memory_mb or 0)
+        self._thread_ready: bool | None = None  # thread mode: warm-up done (True) / failed (False)
         self._lock = threading.Lock()
         self._inflight = 0
+        self.jobs_run = 0  #: jobs handed to a worker (or run inline)
         self._idle: queue.Queue = queue.Queue()
         self._workers: list[_Worker] = []
         self._closed = False
         self.replaced = 0
         if mode == "process":
             for _ in range(self.n):
-                w = _Worker()
+                w = _Worker(self.memory_mb)
                 self._workers.append(w)
                 self._idle.put(w)
         else:
             self._sem = threading.Semaphore(self.n)
+            threading.Thread(target=self._warm_up_inline, name="rangeplan-warm-up", daemon=True).start()
 
     @property
     def capacity(self) -> int:
         """Jobs accepted at once (running + waiting)."""
         return self.n + self.max_queue
 
+    @classmethod
+    def from_env(cls) -> PlanPool:
+        """A pool configured by ``RANGEPLAN_WORKERS``, ``RANGEPLAN_PLAN_TIMEOUT_S`` (30),
+        ``RANGEPLAN_MAX_QUEUE`` (64), ``RANGEPLAN_EXECUTOR`` (process) and
+        ``RANGEPLAN_WORKER_MEMORY_MB`` (:data:`DEFAULT_MEMORY_MB`)."""
+        env = os.environ
+        return cls(int(env.get("RANGEPLAN_WORKERS") or os.cpu_count() or 1),
+                   float(env.get("RANGEPLAN_PLAN_TIMEOUT_S") or 30.0), int(env.get("RANGEPLAN_MAX_QUEUE") or 64),
+                   mode=env.get("RANGEPLAN_EXECUTOR") or "process",
+                   memory_mb=int(env.get("RANGEPLAN_WORKER_MEMORY_MB") or DEFAULT_MEMORY_MB))
+
+    def _warm_up_inline(self) -> None:
+        try:
+            import planner
+            planner.warm_up()
+            self._thread_ready = True
+        except Exception:
+            self._thread_ready = False
+
     def stats(self) -> dict:
         return {"mode": self.mode, "workers": self.n, "in_flight": self._inflight,
-                "timeout_s": self.timeout_s, "replaced_workers": self.replaced}
+                "timeout_s": self.timeout_s, "replaced_workers": self.replaced, "memory_mb": self.memory_mb}
+
+    def readiness(self) -> dict:
+        """``{"ready", "workers_ready", "workers", "failures"}``: ready when at least one
+        worker has loaded the planner's kernels and none is known to be unable to plan."""
+        if self.mode == "thread":
+            ok = bool(self._thread_ready)
+            return {"ready": ok and not self._closed, "workers_ready": self.n if ok else 0, "workers": self.n,
+                    "failures": ["the planner's warm-up failed"] if self._thread_ready is False else []}
+        with self._lock:
+            workers = list(self._workers)
+        ready = [w for w in workers if w.ready and w.alive()]
+        failures = sorted({w.failure for w in workers if w.failure})
+        return {"ready": bool(ready) and not failures and not self._closed, "workers_ready": len(ready),
+                "workers": self.n, "failures": failures}
+
+    def check_work(self, job: dict) -> None:
+        """Raise :class:`TooMuchWork` if a plan job's estimated compute time exceeds the time
+        limit (the estimate takes microseconds)."""
+        if job.get("kind") not in ("plan", "editor") or job.get("request") is None:
+            return
+        from planner import estimate_work
+
+        est = estimate_work(job["request"])
+        if est.seconds > self.timeout_s:
+            raise TooMuchWork(est, self.timeout_s)
 
     def run(self, job: dict):
         """Run a job (blocking); returns what :func:`run_job` returns (or ``("crash", text)``
         for an unexpected exception in the planner), or raises :class:`JobTimeout`,
-        :class:`PoolBusy` or :class:`WorkerCrashed` (the process died)."""
+        :class:`PoolBusy`, :class:`TooMuchWork` or :class:`WorkerCrashed` (the process died)."""
+        self.check_work(job)
         with self._lock:
             if self._closed:
                 raise PoolBusy("the server is shutting down")
             if self._inflight >= self.capacity:
                 raise PoolBusy(f"{self._inflight} jobs in progress")
             self._inflight += 1
+            self.jobs_run += 1
         try:
             if self.mode == "thread":
                 with self._sem:
                     t0 = time.perf_counter()
                     try:
                         out = run_job(job)
+                    except MemoryError:
+                        out = ("error", out_of_memory(None))
                     except Exception as exc:
                         out = ("crash", f"{type(exc).__name__}: {exc}")
                     if time.perf_counter() - t0 > self.timeout_s:
@@ -356,10 +342,18 @@ class PlanPool:
                 if not w.alive():
                     w.kill()
                     replacement = w = self._replace(w)
-                return w.call(job, self.timeout_s)  # ("ok", ...), ("error", ...) or ("crash", text)
+                out = w.call(job, self.timeout_s)  # ("ok", ...), ("error", ...) or ("crash", text)
+                if out[0] == "error" and out[1].get("code") == "too_much_memory":
+                    w.proc.wait(5)  # it exits after a memory error: replace it now
+                    w.kill()
+                    replacement = self._replace(w)
+                return out
             except (JobTimeout, WorkerCrashed, OSError) as exc:
+                status = _exit_status(w) if not isinstance(exc, JobTimeout) else None
                 w.kill()
                 replacement = self._replace(w)
+                if self.memory_mb and status in _ALLOCATION_FAILURE:
+                    raise WorkerOutOfMemory(out_of_memory(self.memory_mb)["message"]) from None
                 if isinstance(exc, OSError):
                     raise WorkerCrashed(str(exc)) from None
                 raise
@@ -370,7 +364,7 @@ class PlanPool:
                 self._inflight -= 1
 
     def _replace(self, old: _Worker) -> _Worker:
-        new = _Worker()
+        new = _Worker(self.memory_mb)
         with self._lock:
             self.replaced += 1
             self._workers = [new if w is old else w for w in self._workers]
@@ -385,4 +379,4 @@ class PlanPool:
 
 
 if __name__ == "__main__":
-    _worker_main(Connection(int(sys.argv[1])))
+    _worker_main(Connection(int(sys.argv[1])), int(sys.argv[2]) if len(sys.argv) > 2 else None)

@@ -35,8 +35,9 @@ Glossary (paper symbol -> code name):
 
 from .errors import PlannerError
 from .model import RobotModel, load_robot
-from .orchestrator import plan, segment, to_csv, warm_up
+from .orchestrator import WorkEstimate, estimate_work, plan, segment, to_csv, warm_up
 from .schema import PlanRequest, PlanResult, SegmentationResult, Settings, parse_request
 
-__all__ = ["plan", "segment", "warm_up", "to_csv", "PlanRequest", "PlanResult", "SegmentationResult", "Settings",
+__all__ = ["plan", "segment", "warm_up", "to_csv", "estimate_work", "WorkEstimate",
+           "PlanRequest", "PlanResult", "SegmentationResult", "Settings",
            "parse_request", "RobotModel", "load_robot", "PlannerError"]

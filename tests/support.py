@@ -41,3 +41,15 @@ def robot_description(name: str) -> dict[str, Any]:
     from planner.schema import builtin_description
 
     return builtin_description(name).model_dump(mode="json")
+
+
+#: the address an in-process API client uses: a loopback name, which the Host allow-list
+#: (app.security) answers; TestClient's default host "testserver" is refused with 400
+LOCAL_URL = "http://localhost"
+
+
+def api_client(app: Any, **kwargs: Any):
+    """A ``TestClient`` for ``app`` that talks to it as a local client does (Host localhost)."""
+    from fastapi.testclient import TestClient
+
+    return TestClient(app, base_url=LOCAL_URL, **kwargs)

@@ -12,17 +12,17 @@ import json
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-from fastapi.testclient import TestClient
 
 from app.api import create_app
 from app.storage import Store
 from planner.errors import PlannerError
 from planner.schema import field_path
-from tests.support import robot_description
+from tests.support import api_client, robot_description
 
 ROOT = Path(__file__).resolve().parent.parent
 TABLE1_PATH = ROOT / "static" / "examples" / "table1.json"
@@ -51,7 +51,7 @@ def store(tmp_path_factory):
 @pytest.fixture(scope="module")
 def client(store):
     app = create_app(store, workers=2, timeout_s=60, max_body_bytes=256 * 1024)
-    with TestClient(app) as c:
+    with api_client(app) as c:
         yield c
 
 
@@ -291,16 +291,24 @@ def test_pool_time_limit_replaces_worker():
         pool.close()
 
 
+def slow_corridor(n: int = 40) -> dict:
+    """A random walk of point segments in the constrained mode: the corridor cannot be kept
+    within the limits, every step solves the slack problem (~10 ms instead of ~0.3 ms), so
+    the work estimate (~0.1 s) is far below the time it takes (seconds)."""
+    pts = np.cumsum(np.random.default_rng(0).uniform(-0.001, 0.001, (n, 2)), axis=0)
+    return {"segments": [{"lower": [float(x), float(y), 0.0], "upper": [float(x), float(y), 0.0]} for x, y in pts],
+            "settings": {"mode": "constrained", "require_settled": False}}
+
+
 def test_compute_limit_stops_runaway_plan(store):
     """A plan longer than the limit answers 422 `timeout` promptly; the killed worker is
     replaced and the next plan succeeds; /health answered meanwhile."""
     app = create_app(store, workers=1, timeout_s=1.0)
-    long = long_corridor()
-    with TestClient(app) as c:
+    with api_client(app) as c:
         done = {}
 
         def slow():
-            done["r"] = c.post("/v1/plan", json=long)
+            done["r"] = c.post("/v1/plan", json=slow_corridor())
 
         th = threading.Thread(target=slow)
         th.start()
@@ -314,18 +322,51 @@ def test_compute_limit_stops_runaway_plan(store):
         assert c.post("/v1/plan", json=TABLE1).status_code == 200
 
 
+def test_too_much_work_is_refused_in_well_under_a_second(store):
+    """The largest corridor the schema accepts (200 000 steps) against a 1 s limit: refused
+    with too_much_work naming the estimate, the limit and the field, before any worker is
+    busy (the pool stays idle and plans Table I at once)."""
+    app = create_app(store, workers=1, timeout_s=1.0)
+    with api_client(app) as c:
+        assert c.post("/v1/plan", json=TABLE1).status_code == 200
+        t0 = time.perf_counter()
+        r = c.post("/v1/plan", json=long_corridor())
+        took = time.perf_counter() - t0
+        err = assert_error(r, 422, "too_much_work", "settings.samples_per_segment")
+        assert took < 0.5, took
+        assert "limit of 1 s" in err["message"] and "100 segments x 2000 samples" in err["message"]
+        est = float(err["message"].split("estimated ")[1].split(" s")[0])
+        assert est > 1.0
+        constrained = {**TABLE1, "settings": {"mode": "constrained", "N": 150}}
+        assert_error(c.post("/v1/plan", json=constrained), 422, "too_much_work", "settings.N")
+        assert c.get("/health").json()["pool"]["in_flight"] == 0
+        assert c.post("/v1/plan", json=TABLE1).status_code == 200
+
+
 # ---------------------------------------------------------------------------------------
 # saved corridors
 
+def all_corridors(client) -> list[dict]:
+    """Every corridor's summary, page after page."""
+    out, cursor = [], None
+    while True:
+        page = client.get("/v1/corridors", params={"limit": 200, **({"cursor": cursor} if cursor else {})}).json()
+        out += page["items"]
+        cursor = page["next_cursor"]
+        if cursor is None:
+            return out
+
+
 def test_corridor_lifecycle(client):
-    r = client.post("/v1/corridors", json=TABLE1)
+    original = {**TABLE1, "name": "lifecycle"}
+    r = client.post("/v1/corridors", json=original)
     assert r.status_code == 201, r.text
     rec = r.json()
     cid = rec["id"]
     assert r.headers["location"] == f"/v1/corridors/{cid}"
-    assert rec["name"] == TABLE1["name"] and rec["request"]["segments"] == TABLE1["segments"]
+    assert rec["name"] == "lifecycle" and rec["request"]["segments"] == TABLE1["segments"]
     assert client.get(f"/v1/corridors/{cid}").json() == rec
-    assert cid in [c["id"] for c in client.get("/v1/corridors").json()]
+    assert cid in [c["id"] for c in all_corridors(client)]
 
     moved = {**shifted(TABLE1, 0.01, 0.0), "name": "moved"}
     upd = client.put(f"/v1/corridors/{cid}", json=moved).json()
@@ -346,12 +387,12 @@ def test_corridor_lifecycle(client):
 
 
 def test_corridor_validated_before_saving(client):
-    n = len(client.get("/v1/corridors").json())
+    n = len(all_corridors(client))
     bad = copy.deepcopy(TABLE1)
     bad["segments"][2]["upper"][1] = -1.0
     assert_error(client.post("/v1/corridors", json=bad), 422, "invalid_input", "segments[2].lower")
     assert_error(client.post("/v1/corridors", json={"segments": [P0]}), 422, "invalid_input", "segments")
-    assert len(client.get("/v1/corridors").json()) == n
+    assert len(all_corridors(client)) == n
 
 
 # ---------------------------------------------------------------------------------------
@@ -463,7 +504,7 @@ def _same_json_values(a, b) -> bool:
 
 
 def test_result_encoding_has_the_stdlib_numbers():
-    from app.workers import _dumps
+    from app.jobs import _dumps
     rng = np.random.default_rng(7)
     rows = (rng.normal(size=(50, 3)) * 10.0 ** rng.integers(-300, 300, size=(50, 3))).tolist()
     result = {"name": "coin\u00e7on \u2013 \u00b5m", "plan_id": None, "steps": 3, "settled": True,
@@ -486,7 +527,7 @@ def test_result_encoding_has_the_stdlib_numbers():
     ("result.drives.force[0][2]", lambda r: r["drives"]["force"][0].__setitem__(2, float("nan"))),
 ])
 def test_non_finite_result_is_diverged_naming_the_number(where, put):
-    from app.workers import _dumps
+    from app.jobs import _dumps
     from planner.errors import PlannerError
     result = {"time": [0.01 * k for k in range(20)], "pose": [[0.1, 0.2, 0.0]] * 20,
               "metrics": {"energy": 1.0, "steps": 19}, "pair": (1.0, 2.0),
@@ -571,5 +612,5 @@ def test_other_responses_validate_against_the_openapi_schema(client):
     r = client.get("/v1/robots/moving-slide")
     assert r.status_code == 200 and not list(_openapi_validator(client, "RobotDescription").iter_errors(r.json()))
     assert r.json()["platform"]["mass"] > 0
-    r = client.post("/v1/corridors", json=TABLE1)
+    r = client.post("/v1/corridors", json={**TABLE1, "name": "schema check"})
     assert r.status_code == 201 and not list(_openapi_validator(client, "CorridorRecord").iter_errors(r.json()))

@@ -17,7 +17,6 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 import pytest
-from fastapi.testclient import TestClient
 
 from app.api import create_app
 from app.batch.config import FORMAT_NAMES
@@ -25,6 +24,7 @@ from app.batch.engine import FORMATS, plan_item
 from app.batch.executors import Engine
 from app.batch.runner import Item, Runner
 from app.storage import Store
+from app.workers import WORKER_NICE
 from planner import plan
 from tests.batch_support import (
     BAD_RANGE,
@@ -37,7 +37,7 @@ from tests.batch_support import (
     variant,
     write_jsonl,
 )
-from tests.support import TABLE1
+from tests.support import TABLE1, api_client
 
 # ---------------------------------------------------------------------------------------
 # the engine function and the dispatcher
@@ -74,10 +74,16 @@ def test_plan_item_reports_the_requests_fault_with_its_code(request_, code, fiel
     assert out["error"]["message"]
 
 
-def test_plan_item_stops_at_the_compute_limit():
+def test_plan_item_stops_at_the_compute_limit(monkeypatch):
     # a constrained plan of 12 x 1000 samples (~0.5 s or more), limited to a quarter of its
     # time: the limit lands inside the compiled loop, which hands back control every
-    # planner.orchestrator.simulate.RETURN_EVERY steps (1/6 of them), so it stops well before the end
+    # planner.orchestrator.simulate.RETURN_EVERY steps (1/6 of them), so it stops well before the end.
+    # The work estimate is a lower estimate (what it accepts may still run into the limit):
+    # here it accepts everything, so that the plan starts and the limit has to stop it
+    import app.batch.engine as engine
+    from planner import WorkEstimate
+
+    monkeypatch.setattr(engine, "estimate_work", lambda req: WorkEstimate(0.0, 1, 1, "segments", "none"))
     req = variant(0, "constrained")
     req["settings"]["samples_per_segment"] = 1000
     assert plan_item(variant(0, "constrained"))["status"] == "ok"  # the kernels loaded: full_s is the plan's
@@ -510,7 +516,7 @@ def test_local_worker_killed_mid_batch_loses_no_item(tmp_path):
 def api(tmp_path_factory):
     store = Store(tmp_path_factory.mktemp("data"))
     app = create_app(store, workers=1, timeout_s=120)
-    with TestClient(app) as c:
+    with api_client(app) as c:
         yield c
 
 
@@ -568,6 +574,7 @@ def test_api_batch_accepts_json_lines_and_waits_on_request(api):
     ({"json": {"requests": [TABLE1], "extra": 1}}, 422, "invalid_input", "extra"),
     ({"json": {"requests": [TABLE1], "name": 5}}, 422, "invalid_input", "name"),
     ({"content": b"\n\n", "headers": {"Content-Type": "application/x-ndjson"}}, 422, "invalid_input", "requests"),
+    ({"json": {"requests": [TABLE1, [None, None]]}}, 422, "invalid_input", "requests[1]"),  # not a request at all
 ])
 def test_api_bad_batch_is_a_clear_422(api, kwargs, status, code, field):
     r = api.post("/v1/batches", **kwargs)
@@ -578,14 +585,15 @@ def test_api_bad_batch_is_a_clear_422(api, kwargs, status, code, field):
 
 def test_api_unknown_batch_is_404(api):
     for method, path in (("get", "/v1/batches/nope"), ("get", "/v1/batches/nope/results"),
-                         ("get", "/v1/batches/nope/results?format=csv"), ("delete", "/v1/batches/nope")):
+                         ("get", "/v1/batches/nope/results?format=csv"), ("post", "/v1/batches/nope/cancel"),
+                         ("delete", "/v1/batches/nope")):
         r = getattr(api, method)(path)
         assert r.status_code == 404 and r.json()["error"]["code"] == "not_found"
 
 
 def test_api_batch_limits(tmp_path):
     app = create_app(Store(tmp_path), workers=1)
-    with TestClient(app) as c:
+    with api_client(app) as c:
         svc = app.state.batches
         svc.max_items, svc.max_queue = 3, 5
         r = c.post("/v1/batches", json={"requests": [TABLE1] * 4})
@@ -601,14 +609,58 @@ def test_api_batch_limits(tmp_path):
         assert c.post("/v1/batches", json={"requests": [TABLE1]}).status_code == 202  # 3 + 1 <= 4
 
 
+def test_api_batch_items_have_the_bounds_of_a_single_plan(tmp_path):
+    """A batch item is refused for too much work as POST /v1/plan refuses it on the same
+    server (the same estimate, limit, code, field and message), in well under a second and
+    without planning; the other items plan."""
+    heavy = {**TABLE1, "settings": {"mode": "constrained", "N": 150}}
+    app = create_app(Store(tmp_path), workers=1, timeout_s=5.0)
+    with api_client(app) as c:
+        single = c.post("/v1/plan", json=heavy)
+        assert single.status_code == 422 and single.json()["error"]["code"] == "too_much_work"
+        assert app.state.batches.timeout_s == 5.0
+        bid = c.post("/v1/batches", json={"requests": [heavy, TABLE1]}).json()["id"]
+        items = [json.loads(ln) for ln in c.get(f"/v1/batches/{bid}/results?wait=true").text.splitlines()]
+    assert [it["status"] for it in items] == ["error", "ok"]
+    assert items[0]["error"] == single.json()["error"]
+    assert items[0]["error"]["field"] == "settings.N" and "limit of 5 s" in items[0]["error"]["message"]
+
+
+def test_plan_item_refuses_too_much_work_before_planning():
+    heavy = {**TABLE1, "settings": {"mode": "constrained", "N": 150}}
+    t0 = time.perf_counter()
+    out = plan_item(heavy, timeout_s=5.0)
+    assert time.perf_counter() - t0 < 1.0 and out["status"] == "error" and out["payload"] is None
+    assert out["error"]["code"] == "too_much_work" and out["error"]["field"] == "settings.N"
+    assert plan_item(TABLE1, timeout_s=5.0)["status"] == "ok"  # within the estimate: planned
+
+
 @pytest.mark.slow
-def test_api_cancel_keeps_finished_results_and_purge_deletes(api):
+def test_local_workers_have_the_api_workers_memory_cap():
+    """A batch worker capped at 700 MiB (~0.5 GiB is the interpreter with the planner) given
+    the largest corridor the schema accepts (~0.8 GiB) answers the API's too_much_memory, and
+    plans the next item."""
+    from app.batch.executors import LocalEngine
+    from tests.test_api import long_corridor
+
+    engine = LocalEngine(1, memory_mb=700)
+    try:
+        out = engine.executor.submit(plan_item, long_corridor(), "none", 120.0).result(300)
+        assert out["status"] == "error" and out["error"]["code"] == "too_much_memory", out["error"]
+        assert "700 MiB" in out["error"]["message"] and "RANGEPLAN_WORKER_MEMORY_MB" in out["error"]["message"]
+        assert engine.executor.submit(plan_item, TABLE1, "none", 120.0).result(300)["status"] == "ok"
+    finally:
+        engine.close(cancel=True)
+
+
+@pytest.mark.slow
+def test_api_cancel_keeps_finished_results_and_delete_deletes(api):
     r = api.post("/v1/batches", json={"requests": [variant(i % 5, "constrained") for i in range(30)]})
     bid = r.json()["id"]
     deadline = time.monotonic() + 120
     while api.get(f"/v1/batches/{bid}").json()["ok"] < 2 and time.monotonic() < deadline:
         time.sleep(0.1)
-    p = api.delete(f"/v1/batches/{bid}").json()
+    p = api.post(f"/v1/batches/{bid}/cancel").json()
     assert p["state"] == "cancelled" and p["cancelled"] > 0 and p["ok"] >= 2
     time.sleep(1.0)
     after = api.get(f"/v1/batches/{bid}").json()
@@ -616,8 +668,12 @@ def test_api_cancel_keeps_finished_results_and_purge_deletes(api):
     items = [json.loads(ln) for ln in api.get(f"/v1/batches/{bid}/results").text.splitlines()]
     assert len(items) == 30 and sum(it["status"] == "ok" for it in items) == p["ok"]
     assert {it["status"] for it in items} <= {"ok", "cancelled"}
-    assert api.delete(f"/v1/batches/{bid}?purge=true").status_code == 204
-    assert api.get(f"/v1/batches/{bid}").status_code == 404
+    assert api.post(f"/v1/batches/{bid}/cancel").json()["ok"] == p["ok"]  # cancelling again changes nothing
+    assert api.delete(f"/v1/batches/{bid}").status_code == 204
+    for path in (f"/v1/batches/{bid}", f"/v1/batches/{bid}/results"):
+        assert api.get(path).status_code == 404
+    assert all(b["id"] != bid for b in api.get("/v1/batches").json())
+    assert api.delete(f"/v1/batches/{bid}").status_code == 404
 
 
 @pytest.mark.slow
@@ -626,7 +682,7 @@ def test_api_batch_survives_a_restart_and_never_takes_the_interactive_pool(tmp_p
     n = 320  # ~17 ms each: long enough to be mid-batch when the server stops
     reqs = [variant(i % 5, "constrained") for i in range(n)]
     app = create_app(Store(store_dir), workers=1)
-    with TestClient(app) as c:
+    with api_client(app) as c:
         bid = c.post("/v1/batches", json={"requests": reqs}).json()["id"]
         deadline = time.monotonic() + 120
         while c.get(f"/v1/batches/{bid}").json()["ok"] < 2 and time.monotonic() < deadline:
@@ -640,12 +696,17 @@ def test_api_batch_survives_a_restart_and_never_takes_the_interactive_pool(tmp_p
         assert batch_pids and all(os.getpriority(os.PRIO_PROCESS, pid) >= 10 for pid in batch_pids)
         pool_pids = [w.proc.pid for w in app.state.pool._workers]
         assert not set(batch_pids) & set(pool_pids)
-        assert all(os.getpriority(os.PRIO_PROCESS, pid) == os.getpriority(os.PRIO_PROCESS, 0) for pid in pool_pids)
+        # interactive workers run below the server (WORKER_NICE: it answers /ready while they plan),
+        # batch workers below the interactive ones (a batch yields to single plans)
+        server = os.getpriority(os.PRIO_PROCESS, 0)
+        assert all(os.getpriority(os.PRIO_PROCESS, pid) == server + WORKER_NICE for pid in pool_pids)
+        assert all(os.getpriority(os.PRIO_PROCESS, b) > os.getpriority(os.PRIO_PROCESS, p)
+                   for b in batch_pids for p in pool_pids)
         before = c.get(f"/v1/batches/{bid}").json()
     assert before["state"] == "running" and before["done"] < n
     # the server stopped mid-batch; a new one on the same store finishes it
     app2 = create_app(Store(store_dir), workers=1)
-    with TestClient(app2) as c:
+    with api_client(app2) as c:
         p = wait_done(c, bid)
         assert p["state"] == "done" and p["ok"] == n
         items = [json.loads(ln) for ln in c.get(f"/v1/batches/{bid}/results").text.splitlines()]

@@ -15,7 +15,6 @@ import time
 from pathlib import Path
 
 import pytest
-from fastapi.testclient import TestClient
 
 from app.api import create_app
 from app.storage import Store
@@ -30,6 +29,7 @@ from tests.batch_support import (
     variant,
     write_jsonl,
 )
+from tests.support import api_client
 
 distributed = pytest.importorskip("distributed")
 
@@ -152,7 +152,7 @@ def test_api_on_a_local_cluster(local_cluster, tmp_path, monkeypatch):
     monkeypatch.setenv("RANGEPLAN_DASK_SCHEDULER", local_cluster.scheduler_address)
     app = create_app(Store(tmp_path), workers=1)
     reqs = [variant(0), BAD_RANGE, variant(1, "constrained"), variant(2)]
-    with TestClient(app) as c:
+    with api_client(app) as c:
         bid = c.post("/v1/batches", json={"requests": reqs}).json()["id"]
         items = [json.loads(ln) for ln in c.get(f"/v1/batches/{bid}/results?wait=true").text.splitlines()]
         p = c.get(f"/v1/batches/{bid}").json()
@@ -226,7 +226,7 @@ def test_api_on_dask_cli_processes(dask_cli_cluster, tmp_path, monkeypatch):
     monkeypatch.setenv("RANGEPLAN_DASK_SCHEDULER", dask_cli_cluster)
     app = create_app(Store(tmp_path), workers=1)
     reqs = [variant(i) for i in range(6)]
-    with TestClient(app) as c:
+    with api_client(app) as c:
         r = c.post("/v1/batches", content="".join(json.dumps(q) + "\n" for q in reqs),
                    headers={"Content-Type": "application/x-ndjson"})
         assert r.status_code == 202

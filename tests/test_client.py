@@ -1,10 +1,11 @@
-"""The typed client (app.client) against a real `rangeplan serve` process: the README's
-example runs as written, every method returns the planner's own models, and every error
-(server answer, client-side validation, transport) is one exception type with code,
-message and field."""
+"""The typed client (app.client) against a real `rangeplan serve` process with a token, as
+deployed: the README's example runs as written, every method returns the planner's own
+models, and every error (server answer, client-side validation, transport, a missing or
+wrong token) is one exception type with code, message and field."""
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -18,10 +19,12 @@ from tests.linuxcnc import rs274
 from tests.support import ROOT, TABLE1
 from tests.test_server_process import Server, free_port
 
+TOKEN = "client-test-token-0123456789"
+
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
-    srv = Server(tmp_path_factory.mktemp("client"), free_port())
+    srv = Server(tmp_path_factory.mktemp("client"), free_port(), {"RANGEPLAN_API_TOKEN": TOKEN})
     yield srv
     srv.stop()
 
@@ -37,7 +40,7 @@ def test_readme_example_runs_against_a_real_server(server, tmp_path):
     assert 8 <= len(code.strip().splitlines()) <= 16
     code = code.replace("http://127.0.0.1:8000", server.url)
     r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300,
-                       env={**__import__("os").environ, "PYTHONPATH": str(ROOT)})
+                       env={**os.environ, "PYTHONPATH": str(ROOT), "RANGEPLAN_API_TOKEN": TOKEN})
     assert r.returncode == 0, r.stderr
     out = r.stdout.strip().splitlines()
     assert out[-1].startswith("invalid_input segments")  # the error example: one exception type
@@ -50,13 +53,13 @@ def test_readme_example_runs_against_a_real_server(server, tmp_path):
 
 
 def test_every_method_returns_the_planner_models(server):
-    with Client(server.url) as rp:
+    with Client(server.url, token=TOKEN) as rp:
         result = rp.plan(TABLE1)
         assert result.plan_id and result.pose.shape[1] == 3
         again = rp.fetch_plan(result.plan_id)
         assert np.array_equal(again.pose, result.pose)
         rec = rp.save(TABLE1)
-        assert rec.request.segments is not None and rec.id in [r.id for r in rp.list()]
+        assert rec.request.segments is not None and rec.id in [r["id"] for r in rp.list()]
         renamed = rp.save({**TABLE1, "name": "renamed"}, rec.id)
         assert renamed.id == rec.id and rp.fetch(rec.id).name == "renamed"
         planned = rp.plan_corridor(rec.id)
@@ -69,11 +72,11 @@ def test_every_method_returns_the_planner_models(server):
         svg = b"<svg xmlns='http://www.w3.org/2000/svg' width='10mm' height='10mm'><circle cx='5' cy='5' r='2'/></svg>"
         assert rp.import_drawing(svg, format="svg").layout.obstacles[0].type == "circle"
         rp.delete(rec.id)
-        assert rec.id not in [r.id for r in rp.list()]
+        assert rec.id not in [r["id"] for r in rp.list()]
 
 
 def test_errors_are_one_exception_type(server):
-    with Client(server.url) as rp:
+    with Client(server.url, token=TOKEN) as rp:
         with pytest.raises(RangeplanError) as e:  # the server's 404
             rp.fetch("nope")
         assert (e.value.code, e.value.status) == ("not_found", 404)
@@ -93,3 +96,14 @@ def test_errors_are_one_exception_type(server):
     with Client(f"http://127.0.0.1:{free_port()}", timeout=2) as down, pytest.raises(RangeplanError) as e:
         down.list()
     assert e.value.code == "unavailable"
+
+
+def test_the_token_is_sent_and_a_missing_or_wrong_one_is_a_clear_error(server, monkeypatch):
+    monkeypatch.delenv("RANGEPLAN_API_TOKEN", raising=False)
+    for token in (None, "wrong-token-0123456789"):
+        with Client(server.url, token=token) as rp, pytest.raises(RangeplanError) as e:
+            rp.list()
+        assert (e.value.code, e.value.status) == ("unauthorized", 401) and "token" in e.value.message
+    monkeypatch.setenv("RANGEPLAN_API_TOKEN", TOKEN)  # the default: the token of the environment
+    with Client(server.url) as rp:
+        assert isinstance(rp.list(), list)

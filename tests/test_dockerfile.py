@@ -1,19 +1,27 @@
-"""No Docker engine runs here, so check the Dockerfile statically: its install steps are
-exactly the Makefile's (what `make run` and CI run), it runs as a non-root user, exposes the
-API and editor ports, health-checks /health and starts `rangeplan serve` on all interfaces."""
+"""The Dockerfile and its lock file, checked statically (the image itself is built and run by
+the opt-in `make container-test`, tests/test_container.py): multi-stage on ``ARG
+BASE_IMAGE``; the runtime dependencies installed from container/requirements.lock, hashes
+checked, in a layer before any source is copied; the lock matches pyproject.toml (every
+runtime dependency pinned within its specifier, no test tool) and is what the test
+environment runs; root owns the install, the service user only /data; kernels compiled
+for a generic CPU into a read-only seed; the health check asks /ready."""
 
 from __future__ import annotations
 
 import re
-import shlex
+import tomllib
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
+from packaging.requirements import Requirement
+from packaging.utils import canonicalize_name
+
 ROOT = Path(__file__).resolve().parent.parent
+LOCK = ROOT / "container" / "requirements.lock"
 
 
-def _dockerfile_instructions() -> list[tuple[str, str]]:
-    text = (ROOT / "Dockerfile").read_text()
-    text = re.sub(r"\\\n", " ", text)  # join continuation lines
+def instructions() -> list[tuple[str, str]]:
+    text = re.sub(r"\\\n", " ", (ROOT / "Dockerfile").read_text())  # join continuation lines
     out = []
     for line in text.splitlines():
         line = line.strip()
@@ -23,65 +31,125 @@ def _dockerfile_instructions() -> list[tuple[str, str]]:
     return out
 
 
-def _makefile():
-    text = (ROOT / "Makefile").read_text()
-    variables = {"PYTHON": "python"}  # the image's interpreter, as PYTHON=python make would use
-    for m in re.finditer(r"^(?:export\s+)?(\w+)\s*[:?]?=\s*(.+)$", text, re.M):
-        variables.setdefault(m.group(1), m.group(2).strip())
-    exports = dict(re.findall(r"^export\s+(\w+)\s*:?=\s*(\S+)", text, re.M))
-
-    def expand(s: str) -> str:
-        for _ in range(5):
-            s = re.sub(r"\$\((\w+)\)", lambda m: variables[m.group(1)], s)
-        return s
-
-    recipe = re.search(r"^\$\(STAMP\):.*\n((?:\t.*\n)+)", text, re.M).group(1)
-    steps = [expand(line.strip()) for line in recipe.splitlines()]
-    steps = [s for s in steps if not s.startswith("touch ")]
-    run_line = re.search(r"^run:.*\n\t(.+)$", text, re.M).group(1)
-    return steps, exports, expand(run_line)
+def stages() -> dict[str, list[tuple[str, str]]]:
+    out: dict[str, list] = {}
+    current = None
+    for op, rest in instructions():
+        if op == "FROM":
+            current = rest.split(" AS ")[-1].strip() if " AS " in rest else rest
+            out[current] = []
+        elif current is not None:
+            out[current].append((op, rest))
+    return out
 
 
-def _norm(cmd: str) -> list[str]:
-    return shlex.split(cmd)
+def pins() -> dict[str, str]:
+    return {canonicalize_name(n): v for n, v in re.findall(r"^([A-Za-z0-9_.-]+)==([^ \\\n]+)", LOCK.read_text(), re.M)}
 
 
-def test_install_steps_identical_to_makefile():
-    steps, _, _ = _makefile()
-    assert any("pip install" in s and "-e" in s for s in steps)
-    runs = [rest for op, rest in _dockerfile_instructions() if op == "RUN"]
-    install = [r for r in runs if "pip install" in r]
-    assert len(install) == 1, install
-    docker_steps = [s.strip() for s in install[0].split("&&")]
-    assert [_norm(s) for s in docker_steps] == [_norm(s) for s in steps]
+def pyproject() -> dict:
+    return tomllib.loads((ROOT / "pyproject.toml").read_text())
 
 
-def test_environment_matches_makefile_exports():
-    _, exports, _ = _makefile()
-    env = " ".join(rest for op, rest in _dockerfile_instructions() if op == "ENV")
-    for k, v in exports.items():
-        assert re.search(rf"\b{k}={re.escape(v)}\b", env), k
+def test_lock_matches_pyproject():
+    """Every runtime dependency is pinned, within its specifier; the lock was compiled from
+    pyproject.toml with hashes; it holds no test-only tool."""
+    text = LOCK.read_text()
+    header = text.split("\n\n")[0] if "\n\n" in text else text[:800]
+    assert "pyproject.toml" in header and "--generate-hashes" in header
+    locked = pins()
+    for dep in pyproject()["project"]["dependencies"]:
+        req = Requirement(dep)
+        name = canonicalize_name(req.name)
+        assert name in locked, f"{req.name} is a dependency but not in the lock: run `make lock`"
+        assert req.specifier.contains(locked[name], prereleases=True), (dep, locked[name])
+    blocks = re.split(r"\n(?=[A-Za-z0-9_.-]+==)", text)
+    assert len(blocks) > len(locked) and all("--hash=sha256:" in b for b in blocks[1:])
+    extras = pyproject()["project"]["optional-dependencies"]
+    test_tools = {canonicalize_name(Requirement(d).name) for d in extras["test"]}
+    # a test tool may be in the lock only as what a runtime package needs (packaging: dask),
+    # never because the lock was compiled with the test extras
+    via = {canonicalize_name(b.split("==")[0]): re.findall(r"#\s+(?:via\s+)?([A-Za-z0-9_.-]+)", b) for b in blocks[1:]}
+    test_only = {n for n in test_tools & set(locked)
+                 if not {canonicalize_name(v) for v in via.get(n, [])} & (set(locked) - test_tools)}
+    assert not test_only, test_only
+    assert {"pytest", "schemathesis", "playwright", "hypothesis", "ruff"}.isdisjoint(locked)
 
 
-def test_image_shape():
-    ins = _dockerfile_instructions()
-    ops = [op for op, _ in ins]
-    assert ins[0] == ("FROM", "python:3.11-slim")
-    user = [rest for op, rest in ins if op == "USER"]
-    assert user and user[-1] not in ("root", "0")
-    # the install runs as that user (after USER), not as root
-    assert ops.index("USER") < max(i for i, (op, rest) in enumerate(ins) if op == "RUN" and "pip install" in rest)
-    exposed = " ".join(rest for op, rest in ins if op == "EXPOSE").split()
-    assert {"8000", "8080"} <= set(exposed)
+def test_tests_run_the_locked_versions():
+    """`make install` installs the lock first, so the suite tests what the image runs."""
+    wrong = {}
+    for name, pinned in pins().items():
+        try:
+            got = version(name)
+        except PackageNotFoundError:
+            got = None
+        if got != pinned:
+            wrong[name] = (pinned, got)
+    assert not wrong, f"installed versions differ from container/requirements.lock: {wrong}"
+    make = (ROOT / "Makefile").read_text()
+    assert make.index("requirements.lock") < make.index("-e '.[test]'")
+
+
+def test_multi_stage_on_a_base_image_argument():
+    ins = instructions()
+    assert ins[0] == ("ARG", "BASE_IMAGE=python:3.11-slim")
+    froms = [rest for op, rest in ins if op == "FROM"]
+    assert len(froms) >= 3 and all(f.startswith("${BASE_IMAGE}") for f in froms)
+    assert list(stages())[-1] == "runtime"
+
+
+def test_dependencies_install_from_the_lock_before_any_source():
+    st = stages()
+    deps = st["deps"]
+    copies = [rest for op, rest in deps if op == "COPY"]
+    assert copies == ["container/requirements.lock /tmp/requirements.lock"], "the deps stage sees only the lock"
+    install = " ".join(rest for op, rest in deps if op == "RUN")
+    assert "--require-hashes" in install and "-r /tmp/requirements.lock" in install and "--no-deps" in install
+    runtime = st["runtime"]
+    order = [(op, rest) for op, rest in runtime if op in ("COPY", "RUN")]
+    first_deps = next(i for i, (op, rest) in enumerate(order) if op == "COPY" and "--from=deps" in rest)
+    first_source = next(i for i, (op, rest) in enumerate(order) if op == "COPY" and "--from=app" in rest)
+    assert first_deps < first_source
+    # no test extra, no editable install anywhere
+    runs = " ".join(rest for op, rest in instructions() if op == "RUN")
+    assert "[test]" not in runs and " -e " not in runs and "pytest" not in runs
+
+
+def test_root_owns_the_install_the_user_only_data():
+    runtime = stages()["runtime"]
+    users = [rest for op, rest in runtime if op == "USER"]
+    assert users == ["10001:0"]
+    user_at = runtime.index(("USER", "10001:0"))
+    assert all(op != "RUN" for op, _ in runtime[user_at:]), "everything is installed as root, before USER"
+    runs = " ".join(rest for op, rest in runtime if op == "RUN")
+    assert "chown 10001:0 /data" in runs and "chmod 2775 /data" in runs
+    assert "--chown" not in " ".join(rest for op, rest in runtime if op == "COPY")
+    assert "go-w /opt/rangeplan" in runs
+
+
+def test_kernels_compiled_for_a_generic_cpu_into_a_read_only_seed():
+    runtime = stages()["runtime"]
+    env = " ".join(rest for op, rest in runtime if op == "ENV")
+    assert "NUMBA_CPU_NAME=generic" in env
+    assert "NUMBA_CACHE_DIR=/tmp/" in env and "RANGEPLAN_KERNEL_SEED=/opt/rangeplan/kernels" in env
+    runs = [rest for op, rest in runtime if op == "RUN"]
+    assert any("NUMBA_CACHE_DIR=/opt/rangeplan/kernels /opt/venv/bin/python -m planner" in r for r in runs)
+
+
+def test_health_check_start_command_and_ports():
+    ins = instructions()
     health = [rest for op, rest in ins if op == "HEALTHCHECK"]
-    assert len(health) == 1 and "/health" in health[0] and "urllib" in health[0]
+    assert len(health) == 1 and "/ready" in health[0] and "urllib" in health[0]
     cmd = [rest for op, rest in ins if op == "CMD"][-1]
-    assert cmd.startswith("[")  # exec form: the server is PID 1 and gets SIGTERM
-    _, _, run_line = _makefile()
-    assert "rangeplan serve" in run_line
-    assert '"rangeplan", "serve", "--host", "0.0.0.0"' in cmd
+    assert cmd.startswith("[") and '"rangeplan", "serve", "--host", "0.0.0.0"' in cmd
+    assert {"8000", "8080"} <= set(" ".join(rest for op, rest in ins if op == "EXPOSE").split())
+    env = " ".join(rest for op, rest in ins if op == "ENV")
+    for k, v in {"OPENBLAS_NUM_THREADS": "1", "RANGEPLAN_DATA_DIR": "/data", "HOME": "/tmp",
+                 "PATH": "/opt/venv/bin:$PATH"}.items():
+        assert f"{k}={v}" in env
 
 
-def test_dockerignore_keeps_venv_and_git_out():
+def test_dockerignore_keeps_venv_git_and_caches_out():
     lines = {line.strip() for line in (ROOT / ".dockerignore").read_text().splitlines()}
-    assert {".git", ".venv"} <= lines
+    assert {".git", ".venv", "**/__pycache__", "tests"} <= lines

@@ -6,6 +6,7 @@ SVG, and the errors bad drawings get."""
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -14,7 +15,8 @@ from shapely import affinity
 
 from planner.errors import PlannerError
 from planner.exchange import import_drawing
-from planner.schema import Layout
+from planner.schema import MAX_POLYGON_POINTS, Layout
+from planner.schema.drawing import MIN_TOLERANCE
 from tests.drawings import (
     ENTITY_KINDS,
     LIBRECAD,
@@ -203,6 +205,29 @@ def test_bad_options_name_the_field():
         with pytest.raises(PlannerError) as e:
             import_drawing(data, options)
         assert e.value.code == "invalid_input" and e.value.field == field
+    for options, field in [({"scale": 5e-324}, "scale"), ({"scale": 1e300}, "scale"),
+                           ({"flatten_tolerance": 5e-324}, "flatten_tolerance"),
+                           ({"join_tolerance": 5e-324}, "join_tolerance"), ({"offset": [1e6, 0]}, "offset[0]"),
+                           ({"start": [0, 0, 1e308]}, "start[2]"), ({"margin": 1e300}, "margin")]:
+        with pytest.raises(PlannerError) as e:  # every number bounded up front
+            import_drawing(data, options)
+        assert e.value.code == "invalid_input" and e.value.field == field, (options, e.value)
+
+
+@pytest.mark.parametrize("kind", ENTITY_KINDS)
+def test_a_curve_finer_than_a_shape_may_be_is_refused_before_it_is_flattened(kind):
+    """Chords within 1 nm of a curve of ~1 m radius would be ~35 000 per curve, more than a
+    shape may have (MAX_POLYGON_POINTS): too_large naming flatten_tolerance, in well under a
+    second, for every curve type (arcs, bulges, ellipses, splines, hatch edges)."""
+    data, _, _ = entity_drawing(kind)
+    t0 = time.perf_counter()
+    with pytest.raises(PlannerError) as e:
+        import_drawing(data, {"flatten_tolerance": MIN_TOLERANCE, "scale": 100.0})
+    assert time.perf_counter() - t0 < 1.0
+    assert (e.value.code, e.value.field) == ("too_large", "flatten_tolerance")
+    assert str(MAX_POLYGON_POINTS) in e.value.message
+    ok = import_drawing(data, {"flatten_tolerance": 1e-4, "scale": 100.0})  # a coarser tolerance: the same shape
+    assert ok.layout.obstacles
 
 
 SVG = """<svg xmlns="http://www.w3.org/2000/svg" xmlns:inkscape="http://www.inkscape.org/namespaces/inkscape"

@@ -163,7 +163,11 @@ def test_typed_numbers_reach_the_request_and_bad_ones_stay_on_the_field(tab):
     assert s.wait_idle(60) and s.last_error is None and s.last_result["settings"]["Ts"] == 0.005
     done = s.plans_done
     client.type(s.gui.cell_size.text, "-0.02")
-    assert wait_for(lambda: s.gui.cell_size.error == "must be > 0.0, got -0.02")
+    # the field checks the schema's own bound on the cell size, and says it as validation does
+    (op, bound), = ((k, v) for k, v in _planning.field_bounds("Cell", "size").items() if k in ("gt", "ge"))
+    assert bound > -0.02
+    expected = f"must be {'>' if op == 'gt' else '>='} {float(bound)}, got -0.02"
+    assert wait_for(lambda: s.gui.cell_size.error == expected), (s.gui.cell_size.error, expected)
     assert s.gui.cell_size.text.label.startswith("\u26a0") and s.gui.cell_size.text.value == "-0.02"
     assert s.request["layout"]["cell"]["size"] == 0.02, "an invalid entry edits nothing"
     time.sleep(0.4)

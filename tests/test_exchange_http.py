@@ -10,15 +10,15 @@ import sys
 
 import numpy as np
 import pytest
-from fastapi.testclient import TestClient
 
 from app.api import create_app
 from app.storage import Store
 from planner.exchange import to_gcode
 from planner.schema import PARTIAL_LAYOUT, ImportResult, PlanResult
+from planner.schema.drawing import MIN_SCALE
 from tests.drawings import DRAWINGS, obstacle_region
 from tests.linuxcnc import rs274
-from tests.support import TABLE1, TABLE1_PATH
+from tests.support import TABLE1, TABLE1_PATH, api_client
 
 TABLE = DRAWINGS / "Table-dining-E.dxf"
 CLI = [sys.executable, "-m", "app.cli"]
@@ -28,7 +28,7 @@ PLACE = {"scale": "0.05", "offset": "0,0.0225", "margin": "0.03", "start": "-0.0
 @pytest.fixture(scope="module")
 def client(tmp_path_factory):
     app = create_app(Store(tmp_path_factory.mktemp("exchange")), workers=1, timeout_s=60, executor="thread")
-    with TestClient(app) as c:
+    with api_client(app) as c:
         yield c
 
 
@@ -154,7 +154,7 @@ def test_cli_import_then_plan_to_each_machine_format(tmp_path):
     (["/nonexistent.dxf"], "cannot read"),
     ([str(TABLE1_PATH)], "not a DXF or SVG"),
     ([str(TABLE), "--layer", "NOPE"], "layers: no geometry on layer(s) 'NOPE'"),
-    ([str(TABLE), "--scale", "0"], "scale: must be > 0"),
+    ([str(TABLE), "--scale", "0"], f"scale: must be >= {MIN_SCALE:g}, got 0"),  # the schema's bound
 ])
 def test_cli_import_errors_exit_2_with_one_line(args, needle):
     r = run("import", *args)

@@ -30,7 +30,17 @@ from planner.errors import PlannerError
 from planner.model import SINGULAR_TOL, load_robot
 from planner.model.kinematics import leg_lengths, singularity_measure, singularity_measure_grid
 from planner.model.reach import check_pose
-from planner.schema import MAX_CELLS, PlanRequest, SegmentationResult, Settings, parse_request
+from planner.schema import (
+    MAX_CELLS,
+    MAX_COORDINATE,
+    MAX_HOLES,
+    MAX_POLYGON_POINTS,
+    PlanRequest,
+    SegmentationResult,
+    Settings,
+    cell_count,
+    parse_request,
+)
 from tests.support import plan_json
 
 ROBOT = load_robot("moving-slide")
@@ -633,13 +643,40 @@ def test_error_too_many_cells():
     _err(base_layout(cell={"shape": "triangle", "size": 2e-4}), "too_large", "layout.cell.size")
 
 
-def test_error_bounds_near_the_float_range_are_too_large_not_an_overflow():
-    # found by the API fuzzing: (upper - lower) / size overflowed to infinity in cell_count
+def test_error_bounds_near_the_float_range_are_refused_not_an_overflow():
+    # found by the API fuzzing: (upper - lower) / size overflowed to infinity in cell_count.
+    # A request's coordinates are bounded (|value| <= MAX_COORDINATE): such bounds are refused
+    # up front, naming the coordinate and the bound
     lay = base_layout(bounds={"lower": [0.0, -8.98846567431158e307], "upper": [1.0, 0.0]},
                       cell={"shape": "square", "size": 0.5})
-    _err(lay, "too_large", "layout.cell.size", "limit")
+    _err(lay, "invalid_input", "layout.bounds.lower[1]", f"{MAX_COORDINATE:g}")
     lay["cell"] = {"shape": "triangle", "size": 0.5}
-    _err(lay, "too_large", "layout.cell.size", "limit")
+    _err(lay, "invalid_input", "layout.bounds.lower[1]", f"{MAX_COORDINATE:g}")
+    # and the cell count itself saturates instead of overflowing: far more cells than any limit
+    for shape in ("square", "triangle"):
+        n, cols, rows = cell_count(np.array([0.0, -8.98846567431158e307]), np.array([1.0, 0.0]), shape, 0.5)
+        assert n > MAX_CELLS and rows > MAX_CELLS and cols >= 1
+
+
+def _plate(holes: int, hole_vertices: int) -> dict:
+    """A square plate (0.04 m, in the workspace's upper half) with ``holes`` small regular
+    polygons of ``hole_vertices`` vertices in a row, each inside it and apart."""
+    r = 0.015 / max(holes, 1)
+    holes_xy = [[[-0.015 + (2 * k + 1) * r + 0.5 * r * math.cos(t), 0.03 + 0.5 * r * math.sin(t)]
+                 for t in np.linspace(0.0, 2 * math.pi, hole_vertices, endpoint=False)] for k in range(holes)]
+    return {"type": "polygon", "points": [[-0.02, 0.01], [0.02, 0.01], [0.02, 0.05], [-0.02, 0.05]],
+            "holes": holes_xy}
+
+
+def test_error_polygon_holes_are_bounded():
+    # within the bounds: a plate with holes is an obstacle like any other
+    lay = base_layout(obstacles=[_plate(MAX_HOLES, 3)])
+    assert segment(lay, ROBOT).segments
+    # more holes than MAX_HOLES, or more vertices in the outline and holes than a polygon may have
+    _err(base_layout(obstacles=[_plate(MAX_HOLES + 1, 3)]), "too_large", "layout.obstacles[0].holes")
+    per_hole = MAX_POLYGON_POINTS // 4
+    e = _err(base_layout(obstacles=[_plate(4, per_hole)]), "too_large", "layout.obstacles[0].holes")
+    assert str(MAX_POLYGON_POINTS) in e.message and str(4 + 4 * per_hole) in e.message
 
 
 def test_error_cell_larger_than_the_bounds():
@@ -685,7 +722,7 @@ def test_error_non_finite_numbers(mutate, field):
     (base_layout(bounds={"lower": [0.1, -0.06], "upper": [0.08, 0.06]}), "layout.bounds.upper", "greater"),
     (base_layout(clearance=-0.001), "layout.clearance", ">= 0"),
     (base_layout(cell={"shape": "hexagon", "size": 0.01}), "layout.cell.shape", "square"),
-    (base_layout(cell={"shape": "square", "size": 0.0}), "layout.cell.size", "> 0"),
+    (base_layout(cell={"shape": "square", "size": 0.0}), "layout.cell.size", ">= 1e-06"),
     (base_layout(psi_range=[0.1, -0.1]), "layout.psi_range", "min <= max"),
     (base_layout(psi_range=[0.05, 0.1]), "layout.psi_range", "start angle"),
     (base_layout(colour="red"), "layout.colour", "unknown"),

@@ -98,9 +98,9 @@ def test_real_server_plans_binds_loopback_and_keeps_corridors(data_dir):
             assert np.hypot(*(pose[-1, :2] - TABLE1["segments"][-1]["lower"][:2])) < 1e-3
 
             # /health answers while two long plans occupy both workers (they then hit the
-            # server's 3 s compute limit)
-            from tests.test_api import long_corridor
-            long = long_corridor()
+            # server's 3 s compute limit; their work estimate is far lower, see test_api)
+            from tests.test_api import slow_corridor
+            long = slow_corridor()
             results = []
             threads = [threading.Thread(target=lambda: results.append(c.post("/v1/plan", json=long)))
                        for _ in range(2)]
@@ -130,7 +130,7 @@ def test_real_server_plans_binds_loopback_and_keeps_corridors(data_dir):
     srv2 = Server(data_dir, free_port())
     try:
         with httpx.Client(base_url=srv2.url, timeout=120) as c:
-            listed = c.get("/v1/corridors").json()
+            listed = c.get("/v1/corridors").json()["items"]
             assert [x["id"] for x in listed] == [saved["id"], second["id"]]
             assert c.get(f"/v1/corridors/{saved['id']}").json() == saved
             assert c.get(f"/v1/plans/{plan_id}").json() == res

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import sqlite3
 import threading
 from datetime import datetime
@@ -166,3 +167,122 @@ def test_new_file_has_large_pages_existing_file_keeps_its_own(tmp_path):
     with st._connect() as con:
         assert con.execute("PRAGMA page_size").fetchone()[0] == default_page
         assert con.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+
+
+# ---------------------------------------------------------------------------------------
+# bounds (issue 15): pages, quotas, unique names
+
+def test_pages_visit_every_corridor_once_in_order_while_others_are_added(tmp_path):
+    st = Store(tmp_path)
+    ids = [st.create_corridor({"i": i}, name=f"c{i}")["id"] for i in range(23)]
+    seen, cursor, pages = [], None, 0
+    while True:
+        items, cursor = st.corridor_page(limit=5, cursor=cursor)
+        seen += [r["id"] for r in items]
+        pages += 1
+        if pages == 2:  # added meanwhile: appears at the end, nothing is skipped or repeated
+            ids.append(st.create_corridor({"late": 1}, name="late")["id"])
+        if cursor is None:
+            break
+    assert seen == ids and pages == 5
+    first = st.corridor_page(limit=3)[0][0]
+    assert set(first) == {"id", "name", "created", "updated", "bytes"}
+    assert first["bytes"] == len(json.dumps({"i": 0}).encode())
+    from app.storage import BadCursor
+    for bad in ("nonsense", "eDk5", "!!"):
+        with pytest.raises(BadCursor):
+            st.corridor_page(cursor=bad)
+
+
+def test_names_are_unique_among_corridors(tmp_path):
+    from app.storage import NameTaken
+    st = Store(tmp_path)
+    a = st.create_corridor(TABLE1, name="cell 7")
+    with pytest.raises(NameTaken) as exc:
+        st.create_corridor(TABLE1, name="cell 7")
+    assert exc.value.holder == a["id"] and a["id"] in str(exc.value)
+    b = st.create_corridor(TABLE1, name="cell 8")
+    with pytest.raises(NameTaken):
+        st.update_corridor(b["id"], TABLE1, name="cell 7")
+    assert st.update_corridor(a["id"], TABLE1, name="cell 7")["name"] == "cell 7"  # its own name
+    st.create_corridor({"x": 1}, name=None)
+    st.create_corridor({"x": 2}, name=None)  # unnamed corridors do not clash
+    st.delete_corridor(a["id"])
+    assert st.create_corridor(TABLE1, name="cell 7")["name"] == "cell 7"
+
+
+def test_quota_per_corridor_and_in_total_plans_make_room_first(tmp_path):
+    from app.storage import StoreFull, TooLarge
+    one = len(json.dumps(TABLE1).encode())
+    st = Store(tmp_path, max_corridor_bytes=2 * one, max_total_bytes=5 * one, max_plan_bytes=one)
+    with pytest.raises(TooLarge, match="RANGEPLAN_MAX_CORRIDOR_BYTES"):
+        st.create_corridor({"pad": "x" * (2 * one)})
+    small_result = json.dumps({"r": "y" * (one // 2 - 40)})
+    plan_ids = [st.save_plan_json(small_result) for _ in range(4)]  # ~2 corridors' worth
+    assert all(plan_ids) and st.count_plans() == 4
+    assert st.save_plan_json(json.dumps({"r": "z" * (2 * one)})) is None  # over max_plan_bytes: not stored
+    for i in range(4):
+        st.create_corridor(TABLE1, name=f"c{i}")
+    u = st.usage()
+    assert u["corridors"] == 4 * one and u["corridors"] + u["plans"] <= 5 * one
+    assert st.count_plans() < 4 and st.get_plan_json(plan_ids[-1]) is not None  # the oldest went first
+    st.create_corridor(TABLE1, name="c4")
+    assert st.count_plans() == 0
+    with pytest.raises(StoreFull, match="RANGEPLAN_MAX_STORE_BYTES"):
+        st.create_corridor(TABLE1, name="c5")
+    assert st.save_plan_json(small_result) is None  # no room left for caches either
+    # replacing a corridor by one of the same size fits (its old bytes are freed)
+    rec = st.list_corridors()[0]
+    assert st.update_corridor(rec["id"], TABLE1) is not None
+
+
+def test_file_from_before_the_quotas_gets_sizes(tmp_path):
+    path = tmp_path / "old.sqlite3"
+    con = sqlite3.connect(path)
+    con.executescript("""
+        CREATE TABLE corridors (seq INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT NOT NULL UNIQUE, name TEXT,
+                                created TEXT NOT NULL, updated TEXT NOT NULL, request TEXT NOT NULL);
+        CREATE TABLE plans (seq INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT NOT NULL UNIQUE, created TEXT NOT NULL,
+                            corridor_id TEXT, request TEXT, result TEXT NOT NULL);""")
+    text = json.dumps(TABLE1)
+    for i in range(2):  # saved twice under one name before names were unique
+        con.execute("INSERT INTO corridors (id, name, created, updated, request) VALUES (?, 'dup', 't', 't', ?)",
+                    (f"{i:032x}", text))
+    con.commit()
+    con.close()
+    st = Store(path)
+    assert st.usage()["corridors"] == 2 * len(text.encode())
+    assert [r["bytes"] for r in st.corridor_page()[0]] == [len(text.encode())] * 2
+    assert st.update_corridor(f"{0:032x}", TABLE1, name="dup")["name"] == "dup"  # keeps its old name
+
+
+def test_database_in_a_group_writable_directory_is_group_writable(tmp_path):
+    """A container's /data is writable by group 0 for any uid (Kubernetes runAsUser,
+    OpenShift): the database (and SQLite's -wal and -shm beside it) made by one uid must be
+    writable by another of the group, whatever the umask; elsewhere the umask rules."""
+    import stat
+
+    shared, private = tmp_path / "shared", tmp_path / "private"
+    shared.mkdir(mode=0o2775)
+    shared.chmod(0o2775)
+    private.mkdir(mode=0o755)
+    private.chmod(0o755)
+    old = os.umask(0o022)
+    try:
+        s = Store(shared)
+        s.create_corridor({"segments": []}, name="a")
+        modes = {p.name: stat.S_IMODE(p.stat().st_mode) for p in shared.iterdir()}
+        assert "rangeplan.sqlite3-wal" in modes, modes
+        assert all(m & 0o060 == 0o060 for m in modes.values()), {k: oct(m) for k, m in modes.items()}
+        assert all(m & 0o007 == 0 for m in modes.values()), "not readable by others"
+        s.close()
+        p = Store(private)
+        p.create_corridor({"segments": []}, name="a")
+        assert stat.S_IMODE((private / "rangeplan.sqlite3").stat().st_mode) == 0o644  # the umask's
+        p.close()
+        # a file made before (without the group's write bit) gets it when its owner opens it
+        (private / "rangeplan.sqlite3").rename(shared / "old.sqlite3")
+        Store(shared / "old.sqlite3").close()
+        assert stat.S_IMODE((shared / "old.sqlite3").stat().st_mode) & 0o060 == 0o060
+    finally:
+        os.umask(old)

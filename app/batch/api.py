@@ -5,11 +5,15 @@
     GET    /v1/batches/{id}            state and progress (total, done, ok, failed, running, rate, ETA)
     GET    /v1/batches/{id}/results    JSON Lines in item order (?wait=true: until the batch ends);
                                        ?format=csv: the summary (the CLI's summary.csv columns)
-    DELETE /v1/batches/{id}            cancel (finished results are kept); ?purge=true: delete it
+    POST   /v1/batches/{id}/cancel     cancel: no further items start (finished results are kept)
+    DELETE /v1/batches/{id}            delete the batch and its results (cancelling what still runs)
 
 :func:`batch_router` is included by :func:`app.api.create_app`; its lifespan starts the
 :class:`~app.batch.service.BatchService` (resuming unfinished batches) beside the app's
-planning pool and stops it at shutdown.
+planning pool and stops it at shutdown. Errors have the service's one shape and helpers
+(:mod:`app.errors`); the token, Host and CORS rules of :mod:`app.security` cover ``/v1/batches``
+like every ``/v1`` path, and each item has the bounds of a single plan (its work estimate,
+compute limit and memory cap: :mod:`app.batch.service`).
 """
 
 from __future__ import annotations
@@ -24,6 +28,8 @@ from fastapi import APIRouter, FastAPI, Query, Request
 from fastapi.responses import JSONResponse, Response, StreamingResponse
 from pydantic import BaseModel, Field
 from starlette.exceptions import HTTPException
+
+from app.errors import error_response, errors_doc
 
 from .service import BatchService, QueueFull
 
@@ -59,18 +65,15 @@ class BatchCreate(BaseModel):
     name: str | None = Field(None, description="Batch name")
 
 
-def _error(status: int, code: str, message: str, field: str | None = None, headers: dict | None = None):
-    return JSONResponse({"error": {"code": code, "message": message, "field": field}}, status_code=status,
-                        headers=headers)
-
-
 def _service(app: FastAPI) -> BatchService:
     """The app's batch service (started by the lifespan, or on first use by a server that
-    runs none)."""
+    runs none), with the app's bounds of one plan (compute limit, memory cap per worker)."""
     with _LOCK:
         svc = getattr(app.state, "batches", None)
         if svc is None:
-            svc = app.state.batches = BatchService(app.state.store.path)
+            limits = getattr(app.state, "plan_limits", None) or {}
+            svc = app.state.batches = BatchService(app.state.store.path, timeout_s=limits.get("timeout_s"),
+                                                   memory_mb=limits.get("memory_mb"))
             svc.start()
         return svc
 
@@ -92,33 +95,33 @@ def _parse_body(body: bytes, content_type: str) -> tuple[list[str], str | None] 
     if content_type in JSONL_TYPES:
         reqs = [ln.decode("utf-8", "replace") for ln in body.splitlines() if ln.strip()]
         if not reqs:
-            return _error(422, "invalid_input", "the JSON Lines body holds no request", "requests")
+            return error_response(422, "invalid_input", "the JSON Lines body holds no request", "requests")
         return reqs, None
     try:
         doc = orjson.loads(body)
     except orjson.JSONDecodeError as exc:
-        return _error(422, "invalid_input", f"body is not valid JSON: {exc}")
+        return error_response(422, "invalid_input", f"body is not valid JSON: {exc}")
     if not isinstance(doc, dict):
-        return _error(422, "invalid_input", "a batch is a JSON object {\"requests\": [...], \"name\": ...}")
+        return error_response(422, "invalid_input", "a batch is a JSON object {\"requests\": [...], \"name\": ...}")
     unknown = sorted(set(doc) - {"requests", "name"})
     if unknown:
-        return _error(422, "invalid_input", "unknown field: not a field of this object", unknown[0])
+        return error_response(422, "invalid_input", "unknown field: not a field of this object", unknown[0])
     reqs, name = doc.get("requests"), doc.get("name")
     if not isinstance(reqs, list) or not reqs:
-        return _error(422, "invalid_input", "must be a non-empty list of plan requests", "requests")
+        return error_response(422, "invalid_input", "must be a non-empty list of plan requests", "requests")
+    for i, r in enumerate(reqs):  # each is validated as a plan request later; what is no object is none
+        if not isinstance(r, dict):
+            return error_response(422, "invalid_input", "must be a JSON object: a plan request (the body of "
+                                  "POST /v1/plan)", f"requests[{i}]")
     if name is not None and not isinstance(name, str):
-        return _error(422, "invalid_input", "must be a string", "name")
+        return error_response(422, "invalid_input", "must be a string", "name")
     return [orjson.dumps(r).decode() for r in reqs], name
 
 
 def batch_router() -> APIRouter:
-    from app.api import ErrorResponse  # the service's one error shape (app.api is loaded: it calls us)
-
     router = APIRouter(lifespan=_lifespan, tags=["batches"])
-    errs: dict[int | str, dict[str, Any]] = {
-        s: {"model": ErrorResponse, "description": d} for s, d in (
-            (404, "Unknown batch id"), (413, "Body too large"), (422, "Invalid batch or query parameter"),
-            (503, "Too many batch items queued"))}
+    errs: dict[int | str, dict[str, Any]] = errors_doc(404, 413, 422, 503, descriptions={
+        404: "Unknown batch id", 422: "Invalid batch or query parameter", 503: "Too many batch items queued"})
 
     @router.post("/v1/batches", status_code=202, response_model=BatchProgress,
                  responses={k: errs[k] for k in (413, 422, 503)},
@@ -138,12 +141,12 @@ def batch_router() -> APIRouter:
             return parsed
         reqs, body_name = parsed
         if len(reqs) > svc.max_items:
-            return _error(422, "too_large", f"{len(reqs)} requests; a batch holds at most {svc.max_items} "
+            return error_response(422, "too_large", f"{len(reqs)} requests; a batch holds at most {svc.max_items} "
                           "(RANGEPLAN_MAX_BATCH_ITEMS)", "requests")
         try:
             out = await asyncio.get_running_loop().run_in_executor(None, svc.create, reqs, body_name or name)
         except QueueFull as exc:
-            return _error(503, "busy", f"too many batch items queued ({exc}); retry later",
+            return error_response(503, "busy", f"too many batch items queued ({exc}); retry later",
                           headers={"Retry-After": "30"})
         return JSONResponse(out, status_code=202, headers={"Location": f"/v1/batches/{out['id']}"})
 
@@ -190,20 +193,23 @@ def batch_router() -> APIRouter:
             raise HTTPException(404, f"no batch with id {batch_id!r}")
         return StreamingResponse(lines, media_type="application/x-ndjson")
 
-    @router.delete("/v1/batches/{batch_id}", response_model=BatchProgress, responses={
-        204: {"description": "Deleted (purge=true)"}, 404: errs[404], 422: errs[422]})
-    def cancel_batch(batch_id: str, request: Request,
-                     purge: bool = Query(False, description="Also delete the batch and its stored results")):
-        """Cancel a batch: no further items start; finished results are kept (``purge=true``
-        deletes the batch and its results)."""
-        svc = _service(request.app)
-        if purge:
-            if not svc.delete(batch_id):
-                raise HTTPException(404, f"no batch with id {batch_id!r}")
-            return Response(status_code=204)
-        out = svc.cancel(batch_id)
+    @router.post("/v1/batches/{batch_id}/cancel", response_model=BatchProgress,
+                 responses={404: errs[404], 422: errs[422]})
+    def cancel_batch(batch_id: str, request: Request):
+        """Cancel a batch: no further items start; the items that finished keep their results
+        (``GET .../results``); the batch stays listed, ``state`` ``cancelled``."""
+        out = _service(request.app).cancel(batch_id)
         if out is None:
             raise HTTPException(404, f"no batch with id {batch_id!r}")
         return out
+
+    @router.delete("/v1/batches/{batch_id}", status_code=204, response_class=Response,
+                   responses={204: {"description": "Deleted"}, 404: errs[404], 422: errs[422]})
+    def delete_batch(batch_id: str, request: Request):
+        """Delete a batch and its stored results; items still waiting or running are cancelled
+        first. Keep the results with ``POST /v1/batches/{id}/cancel`` instead."""
+        if not _service(request.app).delete(batch_id):
+            raise HTTPException(404, f"no batch with id {batch_id!r}")
+        return Response(status_code=204)
 
     return router

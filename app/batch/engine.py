@@ -25,7 +25,8 @@ import threading
 import time
 from typing import Any
 
-from planner import PlannerError, plan, to_csv, warm_up
+from app.failures import degenerate, limit_memory, out_of_memory, timeout, too_much_work
+from planner import PlannerError, estimate_work, plan, to_csv, warm_up
 from planner.schema import PlanRequest, PlanResult, error_details
 
 __all__ = ["FORMATS", "STAGING_PREFIX", "plan_item", "plan_chunk", "unpack_chunk", "warm_worker", "where",
@@ -40,8 +41,28 @@ FORMATS: dict[str, tuple[str | None, Any]] = {
 }
 
 #: set in a worker by :func:`warm_worker` (``local``); Dask workers are recognised by
-#: ``distributed.get_worker()``; anything else is the calling process (``inline``)
-_ENGINE = {"name": "inline"}
+#: ``distributed.get_worker()``; anything else is the calling process (``inline``).
+#: ``memory_mb``: this process's memory cap (:func:`warm_worker`), named by a memory error
+_ENGINE: dict[str, Any] = {"name": "inline", "memory_mb": None}
+#: whether this process has loaded the compiled kernels (:func:`_load_kernels`)
+_KERNELS = {"loaded": False}
+_KERNELS_LOCK = threading.Lock()
+
+
+def _load_kernels() -> float:
+    """Load (or compile) the planner's kernels once per process; returns the seconds taken.
+    Done before the first compute limit is armed: the limit raises its exception in the
+    planning thread at the next bytecode, and raised inside numba while it loads a kernel
+    from its cache it crashed the process (a segmentation fault in ``set_env``)."""
+    with _KERNELS_LOCK:
+        if _KERNELS["loaded"]:
+            return 0.0
+        try:
+            return warm_up()
+        except Exception:  # the first plan compiles instead
+            return 0.0
+        finally:
+            _KERNELS["loaded"] = True
 
 
 class ItemTimeout(BaseException):
@@ -63,10 +84,12 @@ def where() -> dict[str, Any]:
     return {"engine": _ENGINE["name"], "worker": f"{host}:{pid}", "host": host, "pid": pid}
 
 
-def warm_worker(engine: str = "local", nice: int = 0) -> float:
+def warm_worker(engine: str = "local", nice: int = 0, memory_mb: int | None = None) -> float:
     """Load the compiled kernels (``planner.warm_up``) and mark this process as ``engine``;
     ``nice`` > 0 lowers its CPU priority (the service's batch workers yield to interactive
-    plans). Runs once per worker process, never per item. Returns the seconds taken."""
+    plans); ``memory_mb`` caps its address space after the warm-up, as the API's planning
+    workers (an item that needs more fails with ``too_much_memory``). Runs once per worker
+    process, never per item. Returns the seconds taken."""
     import signal
 
     _ENGINE["name"] = engine
@@ -78,10 +101,11 @@ def warm_worker(engine: str = "local", nice: int = 0) -> float:
             os.nice(nice)
         except OSError:
             pass
-    try:
-        return warm_up()
-    except Exception:  # the first plan compiles instead
-        return 0.0
+    seconds = _load_kernels()
+    if memory_mb:
+        limit_memory(memory_mb)
+        _ENGINE["memory_mb"] = int(memory_mb)
+    return seconds
 
 
 class _Deadline:
@@ -128,21 +152,14 @@ def _summary(result: PlanResult) -> dict[str, Any]:
             "max_corridor_violation_m": m.max_corridor_violation_m, "steps": m.steps, "compute_ms": m.compute_ms}
 
 
-def _degenerate(exc: Exception, request: Any) -> dict[str, Any]:
-    # the HTTP workers' wording (app.workers): a singular model is the input's fault
-    custom = not isinstance(getattr(request, "robot", "moving-slide"), str)
-    return {"code": "singular", "field": "robot" if custom else None,
-            "message": f"the robot model is degenerate here ({type(exc).__name__}: {exc}); check that the "
-                       "robot's pivots are distinct, its legs have positive length, masses and inertias "
-                       "are positive, and the corridor avoids singular poses"}
-
-
 def plan_item(request: str | bytes | dict | PlanRequest, fmt: str = "json",
               timeout_s: float | None = None) -> dict[str, Any]:
     """Plan one request (JSON text, a dict or a :class:`PlanRequest`) and return
     ``{"status": "ok" | "error", "name", "payload": bytes | None, "summary": {...} | None,
     "error": {code, message, field} | None, "wall_ms", **where()}``. ``payload`` is the result
-    in ``fmt`` (:data:`FORMATS`). ``timeout_s`` bounds the planning time (code ``timeout``)."""
+    in ``fmt`` (:data:`FORMATS`). ``timeout_s`` bounds the planning time (code ``timeout``),
+    and, as for ``POST /v1/plan``, a request whose work estimate exceeds it is not planned
+    (code ``too_much_work``, in microseconds)."""
     import numpy as np
     from pydantic import ValidationError
 
@@ -152,21 +169,24 @@ def plan_item(request: str | bytes | dict | PlanRequest, fmt: str = "json",
     try:
         if fmt not in FORMATS:
             raise PlannerError("invalid_input", f"unknown format {fmt!r}; one of {', '.join(FORMATS)}", "format")
+        if timeout_s:
+            _load_kernels()  # never under the limit (see there)
         with _Deadline(timeout_s):
             if isinstance(request, (str, bytes)):
                 req = PlanRequest.model_validate_json(request)
             elif isinstance(request, dict):
                 req = PlanRequest.model_validate(request)
             out["name"] = req.name
-            result = plan(req)
-            writer = FORMATS[fmt][1]
-            out["payload"] = writer(result) if writer is not None else None
-        out.update(status="ok", summary=_summary(result))
+            est = estimate_work(req) if timeout_s and timeout_s > 0 else None
+            if est is not None and timeout_s is not None and est.seconds > timeout_s:
+                out["error"] = too_much_work(est, timeout_s)
+            else:
+                result = plan(req)
+                writer = FORMATS[fmt][1]
+                out["payload"] = writer(result) if writer is not None else None
+                out.update(status="ok", summary=_summary(result))
     except ItemTimeout:
-        out["error"] = {"code": "timeout", "field": None,
-                        "message": f"planning took longer than the compute limit of {timeout_s:g} s and was "
-                                   "stopped; use fewer segments or samples, a shorter settings.tail_max_s, "
-                                   "or a larger settings.Ts"}
+        out["error"] = timeout(timeout_s or 0.0)
     except PlannerError as exc:
         out["error"] = exc.to_dict()
     except ValidationError as exc:
@@ -175,9 +195,9 @@ def plan_item(request: str | bytes | dict | PlanRequest, fmt: str = "json",
         msg = first["message"].replace("body is not valid JSON", "not valid JSON", 1)
         out["error"] = {"code": first["code"], "message": msg, "field": first["field"]}
     except (ArithmeticError, np.linalg.LinAlgError) as exc:
-        out["error"] = _degenerate(exc, req)
+        out["error"] = degenerate(exc, custom_robot=not isinstance(getattr(req, "robot", "moving-slide"), str))
     except MemoryError:
-        out["error"] = {"code": "internal_error", "message": "the planner ran out of memory", "field": None}
+        out["error"] = out_of_memory(_ENGINE["memory_mb"])
     except Exception as exc:  # a planner bug: this item fails, the batch goes on
         out["error"] = {"code": "internal_error", "field": None,
                         "message": f"the planner failed unexpectedly: {type(exc).__name__}: {exc}"}

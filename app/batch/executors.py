@@ -89,18 +89,19 @@ class InlineEngine(Engine):
 
 class LocalEngine(Engine):
     """``workers`` local processes (``nice``: their CPU priority offset, > 0 yields to the
-    interactive planning pool)."""
+    interactive planning pool; ``memory_mb``: each one's address-space cap [MiB], None: none)."""
 
     name = "local"
 
-    def __init__(self, workers: int | None = None, nice: int = 0):
+    def __init__(self, workers: int | None = None, nice: int = 0, memory_mb: int | None = None):
         self.workers = max(1, int(workers or os.cpu_count() or 1))
         self.nice = nice
+        self.memory_mb = memory_mb
         self._pool = self._start()
 
     def _start(self) -> ProcessPoolExecutor:
         return ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=warm_worker, initargs=("local", self.nice))
+                                   initializer=warm_worker, initargs=("local", self.nice, self.memory_mb))
 
     @property
     def executor(self) -> Executor:
@@ -140,10 +141,11 @@ class LocalEngine(Engine):
 
 
 def open_engine(workers: int | None = None, scheduler: str | None = None, *, nice: int = 0,
-                inline: bool = False, connect_timeout_s: float = 10.0) -> Engine:
+                inline: bool = False, connect_timeout_s: float = 10.0, memory_mb: int | None = None) -> Engine:
     """The engine for these settings: ``inline``; a Dask cluster at ``scheduler`` (or
-    ``$RANGEPLAN_DASK_SCHEDULER``); else a local pool of ``workers``. Raises ``OSError``
-    when the scheduler cannot be reached within ``connect_timeout_s``."""
+    ``$RANGEPLAN_DASK_SCHEDULER``; its workers have the cluster's own memory limits); else a
+    local pool of ``workers``, each capped at ``memory_mb`` MiB. Raises ``OSError`` when the
+    scheduler cannot be reached within ``connect_timeout_s``."""
     if inline:
         return InlineEngine()
     scheduler = scheduler or os.environ.get(SCHEDULER_ENV) or None
@@ -151,4 +153,4 @@ def open_engine(workers: int | None = None, scheduler: str | None = None, *, nic
         from .cluster import DaskEngine
 
         return DaskEngine(scheduler, connect_timeout_s=connect_timeout_s)
-    return LocalEngine(workers, nice=nice)
+    return LocalEngine(workers, nice=nice, memory_mb=memory_mb)

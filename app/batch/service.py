@@ -4,15 +4,18 @@ the batch engine and stores each outcome.
 **A batch never starves single interactive plans.** Single plans run in the API's own
 ``PlanPool`` (``app.workers``); batches run on a *separate* engine: a local process pool of
 ``RANGEPLAN_BATCH_WORKERS`` processes (default: half the cores, at least one) whose
-processes run at a lower CPU priority (``nice`` +10: when an interactive plan and a batch
-item compete for a core, the kernel gives the interactive one ~90 % of it), or a Dask
+processes run at a lower CPU priority (``nice`` +10, the interactive workers +5: when an
+interactive plan and a batch item compete for a core, the kernel gives the interactive one
+~3/4 of it), or a Dask
 cluster (``RANGEPLAN_DASK_SCHEDULER``), which takes no CPU from this machine at all. A
 separate pool rather than a share of the same one: the ``PlanPool`` keeps its bounded queue
 (``503 busy``) and latency for interactive users whatever the batches hold, and the batch
 engine can be a cluster.
 
-Items use the same request model and bounds as single plans, and the same compute limit per
-plan (``RANGEPLAN_PLAN_TIMEOUT_S``). A batch holds at most ``RANGEPLAN_MAX_BATCH_ITEMS``
+Items use the same request model and bounds as single plans: the same compute limit per
+plan (``RANGEPLAN_PLAN_TIMEOUT_S``), the same work estimate before planning (``too_much_work``)
+and, on the local pool, the same memory cap per worker process (``RANGEPLAN_WORKER_MEMORY_MB``,
+``too_much_memory``). A batch holds at most ``RANGEPLAN_MAX_BATCH_ITEMS``
 (10 000) items; at most ``RANGEPLAN_MAX_BATCH_QUEUE`` (100 000) items wait in all batches
 together (more: ``503 busy``).
 
@@ -34,6 +37,8 @@ from typing import Any
 
 import orjson
 
+from app.workers import DEFAULT_MEMORY_MB
+
 from .config import SCHEDULER_ENV, env_float, env_int
 from .store import FINAL, BatchStore
 
@@ -47,11 +52,13 @@ class QueueFull(Exception):
 class BatchService:
     def __init__(self, db_path: Path | str, *, workers: int | None = None, scheduler: str | None = None,
                  timeout_s: float | None = None, nice: int = 10, max_items: int | None = None,
-                 max_queue: int | None = None, keep: int | None = None):
+                 max_queue: int | None = None, keep: int | None = None, memory_mb: int | None = None):
         self.store = BatchStore(db_path, keep=keep or env_int("RANGEPLAN_MAX_BATCHES", 100))
         self.workers = workers or env_int("RANGEPLAN_BATCH_WORKERS", max(1, (os.cpu_count() or 1) // 2))
         self.scheduler = scheduler or os.environ.get(SCHEDULER_ENV) or None
         self.timeout_s = timeout_s or env_float("RANGEPLAN_PLAN_TIMEOUT_S", 30.0)
+        self.memory_mb = memory_mb if memory_mb is not None else env_int("RANGEPLAN_WORKER_MEMORY_MB",
+                                                                         DEFAULT_MEMORY_MB)
         self.nice = nice
         self.max_items = max_items or env_int("RANGEPLAN_MAX_BATCH_ITEMS", 10_000)
         self.max_queue = max_queue or env_int("RANGEPLAN_MAX_BATCH_QUEUE", 100_000)
@@ -171,7 +178,8 @@ class BatchService:
 
         while not self._stop.is_set():
             try:
-                engine = open_engine(self.workers if not self.scheduler else None, self.scheduler, nice=self.nice)
+                engine = open_engine(self.workers if not self.scheduler else None, self.scheduler, nice=self.nice,
+                                     memory_mb=self.memory_mb)
                 self.engine_error = None
                 return engine
             except OSError as exc:  # a cluster not reachable (yet): keep the items, try again

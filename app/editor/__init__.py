@@ -16,11 +16,14 @@ editor's state is a plan request in the one JSON shape. The parts:
   plots and the leg legend; :mod:`._cursor`: the live cursor readout
 - :mod:`._files`: store, request JSON and trajectory CSV
 - :mod:`._geometry`: numpy / shapely geometry of what is drawn, snapping, clipping
+- :mod:`._gate`: the access rules (:mod:`app.security`) on the editor's port
 
 Entry point: :func:`start_editor` (used by ``app.server.serve``).
 """
 
 from ._editor import Editor, start_editor
+from ._gate import start_guarded
+from ._planning import use_pool
 from ._session import Session
 
-__all__ = ["Editor", "Session", "start_editor"]
+__all__ = ["Editor", "Session", "start_editor", "start_guarded", "use_pool"]

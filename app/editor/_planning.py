@@ -10,12 +10,19 @@ Re-plans run on :class:`PlanWorker`, a thread with a debounce and a generation c
 ``schedule()`` returns at once (GUI callbacks never wait for a plan), the worker computes
 only the newest generation, and the caller drops a result whose generation is no longer
 current (a stale result never overwrites a newer one).
+
+Where a plan is computed (issue 15): under ``rangeplan serve`` the editor plans on the API's
+worker pool (:func:`use_pool`): the same worker processes, work estimate, time limit,
+memory limit and error codes as ``POST /v1/plan``, never in the server process. Without a
+pool (an editor started on its own, tests) it plans on its worker thread, after the same
+work estimate against ``RANGEPLAN_PLAN_TIMEOUT_S``.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -25,7 +32,8 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
-from planner import PlannerError, PlanRequest, PlanResult, RobotModel, load_robot
+from app.failures import too_much_work
+from planner import PlannerError, PlanRequest, PlanResult, RobotModel, estimate_work, load_robot
 from planner import plan as run_plan
 from planner import to_csv as _result_csv
 from planner.exchange import export, import_drawing
@@ -36,7 +44,10 @@ from planner.schema import (
     DEFAULT_ROBOT,
     MAX_LEGS,
     MODE_DEFAULTS,
+    PARTIAL_LAYOUT,
     Cell,
+    ImportOptions,
+    ImportResult,
     Layout,
     Settings,
     builtin_robot_names,
@@ -61,6 +72,7 @@ __all__ = [
     "compute_plan",
     "segmentation_module",
     "to_csv",
+    "use_pool",
     "validate_request",
     "editable",
     "field_bounds",
@@ -71,6 +83,17 @@ __all__ = [
 ]
 
 log = logging.getLogger("rangeplan.editor")
+
+#: the planning pool (an :class:`app.workers.PlanPool`) re-plans run on, or None: inline
+_pool: Any = None
+_DEFAULT_TIMEOUT_S = 30.0
+
+
+def use_pool(pool: Any) -> None:
+    """Plan on ``pool`` (an :class:`app.workers.PlanPool`, shared with the API) from now on;
+    None: plan inline on the editor's worker thread."""
+    global _pool
+    _pool = pool
 
 Robot = RobotModel
 #: whether this planner's settings have a travel speed ``speed_m_s`` [m/s]
@@ -154,10 +177,11 @@ def to_csv(result: dict) -> str:
 
 def drawing_request(data: bytes, filename: str, request: dict, options: dict) -> tuple[dict, str]:
     """``request`` with its layout's bounds and obstacles replaced by a drawing's
-    (:func:`planner.exchange.import_drawing` with ``options``); start, end, cell, clearance
-    and psi range stay. Returns the new request and a one-line summary; raises
-    :class:`PlannerError` naming the cause for a bad drawing."""
-    res = import_drawing(data, options, filename=filename)
+    (:func:`planner.exchange.import_drawing` with ``options``, on the pool of :func:`use_pool`
+    when there is one: the API's workers, compute limit and memory cap); start, end, cell,
+    clearance and psi range stay. Returns the new request and a one-line summary; raises
+    :class:`PlannerError` naming the cause for a bad drawing (or too much work)."""
+    res = _read_drawing(data, filename, options)
     layout = dict(request.get("layout") or {})
     imported = res.to_json_dict()["layout"]
     layout["bounds"], layout["obstacles"] = imported["bounds"], imported["obstacles"]
@@ -169,6 +193,29 @@ def drawing_request(data: bytes, filename: str, request: dict, options: dict) ->
     summary = (f"{len(rep.shapes)} obstacle(s), {rep.holes} hole(s) from layers {', '.join(rep.layers)}; units "
                f"{rep.units} ({rep.units_source}); {len(rep.open_chains)} open chain(s) left out")
     return {**request, "layout": layout}, summary
+
+
+def _read_drawing(data: bytes, filename: str, options: dict) -> ImportResult:
+    pool = _pool
+    if pool is None:
+        return import_drawing(data, options, filename=filename)
+    from app.workers import describe_failure
+
+    try:
+        opts = ImportOptions.model_validate(options)
+    except ValidationError as exc:
+        raise planner_error(exc) from None
+    job = {"kind": "import", "data": data, "options": opts, "filename": filename, "content_type": None}
+    try:
+        out = pool.run(job)
+    except Exception as exc:  # time limit, busy, a worker died
+        e = describe_failure(exc, pool, "import")[1]
+        raise PlannerError(e["code"], e["message"], e["field"]) from None
+    if out[0] == "ok":
+        return ImportResult.model_validate_json(out[1], context=PARTIAL_LAYOUT)
+    if out[0] == "error":
+        raise PlannerError(out[1]["code"], out[1]["message"], out[1].get("field"))
+    raise PlannerError("internal_error", "reading the drawing failed unexpectedly: " + str(out[1]).splitlines()[0])
 
 
 def export_result(result: dict, fmt: str, request: dict) -> str:
@@ -221,8 +268,8 @@ class PlanOutcome:
 
 def compute_plan(request: dict, robots: RobotCache) -> PlanOutcome:
     """Validate, segment (when the request has a layout) and plan ``request`` (the one
-    JSON shape). Never raises for a bad request or an impossible plan: those become
-    ``PlanOutcome.error``."""
+    JSON shape), on the pool of :func:`use_pool` or inline. Never raises for a bad request,
+    an impossible plan or too much work: those become ``PlanOutcome.error``."""
     t0 = time.perf_counter()
 
     def outcome(seg, result, error) -> PlanOutcome:
@@ -234,6 +281,13 @@ def compute_plan(request: dict, robots: RobotCache) -> PlanOutcome:
         first = planner_error(exc).to_dict()
         message = format_validation_error(exc).removeprefix(f"{first['field']}: ")
         return outcome(None, None, {**first, "message": message})
+    pool = _pool
+    if pool is not None:
+        return outcome(*_on_pool(pool, req))
+    limit = float(os.environ.get("RANGEPLAN_PLAN_TIMEOUT_S", _DEFAULT_TIMEOUT_S) or _DEFAULT_TIMEOUT_S)
+    est = estimate_work(req)
+    if est.seconds > limit:
+        return outcome(None, None, too_much_work(est, limit))
     seg_dict = None
     try:
         robot = robots.get(request.get("robot", DEFAULT_ROBOT))
@@ -248,6 +302,23 @@ def compute_plan(request: dict, robots: RobotCache) -> PlanOutcome:
     except ImportError as exc:
         return outcome(None, None, {"code": "unavailable", "message": f"segmentation is not available: {exc}",
                                     "field": "layout"})
+
+
+def _on_pool(pool: Any, req: PlanRequest) -> tuple[dict | None, dict | None, dict | None]:
+    """(segmentation, result, error) of the editor's job on ``pool``."""
+    from app.workers import describe_failure
+
+    try:
+        out = pool.run({"kind": "editor", "request": req})
+    except Exception as exc:  # too much work, time limit, busy, a worker died
+        return None, None, describe_failure(exc, pool)[1]
+    if out[0] == "ok":
+        body = json.loads(out[1])
+        return body["segmentation"], body["result"], body["error"]
+    if out[0] == "error":
+        return None, None, out[1]
+    return None, None, {"code": "internal_error", "message": "the planner failed unexpectedly: "
+                        + str(out[1]).splitlines()[0], "field": None}
 
 
 class PlanWorker(threading.Thread):

@@ -9,10 +9,11 @@ and grid squares the robot reaches, regular; :func:`reachable_region`), :mod:`.s
 Plane geometry: :mod:`.geometry`; per-sample ranges: :mod:`.ranges`.
 """
 
+from .cells import cell_size_rule
 from .ranges import RangeSequence, range_sequence, reference_sequence, segment_counts
 from .reach_region import reachable_region
 from .search import count_turns
 from .segmentation import Segmentation, segment
 
-__all__ = ["RangeSequence", "Segmentation", "count_turns", "range_sequence", "segment_counts",
+__all__ = ["RangeSequence", "Segmentation", "cell_size_rule", "count_turns", "range_sequence", "segment_counts",
            "reachable_region", "reference_sequence", "segment"]

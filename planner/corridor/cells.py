@@ -36,7 +36,7 @@ from ..schema import MAX_CELLS, SQRT3_2, Settings, cell_count
 from .workspace import Workspace
 
 __all__ = ["BLOCKED", "DEFAULT_SPEED", "FREE", "STATE_NAMES", "UNREACHABLE", "Grid", "block_obstacles", "build_grid",
-           "count_states", "default_cell_size", "square_grid", "triangle_grid"]
+           "cell_size_rule", "count_states", "default_cell_size", "square_grid", "triangle_grid"]
 
 #: nominal tool speed of the default cell-size rule [m/s]
 DEFAULT_SPEED = 0.1
@@ -92,13 +92,20 @@ class Grid:
 
 def default_cell_size(ws: Workspace, settings: Settings) -> float:
     """The default cell edge [m] (the module docstring)."""
-    d = float(np.hypot(*(ws.end[:2] - ws.start[:2])))
+    return cell_size_rule(ws.lower, ws.upper, ws.start, ws.end, ws.shape, settings)
+
+
+def cell_size_rule(lower: np.ndarray, upper: np.ndarray, start: np.ndarray, end: np.ndarray, shape: str,
+                   settings: Settings) -> float:
+    """The default cell edge [m] for bounds ``lower``, ``upper`` (x, y) [m], ``start`` and
+    ``end`` poses and a cell ``shape`` (the module docstring)."""
+    d = float(np.hypot(*(np.asarray(end[:2], float) - np.asarray(start[:2], float))))
     s = DEFAULT_SPEED * settings.samples_per_segment * settings.Ts
     if d > 0:
         s = min(max(s, d / 50.0), d / 4.0)
-    W, H = ws.upper - ws.lower
+    W, H = (np.asarray(upper, float) - np.asarray(lower, float)).tolist()
     s = min(s, 0.5 * min(W, H))
-    area = W * H if ws.shape == "square" else 2.0 * W * H / SQRT3_2  # cells ~ area / cell area
+    area = W * H if shape == "square" else 2.0 * W * H / SQRT3_2  # cells ~ area / cell area
     s_cap = math.sqrt(area / (0.9 * MAX_CELLS))
     return max(s, s_cap)
 

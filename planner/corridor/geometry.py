@@ -51,6 +51,12 @@ def polygon_distance(p: np.ndarray, V: np.ndarray) -> np.ndarray:
     return np.where(inside, 0.0, d)
 
 
+#: elements of the (samples x segments) block :func:`corridor_violation` works on at once: the
+#: temporaries stay in cache (0.5 MB each) and memory stays bounded; one 40 000 x 2 000 array
+#: took 7 s and 2.6 GB, these blocks take 0.5 s (issue 15)
+_BLOCK_ELEMENTS = 1 << 16
+
+
 def corridor_violation(poses: np.ndarray, segments: Sequence) -> np.ndarray:
     """Distance [m] of each pose's (x, y) outside the union of the segments' boxes, against
     every segment (the reference of :func:`corridor_distances`, which is linear in the
@@ -58,13 +64,20 @@ def corridor_violation(poses: np.ndarray, segments: Sequence) -> np.ndarray:
 
     The same numbers as ``box_distance(poses[:, None, :2], lo, hi).min(axis=1)`` (the norm
     is the same sum of squares; the square root, being monotone, is taken after the minimum),
-    ~3x faster on a (samples x segments) grid."""
+    computed over blocks of poses so that memory stays bounded for long corridors."""
     lo = np.array([s.lower[:2] for s in segments])
     hi = np.array([s.upper[:2] for s in segments])
-    px, py = poses[:, 0:1], poses[:, 1:2]
-    dx = np.maximum(np.maximum(lo[:, 0] - px, 0.0), px - hi[:, 0])
-    dy = np.maximum(np.maximum(lo[:, 1] - py, 0.0), py - hi[:, 1])
-    return np.sqrt((dx * dx + dy * dy).min(axis=1))
+    out = np.empty(len(poses))
+    step = max(1, _BLOCK_ELEMENTS // max(len(lo), 1))
+    for i in range(0, len(poses), step):
+        px, py = poses[i:i + step, 0:1], poses[i:i + step, 1:2]
+        dx = np.maximum(np.maximum(lo[:, 0] - px, 0.0), px - hi[:, 0])
+        dy = np.maximum(np.maximum(lo[:, 1] - py, 0.0), py - hi[:, 1])
+        dx *= dx
+        dy *= dy
+        dx += dy
+        out[i:i + step] = np.sqrt(dx.min(axis=1))
+    return out
 
 
 def polygon_violation(points: np.ndarray, segments: Sequence) -> np.ndarray:

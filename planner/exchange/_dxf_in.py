@@ -64,6 +64,8 @@ def read_dxf(data: bytes, units: tuple[str, float] | None,
             continue
         try:
             got = list(_pieces(entity, kind, layer, tol))
+        except PlannerError:  # a bound of the import (too many vertices): the drawing's answer
+            raise
         except (ValueError, ZeroDivisionError, ArithmeticError, AttributeError, IndexError, TypeError):
             got = []
         if got:
@@ -93,6 +95,17 @@ def _entities(space: Any, insert_layer: str | None, depth: int, ignored: Counter
             yield from _entities(virtual, layer, depth + 1, ignored)
         else:
             yield e, layer
+
+
+def _flattened(curve, tol: float) -> np.ndarray:
+    """ezdxf's adaptive flattening of a spline within ``tol``, stopped with the error of
+    :func:`~planner.exchange._flatten.chords` once it passes the vertices a shape may have."""
+    pts = []
+    for p in curve.flattening(tol):
+        pts.append((float(p[0]), float(p[1])))
+        if len(pts) > fl.MAX_POLYGON_POINTS + 1:
+            raise fl.too_many_vertices()
+    return np.array(pts, dtype=float).reshape(-1, 2)
 
 
 def _xy(points) -> np.ndarray:
@@ -162,7 +175,7 @@ def _pieces(e, kind: str, layer: str, tol: float) -> Iterator[Piece]:
             pts = _wcs(e, pts, float(e.dxf.get("elevation", (0, 0, 0))[2]))
         yield _piece(pts, bool(e.is_closed) or _closed(pts, 0.0), layer, kind)
     elif kind == "SPLINE":
-        pts = _xy(e.construction_tool().flattening(tol))
+        pts = _flattened(e.construction_tool(), tol)
         if len(pts) >= 2:
             yield _piece(pts, bool(e.closed) or _closed(pts, 0.0), layer, kind)
     else:  # HATCH, MPOLYGON: boundary paths
@@ -192,7 +205,7 @@ def _hatch(e, kind: str, layer: str, tol: float) -> Iterator[Piece]:
                 sweep = (t1 - t0) % (2 * math.pi) or 2 * math.pi
                 pts = fl.ellipse(ct.center, ct.major_axis, ct.minor_axis, t0, sweep, tol)
             elif t == "SPLINE":
-                pts = _xy(edge.construction_tool().flattening(tol))
+                pts = _flattened(edge.construction_tool(), tol)
             else:
                 continue
             yield _piece(_wcs(e, pts, elevation), False, layer, kind)

@@ -10,7 +10,10 @@ One rule for every smooth curve ``c(t)``: ``n`` chords of equal parameter step k
   |P1 - 2 P2 + P3|)``.
 
 Arcs also get at least one chord per 45 degrees (a coarse tolerance never turns a circle
-into a line). The chords' vertices lie on the curve (inscribed).
+into a line). The chords' vertices lie on the curve (inscribed). A curve that would need
+more chords than a shape may have vertices (``MAX_POLYGON_POINTS``) is refused before any
+point is made (``too_large``, field ``flatten_tolerance``): the work of a drawing is bounded
+by its size, not by how fine a tolerance is asked for.
 """
 
 from __future__ import annotations
@@ -19,7 +22,10 @@ import math
 
 import numpy as np
 
-__all__ = ["arc", "bezier", "bulge_polyline", "chords", "ellipse"]
+from ..errors import PlannerError
+from ..schema import MAX_POLYGON_POINTS
+
+__all__ = ["arc", "bezier", "bulge_polyline", "chords", "ellipse", "too_many_vertices"]
 
 MAX_CHORD_ANGLE = math.pi / 4  # [rad]
 
@@ -27,8 +33,17 @@ MAX_CHORD_ANGLE = math.pi / 4  # [rad]
 def chords(bound: float, tol: float, sweep: float = 0.0) -> int:
     """Chords of equal parameter step for a curve with ``|c''| <= bound`` (parameter in
     [0, 1]) to stay within ``tol``; an arc of ``sweep`` [rad] gets one per 45 degrees at least."""
-    n = math.ceil(math.sqrt(max(bound, 0.0) / (8.0 * tol))) if bound > 0 else 1
-    return max(n, math.ceil(abs(sweep) / MAX_CHORD_ANGLE - 1e-9), 1)
+    x = math.sqrt(max(bound, 0.0) / (8.0 * tol)) if bound > 0 else 1.0
+    if not x <= MAX_POLYGON_POINTS:  # also inf and nan (a tolerance that underflowed)
+        raise too_many_vertices()
+    return max(math.ceil(x), math.ceil(abs(sweep) / MAX_CHORD_ANGLE - 1e-9), 1)
+
+
+def too_many_vertices() -> PlannerError:
+    """The error of a curve that needs more vertices than a shape may have."""
+    return PlannerError("too_large", f"a curve of the drawing needs more than {MAX_POLYGON_POINTS} vertices (the "
+                        "limit per shape) to stay within flatten_tolerance; use a larger flatten_tolerance",
+                        "flatten_tolerance")
 
 
 def arc(center, radius: float, start: float, sweep: float, tol: float) -> np.ndarray:

@@ -24,6 +24,7 @@ from pydantic import ValidationError
 from ..errors import PlannerError
 from ..schema import (
     DRAWING_UNITS,
+    MAX_HOLES,
     MAX_OBSTACLES,
     MAX_POLYGON_POINTS,
     PARTIAL_LAYOUT,
@@ -124,10 +125,13 @@ def _obstacle(region: Region) -> dict[str, Any]:
         return {"type": "circle", "center": _round(np.array([cx, cy])), "radius": float(np.round(r, _DECIMALS))}
     poly = shapely.orient_polygons(region.polygon) if hasattr(shapely, "orient_polygons") else region.polygon
     rings = [np.asarray(poly.exterior.coords)[:-1, :2], *(np.asarray(h.coords)[:-1, :2] for h in poly.interiors)]
-    if max(len(r) for r in rings) > MAX_POLYGON_POINTS:
-        raise PlannerError("too_large", f"a shape on layer {region.layer!r} has {max(len(r) for r in rings)} vertices "
-                           f"after flattening, more than the limit of {MAX_POLYGON_POINTS}; use a larger "
-                           "flatten_tolerance", "flatten_tolerance")
+    if len(rings) - 1 > MAX_HOLES:
+        raise PlannerError("too_large", f"a shape on layer {region.layer!r} has {len(rings) - 1} holes (shapes nested "
+                           f"inside it), more than the limit of {MAX_HOLES}", "layers")
+    if sum(len(r) for r in rings) > MAX_POLYGON_POINTS:
+        raise PlannerError("too_large", f"a shape on layer {region.layer!r} has {sum(len(r) for r in rings)} vertices "
+                           f"(outline and holes) after flattening, more than the limit of {MAX_POLYGON_POINTS}; use a "
+                           "larger flatten_tolerance", "flatten_tolerance")
     out: dict[str, Any] = {"type": "polygon", "points": _round(rings[0])}
     if len(rings) > 1:
         out["holes"] = [_round(r) for r in rings[1:]]

@@ -27,15 +27,23 @@ from .limits import (
                      DEFAULT_ROBOT,
                      DEFAULT_SAMPLES_PER_SEGMENT,
                      MAX_CELLS,
+                     MAX_COORDINATE,
+                     MAX_HOLES,
                      MAX_HORIZON,
                      MAX_LEGS,
                      MAX_OBSTACLES,
+                     MAX_PENALTY,
+                     MAX_PENALTY_RATIO,
+                     MAX_PHYSICAL,
                      MAX_POLYGON_POINTS,
                      MAX_SAMPLES_PER_SEGMENT,
                      MAX_SEGMENTS,
                      MAX_TOTAL_STEPS,
+                     MIN_CELL_SIZE,
+                     MIN_SPEED,
                      MIN_TS,
                      MODE_DEFAULTS,
+                     WORK_COSTS,
 )
 from .records import CorridorRecord
 from .request import TIMING_FIELDS, PlanRequest, Reference, Segment, Settings, parse_request
@@ -72,5 +80,7 @@ __all__ = [
     "error_details", "field_path", "format_validation_error", "planner_error",
     "DEFAULT_FORCE_RISE_S", "DEFAULT_LAYOUT_SPEED_M_S", "DEFAULT_MODE",
     "DEFAULT_ROBOT", "DEFAULT_SAMPLES_PER_SEGMENT", "MAX_CELLS", "MAX_HORIZON", "MAX_LEGS", "MAX_OBSTACLES",
-    "MAX_POLYGON_POINTS", "MAX_SAMPLES_PER_SEGMENT", "MAX_SEGMENTS", "MAX_TOTAL_STEPS", "MIN_TS", "MODE_DEFAULTS",
+    "MAX_HOLES", "MAX_POLYGON_POINTS", "MAX_SAMPLES_PER_SEGMENT", "MAX_SEGMENTS", "MAX_TOTAL_STEPS", "MIN_TS",
+    "MODE_DEFAULTS",
+    "MAX_COORDINATE", "MAX_PENALTY", "MAX_PENALTY_RATIO", "MAX_PHYSICAL", "MIN_CELL_SIZE", "MIN_SPEED", "WORK_COSTS",
 ]

@@ -13,10 +13,18 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, GetPydanticSchema
 from pydantic_core import PydanticCustomError, core_schema
 
-__all__ = ["Finite", "Strict", "fail", "Pair", "Triple", "Vec2", "Vec3", "Points2", "Rows3", "Rows", "FloatArray",
-           "array_of"]
+from .limits import MAX_COORDINATE, MAX_PENALTY
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
+__all__ = ["Finite", "Count", "Coordinate", "Strict", "fail", "Pair", "Triple", "Vec2", "Vec3", "Points2", "Rows3",
+           "Rows",
+           "FloatArray", "Point2", "Pose3", "PointPair", "PoseTriple", "Penalty3", "array_of"]
+
+#: a finite JSON number (an integer is a number; true, false and "1.5" are not)
+Finite = Annotated[float, Field(allow_inf_nan=False, strict=True)]
+#: a count: a JSON integer (not 2.0, true or "2")
+Count = Annotated[int, Field(strict=True)]
+#: a coordinate of a request: a position or length in m or an angle in rad, |value| <= MAX_COORDINATE
+Coordinate = Annotated[float, Field(allow_inf_nan=False, strict=True, ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
 
 
 def array_of(inner: Any, **constraints: Any) -> GetPydanticSchema:
@@ -46,6 +54,19 @@ def _to_list(value: Any) -> Any:
 Pair = Annotated[list[Finite], Field(min_length=2, max_length=2)]
 #: [x, y, psi] as JSON
 Triple = Annotated[list[Finite], Field(min_length=3, max_length=3)]
+
+#: [x, y] of a request as JSON, each |value| <= MAX_COORDINATE
+PointPair = Annotated[list[Coordinate], Field(min_length=2, max_length=2)]
+#: [x, y, psi] of a request as JSON, each |value| <= MAX_COORDINATE
+PoseTriple = Annotated[list[Coordinate], Field(min_length=3, max_length=3)]
+#: a request's [x, y] in m (or an angle range [min, max] in rad), |value| <= MAX_COORDINATE
+Point2 = Annotated[np.ndarray, array_of(PointPair)]
+#: a request's [x, y, psi] in m, m, rad, |value| <= MAX_COORDINATE
+Pose3 = Annotated[np.ndarray, array_of(PoseTriple)]
+#: a diagonal penalty (three weights), each in [0, MAX_PENALTY]
+Penalty3 = Annotated[np.ndarray, array_of(Annotated[list[Annotated[float, Field(allow_inf_nan=False, strict=True,
+                                                                                  ge=0, le=MAX_PENALTY)]],
+                                                    Field(min_length=3, max_length=3)])]
 
 #: [x, y] in m
 Vec2 = Annotated[np.ndarray, array_of(list[Finite], min_length=2, max_length=2)]

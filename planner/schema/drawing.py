@@ -16,8 +16,9 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field, field_validator
 
-from ._types import Finite, Strict, Vec2, Vec3
+from ._types import Coordinate, Finite, Point2, Pose3, Strict, Vec2
 from .layout import Layout
+from .limits import MAX_COORDINATE
 
 __all__ = ["DRAWING_UNITS", "DrawingShape", "ImportOptions", "ImportReport", "ImportResult", "OpenChain",
            "PARTIAL_LAYOUT"]
@@ -30,6 +31,12 @@ DRAWING_UNITS: dict[str, float] = {"um": 1e-6, "mm": 1e-3, "cm": 1e-2, "dm": 0.1
 #: validation context under which a layout may lack ``start`` and ``end`` (an imported
 #: drawing before the user says where the robot starts and ends)
 PARTIAL_LAYOUT = {"partial_layout": True}
+
+#: smallest scale factor (and 1 / the largest) a drawing may be placed with
+MIN_SCALE = 1e-9
+#: smallest join and flatten tolerance [m] (1 nm; a curve flattened finer than its bound of
+#: vertices per shape is refused before it is flattened)
+MIN_TOLERANCE = 1e-9
 
 Unit = Literal["um", "mm", "cm", "dm", "m", "in", "ft", "yd", "mil", "px", "pt"]
 
@@ -45,22 +52,25 @@ class ImportOptions(Strict):
     layers: list[str] | None = Field(None, min_length=1, description="Layers whose closed shapes become obstacles "
                                      "(DXF layer names; SVG top-level groups by Inkscape label or id). Default: all "
                                      "layers except bounds_layer")
-    offset: Vec2 = Field(default_factory=lambda: np.zeros(2), description="Translation [x, y] in m applied after "
-                         "units, scale and rotation")
-    rotation: Finite = Field(0.0, description="Rotation in rad (counter-clockwise) about the drawing's origin, "
+    offset: Point2 = Field(default_factory=lambda: np.zeros(2), description="Translation [x, y] in m applied after "
+                           "units, scale and rotation")
+    rotation: Coordinate = Field(0.0, description="Rotation in rad (counter-clockwise) about the drawing's origin, "
                              "applied after units and scale")
-    scale: Finite = Field(1.0, gt=0, description="Scale factor applied to the drawing (after its units)")
-    join_tolerance: Finite = Field(1e-5, gt=0, le=0.01, description="Loose pieces (LINE, ARC, open polylines) whose "
-                                   "ends are closer than this (m, in the workspace) are joined into closed outlines")
-    flatten_tolerance: Finite = Field(1e-4, gt=0, le=0.01, description="Largest distance in m (in the workspace) "
-                                      "between a curve and the polygon that replaces it (arcs, ellipses, splines, "
-                                      "Bezier curves)")
-    margin: Finite = Field(0.01, ge=0, description="Distance in m added around the drawing's extents (the obstacles, "
-                           "start and end) to make the workspace bounds; not used with bounds_layer")
+    scale: Finite = Field(1.0, ge=MIN_SCALE, le=1.0 / MIN_SCALE, description="Scale factor applied to the drawing "
+                          "(after its units)")
+    join_tolerance: Finite = Field(1e-5, ge=MIN_TOLERANCE, le=0.01, description="Loose pieces (LINE, ARC, open "
+                                   "polylines) whose ends are closer than this (m, in the workspace) are joined into "
+                                   "closed outlines")
+    flatten_tolerance: Finite = Field(1e-4, ge=MIN_TOLERANCE, le=0.01, description="Largest distance in m (in the "
+                                      "workspace) between a curve and the polygon that replaces it (arcs, ellipses, "
+                                      "splines, Bezier curves)")
+    margin: Finite = Field(0.01, ge=0, le=MAX_COORDINATE, description="Distance in m added around the drawing's "
+                           "extents (the obstacles, start and end) to make the workspace bounds; not used with "
+                           "bounds_layer")
     bounds_layer: str | None = Field(None, min_length=1, description="Layer whose extents are the workspace bounds "
                                      "(its shapes are not obstacles); default: the extents plus margin")
-    start: Vec3 | None = Field(None, description="Start pose [x, y, psi] in m, m, rad (written into the layout)")
-    end: Vec3 | None = Field(None, description="End pose [x, y, psi] in m, m, rad (written into the layout)")
+    start: Pose3 | None = Field(None, description="Start pose [x, y, psi] in m, m, rad (written into the layout)")
+    end: Pose3 | None = Field(None, description="End pose [x, y, psi] in m, m, rad (written into the layout)")
 
     @field_validator("offset", mode="before")
     @classmethod

@@ -16,8 +16,8 @@ import numpy as np
 import shapely
 from pydantic import Discriminator, Field, Tag, ValidationInfo, field_validator, model_validator
 
-from ._types import Finite, Pair, Strict, Vec2, Vec3, array_of, fail
-from .limits import MAX_CELLS, MAX_OBSTACLES, MAX_POLYGON_POINTS
+from ._types import Finite, Point2, PointPair, Pose3, Strict, array_of, fail
+from .limits import MAX_CELLS, MAX_COORDINATE, MAX_HOLES, MAX_OBSTACLES, MAX_POLYGON_POINTS, MIN_CELL_SIZE
 
 __all__ = ["Bounds", "Cell", "Circle", "Layout", "Obstacle", "Polygon", "Rectangle", "cell_count", "SQRT3_2"]
 
@@ -25,8 +25,8 @@ SQRT3_2 = math.sqrt(3.0) / 2.0  # height of an equilateral triangle of unit edge
 
 
 class Bounds(Strict):
-    lower: Vec2 = Field(description="Workspace lower corner [x, y] in m")
-    upper: Vec2 = Field(description="Workspace upper corner [x, y] in m")
+    lower: Point2 = Field(description="Workspace lower corner [x, y] in m")
+    upper: Point2 = Field(description="Workspace upper corner [x, y] in m")
 
     @model_validator(mode="after")
     def _ordered(self) -> Bounds:
@@ -39,8 +39,8 @@ class Bounds(Strict):
 
 class Rectangle(Strict):
     type: Literal["rectangle"] = Field(description="Obstacle shape")
-    lower: Vec2 = Field(description="Lower corner [x, y] in m")
-    upper: Vec2 = Field(description="Upper corner [x, y] in m")
+    lower: Point2 = Field(description="Lower corner [x, y] in m")
+    upper: Point2 = Field(description="Upper corner [x, y] in m")
 
     @model_validator(mode="after")
     def _size(self) -> Rectangle:
@@ -53,21 +53,22 @@ class Rectangle(Strict):
 
 class Circle(Strict):
     type: Literal["circle"] = Field(description="Obstacle shape")
-    center: Vec2 = Field(description="Centre [x, y] in m")
-    radius: Finite = Field(gt=0, description="Radius in m")
+    center: Point2 = Field(description="Centre [x, y] in m")
+    radius: Finite = Field(gt=0, le=MAX_COORDINATE, description="Radius in m")
 
 
 #: a polygon's vertices [[x, y], ...] in m
-Vertices = Annotated[np.ndarray, array_of(list[Pair], min_length=3, max_length=MAX_POLYGON_POINTS)]
+Vertices = Annotated[np.ndarray, array_of(list[PointPair], min_length=3, max_length=MAX_POLYGON_POINTS)]
 
 
 class Polygon(Strict):
     type: Literal["polygon"] = Field(description="Obstacle shape")
     points: Vertices = Field(
         description="Vertices [[x, y], ...] in m, in order (either orientation)")
-    holes: list[Vertices] = Field(default_factory=list, max_length=MAX_POLYGON_POINTS,
+    holes: list[Vertices] = Field(default_factory=list, max_length=MAX_HOLES,
                                   description="Holes: free areas inside the outline, each its vertices [[x, y], ...] "
-                                  "in m (e.g. a drawing's shapes nested inside another)")
+                                  f"in m (e.g. a drawing's shapes nested inside another); at most {MAX_HOLES}, and "
+                                  f"at most {MAX_POLYGON_POINTS} vertices in the outline and the holes together")
 
     @field_validator("points")
     @classmethod
@@ -82,6 +83,10 @@ class Polygon(Strict):
 
     @model_validator(mode="after")
     def _holes_inside(self) -> Polygon:
+        n = len(self.points) + sum(len(h) for h in self.holes)
+        if n > MAX_POLYGON_POINTS:
+            raise fail(f"the polygon has {n} vertices in its outline and holes, more than the limit of "
+                       f"{MAX_POLYGON_POINTS}", "holes", code="too_large")
         if self.holes:
             poly = shapely.Polygon(self.points, [np.asarray(h) for h in self.holes])
             if not poly.is_valid:
@@ -117,7 +122,8 @@ Obstacle = Annotated[
 
 class Cell(Strict):
     shape: Literal["square", "triangle"] = Field("square", description="Cell shape")
-    size: Finite | None = Field(None, gt=0, description="Cell edge length in m; default from the start-end "
+    size: Finite | None = Field(None, ge=MIN_CELL_SIZE, le=MAX_COORDINATE,
+                                description="Cell edge length in m; default from the start-end "
                                 "distance and the sample time (see the README)")
 
 
@@ -144,13 +150,14 @@ class Layout(Strict):
     bounds: Bounds
     obstacles: list[Obstacle] = Field(default_factory=list, max_length=MAX_OBSTACLES,
                                       description="Obstacles in the workspace")
-    clearance: Finite = Field(0.0, ge=0, description="Distance in m the tool point keeps from every obstacle")
+    clearance: Finite = Field(0.0, ge=0, le=MAX_COORDINATE,
+                              description="Distance in m the tool point keeps from every obstacle")
     cell: Cell = Field(default_factory=lambda: Cell.model_validate({}), description="Cell shape and size")
-    start: Vec3 | None = Field(None, description="Start pose [x, y, psi] in m, m, rad (required here or at the "
+    start: Pose3 | None = Field(None, description="Start pose [x, y, psi] in m, m, rad (required here or at the "
                                "request's top level)")
-    end: Vec3 | None = Field(None, description="End pose [x, y, psi] in m, m, rad (required here or at the "
+    end: Pose3 | None = Field(None, description="End pose [x, y, psi] in m, m, rad (required here or at the "
                              "request's top level)")
-    psi_range: Vec2 | None = Field(None, description="Allowed platform angle [min, max] in rad along the "
+    psi_range: Point2 | None = Field(None, description="Allowed platform angle [min, max] in rad along the "
                                    "corridor; default: between the start and end angles")
 
     @field_validator("obstacles", mode="before")

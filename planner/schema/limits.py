@@ -8,9 +8,10 @@ from __future__ import annotations
 
 __all__ = [
     "MAX_HORIZON", "MAX_SAMPLES_PER_SEGMENT", "MAX_SEGMENTS", "MAX_TOTAL_STEPS", "MAX_CELLS",
-    "MAX_OBSTACLES", "MAX_POLYGON_POINTS", "MAX_LEGS", "MIN_TS", "MODE_DEFAULTS",
-    "DEFAULT_SAMPLES_PER_SEGMENT", "DEFAULT_ROBOT", "DEFAULT_FORCE_RISE_S", "DEFAULT_LAYOUT_SPEED_M_S",
-    "DEFAULT_MODE",
+    "MAX_OBSTACLES", "MAX_POLYGON_POINTS", "MAX_HOLES", "MAX_LEGS", "MIN_TS", "MAX_COORDINATE", "MIN_CELL_SIZE",
+    "MIN_SPEED", "MAX_PENALTY", "MAX_PENALTY_RATIO", "MAX_PHYSICAL", "MODE_DEFAULTS",
+    "DEFAULT_SAMPLES_PER_SEGMENT", "DEFAULT_ROBOT", "WORK_COSTS", "DEFAULT_FORCE_RISE_S",
+    "DEFAULT_LAYOUT_SPEED_M_S", "DEFAULT_MODE",
 ]
 
 #: longest prediction horizon N [samples]
@@ -25,12 +26,29 @@ MAX_TOTAL_STEPS = 200_000
 MAX_CELLS = 40_000
 #: most obstacles in a layout
 MAX_OBSTACLES = 2_000
-#: most vertices of one obstacle polygon
+#: most vertices of one obstacle polygon, its outline and holes together
 MAX_POLYGON_POINTS = 10_000
+#: most holes of one obstacle polygon
+MAX_HOLES = 200
 #: most legs of a robot description
 MAX_LEGS = 16
 #: shortest sample time [s]
 MIN_TS = 1e-4
+#: largest magnitude of a coordinate in a request: positions and lengths [m], angles [rad]
+#: (the robots are metres across; beyond this, products of coordinates overflow)
+MAX_COORDINATE = 1e3
+#: smallest cell edge of a layout [m] (smaller cells are also bounded by MAX_CELLS)
+MIN_CELL_SIZE = 1e-6
+#: slowest target tool speed ``speed_m_s`` [m/s]
+MIN_SPEED = 1e-6
+#: largest penalty weight (k_r, k_u and the diagonals q_ra, q_rb, q_u)
+MAX_PENALTY = 1e12
+#: paper mode: largest ratio of a range penalty to a force penalty (k_r / k_u, or the largest
+#: q_ra, q_rb over the smallest q_u); beyond ~1e13 the horizon problem is too ill-conditioned
+#: to solve in double precision (measured on Table I and psi-turn: 1e12 plans, 1e13 fails)
+MAX_PENALTY_RATIO = 1e12
+#: largest mass [kg], inertia [kg m^2], friction [N s/m], force [N] or speed [m/s] of a robot
+MAX_PHYSICAL = 1e9
 
 #: Defaults that depend on ``settings.mode``, applied where the request leaves the field out.
 #: The constrained mode keeps the corridor by its constraints, so its range penalty only has
@@ -54,3 +72,27 @@ DEFAULT_MODE = "constrained"
 #: space is cut (with a fixed count per segment, 2 mm cells made a move 6x longer than 20 mm
 #: cells); constrained plans at it were contained for 2-20 mm square and triangle cells
 DEFAULT_LAYOUT_SPEED_M_S = 0.05
+
+
+#: What one unit of planning work costs, for the estimate that rejects requests that cannot
+#: finish within a server's time limit before they reach a worker
+#: (:func:`planner.orchestrator.estimate_work`). Seconds; measured on the 2-core machine of
+#: benchmarks/README.md ("Work estimate", benchmarks/bench_work.py), rounded towards the faster
+#: runs so that the estimate errs on the side of accepting (a request it lets through is still
+#: stopped by the time limit). Per receding-horizon step ``a + b N + c N^2 + d N^3`` for each
+#: mode and backend (the constrained mode's QP grows with about N^2.2), per extra RK4 substep,
+#: per (sample x segment) of the corridor metrics, per cell and per obstacle of a segmentation,
+#: and a fixed part per request (parsing, reach checks, the result).
+WORK_COSTS: dict[str, float] = {
+    "paper_compiled_a": 10e-6, "paper_compiled_b": 0.3e-6, "paper_compiled_c": 0.0, "paper_compiled_d": 0.0,
+    "paper_reference_a": 140e-6, "paper_reference_b": 1.5e-6, "paper_reference_c": 0.0, "paper_reference_d": 0.0,
+    "paper_structured_a": 150e-6, "paper_structured_b": 3e-6, "paper_structured_c": 0.0, "paper_structured_d": 0.0,
+    "paper_qr_a": 300e-6, "paper_qr_b": 0.0, "paper_qr_c": 0.0, "paper_qr_d": 0.04e-6,
+    "constrained_compiled_a": 90e-6, "constrained_compiled_b": 0.0, "constrained_compiled_c": 0.25e-6,
+    "constrained_compiled_d": 0.001e-6,
+    "constrained_reference_a": 1500e-6, "constrained_reference_b": 0.0, "constrained_reference_c": 0.25e-6,
+    "constrained_reference_d": 0.001e-6,
+    "substep_compiled": 3e-6, "substep_reference": 150e-6,
+    "sample_segment": 6e-9, "sample_polygon": 20e-9,
+    "cell": 1e-6, "obstacle": 1e-4, "fixed": 3e-3,
+}

@@ -23,7 +23,7 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import (
-    AfterValidator,
+    ConfigDict,
     Discriminator,
     Field,
     StrictBool,
@@ -34,7 +34,7 @@ from pydantic import (
 )
 
 from ..errors import PlannerError
-from ._types import Finite, Pair, Strict, Triple, Vec3, array_of, fail
+from ._types import Coordinate, Count, Finite, Penalty3, PointPair, Pose3, PoseTriple, Strict, array_of, fail
 from .errors import planner_error
 from .layout import Layout
 from .limits import (
@@ -44,15 +44,18 @@ from .limits import (
     DEFAULT_ROBOT,
     DEFAULT_SAMPLES_PER_SEGMENT,
     MAX_HORIZON,
+    MAX_PENALTY,
+    MAX_PENALTY_RATIO,
     MAX_SAMPLES_PER_SEGMENT,
     MAX_SEGMENTS,
     MAX_TOTAL_STEPS,
+    MIN_SPEED,
     MIN_TS,
     MODE_DEFAULTS,
 )
 from .robot import RobotDescription, builtin_description, builtin_robot_names
 
-__all__ = ["PlanRequest", "Reference", "Segment", "Settings", "parse_request", "TIMING_FIELDS"]
+__all__ = ["PlanRequest", "Reference", "Segment", "Settings", "parse_request", "TIMING_FIELDS", "EXAMPLE_REQUEST"]
 
 #: the settings that choose the timing of a corridor; at most one per request
 TIMING_FIELDS = ("samples_per_segment", "segment_samples", "speed_m_s", "total_time_s", "fastest")
@@ -63,28 +66,20 @@ MODE_DECIDES: Any = None
 
 
 #: a convex cell's vertices [[x, y], ...] in m
-CellVertices = Annotated[np.ndarray, array_of(list[Pair], min_length=3)]
+CellVertices = Annotated[np.ndarray, array_of(list[PointPair], min_length=3)]
 #: one pose per sample [[x, y, psi], ...]
-Poses = Annotated[np.ndarray, array_of(list[Triple], min_length=2, max_length=MAX_TOTAL_STEPS)]
-#: one positive number per drive
-PerDrive = Annotated[np.ndarray, array_of(list[Finite], min_length=1)]
-
-
-def _nonnegative(v: np.ndarray) -> np.ndarray:
-    if np.any(v < 0):
-        raise fail("must be >= 0")
-    return v
-
-
-#: the diagonal of a range penalty ``Q_ra`` or ``Q_rb`` (1/m, 1/m, 1/rad), each entry >= 0
-Penalty3 = Annotated[Vec3, AfterValidator(_nonnegative)]
+Poses = Annotated[np.ndarray, array_of(list[PoseTriple], min_length=2, max_length=MAX_TOTAL_STEPS)]
+#: one positive number per drive, at most MAX_PENALTY
+PerDrive = Annotated[np.ndarray, array_of(list[Annotated[float, Field(allow_inf_nan=False, strict=True,
+                                                                         le=MAX_PENALTY)]],
+                                          min_length=1)]
 
 
 class Segment(Strict):
     """One range of the corridor (paper Section V.B): ``r_a = lower``, ``r_b = upper``."""
 
-    lower: Vec3 = Field(description="Lower range limit r_a = [x_a, y_a, psi_a] (m, m, rad)")
-    upper: Vec3 = Field(description="Upper range limit r_b = [x_b, y_b, psi_b] (m, m, rad)")
+    lower: Pose3 = Field(description="Lower range limit r_a = [x_a, y_a, psi_a] (m, m, rad)")
+    upper: Pose3 = Field(description="Upper range limit r_b = [x_b, y_b, psi_b] (m, m, rad)")
     q_ra: Penalty3 | None = Field(None, description="Diagonal of Q_ra for this segment's samples (1/m, 1/m, 1/rad), "
                               ">= 0")
     q_rb: Penalty3 | None = Field(None, description="Diagonal of Q_rb for this segment's samples (1/m, 1/m, 1/rad), "
@@ -128,20 +123,22 @@ class Settings(Strict):
     (or null) take the mode's defaults; after validation they always hold numbers."""
 
     Ts: Finite = Field(0.01, ge=MIN_TS, le=1.0, description="Sample time in s")
-    N: int = Field(MODE_DECIDES, ge=1, le=MAX_HORIZON, description="Prediction horizon in samples; default "
+    N: Count = Field(MODE_DECIDES, ge=1, le=MAX_HORIZON, description="Prediction horizon in samples; default "
                    f"{MODE_DEFAULTS['paper']['N']:g} in paper mode, {MODE_DEFAULTS['constrained']['N']:g} in "
                    "constrained mode")
-    samples_per_segment: int = Field(MODE_DECIDES, ge=1, le=MAX_SAMPLES_PER_SEGMENT,
+    samples_per_segment: Count = Field(MODE_DECIDES, ge=1, le=MAX_SAMPLES_PER_SEGMENT,
                                      description="Samples each segment is held (count); default N if N is given, "
                                      f"else {DEFAULT_SAMPLES_PER_SEGMENT}")
     segment_samples: Annotated[list[Annotated[int, Field(ge=1, le=MAX_SAMPLES_PER_SEGMENT)]],
                                Field(min_length=2, max_length=MAX_SEGMENTS)] | None = Field(
         None, description="Samples each segment is held, one count per segment (a corridor's own timing, e.g. the "
         "one fastest found); instead of samples_per_segment, which it overrides")
-    k_r: Finite = Field(MODE_DECIDES, gt=0, le=1e12, description="Range penalty: Q_ra = Q_rb = k_r I (1/m, 1/rad); "
+    k_r: Finite = Field(MODE_DECIDES, gt=0, le=MAX_PENALTY,
+                        description="Range penalty: Q_ra = Q_rb = k_r I (1/m, 1/rad); "
                         f"default {MODE_DEFAULTS['paper']['k_r']:g} in paper mode, "
                         f"{MODE_DEFAULTS['constrained']['k_r']:g} in constrained mode")
-    k_u: Finite = Field(MODE_DECIDES, gt=0, le=1e12, description="Drive-force penalty: Q_u = k_u I (1/N); default "
+    k_u: Finite = Field(MODE_DECIDES, gt=0, le=MAX_PENALTY,
+                        description="Drive-force penalty: Q_u = k_u I (1/N); default "
                         f"{MODE_DEFAULTS['paper']['k_u']:g} in paper mode, "
                         f"{MODE_DEFAULTS['constrained']['k_u']:g} in constrained mode")
     q_ra: Penalty3 | None = Field(None, description="Diagonal of Q_ra (1/m, 1/m, 1/rad), >= 0; overrides k_r")
@@ -167,10 +164,11 @@ class Settings(Strict):
     settle_angle_rad: Finite = Field(1e-4, gt=0, le=1, description="End-point angle tolerance in rad")
     settle_rate_rad_s: Finite = Field(1e-3, gt=0, le=1, description="Angular speed that counts as stopped in rad/s")
     tail_max_s: Finite = Field(3.0, ge=0, le=600, description="Longest time in s the end point is held for settling")
-    plant_substeps: int = Field(1, ge=1, le=50, description="RK4 steps of the nonlinear model per sample (count)")
+    plant_substeps: Count = Field(1, ge=1, le=50, description="RK4 steps of the nonlinear model per sample (count)")
     require_settled: StrictBool = Field(True, description="Fail with code not_settled instead of returning an "
                                         "unsettled plan")
-    speed_m_s: Finite | None = Field(None, gt=0, le=100, description="Target mean tool speed along the corridor "
+    speed_m_s: Finite | None = Field(None, ge=MIN_SPEED, le=100,
+                                     description="Target mean tool speed along the corridor "
                                      "in m/s; sets samples_per_segment (exclusive with it, total_time_s, fastest); a "
                                      f"layout without a timing setting is timed at {DEFAULT_LAYOUT_SPEED_M_S:g} m/s")
     total_time_s: Finite | None = Field(None, gt=0, le=3600, description="Time in s the corridor's range sequence "
@@ -233,7 +231,28 @@ class Settings(Strict):
             filled["backend"] = "compiled" if self.solver == "riccati" else "reference"
         for key, value in filled.items():
             object.__setattr__(self, key, value)
+        if self.mode == "paper":
+            self._check_conditioning()
         return self
+
+    def _check_conditioning(self) -> None:
+        """Paper mode: the largest range penalty over the smallest force penalty must be at
+        most MAX_PENALTY_RATIO (beyond, the horizon problem is too ill-conditioned to solve)."""
+        given = [(float(np.max(q)), name) for name, q in (("q_ra", self.q_ra), ("q_rb", self.q_rb)) if q is not None]
+        top, name = max(given) if given else (self.k_r, "k_r")
+        message = self.conditioning_error(top)
+        if message:
+            raise fail(message, name)
+
+    def conditioning_error(self, range_penalty: float) -> str | None:
+        """Why ``range_penalty`` over these settings' smallest force penalty is too large a
+        ratio (paper mode), or None."""
+        low, low_name = (float(np.min(self.q_u)), "q_u") if self.q_u is not None else (self.k_u, "k_u")
+        if self.mode != "paper" or range_penalty <= MAX_PENALTY_RATIO * low:
+            return None
+        return (f"the range penalty {range_penalty:g} over the force penalty {low_name} = {low:g} is "
+                f"{range_penalty / low:.3g}, more than {MAX_PENALTY_RATIO:g}: the paper mode's horizon problem is "
+                f"then too ill-conditioned to solve; lower the range penalty or raise settings.{low_name}")
 
     @property
     def tail_steps(self) -> int:
@@ -251,9 +270,24 @@ RobotSpec = Annotated[
 ]
 
 
+#: a small corridor that plans (the OpenAPI document's example request: Swagger UI's "Try it
+#: out" and the API fuzz tests start from it): the start point, two 0.02 m boxes, the end point
+EXAMPLE_REQUEST: dict[str, Any] = {
+    "name": "example: two cells of Table I",
+    "robot": DEFAULT_ROBOT,
+    "segments": [{"lower": [-0.08, 0.0, 0.0], "upper": [-0.08, 0.0, 0.0]},
+                 {"lower": [-0.08, 0.0, 0.0], "upper": [-0.06, 0.02, 0.0]},
+                 {"lower": [-0.06, 0.02, 0.0], "upper": [-0.04, 0.04, 0.0]},
+                 {"lower": [-0.04, 0.04, 0.0], "upper": [-0.04, 0.04, 0.0]}],
+    "settings": {"Ts": 0.01, "N": 20},
+}
+
+
 class PlanRequest(Strict):
     """A plan request: a robot, and a corridor (``segments``), a trajectory to track
     (``reference``) or a workspace to segment (``layout``), with settings."""
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [EXAMPLE_REQUEST]})
 
     name: str | None = Field(None, max_length=200, description="Free-text name of the corridor")
     robot: RobotSpec = Field(DEFAULT_ROBOT, description="Built-in robot name (GET /v1/robots) or a robot "
@@ -266,9 +300,9 @@ class PlanRequest(Strict):
     layout: Layout | None = Field(None, description="Instead of segments: a workspace with obstacles to "
                                   "segment into a corridor (Section V.B)")
     settings: Settings = Field(default_factory=lambda: Settings.model_validate({}), description="Planner settings")
-    start: Vec3 | None = Field(None, description="Shorthand for layout.start: start pose [x, y, psi] in m, m, rad")
-    end: Vec3 | None = Field(None, description="Shorthand for layout.end: end pose [x, y, psi] in m, m, rad")
-    psi_range: Annotated[list[Finite], Field(min_length=2, max_length=2)] | None = Field(
+    start: Pose3 | None = Field(None, description="Shorthand for layout.start: start pose [x, y, psi] in m, m, rad")
+    end: Pose3 | None = Field(None, description="Shorthand for layout.end: end pose [x, y, psi] in m, m, rad")
+    psi_range: Annotated[list[Coordinate], Field(min_length=2, max_length=2)] | None = Field(
         None, description="Shorthand for layout.psi_range: allowed platform angle [min, max] in rad")
 
     @model_validator(mode="before")
@@ -303,6 +337,12 @@ class PlanRequest(Strict):
         if isinstance(rate, np.ndarray) and len(rate) != n_legs:
             raise fail(f"must be one number or one per drive ({n_legs}), got {len(rate)}", "settings.force_rate_n_s")
         if self.segments is not None:
+            for i, seg in enumerate(self.segments):
+                for name in ("q_ra", "q_rb"):
+                    q = getattr(seg, name)
+                    message = None if q is None else st.conditioning_error(float(np.max(q)))
+                    if message:
+                        raise fail(message, f"segments[{i}].{name}")
             if st.segment_samples is not None:
                 if len(st.segment_samples) != len(self.segments):
                     raise fail(f"must have one count per segment ({len(self.segments)}), got "

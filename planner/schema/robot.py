@@ -15,8 +15,8 @@ from typing import Annotated, Any
 import numpy as np
 from pydantic import Discriminator, Field, Tag, field_validator, model_validator
 
-from ._types import Finite, Pair, Strict, Vec2, array_of, fail
-from .limits import MAX_LEGS
+from ._types import Coordinate, Finite, Point2, PointPair, Strict, array_of, fail
+from .limits import MAX_COORDINATE, MAX_LEGS, MAX_PHYSICAL
 
 __all__ = ["BodyDescription", "LegDescription", "PlatformDescription", "RobotDescription",
            "builtin_robot_names", "builtin_description"]
@@ -25,10 +25,10 @@ __all__ = ["BodyDescription", "LegDescription", "PlatformDescription", "RobotDes
 class BodyDescription(Strict):
     """A leg's cylinder or rod."""
 
-    mass: Finite = Field(ge=0, description="Mass in kg")
-    com: Finite = Field(description="Distance of the centre of mass from the base pivot (cylinder) or the "
+    mass: Finite = Field(ge=0, le=MAX_PHYSICAL, description="Mass in kg")
+    com: Coordinate = Field(description="Distance of the centre of mass from the base pivot (cylinder) or the "
                         "platform pivot (rod) in m")
-    inertia: Finite = Field(ge=0, description="Moment of inertia about the centre of mass in kg m^2")
+    inertia: Finite = Field(ge=0, le=MAX_PHYSICAL, description="Moment of inertia about the centre of mass in kg m^2")
 
 
 class LegDescription(Strict):
@@ -36,11 +36,12 @@ class LegDescription(Strict):
 
     cylinder: BodyDescription
     rod: BodyDescription
-    friction: Finite = Field(0.0, ge=0, description="Viscous friction on the leg's sliding speed in N s/m")
-    length_min: Finite = Field(gt=0, description="Shortest leg length in m")
-    length_max: Finite = Field(gt=0, description="Longest leg length in m")
-    force_max: Finite = Field(gt=0, description="Drive force limit in N")
-    speed_max: Finite = Field(gt=0, description="Drive speed limit in m/s")
+    friction: Finite = Field(0.0, ge=0, le=MAX_PHYSICAL,
+                             description="Viscous friction on the leg's sliding speed in N s/m")
+    length_min: Finite = Field(gt=0, le=MAX_COORDINATE, description="Shortest leg length in m")
+    length_max: Finite = Field(gt=0, le=MAX_COORDINATE, description="Longest leg length in m")
+    force_max: Finite = Field(gt=0, le=MAX_PHYSICAL, description="Drive force limit in N")
+    speed_max: Finite = Field(gt=0, le=MAX_PHYSICAL, description="Drive speed limit in m/s")
 
     @model_validator(mode="after")
     def _stroke(self) -> LegDescription:
@@ -50,12 +51,12 @@ class LegDescription(Strict):
 
 
 class PlatformDescription(Strict):
-    mass: Finite = Field(gt=0, description="Platform mass in kg")
-    inertia: Finite = Field(gt=0, description="Platform moment of inertia about its centre in kg m^2")
+    mass: Finite = Field(gt=0, le=MAX_PHYSICAL, description="Platform mass in kg")
+    inertia: Finite = Field(gt=0, le=MAX_PHYSICAL, description="Platform moment of inertia about its centre in kg m^2")
 
 
 #: one pivot per leg, at least 3 legs [[x, y], ...] in m
-Pivots = Annotated[np.ndarray, array_of(list[Pair], min_length=3, max_length=MAX_LEGS)]
+Pivots = Annotated[np.ndarray, array_of(list[PointPair], min_length=3, max_length=MAX_LEGS)]
 
 
 def _legs_kind(value: Any) -> str:
@@ -88,7 +89,7 @@ class RobotDescription(Strict):
     platform: PlatformDescription
     legs: Legs = Field(
         description="One leg description shared by all legs, or one per leg")
-    tool_offset: Vec2 = Field(default_factory=lambda: np.zeros(2),
+    tool_offset: Point2 = Field(default_factory=lambda: np.zeros(2),
                               description="Tool point [x, y] in the platform frame, in m")
 
     @field_validator("base_pivots")

@@ -1,0 +1,40 @@
+"""The compiled kernels of a read-only installation (the container image, issue 15).
+
+numba caches compiled code beside the sources or in ``NUMBA_CACHE_DIR``, and needs that
+place to be writable even to *load* from it. An image built with ``NUMBA_CPU_NAME=generic``
+(code for any x86-64, so the cache is not tied to the build machine's CPU) compiles the
+kernels at build time into a read-only seed (``RANGEPLAN_KERNEL_SEED``); at start
+:func:`seed_kernel_cache` copies it into ``NUMBA_CACHE_DIR`` (e.g. on a tmpfs ``/tmp``)
+before the planner is imported, so a container started ``--read-only`` under any user
+loads the kernels in a second instead of compiling them for minutes.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+__all__ = ["seed_kernel_cache"]
+
+
+def seed_kernel_cache(environ: dict | None = None) -> str | None:
+    """Copy ``RANGEPLAN_KERNEL_SEED`` into ``NUMBA_CACHE_DIR`` (files it lacks only);
+    returns what was done, for the log, or None when neither is set."""
+    env = os.environ if environ is None else environ
+    seed, cache = env.get("RANGEPLAN_KERNEL_SEED"), env.get("NUMBA_CACHE_DIR")
+    if not seed or not cache:
+        return None
+    src, dst = Path(seed), Path(cache)
+    if not src.is_dir():
+        return f"kernel seed {src} not found: the kernels compile on first use"
+    copied = 0
+    for path in src.rglob("*"):
+        target = dst / path.relative_to(src)
+        if path.is_dir():
+            target.mkdir(parents=True, exist_ok=True)
+        elif not target.exists():
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(path, target)
+            copied += 1
+    return f"kernels: {copied} cache files copied from {src} to {dst}"

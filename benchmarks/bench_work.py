@@ -1,0 +1,126 @@
+"""The work estimate against the measured planning time (issue 15).
+
+A server rejects a request whose estimated compute time
+(:func:`planner.estimate_work`) exceeds its time limit. The estimate is meant to be a *lower*
+estimate: measured / estimated should be >= 1 (a rejected request could not have finished)
+and not far above it (or too much work slips through to the time limit). For each request
+of a suite (modes, backends, horizons, long corridors, layouts, the fastest-timing search,
+reference tracking) this prints the estimate, the measured wall time of ``planner.plan``
+(median of ``--repeat`` runs; one run for those over a second) and their ratio, and the
+time the estimate itself takes.
+
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_work.py [--repeat 3] [--quick]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+import argparse  # noqa: E402
+import copy  # noqa: E402
+import json  # noqa: E402
+import statistics  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_segmentation import layout as obstacle_layout  # noqa: E402
+
+from planner import PlannerError, estimate_work, plan  # noqa: E402
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "static" / "examples"
+TABLE1 = json.loads((EXAMPLES / "table1.json").read_text())
+PSI = json.loads((EXAMPLES / "psi-turn.json").read_text())
+
+
+def with_settings(req: dict, **settings) -> dict:
+    out = copy.deepcopy(req)
+    out["settings"] = {**out.get("settings", {}), **settings}
+    return out
+
+
+def walk(n: int, seed: int = 0) -> dict:
+    """``n`` point segments on a random walk of 1 mm steps (the issue's 1 999-segment request)."""
+    pts = np.cumsum(np.random.default_rng(seed).uniform(-0.001, 0.001, (n, 2)), axis=0)
+    return {"segments": [{"lower": [float(x), float(y), 0.0], "upper": [float(x), float(y), 0.0]} for x, y in pts],
+            "settings": {"require_settled": False}}
+
+
+def suite(quick: bool) -> list[tuple[str, dict]]:
+    lay = obstacle_layout("square")
+    tri = obstacle_layout("triangle")
+    cases = [
+        ("Table I, paper", TABLE1),
+        ("Table I, paper, N = 80", with_settings(TABLE1, N=80)),
+        ("Table I, paper, 5 RK4 substeps", with_settings(TABLE1, plant_substeps=5)),
+        ("Table I, paper, reference backend", with_settings(TABLE1, backend="reference")),
+        ("Table I, paper, structured solver", with_settings(TABLE1, backend="reference", solver="structured")),
+        ("Table I, paper, QR solver", with_settings(TABLE1, backend="reference", solver="qr")),
+        ("Table I, constrained N = 10", with_settings(TABLE1, mode="constrained", N=10)),
+        ("Table I, constrained", with_settings(TABLE1, mode="constrained")),
+        ("Table I, constrained N = 60", with_settings(TABLE1, mode="constrained", N=60)),
+        ("Table I, constrained, reference", with_settings(TABLE1, mode="constrained", backend="reference")),
+        ("Table I, constrained, fastest", with_settings(TABLE1, mode="constrained", fastest=True)),
+        ("psi-turn, constrained", with_settings(PSI, mode="constrained")),
+        ("Table I, speed 0.02 m/s", with_settings(TABLE1, speed_m_s=0.02)),
+        ("reference tracking, 500 poses", {"reference": {"pose": [[-0.08 + 0.14 * i / 499, 0.04 * i / 499, 0.0]
+                                                                  for i in range(500)]}}),
+        ("layout 0.3 m, 5 mm squares, 20 obstacles", {"layout": lay}),
+        ("layout, triangles", {"layout": tri}),
+        ("layout, constrained", {"layout": lay, "settings": {"mode": "constrained"}}),
+        ("200 point segments", walk(200)),
+        ("1 999 point segments", walk(1999)),
+    ]
+    if not quick:
+        cases += [
+            ("1 999 point segments x 100 samples", with_settings(walk(1999), samples_per_segment=100)),
+            ("200 point segments, constrained", with_settings(walk(200), mode="constrained")),
+            ("Table I, constrained N = 120", with_settings(TABLE1, mode="constrained", N=120)),
+        ]
+    return cases
+
+
+def measure(req: dict, repeat: int) -> tuple[float, str]:
+    times, outcome = [], "ok"
+    for _ in range(repeat):
+        t = time.perf_counter()
+        try:
+            plan(req)
+        except PlannerError as exc:
+            outcome = exc.code
+        times.append(time.perf_counter() - t)
+        if times[-1] > 1.0:
+            break
+    return statistics.median(times), outcome
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--quick", action="store_true", help="leave out the three slowest requests")
+    args = ap.parse_args()
+    plan(TABLE1)  # load the kernels
+    print("| request | steps (est.) | estimate [s] | measured [s] | measured / estimate | outcome "
+          "| estimate took [us] |")
+    print("|---|---:|---:|---:|---:|---|---:|")
+    ratios = []
+    for name, req in suite(args.quick):
+        t = time.perf_counter()
+        est = estimate_work(req)
+        est_us = (time.perf_counter() - t) * 1e6
+        took, outcome = measure(req, args.repeat)
+        ratios.append(took / est.seconds)
+        print(f"| {name} | {est.steps} | {est.seconds:.3g} | {took:.3g} | {took / est.seconds:.2f} | {outcome} | "
+              f"{est_us:.0f} |", flush=True)
+    print(f"\nmeasured / estimate: min {min(ratios):.2f}, median {statistics.median(ratios):.2f}, "
+          f"max {max(ratios):.2f}")
+
+
+if __name__ == "__main__":
+    main()

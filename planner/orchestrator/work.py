@@ -1,0 +1,154 @@
+"""How much work a request is, before any of it is done: the estimate a server compares with
+its time limit to reject, in microseconds, what could not finish anyway (issue 15).
+
+The estimate follows what :func:`~planner.orchestrator.plan` will do, stage by stage, from
+the validated request alone (no robot model, no segmentation, no simulation):
+
+* the corridor's length: ``n`` segments (given; or, for a layout, the start point, the
+  cells of the shortest possible path between start and end, and the end point; or one per
+  reference pose) held ``S`` samples each (``samples_per_segment``, or what ``speed_m_s`` /
+  ``total_time_s`` resolve to), plus a settling tail of at most half a second;
+* the cost of one receding-horizon step for the mode, backend, solver and horizon ``N``
+  (``a + b N + c N^2 + d N^3``; the constrained QP grows with about ``N^2.2``) and the RK4
+  substeps;
+* the corridor metrics of the result (every sample against every segment, and against
+  every exact cell polygon);
+* a layout's segmentation (per cell and per obstacle);
+* the ``fastest`` timing search: about ``2 + log2(N)`` plans at ``S = N``.
+
+Unit costs are :data:`planner.schema.WORK_COSTS` (seconds on the reference machine,
+``benchmarks/bench_work.py``). They are rounded towards the fast runs, and the unknowns
+(the layout's path, the settling, the search) are taken at their likely low end: the
+estimate is a *lower* estimate, so a request it accepts may still run into the server's
+time limit, but one it rejects could not have finished.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..corridor import cell_size_rule
+from ..schema import SQRT3_2, WORK_COSTS, PlanRequest, cell_count, parse_request
+from .timing import centre_path_length, method_of, moving_segments
+
+__all__ = ["WorkEstimate", "estimate_work"]
+
+#: settling time the estimate counts after the corridor [s] (Table I settles in ~0.5 s)
+TAIL_S = 0.5
+
+
+@dataclass(frozen=True)
+class WorkEstimate:
+    """The estimated compute time of a request and what it is made of."""
+
+    seconds: float  #: estimated compute time on the reference machine [s]
+    steps: int  #: receding-horizon steps over all plans of the request
+    plans: int  #: plans the request runs (more than one for ``fastest``)
+    field: str  #: the request field that contributes most
+    detail: str  #: the arithmetic, in words
+
+    def message(self, limit_s: float) -> str:
+        """Why a server with the time limit ``limit_s`` [s] rejects this request."""
+        return (f"this request needs an estimated {self.seconds:.3g} s of planning ({self.detail}), more than this "
+                f"server's limit of {limit_s:g} s; make it smaller: fewer segments or samples per segment, a larger "
+                "settings.Ts, a shorter horizon settings.N, or the paper mode")
+
+
+def _step_cost(mode: str, backend: str, solver: str, N: int, substeps: int) -> float:
+    """Seconds of one receding-horizon step."""
+    key = f"{mode}_{backend}"
+    if mode == "paper" and backend == "reference" and solver != "riccati":
+        key = f"paper_{solver}"
+    c = WORK_COSTS
+    step = c[f"{key}_a"] + c[f"{key}_b"] * N + c[f"{key}_c"] * N ** 2 + c[f"{key}_d"] * N ** 3
+    return step + (substeps - 1) * c[f"substep_{backend}"]
+
+
+def _layout_corridor(req: PlanRequest, S: int) -> tuple[int, int, int]:
+    """(segments of the shortest possible corridor, cells of the grid, obstacles) of a layout."""
+    lay = req.layout
+    assert lay is not None
+    st = req.settings.model_copy(update={"samples_per_segment": S})
+    lower, upper = lay.bounds.lower, lay.bounds.upper
+    shape = lay.cell.shape
+    size = lay.cell.size if lay.cell.size is not None else cell_size_rule(lower, upper, lay.start_pose,
+                                                                          lay.end_pose, shape, st)
+    cells = cell_count(lower, upper, shape, size)[0]
+    dx, dy = np.abs(lay.end_pose[:2] - lay.start_pose[:2]).tolist()
+    # fewest edge-adjacent cells from a cell holding the start to one holding the end (a point
+    # on a cell edge may take either cell): a square path steps in x and y separately; a
+    # triangle advances half an edge in x per cell and a row (s sqrt(3)/2) per row crossing
+    if shape == "square":
+        path = max(0, math.ceil(dx / size) - 1) + max(0, math.ceil(dy / size) - 1) + 1
+    else:
+        path = max(0, math.ceil(2.0 * dx / size) - 2) + max(0, math.ceil(dy / (size * SQRT3_2)) - 1) + 1
+    return path + 2, cells, len(lay.obstacles)
+
+
+def _samples_per_segment(req: PlanRequest, n: int) -> int:
+    st = req.settings
+    if st.speed_m_s is not None and req.segments is not None:
+        length = centre_path_length(req.segments)
+        return max(1, round(length / (st.speed_m_s * st.Ts * moving_segments(n)))) if length > 0 else 1
+    if st.total_time_s is not None:
+        return max(1, round(st.total_time_s / (n * st.Ts)))
+    if st.fastest:
+        return st.N
+    return st.samples_per_segment
+
+
+def estimate_work(request: Any) -> WorkEstimate:
+    """The estimated compute time of planning ``request`` (a validated
+    :class:`~planner.schema.PlanRequest` or a dict in the one JSON shape); see the module
+    docstring. Costs microseconds (a layout: its cell count; ``speed_m_s``: one pass over
+    the segments)."""
+    req = parse_request(request)
+    st = req.settings
+    c = WORK_COSTS
+    cells = obstacles = 0
+    method = method_of(st)
+    timing_field = f"settings.{method}"
+    if req.reference is not None:
+        n, S = len(req.reference.pose), 1
+        corridor_field = "reference.pose"
+    elif req.segments is not None:
+        n = len(req.segments)
+        S = _samples_per_segment(req, n)
+        corridor_field = "segments"
+    else:
+        S = _samples_per_segment(req, 0) if method != "speed_m_s" else st.N
+        n, cells, obstacles = _layout_corridor(req, S if method != "total_time_s" else st.N)
+        if method == "total_time_s":
+            S = _samples_per_segment(req, n)
+        corridor_field = "layout.cell.size"
+    polygons = req.layout is not None or any(s.polygon is not None for s in (req.segments or ()))
+    plans = 2 + max(1, math.ceil(math.log2(max(st.N, 2)))) if st.fastest else 1
+    steps_one = n * S + min(st.tail_steps, math.ceil(TAIL_S / st.Ts))
+    step_s = _step_cost(st.mode, st.backend, st.solver, st.N, st.plant_substeps)
+    loop_s = plans * steps_one * step_s
+    metrics_s = plans * steps_one * n * (c["sample_segment"] + (c["sample_polygon"] if polygons else 0.0))
+    segment_s = cells * c["cell"] + obstacles * c["obstacle"]
+    seconds = c["fixed"] + loop_s + metrics_s + segment_s
+    # the field to change: the horizon if a step costs more than at the mode's default N,
+    # else what makes the corridor long (its segments, or its samples per segment)
+    default_step = _step_cost(st.mode, st.backend, st.solver, 20 if st.mode == "paper" else 30, st.plant_substeps)
+    if loop_s >= metrics_s and step_s > 2.0 * default_step and "N" in st.model_fields_set:
+        field = "settings.N"
+    elif req.reference is None and S > max(n, 20) and method != "fastest":
+        field = timing_field
+    else:
+        field = corridor_field if not st.fastest else "settings.fastest"
+    what = ("reference poses" if req.reference is not None else "segments" if req.segments is not None
+            else f"segments (shortest path through {cells} cells)")
+    detail = (f"{n} {what} x {S} samples + settling = {steps_one} steps"
+              f"{f' x {plans} plans of the fastest-timing search' if plans > 1 else ''}, "
+              f"~{step_s * 1e6:.0f} us per step in {st.mode} mode at N = {st.N}"
+              f"{'' if st.backend == 'compiled' else f' ({st.backend} backend, {st.solver} solver)'}, "
+              f"{metrics_s:.2g} s of corridor metrics")
+    if segment_s > 0.01:
+        detail += f", {segment_s:.2g} s of segmentation"
+    return WorkEstimate(seconds=seconds, steps=plans * steps_one, plans=plans, field=field, detail=detail)

@@ -1,0 +1,54 @@
+"""Load for the readiness test (issue 15): ``clients`` concurrent HTTP clients (asyncio,
+one connection each), each sending ``per_client`` requests that mix plans (Table I), saves
+(a corridor under a name of its own) and list pages, as fast as answers come back. Prints a
+JSON summary: answers per status, errors, wall time.
+
+    python -m tests.loadgen URL [CLIENTS] [PER_CLIENT]
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import httpx
+
+TABLE1 = json.loads((Path(__file__).resolve().parents[1] / "static" / "examples" / "table1.json").read_text())
+
+
+async def client(http: httpx.AsyncClient, i: int, n: int, statuses: Counter, errors: list) -> None:
+    for k in range(n):
+        kind = (i + k) % 3
+        try:
+            if kind == 0:
+                r = await http.post("/v1/plan", json=TABLE1)
+            elif kind == 1:
+                r = await http.post("/v1/corridors", json={**TABLE1, "name": f"load {i}-{k}"})
+            else:
+                r = await http.get("/v1/corridors", params={"limit": 50})
+            await r.aread()
+            statuses[f"{('plan', 'save', 'list')[kind]} {r.status_code}"] += 1
+        except httpx.HTTPError as exc:
+            errors.append(f"{type(exc).__name__}: {exc}")
+
+
+async def main(url: str, clients: int, per_client: int) -> dict:
+    statuses: Counter = Counter()
+    errors: list = []
+    limits = httpx.Limits(max_connections=clients, max_keepalive_connections=clients)
+    t0 = time.monotonic()
+    async with httpx.AsyncClient(base_url=url, timeout=120, limits=limits) as http:
+        await asyncio.gather(*(client(http, i, per_client, statuses, errors) for i in range(clients)))
+    return {"statuses": dict(statuses), "errors": errors[:20], "n_errors": len(errors),
+            "seconds": time.monotonic() - t0}
+
+
+if __name__ == "__main__":
+    url = sys.argv[1]
+    clients = int(sys.argv[2]) if len(sys.argv) > 2 else 200
+    per_client = int(sys.argv[3]) if len(sys.argv) > 3 else 3
+    print(json.dumps(asyncio.run(main(url, clients, per_client))))

@@ -1,0 +1,56 @@
+"""Under 200 concurrent clients mixing plans, saves and list pages on loopback, /ready
+answers within 1 s throughout (issue 15). The load runs in a process of its own
+(:mod:`tests.loadgen`, 200 clients x 3 requests); this process probes /ready every 50 ms."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+
+from tests.fuzz.runner import _start_server
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def probe_while(proc: subprocess.Popen, url: str) -> list[tuple[float, int]]:
+    """(seconds, status) of GET /ready every 50 ms until ``proc`` ends."""
+    out = []
+    with httpx.Client(base_url=url, timeout=10) as c:
+        while proc.poll() is None:
+            t0 = time.monotonic()
+            status = c.get("/ready").status_code
+            out.append((time.monotonic() - t0, status))
+            time.sleep(0.05)
+    return out
+
+
+@pytest.mark.slow
+def test_ready_answers_within_a_second_under_200_clients(tmp_path):
+    server, log, url = _start_server(tmp_path, timeout_s=30, workers=2, token=None)
+    try:
+        load = subprocess.Popen([sys.executable, "-m", "tests.loadgen", url, "200", "3"], cwd=ROOT,
+                                stdout=subprocess.PIPE, text=True)
+        probes = probe_while(load, url)
+        summary = json.loads(load.communicate(timeout=300)[0])
+    finally:
+        server.terminate()
+        server.wait(30)
+        log.close()
+    latencies = [t for t, _ in probes]
+    assert len(probes) >= 10, probes
+    assert all(s == 200 for _, s in probes), probes
+    assert max(latencies) < 1.0, f"slowest /ready {max(latencies):.3f} s"
+    st = summary["statuses"]
+    assert summary["n_errors"] == 0, summary["errors"]
+    assert sum(st.values()) == 600
+    # every answer is a result, a saved corridor, a page, or 'busy, retry' (503 with Retry-After)
+    assert {k.split()[1] for k in st} <= {"200", "201", "503"}, st
+    assert st.get("plan 200", 0) > 0 and st.get("save 201", 0) > 0 and st.get("list 200", 0) > 0, st
+    print(f"\n/ready under load: {len(probes)} probes, median {sorted(latencies)[len(latencies) // 2] * 1e3:.0f} ms, "
+          f"max {max(latencies) * 1e3:.0f} ms; load {summary}")
