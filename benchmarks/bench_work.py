@@ -55,31 +55,36 @@ def walk(n: int, seed: int = 0) -> dict:
 def suite(quick: bool) -> list[tuple[str, dict]]:
     lay = obstacle_layout("square")
     tri = obstacle_layout("triangle")
+    paper = with_settings(TABLE1, mode="paper")  # the default mode is the constrained one
     cases = [
-        ("Table I, paper", TABLE1),
-        ("Table I, paper, N = 80", with_settings(TABLE1, N=80)),
-        ("Table I, paper, 5 RK4 substeps", with_settings(TABLE1, plant_substeps=5)),
-        ("Table I, paper, reference backend", with_settings(TABLE1, backend="reference")),
-        ("Table I, paper, structured solver", with_settings(TABLE1, backend="reference", solver="structured")),
-        ("Table I, paper, QR solver", with_settings(TABLE1, backend="reference", solver="qr")),
+        ("Table I, paper", paper),
+        ("Table I, paper, N = 80", with_settings(paper, N=80)),
+        ("Table I, paper, 5 RK4 substeps", with_settings(paper, plant_substeps=5)),
+        ("Table I, paper, reference backend", with_settings(paper, backend="reference")),
+        ("Table I, paper, structured solver", with_settings(paper, backend="reference", solver="structured")),
+        ("Table I, paper, QR solver", with_settings(paper, backend="reference", solver="qr")),
         ("Table I, constrained N = 10", with_settings(TABLE1, mode="constrained", N=10)),
         ("Table I, constrained", with_settings(TABLE1, mode="constrained")),
         ("Table I, constrained N = 60", with_settings(TABLE1, mode="constrained", N=60)),
         ("Table I, constrained, reference", with_settings(TABLE1, mode="constrained", backend="reference")),
         ("Table I, constrained, fastest", with_settings(TABLE1, mode="constrained", fastest=True)),
         ("psi-turn, constrained", with_settings(PSI, mode="constrained")),
-        ("Table I, speed 0.02 m/s", with_settings(TABLE1, speed_m_s=0.02)),
+        ("Table I, paper, speed 0.02 m/s", with_settings(paper, speed_m_s=0.02)),
+        ("Table I, constrained, speed 0.02 m/s", with_settings(TABLE1, mode="constrained", speed_m_s=0.02)),
         ("reference tracking, 500 poses", {"reference": {"pose": [[-0.08 + 0.14 * i / 499, 0.04 * i / 499, 0.0]
-                                                                  for i in range(500)]}}),
-        ("layout 0.3 m, 5 mm squares, 20 obstacles", {"layout": lay}),
-        ("layout, triangles", {"layout": tri}),
-        ("layout, constrained", {"layout": lay, "settings": {"mode": "constrained"}}),
-        ("200 point segments", walk(200)),
-        ("1 999 point segments", walk(1999)),
+                                                                  for i in range(500)]},
+                                           "settings": {"mode": "paper"}}),
+        ("layout 0.3 m, 5 mm squares, 20 obstacles, paper", {"layout": lay, "settings": {"mode": "paper"}}),
+        ("layout, triangles, paper", {"layout": tri, "settings": {"mode": "paper"}}),
+        ("layout, constrained (default tool speed)", {"layout": lay}),
+        ("layout, triangles, constrained (default tool speed)", {"layout": tri}),
+        ("200 point segments, paper", with_settings(walk(200), mode="paper")),
+        ("1 999 point segments, paper", with_settings(walk(1999), mode="paper")),
     ]
     if not quick:
         cases += [
-            ("1 999 point segments x 100 samples", with_settings(walk(1999), samples_per_segment=100)),
+            ("1 999 point segments x 100 samples, paper", with_settings(walk(1999), mode="paper",
+                                                                        samples_per_segment=100)),
             ("200 point segments, constrained", with_settings(walk(200), mode="constrained")),
             ("Table I, constrained N = 120", with_settings(TABLE1, mode="constrained", N=120)),
         ]

@@ -9,10 +9,10 @@ the validated request alone (no robot model, no segmentation, no simulation):
   reference pose) held ``S`` samples each (``samples_per_segment``, or what ``speed_m_s`` /
   ``total_time_s`` resolve to), plus a settling tail of at most half a second;
 * the cost of one receding-horizon step for the mode, backend, solver and horizon ``N``
-  (``a + b N + c N^2 + d N^3``; the constrained QP grows with about ``N^2.2``) and the RK4
-  substeps;
-* the corridor metrics of the result (every sample against every segment, and against
-  every exact cell polygon);
+  (``a + b N + c N^2 + d N^3``; the compiled constrained step about linearly in N, its numpy
+  reference with DAQP about ``N^2.2``) and the RK4 substeps;
+* the range sequence, the corridor metrics and the result, per sample (linear in the
+  samples; more with exact cell polygons);
 * a layout's segmentation (per cell and per obstacle);
 * the ``fastest`` timing search: about ``2 + log2(N)`` plans at ``S = N``.
 
@@ -124,13 +124,18 @@ def estimate_work(request: Any) -> WorkEstimate:
         n, cells, obstacles = _layout_corridor(req, S if method != "total_time_s" else st.N)
         if method == "total_time_s":
             S = _samples_per_segment(req, n)
+        elif method == "speed_m_s":  # (the default tool speed too): the straight line from start to
+            # end is no longer than the corridor's centre path, so this count is a lower one
+            assert req.layout is not None and st.speed_m_s is not None
+            line = float(np.linalg.norm(req.layout.end_pose[:2] - req.layout.start_pose[:2]))
+            S = max(1, math.floor(line / (st.speed_m_s * st.Ts * moving_segments(n))))
         corridor_field = "layout.cell.size"
     polygons = req.layout is not None or any(s.polygon is not None for s in (req.segments or ()))
     plans = 2 + max(1, math.ceil(math.log2(max(st.N, 2)))) if st.fastest else 1
     steps_one = n * S + min(st.tail_steps, math.ceil(TAIL_S / st.Ts))
     step_s = _step_cost(st.mode, st.backend, st.solver, st.N, st.plant_substeps)
     loop_s = plans * steps_one * step_s
-    metrics_s = plans * steps_one * n * (c["sample_segment"] + (c["sample_polygon"] if polygons else 0.0))
+    metrics_s = plans * steps_one * (c["sample"] + (c["sample_polygon"] if polygons else 0.0))
     segment_s = cells * c["cell"] + obstacles * c["obstacle"]
     seconds = c["fixed"] + loop_s + metrics_s + segment_s
     # the field to change: the horizon if a step costs more than at the mode's default N,
