@@ -337,7 +337,7 @@ def test_too_much_work_is_refused_in_well_under_a_second(store):
         assert "limit of 1 s" in err["message"] and "100 segments x 2000 samples" in err["message"]
         est = float(err["message"].split("estimated ")[1].split(" s")[0])
         assert est > 1.0
-        constrained = {**TABLE1, "settings": {"mode": "constrained", "N": 150}}
+        constrained = {**TABLE1, "settings": {"mode": "constrained", "N": 150, "backend": "reference"}}
         assert_error(c.post("/v1/plan", json=constrained), 422, "too_much_work", "settings.N")
         assert c.get("/health").json()["pool"]["in_flight"] == 0
         assert c.post("/v1/plan", json=TABLE1).status_code == 200

@@ -613,7 +613,7 @@ def test_api_batch_items_have_the_bounds_of_a_single_plan(tmp_path):
     """A batch item is refused for too much work as POST /v1/plan refuses it on the same
     server (the same estimate, limit, code, field and message), in well under a second and
     without planning; the other items plan."""
-    heavy = {**TABLE1, "settings": {"mode": "constrained", "N": 150}}
+    heavy = {**TABLE1, "settings": {"mode": "constrained", "N": 150, "backend": "reference"}}
     app = create_app(Store(tmp_path), workers=1, timeout_s=5.0)
     with api_client(app) as c:
         single = c.post("/v1/plan", json=heavy)
@@ -627,7 +627,7 @@ def test_api_batch_items_have_the_bounds_of_a_single_plan(tmp_path):
 
 
 def test_plan_item_refuses_too_much_work_before_planning():
-    heavy = {**TABLE1, "settings": {"mode": "constrained", "N": 150}}
+    heavy = {**TABLE1, "settings": {"mode": "constrained", "N": 150, "backend": "reference"}}
     t0 = time.perf_counter()
     out = plan_item(heavy, timeout_s=5.0)
     assert time.perf_counter() - t0 < 1.0 and out["status"] == "error" and out["payload"] is None
