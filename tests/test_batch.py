@@ -98,29 +98,22 @@ def test_plan_item_stops_at_the_compute_limit(monkeypatch):
     assert plan_item(req, timeout_s=60)["status"] == "ok"  # the limit is withdrawn after the plan
 
 
-class _PoisonEngine(Engine):
-    """Runs tasks inline; a task holding the poison request 'crashes its worker' (raises
-    BrokenProcessPool like a process pool whose worker died), and so does every other task
-    in flight with it, as a real broken pool does."""
+class _InlineEngine(Engine):
+    """Runs each task in this process at submit; ``hook(fn, args)`` decides its outcome."""
 
-    name = "poison"
+    name = "local"
 
-    def __init__(self):
-        self.restarts = 0
-        outer = self
-
+    def __init__(self, hook):
         class Ex(Executor):
             def submit(self, fn, /, *args, **kwargs):
                 f: Future = Future()
-                requests = args[0]
-                if any(r == "POISON" for r in requests):
-                    f.set_exception(BrokenProcessPool("a worker died"))
-                else:
-                    f.set_result(fn(*args, **kwargs))
-                outer.submitted.append(list(requests))
+                try:
+                    f.set_result(hook(fn, args))
+                except BrokenProcessPool as exc:
+                    f.set_exception(exc)
                 return f
-        self.submitted: list[list] = []
         self._ex = Ex()
+        self.restarts = 0
 
     @property
     def executor(self):
@@ -135,6 +128,25 @@ class _PoisonEngine(Engine):
 
     def restart(self):
         self.restarts += 1
+
+
+class _PoisonEngine(_InlineEngine):
+    """Runs tasks inline; a task holding the poison request 'crashes its worker' (raises
+    BrokenProcessPool like a process pool whose worker died), and so does every other task
+    in flight with it, as a real broken pool does."""
+
+    name = "poison"
+
+    def __init__(self):
+        self.submitted: list[list] = []
+
+        def hook(fn, args):
+            requests = args[0]
+            self.submitted.append(list(requests))
+            if any(r == "POISON" for r in requests):
+                raise BrokenProcessPool("a worker died")
+            return fn(*args)
+        super().__init__(hook)
 
 
 def test_runner_finds_the_item_that_kills_its_worker_and_charges_no_other():
@@ -213,38 +225,6 @@ def test_worker_written_results_equal_the_returned_ones(tmp_path):
             a = json.loads((tmp_path / "wrote" / row["file"]).read_bytes())
             assert_same_plan(a, json.loads((tmp_path / "sent" / row["file"]).read_bytes()), tol=0.0)
             assert_same_plan(a, plan(reqs[int(row["item"])]).to_json_dict())
-
-
-class _InlineEngine(Engine):
-    """Runs each task in this process at submit; ``hook(fn, args)`` decides its outcome."""
-
-    name = "local"
-
-    def __init__(self, hook):
-        class Ex(Executor):
-            def submit(self, fn, /, *args, **kwargs):
-                f: Future = Future()
-                try:
-                    f.set_result(hook(fn, args))
-                except BrokenProcessPool as exc:
-                    f.set_exception(exc)
-                return f
-        self._ex = Ex()
-        self.restarts = 0
-
-    @property
-    def executor(self):
-        return self._ex
-
-    @property
-    def slots(self):
-        return 2
-
-    def is_lost_worker(self, exc):
-        return isinstance(exc, BrokenProcessPool)
-
-    def restart(self):
-        self.restarts += 1
 
 
 def test_a_worker_that_dies_while_writing_leaves_no_result_behind(tmp_path):

@@ -284,6 +284,20 @@ def zoh(A22, B2, Ts, Ad, Bd):
 
 
 @njit(cache=True)
+def blocks_derivative(A22, B2, x, u, out):
+    """Eq. (8) with its blocks already factorised: ``x_dot = (y_dot, A22 y_dot + B2 u)`` into
+    ``out`` (6,) (the same numbers as :func:`state_derivative` at that state)."""
+    for i in range(3):
+        out[i] = x[3 + i]
+        acc = 0.0
+        for j in range(3):
+            acc += A22[i, j] * x[3 + j]
+        for j in range(B2.shape[1]):
+            acc += B2[i, j] * u[j]
+        out[3 + i] = acc
+
+
+@njit(cache=True)
 def state_derivative(packed, x, u, out):
     """Eq. (7): ``x_dot = f(x) + G(x) u`` into ``out`` (6,)."""
     out[0], out[1], out[2] = x[3], x[4], x[5]

@@ -16,7 +16,7 @@ from numba import njit
 from ..constraints.dual_kernels import SOLVED
 from ..constraints.step_kernels import constrained_step
 from ..horizon.kernels import riccati
-from ..model.kernels import acceleration, factorised_blocks, rk4, zoh
+from ..model.kernels import acceleration, blocks_derivative, factorised_blocks, rk4, zoh
 
 __all__ = ["simulate_constrained", "simulate_paper", "OK", "DIVERGED", "SINGULAR", "PYTHON_STEP"]
 
@@ -64,14 +64,7 @@ def simulate_paper(packed, x0, lo, hi, qa, qb, qu, K, N, Ts, substeps, max_steps
             steps = k
             break
         u = Uh[0]
-        for i in range(3):
-            xdot[i] = x[3 + i]
-            acc = 0.0
-            for j in range(3):
-                acc += A22[i, j] * x[3 + j]
-            for j in range(n):
-                acc += B2[i, j] * u[j]
-            xdot[3 + i] = acc
+        blocks_derivative(A22, B2, x, u, xdot)
         U[k] = u
         ACC[k] = xdot[3:]
         x = rk4(packed, x, u, Ts, substeps, xdot)
@@ -160,14 +153,7 @@ def simulate_constrained(packed, k0, max_steps, K, Ts, substeps, end, settle, X,
         flags[0] = flags[1] = flags[2] = 1
         for lg in range(m):
             u_prev[lg] = z[lg] * umax[lg]
-        for i in range(3):
-            xdot[i] = x[3 + i]
-            acc = 0.0
-            for j in range(3):
-                acc += A22[i, j] * x[3 + j]
-            for j in range(m):
-                acc += B2[i, j] * u_prev[j]
-            xdot[3 + i] = acc
+        blocks_derivative(A22, B2, x, u_prev, xdot)
         U[k] = u_prev
         ACC[k] = xdot[3:]
         x = rk4(packed, x, u_prev, Ts, substeps, xdot)
