@@ -33,6 +33,7 @@ import asyncio
 import json
 import os
 import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -56,7 +57,9 @@ from app.http_exchange import (
     plan_content,
     read_drawing,
 )
+from app.json_limits import body_error_text
 from app.middleware import BodySizeLimit
+from app.observability import install_observability, observe_job
 from app.security import AccessPolicy, install_access_control
 from app.storage import (
     CURSOR_PATTERN,
@@ -147,6 +150,10 @@ _PLAN_RESPONSES = {200: {"model": PlanResult, "description": "The planned trajec
 _CORRIDOR_LINKS = {name: {"operationId": op, "parameters": {"corridor_id": "$response.body#/id"}}
                    for name, op in (("GetCorridor", "get_corridor"), ("UpdateCorridor", "update_corridor"),
                                     ("DeleteCorridor", "delete_corridor"), ("PlanCorridor", "plan_corridor"))}
+
+
+#: the metrics' outcome of a job the pool did not run to the end (app.observability)
+_FAILURE_OUTCOME = {JobTimeout: "timeout", TooMuchWork: "refused", PoolBusy: "refused"}
 
 
 def _attachment(plan_id: str | None, fmt: str) -> str:
@@ -241,6 +248,7 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
     app.add_middleware(BodySizeLimit, limit=max_body)
     app.include_router(batch_router())  # /v1/batches (app/batch/): batches on their own workers
     install_access_control(app, access)  # outside the body limit: refused before the body is read
+    install_observability(app)  # request ids, JSON access lines, GET /metrics (app.observability)
     app.state.access = access
 
     @app.exception_handler(RequestValidationError)
@@ -250,8 +258,9 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
     @app.exception_handler(StarletteHTTPException)
     async def _on_http(request: Request, exc: StarletteHTTPException):
         if exc.status_code == 400 and exc.detail == "There was an error parsing the body":
-            # FastAPI's answer to a body that is not UTF-8: invalid JSON like any other
-            return error_response(422, "invalid_input", "body is not valid JSON (it must be UTF-8 text)")
+            # FastAPI's answer to a body that is not UTF-8, nested too deep or with a too long
+            # number: invalid JSON like any other, naming the limit it hit (app.json_limits)
+            return error_response(422, "invalid_input", body_error_text(exc.__cause__))
         code = CODES_BY_STATUS.get(exc.status_code, "http_error")
         msg = exc.detail if isinstance(exc.detail, str) else json.dumps(exc.detail)
         headers = getattr(exc, "headers", None)
@@ -284,12 +293,15 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
     async def run_job(request: Request, job: dict, media_type: str = "application/json") -> Response:
         pool = ensure_pool(request.app)
         loop = asyncio.get_running_loop()
+        t0 = time.perf_counter()
         try:
             out: Any = await loop.run_in_executor(request.app.state.threads, pool.run, job)
         except (JobTimeout, TooMuchWork, PoolBusy, WorkerCrashed) as exc:
             status, e = describe_failure(exc, pool, job["kind"])
+            observe_job(request.app, job, time.perf_counter() - t0, _FAILURE_OUTCOME.get(type(exc), "crash"))
             return error_response(status, e["code"], e["message"], e["field"],
                                   headers={"Retry-After": "1"} if status == 503 else None)
+        observe_job(request.app, job, time.perf_counter() - t0, str(out[0]))
         if out[0] == "error":
             e = out[1]
             return error_response(422, e["code"], e["message"], e.get("field"))

@@ -26,8 +26,8 @@ from typing import Any
 
 from ..errors import PlannerError
 
-__all__ = ["MAX_BLOCK_DEPTH", "MAX_DRAWING_ENTITIES", "MAX_DRAWING_VERTICES", "MAX_SVG_SEGMENTS", "charge", "dxf_expanded_entities",
-           "svg_expanded_elements", "vertex_budget"]
+__all__ = ["MAX_BLOCK_DEPTH", "MAX_DRAWING_ENTITIES", "MAX_DRAWING_VERTICES", "MAX_SVG_SEGMENTS", "charge",
+           "dxf_expanded_entities", "svg_expanded_elements", "vertex_budget"]
 
 #: deepest nesting of block references (DXF) or ``<use>`` references (SVG) followed
 MAX_BLOCK_DEPTH = 8
