@@ -114,8 +114,13 @@ def _run_api(app, host: str, port: int) -> int:
 
     stop_signal = _StopSignal.install()
     try:
-        config = uvicorn.Config(app, host=host, port=port, log_level=os.environ.get("RANGEPLAN_LOG_LEVEL", "info"),
-                                access_log=os.environ.get("RANGEPLAN_ACCESS_LOG", "1") != "0")
+        from app.observability import log_config
+
+        level = os.environ.get("RANGEPLAN_LOG_LEVEL", "info")
+        # JSON lines (app.observability); the access lines are the app's own (with request ids),
+        # not uvicorn's (RANGEPLAN_ACCESS_LOG=0 turns them off)
+        config = uvicorn.Config(app, host=host, port=port, log_level=level, access_log=False,
+                                log_config=log_config(level))
         server = uvicorn.Server(config)
         server.run()
         # uvicorn returns (does not raise) when it cannot bind
