@@ -45,6 +45,7 @@ from fastapi.responses import JSONResponse, RedirectResponse, Response
 from pydantic import BaseModel, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from app import storage_io
 from app.batch.api import batch_router
 from app.docs import install_docs
 from app.errors import CODES_BY_STATUS, error_response, errors_doc, validation_response
@@ -426,8 +427,8 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
         """What storage keeps: the request as the client sent it (validated exactly as for planning)."""
         return body.to_json_dict()
 
-    def get_or_404(store: Store, corridor_id: str) -> dict:
-        rec = store.get_corridor(corridor_id)
+    async def get_or_404(store: Store, corridor_id: str) -> dict:
+        rec = await storage_io.read(store.get_corridor, corridor_id)
         if rec is None:
             raise StarletteHTTPException(404, f"no corridor with id {corridor_id!r}")
         return rec
@@ -438,10 +439,10 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
                                "headers": {"Location": {"description": "The corridor's address",
                                                         "schema": {"type": "string"}}}},
                          **errors_doc(409, 413, 422, 507)})
-    def create_corridor(body: PlanRequest, request: Request, response: Response):
+    async def create_corridor(body: PlanRequest, request: Request, response: Response):
         """Save a plan request as a corridor; its name is the request's ``name``, unique among
         corridors (409 if another has it: replace that one with PUT)."""
-        rec = request.app.state.store.create_corridor(saved(body), body.name)
+        rec = await storage_io.write(request.app.state.store.create_corridor, saved(body), body.name)
         response.headers["Location"] = f"/v1/corridors/{rec['id']}"
         return rec
 
@@ -449,35 +450,35 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
              responses={200: {"description": "A page of corridors", "links": {"NextPage": {
                  "operationId": "list_corridors", "parameters": {"cursor": "$response.body#/next_cursor"}}}},
                         **errors_doc(422)})
-    def list_corridors(request: Request,
+    async def list_corridors(request: Request,
                        limit: int = Query(DEFAULT_PAGE_SIZE, ge=1, le=MAX_PAGE_SIZE, description="Corridors per page"),
                        cursor: str | None = Query(None, pattern=CURSOR_PATTERN,
                                                   description="next_cursor of the previous page")):
         """Saved corridors a page at a time, oldest first, as summaries."""
         try:
-            items, nxt = request.app.state.store.corridor_page(limit, cursor)
+            items, nxt = await storage_io.read(request.app.state.store.corridor_page, limit, cursor)
         except BadCursor as exc:
             return error_response(422, "invalid_input", str(exc), "cursor")
         return {"items": items, "next_cursor": nxt}
 
     @app.get("/v1/corridors/{corridor_id}", response_model=CorridorRecord, response_model_exclude_unset=True,
              tags=["corridors"], operation_id="get_corridor", responses=errors_doc(404))
-    def get_corridor(corridor_id: str, request: Request):
-        return get_or_404(request.app.state.store, corridor_id)
+    async def get_corridor(corridor_id: str, request: Request):
+        return await get_or_404(request.app.state.store, corridor_id)
 
     @app.put("/v1/corridors/{corridor_id}", response_model=CorridorRecord, response_model_exclude_unset=True,
              tags=["corridors"], operation_id="update_corridor", responses=errors_doc(404, 409, 413, 422, 507))
-    def update_corridor(corridor_id: str, body: PlanRequest, request: Request):
+    async def update_corridor(corridor_id: str, body: PlanRequest, request: Request):
         """Replace a saved corridor's request (and name: 409 if another corridor has it)."""
-        rec = request.app.state.store.update_corridor(corridor_id, saved(body), body.name)
+        rec = await storage_io.write(request.app.state.store.update_corridor, corridor_id, saved(body), body.name)
         if rec is None:
             raise StarletteHTTPException(404, f"no corridor with id {corridor_id!r}")
         return rec
 
     @app.delete("/v1/corridors/{corridor_id}", status_code=204, response_class=Response, tags=["corridors"],
                 operation_id="delete_corridor", responses=errors_doc(404))
-    def delete_corridor(corridor_id: str, request: Request):
-        if not request.app.state.store.delete_corridor(corridor_id):
+    async def delete_corridor(corridor_id: str, request: Request):
+        if not await storage_io.write(request.app.state.store.delete_corridor, corridor_id):
             raise StarletteHTTPException(404, f"no corridor with id {corridor_id!r}")
         return Response(status_code=204)
 
@@ -487,7 +488,7 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
                             forces: bool = Forces):
         """Plan a saved corridor; the result is stored with a link to the corridor."""
         store: Store = request.app.state.store
-        rec = await asyncio.get_running_loop().run_in_executor(None, store.get_corridor, corridor_id)
+        rec = await storage_io.read(store.get_corridor, corridor_id)
         if rec is None:
             raise StarletteHTTPException(404, f"no corridor with id {corridor_id!r}")
         from pydantic import ValidationError
