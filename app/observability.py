@@ -204,6 +204,9 @@ def _route_of(scope: dict, status: int) -> str:
     return "(unmatched)" if status in (404, 405) or status < 400 else "(refused)"
 
 
+_METHODS = frozenset({"GET", "HEAD", "POST", "PUT", "DELETE", "OPTIONS", "PATCH"})
+
+
 class RequestContext:
     """ASGI wrapper (outermost): request id in and out, one access line and the request
     metrics per HTTP request; an exception that escaped the app's error handler (which has
@@ -246,12 +249,13 @@ class RequestContext:
             elapsed = time.perf_counter() - t0
             route = _route_of(scope, status)
             method = scope.get("method", "")
+            method = method if method in _METHODS else "other"  # a label of bounded cardinality
             self.metrics.requests.labels(route, method, str(status)).inc()
             self.metrics.latency.labels(route, method).observe(elapsed)
             if self.access and access_log.isEnabledFor(logging.INFO):
                 client = scope.get("client")
                 access_log.info("request", extra={
-                    "request_id": rid, "method": method, "path": scope.get("path", ""), "route": route,
+                    "request_id": rid, "method": scope.get("method", ""), "path": scope.get("path", ""), "route": route,
                     "status": status, "duration_ms": round(elapsed * 1e3, 3),
                     "client": f"{client[0]}:{client[1]}" if client else None})
             _request_id.reset(token)

@@ -1,13 +1,13 @@
 """Storage calls off the event loop, on executors of their own (issue 21: latency under load).
 
-Measured with 200 concurrent clients mixing plans, saves and list pages
-(``benchmarks/bench_load.py``): corridor lists reached a p99 of 9-15 s and ``/ready`` 2.1 s.
-The storage endpoints were plain ``def`` endpoints, run on Starlette's shared thread pool
-(40 threads). A save holds its thread while it waits for SQLite's one writer lock and its
-``fsync`` (corridors are durable: ``synchronous=FULL``), and so does every save queued
-behind it; with ~70 saves in flight every thread of the pool waited on the writer, and a
-list page, a read that WAL mode never blocks, waited for a free thread behind them. Forty
-threads busy in Python besides the event loop also took the GIL from the loop (``/ready``).
+With 200 concurrent clients mixing plans, saves and list pages (``benchmarks/bench_load.py``)
+corridor lists reached a p99 of 9-15 s. The storage endpoints were plain ``def`` endpoints,
+run on Starlette's shared thread pool (40 threads). A save holds its thread while it waits
+for SQLite's one writer lock and its ``fsync`` (corridors are durable: ``synchronous=FULL``),
+and so does every save queued behind it: with ~70 saves in flight every thread of the pool
+can be waiting on the writer, and a list page, a read that WAL mode never blocks, then waits
+for a free thread behind them. (On the shared machine of the measurement in
+benchmarks/README.md the CPU queue dominated both trees; see there.)
 
 Here reads and writes have executors of their own: writes run one at a time on a single
 thread (SQLite serialises writers anyway, so more threads only wait), reads on a few threads
