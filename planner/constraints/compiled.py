@@ -10,14 +10,13 @@ reference; the controller picks one of the two at construction.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from ..corridor import RangeSequence
 from ..model import RobotModel
 from ..schema import Settings
 from . import kernels as ck
+from .composed import Constraints
 from .corridor import ArrivalConstraint, CorridorConstraint, EndApproachConstraint
 from .drives import DriveForceRateConstraint, LegSpeedConstraint, LegStrokeConstraint
 from .qp import DenseQP, QPSolution
@@ -25,9 +24,6 @@ from .rows import ROW_UNIT_M, Rows
 from .stagewise import DEPENDENT_TOL, SOLVE_TOL, WARM_TOL
 from .step import FullQP, StepQP
 from .step_kernels import constrained_step
-
-if TYPE_CHECKING:
-    from .controller import Constraints
 
 __all__ = ["KERNEL_SECTIONS", "MAX_ITERATIONS", "RELAX_M", "AssemblyInputs", "CompiledAssembly", "StepOutcome"]
 
