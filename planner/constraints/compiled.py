@@ -10,6 +10,7 @@ reference; the controller picks one of the two at construction.
 from __future__ import annotations
 
 from dataclasses import dataclass
+
 import numpy as np
 
 from ..corridor import RangeSequence

@@ -51,7 +51,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, NamedTuple, Protocol
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
@@ -59,14 +59,13 @@ from ..corridor import RangeSequence
 from ..corridor.geometry import corridor_gaps
 from ..errors import PlannerError
 from ..model import RobotModel
-from ..schema import DEFAULT_FORCE_RISE_S, Segment, Settings
+from ..schema import Segment, Settings
 from .compiled import CompiledAssembly
 from .composed import Constraints
-from .corridor import MARGIN_M, MARGIN_RAD, ArrivalConstraint, CorridorConstraint, EndApproachConstraint
-from .drives import DriveForceConstraint, DriveForceRateConstraint, LegSpeedConstraint, LegStrokeConstraint
+from .corridor import MARGIN_M, MARGIN_RAD
 from .qp import DenseQP, QPSolution
 from .reference import ReferenceAssembly
-from .rows import ROW_UNIT_M, RowConstraint
+from .rows import ROW_UNIT_M
 from .stagewise import SOLVED, shifted
 
 __all__ = ["CONTAIN_TOL_M", "CONTAIN_TOL_RAD", "REFINE_MAX", "REFINE_TOL_M", "REFINE_TOL_RAD", "Assembly",
