@@ -119,8 +119,8 @@ def test_the_check_finds_a_type_only_cycle(tmp_path):
     (pkg / "sub" / "b.py").write_text("from ..c import C\nB = 2\n")
     (pkg / "c.py").write_text("def f():\n    from pkg.sub import a\nC = 3\n")
     graph = module_graph(tmp_path, "pkg")
-    assert graph == {"pkg": set(), "pkg.c": {"pkg.sub.a"}, "pkg.sub": {"pkg.sub.a"}, "pkg.sub.a": {"pkg.c", "pkg.sub.b"},
-                     "pkg.sub.b": {"pkg.c"}}
+    assert graph == {"pkg": set(), "pkg.c": {"pkg.sub.a"}, "pkg.sub": {"pkg.sub.a"},
+                     "pkg.sub.a": {"pkg.c", "pkg.sub.b"}, "pkg.sub.b": {"pkg.c"}}
     assert cycles(graph) == [["pkg.c", "pkg.sub.a", "pkg.c"]]
     (pkg / "c.py").write_text("C = 3\n")
     assert cycles(module_graph(tmp_path, "pkg")) == []
