@@ -444,6 +444,11 @@ class Store:
             row = con.execute("SELECT result FROM plans WHERE id = ?", (id,)).fetchone()
         return row[0] if row else None
 
+    def has_plan(self, id: str) -> bool:
+        """Whether a plan of this id is stored (without reading it)."""
+        with self._connect() as con:
+            return con.execute("SELECT 1 FROM plans WHERE id = ?", (id,)).fetchone() is not None
+
     def get_plan(self, id: str) -> dict | None:
         text = self.get_plan_json(id)
         return None if text is None else json.loads(text)
