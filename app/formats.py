@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 from planner.exchange import EXPORT_FORMATS
 from planner.orchestrator import to_csv
@@ -59,10 +59,14 @@ OUTPUT_FORMATS: dict[str, OutputFormat] = {
 #: the machine formats (exports of a stored plan; the editor's downloads)
 MACHINE_FORMATS: tuple[str, ...] = tuple(k for k, v in OUTPUT_FORMATS.items() if v.machine)
 
-#: the names as a type (FastAPI validates ``?format=`` against it; the OpenAPI enum)
-PlanFormat = Literal[tuple(OUTPUT_FORMATS)]  # type: ignore[valid-type]  # pyright: ignore[reportInvalidTypeForm]
-#: the formats of a stored plan other than JSON (the typed client's ``export``)
-ExportFormatName = Literal[tuple(k for k in OUTPUT_FORMATS if k != "json")]  # type: ignore[valid-type]  # pyright: ignore[reportInvalidTypeForm]
+if TYPE_CHECKING:
+    PlanFormat = str
+    ExportFormatName = str
+else:
+    #: the names as a type (FastAPI validates ``?format=`` against it: the OpenAPI enum)
+    PlanFormat = Literal[tuple(OUTPUT_FORMATS)]
+    #: the formats of a stored plan other than JSON (the typed client's ``export``)
+    ExportFormatName = Literal[tuple(k for k in OUTPUT_FORMATS if k != "json")]
 
 
 def format_help() -> str:

@@ -155,7 +155,8 @@ Outcome = Done | Failed
 
 def failed(error: dict[str, Any], status: int = 422) -> Failed:
     """A :class:`Failed` from a ``{code, message, field}`` dict."""
-    return Failed(ErrorDetail(code=error["code"], message=error["message"], field=error.get("field")), status)
+    return Failed(ErrorDetail(code=error["code"], message=error["message"], field=error.get("field"), details=None),
+                  status)
 
 
 def crashed(exc: BaseException) -> Failed:

@@ -13,7 +13,7 @@ import os
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import Field, ValidationError
+from pydantic import Field, JsonValue, ValidationError
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 __all__ = ["Settings", "SettingsError", "settings", "settings_table"]
@@ -33,7 +33,7 @@ def _f(default: Any = None, description: str = "", *, cli: str | None = None, de
        factory=None, **kw: Any) -> Any:
     """A setting: its default (or ``factory``), description, CLI flag and the default as the
     table shows it."""
-    extra = {"cli": cli, "default_text": default_text}
+    extra: dict[str, JsonValue] = {"cli": cli, "default_text": default_text}
     if factory is not None:
         return Field(default_factory=factory, description=description, json_schema_extra=extra, **kw)
     return Field(default, description=description, json_schema_extra=extra, **kw)
