@@ -267,13 +267,12 @@ def _export(job: ExportJob) -> Done:
         raise _NotFound(f"no plan with id {job.plan_id!r}")
     result = PlanResult.model_validate_json(text)
     del text
-    layout = None
-    if job.format == "dxf":  # the layout of the plan's request: a DXF's obstacles
-        info = store.plan_info(job.plan_id) if store is not None else None
-        try:
-            layout = PlanRequest.model_validate(info["request"]).layout if info and info.get("request") else None
-        except ValueError:  # a request stored by an older version: the DXF has no obstacles then
-            layout = None
+    layout = None  # the layout of the plan's request (a DXF draws its obstacles)
+    info = store.plan_info(job.plan_id) if store is not None else None
+    try:
+        layout = PlanRequest.model_validate(info["request"]).layout if info and info.get("request") else None
+    except ValueError:  # a request stored by an older version: the DXF has no obstacles then
+        layout = None
     body = write(result, job.format, layout=layout, forces=job.forces, source=f"plan {job.plan_id}")
     del result
     if job.spool is None:
