@@ -39,6 +39,7 @@ from fastapi import FastAPI
 from app.batch.api import batch_router
 from app.docs import install_docs
 from app.handlers import install_error_handlers
+from app.jobs import clean_spool, spool_dir
 from app.middleware import BodySizeLimit
 from app.routers import corridors, planning, robots
 from app.routers import service as service_routes
@@ -88,6 +89,7 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
     the editor (the caller closes it); by default the app starts and closes its own."""
     cfg = read_settings()
     store = store if store is not None else Store(default_data_dir())
+    clean_spool(spool_dir(store.path))  # export files of responses that never finished
     shared = service or (JobService(pool) if pool is not None else None)
     timeout_s = timeout_s or cfg.plan_timeout_s
     memory_mb = memory_mb if memory_mb is not None else cfg.worker_memory_mb

@@ -42,8 +42,8 @@ from app.failures import degenerate, out_of_memory, timeout, too_much_work
 from planner.schema import ImportOptions, PlanRequest
 
 __all__ = ["Done", "EditorJob", "ErrorDetail", "ExportJob", "Failed", "ImportJob", "ItemTimeout", "Job", "Outcome",
-           "PlanJob", "SegmentJob", "SleepJob", "crashed", "estimate", "failed", "run_bounded", "run_job",
-           "segmentation_module"]
+           "PlanJob", "SegmentJob", "SleepJob", "check_estimate", "clean_spool", "crashed", "estimate", "failed",
+           "run_bounded", "run_job", "segmentation_module", "spool_dir"]
 
 
 class ErrorDetail(BaseModel):
@@ -225,7 +225,6 @@ def _execute(job: Job) -> Done:
 
 
 def _plan(job: PlanJob) -> Done:
-    from app.formats import write
     from app.storage import new_id
     from planner import plan
 
@@ -244,6 +243,8 @@ def _plan(job: PlanJob) -> Done:
     elif job.format == "none":
         payload = None
     else:
+        from app.formats import write  # (imports the machine formats' writers: loaded by the workers at start)
+
         payload = write(result, job.format, layout=req.layout, forces=job.forces, source=job.source)
     return Done(payload, plan_id, _summary(result))
 
@@ -285,6 +286,30 @@ def _export(job: ExportJob) -> Done:
 
 class _NotFound(LookupError):
     pass
+
+
+def spool_dir(store_path: str | os.PathLike) -> str:
+    """Where export jobs of the store at ``store_path`` write their files: ``exports/``
+    beside the database (the server streams each file, then deletes it)."""
+    return os.path.join(os.path.dirname(os.fspath(store_path)), "exports")
+
+
+def clean_spool(spool: str, older_than_s: float = 3600.0) -> int:
+    """Delete export files left by a response that never finished (a client that went away
+    mid-stream, a server that was killed); returns how many."""
+    n = 0
+    try:
+        entries = list(os.scandir(spool))
+    except OSError:
+        return 0
+    for e in entries:
+        try:
+            if e.name.startswith("export-") and time.time() - e.stat().st_mtime > older_than_s:
+                os.unlink(e.path)
+                n += 1
+        except OSError:
+            pass
+    return n
 
 
 def _spool_file(spool: str) -> tuple[int, str]:

@@ -81,7 +81,9 @@ def _worker_main(conn, memory_mb: int | None = None) -> None:
     except OSError:
         pass
     # import the planner and load its compiled kernels before the first job, not during it
-    import app.storage  # noqa: F401  (imported before the first job, not during it)
+    # (and the storage and the export writers: imported before the first job, not during it)
+    import app.formats
+    import app.storage  # noqa: F401
     import planner
     status: tuple = ("ready", None)
     try:

@@ -12,7 +12,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from app.errors import error_response, errors_doc
 from app.formats import PlanFormat
 from app.http_exchange import import_openapi, import_options, plan_content, read_drawing
-from app.jobs import ExportJob, ImportJob, PlanJob, SegmentJob
+from app.jobs import ExportJob, ImportJob, PlanJob, SegmentJob, spool_dir
 from app.routers.deps import Forces, Format, plan_format, store, submit
 from planner.schema import ImportOptions, ImportResult, PlanRequest, PlanResult, SegmentationResult, planner_error
 
@@ -86,8 +86,8 @@ async def get_plan(plan_id: str, request: Request, format: PlanFormat | None = F
         return Response(text, media_type="application/json")
     if not await _in_thread(st.has_plan, plan_id):
         raise StarletteHTTPException(404, f"no plan with id {plan_id!r}")
-    spool = str(st.path.parent / "exports")
-    return await submit(request, ExportJob(plan_id, str(st.path), fmt, forces, spool), fmt, name=plan_id)
+    job = ExportJob(plan_id, str(st.path), fmt, forces, spool_dir(st.path))
+    return await submit(request, job, fmt, name=plan_id)
 
 
 async def _in_thread(fn, *args):
