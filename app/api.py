@@ -90,14 +90,14 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
     cfg = read_settings()
     store = store if store is not None else Store(default_data_dir())
     clean_spool(spool_dir(store.path))  # export files of responses that never finished
-    shared = service or (JobService(pool) if pool is not None else None)
+    shared = service or (JobService(pool, export_timeout_s=cfg.export_timeout_s) if pool is not None else None)
     timeout_s = timeout_s or cfg.plan_timeout_s
     memory_mb = memory_mb if memory_mb is not None else cfg.worker_memory_mb
 
     def make() -> JobService:
         queue = max_queue if max_queue is not None else cfg.max_queue
         return JobService.start(workers or cfg.workers, timeout_s, queue, mode=executor or cfg.executor,
-                                memory_mb=memory_mb)
+                                memory_mb=memory_mb, export_timeout_s=cfg.export_timeout_s)
 
     holder: _ServiceHolder
 

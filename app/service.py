@@ -23,7 +23,7 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 from app.failures import import_timeout, out_of_memory, timeout
-from app.jobs import Failed, ImportJob, Job, Outcome, check_estimate, failed, run_bounded
+from app.jobs import ExportJob, Failed, ImportJob, Job, Outcome, check_estimate, failed, run_bounded
 from app.workers import JobTimeout, PlanPool, PoolBusy, WorkerCrashed, WorkerOutOfMemory
 
 __all__ = ["JobService", "describe_failure"]
@@ -35,6 +35,9 @@ def describe_failure(exc: Exception, job: Job, timeout_s: float, memory_mb: int 
     if isinstance(exc, WorkerOutOfMemory):
         return failed({"code": "too_much_memory", "message": str(exc) or out_of_memory(memory_mb)["message"]})
     if isinstance(exc, JobTimeout):
+        if isinstance(job, ExportJob):
+            return failed({"code": "timeout", "field": "format", "message": f"writing the plan as {job.format} took "
+                           f"longer than the export limit of {timeout_s:g} s (RANGEPLAN_EXPORT_TIMEOUT_S)"})
         return failed(import_timeout(timeout_s) if isinstance(job, ImportJob) else timeout(timeout_s))
     if isinstance(exc, PoolBusy):
         return failed({"code": "busy", "message": f"too many plans in progress ({exc}); retry shortly"}, 503)
@@ -48,17 +51,21 @@ class JobService:
     ``timeout_s``, the editor started on its own). :meth:`run` blocks; :meth:`arun` awaits
     it from an event loop on a thread pool sized to the pool's capacity."""
 
-    def __init__(self, pool: PlanPool | None = None, *, timeout_s: float = 30.0, memory_mb: int | None = None):
+    def __init__(self, pool: PlanPool | None = None, *, timeout_s: float = 30.0, memory_mb: int | None = None,
+                 export_timeout_s: float | None = None):
         self.pool = pool
         self.timeout_s = pool.timeout_s if pool is not None else float(timeout_s)
         self.memory_mb = pool.memory_mb if pool is not None else memory_mb
+        #: the time limit of an export (a stored plan is bounded by its size, not its work)
+        self.export_timeout_s = max(self.timeout_s, export_timeout_s or 0.0)
         self._threads: ThreadPoolExecutor | None = None
 
     @classmethod
     def start(cls, workers: int, timeout_s: float, max_queue: int, mode: str = "process",
-              memory_mb: int | None = None) -> JobService:
+              memory_mb: int | None = None, export_timeout_s: float | None = None) -> JobService:
         """A service with a new pool of its own (:meth:`close` ends it)."""
-        return cls(PlanPool(workers, timeout_s, max_queue, mode=mode, memory_mb=memory_mb))
+        return cls(PlanPool(workers, timeout_s, max_queue, mode=mode, memory_mb=memory_mb),
+                   export_timeout_s=export_timeout_s)
 
     def run(self, job: Job) -> Outcome:
         """Estimate, bound, run ``job`` on a worker; never raises for the input's fault, a
@@ -66,12 +73,13 @@ class JobService:
         refused = check_estimate(job, self.timeout_s)
         if refused is not None:
             return refused
+        limit = self.export_timeout_s if isinstance(job, ExportJob) else self.timeout_s
         if self.pool is None:
-            return run_bounded(job, self.timeout_s, self.memory_mb)
+            return run_bounded(job, limit, self.memory_mb)
         try:
-            return self.pool.run(job)
+            return self.pool.run(job, limit)
         except (JobTimeout, PoolBusy, WorkerCrashed) as exc:
-            return describe_failure(exc, job, self.timeout_s, self.memory_mb)
+            return describe_failure(exc, job, limit, self.memory_mb)
 
     async def arun(self, job: Job) -> Outcome:
         """:meth:`run` from an event loop (on a thread: the pool blocks)."""

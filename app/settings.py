@@ -60,6 +60,8 @@ class Settings(BaseSettings):
                                                 "server process (no parallelism, no stopping; for measurements)")
     plan_timeout_s: float = _f(30.0, "Compute limit of one plan, import or batch item [s]; work estimated above it is "
                                "refused before it starts", cli="batch --timeout (default there: none)", gt=0)
+    export_timeout_s: float = _f(120.0, "Time limit of writing a stored plan in an export format (GET /v1/plans/{id}?"
+                                 "format=) [s]; at least RANGEPLAN_PLAN_TIMEOUT_S", gt=0)
     worker_memory_mb: int = _f(2048, "Address-space limit of each planning process [MiB] (0: none)", ge=0)
     max_queue: int = _f(64, "Jobs waiting for a worker beyond which the API answers 503 busy", ge=0)
     max_body_bytes: int = _f(2 * MiB, "Largest request body [bytes] (413 above)", default_text="2 MiB", gt=0)

@@ -265,10 +265,12 @@ class PlanPool:
         return {"ready": bool(ready) and not failures and not self._closed, "workers_ready": len(ready),
                 "workers": self.n, "failures": failures}
 
-    def run(self, job: Job) -> Outcome:
+    def run(self, job: Job, timeout_s: float | None = None) -> Outcome:
         """Run a job (blocking); returns its outcome (:func:`app.jobs.run_job`), or raises
         :class:`JobTimeout`, :class:`PoolBusy` or :class:`WorkerCrashed` (the process died).
-        The work estimate is the caller's (:class:`app.service.JobService`)."""
+        ``timeout_s`` overrides the pool's time limit for this job. The work estimate is the
+        caller's (:class:`app.service.JobService`)."""
+        limit = self.timeout_s if timeout_s is None else float(timeout_s)
         with self._lock:
             if self._closed:
                 raise PoolBusy("the server is shutting down")
@@ -281,7 +283,7 @@ class PlanPool:
                 with self._sem:
                     t0 = time.perf_counter()
                     out = run_job(job)
-                    if time.perf_counter() - t0 > self.timeout_s:
+                    if time.perf_counter() - t0 > limit:
                         raise JobTimeout  # cannot stop a thread: only report it afterwards
                     return out
             w = self._idle.get()
@@ -290,7 +292,7 @@ class PlanPool:
                 if not w.alive():
                     w.kill()
                     replacement = w = self._replace(w)
-                out = w.call(job, self.timeout_s)
+                out = w.call(job, limit)
                 if isinstance(out, Failed) and out.error.code == "too_much_memory":
                     w.proc.wait(5)  # it exits after a memory error: replace it now
                     w.kill()
