@@ -294,7 +294,7 @@ class PlanPool:
                     replacement = w = self._replace(w)
                 out = w.call(job, limit)
                 if isinstance(out, Failed) and out.error.code == "too_much_memory":
-                    w.proc.wait(5)  # it exits after a memory error: replace it now
+                    _exit_status(w)  # it exits after a memory error (or is killed): replace it now
                     w.kill()
                     replacement = self._replace(w)
                 return out
