@@ -9,7 +9,8 @@
   request (logger ``rangeplan.access``) has ``request_id``, ``method``, ``path`` (no query
   string: it may hold a token), ``route`` (the route template), ``status``,
   ``duration_ms`` and ``client``. ``rangeplan serve`` logs this way (:func:`log_config`,
-  uvicorn's own lines included); ``RANGEPLAN_ACCESS_LOG=0`` turns the access lines off.
+  uvicorn's own lines included); ``RANGEPLAN_ACCESS_LOG=0`` (app.settings) turns the access
+  lines off.
 * **Metrics.** ``GET /metrics`` in Prometheus' text format, behind the token like ``/v1``
   (:mod:`app.security`): requests by route template, method and status, their latency
   (histogram), plan durations by mode, queue depth, worker restarts and batch progress
@@ -26,7 +27,6 @@ from __future__ import annotations
 import contextvars
 import json
 import logging
-import os
 import re
 import time
 import uuid
@@ -38,7 +38,7 @@ from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
 from prometheus_client.registry import Collector
 
 __all__ = ["JsonFormatter", "Metrics", "RequestIdFilter", "REQUEST_ID_HEADER", "current_request_id",
-           "install_observability", "log_config", "observe_job"]
+           "install_observability", "job_outcome", "log_config", "observe_job"]
 
 REQUEST_ID_HEADER = "X-Request-ID"
 _SANE_ID = re.compile(r"[A-Za-z0-9._:-]{1,128}")
@@ -170,25 +170,44 @@ class Metrics:
         self.plans = Histogram("rangeplan_plan_duration_seconds", "Time a plan job spent in the planning pool "
                                "(queue, planning, serialisation), by mode and outcome (s)", ["mode", "outcome"],
                                buckets=PLAN_BUCKETS, registry=r)
-        self.jobs = Counter("rangeplan_jobs", "Jobs run by the planning pool, by kind (plan, segment, import) and "
-                            "outcome (ok, error, refused, crash) (count)", ["kind", "outcome"], registry=r)
+        self.jobs = Counter("rangeplan_jobs", "Jobs the HTTP routes ran on the job service, by kind (plan, segment, "
+                            "import, export) and outcome (ok, error, timeout, refused, crash) (count)",
+                            ["kind", "outcome"], registry=r)
         r.register(_StateCollector(app))
 
     def text(self) -> bytes:
         return generate_latest(self.registry)
 
 
-def observe_job(app: Any, job: dict, seconds: float, outcome: str) -> None:
-    """Count a job the planning path ran (``outcome``: ok, error, refused, crash)."""
+#: error codes of a job the pool did not run (the metrics' ``refused``) and of one it stopped
+_REFUSED = frozenset({"too_much_work", "busy", "unavailable"})
+
+
+def job_outcome(outcome: Any) -> str:
+    """The metrics' outcome of a job's :mod:`app.jobs` outcome: ok, error (the input's),
+    timeout, refused (not run: too much work, busy) or crash (a bug or a dead worker)."""
+    if getattr(outcome, "ok", False):
+        return "ok"
+    code = getattr(getattr(outcome, "error", None), "code", "")
+    if code == "timeout":
+        return "timeout"
+    if code in _REFUSED:
+        return "refused"
+    return "crash" if getattr(outcome, "status", 500) >= 500 else "error"
+
+
+def observe_job(app: Any, job: Any, seconds: float, outcome: Any) -> None:
+    """Count a job the HTTP routes ran (``job``: an :mod:`app.jobs` job; ``outcome``: its
+    outcome, or a label of :func:`job_outcome`)."""
     metrics: Metrics | None = getattr(app.state, "metrics", None)
     if metrics is None:
         return
-    kind = str(job.get("kind", "other"))
-    metrics.jobs.labels(kind, outcome).inc()
+    label = outcome if isinstance(outcome, str) else job_outcome(outcome)
+    kind = str(getattr(job, "kind", "other"))
+    metrics.jobs.labels(kind, label).inc()
     if kind == "plan":
-        req = job.get("request")
-        mode = getattr(getattr(req, "settings", None), "mode", None) or "unknown"
-        metrics.plans.labels(mode, outcome).observe(seconds)
+        mode = getattr(getattr(getattr(job, "request", None), "settings", None), "mode", None) or "unknown"
+        metrics.plans.labels(mode, label).observe(seconds)
 
 
 # ---------------------------------------------------------------------------------------
@@ -261,14 +280,14 @@ class RequestContext:
             _request_id.reset(token)
 
 
-def install_observability(app: Any) -> Metrics:
-    """Add request ids, access lines and ``GET /metrics`` to a FastAPI ``app`` (the route is
-    protected like ``/v1`` by :mod:`app.security`)."""
+def install_observability(app: Any, access_log: bool = True) -> Metrics:
+    """Add request ids, access lines (``access_log``) and ``GET /metrics`` to a FastAPI
+    ``app`` (the route is protected like ``/v1`` by :mod:`app.security`)."""
     from fastapi import Response
 
     metrics = Metrics(app)
     app.state.metrics = metrics
-    access = os.environ.get("RANGEPLAN_ACCESS_LOG", "1") != "0"
+    access = access_log
     build = app.build_middleware_stack
 
     def build_middleware_stack():
