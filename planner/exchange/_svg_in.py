@@ -20,6 +20,7 @@ import numpy as np
 
 from ..errors import PlannerError
 from . import _flatten as fl
+from ._budget import svg_expanded_elements
 from ._pieces import Drawing, Piece
 
 __all__ = ["read_svg"]
@@ -40,6 +41,7 @@ def _tag_layers(data: bytes) -> tuple[bytes, bool]:
     if not (root.tag == "svg" or root.tag.endswith("}svg")):
         raise PlannerError("invalid_drawing", f"not an SVG drawing: the root element is <{root.tag}>, not <svg>",
                            "drawing")
+    svg_expanded_elements(root)  # <use> references bounded before svgelements copies any
     physical = bool(_PHYSICAL.match(root.get("width", "")) or _PHYSICAL.match(root.get("height", "")))
     for child in root:
         if child.tag == "g" or child.tag.endswith("}g"):
