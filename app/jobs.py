@@ -116,7 +116,7 @@ def run_job(job: dict) -> tuple:
             from planner import plan, to_csv
 
             req = job["request"]
-            result = plan(req)
+            result = plan(req, work_limit_s=job.get("work_limit_s"))
             plan_id = new_id() if job.get("store") else None
             result.plan_id = plan_id
             data = result.to_json()

@@ -310,6 +310,8 @@ class PlanPool:
         est = estimate_work(job["request"])
         if est.seconds > self.timeout_s:
             raise TooMuchWork(est, self.timeout_s)
+        # a layout's corridor is estimated again once segmented, in the worker (issue 20)
+        job["work_limit_s"] = self.timeout_s
 
     def run(self, job: dict):
         """Run a job (blocking); returns what :func:`run_job` returns (or ``("crash", text)``

@@ -181,7 +181,7 @@ def plan_item(request: str | bytes | dict | PlanRequest, fmt: str = "json",
             if est is not None and timeout_s is not None and est.seconds > timeout_s:
                 out["error"] = too_much_work(est, timeout_s)
             else:
-                result = plan(req)
+                result = plan(req, work_limit_s=timeout_s)
                 writer = FORMATS[fmt][1]
                 out["payload"] = writer(result) if writer is not None else None
                 out.update(status="ok", summary=_summary(result))
