@@ -161,8 +161,8 @@ def _endpoint_cells(grid: Grid, state: np.ndarray, blocker: np.ndarray, ws: Work
         raise PlannerError("unreachable", f"the {key} {format_point(p)} is reachable, but its cell {c} is not wholly "
                            f"reachable (a leg leaves its stroke or the robot is singular somewhere in the cell at "
                            f"some angle in psi_range [{ws.psi_range[0]:g}, {ws.psi_range[1]:g}] rad)", f"{path}.{key}")
-    why = (f"overlaps obstacle {blocker[c]} grown by the clearance ({ws.clearance:g} m)" if blocker[c] >= 0
-           else "extends past the bounds")
+    grown = f" grown by the clearance ({ws.clearance:g} m)" if ws.clearance > 0 else ""
+    why = f"overlaps obstacle {blocker[c]}{grown}" if blocker[c] >= 0 else "extends past the bounds"
     raise PlannerError("no_path", f"the cell {c} holding the {key} {format_point(p)} is not wholly free: it {why}",
                        f"{path}.{key}")
 
@@ -292,6 +292,22 @@ def _separation(ws: Workspace) -> str | None:
             "the bounds cut the start off from the end")
 
 
+def _endpoint_blocker(ws: Workspace, key: str) -> str | None:
+    """Why every cell holding the start or end (``key``) meets an obstacle: the point touches
+    an obstacle grown by the clearance (a cell holding it reaches into it at any size), said
+    with the obstacle; None if it does not."""
+    p = ws.start if key == "start" else ws.end
+    pieces, owner = ws.grown_parts()
+    if not len(pieces):
+        return None
+    d = shapely.distance(pieces, shapely.Point(p[0], p[1]))
+    i = int(np.argmin(d))
+    if d[i] > 1e-9 * max(float(np.max(ws.upper - ws.lower)), 1e-9):
+        return None
+    grown = f" grown by the clearance {ws.clearance:g} m" if ws.clearance > 0 else ""
+    return f"the {key} lies on the edge of obstacle {int(owner[i])} (layout.obstacles[{int(owner[i])}]){grown}"
+
+
 def _no_path_error(exc: PlannerError, ws: Workspace, model: Any, s: float, field_path: str) -> PlannerError:
     """The failed segmentation's error with advice that works: the remedies checked by
     segmenting again, or the obstacle that makes every cell size hopeless."""
@@ -306,6 +322,12 @@ def _no_path_error(exc: PlannerError, ws: Workspace, model: Any, s: float, field
             "; a smaller clearance opens a gap narrower than the smallest cells tried")
         return PlannerError(exc.code, f"{exc.message}; the {cut}: {hopeless}; move the start or the end",
                             exc.field)
+    if exc.field is not None and exc.field.endswith((".start", ".end")):
+        key = exc.field.rsplit(".", 1)[1]
+        why = _endpoint_blocker(ws, key)
+        if why is not None:
+            return PlannerError(exc.code, f"{exc.message}; {why}: no cell holding it is wholly free, at any size "
+                                "(tried down to " f"{s * REMEDY_SMALLEST:g} m); move the {key}", exc.field)
     return PlannerError(exc.code, f"{exc.message}; cells down to {s * REMEDY_SMALLEST:g} m, a smaller clearance "
                         "and the narrowest psi_range were tried and give no path: the free space that joins them "
                         "is narrower than that, or the robot cannot reach it; move the start or the end",
