@@ -36,7 +36,7 @@ from .fastest import search as search_fastest
 from .result import build_result
 from .simulate import Resume, Simulation, simulate
 from .timing import method_of, resolve_timing, timing_info
-from .work import check_work
+from .work import check_work, estimate_work
 
 __all__ = ["plan", "segment", "warm_up"]
 
@@ -91,7 +91,11 @@ def plan(request: Any, *, robot: RobotModel | None = None, segments: Sequence[Se
         result = _plan_once(req.name, model, st, segments, req.reference, method=method)
     except PlannerError as exc:
         if exc.code == "infeasible" and exc.field == "settings" and segments is not None:
-            raise _more_time_advice(exc, req.name, model, given, st, segments) from None
+            budget = None
+            if work_limit_s is not None and work_limit_s > 0:  # what the limit leaves for the checks
+                budget = work_limit_s - (time.perf_counter() - t0)
+            raise _more_time_advice(exc, req.name, model, given, st, segments, budget,
+                                    estimate_work(req, segments).seconds) from None
         raise
     result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3  # everything, result arrays included
     mt = result.metrics
@@ -109,27 +113,42 @@ MORE_TIME = (2, 4, 8, 16)
 
 
 def _more_time_advice(exc: PlannerError, name: str | None, model: RobotModel, given: Settings, st: Settings,
-                      segments: Sequence[Segment]) -> PlannerError:
+                      segments: Sequence[Segment], budget_s: float | None = None,
+                      estimate_s: float = 0.0) -> PlannerError:
     """``exc`` (an infeasible constrained plan) with advice that was checked: the corridor
     planned again with :data:`MORE_TIME` times the samples of every segment (each candidate
     abandoned at its first infeasible step); the first that plans is named in the timing field
-    the request used. If none plans, the error says that more time does not help."""
+    the request used. If none plans, the error says that more time does not help.
+    ``budget_s``: the compute time the checks may take (None: no bound); a candidate whose
+    estimate (``estimate_s`` of the request times the factor) does not fit is not planned."""
     counts = np.asarray(st.segment_samples if st.segment_samples is not None
                         else [st.samples_per_segment] * len(segments), dtype=np.int64)
-    tried = []
+    tried: list[int] = []
+    stop = ""  # why the search stopped early
     for factor in MORE_TIME:
         new = counts * factor
         if int(new.max()) > MAX_SAMPLES_PER_SEGMENT or int(new.sum()) + st.tail_steps > MAX_TOTAL_STEPS:
+            stop = "more time exceeds the limits on samples"
             break
         sub = st.model_copy(update={"segment_samples": None if st.segment_samples is None else [int(c) for c in new],
                                     "samples_per_segment": int(st.samples_per_segment * factor),
                                     "require_settled": True})
+        if budget_s is not None and estimate_s * factor > budget_s:
+            stop = "more was not tried within the work limit"
+            break
+        t_try = time.perf_counter()
         tried.append(factor)
         try:
-            _run(name, model, sub, segments, None, abandon=True)
+            settled = _run(name, model, sub, segments, None, abandon=True)[0].metrics.settled
         except PlannerError as again:
+            if budget_s is not None:
+                budget_s -= time.perf_counter() - t_try
             if again.code == "infeasible":
                 continue
+            stop = f"{factor}x the time fails otherwise ({again.code})"
+            break
+        if not settled:
+            stop = f"{factor}x the time keeps the corridor but does not settle within settings.tail_max_s"
             break
         if given.speed_m_s is not None:
             how = f"settings.speed_m_s = {given.speed_m_s / factor:.6g} m/s"
@@ -141,8 +160,11 @@ def _more_time_advice(exc: PlannerError, name: str | None, model: RobotModel, gi
             how = f"settings.samples_per_segment = {st.samples_per_segment * factor}"
         return PlannerError("infeasible", f"{exc.message}; {factor}x the time plans ({how}, checked)", exc.field)
     if not tried:
-        return exc
+        return PlannerError("infeasible", f"{exc.message}; more time was not tried ({stop})", exc.field)
     times = ", ".join(f"{f}x" for f in tried)
+    if stop:
+        return PlannerError("infeasible", f"{exc.message}; {times} the time do not help either (checked; {stop})",
+                            exc.field)
     return PlannerError("infeasible", f"{exc.message}; {times} the time do not help either (checked): the "
                         "corridor is too narrow there for the robot's drive limits", exc.field)
 

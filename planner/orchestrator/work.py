@@ -29,6 +29,7 @@ serpentine corridor is refused before its simulation starts.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -103,11 +104,12 @@ def _samples_per_segment(req: PlanRequest, n: int) -> int:
     return st.samples_per_segment
 
 
-def estimate_work(request: Any) -> WorkEstimate:
+def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEstimate:
     """The estimated compute time of planning ``request`` (a validated
     :class:`~planner.schema.PlanRequest` or a dict in the one JSON shape); see the module
     docstring. Costs microseconds (a layout: its cell count; ``speed_m_s``: one pass over
-    the segments)."""
+    the segments). ``segments``: a layout's corridor once segmented (its length is then
+    known: the estimate :func:`check_work` bounds the simulation with)."""
     req = parse_request(request)
     st = req.settings
     c = WORK_COSTS
@@ -121,6 +123,11 @@ def estimate_work(request: Any) -> WorkEstimate:
         n = len(req.segments)
         S = _samples_per_segment(req, n)
         corridor_field = "segments"
+    elif segments is not None:  # a layout, segmented
+        n = len(segments)
+        S = _samples_per_segment(req.model_copy(update={"segments": list(segments)}), n)
+        cells, obstacles = _layout_corridor(req, S)[1:]
+        corridor_field = "layout.cell.size"
     else:
         S = _samples_per_segment(req, 0) if method != "speed_m_s" else st.N
         n, cells, obstacles = _layout_corridor(req, S if method != "total_time_s" else st.N)
@@ -150,6 +157,7 @@ def estimate_work(request: Any) -> WorkEstimate:
     else:
         field = corridor_field if not st.fastest else "settings.fastest"
     what = ("reference poses" if req.reference is not None else "segments" if req.segments is not None
+            else f"segments (the path through {cells} cells)" if segments is not None
             else f"segments (shortest path through {cells} cells)")
     detail = (f"{n} {what} x {S} samples + settling (at most {st.tail_max_s:g} s) = {steps_one} steps"
               f"{f' x {plans} plans of the fastest-timing search' if plans > 1 else ''}, "
@@ -166,10 +174,7 @@ def check_work(request: Any, segments: Any, limit_s: float | None) -> None:
     ``segments`` (a layout's, once segmented) is estimated over ``limit_s`` [s] (None: no limit)."""
     if limit_s is None or limit_s <= 0:
         return
-    req = parse_request(request)
-    corridor = req.model_copy(update={"segments": list(segments), "layout": None, "reference": None})
-    est = estimate_work(corridor)
+    est = estimate_work(request, segments)
     if est.seconds > limit_s:
-        field = "layout.cell.size" if est.field == "segments" and req.layout is not None else est.field
-        raise PlannerError("too_much_work", f"the segmented layout's corridor ({len(segments)} segments) "
-                           + est.message(limit_s), field)
+        raise PlannerError("too_much_work", f"the segmented layout's corridor ({len(segments)} segments): "
+                           + est.message(limit_s), est.field)
