@@ -130,9 +130,25 @@ def _more_time_advice(exc: PlannerError, name: str | None, model: RobotModel, gi
         if int(new.max()) > MAX_SAMPLES_PER_SEGMENT or int(new.sum()) + st.tail_steps > MAX_TOTAL_STEPS:
             stop = "more time exceeds the limits on samples"
             break
-        sub = st.model_copy(update={"segment_samples": None if st.segment_samples is None else [int(c) for c in new],
-                                    "samples_per_segment": int(st.samples_per_segment * factor),
-                                    "require_settled": True})
+        # the settings advised, in the timing field the request used, resolved as a request would be
+        if given.speed_m_s is not None:
+            advised = given.model_copy(update={"speed_m_s": given.speed_m_s / factor})
+            how = f"settings.speed_m_s = {given.speed_m_s / factor:.6g} m/s"
+        elif given.total_time_s is not None:
+            advised = given.model_copy(update={"total_time_s": given.total_time_s * factor})
+            how = f"settings.total_time_s = {given.total_time_s * factor:.6g} s"
+        elif given.segment_samples is not None:
+            advised = st.model_copy(update={"segment_samples": [int(c) for c in new],
+                                            "samples_per_segment": int(new.max())})
+            how = f"settings.segment_samples x {factor}"
+        else:
+            advised = st.model_copy(update={"samples_per_segment": int(st.samples_per_segment * factor)})
+            how = f"settings.samples_per_segment = {st.samples_per_segment * factor}"
+        try:
+            sub = resolve_timing(advised, segments).model_copy(update={"require_settled": True})
+        except PlannerError:
+            stop = "more time exceeds the limits on samples"
+            break
         if budget_s is not None and estimate_s * factor > budget_s:
             stop = "more was not tried within the work limit"
             break
@@ -150,14 +166,6 @@ def _more_time_advice(exc: PlannerError, name: str | None, model: RobotModel, gi
         if not settled:
             stop = f"{factor}x the time keeps the corridor but does not settle within settings.tail_max_s"
             break
-        if given.speed_m_s is not None:
-            how = f"settings.speed_m_s = {given.speed_m_s / factor:.6g} m/s"
-        elif given.total_time_s is not None:
-            how = f"settings.total_time_s = {given.total_time_s * factor:.6g} s"
-        elif given.segment_samples is not None:
-            how = f"settings.segment_samples x {factor}"
-        else:
-            how = f"settings.samples_per_segment = {st.samples_per_segment * factor}"
         return PlannerError("infeasible", f"{exc.message}; {factor}x the time plans ({how}, checked)", exc.field)
     if not tried:
         return PlannerError("infeasible", f"{exc.message}; more time was not tried ({stop})", exc.field)
