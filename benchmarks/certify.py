@@ -32,7 +32,6 @@ sys.path.insert(0, str(ROOT))
 
 from tests.certify_support import certify_case, draw_cases  # noqa: E402
 
-
 #: the machine's speed now against the reference machine of the work estimate: Table I's CPU
 #: time measured in each worker every CALIBRATE cases over its time on the quiet reference
 #: machine (REFERENCE_S, benchmarks/README.md: constrained ~17-20 ms, paper ~5 ms; the shared
@@ -49,13 +48,13 @@ def _calibrate() -> None:
 
     for mode in ("constrained", "paper"):
         req = with_settings(TABLE1, mode=mode)
-        best = min(_cpu(lambda: plan(req)) for _ in range(3))
+        best = min(_cpu(plan, req) for _ in range(3))
         _SPEED[mode] = best / REFERENCE_S[mode]
 
 
-def _cpu(f) -> float:
+def _cpu(f, *args) -> float:
     t0 = time.process_time()
-    f()
+    f(*args)
     return time.process_time() - t0
 
 
@@ -119,7 +118,7 @@ def main() -> None:
     wall = time.perf_counter() - t0
     codes = sorted(set(counts["constrained"]) | set(counts["paper"]))
     print(f"\n{done} cases certified in {wall / 60:.1f} min on {args.workers} workers (seed {args.seed})\n")
-    print(f"| outcome | constrained (default) | paper |\n|---|---|---|")
+    print("| outcome | constrained (default) | paper |\n|---|---|---|")
     for c in codes:
         print(f"| {c} | {counts['constrained'][c]} | {counts['paper'][c]} |")
     print(f"\nproblems (needless failures, wrong advice, uncertified answers): {len(problems)}")

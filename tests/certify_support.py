@@ -260,7 +260,8 @@ def check_plan(request: dict, result: Any, segments: list[dict] | None = None) -
             v.fail(f"overshoot {over:.3g} m past the end point")
         fr = st.get("force_rate_n_s")
         if fr != "off":
-            limit = robot.fmax / FORCE_RISE_S if fr is None else np.broadcast_to(np.asarray(fr, float), robot.fmax.shape)
+            limit = (robot.fmax / FORCE_RISE_S if fr is None
+                     else np.broadcast_to(np.asarray(fr, float), robot.fmax.shape))
             worst = float((np.abs(dU) / Ts / limit).max(initial=0.0))
             if worst > 1.0 + TOL_REL:
                 v.fail(f"force rate {worst:.6f} x its limit")

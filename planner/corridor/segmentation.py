@@ -51,14 +51,14 @@ from ..errors import PlannerError
 from ..model import load_robot
 from ..schema import (
     MAX_CELLS,
-    MIN_CELL_SIZE,
-    cell_count,
     MAX_SEGMENTS,
     MAX_TOTAL_STEPS,
+    MIN_CELL_SIZE,
     Layout,
     Segment,
     SegmentationResult,
     Settings,
+    cell_count,
 )
 from .cells import FREE, STATE_NAMES, UNREACHABLE, Grid, block_obstacles, build_grid, count_states, default_cell_size
 from .geometry import halfplanes
@@ -284,7 +284,8 @@ def _separation(ws: Workspace) -> str | None:
             elif x0 <= ws.lower[0] + tol and x1 >= ws.upper[0] - tol:
                 where = f"spans the bounds from x = {x0:.4f} m to {x1:.4f} m (at y = {y0:.4f} .. {y1:.4f} m)"
             else:
-                where = f"cuts the start off from the end (it covers x = {x0:.4f} .. {x1:.4f} m, y = {y0:.4f} .. {y1:.4f} m)"
+                where = (f"cuts the start off from the end (it covers x = {x0:.4f} .. {x1:.4f} m, "
+                         f"y = {y0:.4f} .. {y1:.4f} m)")
             grown = f" grown by the clearance {ws.clearance:g} m" if ws.clearance > 0 else ""
             return f"obstacle{'s' if len(ids) > 1 else ''} {names}{grown} {where}"
     ids = sorted({int(i) for i in owner})
