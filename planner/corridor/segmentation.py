@@ -191,9 +191,9 @@ def _cells_and_path(ws: Workspace, model: Any, s: float, grown: tuple, field_pat
         cnt = count_states(state)
         raise PlannerError("no_path", f"no chain of free {ws.shape} cells (sharing edges) joins the start "
                            f"{format_point(ws.start)} to the end {format_point(ws.end)}: {cnt['free']} of "
-                           f"{len(state)} cells are free, {cnt['blocked']} blocked by obstacles (grown by the "
-                           f"clearance {ws.clearance:g} m) or the bounds, {cnt['unreachable']} unreachable by the "
-                           "robot", field_path)
+                           f"{len(state)} cells are free, {cnt['blocked']} blocked by obstacles"
+                           f"{f' (grown by the clearance {ws.clearance:g} m)' if ws.clearance > 0 else ''} or the "
+                           f"bounds, {cnt['unreachable']} unreachable by the robot", field_path)
     return grid, state, found
 
 

@@ -99,5 +99,5 @@ WORK_COSTS: dict[str, float] = {
     "constrained_reference_d": 0.001e-6,
     "substep_compiled": 1.5e-6, "substep_reference": 150e-6,
     "sample": 2.5e-6, "sample_polygon": 1e-6,
-    "cell": 1e-6, "obstacle": 1e-4, "fixed": 1.5e-3,
+    "cell": 4e-6, "obstacle": 1e-4, "fixed": 1.5e-3,
 }
