@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -47,14 +48,15 @@ def export_format_for(path: str) -> ExportFormat | None:
 
 
 def export(result: PlanResult, format: ExportFormat, *, layout: Layout | None = None, forces: bool = False,
-           source: str | None = None) -> str:
+           source: str | None = None, header: Sequence[str] = ()) -> str:
     """The plan in ``format`` as text. ``layout`` adds obstacles and bounds to a DXF,
     ``forces`` drive-force columns to the joint stream, ``source`` names the plan's origin
-    in the G-code and joint headers."""
+    in the G-code and joint headers, ``header`` adds provenance lines to every format's
+    header (comments; DXF custom header properties)."""
     if format == "gcode":
-        return to_gcode(result, source)
+        return to_gcode(result, source, header)
     if format == "joints":
-        return to_joints(result, forces, source)
+        return to_joints(result, forces, source, header)
     if format == "dxf":
-        return to_dxf(result, layout)
+        return to_dxf(result, layout, header)
     raise ValueError(f"unknown export format {format!r}; one of {', '.join(EXPORT_FORMATS)}")

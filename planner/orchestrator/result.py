@@ -144,13 +144,16 @@ def csv_columns(n_legs: int) -> list[str]:
     return cols
 
 
-def to_csv(result: PlanResult) -> str:
-    """One row per sample, a header naming each column with its unit."""
+def to_csv(result: PlanResult, header: Sequence[str] = ()) -> str:
+    """One row per sample, a header naming each column with its unit; ``header`` lines come
+    first as ``# `` comment lines (the editor's design, plan id, request hash)."""
     d, c = result.drives, result.corridor
     table = np.column_stack((result.time, result.pose, result.velocity, result.acceleration, d.length, d.velocity,
                              d.force, c.lower, c.upper, c.violation_m))
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
+    for line in header:
+        buf.write("# " + " ".join(str(line).splitlines()) + "\n")
     w.writerow(csv_columns(np.asarray(d.force).shape[1]))
-    w.writerows([[repr(v) for v in row] for row in table.tolist()])
+    w.writerows([[repr(v) for v in row] for row in (table + 0.0).tolist()])  # + 0.0: never "-0.0"
     return buf.getvalue()
