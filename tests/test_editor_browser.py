@@ -539,3 +539,50 @@ def test_after_a_failed_plan_no_download_of_an_earlier_plan_is_possible(tab):
     time.sleep(1.0)
     assert len(downloads) == n == 1
     tab.shot("09-failed-plan-no-download")
+
+
+def test_plan_undo_and_redo_stay_in_view_however_long_the_tab(tab):
+    """The tabs' content scrolls in its own box: scrolled to its last control (Edit, Files),
+    the Plan, Undo and Redo buttons are still on screen and clickable."""
+    page = tab.page
+    controls = [page.get_by_role("button", name=n, exact=True) for n in ("Plan", "Undo", "Redo")]
+    for name, last in (("Edit", "Grid (m), empty = cell size"), ("Files", "Download trajectory CSV")):
+        tab.tab(name)
+        target = tab.field(last) if name == "Edit" else page.get_by_role("button", name=last)
+        target.scroll_into_view_if_needed()
+        assert wait_for(lambda t=target: (t.bounding_box() or {"y": -1})["y"] >= 0, 5)
+        assert target.bounding_box()["y"] <= H
+        for c in controls:
+            box = c.bounding_box()
+            assert box is not None and 0 <= box["y"] and box["y"] + box["height"] <= H, (name, box)
+    s = tab.session
+    done = s.plans_done
+    controls[0].click()  # still clickable
+    assert wait_for(lambda: s.plans_done > done, 60)
+
+
+def test_readme_screenshot_of_an_imported_drawing_with_holes(tab):
+    """LibreCAD's cooker (a body with four hob holes) imported in the Files tab, placed where the
+    robot reaches, planned at once; the view fits it (written to docs/drawing.png when
+    RANGEPLAN_DOCS_DRAWING_SCREENSHOT names that path)."""
+    from tests.drawings import DRAWINGS
+
+    s, page = tab.session, tab.page
+    tab.tab("Files")
+    done = s.plans_done
+    with page.expect_file_chooser() as chooser:
+        page.get_by_role("button", name="Import drawing (DXF/SVG)").click()
+    chooser.value.set_files(str(DRAWINGS / "Kitchen-cooker-V.dxf"))
+    assert wait_for(lambda: s.plans_done > done and s.wait_idle(1), 60)
+    assert s.last_error is None, s.last_error
+    assert sum(len(o.get("holes", [])) for o in s.request["layout"]["obstacles"]) >= 4
+    s.gui.robot_style.value = "outline"
+    s.gui.time.value = round(0.5 * float(s.last_result["time"][-1]), 2)
+    tab.tab("Result")
+    for close in page.locator(".mantine-Notification-closeButton").all():
+        close.click()
+    time.sleep(1.5)
+    path = tab.shot("10-drawing")
+    target = os.environ.get("RANGEPLAN_DOCS_DRAWING_SCREENSHOT")
+    if target:
+        Path(target).write_bytes(path.read_bytes())

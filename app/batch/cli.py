@@ -9,6 +9,7 @@ finished result and the summary of what finished are kept; the same command resu
 from __future__ import annotations
 
 import argparse
+import itertools
 import os
 import sys
 import time
@@ -119,7 +120,7 @@ def run_batch(inputs: list[str], outdir: str | Path, *, workers: int | None = No
                 lines[item.key] = (item.index, row_line(row))
                 statuses[item.key] = row["status"]
                 counts["skipped"] += 1
-                prog.done += 1
+                prog.skip()
                 continue
             shas[item.index] = sha
             yield item
@@ -166,9 +167,11 @@ def run_batch(inputs: list[str], outdir: str | Path, *, workers: int | None = No
     t0 = time.perf_counter()
     runner = Runner(engine, on_done, fmt=fmt, timeout_s=timeout_s or None, stage=str(stage) if stage else None)
     try:
-        prog.start(engine.describe())
         consumed = todo()
-        runner.run(consumed, remaining=lambda: max(0, total - prog.done - runner.running))
+        first = next(consumed, None)  # items already done before the first to plan: the bar starts past them
+        prog.start(engine.describe())
+        runner.run(itertools.chain(() if first is None else (first,), consumed),
+                   remaining=lambda: max(0, total - prog.done - runner.running))
     except KeyboardInterrupt:
         interrupted = True
     finally:

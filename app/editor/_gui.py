@@ -43,6 +43,8 @@ if TYPE_CHECKING:
 __all__ = ["PLAY_FPS", "EditorGui", "Playback", "error_body", "error_title"]
 
 PLAY_FPS = 30.0  #: playback frame rate [1/s]
+#: the tab panels scroll on their own (Mantine's role=tabpanel): the controls above stay visible
+PANEL_CSS = "[role=tabpanel]{max-height:max(220px,calc(100vh - 600px));overflow-y:auto;overscroll-behavior:contain}"
 _XY, _XY_PSI = ("x", "y"), ("x", "y", "ψ")
 
 
@@ -135,6 +137,9 @@ class EditorGui:
                                                  "the robot stays readable")
         self.robot_style.on_update(lambda _: session.scene.set_robot_style(self.robot_style.value))
         self.leg_legend = gui.add_html(leg_legend_html(4, None))
+        # The tabs' content scrolls in its own box, so the controls above it (Plan, Undo, Redo,
+        # status, time, Play) stay in view however long the Edit or Files tab is.
+        gui.add_html(f"<style>{PANEL_CSS}</style>")
         tabs = gui.add_tab_group()
         with tabs.add_tab("Edit"):
             self._build_edit_tab(gui)
