@@ -40,7 +40,7 @@ SEGMENT_HANDLES = ("left", "right", "bottom", "top", "centre")
 REACH_SAMPLES = 120  #: grid samples per side of the reachable-workspace outline
 HANDLE_SCALE = 0.12  #: size of a start/end gizmo, as a fraction of the larger bounds side
 DOT_RADIUS = 0.01  #: radius of a start/end dot, as a fraction of the larger bounds side
-MAX_TICK_LABELS = 16  #: axis labels per axis (a label node each, made once)
+MAX_TICK_LABELS = 8  #: axis labels per axis (a label node each, made once)
 #: how the robot is drawn: legs' width [px], platform fill shown, platform edge width [px]
 ROBOT_STYLES = {"solid": (5.0, True, 2.0), "outline": (1.5, False, 1.0), "hidden": (0.0, False, 0.0)}
 
