@@ -19,6 +19,8 @@ import numpy as np
 from ._geometry import obstacle_shape
 from ._placement import fit_drawing, free_point, reachable_region
 from ._planning import (
+    MACHINE_FORMATS,
+    OUTPUT_FORMATS,
     PlannerError,
     drawing_request,
     editable,
@@ -269,8 +271,8 @@ class EditorFiles:
                 f"{p.offset[1]:.4f}) m; " + ("; ".join(moved) if moved else "start and end kept"))
         return req, text
 
-    #: download file name of each machine format
-    EXPORTS = {"gcode": "trajectory.ngc", "joints": "legs.txt", "dxf": "plan.dxf"}
+    #: download file name of each machine format (the registry's)
+    EXPORTS = {fmt: OUTPUT_FORMATS[fmt].filename for fmt in MACHINE_FORMATS}
 
     def download_export(self, client, fmt: str) -> None:
         """Send the plan of the design on screen to ``client`` as G-code, a leg-length stream

@@ -31,7 +31,9 @@ from ._planning import (
     DEFAULT_MODE,
     DEFAULT_ROBOT,
     HAS_SPEED_SETTING,
+    MACHINE_FORMATS,
     MODE_DEFAULTS,
+    OUTPUT_FORMATS,
     builtin_robot_names,
     field_bounds,
 )
@@ -286,10 +288,9 @@ class EditorGui:
         with gui.add_folder("Machine files (of the plan on screen)"):
             self.downloads_note = gui.add_markdown("Downloads: no plan yet")
             self.download_buttons = {}
-            for fmt, label in (("gcode", "Download G-code (LinuxCNC)"), ("joints", "Download leg lengths "
-                               "(halstreamer)"), ("dxf", "Download DXF (path, corridor, obstacles)"),
-                               ("csv", "Download trajectory CSV")):
-                button = gui.add_button(label, disabled=True)
+            for fmt in (*MACHINE_FORMATS, "csv"):
+                title = OUTPUT_FORMATS[fmt].title or "trajectory CSV"
+                button = gui.add_button(f"Download {title}", disabled=True)
                 if fmt == "csv":
                     button.on_click(lambda e: editor.files.download_csv(e.client))
                 else:
