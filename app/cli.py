@@ -62,11 +62,13 @@ def output_format(args) -> str:
 def cmd_plan(args) -> int:
     from planner import PlannerError, plan, to_csv
     from planner.exchange import export
+    from planner.orchestrator.compiling import compile_progress
 
     request = load_request(args.input)
     fmt = output_format(args)
     try:
-        result = plan(request)
+        with compile_progress():  # the first plan after installing compiles the kernels: progress on stderr
+            result = plan(request)
     except PlannerError as exc:
         raise InputError(f"{args.input}: {exc.code}: {exc}") from None
     if fmt == "csv":
@@ -128,15 +130,20 @@ def cmd_serve(args) -> int:
                  allow_unauthenticated=args.allow_unauthenticated)
 
 
-def add_import_parser(sub) -> None:
+def add_import_parser(sub, full: bool = True) -> None:
+    """The ``import`` sub-command; its options (help texts from :class:`planner.schema.ImportOptions`)
+    only when ``full``: ``rangeplan --help`` and the other commands do not load the schema."""
+    pi = sub.add_parser("import", help="turn a DXF or SVG drawing into a plan request with a layout",
+                        description="Closed shapes of the drawing become obstacles (nested ones holes); loose LINE/ARC "
+                        "pieces are joined. Lengths in m, angles in rad (in the robot's workspace).")
+    pi.set_defaults(func=cmd_import)
+    if not full:
+        return
     from planner.schema import DRAWING_UNITS, ImportOptions
 
     def helptext(field: str) -> str:
         return (ImportOptions.model_fields[field].description or "").replace("%", "%%")
 
-    pi = sub.add_parser("import", help="turn a DXF or SVG drawing into a plan request with a layout",
-                        description="Closed shapes of the drawing become obstacles (nested ones holes); loose LINE/ARC "
-                        "pieces are joined. Lengths in m, angles in rad (in the robot's workspace).")
     pi.add_argument("drawing", help="DXF or SVG file ('-' for standard input)")
     pi.add_argument("-o", "--output", help="plan request JSON to write; standard output if omitted")
     pi.add_argument("--layer", action="append", help=helptext("layers") + " (repeat for several)")
@@ -152,10 +159,11 @@ def add_import_parser(sub) -> None:
     pi.add_argument("--bounds-layer", metavar="NAME", help=helptext("bounds_layer"))
     pi.add_argument("--report", metavar="FILE", help="write the import report (shapes, holes, open chains, "
                     "units) as JSON to FILE")
-    pi.set_defaults(func=cmd_import)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The whole parser; given the ``command`` about to run, the other commands' options that
+    need heavy imports are left out (``rangeplan --help`` in well under a second)."""
     p = argparse.ArgumentParser(prog="rangeplan", description="Range-space predictive control trajectory planner "
                                 "for planar parallel robots (SI units throughout).")
     sub = p.add_subparsers(dest="command", required=True)
@@ -168,7 +176,7 @@ def build_parser() -> argparse.ArgumentParser:
     pp.add_argument("--forces", action="store_true", help="joints format: add the drive forces (N)")
     pp.add_argument("--compact", action="store_true", help="JSON without indentation")
     pp.set_defaults(func=cmd_plan)
-    add_import_parser(sub)
+    add_import_parser(sub, full=command in (None, "import"))
     ps = sub.add_parser("serve", help="serve the HTTP API and the browser editor")
     ps.add_argument("--host", default=os.environ.get("RANGEPLAN_HOST", "127.0.0.1"),
                     help="API host (env RANGEPLAN_HOST, default 127.0.0.1)")
@@ -186,7 +194,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else argv
+    # the first word that is no option names the command ("" for `rangeplan --help`)
+    command = next((a for a in argv if not a.startswith("-")), "")
+    parser = build_parser(command)
     args = parser.parse_args(argv)
     try:
         return args.func(args)

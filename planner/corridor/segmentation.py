@@ -45,7 +45,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import shapely
 
 from ..errors import PlannerError
 from ..model import load_robot
@@ -92,6 +91,7 @@ class Segmentation:
         if not self.grown_parts or not len(self.grown_parts[0]):
             return []
         pieces, owner = self.grown_parts
+        import shapely  # loaded on first use: plans of given segments never need it
         return [shapely.union_all(pieces[owner == i]) for i in range(int(owner.max()) + 1)]
 
     @property
@@ -117,6 +117,7 @@ class Segmentation:
             else:
                 A, b = halfplanes(seg.polygon)
                 hps.append({"A": A.tolist(), "b": b.tolist()})
+        import shapely  # loaded on first use: plans of given segments never need it
         grown = [np.asarray(part.exterior.coords)[:-1].tolist() for g in self.grown for part in shapely.get_parts(g)]
         return {
             "cell": {"shape": self.shape, "size": self.size},
