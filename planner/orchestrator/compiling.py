@@ -172,12 +172,21 @@ def compile_progress(stream: TextIO | None = None, interval: float | None = None
     """Within the block, report on ``stream`` (default ``sys.stderr``) any compiling of
     the planner's kernels: a line when it starts, progress with an estimate of the time
     left every ``interval`` seconds (1 s on a terminal, 10 s otherwise), a line at the end."""
+    global _active
+    if _active:  # nested (warm_up within the CLI's block): the outer one reports
+        yield
+        return
     out = sys.stderr if stream is None else stream
     tty = bool(getattr(out, "isatty", lambda: False)())
     progress = _Progress(out, interval if interval is not None else (1.0 if tty else 10.0))
     event.register("numba:compile", progress)
+    _active = True
     try:
         yield
     finally:
+        _active = False
         event.unregister("numba:compile", progress)
         progress.close()
+
+
+_active = False  # a compile_progress block is open (numba compiles under one global lock)
