@@ -43,8 +43,9 @@ def kernel_key() -> str:
     """sha256 of numba's and llvmlite's versions, a non-default ``NUMBA_OPT`` (numba's own cache
     ignores it) and every kernel source (hex, 64 digits)."""
     import llvmlite
+    from numba.core import config
 
-    opt = int(numba.config.OPT)
+    opt = int(getattr(config, "OPT", 3))
     h = hashlib.sha256(f"numba {numba.__version__} llvmlite {llvmlite.__version__}{'' if opt == 3 else f' opt {opt}'}\n"
                        .encode())
     for rel in KERNEL_SOURCES:
