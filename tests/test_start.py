@@ -95,21 +95,36 @@ def test_kernels_use_the_keyed_cache():
 
 
 @pytest.mark.slow
-def test_a_new_process_loads_what_another_compiled(tmp_path):
-    # a small kernel: the first process compiles it into the keyed cache, the second loads it
+def test_a_new_process_loads_what_another_compiled_also_from_a_read_only_seed(tmp_path):
+    # a small kernel compiled by one process into a seed (as the image build does), the seed made
+    # read-only, copied by app.kernel_cache at start into another NUMBA_CACHE_DIR: the next
+    # process loads the kernel from the copy instead of compiling it
+    from app.kernel_cache import seed_kernel_cache
+
     code = ("import json\nimport numpy as np\nfrom planner.model import kernels as k\n"
             "d = k.smallest_singular_values\nd(np.eye(3)[None])\n"
             "s = d.stats\nprint(json.dumps({'hits': sum(s.cache_hits.values()),\n"
             "                  'misses': sum(s.cache_misses.values())}))")
-    env = {"RANGEPLAN_KERNEL_CACHE": str(tmp_path), "PATH": "/usr/bin:/bin", "OPENBLAS_NUM_THREADS": "1"}
-    runs = []
-    for _ in range(2):
-        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env,
+
+    def run(cache: Path) -> dict:
+        env = {"NUMBA_CACHE_DIR": str(cache), "PATH": "/usr/bin:/bin", "OPENBLAS_NUM_THREADS": "1"}
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, env=env,
                              cwd=Path(__file__).resolve().parents[1])
         assert out.returncode == 0, out.stderr
-        runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
-    assert runs[0] == {"hits": 0, "misses": 1} and runs[1] == {"hits": 1, "misses": 0}
-    assert any(tmp_path.rglob("*.nbi"))
+        return json.loads(out.stdout.strip().splitlines()[-1])
+
+    seed, cache = tmp_path / "seed", tmp_path / "cache"
+    assert run(seed) == {"hits": 0, "misses": 1}
+    assert list(seed.glob(f"rangeplan-{_jit.kernel_key()[:16]}/model/*.nbi"))
+    for p in seed.rglob("*"):
+        p.chmod(0o555 if p.is_dir() else 0o444)
+    try:
+        assert "copied" in (seed_kernel_cache({"RANGEPLAN_KERNEL_SEED": str(seed), "NUMBA_CACHE_DIR": str(cache)})
+                            or "")
+        assert run(cache) == {"hits": 1, "misses": 0}
+    finally:
+        for p in seed.rglob("*"):
+            p.chmod(0o755 if p.is_dir() else 0o644)
 
 
 def _event(name: str) -> SimpleNamespace:

@@ -164,7 +164,8 @@ class _Progress(event.Listener):
         if self.thread is not None:
             self.thread.join()
             elapsed = time.perf_counter() - (self.t0 or time.perf_counter())
-            self._write(f"compiled {len(self.done)} kernels in {elapsed:.0f} s (cached for the next runs)", final=True)
+            n = len(self.done & self.pending) if self.pending else len(self.done)
+            self._write(f"compiled {n} kernels in {elapsed:.0f} s (cached for the next runs)", final=True)
 
 
 @contextmanager
