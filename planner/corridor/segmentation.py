@@ -261,6 +261,8 @@ def _remedies(ws: Workspace, model: Any, s: float, field_path: str) -> list[str]
 def _separation(ws: Workspace) -> str | None:
     """Which grown obstacles (with the bounds) cut the start off from the end in the free
     space itself (no cells), said with their extent; None when the free space joins them."""
+    import shapely  # loaded on first use: plans of given segments never need it
+
     box = shapely.box(ws.lower[0], ws.lower[1], ws.upper[0], ws.upper[1])
     pieces, owner = ws.grown_parts()
     if not len(pieces):
@@ -298,6 +300,8 @@ def _endpoint_blocker(ws: Workspace, key: str) -> str | None:
     """Why every cell holding the start or end (``key``) meets an obstacle: the point touches
     an obstacle grown by the clearance (a cell holding it reaches into it at any size), said
     with the obstacle; None if it does not."""
+    import shapely  # loaded on first use: plans of given segments never need it
+
     p = ws.start if key == "start" else ws.end
     pieces, owner = ws.grown_parts()
     if not len(pieces):
