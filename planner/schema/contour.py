@@ -147,8 +147,12 @@ class ContourRequest(Strict):
     @field_validator("tolerance_m")
     @classmethod
     def _tol(cls, v: float | None) -> float | None:
-        if v is not None and not MIN_CONTOUR_TOLERANCE_M <= v <= 0.01:
-            raise fail(f"must be between {MIN_CONTOUR_TOLERANCE_M:g} and 0.01 m, got {v:g}")
+        if v is not None and v < MIN_CONTOUR_TOLERANCE_M:
+            raise fail(f"{v:g} m is below what the planner can hold: the tube's cells keep a 1e-06 m margin for the "
+                       "model's one-step error, and a cell narrower than ten margins leaves a sample no room; give "
+                       f"at least {MIN_CONTOUR_TOLERANCE_M:g} m")
+        if v is not None and v > 0.01:
+            raise fail(f"must be at most 0.01 m, got {v:g}")
         return v
 
     @model_validator(mode="after")
