@@ -45,6 +45,7 @@ from pydantic import BaseModel, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from app.batch.api import batch_router
+from app.contour_api import router as contour_router
 from app.docs import install_docs
 from app.errors import CODES_BY_STATUS, error_response, errors_doc, validation_response
 from app.http_exchange import (
@@ -240,6 +241,7 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
                              "memory_mb": shared_pool.memory_mb if shared_pool else memory_mb}
     app.add_middleware(BodySizeLimit, limit=max_body)
     app.include_router(batch_router())  # /v1/batches (app/batch/): batches on their own workers
+    app.include_router(contour_router)  # /v1/contour (app/contour_api.py): G-code programs
     install_access_control(app, access)  # outside the body limit: refused before the body is read
     app.state.access = access
 

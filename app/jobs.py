@@ -135,6 +135,8 @@ def run_job(job: dict) -> tuple:
             else:
                 payload = data
             return ("ok", payload, {"plan_id": plan_id})
+        if job["kind"] == "contour":  # a G-code program (app/contour_api.py)
+            return _contour(job)
         if job["kind"] == "import":
             from planner.exchange import import_drawing
 
@@ -162,6 +164,33 @@ def run_job(job: dict) -> tuple:
             # the planner's own checks let through; the input's fault, not the server's
             return ("error", _degenerate(exc, job))
         raise
+
+
+def _contour(job: dict) -> tuple:
+    """Contour a G-code program (:func:`planner.contour.plan_contour`): stored like a plan."""
+    from app.storage import new_id
+    from planner import to_csv
+    from planner.contour import plan_contour
+    from planner.exchange import export
+
+    req = job["request"]
+    result = plan_contour(req)
+    plan_id = new_id() if job.get("store") else None
+    result.plan_id = plan_id
+    data = result.to_json()
+    store = _store(job.get("store"))
+    if plan_id and store is not None and store.save_plan_json(
+            data.decode(), req.model_dump(mode="json"), None, id=plan_id) is None:
+        plan_id = result.plan_id = None
+        data = result.to_json()
+    fmt = job.get("format")
+    if fmt == "csv":
+        payload = to_csv(result).encode()
+    elif fmt in ("gcode", "joints", "dxf"):
+        payload = export(result, fmt, forces=bool(job.get("forces")), source=job.get("source")).encode()
+    else:
+        payload = data
+    return ("ok", payload, {"plan_id": plan_id})
 
 
 def _editor_plan(req) -> bytes:

@@ -8,7 +8,7 @@
   to the programmed path.
 """
 
-from .plan import parse_contour_request, plan_contour
+from .plan import estimate_contour, parse_contour_request, plan_contour
 from .tube import PathGeometry, Tube, tube
 
-__all__ = ["PathGeometry", "Tube", "parse_contour_request", "plan_contour", "tube"]
+__all__ = ["PathGeometry", "Tube", "estimate_contour", "parse_contour_request", "plan_contour", "tube"]

@@ -49,7 +49,7 @@ from ..schema import (
 )
 from .tube import PathGeometry, Tube, tube
 
-__all__ = ["plan_contour", "parse_contour_request"]
+__all__ = ["CONTOUR_STEP_S", "estimate_contour", "parse_contour_request", "plan_contour"]
 
 #: fastest: the reference cell speed and acceleration the scale multiplies [m/s, m/s^2]
 V0_M_S = 0.1
@@ -469,3 +469,28 @@ def _join(parts: list[_Part], req: ContourRequest, st: Settings, model: RobotMod
                                                segments=[{"lower": s.lower, "upper": s.upper, "polygon": s.polygon}
                                                          for s in segments]),
                       metrics=Metrics(**md), timing=timing)
+
+
+#: seconds per receding-horizon step of a tube plan (polygon cells with eight half-planes,
+#: junctions): measured ~0.5-1.3 ms per step on the benchmark programs (benchmarks/bench_contour.py);
+#: the estimate takes the low end, so it errs on the side of accepting
+CONTOUR_STEP_S = 3e-4
+
+
+def estimate_contour(request: Any, program: Program | None = None) -> tuple[float, str]:
+    """A lower estimate of the compute time of :func:`plan_contour` [s] and the arithmetic in
+    words: the cut samples at the programmed feed (``program``; ~1.5 plans) or at the
+    reference speed (``fastest``: ~10 candidate plans) times the step cost."""
+    req = parse_contour_request(request)
+    st = req.plan_settings()
+    if program is None:
+        program = read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
+    samples = 0.0
+    for b in program.passes:
+        for e in b.elements:
+            v = e.feed_m_s if req.feed == "program" else V0_M_S * 2
+            samples += e.length_m / max(v, 1e-9) / st.Ts
+    plans = 1.5 if req.feed == "program" else SCALE_STEPS + 3
+    seconds = samples * plans * CONTOUR_STEP_S
+    return seconds, (f"{len(program.passes)} passes, ~{samples:.0f} cut samples at Ts = {st.Ts:g} s x {plans:g} "
+                     f"plans x ~{CONTOUR_STEP_S * 1e6:.0f} us per step")
