@@ -25,7 +25,15 @@ from typing import Any, Literal
 import httpx
 from pydantic import ValidationError
 
-from planner.schema import PARTIAL_LAYOUT, ContourRequest, CorridorRecord, ImportResult, PlanRequest, PlanResult, planner_error
+from planner.schema import (
+    PARTIAL_LAYOUT,
+    ContourRequest,
+    CorridorRecord,
+    ImportResult,
+    PlanRequest,
+    PlanResult,
+    planner_error,
+)
 
 __all__ = ["Client", "RangeplanError"]
 

@@ -26,6 +26,8 @@ from planner.schema import ContourRequest, PlanResult
 __all__ = ["router"]
 
 router = APIRouter()
+_FORMAT = Query(None, description=FORMAT_HELP)
+_FORCES = Query(False, description="With format=joints: add the drive forces (N)")
 
 _RESPONSES: dict[int | str, dict[str, Any]] = {
     200: {"model": PlanResult, "description": "The planned trajectory of the whole program with its `contour` "
@@ -34,9 +36,8 @@ _RESPONSES: dict[int | str, dict[str, Any]] = {
 
 
 @router.post("/v1/contour", tags=["planning"], response_class=Response, responses=_RESPONSES)
-async def contour(body: ContourRequest, request: Request,
-                  format: PlanFormat | None = Query(None, description=FORMAT_HELP),
-                  forces: bool = Query(False, description="With format=joints: add the drive forces (N)")):
+async def contour(body: ContourRequest, request: Request, format: PlanFormat | None = _FORMAT,
+                  forces: bool = _FORCES):
     """Contour a G-code program (RS274NGC: G0 G1 G2 G3 G4 G17 G20 G21 G90 G91 G61 G64 P, F, S, T,
     M3/M5/M6): every cut pass within `tolerance_m` of the programmed path (each sample and the
     straight move to the next), `feed` `program` (never faster than F) or `fastest` (as the

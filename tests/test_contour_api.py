@@ -53,7 +53,8 @@ def test_http_equals_the_library_and_is_stored(client, posted):
     ({"origin": [0.3, 0.0]}, 422, "unreachable", ["line 7"]),
     ({"tolerance_m": 5e-6}, 422, "invalid_input", ["tolerance_m"]),
     ({"program": SMALL * 2000}, 413, "too_large", []),
-    ({"program": "F100\nG1 Z-1\n" + "G1 X50\nG1 X-50\n" * 3000, "feed": "fastest"}, 422, "too_much_work", ["estimated"]),
+    ({"program": "F100\nG1 Z-1\n" + "G1 X50\nG1 X-50\n" * 3000, "feed": "fastest"}, 422, "too_much_work",
+     ["estimated"]),
 ])
 def test_bad_programs_are_4xx_naming_the_cause(client, body, status, code, words):
     r = client.post("/v1/contour", json={"program": SMALL, "origin": ORIGIN, **body})

@@ -36,6 +36,7 @@ from ..schema import (
     ContourRequest,
     ContourSection,
     CorridorSamples,
+    CorridorSegment,
     Drives,
     Metrics,
     PassSummary,
@@ -213,7 +214,8 @@ def _cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int],
     t = tube(els, origin, tol, psi, piece_max)
     t.element = np.asarray(chunk)[t.element]
     # the first point: where the robot is (within the tube)
-    t.segments[0] = Segment(lower=np.array([pos[0], pos[1], psi]), upper=np.array([pos[0], pos[1], psi]))
+    here = [float(pos[0]), float(pos[1]), psi]
+    t.segments[0] = Segment.model_validate({"lower": here, "upper": here})
     if len(t.segments) > MAX_SEGMENTS:
         raise PlannerError("too_large", f"line {els[0].line}: the pass needs {len(t.segments)} tube cells at a "
                            f"tolerance of {tol * 1e3:g} mm, more than the limit of {MAX_SEGMENTS}; split the pass "
@@ -235,7 +237,7 @@ def _cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int],
             counts = _profile(t, feed_of * scale, A_PROGRAM_M_S2 * scale * scale, st.Ts)
             _check_counts(counts, els[0].line)
             try:
-                res = plan_timed(name, model, st, t.segments, counts)
+                res = plan_timed(name, model, st, t.segments, counts.tolist())
             except PlannerError as err:
                 if err.code not in ("infeasible", "not_settled"):
                     raise
@@ -258,7 +260,7 @@ def _cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int],
                 counts = _profile(t, v_cap * lam, A0_M_S2 * lam * lam, st.Ts)
                 _check_counts(counts, els[0].line)
                 try:
-                    res = plan_timed(name, model, st, t.segments, counts)
+                    res = plan_timed(name, model, st, t.segments, counts.tolist())
                     tried[lam] = res if feasible(res) else None
                 except PlannerError as err:
                     if err.code not in ("infeasible", "not_settled"):
@@ -377,7 +379,8 @@ def _travel(req: ContourRequest, model: RobotModel, st: Settings, a: np.ndarray,
         raise PlannerError(err.code, f"line {line}: the move from [{a[0]:.4f}, {a[1]:.4f}] to [{b[0]:.4f}, "
                            f"{b[1]:.4f}] m (robot frame): {err.message}", "program") from None
     K = len(res.time)
-    return _Part(res, np.zeros(K, bool), np.zeros(K, np.int64), np.zeros(K), segments=[Segment(**s) for s in segs])
+    return _Part(res, np.zeros(K, bool), np.zeros(K, np.int64), np.zeros(K),
+                 segments=[Segment.model_validate(s) for s in segs])
 
 
 def _dwell(pos: np.ndarray, psi: float, duration: float, Ts: float) -> _Part:
@@ -459,15 +462,17 @@ def _join(parts: list[_Part], req: ContourRequest, st: Settings, model: RobotMod
     timing = Timing(method="fastest" if req.feed == "fastest" else "segment_samples",
                     samples_per_segment=first.settings.samples_per_segment, segment_samples=None,
                     sequence_time_s=(K - 1) * Ts, moving_time_s=None,
-                    path_length_m=float(md["path_length_m"]))
+                    path_length_m=float(md["path_length_m"]), evaluations=None, feasible=None,
+                    one_fewer_sample_infeasible=None)
     settings = st.model_copy(update={"segment_samples": None})
-    return PlanResult(name=req.name, robot=first.robot, mode="constrained", criterion="range-space",
+    return PlanResult(plan_id=None, contour=None, name=req.name, robot=first.robot, mode="constrained",
+                      criterion="range-space",
                       settings=settings, units=first.units, time=np.arange(K) * Ts, pose=a["pose"],
                       velocity=a["velocity"], acceleration=a["acceleration"],
                       drives=Drives(length=a["length"], velocity=a["legv"], force=a["force"]),
                       corridor=CorridorSamples(lower=a["lower"], upper=a["upper"], violation_m=a["viol"],
-                                               segments=[{"lower": s.lower, "upper": s.upper, "polygon": s.polygon}
-                                                         for s in segments]),
+                                               segments=[CorridorSegment(lower=s.lower, upper=s.upper,
+                                                                         polygon=s.polygon) for s in segments]),
                       metrics=Metrics(**md), timing=timing)
 
 

@@ -94,6 +94,7 @@ def _pieces(elements: list[PathElement], origin: np.ndarray, s_a: float, piece_m
             step = min(step, piece_max / r, math.pi / 2)
             n = max(1, math.ceil(abs(e.sweep_rad) / step))
             a = e.start_angle_rad + e.sweep_rad * np.arange(n + 1) / n
+            assert e.centre is not None
             pts = e.centre + r * np.stack((np.cos(a), np.sin(a)), axis=1) + origin
             pts[-1] = e.end + origin if abs(abs(e.sweep_rad) - 2 * math.pi) > 1e-9 else pts[0]
             for k in range(n):
@@ -118,12 +119,12 @@ def tube(elements: list[PathElement], origin: np.ndarray, tol: float, psi: float
     def add(poly: np.ndarray | None, point: np.ndarray | None, e: int, ln: float, tr: float, r: float) -> None:
         if poly is not None:
             lo, hi = poly.min(axis=0), poly.max(axis=0)
-            segs.append(Segment(lower=np.array([lo[0], lo[1], psi]), upper=np.array([hi[0], hi[1], psi]),
-                                polygon=poly))
+            segs.append(Segment.model_validate({"lower": [lo[0], lo[1], psi], "upper": [hi[0], hi[1], psi],
+                                                "polygon": poly.tolist()}))
         else:
             assert point is not None
-            p = np.array([point[0], point[1], psi])
-            segs.append(Segment(lower=p, upper=p.copy()))
+            p = [float(point[0]), float(point[1]), psi]
+            segs.append(Segment.model_validate({"lower": p, "upper": p}))
         elem.append(e)
         length.append(ln)
         turn.append(tr)

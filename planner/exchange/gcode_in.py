@@ -4,8 +4,8 @@ of lines and arcs in m (the program's own frame), split into cut passes, travel 
 Supported (what CAM posts for a 2.5D contour emit): ``G0 G1 G2 G3`` (arcs by ``I J`` offsets,
 incremental as LinuxCNC's default ``G91.1``, or by ``R``; full circles with ``I J``), ``G4 P``
 (seconds), ``G17``, ``G20 G21``, ``G90 G91``, ``G61`` (exact stop), ``G64`` (``P``: the path
-tolerance), ``F`` (units per minute, ``G94``), ``M3 M4 M5 M6 M7 M8 M9``, ``M0 M1`` (a pause: the tool stops there), ``S``, ``T``, ``N``
-line numbers, ``( )`` and ``;`` comments, ``%`` delimiters, ``M2``/``M30`` (what follows is
+tolerance), ``F`` (units per minute, ``G94``), ``M3 M4 M5 M6 M7 M8 M9``, ``M0 M1`` (a pause: the tool stops
+there), ``S``, ``T``, ``N`` line numbers, ``( )`` and ``;`` comments, ``%`` delimiters, ``M2``/``M30`` (what follows is
 ignored, as LinuxCNC does). The no-op cancels CAM headers carry (``G40`` cutter compensation
 off, ``G49`` tool length offset off, ``G80`` canned cycle off, ``G54`` the first work offset,
 zero here, ``G94``) are accepted and listed. Anything else (``G41``/``G42`` cutter compensation,

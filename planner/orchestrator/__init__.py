@@ -7,5 +7,6 @@ from .simulate import PaperController, Simulation, simulate
 from .timing import feasible, resolve_timing, timing_info
 from .work import WorkEstimate, estimate_work
 
-__all__ = ["plan", "plan_timed", "segment", "warm_up", "build_result", "to_csv", "PaperController", "Simulation", "simulate",
+__all__ = ["plan", "plan_timed", "segment", "warm_up", "build_result", "to_csv", "PaperController", "Simulation",
+           "simulate",
            "feasible", "resolve_timing", "timing_info", "WorkEstimate", "estimate_work"]

@@ -44,16 +44,16 @@ class PathElement(_Out):
     line: int = Field(description="Source line number (1-based)")
     start: Vec2 = Field(description="Start point [x, y] in m (program frame)")
     end: Vec2 = Field(description="End point [x, y] in m (program frame)")
-    centre: Vec2 | None = Field(None, description="Arc centre [x, y] in m; null for a line")
-    radius_m: float | None = Field(None, description="Arc radius (from the centre to the start), m")
-    start_angle_rad: float | None = Field(None, description="Angle of the start point about the centre, rad")
-    sweep_rad: float | None = Field(None, description="Signed swept angle, rad (> 0 counter-clockwise, G3; < 0 "
+    centre: Vec2 | None = Field(default=None, description="Arc centre [x, y] in m; null for a line")
+    radius_m: float | None = Field(default=None, description="Arc radius (from the centre to the start), m")
+    start_angle_rad: float | None = Field(default=None, description="Angle of the start point about the centre, rad")
+    sweep_rad: float | None = Field(default=None, description="Signed swept angle, rad (> 0 counter-clockwise, G3; < 0 "
                                     "clockwise, G2; +-2 pi for a full circle)")
     length_m: float = Field(description="Length of the move in XY, m")
     z_start_m: float = Field(description="Z at the start, m")
     z_end_m: float = Field(description="Z at the end, m")
     feed_m_s: float = Field(description="Programmed feed F, m/s")
-    exact_stop: bool = Field(False, description="G61 active: the tool stops at the end of this move")
+    exact_stop: bool = Field(default=False, description="G61 active: the tool stops at the end of this move")
 
     def point_at(self, s: np.ndarray) -> np.ndarray:
         """Points at arc length ``s`` (n,) from the start, (n, 2) [m]."""
@@ -75,9 +75,9 @@ class ProgramBlock(_Out):
     kind: Literal["cut", "travel", "dwell"] = Field(description="What the piece is")
     line: int = Field(description="Source line of its first move (1-based)")
     elements: list[PathElement] = Field(default_factory=list, description="cut: the moves, in order; travel: one")
-    rapid: bool = Field(False, description="travel: a G0 rapid (else a feed move above the cutting height)")
-    duration_s: float = Field(0.0, description="dwell: its time, s (Z at the feed or rapid speed, G4 P)")
-    reason: str = Field("", description="dwell: 'plunge', 'retract', 'G4' or 'pause' (M0/M1)")
+    rapid: bool = Field(default=False, description="travel: a G0 rapid (else a feed move above the cutting height)")
+    duration_s: float = Field(default=0.0, description="dwell: its time, s (Z at the feed or rapid speed, G4 P)")
+    reason: str = Field(default="", description="dwell: 'plunge', 'retract', 'G4' or 'pause' (M0/M1)")
 
 
 class ProgramWord(_Out):
@@ -114,18 +114,20 @@ class ContourRequest(Strict):
     """Contour a G-code program: the body of ``POST /v1/contour`` and what ``rangeplan
     contour`` builds from its options."""
 
-    name: str | None = Field(None, max_length=200, description="A name for the plan")
+    name: str | None = Field(default=None, max_length=200, description="A name for the plan")
     program: str = Field(description="The G-code program's text (RS274NGC, LinuxCNC dialect)")
     origin: list[Finite] = Field(default_factory=lambda: [0.0, 0.0], min_length=2, max_length=2,
                                  description="Where program zero (X0 Y0) sits in the robot frame [x, y], m")
-    tolerance_m: Finite | None = Field(None, description="Largest distance of the tool point from the programmed "
-                                       "path while cutting, m; default: the program's G64 P, else 5e-5 m (0.05 mm)")
-    feed: Literal["program", "fastest"] = Field("program", description="'program': never faster than the "
+    tolerance_m: Finite | None = Field(default=None, description="Largest distance of the tool point from the "
+                                       "programmed path while cutting, m; default: the program's G64 P, else "
+                                       "5e-5 m (0.05 mm)")
+    feed: Literal["program", "fastest"] = Field(default="program", description="'program': never faster than the "
                                                 "programmed F; 'fastest': as fast as the drives allow")
-    cut_below_m: Finite = Field(0.0, description="Feed moves with Z below this cut (program frame), m")
-    z_rapid_m_s: Finite = Field(0.05, gt=0, le=10.0, description="Speed of Z rapids (retracts, approaches), m/s: "
-                                "their dwell time")
-    robot: str | RobotDescription = Field("moving-slide", description="Built-in robot name or a full description")
+    cut_below_m: Finite = Field(default=0.0, description="Feed moves with Z below this cut (program frame), m")
+    z_rapid_m_s: Finite = Field(default=0.05, gt=0, le=10.0, description="Speed of Z rapids (retracts, "
+                                "approaches), m/s: their dwell time")
+    robot: str | RobotDescription = Field(default="moving-slide",
+                                          description="Built-in robot name or a full description")
     settings: dict[str, Any] = Field(default_factory=dict, description="Plan settings (Ts, N, k_r, k_u, ...; not the "
                                      "timing options, which the feed decides)")
 
