@@ -85,3 +85,20 @@ def test_cli_writes_the_same_plan_and_exits_2_on_a_bad_program(tmp_path):
     r = subprocess.run([sys.executable, "-m", "app.cli", "contour", str(big)], capture_output=True, text=True,
                        timeout=60)
     assert r.returncode == 2 and "too_large" in r.stderr
+
+
+def test_typed_client_contour(client, posted, tmp_path):
+    from app.client import Client, RangeplanError
+
+    prog = tmp_path / "part.ngc"
+    prog.write_text(SMALL)
+    with Client(str(client.base_url), transport=client._transport) as rp:
+        res = rp.contour(prog, origin=ORIGIN)
+        assert res.contour is not None and res.plan_id
+        assert np.allclose(res.pose, posted.json()["pose"], atol=1e-12)
+        with pytest.raises(RangeplanError) as err:
+            rp.contour(SMALL.replace("G1 Y20", "G83 Y20"), origin=ORIGIN)
+        assert err.value.status == 422 and "G83" in err.value.message
+        with pytest.raises(RangeplanError) as err:  # checked before sending
+            rp.contour(SMALL, tolerance_m=1e-7)
+        assert err.value.field == "tolerance_m" and err.value.status is None

@@ -152,6 +152,11 @@ def tube(elements: list[PathElement], origin: np.ndarray, tol: float, psi: float
     return Tube(segs, np.array(elem), np.array(length), np.array(turn), np.array(radius), rho)
 
 
+def _norm(v: np.ndarray) -> np.ndarray:
+    """Length of the last axis' 2-vectors (cheaper than numpy.linalg.norm here)."""
+    return np.sqrt(v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1])
+
+
 class PathGeometry:
     """The programmed path of a pass (lines and arcs, robot frame) as arrays, for the distance
     of many points to a few candidate elements each (vectorised)."""
@@ -177,14 +182,14 @@ class PathGeometry:
         ab = b - a
         L2 = np.maximum(np.einsum("mcj,mcj->mc", ab, ab), 1e-300)
         t = np.clip(np.einsum("mcj,mcj->mc", P - a, ab) / L2, 0.0, 1.0)
-        d_line = np.linalg.norm(P - (a + t[..., None] * ab), axis=2)
+        d_line = _norm(P - (a + t[..., None] * ab))
         c, r = self.c[cand], self.r[cand]
         v = P - c
-        rad = np.linalg.norm(v, axis=2)
+        rad = _norm(v)
         ang = np.arctan2(v[..., 1], v[..., 0])
         sw = self.sweep[cand]
         off = np.mod((ang - self.a0[cand]) * np.sign(sw), 2 * np.pi)
         inside = (off <= np.abs(sw) + 1e-12) | (np.abs(sw) >= 2 * np.pi - 1e-12)
-        d_ends = np.minimum(np.linalg.norm(P - a, axis=2), np.linalg.norm(P - b, axis=2))
+        d_ends = np.minimum(_norm(P - a), _norm(P - b))
         d_arc = np.where(inside, np.abs(rad - r), d_ends)
         return np.where(self.arc[cand], d_arc, d_line).min(axis=1)
