@@ -45,24 +45,16 @@ def load_request(path: str):
         raise InputError(f"{path}: {format_validation_error(exc)}") from None
 
 
-OUTPUT_FORMATS = ("json", "csv", "gcode", "joints", "dxf")
-
-
 def output_format(args) -> str:
     """``--format``, else the output file's extension (.csv, .ngc/.nc/.gcode, .txt, .dxf), else JSON."""
-    from planner.exchange import export_format_for
+    from app.formats import format_for_path
 
-    if args.format:
-        return args.format
-    out = (args.output or "").lower()
-    if out.endswith(".csv"):
-        return "csv"
-    return export_format_for(out) or "json"
+    return args.format or format_for_path(args.output or "")
 
 
 def cmd_plan(args) -> int:
-    from planner import PlannerError, plan, to_csv
-    from planner.exchange import export
+    from app.formats import write
+    from planner import PlannerError, plan
 
     request = load_request(args.input)
     fmt = output_format(args)
@@ -70,12 +62,10 @@ def cmd_plan(args) -> int:
         result = plan(request)
     except PlannerError as exc:
         raise InputError(f"{args.input}: {exc.code}: {exc}") from None
-    if fmt == "csv":
-        text = to_csv(result)
-    elif fmt in ("gcode", "joints", "dxf"):
-        text = export(result, fmt, layout=request.layout, forces=args.forces, source=args.input)
-    else:
+    if fmt == "json":
         text = json.dumps(result.to_json_dict(), indent=None if args.compact else 1)
+    else:
+        text = write(result, fmt, layout=request.layout, forces=args.forces, source=args.input).decode()
     if args.output and args.output != "-":
         Path(args.output).write_text(text + ("" if text.endswith("\n") else "\n"))
         m = result.metrics
@@ -98,9 +88,9 @@ def parse_pair(text: str, option: str) -> list[float]:
 
 def cmd_contour(args) -> int:
     """``rangeplan contour PROGRAM.ngc``: plan a G-code program (issue 22)."""
-    from planner import PlannerError, to_csv
+    from app.formats import write
+    from planner import PlannerError
     from planner.contour import plan_contour
-    from planner.exchange import export
     from planner.schema import MAX_PROGRAM_BYTES
 
     try:
@@ -123,12 +113,10 @@ def cmd_contour(args) -> int:
         result = plan_contour(request)
     except PlannerError as exc:
         raise InputError(f"{args.program}: {exc.code}: {exc}") from None
-    if fmt == "csv":
-        out = to_csv(result)
-    elif fmt in ("gcode", "joints", "dxf"):
-        out = export(result, fmt, forces=args.forces, source=args.program)
-    else:
+    if fmt == "json":
         out = json.dumps(result.to_json_dict(), indent=None if args.compact else 1)
+    else:
+        out = write(result, fmt, forces=args.forces, source=args.program).decode()
     c = result.contour
     assert c is not None
     if args.output and args.output != "-":
@@ -181,9 +169,15 @@ def cmd_import(args) -> int:
 
 def cmd_serve(args) -> int:
     from app.server import serve
+    from app.settings import SettingsError, settings
 
-    return serve(host=args.host, port=args.port, editor_port=args.editor_port, editor=not args.no_editor,
-                 allow_unauthenticated=args.allow_unauthenticated)
+    try:
+        cfg = settings()  # the flags' defaults: RANGEPLAN_HOST, _PORT, _EDITOR_PORT
+    except SettingsError as exc:
+        raise InputError(str(exc)) from None
+    return serve(host=args.host or cfg.host, port=cfg.port if args.port is None else args.port,
+                 editor_port=cfg.editor_port if args.editor_port is None else args.editor_port,
+                 editor=not args.no_editor, allow_unauthenticated=args.allow_unauthenticated)
 
 
 def add_import_parser(sub) -> None:
@@ -213,6 +207,17 @@ def add_import_parser(sub) -> None:
     pi.set_defaults(func=cmd_import)
 
 
+def _format_name(text: str) -> str:
+    """``--format``: one of :data:`app.formats.OUTPUT_FORMATS` (read when the flag is used:
+    ``rangeplan --help`` does not import the planner)."""
+    from app.formats import OUTPUT_FORMATS
+
+    if text not in OUTPUT_FORMATS:
+        raise argparse.ArgumentTypeError(f"invalid choice: {text!r} (choose from "
+                                         f"{', '.join(repr(k) for k in OUTPUT_FORMATS)})")
+    return text
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="rangeplan", description="Range-space predictive control trajectory planner "
                                 "for planar parallel robots (SI units throughout).")
@@ -221,8 +226,8 @@ def build_parser() -> argparse.ArgumentParser:
     pp.add_argument("input", help="plan request JSON file ('-' for standard input)")
     pp.add_argument("-o", "--output", help="output file: .json (default), .csv, .ngc (G-code), .txt (leg lengths "
                     "for halstreamer) or .dxf; standard output if omitted")
-    pp.add_argument("--format", choices=OUTPUT_FORMATS, help="output format (default: from the output file's "
-                    "extension, else json)")
+    pp.add_argument("--format", type=_format_name, metavar="FORMAT", help="output format: json, csv or a machine "
+                    "format as -o names them (default: from the output file's extension, else json)")
     pp.add_argument("--forces", action="store_true", help="joints format: add the drive forces (N)")
     pp.add_argument("--compact", action="store_true", help="JSON without indentation")
     pp.set_defaults(func=cmd_plan)
@@ -247,12 +252,9 @@ def build_parser() -> argparse.ArgumentParser:
     pc.add_argument("--compact", action="store_true", help="JSON without indentation")
     pc.set_defaults(func=cmd_contour)
     ps = sub.add_parser("serve", help="serve the HTTP API and the browser editor")
-    ps.add_argument("--host", default=os.environ.get("RANGEPLAN_HOST", "127.0.0.1"),
-                    help="API host (env RANGEPLAN_HOST, default 127.0.0.1)")
-    ps.add_argument("--port", type=int, default=int(os.environ.get("RANGEPLAN_PORT", "8000")),
-                    help="API port (env RANGEPLAN_PORT, default 8000)")
-    ps.add_argument("--editor-port", type=int, default=int(os.environ.get("RANGEPLAN_EDITOR_PORT", "8080")),
-                    help="editor (viser) port (env RANGEPLAN_EDITOR_PORT, default 8080)")
+    ps.add_argument("--host", help="API host (env RANGEPLAN_HOST, default 127.0.0.1)")
+    ps.add_argument("--port", type=int, help="API port (env RANGEPLAN_PORT, default 8000)")
+    ps.add_argument("--editor-port", type=int, help="editor (viser) port (env RANGEPLAN_EDITOR_PORT, default 8080)")
     ps.add_argument("--no-editor", action="store_true", help="serve the API only")
     ps.add_argument("--allow-unauthenticated", action="store_true",
                     help="serve on a non-loopback address without a token (RANGEPLAN_API_TOKEN); refused otherwise")

@@ -25,6 +25,7 @@ from typing import Any, Literal
 import httpx
 from pydantic import ValidationError
 
+from app.formats import ExportFormatName
 from planner.schema import (
     PARTIAL_LAYOUT,
     ContourRequest,
@@ -38,7 +39,8 @@ from planner.schema import (
 __all__ = ["Client", "RangeplanError"]
 
 Request = PlanRequest | Mapping[str, Any]
-ExportFormat = Literal["csv", "gcode", "joints", "dxf"]
+#: ``csv`` and the machine formats (:data:`app.formats.OUTPUT_FORMATS`)
+ExportFormat = ExportFormatName
 _DRAWING_TYPES = {".dxf": "application/dxf", ".svg": "image/svg+xml"}
 
 
@@ -68,6 +70,7 @@ class Client:
 
     def __init__(self, base_url: str = "http://127.0.0.1:8000", *, token: str | None = None, timeout: float = 120.0,
                  transport: httpx.BaseTransport | None = None):
+        # the client's own environment (it may run on another machine than the service)
         token = token if token is not None else os.environ.get("RANGEPLAN_API_TOKEN") or None
         headers = {"Authorization": f"Bearer {token}"} if token else None
         self._http = httpx.Client(base_url=base_url, timeout=timeout, transport=transport, headers=headers)
@@ -111,8 +114,9 @@ class Client:
         return PlanResult.model_validate_json(self._call("GET", f"/v1/plans/{plan_id}").content)
 
     def export(self, plan_id: str, format: ExportFormat, *, forces: bool = False) -> str:
-        """A stored plan as ``csv``, ``gcode`` (LinuxCNC), ``joints`` (leg lengths for
-        halstreamer; ``forces`` adds the drive forces) or ``dxf`` (path, corridor, obstacles)."""
+        """A stored plan in an output format of :data:`app.formats.OUTPUT_FORMATS` other than
+        JSON: ``csv``, ``gcode`` (LinuxCNC), ``joints`` (leg lengths for halstreamer;
+        ``forces`` adds the drive forces), ``dxf`` (path, corridor, obstacles), ..."""
         params: dict[str, Any] = {"format": format}
         if forces:
             params["forces"] = "true"

@@ -1,15 +1,14 @@
 """The one error shape of the HTTP API, ``{"error": {"code", "message", "field"}}``: its
-models (for the OpenAPI document), the response helper, and the status of each error code
-that is not a planner error (those answer 422)."""
+models (for the OpenAPI document; :class:`ErrorDetail` is the job model's, :mod:`app.jobs`), the
+response helper, and the status of each error code that is not a planner error (those answer 422)."""
 
 from __future__ import annotations
 
-from typing import Any
-
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
-from pydantic import BaseModel, Field
+from pydantic import BaseModel
 
+from app.jobs import ErrorDetail
 from planner.schema import error_details
 
 __all__ = ["CODES_BY_STATUS", "ErrorDetail", "ErrorResponse", "error_response", "errors_doc", "validation_response"]
@@ -22,17 +21,6 @@ _DESCRIPTIONS = {400: "Bad request (e.g. a Host this server does not answer to)"
                  409: "Name already taken by another corridor", 413: "Body or stored object too large",
                  422: "Invalid input, too much work, or a planner error", 503: "Too many plans queued",
                  507: "The store is full", 500: "Internal error"}
-
-
-class ErrorDetail(BaseModel):
-    code: str = Field(description="Stable machine-readable cause: invalid_input, unreachable, singular, "
-                      "not_settled, diverged, no_path, infeasible, too_large, too_much_work, too_much_memory, "
-                      "timeout, not_found, name_taken, storage_full, unauthorized, busy, unavailable, "
-                      "internal_error, ...")
-    message: str = Field(description="Plain-language explanation")
-    field: str | None = Field(None, description="Path of the request field at fault, e.g. 'segments[3].lower'")
-    details: list[dict[str, Any]] | None = Field(None, description="All validation failures "
-                                                 "[{field, message}] when there are several")
 
 
 class ErrorResponse(BaseModel):

@@ -5,40 +5,28 @@ body or multipart), its options as query parameters (documented from
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Any
 
 from fastapi import Request
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from app.formats import OUTPUT_FORMATS
 from planner.errors import PlannerError
-from planner.exchange import DRAWING_FORMATS, EXPORT_FORMATS
+from planner.exchange import DRAWING_FORMATS
 from planner.schema import ImportOptions
 
-__all__ = ["PlanFormat", "FORMAT_HELP", "LIST_OPTIONS", "import_openapi", "import_options", "media_type",
-           "plan_content", "read_drawing"]
+__all__ = ["LIST_OPTIONS", "import_openapi", "import_options", "plan_content", "read_drawing"]
 
-PlanFormat = Literal["json", "csv", "gcode", "joints", "dxf"]
-FORMAT_HELP = ("Response format: 'json' (default), 'csv' (one row per sample, units in the header), "
-               + ", ".join(f"'{k}' ({v.what})" for k, v in EXPORT_FORMATS.items())
-               + "; overrides the Accept header")
 #: options that take several values: repeat the parameter or separate the values by commas
 LIST_OPTIONS = ("layers", "offset", "start", "end")
 _MULTIPART = "multipart/form-data"
 
 
-def media_type(fmt: str) -> str:
-    """The response media type of a plan output format."""
-    if fmt == "csv":
-        return "text/csv; charset=utf-8"
-    if fmt in EXPORT_FORMATS:
-        return EXPORT_FORMATS[fmt].media_type
-    return "application/json"
-
-
 def plan_content() -> dict[str, Any]:
-    """The OpenAPI content types of a plan response besides JSON."""
-    return {"text/csv": {"schema": {"type": "string"}}, "text/plain": {"schema": {"type": "string"}},
-            "image/vnd.dxf": {"schema": {"type": "string"}}}
+    """The OpenAPI content types of a plan response besides JSON (one per media type of
+    :data:`app.formats.OUTPUT_FORMATS`, without parameters)."""
+    types = dict.fromkeys(f.media_type.split(";")[0] for f in OUTPUT_FORMATS.values())
+    return {t: {"schema": {"type": "string"}} for t in types if t != "application/json"}
 
 
 def import_openapi() -> dict[str, Any]:

@@ -1,21 +1,383 @@
-"""What a planning job does (in a worker process, or inline in "thread" mode): the planner
-called on a validated request, the result serialised to JSON (and stored) there, so that
-the server process only moves bytes. Jobs are plain dicts with a ``kind``: ``"plan"``,
-``"segment"``, ``"editor"`` (segmentation and plan for the editor) or ``"sleep"`` (tests).
+"""The one job model of the service: what a worker is asked to do (a typed job), what it
+answers (a typed outcome), and the one place a failure becomes an :class:`ErrorDetail`.
+
+Jobs (:data:`Job`) are frozen dataclasses, picklable to a worker process:
+
+* :class:`PlanJob` plan a validated request, serialise it (and store it) in the worker;
+* :class:`SegmentJob` cells and corridor of a layout, no planning;
+* :class:`ImportJob` a DXF/SVG drawing as a layout and a report;
+* :class:`EditorJob` the editor's re-plan (segmentation kept when the plan fails);
+* :class:`ExportJob` a stored plan in an output format, written to a spool file the server
+  streams (the server process never parses the stored plan);
+* :class:`SleepJob` (tests of the time limit).
+
+A new kind (e.g. a contour job around ``planner.plan_contour``) is a dataclass here, a
+branch of :func:`_execute`, and, if it can be estimated, one in :func:`estimate`.
+
+Outcomes (:data:`Outcome`) are :class:`Done` (bytes ready to send, the stored plan id, the
+plan's summary, or the spool file) or :class:`Failed` (an :class:`ErrorDetail` and the HTTP
+status it answers). Who runs a job: :class:`app.service.JobService` (the API, the editor;
+worker processes of :class:`app.workers.PlanPool`) and :func:`run_bounded` (a batch item on a
+local pool or a Dask worker, or inline): the same estimate, bounds and error mapping.
+
+No web framework or editor import: workers import this module.
 """
 
 from __future__ import annotations
 
+import ctypes
 import json
 import math
+import os
+import threading
 import time
+from dataclasses import dataclass
 from itertools import chain
+from typing import Any, ClassVar
 
 import orjson
+from pydantic import BaseModel, Field
 
-from app.failures import degenerate
+from app.failures import degenerate, out_of_memory, timeout, too_much_work
+from planner.schema import ContourRequest, ImportOptions, PlanRequest
 
-__all__ = ["run_job"]
+__all__ = ["ContourJob", "ContourWork", "Done", "EditorJob", "ErrorDetail", "ExportJob", "Failed", "ImportJob", "ItemTimeout", "Job", "Outcome",
+           "PlanJob", "SegmentJob", "SleepJob", "check_estimate", "clean_spool", "crashed", "estimate", "failed",
+           "run_bounded", "run_job", "segmentation_module", "spool_dir"]
+
+
+class ErrorDetail(BaseModel):
+    code: str = Field(description="Stable machine-readable cause: invalid_input, unreachable, singular, "
+                      "not_settled, diverged, no_path, infeasible, too_large, too_much_work, too_much_memory, "
+                      "timeout, not_found, name_taken, storage_full, unauthorized, busy, unavailable, "
+                      "internal_error, ...")
+    message: str = Field(description="Plain-language explanation")
+    field: str | None = Field(None, description="Path of the request field at fault, e.g. 'segments[3].lower'")
+    details: list[dict[str, Any]] | None = Field(None, description="All validation failures "
+                                                 "[{field, message}] when there are several")
+
+    def to_dict(self) -> dict[str, Any]:
+        """``{code, message, field}`` (the planner's error dict)."""
+        return {"code": self.code, "message": self.message, "field": self.field}
+
+
+# ---------------------------------------------------------------------------------------
+# jobs
+
+@dataclass(frozen=True)
+class PlanJob:
+    """Plan ``request`` and answer it in ``format`` (:data:`app.formats.OUTPUT_FORMATS`, or
+    ``none``: the summary only). With ``store`` (the SQLite file) the result is stored
+    first; ``source`` names the plan's origin in machine-format headers."""
+
+    request: PlanRequest
+    format: str = "json"
+    forces: bool = False
+    source: str | None = None
+    store: str | None = None
+    corridor_id: str | None = None
+    kind: ClassVar[str] = "plan"
+
+
+@dataclass(frozen=True)
+class SegmentJob:
+    request: PlanRequest
+    kind: ClassVar[str] = "segment"
+
+
+@dataclass(frozen=True)
+class ImportJob:
+    data: bytes
+    options: ImportOptions
+    filename: str | None = None
+    content_type: str | None = None
+    kind: ClassVar[str] = "import"
+
+
+@dataclass(frozen=True)
+class EditorJob:
+    """The editor's re-plan: JSON ``{"segmentation", "result", "error"}`` (each may be null)."""
+
+    request: PlanRequest
+    kind: ClassVar[str] = "editor"
+
+
+@dataclass(frozen=True)
+class ExportJob:
+    """The stored plan ``plan_id`` of ``store`` in ``format``, written to a new file in
+    ``spool`` (a directory; None: answered as bytes). Done with ``path`` set, or a Failed
+    ``not_found`` (404) when the plan is gone."""
+
+    plan_id: str
+    store: str
+    format: str
+    forces: bool = False
+    spool: str | None = None
+    kind: ClassVar[str] = "export"
+
+
+@dataclass(frozen=True)
+class ContourJob:
+    """Contour a G-code program (:func:`planner.contour.plan_contour`; ``POST /v1/contour``),
+    stored and answered like a :class:`PlanJob`."""
+
+    request: ContourRequest
+    format: str = "json"
+    forces: bool = False
+    source: str | None = None
+    store: str | None = None
+    kind: ClassVar[str] = "contour"
+
+
+@dataclass(frozen=True)
+class SleepJob:
+    seconds: float
+    kind: ClassVar[str] = "sleep"
+
+
+Job = PlanJob | SegmentJob | ImportJob | EditorJob | ExportJob | ContourJob | SleepJob
+
+
+# ---------------------------------------------------------------------------------------
+# outcomes
+
+@dataclass(frozen=True)
+class Done:
+    """A job that ran to the end: ``payload`` (bytes ready to send; empty when ``path``
+    holds them), the stored plan's id, a plan's metrics summary, the spool file."""
+
+    payload: bytes | None = b""
+    plan_id: str | None = None
+    summary: dict[str, Any] | None = None
+    path: str | None = None
+    ok: ClassVar[bool] = True
+
+
+@dataclass(frozen=True)
+class Failed:
+    """A job that did not: the error and the HTTP status it answers (422: the input's
+    fault; 404, 503 busy, 500 a planner bug or a dead worker)."""
+
+    error: ErrorDetail
+    status: int = 422
+    ok: ClassVar[bool] = False
+
+
+Outcome = Done | Failed
+
+
+def failed(error: dict[str, Any], status: int = 422) -> Failed:
+    """A :class:`Failed` from a ``{code, message, field}`` dict."""
+    return Failed(ErrorDetail(code=error["code"], message=error["message"], field=error.get("field"), details=None),
+                  status)
+
+
+def crashed(exc: BaseException) -> Failed:
+    """An unexpected exception in the planner: 500, its type and first line."""
+    first = f"{type(exc).__name__}: {exc}".splitlines()[0]
+    return failed({"code": "internal_error", "message": f"the planner failed unexpectedly: {first}"}, 500)
+
+
+# ---------------------------------------------------------------------------------------
+# running a job (in a worker process, or inline)
+
+def estimate(job: Job):
+    """The planner's work estimate (:func:`planner.estimate_work`) of a job that plans, else
+    None (microseconds; compared with the time limit before the job is queued)."""
+    if isinstance(job, (PlanJob, EditorJob)):
+        from planner import estimate_work
+
+        return estimate_work(job.request)
+    if isinstance(job, ContourJob):
+        from planner.contour import estimate_contour
+
+        return ContourWork(*estimate_contour(job.request))
+    return None
+
+
+@dataclass(frozen=True)
+class ContourWork:
+    """The work estimate of a :class:`ContourJob` (:func:`planner.contour.estimate_contour`)."""
+
+    seconds: float
+    detail: str
+    field: str = "program"
+
+    def message(self, limit_s: float) -> str:
+        return (f"this program needs an estimated {self.seconds:.3g} s of planning ({self.detail}), more than this "
+                f"server's limit of {limit_s:g} s; split the program, give a larger tolerance_m or settings.Ts, or "
+                "feed 'program'")
+
+
+def run_job(job: Job, memory_mb: int | None = None) -> Outcome:
+    """Run one job here and now; never raises for the input's fault nor for a planner bug
+    (``memory_mb``: this process's memory cap, named by a memory error)."""
+    import numpy as np
+
+    from planner.errors import PlannerError
+
+    try:
+        return _execute(job)
+    except PlannerError as exc:
+        return failed(exc.to_dict())
+    except (ArithmeticError, np.linalg.LinAlgError) as exc:
+        # singular or non-finite model matrices: a degenerate robot description or pose the
+        # planner's own checks let through; the input's fault, not the server's
+        request = getattr(job, "request", None)
+        return failed(degenerate(exc, custom_robot=not isinstance(getattr(request, "robot", None), str)))
+    except MemoryError:
+        return failed(out_of_memory(memory_mb))
+    except _NotFound as exc:
+        return failed({"code": "not_found", "message": str(exc)}, 404)
+    except Exception as exc:  # a planner bug: reported, the worker keeps serving
+        return crashed(exc)
+
+
+def _execute(job: Job) -> Done:
+    if isinstance(job, PlanJob):
+        return _plan(job)
+    if isinstance(job, ExportJob):
+        return _export(job)
+    if isinstance(job, ContourJob):
+        return _contour(job)
+    if isinstance(job, ImportJob):
+        from planner.exchange import import_drawing
+
+        res = import_drawing(job.data, job.options, filename=job.filename, content_type=job.content_type)
+        return Done(_dumps(res.to_json_dict()))
+    if isinstance(job, SegmentJob):
+        from planner import segment
+
+        return Done(_dumps(segment(job.request).to_dict()))
+    if isinstance(job, EditorJob):
+        return Done(_editor_plan(job.request))
+    if isinstance(job, SleepJob):
+        time.sleep(float(job.seconds))
+        return Done(b"{}")
+    raise ValueError(f"unknown job {type(job).__name__}")
+
+
+def _plan(job: PlanJob) -> Done:
+    from app.storage import new_id
+    from planner import plan
+
+    req = job.request
+    result = plan(req)
+    plan_id = new_id() if job.store else None
+    result.plan_id = plan_id
+    data = result.to_json()
+    store = _store(job.store)
+    if plan_id and store is not None and store.save_plan_json(
+            data.decode(), req.to_json_dict(), job.corridor_id, id=plan_id) is None:
+        plan_id = result.plan_id = None  # too large to keep (storage quotas): sent, not stored
+        data = result.to_json()
+    if job.format == "json":
+        payload: bytes | None = data
+    elif job.format == "none":
+        payload = None
+    else:
+        from app.formats import write  # (imports the machine formats' writers: loaded by the workers at start)
+
+        payload = write(result, job.format, layout=req.layout, forces=job.forces, source=job.source)
+    return Done(payload, plan_id, _summary(result))
+
+
+def _contour(job: ContourJob) -> Done:
+    """Contour a G-code program: stored and answered like a plan (the stored request is the
+    contour request)."""
+    from app.storage import new_id
+    from planner.contour import plan_contour
+
+    req = job.request
+    result = plan_contour(req)
+    plan_id = new_id() if job.store else None
+    result.plan_id = plan_id
+    data = result.to_json()
+    store = _store(job.store)
+    if plan_id and store is not None and store.save_plan_json(
+            data.decode(), req.model_dump(mode="json"), None, id=plan_id) is None:
+        plan_id = result.plan_id = None
+        data = result.to_json()
+    if job.format == "json":
+        payload: bytes | None = data
+    elif job.format == "none":
+        payload = None
+    else:
+        from app.formats import write
+
+        payload = write(result, job.format, layout=None, forces=job.forces, source=job.source)
+    return Done(payload, plan_id, _summary(result))
+
+
+def _summary(result) -> dict[str, Any]:
+    m = result.metrics
+    return {"duration_s": m.duration_s, "energy": m.energy, "max_force_ratio": m.max_force_ratio,
+            "contained": m.contained, "settled": m.settled, "end_error_m": m.end_error_m,
+            "max_corridor_violation_m": m.max_corridor_violation_m, "steps": m.steps, "compute_ms": m.compute_ms}
+
+
+def _export(job: ExportJob) -> Done:
+    """Read the stored plan (in this worker: the server process never holds it), write it in
+    the format to a spool file, answer its path."""
+    from app.formats import write
+    from planner.schema import PlanResult
+
+    store = _store(job.store)
+    text = store.get_plan_json(job.plan_id) if store is not None else None
+    if text is None:
+        raise _NotFound(f"no plan with id {job.plan_id!r}")
+    result = PlanResult.model_validate_json(text)
+    del text
+    layout = None  # the layout of the plan's request (a DXF draws its obstacles)
+    info = store.plan_info(job.plan_id) if store is not None else None
+    try:
+        layout = PlanRequest.model_validate(info["request"]).layout if info and info.get("request") else None
+    except ValueError:  # a request stored by an older version: the DXF has no obstacles then
+        layout = None
+    body = write(result, job.format, layout=layout, forces=job.forces, source=f"plan {job.plan_id}")
+    del result
+    if job.spool is None:
+        return Done(body)
+    fd, path = _spool_file(job.spool)
+    with os.fdopen(fd, "wb") as f:
+        f.write(body)
+    return Done(None, path=path)
+
+
+class _NotFound(LookupError):
+    pass
+
+
+def spool_dir(store_path: str | os.PathLike) -> str:
+    """Where export jobs of the store at ``store_path`` write their files: ``exports/``
+    beside the database (the server streams each file, then deletes it)."""
+    return os.path.join(os.path.dirname(os.fspath(store_path)), "exports")
+
+
+def clean_spool(spool: str, older_than_s: float = 3600.0) -> int:
+    """Delete export files left by a response that never finished (a client that went away
+    mid-stream, a server that was killed); returns how many."""
+    n = 0
+    try:
+        entries = list(os.scandir(spool))
+    except OSError:
+        return 0
+    for e in entries:
+        try:
+            if e.name.startswith("export-") and time.time() - e.stat().st_mtime > older_than_s:
+                os.unlink(e.path)
+                n += 1
+        except OSError:
+            pass
+    return n
+
+
+def _spool_file(spool: str) -> tuple[int, str]:
+    import tempfile
+
+    os.makedirs(spool, exist_ok=True)
+    return tempfile.mkstemp(prefix="export-", suffix=".part", dir=spool)
+
 
 _stores: dict = {}
 
@@ -29,6 +391,104 @@ def _store(path):
         st = _stores[path] = Store(path)
     return st
 
+
+def segmentation_module():
+    """``planner.corridor`` (its ``segment``), which the editor's re-plan segments with.
+    Tests replace this function to control the segmentation's timing (inline runs)."""
+    from planner import corridor
+
+    return corridor
+
+
+def _editor_plan(req) -> bytes:
+    """The editor's re-plan: the segmentation of a layout (kept when the plan then fails)
+    and the plan, as JSON ``{"segmentation", "result", "error"}`` (each may be null)."""
+    from planner import PlannerError, load_robot, plan
+
+    seg = None
+    try:
+        robot = load_robot(req.robot)
+        segments = None
+        if req.layout is not None:
+            seg = segmentation_module().segment(req.layout, robot, req.settings)
+            segments = seg.segments
+        result = plan(req, robot=robot, segments=segments).to_json_dict()
+        return _dumps({"segmentation": seg.to_dict() if seg else None, "result": result, "error": None})
+    except PlannerError as exc:
+        return _dumps({"segmentation": seg.to_dict() if seg else None, "result": None, "error": exc.to_dict()})
+
+
+# ---------------------------------------------------------------------------------------
+# the in-process executor: estimate, deadline, error mapping (batch items, inline runs)
+
+class ItemTimeout(BaseException):
+    """Raised inside the running thread when a job passes its time limit (a BaseException
+    so that no ``except Exception`` in the planner swallows it)."""
+
+
+class _Deadline:
+    """Raise :class:`ItemTimeout` in the calling thread after ``seconds`` (at the next Python
+    bytecode: a single compiled kernel call is not interrupted, the request bounds keep those
+    short). Works in any thread (Dask runs tasks in a thread pool), unlike ``SIGALRM``."""
+
+    def __init__(self, seconds: float | None):
+        self.seconds = seconds
+        self._lock = threading.Lock()
+        self._armed = False
+        self._fired = False
+        self._timer: threading.Timer | None = None
+
+    def _fire(self) -> None:
+        with self._lock:
+            if self._armed:
+                self._fired = True
+                ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(self._tid), ctypes.py_object(ItemTimeout))
+
+    def __enter__(self):
+        if self.seconds and self.seconds > 0:
+            self._tid = threading.get_ident()
+            self._armed = True
+            self._timer = threading.Timer(self.seconds, self._fire)
+            self._timer.daemon = True
+            self._timer.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._timer is None:
+            return
+        with self._lock:
+            self._armed = False
+            self._timer.cancel()
+            if self._fired:  # fired but maybe not yet delivered: withdraw it
+                ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(self._tid), None)
+
+
+def check_estimate(job: Job, timeout_s: float | None) -> Failed | None:
+    """A :class:`Failed` ``too_much_work`` if the job's work estimate exceeds ``timeout_s``."""
+    if not timeout_s or timeout_s <= 0:
+        return None
+    est = estimate(job)
+    if est is not None and est.seconds > timeout_s:
+        return failed(too_much_work(est, timeout_s))
+    return None
+
+
+def run_bounded(job: Job, timeout_s: float | None = None, memory_mb: int | None = None) -> Outcome:
+    """Run ``job`` in this thread under the same bounds as the service's workers: refused
+    before it starts if its work estimate exceeds ``timeout_s`` (``too_much_work``), stopped
+    at ``timeout_s`` (``timeout``), every failure mapped by :func:`run_job`."""
+    refused = check_estimate(job, timeout_s)
+    if refused is not None:
+        return refused
+    try:
+        with _Deadline(timeout_s):
+            return run_job(job, memory_mb)
+    except ItemTimeout:
+        return failed(timeout(timeout_s or 0.0))
+
+
+# ---------------------------------------------------------------------------------------
+# JSON out
 
 def _check_finite(obj, path="result"):
     """json.dumps(allow_nan=False) says only *that* a value is not finite; say where."""
@@ -102,113 +562,3 @@ def _dumps(result: dict) -> bytes:
         from planner.errors import PlannerError
         raise PlannerError("diverged", f"the planner produced a non-finite number at {_check_finite(result)}; "
                            "try a smaller sample time or larger k_u", "settings") from None
-
-
-def run_job(job: dict) -> tuple:
-    """Run one job; returns ``("ok", payload: bytes, meta: dict)`` or
-    ``("error", PlannerError.to_dict())``. ``job["request"]`` is a validated
-    :class:`planner.schema.PlanRequest`."""
-    from planner.errors import PlannerError
-
-    try:
-        if job["kind"] == "plan":
-            from app.storage import new_id
-            from planner import plan, to_csv
-
-            req = job["request"]
-            result = plan(req)
-            plan_id = new_id() if job.get("store") else None
-            result.plan_id = plan_id
-            data = result.to_json()
-            store = _store(job.get("store"))
-            if plan_id and store is not None and store.save_plan_json(
-                    data.decode(), req.to_json_dict(), job.get("corridor_id"), id=plan_id) is None:
-                plan_id = result.plan_id = None  # too large to keep (storage quotas): sent, not stored
-                data = result.to_json()
-            fmt = job.get("format")
-            if fmt == "csv":
-                payload = to_csv(result).encode()
-            elif fmt in ("gcode", "joints", "dxf"):
-                from planner.exchange import export
-                payload = export(result, fmt, layout=req.layout, forces=bool(job.get("forces")),
-                                 source=job.get("source")).encode()
-            else:
-                payload = data
-            return ("ok", payload, {"plan_id": plan_id})
-        if job["kind"] == "contour":  # a G-code program (app/contour_api.py)
-            return _contour(job)
-        if job["kind"] == "import":
-            from planner.exchange import import_drawing
-
-            res = import_drawing(job["data"], job["options"], filename=job.get("filename"),
-                                 content_type=job.get("content_type"))
-            return ("ok", _dumps(res.to_json_dict()), {})
-        if job["kind"] == "segment":
-            from planner import segment
-
-            return ("ok", _dumps(segment(job["request"]).to_dict()), {})
-        if job["kind"] == "editor":
-            return ("ok", _editor_plan(job["request"]), {})
-        if job["kind"] == "sleep":  # for tests of the time limit
-            time.sleep(float(job["seconds"]))
-            return ("ok", b"{}", {})
-        raise ValueError(f"unknown job kind {job['kind']!r}")
-    except PlannerError as exc:
-        return ("error", exc.to_dict())
-    except ArithmeticError as exc:  # numpy LinAlgError is a ValueError; see below
-        return ("error", _degenerate(exc, job))
-    except ValueError as exc:
-        import numpy as np
-        if isinstance(exc, np.linalg.LinAlgError):
-            # singular or non-finite model matrices: a degenerate robot description or pose
-            # the planner's own checks let through; the input's fault, not the server's
-            return ("error", _degenerate(exc, job))
-        raise
-
-
-def _contour(job: dict) -> tuple:
-    """Contour a G-code program (:func:`planner.contour.plan_contour`): stored like a plan."""
-    from app.storage import new_id
-    from planner import to_csv
-    from planner.contour import plan_contour
-    from planner.exchange import export
-
-    req = job["request"]
-    result = plan_contour(req)
-    plan_id = new_id() if job.get("store") else None
-    result.plan_id = plan_id
-    data = result.to_json()
-    store = _store(job.get("store"))
-    if plan_id and store is not None and store.save_plan_json(
-            data.decode(), req.model_dump(mode="json"), None, id=plan_id) is None:
-        plan_id = result.plan_id = None
-        data = result.to_json()
-    fmt = job.get("format")
-    if fmt == "csv":
-        payload = to_csv(result).encode()
-    elif fmt in ("gcode", "joints", "dxf"):
-        payload = export(result, fmt, forces=bool(job.get("forces")), source=job.get("source")).encode()
-    else:
-        payload = data
-    return ("ok", payload, {"plan_id": plan_id})
-
-
-def _editor_plan(req) -> bytes:
-    """The editor's re-plan: the segmentation of a layout (kept when the plan then fails)
-    and the plan, as JSON ``{"segmentation", "result", "error"}`` (each may be null)."""
-    from planner import PlannerError, plan, segment
-
-    seg = None
-    try:
-        segments = None
-        if req.layout is not None:
-            seg = segment(req)
-            segments = seg.segments
-        result = plan(req, segments=segments).to_json_dict()
-        return _dumps({"segmentation": seg.to_dict() if seg else None, "result": result, "error": None})
-    except PlannerError as exc:
-        return _dumps({"segmentation": seg.to_dict() if seg else None, "result": None, "error": exc.to_dict()})
-
-
-def _degenerate(exc: Exception, job: dict) -> dict:
-    return degenerate(exc, custom_robot=not isinstance(getattr(job.get("request"), "robot", None), str))

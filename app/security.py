@@ -30,7 +30,6 @@ import hashlib
 import hmac
 import ipaddress
 import json
-import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from http.cookies import SimpleCookie
@@ -100,7 +99,18 @@ class AccessPolicy:
         ``RANGEPLAN_ALLOWED_HOSTS`` and ``RANGEPLAN_CORS_ORIGINS``; ``bind_host`` (the
         server's address, unless a wildcard) is allowed as a Host too. Raises
         :class:`ConfigError`."""
-        env = os.environ if environ is None else environ
+        if environ is None:  # the settings object's view of the environment
+            from app.settings import SettingsError, settings
+
+            try:
+                cfg = settings()
+            except SettingsError as exc:
+                raise ConfigError(str(exc)) from None
+            env: Mapping[str, str] = {f"RANGEPLAN_{k.upper()}": str(getattr(cfg, k)) for k in
+                                      ("api_token", "api_token_file", "allowed_hosts", "cors_origins")
+                                      if getattr(cfg, k) is not None}
+        else:
+            env = environ
         token = env.get("RANGEPLAN_API_TOKEN") or None
         path = env.get("RANGEPLAN_API_TOKEN_FILE")
         if path:

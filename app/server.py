@@ -72,50 +72,58 @@ def serve(host: str = "127.0.0.1", port: int = 8000, editor_port: int = 8080, ed
         _log(seeded)
 
     from app.api import create_app
+    from app.service import JobService
+    from app.settings import SettingsError, settings
     from app.storage import Store, default_data_dir
-    from app.workers import PlanPool
 
+    try:
+        cfg = settings()
+    except SettingsError as exc:
+        _log(f"error: {exc}")
+        return 2
     store = Store(default_data_dir())
     _log(f"data: {store.path}")
     _log(f"access: {'token required' if policy.auth_required else 'no token'}; hosts "
          f"{', '.join(sorted(policy.allowed_hosts))}; CORS {', '.join(policy.cors_origins) or 'off'}")
-    pool = PlanPool.from_env()
+    # one job service for the API and the editor: the same workers, estimate, limits, errors
+    service = JobService.start(cfg.workers, cfg.plan_timeout_s, cfg.max_queue, mode=cfg.executor,
+                               memory_mb=cfg.worker_memory_mb, export_timeout_s=cfg.export_timeout_s)
     handle = None
     try:
         if editor:
             try:
-                from app.editor import start_editor, start_guarded, use_pool
+                from app.editor import start_editor, start_guarded, use_service
             except ImportError as exc:
                 _log(f"editor unavailable ({exc}); serving the API only")
             else:
-                use_pool(pool)  # the editor plans on the API's workers, under the same limits
+                use_service(service)  # the editor plans on the API's workers, under the same limits
                 handle = start_guarded(policy, lambda: start_editor(host, editor_port, store))
                 if editor_port and handle.port != editor_port:
                     _log(f"error: the editor port {editor_port} is taken; choose another with --editor-port "
                          "(RANGEPLAN_EDITOR_PORT) or run without the editor (--no-editor)")
                     return 1
                 _log(f"editor: http://{host}:{handle.port}")
-        app = create_app(store, editor_port=handle.port if handle is not None else None, access=policy, pool=pool)
+        app = create_app(store, editor_port=handle.port if handle is not None else None, access=policy,
+                         service=service)
         _log(f"API: http://{host}:{port} (OpenAPI at /docs)")
-        return _run_api(app, host, port)
+        return _run_api(app, host, port, cfg.log_level, cfg.access_log)
     finally:
         if handle is not None:
             try:
                 handle.stop()
             except Exception as exc:  # the editor's shutdown must not hide the API's exit status
                 _log(f"editor shutdown: {exc}")
-            from app.editor import use_pool
-            use_pool(None)
-        pool.close()
+            from app.editor import use_service
+            use_service(None)
+        service.close()
 
 
-def _run_api(app, host: str, port: int) -> int:
+def _run_api(app, host: str, port: int, log_level: str = "info", access_log: bool = True) -> int:
     import uvicorn
 
     stop_signal = _StopSignal.install()
     try:
-        config = uvicorn.Config(app, host=host, port=port, log_level=os.environ.get("RANGEPLAN_LOG_LEVEL", "info"),
-                                access_log=os.environ.get("RANGEPLAN_ACCESS_LOG", "1") != "0")
+        config = uvicorn.Config(app, host=host, port=port, log_level=log_level, access_log=access_log)
         server = uvicorn.Server(config)
         server.run()
         # uvicorn returns (does not raise) when it cannot bind

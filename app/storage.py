@@ -48,10 +48,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 DB_NAME = "rangeplan.sqlite3"
-DEFAULT_MAX_PLANS = 1000
-DEFAULT_MAX_CORRIDOR_BYTES = 1 << 20
-DEFAULT_MAX_PLAN_BYTES = 64 << 20
-DEFAULT_MAX_TOTAL_BYTES = 1 << 30
+#: (the quotas' defaults are those of :class:`app.settings.Settings`)
 #: corridors per page of a list: default and largest
 DEFAULT_PAGE_SIZE = 50
 MAX_PAGE_SIZE = 200
@@ -114,13 +111,6 @@ class BadCursor(ValueError):
     """A list cursor this store did not make."""
 
 
-def _env_int(name: str, default: int) -> int:
-    try:
-        return int(os.environ.get(name, default))
-    except ValueError:
-        return default
-
-
 #: what a cursor looks like (a row position; any such string is a valid cursor)
 CURSOR_PATTERN = r"^[0-9]{1,18}$"
 
@@ -138,9 +128,11 @@ def decode_cursor(cursor: str) -> int:
 def default_data_dir() -> Path:
     """Where the database lives: ``$RANGEPLAN_DATA_DIR``, else ``$XDG_DATA_HOME/rangeplan``,
     else ``~/.local/share/rangeplan`` (created on first use by :class:`Store`)."""
-    env = os.environ.get("RANGEPLAN_DATA_DIR")
-    if env:
-        return Path(env).expanduser()
+    from app.settings import settings
+
+    configured = settings().data_dir
+    if configured is not None:
+        return configured.expanduser()
     xdg = os.environ.get("XDG_DATA_HOME")
     base = Path(xdg).expanduser() if xdg else Path.home() / ".local" / "share"
     return base / "rangeplan"
@@ -239,13 +231,13 @@ class Store:
             path = path / DB_NAME
         path.parent.mkdir(parents=True, exist_ok=True)
         self.path = path
-        if max_plans is None:
-            max_plans = int(os.environ.get("RANGEPLAN_MAX_PLANS", DEFAULT_MAX_PLANS))
-        self.max_plans = max(1, int(max_plans))
-        self.max_corridor_bytes = int(max_corridor_bytes or _env_int("RANGEPLAN_MAX_CORRIDOR_BYTES",
-                                                                     DEFAULT_MAX_CORRIDOR_BYTES))
-        self.max_plan_bytes = int(max_plan_bytes or _env_int("RANGEPLAN_MAX_PLAN_BYTES", DEFAULT_MAX_PLAN_BYTES))
-        self.max_total_bytes = int(max_total_bytes or _env_int("RANGEPLAN_MAX_STORE_BYTES", DEFAULT_MAX_TOTAL_BYTES))
+        from app.settings import settings
+
+        cfg = settings()  # RANGEPLAN_MAX_PLANS, _MAX_CORRIDOR_BYTES, _MAX_PLAN_BYTES, _MAX_STORE_BYTES
+        self.max_plans = max(1, int(max_plans if max_plans is not None else cfg.max_plans))
+        self.max_corridor_bytes = int(max_corridor_bytes or cfg.max_corridor_bytes)
+        self.max_plan_bytes = int(max_plan_bytes or cfg.max_plan_bytes)
+        self.max_total_bytes = int(max_total_bytes or cfg.max_store_bytes)
         self._db = Connections(path)
         with self._connect() as con:
             # a new file gets 16 KiB pages: a ~150 kB plan result is 10 overflow pages, not
@@ -443,6 +435,11 @@ class Store:
         with self._connect() as con:
             row = con.execute("SELECT result FROM plans WHERE id = ?", (id,)).fetchone()
         return row[0] if row else None
+
+    def has_plan(self, id: str) -> bool:
+        """Whether a plan of this id is stored (without reading it)."""
+        with self._connect() as con:
+            return con.execute("SELECT 1 FROM plans WHERE id = ?", (id,)).fetchone() is not None
 
     def get_plan(self, id: str) -> dict | None:
         text = self.get_plan_json(id)

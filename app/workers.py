@@ -5,20 +5,23 @@ give no parallelism; worker processes do, and a process that runs past the time 
 be killed and replaced without disturbing the other jobs (a thread cannot be stopped).
 
 Each worker owns one end of a pipe, imports the planner once, then serves jobs. A job is
-a plain dict (``kind``: ``"plan"``, ``"segment"`` or ``"import"``); the worker runs the planner, serialises
-the result to JSON itself, stores plans in the SQLite store itself (WAL, multi-process safe)
-and sends back ready-to-send bytes, so the server process only moves bytes.
+one of :data:`app.jobs.Job` (plan, segment, import, editor, export, ...); the worker runs it
+(:func:`app.jobs.run_job`), serialises the result to JSON itself, stores plans in the SQLite
+store itself (WAL, multi-process safe) and sends back a typed outcome with ready-to-send
+bytes (or the spool file of an export), so the server process only moves bytes.
 
-The pool is used from threads (``run`` blocks); the API and the editor call it through
-thread pools. ``mode="thread"`` runs jobs in the calling thread instead (no parallelism under
+The pool is used from threads (``run`` blocks) by :class:`app.service.JobService`, which
+the API and the editor submit jobs to: the service checks the work estimate and maps the
+pool's exceptions (:class:`JobTimeout`, :class:`PoolBusy`, :class:`WorkerCrashed`) to error
+outcomes. ``mode="thread"`` runs jobs in the calling thread instead (no parallelism under
 the GIL, no way to stop a runaway job; kept to measure the difference, see
 benchmarks/bench_http.py, and for an editor run without a server).
 
 Bounds on each job (issue 15), the same for the API and the editor:
 
 * before a job is queued, the planner's work estimate (:func:`planner.estimate_work`) is
-  compared with the time limit: :class:`TooMuchWork` in microseconds instead of a worker
-  held until the limit;
+  compared with the time limit (by the service): ``too_much_work`` in microseconds instead
+  of a worker held until the limit;
 * the time limit itself (:class:`JobTimeout`; the worker is killed and replaced);
 * an address-space limit per worker process (``memory_mb``, ``RLIMIT_AS``): a job that needs
   more fails with ``too_much_memory`` and the worker is replaced.
@@ -42,11 +45,10 @@ import subprocess  # noqa: E402
 import sys  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
-import traceback  # noqa: E402
 from multiprocessing.connection import Connection  # noqa: E402
 
-from app.failures import import_timeout, limit_memory, out_of_memory, timeout, too_much_work  # noqa: E402
-from app.jobs import run_job  # noqa: E402
+from app.failures import limit_memory, out_of_memory  # noqa: E402
+from app.jobs import Failed, Job, Outcome, run_job  # noqa: E402
 
 
 class JobTimeout(Exception):
@@ -66,30 +68,6 @@ class WorkerOutOfMemory(WorkerCrashed):
     the JSON encoder does, or the kernel's OOM killer) while it had a memory limit."""
 
 
-class TooMuchWork(Exception):
-    """The job's estimated compute time exceeds the pool's time limit (not run)."""
-
-    def __init__(self, estimate, limit_s: float):
-        super().__init__(estimate.message(limit_s))
-        self.estimate, self.limit_s = estimate, limit_s
-
-
-def describe_failure(exc: Exception, pool: PlanPool, kind: str = "plan") -> tuple[int, dict]:
-    """The HTTP status and ``{code, message, field}`` of a job of ``kind`` the pool did not
-    run to the end (the API's and the editor's one wording)."""
-    if isinstance(exc, TooMuchWork):
-        return 422, too_much_work(exc.estimate, exc.limit_s)
-    if isinstance(exc, WorkerOutOfMemory):
-        return 422, {"code": "too_much_memory", "message": str(exc), "field": None}
-    if isinstance(exc, JobTimeout):
-        return 422, import_timeout(pool.timeout_s) if kind == "import" else timeout(pool.timeout_s)
-    if isinstance(exc, PoolBusy):
-        return 503, {"code": "busy", "message": f"too many plans in progress ({exc}); retry shortly", "field": None}
-    if isinstance(exc, WorkerCrashed):
-        return 500, {"code": "internal_error", "message": f"the planning process died: {exc}", "field": None}
-    raise exc
-
-
 #: default address-space limit of a worker process [MiB] (the interpreter with the planner
 #: loaded takes ~0.5 GiB of it; the largest plan within the request bounds peaked at 0.8 GiB)
 DEFAULT_MEMORY_MB = 2048
@@ -103,7 +81,9 @@ def _worker_main(conn, memory_mb: int | None = None) -> None:
     except OSError:
         pass
     # import the planner and load its compiled kernels before the first job, not during it
-    import app.storage  # noqa: F401  (imported before the first job, not during it)
+    # (and the storage and the export writers: imported before the first job, not during it)
+    import app.formats
+    import app.storage  # noqa: F401
     import planner
     status: tuple = ("ready", None)
     try:
@@ -124,18 +104,14 @@ def _worker_main(conn, memory_mb: int | None = None) -> None:
             return
         if job is None:
             return
-        ran_out = False
-        try:
-            out = run_job(job)
-        except MemoryError:
-            out, ran_out = ("error", out_of_memory(memory_mb)), True
-        except Exception as exc:  # a planner bug: report it, keep serving
-            out = ("crash", f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=8)}")
+        out = run_job(job, memory_mb)
+        # the heap may be fragmented or half-built after a memory error: start afresh
+        ran_out = isinstance(out, Failed) and out.error.code == "too_much_memory"
         try:
             conn.send(out)
         except (OSError, ValueError):
             return
-        if ran_out:  # the heap may be fragmented or half-built: start afresh
+        if ran_out:
             return
 
 
@@ -177,7 +153,7 @@ class _Worker:
         finally:
             self.started.set()
 
-    def call(self, job: dict, timeout: float):
+    def call(self, job: Job, timeout: float) -> Outcome:
         try:
             # interpreter start and imports do not count against the job
             if not self.started.wait(STARTUP_TIMEOUT_S + 1) or not self.ready:
@@ -263,17 +239,6 @@ class PlanPool:
         """Jobs accepted at once (running + waiting)."""
         return self.n + self.max_queue
 
-    @classmethod
-    def from_env(cls) -> PlanPool:
-        """A pool configured by ``RANGEPLAN_WORKERS``, ``RANGEPLAN_PLAN_TIMEOUT_S`` (30),
-        ``RANGEPLAN_MAX_QUEUE`` (64), ``RANGEPLAN_EXECUTOR`` (process) and
-        ``RANGEPLAN_WORKER_MEMORY_MB`` (:data:`DEFAULT_MEMORY_MB`)."""
-        env = os.environ
-        return cls(int(env.get("RANGEPLAN_WORKERS") or os.cpu_count() or 1),
-                   float(env.get("RANGEPLAN_PLAN_TIMEOUT_S") or 30.0), int(env.get("RANGEPLAN_MAX_QUEUE") or 64),
-                   mode=env.get("RANGEPLAN_EXECUTOR") or "process",
-                   memory_mb=int(env.get("RANGEPLAN_WORKER_MEMORY_MB") or DEFAULT_MEMORY_MB))
-
     def _warm_up_inline(self) -> None:
         try:
             import planner
@@ -300,22 +265,12 @@ class PlanPool:
         return {"ready": bool(ready) and not failures and not self._closed, "workers_ready": len(ready),
                 "workers": self.n, "failures": failures}
 
-    def check_work(self, job: dict) -> None:
-        """Raise :class:`TooMuchWork` if a plan job's estimated compute time exceeds the time
-        limit (the estimate takes microseconds)."""
-        if job.get("kind") not in ("plan", "editor") or job.get("request") is None:
-            return
-        from planner import estimate_work
-
-        est = estimate_work(job["request"])
-        if est.seconds > self.timeout_s:
-            raise TooMuchWork(est, self.timeout_s)
-
-    def run(self, job: dict):
-        """Run a job (blocking); returns what :func:`run_job` returns (or ``("crash", text)``
-        for an unexpected exception in the planner), or raises :class:`JobTimeout`,
-        :class:`PoolBusy`, :class:`TooMuchWork` or :class:`WorkerCrashed` (the process died)."""
-        self.check_work(job)
+    def run(self, job: Job, timeout_s: float | None = None) -> Outcome:
+        """Run a job (blocking); returns its outcome (:func:`app.jobs.run_job`), or raises
+        :class:`JobTimeout`, :class:`PoolBusy` or :class:`WorkerCrashed` (the process died).
+        ``timeout_s`` overrides the pool's time limit for this job. The work estimate is the
+        caller's (:class:`app.service.JobService`)."""
+        limit = self.timeout_s if timeout_s is None else float(timeout_s)
         with self._lock:
             if self._closed:
                 raise PoolBusy("the server is shutting down")
@@ -327,13 +282,8 @@ class PlanPool:
             if self.mode == "thread":
                 with self._sem:
                     t0 = time.perf_counter()
-                    try:
-                        out = run_job(job)
-                    except MemoryError:
-                        out = ("error", out_of_memory(None))
-                    except Exception as exc:
-                        out = ("crash", f"{type(exc).__name__}: {exc}")
-                    if time.perf_counter() - t0 > self.timeout_s:
+                    out = run_job(job)
+                    if time.perf_counter() - t0 > limit:
                         raise JobTimeout  # cannot stop a thread: only report it afterwards
                     return out
             w = self._idle.get()
@@ -342,9 +292,9 @@ class PlanPool:
                 if not w.alive():
                     w.kill()
                     replacement = w = self._replace(w)
-                out = w.call(job, self.timeout_s)  # ("ok", ...), ("error", ...) or ("crash", text)
-                if out[0] == "error" and out[1].get("code") == "too_much_memory":
-                    w.proc.wait(5)  # it exits after a memory error: replace it now
+                out = w.call(job, limit)
+                if isinstance(out, Failed) and out.error.code == "too_much_memory":
+                    _exit_status(w)  # it exits after a memory error (or is killed): replace it now
                     w.kill()
                     replacement = self._replace(w)
                 return out

@@ -54,7 +54,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from planner import plan
 from planner.constraints import ArrivalConstraint, CorridorConstraint, EndApproachConstraint
-from planner.constraints.controller import force_rate
+from planner.constraints.composed import force_rate
 from planner.corridor import range_sequence
 from planner.corridor.geometry import approach_direction, corridor_violation
 from planner.model import dynamics, load_robot

@@ -280,13 +280,14 @@ def long_corridor() -> dict:
 
 
 def test_pool_time_limit_replaces_worker():
+    from app.jobs import Done, SleepJob
     from app.workers import JobTimeout, PlanPool
     pool = PlanPool(workers=1, timeout_s=0.5)
     try:
         with pytest.raises(JobTimeout):
-            pool.run({"kind": "sleep", "seconds": 60})
+            pool.run(SleepJob(60))
         assert pool.replaced == 1
-        assert pool.run({"kind": "sleep", "seconds": 0}) == ("ok", b"{}", {})
+        assert pool.run(SleepJob(0)) == Done(b"{}")
     finally:
         pool.close()
 
@@ -543,14 +544,14 @@ def test_non_finite_result_is_diverged_naming_the_number(where, put):
 def test_worker_plans_builtin_robot_like_the_planner():
     """The worker keeps one model per built-in robot: its results are the planner's own,
     and an unknown robot name is still the planner's error naming the field."""
-    from app.workers import run_job
+    from app.jobs import Done, PlanJob, run_job
     from planner import parse_request
     from tests.support import plan_json
-    job = {"kind": "plan", "request": parse_request(TABLE1), "format": "json", "store": None}
+    job = PlanJob(parse_request(TABLE1), "json")
     for _ in range(2):
-        status, payload, meta = run_job(job)
-        assert status == "ok" and meta == {"plan_id": None}
-        assert strip_volatile(json.loads(payload)) == strip_volatile(plan_json(TABLE1))
+        out = run_job(job)
+        assert isinstance(out, Done) and out.plan_id is None and out.payload is not None
+        assert strip_volatile(json.loads(out.payload)) == strip_volatile(plan_json(TABLE1))
     with pytest.raises(PlannerError) as exc:  # validated before it reaches a worker
         parse_request({**TABLE1, "robot": "no-such-robot"})
     assert exc.value.code == "invalid_input" and exc.value.field == "robot"

@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 from planner import plan
-from planner.constraints import ConstrainedController, kernels
+from planner.constraints import ConstrainedController
 from planner.constraints.reference import ReferenceAssembly
-from planner.model import kinematics, load_robot
+from planner.model import load_robot
 from tests.support import PSI_TURN, TABLE1, plan_json, with_settings
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -110,19 +110,6 @@ def robots():
     desc = json.loads((ROOT / "planner" / "data" / "moving-slide.json").read_text())
     desc["tool_offset"] = [0.012, -0.007]  # pivots relative to the tool point differ from the platform's
     return [ms, load_robot("tri-slide"), load_robot(desc)]
-
-
-@pytest.mark.parametrize("ri", range(3))
-def test_leg_rows_kernel_equals_the_kinematics(ri):
-    """``kernels.leg_rows`` (the leg linearisation of the compiled rows) equals
-    ``kinematics.leg_jacobians`` and ``kinematics.leg_lengths``."""
-    robot = robots()[ri]
-    rng = np.random.default_rng(ri)
-    poses = np.column_stack((rng.uniform(-0.05, 0.05, (50, 2)), rng.uniform(-0.3, 0.3, 50)))
-    J, L = np.empty((50, robot.n_legs, 3)), np.empty((50, robot.n_legs))
-    kernels.leg_rows(np.ascontiguousarray(robot.r0), np.ascontiguousarray(robot.base), poses, J, L)
-    assert np.allclose(J, kinematics.leg_jacobians(robot, poses), rtol=0, atol=1e-14)
-    assert np.allclose(L, kinematics.leg_lengths(robot, poses), rtol=1e-14, atol=0)
 
 
 @pytest.mark.parametrize("case", ["table1", "triangle", "psi"])

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from app import editor as editor_mod
+from app import jobs
 from app.editor import _geometry as geo
 from app.editor import _planning
 from planner.model import SINGULAR_TOL, kinematics, load_robot
@@ -312,7 +313,7 @@ def test_edits_are_debounced_into_one_plan(editor):
 
 def test_stale_result_never_overwrites_a_newer_one(seg_impl, monkeypatch):
     fake = FakeSegmentation(delay=0.8)
-    monkeypatch.setattr(_planning, "segmentation_module", lambda: fake)
+    monkeypatch.setattr(jobs, "segmentation_module", lambda: fake)
     t = Tab(None, debounce=0.05)
     h = t.session
     try:

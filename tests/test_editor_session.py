@@ -14,6 +14,7 @@ import pytest
 import shapely
 from pydantic import ValidationError
 
+from app import jobs
 from app.editor import _geometry as geo
 from app.editor import _planning
 from app.editor._fields import Bounds, parse_number, parse_vector
@@ -340,7 +341,7 @@ def test_the_panel_answers_while_a_plan_runs(monkeypatch):
     """A slow segmentation (1 s) on the worker: typed values, undo and the status line are
     handled at once meanwhile, and the status names the plan being computed."""
     fake = FakeSegmentation(delay=1.0)
-    monkeypatch.setattr(_planning, "segmentation_module", lambda: fake)
+    monkeypatch.setattr(jobs, "segmentation_module", lambda: fake)
     t = Tab(None, debounce=0.05)
     s, client = t.session, t.clients[0]
     try:

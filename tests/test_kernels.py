@@ -57,6 +57,34 @@ def test_model_kernels_equal_the_reference_model(ri):
         assert np.allclose(A22 @ x[3:] + B2 @ u, acc, rtol=1e-11, atol=1e-11 * np.abs(acc).max())
 
 
+@pytest.mark.parametrize("ri", range(3))
+def test_leg_kernel_equals_the_kinematics(ri):
+    """The compiled leg geometry (``kernels.leg``, one leg at a pose) equals the numpy one
+    (``kinematics.leg_vectors`` and the leg rows of ``R``, ``kinematics.leg_rows``), and the
+    batched compiled leg rows (``kernels.leg_jacobians``, the constrained mode's leg
+    linearisation) equal ``kinematics.leg_jacobians`` and ``kinematics.leg_lengths``; the
+    leg vectors close the loop (eq. 2) with the physical coordinates."""
+    robot = robots()[ri]
+    rng = np.random.default_rng(ri)
+    poses = np.column_stack((rng.uniform(-0.05, 0.05, (50, 2)), rng.uniform(-0.3, 0.3, 50)))
+    rx, ry, dx, dy = kinematics.leg_vectors(robot, poses)
+    for k, y in enumerate(poses):
+        length, e, r, _, J_l, J_phi = kinematics.leg_rows(robot, y)
+        assert np.allclose(np.column_stack((rx[k], ry[k])), r, rtol=0, atol=1e-15)
+        assert np.allclose(np.hypot(dx[k], dy[k]), length, rtol=1e-15, atol=0)
+        s = dynamics.physical_coordinates(robot, y)
+        assert np.abs(dynamics.loop_closure(robot, s)).max() < 1e-14
+        c, sn = np.cos(y[2]), np.sin(y[2])
+        for i in range(robot.n_legs):
+            got = kernels.leg(c, sn, *robot.r0[i], *robot.base[i], y[0], y[1])
+            ref = (r[i, 0], r[i, 1], length[i], e[i, 0], e[i, 1], J_l[i, 2], J_phi[i, 2] * length[i])
+            assert np.allclose(got, ref, rtol=0, atol=1e-15)
+    J, L = np.empty((50, robot.n_legs, 3)), np.empty((50, robot.n_legs))
+    kernels.leg_jacobians(np.ascontiguousarray(robot.r0), np.ascontiguousarray(robot.base), poses, J, L)
+    assert np.allclose(J, kinematics.leg_jacobians(robot, poses), rtol=0, atol=1e-14)
+    assert np.allclose(L, kinematics.leg_lengths(robot, poses), rtol=1e-14, atol=0)
+
+
 @pytest.mark.parametrize("Ts", [0.001, 0.01, 0.5, 5.0])  # the last two take the expm branch
 def test_zoh_kernel_equals_the_matrix_exponential(Ts):
     robot = load_robot("moving-slide")

@@ -111,24 +111,24 @@ def test_memory_cap_stops_a_plan_with_a_clear_error_and_the_worker_is_replaced()
     """A worker limited to 700 MiB of address space (~0.5 GiB is the interpreter with the
     planner) runs the largest corridor the schema accepts (200 000 steps; ~0.8 GiB): it
     answers too_much_memory, the worker is replaced, the next plan succeeds."""
-    from app.workers import WorkerOutOfMemory, describe_failure
+    from app.jobs import Done, Failed, PlanJob
+    from app.service import JobService
     from planner import PlanRequest
     from tests.test_api import long_corridor
 
     pool = PlanPool(workers=1, timeout_s=120, memory_mb=700)
+    service = JobService(pool)
     try:
-        try:  # numpy's MemoryError is reported by the worker; an allocation abort (Rust) by the pool
-            out = pool.run({"kind": "plan", "request": PlanRequest.model_validate(long_corridor())})
-            assert out[0] == "error", out
-            error = out[1]
-        except WorkerOutOfMemory as exc:
-            status, error = describe_failure(exc, pool)
-            assert status == 422
-        assert error["code"] == "too_much_memory", error
-        assert "700 MiB" in error["message"] and "RANGEPLAN_WORKER_MEMORY_MB" in error["message"]
+        # numpy's MemoryError is reported by the worker, an allocation abort (Rust) by the
+        # pool: the service answers both alike
+        out = service.run(PlanJob(PlanRequest.model_validate(long_corridor())))
+        assert isinstance(out, Failed) and out.status == 422, out
+        error = out.error
+        assert error.code == "too_much_memory", error
+        assert "700 MiB" in error.message and "RANGEPLAN_WORKER_MEMORY_MB" in error.message
         assert pool.replaced == 1
-        ok = pool.run({"kind": "plan", "request": PlanRequest.model_validate(TABLE1)})
-        assert ok[0] == "ok"
+        ok = service.run(PlanJob(PlanRequest.model_validate(TABLE1)))
+        assert isinstance(ok, Done)
     finally:
         pool.close()
 

@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from .config import FORMAT_NAMES, SCHEDULER_ENV, env_float
+from .config import FORMAT_NAMES, SCHEDULER_ENV
 
 __all__ = ["add_parser", "cmd_batch", "run_batch"]
 
@@ -32,7 +32,7 @@ def add_parser(sub: Any) -> None:
     pb.add_argument("inputs", nargs="+", metavar="INPUT", help="request .json file, directory, or .jsonl file")
     pb.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="output directory (created)")
     pb.add_argument("--workers", type=int, help="local worker processes (default: the CPU count)")
-    pb.add_argument("--scheduler", default=os.environ.get(SCHEDULER_ENV) or None, metavar="ADDRESS",
+    pb.add_argument("--scheduler", metavar="ADDRESS",
                     help=f"Dask scheduler, e.g. tcp://10.0.0.5:8786 (env {SCHEDULER_ENV}); default: a local pool")
     pb.add_argument("--format", choices=list(FORMAT_NAMES), default="json",
                     help="result file format (none: summary.csv only)")
@@ -40,7 +40,7 @@ def add_parser(sub: Any) -> None:
                     help="skip items already done in OUTDIR (default: on)")
     pb.add_argument("--progress", choices=["auto", "bar", "lines", "none"], default="auto",
                     help="progress bar on a terminal, a line per item otherwise (default: auto)")
-    pb.add_argument("--timeout", type=float, default=env_float("RANGEPLAN_PLAN_TIMEOUT_S", 0.0), metavar="SECONDS",
+    pb.add_argument("--timeout", type=float, metavar="SECONDS",
                     help="compute limit per item, s (env RANGEPLAN_PLAN_TIMEOUT_S; default 0: none)")
     pb.add_argument("--inline", action="store_true", help="plan in this process, one item at a time (no pool)")
     pb.add_argument("--worker-writes", action=argparse.BooleanOptionalAction, default=True,
@@ -72,121 +72,158 @@ def run_batch(inputs: list[str], outdir: str | Path, *, workers: int | None = No
     result back as without the option. The staging directory, and with it any file of a
     worker that died or of an item that was cancelled, is removed at the end (and any left by
     a run that was killed, at the start of the next)."""
-    import shutil
-    import uuid
-
-    from .engine import FORMATS, STAGING_PREFIX
-    from .executors import open_engine
-    from .inputs import count_items, iter_items, resolve_inputs
-    from .progress import make_progress
-    from .runner import Item, Runner, failed_outcome
-    from .summary import header_line, read_summary, row_line, summary_row, write_summary
+    from .inputs import count_items, resolve_inputs
 
     files = resolve_inputs(inputs)
-    total = count_items(files)
-    out = Path(outdir)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise _Usage(f"{out}: cannot create the output directory: {exc.strerror or exc}") from None
-    ext = FORMATS[fmt][0]
-    for old in out.glob(STAGING_PREFIX + "*"):  # a run killed before it could clean up
-        shutil.rmtree(old, ignore_errors=True)
-    stage: Path | None = None
-    if worker_writes and ext is not None:
-        stage = out.resolve() / f"{STAGING_PREFIX}{uuid.uuid4().hex}"
-        stage.mkdir()
-    summary_path = out / SUMMARY
-    previous = read_summary(summary_path) if resume else {}
-    lines: dict[str, tuple[int, str]] = {}
-    statuses: dict[str, str] = {}
-    shas: dict[int, str] = {}
-    counts = {"ok": 0, "error": 0, "failed": 0, "cancelled": 0, "skipped": 0, "worker_written": 0}
-    prog = make_progress(progress, total, 0, stream)
+    run = _BatchRun(files, count_items(files), Path(outdir), fmt, resume, worker_writes)
+    return run.execute(workers, scheduler, progress, timeout_s, inline, engine, stream)
 
-    def done_before(item: Item, sha: str) -> bool:
-        row = previous.get(item.key)
+
+class _BatchRun:
+    """One run of :func:`run_batch`: the output directory, its staging directory, the
+    summary journal and the counts; :meth:`execute` runs the items on an engine."""
+
+    def __init__(self, files: list, total: int, out: Path, fmt: str, resume: bool, worker_writes: bool):
+        import shutil
+        import uuid
+
+        from .engine import FORMATS, STAGING_PREFIX
+        from .summary import read_summary
+
+        self.files, self.total, self.out, self.fmt = files, total, out, fmt
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise _Usage(f"{out}: cannot create the output directory: {exc.strerror or exc}") from None
+        self.ext = FORMATS[fmt][0]
+        for old in out.glob(STAGING_PREFIX + "*"):  # a run killed before it could clean up
+            shutil.rmtree(old, ignore_errors=True)
+        self.stage: Path | None = None
+        if worker_writes and self.ext is not None:
+            self.stage = out.resolve() / f"{STAGING_PREFIX}{uuid.uuid4().hex}"
+            self.stage.mkdir()
+        self.summary_path = out / SUMMARY
+        self.previous = read_summary(self.summary_path) if resume else {}
+        self.lines: dict[str, tuple[int, str]] = {}
+        self.statuses: dict[str, str] = {}
+        self.shas: dict[int, str] = {}
+        self.counts = {"ok": 0, "error": 0, "failed": 0, "cancelled": 0, "skipped": 0, "worker_written": 0}
+        self.prog: Any = None
+        self.journal: Any = None
+
+    def done_before(self, item: Any, sha: str) -> bool:
+        row = self.previous.get(item.key)
         if row is None or row.get("request_sha") != sha or row["status"] not in ("ok", "error"):
             return False
-        if row["status"] == "ok" and ext is not None and not (out / f"{item.key}{ext}").is_file():
+        if row["status"] == "ok" and self.ext is not None and not (self.out / f"{item.key}{self.ext}").is_file():
             return False
         return True
 
-    def todo():
-        for item, sha in iter_items(files):
-            if sha and done_before(item, sha):
-                row = dict(previous[item.key], item=str(item.index))
-                lines[item.key] = (item.index, row_line(row))
-                statuses[item.key] = row["status"]
-                counts["skipped"] += 1
-                prog.done += 1
+    def todo(self):
+        """The items still to plan (those done by a previous run are counted as skipped)."""
+        from .inputs import iter_items
+        from .summary import row_line
+
+        for item, sha in iter_items(self.files):
+            if sha and self.done_before(item, sha):
+                row = dict(self.previous[item.key], item=str(item.index))
+                self.lines[item.key] = (item.index, row_line(row))
+                self.statuses[item.key] = row["status"]
+                self.counts["skipped"] += 1
+                self.prog.done += 1
                 continue
-            shas[item.index] = sha
+            self.shas[item.index] = sha
             yield item
 
-    journal = open(summary_path, "a" if previous else "w", newline="")
-    if not previous:
-        journal.write(header_line())
+    def _result_file(self, item: Any, outcome: dict[str, Any]) -> tuple[str, dict[str, Any]]:
+        """Put an item's result in place: the worker's staged file renamed, or the payload
+        written; its file name ("" for none) and the outcome (failed if it cannot be moved)."""
+        from .runner import failed_outcome
 
-    def on_done(item: Item, outcome: dict[str, Any]) -> None:
-        file = ""
-        if outcome["status"] == "ok" and ext is not None and outcome.get("staged") and stage is not None:
-            file = f"{item.key}{ext}"
+        if outcome["status"] != "ok" or self.ext is None:
+            return "", outcome
+        file = f"{item.key}{self.ext}"
+        if outcome.get("staged") and self.stage is not None:
             try:  # the worker wrote it whole under a temporary name: now it is the result
-                os.replace(stage / outcome["staged"], out / file)
-                counts["worker_written"] += 1
+                os.replace(self.stage / outcome["staged"], self.out / file)
+                self.counts["worker_written"] += 1
             except OSError as exc:
                 where = {k: outcome.get(k) for k in ("engine", "worker", "attempts")}
-                outcome = {**failed_outcome("internal_error", f"the result file written by the worker cannot be "
-                                            f"moved into {out}: {exc.strerror or exc}", status="failed"), **where}
-                file = ""
-        elif outcome["status"] == "ok" and ext is not None and outcome.get("payload") is not None:
-            file = f"{item.key}{ext}"
-            tmp = out / (file + ".tmp")
+                return "", {**failed_outcome("internal_error", f"the result file written by the worker cannot be "
+                                             f"moved into {self.out}: {exc.strerror or exc}", status="failed"),
+                            **where}
+            return file, outcome
+        if outcome.get("payload") is not None:
+            tmp = self.out / (file + ".tmp")
             tmp.write_bytes(outcome["payload"])
-            os.replace(tmp, out / file)
-        line = row_line(summary_row(item.index, item.key, outcome, shas.pop(item.index, ""), file))
-        lines[item.key] = (item.index, line)
-        statuses[item.key] = outcome["status"]
-        journal.write(line)
-        journal.flush()
-        counts[outcome["status"]] = counts.get(outcome["status"], 0) + 1
-        prog.item(item.key, outcome)
+            os.replace(tmp, self.out / file)
+            return file, outcome
+        return "", outcome
 
-    own_engine = engine is None
-    try:
-        if own_engine:
-            engine = open_engine(workers, scheduler, inline=inline)
-    except BaseException:
-        journal.close()
-        if stage is not None:
-            shutil.rmtree(stage, ignore_errors=True)
-        raise
-    interrupted = False
-    t0 = time.perf_counter()
-    runner = Runner(engine, on_done, fmt=fmt, timeout_s=timeout_s or None, stage=str(stage) if stage else None)
-    try:
-        prog.start(engine.describe())
-        consumed = todo()
-        runner.run(consumed, remaining=lambda: max(0, total - prog.done - runner.running))
-    except KeyboardInterrupt:
-        interrupted = True
-    finally:
-        elapsed = time.perf_counter() - t0
-        prog.close()
-        if own_engine:
-            engine.close(cancel=interrupted)
-        if stage is not None:  # what is left there was never reported: a dead worker's, a cancelled item's
-            shutil.rmtree(stage, ignore_errors=True)
-        journal.close()
-        write_summary(summary_path, lines.values())
-    failed = counts["error"] + counts["failed"]
-    return {"ok": counts["ok"], "failed": failed, "skipped": counts["skipped"], "total": total,
-            "finished": len(lines), "interrupted": interrupted, "elapsed_s": elapsed,
-            "rate": (counts["ok"] + failed) / elapsed if elapsed > 0 else 0.0, "engine": engine.name,
-            "summary": str(summary_path), "lost_workers": runner.stats.lost_workers,
-            "resubmitted": runner.stats.resubmitted_items, "worker_written": counts["worker_written"],
-            "all_ok": not interrupted and len(statuses) == total and all(v == "ok" for v in statuses.values())}
+    def on_done(self, item: Any, outcome: dict[str, Any]) -> None:
+        from .summary import row_line, summary_row
+
+        file, outcome = self._result_file(item, outcome)
+        line = row_line(summary_row(item.index, item.key, outcome, self.shas.pop(item.index, ""), file))
+        self.lines[item.key] = (item.index, line)
+        self.statuses[item.key] = outcome["status"]
+        self.journal.write(line)
+        self.journal.flush()
+        self.counts[outcome["status"]] = self.counts.get(outcome["status"], 0) + 1
+        self.prog.item(item.key, outcome)
+
+    def execute(self, workers: int | None, scheduler: str | None, progress: str, timeout_s: float, inline: bool,
+                engine: Any, stream: Any) -> dict[str, Any]:
+        import shutil
+
+        from .executors import open_engine
+        from .progress import make_progress
+        from .runner import Runner
+        from .summary import header_line, write_summary
+
+        self.prog = make_progress(progress, self.total, 0, stream)
+        self.journal = open(self.summary_path, "a" if self.previous else "w", newline="")
+        if not self.previous:
+            self.journal.write(header_line())
+        own_engine = engine is None
+        try:
+            if own_engine:
+                engine = open_engine(workers, scheduler, inline=inline)
+        except BaseException:
+            self.journal.close()
+            if self.stage is not None:
+                shutil.rmtree(self.stage, ignore_errors=True)
+            raise
+        interrupted = False
+        t0 = time.perf_counter()
+        runner = Runner(engine, self.on_done, fmt=self.fmt, timeout_s=timeout_s or None,
+                        stage=str(self.stage) if self.stage else None)
+        try:
+            self.prog.start(engine.describe())
+            runner.run(self.todo(), remaining=lambda: max(0, self.total - self.prog.done - runner.running))
+        except KeyboardInterrupt:
+            interrupted = True
+        finally:
+            elapsed = time.perf_counter() - t0
+            self.prog.close()
+            if own_engine:
+                engine.close(cancel=interrupted)
+            if self.stage is not None:  # what is left there was never reported: a dead worker's, a cancelled item's
+                shutil.rmtree(self.stage, ignore_errors=True)
+            self.journal.close()
+            write_summary(self.summary_path, self.lines.values())
+        return self._result(engine, runner, interrupted, elapsed)
+
+    def _result(self, engine: Any, runner: Any, interrupted: bool, elapsed: float) -> dict[str, Any]:
+        counts, total = self.counts, self.total
+        failed = counts["error"] + counts["failed"]
+        return {"ok": counts["ok"], "failed": failed, "skipped": counts["skipped"], "total": total,
+                "finished": len(self.lines), "interrupted": interrupted, "elapsed_s": elapsed,
+                "rate": (counts["ok"] + failed) / elapsed if elapsed > 0 else 0.0, "engine": engine.name,
+                "summary": str(self.summary_path), "lost_workers": runner.stats.lost_workers,
+                "resubmitted": runner.stats.resubmitted_items, "worker_written": counts["worker_written"],
+                "all_ok": not interrupted and len(self.statuses) == total
+                and all(v == "ok" for v in self.statuses.values())}
 
 
 def cmd_batch(args: argparse.Namespace) -> int:
@@ -195,6 +232,17 @@ def cmd_batch(args: argparse.Namespace) -> int:
     def usage(msg: str) -> int:
         print(f"rangeplan: error: {msg}", file=sys.stderr)
         return 2
+
+    from app.settings import SettingsError, settings
+
+    try:  # the flags' defaults: RANGEPLAN_DASK_SCHEDULER, RANGEPLAN_PLAN_TIMEOUT_S (if set; else no limit)
+        cfg = settings()
+    except SettingsError as exc:
+        return usage(str(exc))
+    if args.scheduler is None:
+        args.scheduler = cfg.dask_scheduler
+    if args.timeout is None:
+        args.timeout = cfg.plan_timeout_s if "plan_timeout_s" in cfg.model_fields_set else 0.0
 
     if args.workers is not None and args.workers < 1:
         return usage(f"--workers must be >= 1, got {args.workers}")

@@ -91,7 +91,9 @@ class DaskEngine(Engine):
         except (OSError, TimeoutError) as exc:
             raise OSError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
         try:
-            self.client.register_plugin(WarmUp(os.environ.get(MALLOC_ENV, "relax")), name=WarmUp.name)
+            from app.settings import settings
+
+            self.client.register_plugin(WarmUp(settings().dask_malloc), name=WarmUp.name)
         except Exception as exc:  # a worker without rangeplan cannot even load the plugin
             self.client.close()
             raise OSError(f"the Dask workers at {address} cannot load rangeplan ({type(exc).__name__}: {exc}); "

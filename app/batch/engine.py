@@ -2,9 +2,12 @@
 picklable outcome (plain types and the result's bytes in the requested format).
 
 :func:`plan_item` is what every engine runs: the calling process (``inline``), a local
-process pool (``local``) or a Dask worker (``dask``). It never raises for a request's
-fault: a planner error comes back as ``{"status": "error", "error": {code, message,
-field}}``, like the HTTP API's 422 body. :func:`plan_chunk` plans several requests in one
+process pool (``local``) or a Dask worker (``dask``). It validates the request and runs it
+as the service's typed job (:class:`app.jobs.PlanJob`) through the service's in-process
+executor (:func:`app.jobs.run_bounded`: the same work estimate, time limit and error mapping
+as the HTTP API's workers). It never raises for a request's fault: a planner error comes
+back as ``{"status": "error", "error": {code, message, field}}``, like the HTTP API's 422
+body. :func:`plan_chunk` plans several requests in one
 task (fewer round trips to a pool or a scheduler per plan; each item still has its own time
 limit and outcome) and, where the worker sees the caller's output directory, writes each
 result there itself so that only a summary travels back (the task-attempt files of an output
@@ -17,7 +20,6 @@ Workers import this module once and load the compiled kernels once
 
 from __future__ import annotations
 
-import ctypes
 import os
 import socket
 import sys
@@ -25,9 +27,11 @@ import threading
 import time
 from typing import Any
 
-from app.failures import degenerate, limit_memory, out_of_memory, timeout, too_much_work
-from planner import PlannerError, estimate_work, plan, to_csv, warm_up
-from planner.schema import PlanRequest, PlanResult, error_details
+from app.failures import limit_memory
+from app.formats import OUTPUT_FORMATS
+from app.jobs import Failed, ItemTimeout, PlanJob, failed, run_bounded
+from planner import PlannerError, warm_up
+from planner.schema import PlanRequest, error_details
 
 __all__ = ["FORMATS", "STAGING_PREFIX", "plan_item", "plan_chunk", "unpack_chunk", "warm_worker", "where",
            "ItemTimeout"]
@@ -35,8 +39,7 @@ __all__ = ["FORMATS", "STAGING_PREFIX", "plan_item", "plan_chunk", "unpack_chunk
 #: output formats: file extension and the function writing a result's bytes (``none``: the
 #: summary only, no result file; what a million-corridor study keeps, see docs/batch-scale.md)
 FORMATS: dict[str, tuple[str | None, Any]] = {
-    "json": (".json", lambda r: r.to_json()),
-    "csv": (".csv", lambda r: to_csv(r).encode()),
+    **{k: (OUTPUT_FORMATS[k].extension, OUTPUT_FORMATS[k].writer) for k in ("json", "csv")},
     "none": (None, None),
 }
 
@@ -63,11 +66,6 @@ def _load_kernels() -> float:
             return 0.0
         finally:
             _KERNELS["loaded"] = True
-
-
-class ItemTimeout(BaseException):
-    """Raised inside the planning thread when an item passes its time limit (a
-    BaseException so that no ``except Exception`` in the planner swallows it)."""
 
 
 def where() -> dict[str, Any]:
@@ -108,50 +106,6 @@ def warm_worker(engine: str = "local", nice: int = 0, memory_mb: int | None = No
     return seconds
 
 
-class _Deadline:
-    """Raise :class:`ItemTimeout` in the calling thread after ``seconds`` (at the next Python
-    bytecode: a single compiled kernel call is not interrupted, the request bounds keep those
-    short). Works in any thread (Dask runs tasks in a thread pool), unlike ``SIGALRM``."""
-
-    def __init__(self, seconds: float | None):
-        self.seconds = seconds
-        self._lock = threading.Lock()
-        self._armed = False
-        self._fired = False
-        self._timer: threading.Timer | None = None
-
-    def _fire(self) -> None:
-        with self._lock:
-            if self._armed:
-                self._fired = True
-                ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(self._tid), ctypes.py_object(ItemTimeout))
-
-    def __enter__(self):
-        if self.seconds and self.seconds > 0:
-            self._tid = threading.get_ident()
-            self._armed = True
-            self._timer = threading.Timer(self.seconds, self._fire)
-            self._timer.daemon = True
-            self._timer.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        if self._timer is None:
-            return
-        with self._lock:
-            self._armed = False
-            self._timer.cancel()
-            if self._fired:  # fired but maybe not yet delivered: withdraw it
-                ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(self._tid), None)
-
-
-def _summary(result: PlanResult) -> dict[str, Any]:
-    m = result.metrics
-    return {"duration_s": m.duration_s, "energy": m.energy, "max_force_ratio": m.max_force_ratio,
-            "contained": m.contained, "settled": m.settled, "end_error_m": m.end_error_m,
-            "max_corridor_violation_m": m.max_corridor_violation_m, "steps": m.steps, "compute_ms": m.compute_ms}
-
-
 def plan_item(request: str | bytes | dict | PlanRequest, fmt: str = "json",
               timeout_s: float | None = None) -> dict[str, Any]:
     """Plan one request (JSON text, a dict or a :class:`PlanRequest`) and return
@@ -160,47 +114,34 @@ def plan_item(request: str | bytes | dict | PlanRequest, fmt: str = "json",
     in ``fmt`` (:data:`FORMATS`). ``timeout_s`` bounds the planning time (code ``timeout``),
     and, as for ``POST /v1/plan``, a request whose work estimate exceeds it is not planned
     (code ``too_much_work``, in microseconds)."""
-    import numpy as np
     from pydantic import ValidationError
 
     t0 = time.perf_counter()
     out: dict[str, Any] = {"status": "error", "name": None, "payload": None, "summary": None, "error": None}
-    req: Any = request
     try:
         if fmt not in FORMATS:
             raise PlannerError("invalid_input", f"unknown format {fmt!r}; one of {', '.join(FORMATS)}", "format")
         if timeout_s:
             _load_kernels()  # never under the limit (see there)
-        with _Deadline(timeout_s):
-            if isinstance(request, (str, bytes)):
-                req = PlanRequest.model_validate_json(request)
-            elif isinstance(request, dict):
-                req = PlanRequest.model_validate(request)
-            out["name"] = req.name
-            est = estimate_work(req) if timeout_s and timeout_s > 0 else None
-            if est is not None and timeout_s is not None and est.seconds > timeout_s:
-                out["error"] = too_much_work(est, timeout_s)
-            else:
-                result = plan(req)
-                writer = FORMATS[fmt][1]
-                out["payload"] = writer(result) if writer is not None else None
-                out.update(status="ok", summary=_summary(result))
-    except ItemTimeout:
-        out["error"] = timeout(timeout_s or 0.0)
+        req = request
+        if isinstance(request, (str, bytes)):
+            req = PlanRequest.model_validate_json(request)
+        elif isinstance(request, dict):
+            req = PlanRequest.model_validate(request)
+        assert isinstance(req, PlanRequest)
+        out["name"] = req.name
+        outcome = run_bounded(PlanJob(req, fmt), timeout_s, _ENGINE["memory_mb"])
     except PlannerError as exc:
-        out["error"] = exc.to_dict()
+        outcome = failed(exc.to_dict())
     except ValidationError as exc:
         details = error_details(exc.errors())
         first = details[0] if details else {"code": "invalid_input", "field": None, "message": "invalid input"}
         msg = first["message"].replace("body is not valid JSON", "not valid JSON", 1)
-        out["error"] = {"code": first["code"], "message": msg, "field": first["field"]}
-    except (ArithmeticError, np.linalg.LinAlgError) as exc:
-        out["error"] = degenerate(exc, custom_robot=not isinstance(getattr(req, "robot", "moving-slide"), str))
-    except MemoryError:
-        out["error"] = out_of_memory(_ENGINE["memory_mb"])
-    except Exception as exc:  # a planner bug: this item fails, the batch goes on
-        out["error"] = {"code": "internal_error", "field": None,
-                        "message": f"the planner failed unexpectedly: {type(exc).__name__}: {exc}"}
+        outcome = failed({"code": first["code"], "message": msg, "field": first["field"]})
+    if isinstance(outcome, Failed):
+        out["error"] = outcome.error.to_dict()
+    else:
+        out.update(status="ok", payload=outcome.payload, summary=outcome.summary)
     out["wall_ms"] = (time.perf_counter() - t0) * 1e3
     out.update(where())
     return out

@@ -148,7 +148,10 @@ def open_engine(workers: int | None = None, scheduler: str | None = None, *, nic
     scheduler cannot be reached within ``connect_timeout_s``."""
     if inline:
         return InlineEngine()
-    scheduler = scheduler or os.environ.get(SCHEDULER_ENV) or None
+    if not scheduler:
+        from app.settings import settings
+
+        scheduler = settings().dask_scheduler or None
     if scheduler:
         from .cluster import DaskEngine
 

@@ -28,7 +28,6 @@ server's data directory.
 
 from __future__ import annotations
 
-import os
 import threading
 import time
 from collections.abc import Iterator
@@ -37,9 +36,8 @@ from typing import Any
 
 import orjson
 
-from app.workers import DEFAULT_MEMORY_MB
+from app.settings import settings
 
-from .config import SCHEDULER_ENV, env_float, env_int
 from .store import FINAL, BatchStore
 
 __all__ = ["BatchService", "QueueFull"]
@@ -53,15 +51,15 @@ class BatchService:
     def __init__(self, db_path: Path | str, *, workers: int | None = None, scheduler: str | None = None,
                  timeout_s: float | None = None, nice: int = 10, max_items: int | None = None,
                  max_queue: int | None = None, keep: int | None = None, memory_mb: int | None = None):
-        self.store = BatchStore(db_path, keep=keep or env_int("RANGEPLAN_MAX_BATCHES", 100))
-        self.workers = workers or env_int("RANGEPLAN_BATCH_WORKERS", max(1, (os.cpu_count() or 1) // 2))
-        self.scheduler = scheduler or os.environ.get(SCHEDULER_ENV) or None
-        self.timeout_s = timeout_s or env_float("RANGEPLAN_PLAN_TIMEOUT_S", 30.0)
-        self.memory_mb = memory_mb if memory_mb is not None else env_int("RANGEPLAN_WORKER_MEMORY_MB",
-                                                                         DEFAULT_MEMORY_MB)
+        cfg = settings()
+        self.store = BatchStore(db_path, keep=keep or cfg.max_batches)
+        self.workers = workers or cfg.batch_workers
+        self.scheduler = scheduler or cfg.dask_scheduler or None
+        self.timeout_s = timeout_s or cfg.plan_timeout_s
+        self.memory_mb = memory_mb if memory_mb is not None else cfg.worker_memory_mb
         self.nice = nice
-        self.max_items = max_items or env_int("RANGEPLAN_MAX_BATCH_ITEMS", 10_000)
-        self.max_queue = max_queue or env_int("RANGEPLAN_MAX_BATCH_QUEUE", 100_000)
+        self.max_items = max_items or cfg.max_batch_items
+        self.max_queue = max_queue or cfg.max_batch_queue
         self.engine: Any = None
         self.engine_error: str | None = None
         self._runner: Any = None

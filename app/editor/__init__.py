@@ -23,7 +23,7 @@ Entry point: :func:`start_editor` (used by ``app.server.serve``).
 
 from ._editor import Editor, start_editor
 from ._gate import start_guarded
-from ._planning import use_pool
+from ._planning import use_pool, use_service
 from ._session import Session
 
-__all__ = ["Editor", "Session", "start_editor", "start_guarded", "use_pool"]
+__all__ = ["Editor", "Session", "start_editor", "start_guarded", "use_pool", "use_service"]

@@ -12,7 +12,16 @@ from __future__ import annotations
 import json
 from typing import TYPE_CHECKING, Any
 
-from ._planning import PlannerError, drawing_request, editable, export_result, to_csv, validate_request
+from ._planning import (
+    MACHINE_FORMATS,
+    OUTPUT_FORMATS,
+    PlannerError,
+    drawing_request,
+    editable,
+    export_result,
+    to_csv,
+    validate_request,
+)
 
 if TYPE_CHECKING:
     from ._session import Session
@@ -135,8 +144,8 @@ class EditorFiles:
         self._editor.notify("Drawing imported", f"{upload.name}: {summary}", color="green", client=client)
         return True
 
-    #: download file name of each machine format
-    EXPORTS = {"gcode": "trajectory.ngc", "joints": "legs.txt", "dxf": "plan.dxf"}
+    #: download file name of each machine format (the registry's)
+    EXPORTS = {fmt: OUTPUT_FORMATS[fmt].filename for fmt in MACHINE_FORMATS}
 
     def download_export(self, client, fmt: str) -> None:
         """Send the newest trajectory to ``client`` as G-code, a leg-length stream or DXF."""

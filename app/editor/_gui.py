@@ -31,7 +31,9 @@ from ._planning import (
     DEFAULT_MODE,
     DEFAULT_ROBOT,
     HAS_SPEED_SETTING,
+    MACHINE_FORMATS,
     MODE_DEFAULTS,
+    OUTPUT_FORMATS,
     builtin_robot_names,
     field_bounds,
 )
@@ -267,9 +269,9 @@ class EditorGui:
                 drawing.value, {"scale": float(self.drawing_scale.value or 1.0),
                                 "offset": [float(v) for v in (self.drawing_offset.value or (0.0, 0.0))]},
                 client=e.client))
-            for fmt, label in (("gcode", "Download G-code (LinuxCNC)"), ("joints", "Download leg lengths "
-                               "(halstreamer)"), ("dxf", "Download DXF (path, corridor, obstacles)")):
-                gui.add_button(label).on_click(lambda e, f=fmt: editor.files.download_export(e.client, f))
+            for fmt in MACHINE_FORMATS:
+                gui.add_button(f"Download {OUTPUT_FORMATS[fmt].title}").on_click(
+                    lambda e, f=fmt: editor.files.download_export(e.client, f))
 
     # ------------------------------------------------------------------ showing values
     def show_request(self, request: dict, selected_segment: int = 0) -> None:

@@ -11,18 +11,19 @@ Re-plans run on :class:`PlanWorker`, a thread with a debounce and a generation c
 only the newest generation, and the caller drops a result whose generation is no longer
 current (a stale result never overwrites a newer one).
 
-Where a plan is computed (issue 15): under ``rangeplan serve`` the editor plans on the API's
-worker pool (:func:`use_pool`): the same worker processes, work estimate, time limit,
-memory limit and error codes as ``POST /v1/plan``, never in the server process. Without a
-pool (an editor started on its own, tests) it plans on its worker thread, after the same
-work estimate against ``RANGEPLAN_PLAN_TIMEOUT_S``.
+Where a plan is computed: every re-plan and drawing import is a typed job
+(:class:`app.jobs.EditorJob`, :class:`app.jobs.ImportJob`) submitted to the service's one
+executor, :class:`app.service.JobService`. Under ``rangeplan serve`` that is the API's
+service (:func:`use_service`): the same worker processes, work estimate, time limit, memory
+limit and error codes as ``POST /v1/plan``, never in the server process. Without one (an
+editor started on its own, tests) the job runs on the editor's worker thread under the same
+estimate and limit (``RANGEPLAN_PLAN_TIMEOUT_S``).
 """
 
 from __future__ import annotations
 
 import json
 import logging
-import os
 import threading
 import time
 from collections.abc import Callable
@@ -32,11 +33,11 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
-from app.failures import too_much_work
-from planner import PlannerError, PlanRequest, PlanResult, RobotModel, estimate_work, load_robot
-from planner import plan as run_plan
-from planner import to_csv as _result_csv
-from planner.exchange import export, import_drawing
+from app.formats import MACHINE_FORMATS, OUTPUT_FORMATS, write
+from app.jobs import EditorJob, Failed, ImportJob
+from app.service import JobService
+from app.settings import settings
+from planner import PlannerError, PlanRequest, PlanResult, RobotModel, load_robot
 from planner.model import SINGULAR_TOL, kinematics
 from planner.schema import (
     DEFAULT_LAYOUT_SPEED_M_S,
@@ -60,6 +61,8 @@ __all__ = [
     "DEFAULT_MODE",
     "DEFAULT_ROBOT",
     "HAS_SPEED_SETTING",
+    "MACHINE_FORMATS",
+    "OUTPUT_FORMATS",
     "MAX_LEGS",
     "MODE_DEFAULTS",
     "SINGULAR_TOL",
@@ -70,9 +73,9 @@ __all__ = [
     "RobotCache",
     "builtin_robot_names",
     "compute_plan",
-    "segmentation_module",
     "to_csv",
     "use_pool",
+    "use_service",
     "validate_request",
     "editable",
     "field_bounds",
@@ -84,28 +87,28 @@ __all__ = [
 
 log = logging.getLogger("rangeplan.editor")
 
-#: the planning pool (an :class:`app.workers.PlanPool`) re-plans run on, or None: inline
-_pool: Any = None
-_DEFAULT_TIMEOUT_S = 30.0
+#: the job service re-plans and imports are submitted to, or None: inline (:func:`_service`)
+_shared: JobService | None = None
+
+
+def use_service(service: JobService | None) -> None:
+    """Submit re-plans and imports to ``service`` (the API's, under ``rangeplan serve``)
+    from now on; None: run them on the editor's worker thread (same estimate and limit)."""
+    global _shared
+    _shared = service
 
 
 def use_pool(pool: Any) -> None:
-    """Plan on ``pool`` (an :class:`app.workers.PlanPool`, shared with the API) from now on;
-    None: plan inline on the editor's worker thread."""
-    global _pool
-    _pool = pool
+    """:func:`use_service` with a service around ``pool`` (an :class:`app.workers.PlanPool`)."""
+    use_service(JobService(pool) if pool is not None else None)
+
+
+def _service() -> JobService:
+    return _shared if _shared is not None else JobService(None, timeout_s=settings().plan_timeout_s)
 
 Robot = RobotModel
 #: whether this planner's settings have a travel speed ``speed_m_s`` [m/s]
 HAS_SPEED_SETTING = "speed_m_s" in Settings.model_fields
-
-
-def segmentation_module():
-    """``planner.corridor`` (its ``segment``). Tests replace this function to control the
-    segmentation's timing."""
-    from planner import corridor
-
-    return corridor
 
 
 def validate_request(request: dict) -> tuple[PlanRequest | None, str | None]:
@@ -172,7 +175,7 @@ def editable(req: PlanRequest) -> dict:
 
 def to_csv(result: dict) -> str:
     """The CSV of a plan result (as JSON types)."""
-    return _result_csv(PlanResult.model_validate(result))
+    return write(PlanResult.model_validate(result), "csv").decode()
 
 
 def drawing_request(data: bytes, filename: str, request: dict, options: dict) -> tuple[dict, str]:
@@ -196,34 +199,22 @@ def drawing_request(data: bytes, filename: str, request: dict, options: dict) ->
 
 
 def _read_drawing(data: bytes, filename: str, options: dict) -> ImportResult:
-    pool = _pool
-    if pool is None:
-        return import_drawing(data, options, filename=filename)
-    from app.workers import describe_failure
-
     try:
         opts = ImportOptions.model_validate(options)
     except ValidationError as exc:
         raise planner_error(exc) from None
-    job = {"kind": "import", "data": data, "options": opts, "filename": filename, "content_type": None}
-    try:
-        out = pool.run(job)
-    except Exception as exc:  # time limit, busy, a worker died
-        e = describe_failure(exc, pool, "import")[1]
-        raise PlannerError(e["code"], e["message"], e["field"]) from None
-    if out[0] == "ok":
-        return ImportResult.model_validate_json(out[1], context=PARTIAL_LAYOUT)
-    if out[0] == "error":
-        raise PlannerError(out[1]["code"], out[1]["message"], out[1].get("field"))
-    raise PlannerError("internal_error", "reading the drawing failed unexpectedly: " + str(out[1]).splitlines()[0])
+    out = _service().run(ImportJob(data, opts, filename))
+    if isinstance(out, Failed):
+        raise PlannerError(out.error.code, out.error.message, out.error.field)
+    return ImportResult.model_validate_json(out.payload or b"", context=PARTIAL_LAYOUT)
 
 
 def export_result(result: dict, fmt: str, request: dict) -> str:
-    """A plan result (JSON types) as ``gcode``, ``joints`` or ``dxf`` (with the obstacles of
-    ``request``'s layout when it is valid)."""
+    """A plan result (JSON types) in a machine format (:data:`MACHINE_FORMATS`: G-code, leg
+    lengths, DXF with the obstacles of ``request``'s layout when it is valid)."""
     model, _ = validate_request(request)
     layout = model.layout if model is not None else None
-    return export(PlanResult.model_validate(result), fmt, layout=layout, source="rangeplan editor")  # type: ignore
+    return write(PlanResult.model_validate(result), fmt, layout=layout, source="rangeplan editor").decode()
 
 
 class RobotCache:
@@ -267,9 +258,10 @@ class PlanOutcome:
 
 
 def compute_plan(request: dict, robots: RobotCache) -> PlanOutcome:
-    """Validate, segment (when the request has a layout) and plan ``request`` (the one
-    JSON shape), on the pool of :func:`use_pool` or inline. Never raises for a bad request,
-    an impossible plan or too much work: those become ``PlanOutcome.error``."""
+    """Validate ``request`` (the one JSON shape), then segment (when it has a layout) and
+    plan it as an :class:`app.jobs.EditorJob` of the job service. Never raises for a bad
+    request, an impossible plan or too much work: those become ``PlanOutcome.error``.
+    (``robots``: the editor's cache, for drawing; the job loads its own.)"""
     t0 = time.perf_counter()
 
     def outcome(seg, result, error) -> PlanOutcome:
@@ -281,44 +273,11 @@ def compute_plan(request: dict, robots: RobotCache) -> PlanOutcome:
         first = planner_error(exc).to_dict()
         message = format_validation_error(exc).removeprefix(f"{first['field']}: ")
         return outcome(None, None, {**first, "message": message})
-    pool = _pool
-    if pool is not None:
-        return outcome(*_on_pool(pool, req))
-    limit = float(os.environ.get("RANGEPLAN_PLAN_TIMEOUT_S", _DEFAULT_TIMEOUT_S) or _DEFAULT_TIMEOUT_S)
-    est = estimate_work(req)
-    if est.seconds > limit:
-        return outcome(None, None, too_much_work(est, limit))
-    seg_dict = None
-    try:
-        robot = robots.get(request.get("robot", DEFAULT_ROBOT))
-        segments = req.segments
-        if req.layout is not None:
-            seg = segmentation_module().segment(req.layout, robot, req.settings)
-            seg_dict = seg.to_dict()
-            segments = seg.segments
-        return outcome(seg_dict, run_plan(req, robot=robot, segments=segments).to_json_dict(), None)
-    except PlannerError as exc:
-        return outcome(seg_dict, None, exc.to_dict())
-    except ImportError as exc:
-        return outcome(None, None, {"code": "unavailable", "message": f"segmentation is not available: {exc}",
-                                    "field": "layout"})
-
-
-def _on_pool(pool: Any, req: PlanRequest) -> tuple[dict | None, dict | None, dict | None]:
-    """(segmentation, result, error) of the editor's job on ``pool``."""
-    from app.workers import describe_failure
-
-    try:
-        out = pool.run({"kind": "editor", "request": req})
-    except Exception as exc:  # too much work, time limit, busy, a worker died
-        return None, None, describe_failure(exc, pool)[1]
-    if out[0] == "ok":
-        body = json.loads(out[1])
-        return body["segmentation"], body["result"], body["error"]
-    if out[0] == "error":
-        return None, None, out[1]
-    return None, None, {"code": "internal_error", "message": "the planner failed unexpectedly: "
-                        + str(out[1]).splitlines()[0], "field": None}
+    out = _service().run(EditorJob(req))
+    if isinstance(out, Failed):
+        return outcome(None, None, out.error.to_dict())
+    body = json.loads(out.payload or b"{}")
+    return outcome(body["segmentation"], body["result"], body["error"])
 
 
 class PlanWorker(threading.Thread):

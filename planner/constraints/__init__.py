@@ -14,13 +14,15 @@ Modules, by concept:
 ``stagewise``   the step's QP as a stage-wise problem: Riccati factorisation, dual active set
 ``compiled``    the compiled assembly (``backend: "compiled"``): one compiled call per step
 ``reference``   the numpy reference assembly (``backend: "reference"``)
-``controller``  the receding-horizon controller: composes the constraints, refines, reports
+``composed``    the constraints of a plan, composed (:class:`Constraints`)
+``controller``  the receding-horizon controller: builds the constraints, refines, reports
 ``kernels``     the compiled kernels (numba): rows, dense QP, plant step; ``stagewise_kernels``
                 and ``step_kernels``: the stage-wise solver and the fused step
 ==============  ==========================================================================
 """
 
-from .controller import CONTAIN_TOL_M, CONTAIN_TOL_RAD, ConstrainedController, Constraints, ControllerStats, Memory
+from .composed import Constraints
+from .controller import CONTAIN_TOL_M, CONTAIN_TOL_RAD, ConstrainedController, ControllerStats, Memory
 from .corridor import (
     END_TOL_M,
     END_TOL_RAD,

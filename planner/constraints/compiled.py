@@ -10,7 +10,6 @@ reference; the controller picks one of the two at construction.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,6 +17,7 @@ from ..corridor import RangeSequence
 from ..model import RobotModel
 from ..schema import Settings
 from . import kernels as ck
+from .composed import Constraints
 from .corridor import ArrivalConstraint, CorridorConstraint, EndApproachConstraint
 from .drives import DriveForceRateConstraint, LegSpeedConstraint, LegStrokeConstraint
 from .qp import DenseQP, QPSolution
@@ -25,9 +25,6 @@ from .rows import ROW_UNIT_M, Rows
 from .stagewise import DEPENDENT_TOL, SOLVE_TOL, WARM_TOL
 from .step import FullQP, StepQP
 from .step_kernels import constrained_step
-
-if TYPE_CHECKING:
-    from .controller import Constraints
 
 __all__ = ["KERNEL_SECTIONS", "MAX_ITERATIONS", "RELAX_M", "AssemblyInputs", "CompiledAssembly", "StepOutcome"]
 

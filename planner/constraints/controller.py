@@ -5,7 +5,7 @@ robot toward the middle of each range and does not keep it inside. This mode kee
 criterion and the same model (eq. 8/9, re-linearised every sample) and adds, over the whole
 horizon, hard constraints, solved as one dense quadratic program per sample with DAQP
 (:mod:`~planner.constraints.qp`). The constraints are objects composed here
-(:class:`Constraints`), each giving its rows: the corridor and the no-overshoot half-plane
+(:class:`~planner.constraints.composed.Constraints`), each giving its rows: the corridor and the no-overshoot half-plane
 (:mod:`~planner.constraints.corridor`), the drive forces, leg speeds and leg strokes
 (:mod:`~planner.constraints.drives`).
 
@@ -51,7 +51,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, NamedTuple, Protocol
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
@@ -59,17 +59,17 @@ from ..corridor import RangeSequence
 from ..corridor.geometry import corridor_gaps
 from ..errors import PlannerError
 from ..model import RobotModel
-from ..schema import DEFAULT_FORCE_RISE_S, Segment, Settings
+from ..schema import Segment, Settings
 from .compiled import CompiledAssembly
-from .corridor import MARGIN_M, MARGIN_RAD, ArrivalConstraint, CorridorConstraint, EndApproachConstraint
-from .drives import DriveForceConstraint, DriveForceRateConstraint, LegSpeedConstraint, LegStrokeConstraint
+from .composed import Constraints
+from .corridor import MARGIN_M, MARGIN_RAD
 from .qp import DenseQP, QPSolution
 from .reference import ReferenceAssembly
-from .rows import ROW_UNIT_M, RowConstraint
+from .rows import ROW_UNIT_M
 from .stagewise import SOLVED, shifted
 
 __all__ = ["CONTAIN_TOL_M", "CONTAIN_TOL_RAD", "REFINE_MAX", "REFINE_TOL_M", "REFINE_TOL_RAD", "Assembly",
-           "ConstrainedController", "Constraints", "ControllerStats", "LoopRecord", "Memory", "force_rate"]
+           "ConstrainedController", "ControllerStats", "LoopRecord", "Memory"]
 
 #: a plan is "contained" when its actual corridor violation is at most this [m] ...
 CONTAIN_TOL_M = 1e-9
@@ -82,43 +82,6 @@ CONTAIN_TOL_RAD = 1e-7
 REFINE_TOL_M = 1e-8
 REFINE_TOL_RAD = 3e-8
 REFINE_MAX = 3
-
-
-class Constraints(NamedTuple):
-    """The constrained mode's constraints, composed: the drive-force bounds and the row
-    constraints, in row order (the compiled assembly's kernel follows the same order)."""
-
-    forces: DriveForceConstraint
-    corridor: CorridorConstraint
-    approach: EndApproachConstraint
-    arrival: ArrivalConstraint
-    leg_speed: LegSpeedConstraint
-    rate: DriveForceRateConstraint
-    stroke: LegStrokeConstraint
-
-    @classmethod
-    def of(cls, model: RobotModel, seq: RangeSequence, segments: Sequence[Segment] | None,
-           st: Settings) -> Constraints:
-        """The constraints of a plan (``st``: the force-rate limit and the sample time)."""
-        return cls(DriveForceConstraint(model), CorridorConstraint(seq, segments), EndApproachConstraint(seq, segments),
-                   ArrivalConstraint(seq, segments), LegSpeedConstraint(model),
-                   DriveForceRateConstraint(model, force_rate(model, st), st.Ts), LegStrokeConstraint(model))
-
-    @property
-    def rows(self) -> tuple[RowConstraint, ...]:
-        """The constraints that give rows, in row order (hard ones first)."""
-        return self.corridor, self.approach, self.arrival, self.leg_speed, self.rate, self.stroke
-
-
-def force_rate(model: RobotModel, st: Settings) -> np.ndarray | None:
-    """The drive-force rate limit [N/s] per drive of ``settings.force_rate_n_s`` (None: no limit):
-    by default each drive's ``force_max`` per :data:`~planner.schema.limits.DEFAULT_FORCE_RISE_S`."""
-    rate = st.force_rate_n_s
-    if isinstance(rate, str):  # "off"
-        return None
-    if rate is None:
-        return np.asarray(model.force_max, float) / DEFAULT_FORCE_RISE_S
-    return np.broadcast_to(np.asarray(rate, float), (model.n_legs,)).copy()
 
 
 class Assembly(Protocol):

@@ -29,34 +29,15 @@ import math
 import numpy as np
 from numba import njit
 
-from ..model.kernels import rk4, state_derivative
+from ..model.kernels import leg_jacobians, rk4, state_derivative
 
 __all__ = ["KIND_CORRIDOR", "KIND_RATE", "KIND_SPEED", "KIND_STROKE", "approach_count", "approach_fill",
            "arrival_count", "arrival_fill", "assemble", "corridor_count", "corridor_fill", "finish", "first_legs",
-           "leg_rows", "offset", "one_step_error", "plant_step", "rate_fill", "speed_fill", "stroke_fill"]
+           "offset", "one_step_error", "plant_step", "rate_fill", "speed_fill", "stroke_fill"]
 
 #: kinds of rows (the slack variable that softens each in the slack problem; rate rows are
 #: never softened); the values of :class:`planner.constraints.rows.RowKind`
 KIND_CORRIDOR, KIND_STROKE, KIND_SPEED, KIND_RATE = 0, 1, 2, 3
-
-
-@njit(cache=True)
-def leg_rows(r0, base, poses, J, L):
-    """Leg Jacobians ``J_l`` (k, n, 3) and leg lengths (k, n) [m] at the poses (k, 3), into
-    ``J`` and ``L``: the compiled twin of :func:`planner.model.kinematics.leg_jacobians` and
-    :func:`~planner.model.kinematics.leg_lengths` (``r0``: :attr:`RobotModel.r0`)."""
-    n = r0.shape[0]
-    for k in range(poses.shape[0]):
-        c, s = math.cos(poses[k, 2]), math.sin(poses[k, 2])
-        for i in range(n):
-            rx = c * r0[i, 0] - s * r0[i, 1]
-            ry = s * r0[i, 0] + c * r0[i, 1]
-            dx = poses[k, 0] + rx - base[i, 0]
-            dy = poses[k, 1] + ry - base[i, 1]
-            li = math.hypot(dx, dy)
-            ex, ey = dx / li, dy / li
-            J[k, i, 0], J[k, i, 1], J[k, i, 2] = ex, ey, rx * ey - ry * ex
-            L[k, i] = li
 
 
 # ---- the rows of each constraint (compiled twins of the constraint objects' ``rows``) -------
@@ -262,7 +243,7 @@ def assemble(k, N, x, y_prev, u_prev, unit, K, lower, upper, qa, qb, r0, base,
             y_nom[j, a] = y_prev[j, a] if y_prev.shape[0] > 0 else x[a]
     J = np.empty((N, m, 3))
     L = np.empty((N, m))
-    leg_rows(r0, base, y_nom, J, L)
+    leg_jacobians(r0, base, y_nom, J, L)
     nrow = (corridor_count(idx, has_hp, hp_ptr) + approach_count(idx, app_on, app_from) + arrival_count(idx, arr_from)
             + (3 if rate_on else 2) * N * m)
     col = np.full((nrow, 3), -1, np.int64)
@@ -293,7 +274,7 @@ def first_legs(x1, r0, base, lmin, lmax, unit, speed0, stroke0, val, b0l, b0u):
         y1[0, a] = x1[a]
     J = np.empty((1, m, 3))
     L = np.empty((1, m))
-    leg_rows(r0, base, y1, J, L)
+    leg_jacobians(r0, base, y1, J, L)
     for i in range(m):
         for a in range(3):
             val[speed0 + i, a] = J[0, i, a] / unit

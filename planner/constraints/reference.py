@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -16,11 +15,9 @@ from ..corridor import RangeSequence
 from ..model import RobotModel, kinematics
 from ..model.plant import rk4_sample
 from ..schema import Settings
+from .composed import Constraints
 from .qp import DenseQP, QPSolution
 from .rows import Rows, StepContext
-
-if TYPE_CHECKING:
-    from .controller import Constraints
 
 __all__ = ["ReferenceAssembly", "ReferenceQP"]
 

@@ -1,7 +1,11 @@
-"""The machine output formats of a plan, by name, with their media type and file extension."""
+"""The machine output formats of a plan: the one registry, by name, of each format's writer,
+media type, file extension(s) and description. Everything that offers an export (the CLI,
+the HTTP API's ``?format=``, the typed client, the editor's download buttons) reads this
+table through :mod:`app.formats`; a new format is its writer module plus one entry here."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
@@ -20,16 +24,29 @@ class _Format:
     media_type: str
     extension: str
     what: str
+    #: ``(result, layout, forces, source) -> text``
+    write: Callable[[PlanResult, Layout | None, bool, str | None], str]
+    #: file-name endings that name this format (the first is :attr:`extension`)
+    suffixes: tuple[str, ...]
+    #: a short title (the editor's download button) and the editor's download file name
+    title: str
+    filename: str
 
 
-#: name -> media type, file extension, description
+#: name -> writer, media type, file extension, description
 EXPORT_FORMATS: dict[str, _Format] = {
     "gcode": _Format("text/plain; charset=utf-8", ".ngc", "LinuxCNC G-code: X Y in mm, C = psi in degrees, G93 "
-                     "inverse-time feed, one G1 per sample time"),
+                     "inverse-time feed, one G1 per sample time",
+                     lambda r, layout, forces, source: to_gcode(r, source), (".ngc", ".nc", ".gcode"),
+                     "G-code (LinuxCNC)", "trajectory.ngc"),
     "joints": _Format("text/plain; charset=utf-8", ".txt", "leg lengths per sample in mm (with forces in N), "
-                      "whitespace-separated, for halstreamer"),
+                      "whitespace-separated, for halstreamer",
+                      lambda r, layout, forces, source: to_joints(r, forces, source), (".txt",),
+                      "leg lengths (halstreamer)", "legs.txt"),
     "dxf": _Format("image/vnd.dxf", ".dxf", "DXF in mm: the path on layer PATH, corridor cells on CORRIDOR, "
-                   "obstacles on OBSTACLES"),
+                   "obstacles on OBSTACLES",
+                   lambda r, layout, forces, source: to_dxf(r, layout), (".dxf",),
+                   "DXF (path, corridor, obstacles)", "plan.dxf"),
 }
 
 
@@ -37,12 +54,9 @@ def export_format_for(path: str) -> ExportFormat | None:
     """The export format a file name's extension names (``.ngc``/``.nc``/``.gcode``,
     ``.txt``, ``.dxf``), or None."""
     name = path.lower()
-    if name.endswith((".ngc", ".nc", ".gcode")):
-        return "gcode"
-    if name.endswith(".txt"):
-        return "joints"
-    if name.endswith(".dxf"):
-        return "dxf"
+    for fmt, spec in EXPORT_FORMATS.items():
+        if name.endswith(spec.suffixes):
+            return fmt  # type: ignore[return-value]
     return None
 
 
@@ -51,10 +65,7 @@ def export(result: PlanResult, format: ExportFormat, *, layout: Layout | None = 
     """The plan in ``format`` as text. ``layout`` adds obstacles and bounds to a DXF,
     ``forces`` drive-force columns to the joint stream, ``source`` names the plan's origin
     in the G-code and joint headers."""
-    if format == "gcode":
-        return to_gcode(result, source)
-    if format == "joints":
-        return to_joints(result, forces, source)
-    if format == "dxf":
-        return to_dxf(result, layout)
-    raise ValueError(f"unknown export format {format!r}; one of {', '.join(EXPORT_FORMATS)}")
+    spec = EXPORT_FORMATS.get(format)
+    if spec is None:
+        raise ValueError(f"unknown export format {format!r}; one of {', '.join(EXPORT_FORMATS)}")
+    return spec.write(result, layout, forces, source)

@@ -9,7 +9,6 @@ The hot functions have compiled twins in :mod:`planner.model.kernels` (tested eq
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 from typing import Any, cast
 
 import numpy as np
@@ -97,63 +96,33 @@ def forces_g(model: RobotModel, s: np.ndarray, s_dot: np.ndarray) -> np.ndarray:
     return g
 
 
-@lru_cache(maxsize=64)
-def _constants(model: RobotModel) -> dict:
-    """Complex-number constants of the numpy dynamics (planar vectors as x + iy)."""
-    n = model.n_legs
-    return {
-        "r0": model.r0[:, 0] + 1j * model.r0[:, 1],
-        "base": model.base[:, 0] + 1j * model.base[:, 1],
-        "tool": complex(model.tool[0], model.tool[1]),
-        "w_r": np.concatenate((model.rod_mass, np.zeros(n))),  # weights of J_l rows in M_r
-        "swap": np.concatenate((np.arange(n, 2 * n), np.arange(n))),
-    }
-
-
 def _terms(model: RobotModel, y, v):
-    """Shared pieces of eqs. (4)-(8) at state (y, v), all legs at once.
+    """Shared pieces of eqs. (4)-(8) at state (y, v), all legs at once, from the leg rows of
+    ``R`` (:func:`~planner.model.kinematics.leg_rows`).
 
     Returns ``W = [J_l; J_phi]`` (2n, 3) (the leg rows of ``R``), ``M_r = R^T M R`` (3, 3)
     and per-leg scalars: leg length ``l``, ``r x e``, ``r . e``, ``l_dot``, ``phi_dot``,
-    the leg inertia about its base pivot ``J_leg``, and the platform centre ``rc``
-    relative to the tool point (complex).
+    the leg inertia about its base pivot ``J_leg``, and the platform centre ``rc`` (2,)
+    relative to the tool point.
     """
-    k = _constants(model)
-    n = model.n_legs
-    z = complex(math.cos(y[2]), math.sin(y[2]))
-    r = k["r0"] * z  # pivots relative to the tool point, world frame
-    d = r + complex(y[0], y[1]) - k["base"]
-    l = np.abs(d)
-    e = d / l
-    re = r.conjugate() * e  # real: r . e, imag: r x e
-    ev = e.conjugate() * complex(v[0], v[1])  # real: e . v, imag: n . v
-    cross, dot = re.imag, re.real
+    l, e, r, rc, J_l, J_phi = leg_rows(model, y)
+    cross = J_l[:, 2]
+    dot = np.einsum("ij,ij->i", r, e)
     w = v[2]
-    l_dot = ev.real + cross * w
-    phi_dot = (ev.imag + dot * w) / l
-    el = e / l
-    W = np.empty((2 * n, 3))  # [J_l; J_phi]: rows (e, r x e) and (n, r . e) / l
-    W[:n, 0] = e.real
-    W[:n, 1] = e.imag
-    W[:n, 2] = cross
-    W[n:, 0] = -el.imag
-    W[n:, 1] = el.real
-    W[n:, 2] = dot / l
+    l_dot = J_l @ v
+    phi_dot = (e[:, 0] * v[1] - e[:, 1] * v[0] + dot * w) / l
+    W = np.vstack((J_l, J_phi))
     arm = l - model.rod_com
     J_leg = model.leg_inertia_const + model.rod_mass * arm * arm
-    wts = k["w_r"].copy()
-    wts[n:] = J_leg
-    M_r = (W.T * wts) @ W
+    M_r = (W.T * np.concatenate((model.rod_mass, J_leg))) @ W
     mp = model.platform_mass
-    rc = -k["tool"] * z
     M_r[0, 0] += mp
     M_r[1, 1] += mp
-    M_r[2, 2] += mp * abs(rc) ** 2 + model.platform_inertia
-    if rc != 0:
-        M_r[0, 2] -= mp * rc.imag
-        M_r[2, 0] -= mp * rc.imag
-        M_r[1, 2] += mp * rc.real
-        M_r[2, 1] += mp * rc.real
+    M_r[2, 2] += mp * (rc[0] * rc[0] + rc[1] * rc[1]) + model.platform_inertia
+    M_r[0, 2] -= mp * rc[1]
+    M_r[2, 0] -= mp * rc[1]
+    M_r[1, 2] += mp * rc[0]
+    M_r[2, 1] += mp * rc[0]
     return W, M_r, l, cross, dot, l_dot, phi_dot, J_leg, rc
 
 
@@ -181,9 +150,7 @@ def _h_r(model: RobotModel, W, l, cross, dot, l_dot, phi_dot, J_leg, rc, w, u=No
         h_l = h_l + u
     h_phi = (2.0 * (J_leg / l - m_r * (l - model.rod_com)) * l_dot * phi_dot - J_leg * cross * (w * w) / l)
     h_r = W.T @ np.concatenate((h_l, h_phi))
-    if rc != 0:
-        h_r[0] += model.platform_mass * w * w * rc.real
-        h_r[1] += model.platform_mass * w * w * rc.imag
+    h_r[:2] += model.platform_mass * w * w * rc
     return h_r
 
 
@@ -213,15 +180,13 @@ def factorised_blocks(model: RobotModel, x) -> tuple[np.ndarray, np.ndarray]:
     # K(v) with K v = h: half-gradients of the quadratic terms, gradients of the linear ones
     a_sw = np.concatenate((-m_r * model.rod_com * phi_dot, c1 * phi_dot))  # times the other row block
     a_own = np.concatenate((-model.friction, c1 * l_dot))  # times the own row block
-    K = a_sw[:, None] * W[_constants(model)["swap"]] + a_own[:, None] * W
+    K = a_sw[:, None] * np.roll(W, n, axis=0) + a_own[:, None] * W
     K[:n, 2] += m_r * dot * w
     K[n:, 2] -= J_leg * cross * w / l
     rhs = np.empty((3, 3 + n))
     rhs[:, :3] = W.T @ K
     rhs[:, 3:] = W[:n].T
-    if rc != 0:
-        rhs[0, 2] += model.platform_mass * w * rc.real
-        rhs[1, 2] += model.platform_mass * w * rc.imag
+    rhs[:2, 2] += model.platform_mass * w * rc
     sol = _solve(M_r, rhs)
     return sol[:, :3], sol[:, 3:]
 

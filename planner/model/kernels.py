@@ -1,7 +1,8 @@
 """Compiled twins (numba) of the model's hot functions: dynamics (eqs. 4-8,
 :mod:`planner.model.dynamics`), zero-order hold (eq. 9, :mod:`planner.model.discretisation`),
 the RK4 plant (:func:`planner.model.plant.rk4_sample`) and the singularity measure
-(:func:`planner.model.kinematics.singularity_measure`).
+(:func:`planner.model.kinematics.singularity_measure`), and the leg geometry they share
+(:func:`leg`, the twin of :func:`planner.model.kinematics.leg_vectors`).
 
 Why compiled: one receding-horizon step works on 3x3 to 6x6 matrices. In numpy each of the
 few hundred small operations of a step costs a call (~1 us) whatever its size, so a step
@@ -44,6 +45,38 @@ def pack(robot) -> np.ndarray:
 
 
 @njit(cache=True)
+def leg(c, s, r0x, r0y, bx, by, px, py):
+    """One leg at a pose (the compiled twin of :func:`planner.model.kinematics.leg_vectors`,
+    the loop closure of eq. 2 solved for the leg, and of the leg's entries of ``R``, eq. 4):
+    the tool point ``(px, py)`` and ``c, s`` = cos, sin of the platform angle, the leg's pivot
+    relative to the tool point, platform frame, ``(r0x, r0y)`` and its base pivot ``(bx, by)``
+    [m] -> ``(rx, ry, l, ex, ey, r x e, r . e)``: the pivot relative to the tool point, world
+    frame [m], the leg length [m], its unit direction and the two products [m]. The one
+    compiled statement of the leg geometry: :func:`leg_jacobians` and the dynamics use it."""
+    rx = r0x * c - r0y * s
+    ry = r0x * s + r0y * c
+    dx = px + rx - bx
+    dy = py + ry - by
+    length = math.hypot(dx, dy)
+    ex, ey = dx / length, dy / length
+    return rx, ry, length, ex, ey, rx * ey - ry * ex, rx * ex + ry * ey
+
+
+@njit(cache=True)
+def leg_jacobians(r0, base, poses, J, L):
+    """Leg Jacobians ``J_l`` (k, n, 3) and leg lengths (k, n) [m] at the poses (k, 3), into
+    ``J`` and ``L`` (``r0``: :attr:`RobotModel.r0`, ``base``: :attr:`RobotModel.base`): the
+    compiled twin of :func:`planner.model.kinematics.leg_jacobians` and
+    :func:`~planner.model.kinematics.leg_lengths` (the leg rows of ``R``, eq. 4)."""
+    for k in range(poses.shape[0]):
+        c, s = math.cos(poses[k, 2]), math.sin(poses[k, 2])
+        for i in range(r0.shape[0]):
+            _, _, li, ex, ey, cr, _ = leg(c, s, r0[i, 0], r0[i, 1], base[i, 0], base[i, 1], poses[k, 0], poses[k, 1])
+            J[k, i, 0], J[k, i, 1], J[k, i, 2] = ex, ey, cr
+            L[k, i] = li
+
+
+@njit(cache=True)
 def _terms(packed, n, x, W, M):
     """The shared pieces of eqs. (4)-(8) at state ``x = (y, y_dot)`` (as the numpy
     ``planner.model.dynamics._terms``): fills ``W = [J_l; J_phi]`` (2n, 3) and ``M = R^T M R`` (3, 3) and
@@ -63,15 +96,8 @@ def _terms(packed, n, x, W, M):
     o = _NROWS * n
     mp, ip, tx, ty = packed[o], packed[o + 1], packed[o + 2], packed[o + 3]
     for i in range(n):
-        r0x, r0y = packed[_R0X * n + i], packed[_R0Y * n + i]
-        rx = r0x * c - r0y * s
-        ry = r0x * s + r0y * c
-        dx = rx + x[0] - packed[_BX * n + i]
-        dy = ry + x[1] - packed[_BY * n + i]
-        li = math.hypot(dx, dy)
-        ex, ey = dx / li, dy / li
-        cr = rx * ey - ry * ex
-        dt = rx * ex + ry * ey
+        _, _, li, ex, ey, cr, dt = leg(c, s, packed[_R0X * n + i], packed[_R0Y * n + i], packed[_BX * n + i],
+                                       packed[_BY * n + i], x[0], x[1])
         ld = ex * x[3] + ey * x[4] + cr * w
         pd = (ex * x[4] - ey * x[3] + dt * w) / li
         arm = li - packed[_ACOM * n + i]

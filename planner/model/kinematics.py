@@ -29,7 +29,10 @@ GRID_BLOCK = 4096
 
 def leg_vectors(model: RobotModel, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """For poses (k, 3): the platform pivots relative to the tool point, world frame,
-    ``(rx, ry)``, and the leg vectors base pivot -> platform pivot ``(dx, dy)``, each (k, n) [m]."""
+    ``(rx, ry)``, and the leg vectors base pivot -> platform pivot ``(dx, dy)``, each (k, n) [m]:
+    the loop closure (eq. 2) solved for the legs, ``l_i e(phi_i) = y + Rot(psi) r0_i - A_i``.
+    The one numpy statement of the leg geometry (every function here builds on it); its
+    compiled twin is :func:`planner.model.kernels.leg` (``tests/test_kernels.py``)."""
     poses = np.atleast_2d(poses)
     c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
     r0 = model.r0
@@ -55,15 +58,15 @@ def leg_jacobians(model: RobotModel, poses: np.ndarray) -> np.ndarray:
 
 
 def legs(model: RobotModel, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Inverse kinematics at one pose ``y``: ``(l, e, r, rc)``: leg lengths (n,) [m], unit leg
-    directions (n, 2), pivots relative to the tool point, world frame (n, 2) [m], and the
-    platform centre relative to the tool point (2,) [m]."""
+    """Inverse kinematics at one pose ``y`` (:func:`leg_vectors`): ``(l, e, r, rc)``: leg lengths
+    (n,) [m], unit leg directions (n, 2), pivots relative to the tool point, world frame (n, 2)
+    [m], and the platform centre relative to the tool point ``-Rot(psi) tool`` (2,) [m]."""
+    rx, ry, dx, dy = leg_vectors(model, y)
+    r, d = np.column_stack((rx[0], ry[0])), np.column_stack((dx[0], dy[0]))
+    length = np.hypot(d[:, 0], d[:, 1])
     c, s = math.cos(y[2]), math.sin(y[2])
-    rot = np.array([[c, -s], [s, c]])
-    r = model.r0 @ rot.T
-    d = y[:2] + r - model.base
-    length = np.sqrt(np.einsum("ij,ij->i", d, d))
-    return length, d / length[:, None], r, -(rot @ model.tool)
+    tx, ty = model.tool
+    return length, d / length[:, None], r, np.array([-(c * tx - s * ty), -(s * tx + c * ty)])
 
 
 def leg_rows(model: RobotModel, y: np.ndarray):

@@ -1,0 +1,96 @@
+"""Planning: ``POST /v1/plan``, ``POST /v1/import``, ``POST /v1/segment`` and
+``GET /v1/plans/{id}`` (a stored plan again, in any output format: an export job on a
+worker that reads the stored plan and writes a file the server streams)."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Request
+from fastapi.responses import Response
+from pydantic import ValidationError
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from app.errors import error_response, errors_doc
+from app.formats import PlanFormat
+from app.http_exchange import import_openapi, import_options, plan_content, read_drawing
+from app.jobs import ExportJob, ImportJob, PlanJob, SegmentJob, spool_dir
+from app.routers.deps import Forces, Format, plan_format, store, submit
+from planner.schema import ImportOptions, ImportResult, PlanRequest, PlanResult, SegmentationResult, planner_error
+
+__all__ = ["PLAN_RESPONSES", "plan_response", "router"]
+
+router = APIRouter(tags=["planning"])
+
+_PLAN_HEADERS = {"Location": {"description": "GET this to fetch the result again (absent if not stored)",
+                              "schema": {"type": "string"}},
+                 "X-Plan-Id": {"description": "The plan's id (absent if not stored)", "schema": {"type": "string"}}}
+PLAN_RESPONSES = {200: {"model": PlanResult, "description": "The planned trajectory (JSON, or CSV with a "
+                        "header naming each column with its unit)",
+                        "content": plan_content(), "headers": _PLAN_HEADERS,
+                        "links": {"GetPlan": {"operationId": "get_plan",
+                                              "parameters": {"plan_id": "$response.header.X-Plan-Id"}}}},
+                  **errors_doc(413, 422, 503)}
+
+
+async def plan_response(request: Request, req: PlanRequest, fmt: str | None, corridor_id: str | None = None,
+                        forces: bool = False) -> Response:
+    """Plan ``req`` on a worker (stored, linked to ``corridor_id``) and answer in ``fmt``."""
+    fmt = plan_format(request, fmt)
+    job = PlanJob(req, fmt, forces, source=f"corridor {corridor_id}" if corridor_id else "POST /v1/plan",
+                  store=str(store(request).path), corridor_id=corridor_id)
+    return await submit(request, job, fmt)
+
+
+@router.post("/v1/plan", response_class=Response, responses=PLAN_RESPONSES)
+async def plan(body: PlanRequest, request: Request, format: PlanFormat | None = Format, forces: bool = Forces):
+    """Plan a trajectory for a corridor (``segments``), a reference or a ``layout``.
+    The result is stored: fetch it again at ``GET /v1/plans/{plan_id}``."""
+    return await plan_response(request, body, format, forces=forces)
+
+
+@router.post("/v1/import", response_class=Response, openapi_extra=import_openapi(),
+             responses={200: {"model": ImportResult, "description": "The drawing as a layout (m, rad) and a "
+                              "report of the shapes used, holes, pieces left open and the units applied"},
+                        **errors_doc(413, 415, 422, 503)})
+async def import_drawing(request: Request):
+    """Read a DXF or SVG drawing (the body, or a multipart file upload): its closed shapes
+    become a layout's obstacles, placed by the query parameters (units, layers, offset [m],
+    rotation [rad], scale, tolerances [m], margin [m], bounds_layer, start, end)."""
+    try:
+        options = ImportOptions.model_validate(import_options(request))
+    except ValidationError as exc:
+        raise planner_error(exc) from None
+    data, filename, content_type = await read_drawing(request)
+    return await submit(request, ImportJob(data, options, filename, content_type))
+
+
+@router.post("/v1/segment", response_class=Response,
+             responses={200: {"model": SegmentationResult, "description": "Cells and corridor"},
+                        **errors_doc(413, 422, 503)})
+async def segment(body: PlanRequest, request: Request):
+    """Segment a ``layout`` (workspace with obstacles) into cells and a corridor, without planning."""
+    if body.layout is None:
+        return error_response(422, "invalid_input", "a segmentation request needs a layout", "layout")
+    return await submit(request, SegmentJob(body))
+
+
+@router.get("/v1/plans/{plan_id}", response_class=Response, operation_id="get_plan", responses={
+    200: {k: v for k, v in PLAN_RESPONSES[200].items() if k not in ("links", "headers")}, **errors_doc(404)})
+async def get_plan(plan_id: str, request: Request, format: PlanFormat | None = Format, forces: bool = Forces):
+    """A stored plan result (the newest plans are kept; see RANGEPLAN_MAX_PLANS)."""
+    st = store(request)
+    fmt = plan_format(request, format)
+    if fmt == "json":
+        text = await _in_thread(st.get_plan_json, plan_id)
+        if text is None:
+            raise StarletteHTTPException(404, f"no plan with id {plan_id!r}")
+        return Response(text, media_type="application/json")
+    if not await _in_thread(st.has_plan, plan_id):
+        raise StarletteHTTPException(404, f"no plan with id {plan_id!r}")
+    job = ExportJob(plan_id, str(st.path), fmt, forces, spool_dir(st.path))
+    return await submit(request, job, fmt, name=plan_id)
+
+
+async def _in_thread(fn, *args):
+    import asyncio
+
+    return await asyncio.get_running_loop().run_in_executor(None, fn, *args)

@@ -1,0 +1,52 @@
+"""Liveness and readiness: ``GET /health``, ``GET /ready``."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import APIRouter, Request
+from fastapi.responses import JSONResponse
+from pydantic import BaseModel, Field
+
+from app.routers.deps import service
+
+__all__ = ["VERSION", "router"]
+
+VERSION = "0.1.0"
+
+router = APIRouter(tags=["service"])
+
+
+class HealthModel(BaseModel):
+    status: str = Field(description="'ok': the server process answers (see /ready for planning)")
+    version: str = Field(description="rangeplan version")
+    pool: dict[str, Any] = Field(description="Planning pool: mode, workers, jobs in flight, time limit (s), memory "
+                                 "limit per worker (MiB)")
+    editor_port: int | None = Field(description="TCP port of the browser editor, if it runs")
+
+
+class ReadyModel(BaseModel):
+    status: str = Field(description="'ready', 'starting' (workers still loading the planner) or 'failed'")
+    workers_ready: int = Field(description="Planning workers that have loaded the kernels (count)")
+    workers: int = Field(description="Planning workers (count)")
+    failures: list[str] = Field(description="Why workers cannot plan, if any")
+
+
+@router.get("/health", response_model=HealthModel)
+async def health(request: Request):
+    """Liveness: answers immediately, also while plans run (no data; for planning see /ready)."""
+    svc = getattr(request.app.state, "service", None)
+    return {"status": "ok", "version": VERSION, "pool": svc.stats() if svc else {},
+            "editor_port": request.app.state.editor_port}
+
+
+@router.get("/ready", response_model=ReadyModel,
+            responses={503: {"model": ReadyModel, "description": "Not ready: the workers are loading the planner "
+                             "or cannot plan"}})
+async def ready(request: Request):
+    """Readiness: 200 once at least one worker has loaded the planner's kernels and none
+    has failed to; 503 before (or when they cannot plan). The container's health check."""
+    state = service(request).readiness()
+    body = {"status": "ready" if state["ready"] else "failed" if state["failures"] else "starting",
+            "workers_ready": state["workers_ready"], "workers": state["workers"], "failures": state["failures"]}
+    return JSONResponse(body, status_code=200 if state["ready"] else 503)

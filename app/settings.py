@@ -1,0 +1,126 @@
+"""The service's one settings object: every ``RANGEPLAN_*`` environment variable, its CLI
+flag where there is one, its default and its meaning, in one table (:class:`Settings`).
+
+Read with :func:`settings` (the environment at the time of the call; a value that does not
+parse is a :class:`SettingsError` naming the variable and the cause, never a silent
+default). The README's configuration table is :func:`settings_table` (a test keeps them
+equal; ``python -m app.settings`` prints it). No web framework, planner or editor import.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import Field, JsonValue, ValidationError
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+__all__ = ["Settings", "SettingsError", "settings", "settings_table"]
+
+MiB = 1024 * 1024
+
+
+def _cpus() -> int:
+    return os.cpu_count() or 1
+
+
+def _half_cpus() -> int:
+    return max(1, _cpus() // 2)
+
+
+def _f(default: Any = None, description: str = "", *, cli: str | None = None, default_text: str | None = None,
+       factory=None, **kw: Any) -> Any:
+    """A setting: its default (or ``factory``), description, CLI flag and the default as the
+    table shows it."""
+    extra: dict[str, JsonValue] = {"cli": cli, "default_text": default_text}
+    if factory is not None:
+        return Field(default_factory=factory, description=description, json_schema_extra=extra, **kw)
+    return Field(default, description=description, json_schema_extra=extra, **kw)
+
+
+class Settings(BaseSettings):
+    """Configuration of ``rangeplan serve``, the HTTP API, its workers, storage, batches and
+    the editor: each field is the environment variable ``RANGEPLAN_<FIELD>``."""
+
+    model_config = SettingsConfigDict(env_prefix="RANGEPLAN_", extra="ignore", frozen=True,
+                                      env_ignore_empty=True)
+
+    # -- serving
+    host: str = _f("127.0.0.1", "Address the API binds (a non-loopback address needs a token)", cli="serve --host")
+    port: int = _f(8000, "TCP port of the API", cli="serve --port", ge=0, le=65535)
+    editor_port: int = _f(8080, "TCP port of the browser editor", cli="serve --editor-port", ge=0, le=65535)
+    log_level: str = _f("info", "uvicorn's log level (critical, error, warning, info, debug, trace)")
+    access_log: bool = _f(True, "uvicorn's access log (0: off)")
+    static_dir: Path | None = _f(None, "Landing page directory (index.html, examples/)",
+                                 default_text="the repository's static/")
+    # -- planning
+    workers: int = _f(None, "Planning worker processes", factory=_cpus, default_text="CPU count", ge=1)
+    executor: Literal["process", "thread"] = _f("process", "Where plans run: worker processes, or threads of the "
+                                                "server process (no parallelism, no stopping; for measurements)")
+    plan_timeout_s: float = _f(30.0, "Compute limit of one plan, import or batch item [s]; work estimated above it is "
+                               "refused before it starts", cli="batch --timeout (default there: none)", gt=0)
+    export_timeout_s: float = _f(120.0, "Time limit of writing a stored plan in an export format (GET /v1/plans/{id}?"
+                                 "format=) [s]; at least RANGEPLAN_PLAN_TIMEOUT_S", gt=0)
+    worker_memory_mb: int = _f(2048, "Address-space limit of each planning process [MiB] (0: none)", ge=0)
+    max_queue: int = _f(64, "Jobs waiting for a worker beyond which the API answers 503 busy", ge=0)
+    max_body_bytes: int = _f(2 * MiB, "Largest request body [bytes] (413 above)", default_text="2 MiB", gt=0)
+    # -- storage
+    data_dir: Path | None = _f(None, "Directory of the SQLite store",
+                               default_text="$XDG_DATA_HOME/rangeplan or ~/.local/share/rangeplan")
+    max_plans: int = _f(1000, "Stored plans kept (the oldest are dropped)", ge=1)
+    max_corridor_bytes: int = _f(1 * MiB, "Largest corridor request JSON [bytes] (413 above)", default_text="1 MiB",
+                                 gt=0)
+    max_plan_bytes: int = _f(64 * MiB, "Largest plan result stored [bytes] (larger ones are answered, not stored)",
+                             default_text="64 MiB", gt=0)
+    max_store_bytes: int = _f(1024 * MiB, "Corridors and plans together [bytes] (507 when corridors fill it)",
+                              default_text="1 GiB", gt=0)
+    # -- access
+    api_token: str | None = _f(None, "Bearer token every request needs (none: no token)")
+    api_token_file: Path | None = _f(None, "File holding the token (instead of RANGEPLAN_API_TOKEN)")
+    allowed_hosts: str = _f("", "Host names the server answers to besides loopback (comma-separated)")
+    cors_origins: str = _f("", "Origins allowed cross-origin requests (comma-separated scheme://host[:port], or *)")
+    # -- batches
+    batch_workers: int = _f(None, "Worker processes of the service's batches", factory=_half_cpus,
+                            default_text="half the CPU count", ge=1)
+    max_batches: int = _f(100, "Finished batches kept", ge=1)
+    max_batch_items: int = _f(10_000, "Items of one batch", ge=1)
+    max_batch_queue: int = _f(100_000, "Items of all queued batches", ge=1)
+    dask_scheduler: str | None = _f(None, "Dask scheduler address (tcp://host:8786): batches run on that cluster",
+                                    cli="batch --scheduler")
+    dask_malloc: str = _f("relax", "glibc malloc tuning of Dask workers (relax | keep)")
+    # -- kernels
+    kernel_seed: Path | None = _f(None, "Compiled-kernel cache copied into NUMBA_CACHE_DIR before the planner loads")
+
+
+class SettingsError(ValueError):
+    """An environment variable whose value does not parse (its name and the cause)."""
+
+
+def settings() -> Settings:
+    """The settings of the current environment; raises :class:`SettingsError` for a value
+    that does not parse."""
+    try:
+        return Settings()
+    except ValidationError as exc:
+        e = exc.errors()[0]
+        name = f"RANGEPLAN_{str(e['loc'][0]).upper()}" if e.get("loc") else "RANGEPLAN_*"
+        raise SettingsError(f"{name}: {e['msg']} (got {e.get('input')!r})") from None
+
+
+def settings_table() -> str:
+    """The configuration table of the README (Markdown): variable, CLI flag, default, meaning."""
+    rows = ["| environment | CLI flag | default | meaning |", "|---|---|---|---|"]
+    for name, f in Settings.model_fields.items():
+        extra: dict[str, Any] = f.json_schema_extra if isinstance(f.json_schema_extra, dict) else {}
+        default = extra.get("default_text")
+        if default is None:
+            d = f.default
+            default = "none" if d is None else ("1" if d is True else "0" if d is False else str(d))
+        cli = f"`{extra['cli']}`" if extra.get("cli") else ""
+        rows.append(f"| `RANGEPLAN_{name.upper()}` | {cli} | {default} | {f.description} |")
+    return "\n".join(rows) + "\n"
+
+
+if __name__ == "__main__":
+    print(settings_table(), end="")
