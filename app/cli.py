@@ -238,7 +238,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "are free moves; plunges, retracts and G4 at rest. One trajectory for the whole program.")
     pc.add_argument("program", help="G-code file (RS274NGC; '-' for standard input)")
     pc.add_argument("-o", "--output", help="output file: .json (default), .csv, .ngc, .txt or .dxf")
-    pc.add_argument("--format", choices=OUTPUT_FORMATS, help="output format (default: from the extension)")
+    pc.add_argument("--format", type=_format_name, metavar="FORMAT", help="output format (default: from the extension)")
     pc.add_argument("--origin", metavar="X,Y", help="program zero in the robot frame, m (default 0,0); "
                     "negative: --origin=-0.04,-0.015")
     pc.add_argument("--tolerance", type=float, metavar="M", help="largest distance from the programmed path, m "

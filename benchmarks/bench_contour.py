@@ -33,13 +33,13 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from planner.contour import plan_contour  # noqa: E402
-from planner.exchange import read_gcode  # noqa: E402
-from planner.model import load_robot  # noqa: E402
-from planner.model.dynamics import generalised_forces  # noqa: E402
-from planner.schema import PathElement  # noqa: E402
+from planner.contour import plan_contour
+from planner.exchange import read_gcode
+from planner.model import load_robot
+from planner.model.dynamics import generalised_forces
+from planner.schema import PathElement
 
 ORIGIN = [-0.013, -0.0075]
 TOL = 2e-5
