@@ -164,3 +164,12 @@ def test_program_tolerance_is_used_and_a_too_small_one_refused():
     with pytest.raises(PlannerError) as err:
         plan_contour({"program": SMALL.replace("P0.05", "P0.001"), "origin": ORIGIN})
     assert err.value.field == "tolerance_m" and "G64 P" in err.value.message
+
+
+def test_bad_settings_name_the_field():
+    with pytest.raises(PlannerError) as err:
+        plan_contour({"program": SMALL, "origin": ORIGIN, "settings": {"Ts": -1}})
+    assert err.value.field == "settings.Ts"
+    with pytest.raises(PlannerError) as err:
+        plan_contour({"program": SMALL, "origin": ORIGIN, "settings": {"bogus": 1}})
+    assert err.value.field is not None and err.value.field.startswith("settings")

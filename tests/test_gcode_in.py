@@ -197,3 +197,10 @@ def test_program_without_a_cut_and_too_large_program():
 def test_arc_radius_mismatch_is_refused():
     with pytest.raises(PlannerError, match="line 3: the radius to the end"):
         read_gcode("G21 F100\nG1 Z-1\nG2 X10 Y0 I5.1 J0\nM2\n")
+
+
+@pytest.mark.parametrize("line", ["G1 X" + "9" * 400, "G1 X1e5", "S" + "1" * 40])
+def test_numbers_out_of_range_or_not_numbers_are_refused(line):
+    with pytest.raises(PlannerError) as err:
+        read_gcode(f"G21 F100\nG1 Z-1\n{line}\nM2\n")
+    assert "line 3" in err.value.message

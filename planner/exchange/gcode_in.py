@@ -37,6 +37,8 @@ from ..schema.contour import (
 __all__ = ["read_gcode"]
 
 _UNIT = {"mm": 1e-3, "inch": 0.0254}
+#: largest magnitude of a word's number (a length of 1 km in mm, a feed, a spindle speed)
+MAX_WORD_VALUE = 1e6
 #: largest difference between an arc's start and end radius (as LinuxCNC: 0.002 mm) [m]
 ARC_RADIUS_TOL_M = 2e-6
 _WORD = re.compile(r"([A-Z])\s*([-+]?\s*(?:\d+\.?\d*|\.\d+))")
@@ -126,6 +128,9 @@ def read_gcode(text: str, *, cut_below: float = 0.0, z_rapid_m_s: float = 0.05) 
         found = [(m.group(1), float(m.group(2).replace(" ", ""))) for m in _WORD.finditer(body)]
         gs = [v for k, v in found if k == "G"]
         ms = [int(v) if v == int(v) else v for k, v in found if k == "M"]
+        for k, v in found:
+            if not abs(v) <= MAX_WORD_VALUE:
+                raise _fail(ln, f"the word {k}{v:g} is out of range (|value| <= {MAX_WORD_VALUE:g})")
         vals: dict[str, float] = {}
         for k, v in found:
             if k in "GM":

@@ -167,8 +167,16 @@ class ContourRequest(Strict):
         return self
 
     def plan_settings(self) -> Settings:
-        """The validated plan settings (errors name ``settings.<field>``)."""
-        return Settings.model_validate(self.settings)
+        """The validated plan settings; raises :class:`~planner.errors.PlannerError` naming
+        ``settings.<field>``."""
+        from pydantic import ValidationError
+
+        from .errors import planner_error
+
+        try:
+            return Settings.model_validate(self.settings)
+        except ValidationError as exc:
+            raise planner_error(exc, "settings") from None
 
 
 class PassSummary(_Out):
