@@ -25,9 +25,8 @@ No web framework or editor import: workers import this module.
 
 from __future__ import annotations
 
-import dataclasses
-
 import ctypes
+import dataclasses
 import json
 import math
 import os
