@@ -38,7 +38,7 @@ from .simulate import Resume, Simulation, simulate
 from .timing import method_of, resolve_timing, timing_info
 from .work import check_work, estimate_work
 
-__all__ = ["plan", "segment", "warm_up"]
+__all__ = ["plan", "plan_timed", "segment", "warm_up"]
 
 
 def _robot(req: PlanRequest, robot: RobotModel | None) -> RobotModel:
@@ -213,6 +213,20 @@ def _run(name: str | None, model: RobotModel, st: Settings, segments: Sequence[S
             f"{mt.infeasible_steps} of {mt.steps} steps needed slack (up to "
             f"{(mt.constraint_slack_max_m or 0.0) * 1e3:.4f} mm)")
     return result, sim
+
+
+def plan_timed(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment],
+               counts: Sequence[int], *, abandon: bool = True) -> PlanResult:
+    """One constrained plan of ``segments`` held ``counts`` samples each (a caller's own
+    timing search, e.g. :mod:`planner.contour`). ``abandon``: raise ``infeasible`` at the first
+    step that needs slack instead of planning on. The segments' reach is the caller's check."""
+    t0 = time.perf_counter()
+    sub = st.model_copy(update={"fastest": False, "segment_samples": [int(c) for c in counts],
+                                "samples_per_segment": int(max(counts)), "require_settled": True})
+    result = _run(name, model, sub, segments, None, abandon=abandon,
+                  timing={"method": "segment_samples"})[0]
+    result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3
+    return result
 
 
 def _fastest(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment]) -> PlanResult:
