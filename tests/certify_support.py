@@ -515,27 +515,29 @@ def cases(draw: Any) -> dict:
     return case
 
 
-def draw_cases(n: int, seed: int, start: int = 0) -> list[dict]:
-    """Cases ``start .. start + n - 1`` of the seeded list: case ``i`` is drawn by hypothesis's own
-    provider (its distributions, which favour boundary values: bounds' corners, zero widths)
-    from a random generator seeded with ``(seed, i)``, so that each case is the same in every
-    run and every process, independent of the others. (The ``@given`` engine is not used: its
-    generation adapts to what it saw and to time, so its examples differ between runs.)"""
+def draw_case(seed: int, i: int) -> dict:
+    """Case ``i`` of the seeded list, drawn by hypothesis's own provider (its distributions,
+    which favour boundary values: bounds' corners, zero widths) from a random generator seeded
+    with ``(seed, i)``: the same in every run and every process, independent of the others.
+    (The ``@given`` engine is not used: its generation adapts to what it saw and to time, so
+    its examples differ between runs.)"""
     import random
 
     from hypothesis.errors import StopTest
     from hypothesis.internal.conjecture.data import ConjectureData
 
-    out: list[dict] = []
-    i = start
-    while len(out) < n:
-        data = ConjectureData(random=random.Random(f"certify {seed} {i}"))
-        i += 1
+    for attempt in range(100):  # an overrun of the choice budget: draw again
+        data = ConjectureData(random=random.Random(f"certify {seed} {i} {attempt}"))
         try:
-            out.append(data.draw(cases()))
-        except StopTest:  # an overrun of the choice budget: the next seed
+            return data.draw(cases())
+        except StopTest:
             continue
-    return out
+    raise RuntimeError(f"case {i} of seed {seed} could not be drawn")
+
+
+def draw_cases(n: int, seed: int, start: int = 0) -> list[dict]:
+    """Cases ``start .. start + n - 1`` of the seeded list (:func:`draw_case`)."""
+    return [draw_case(seed, i) for i in range(start, start + n)]
 
 
 # ---------------------------------------------------------------- certifying one case
