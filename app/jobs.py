@@ -25,9 +25,8 @@ No web framework or editor import: workers import this module.
 
 from __future__ import annotations
 
-import dataclasses
-
 import ctypes
+import dataclasses
 import json
 import math
 import os
@@ -44,8 +43,8 @@ from app.failures import degenerate, out_of_memory, timeout, too_much_work
 from planner.schema import ImportOptions, PlanRequest
 
 __all__ = ["Done", "EditorJob", "ErrorDetail", "ExportJob", "Failed", "ImportJob", "ItemTimeout", "Job", "Outcome",
-           "PlanJob", "SegmentJob", "SleepJob", "check_estimate", "clean_spool", "crashed", "estimate", "failed",
-           "run_bounded", "run_job", "segmentation_module", "spool_dir"]
+           "PlanJob", "SegmentJob", "SleepJob", "bounded", "check_estimate", "clean_spool", "crashed", "estimate",
+           "failed", "run_bounded", "run_job", "segmentation_module", "spool_dir"]
 
 
 class ErrorDetail(BaseModel):
