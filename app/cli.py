@@ -54,11 +54,13 @@ def output_format(args) -> str:
 def cmd_plan(args) -> int:
     from app.formats import write
     from planner import PlannerError, plan
+    from planner.orchestrator.compiling import compile_progress
 
     request = load_request(args.input)
     fmt = output_format(args)
     try:
-        result = plan(request)
+        with compile_progress():  # the first plan after installing compiles the kernels: progress on stderr
+            result = plan(request)
     except PlannerError as exc:
         raise InputError(f"{args.input}: {exc.code}: {exc}") from None
     if fmt == "json":
@@ -92,7 +94,9 @@ def cmd_import(args) -> int:
                                 filename=None if args.drawing == "-" else args.drawing)
     except PlannerError as exc:
         raise InputError(f"{args.drawing}: {exc.code}: {exc}") from None
-    text = json.dumps(result.to_request(), indent=1)
+    request = result.to_request()
+    request["layout"] = _with_cells(request["layout"], args)
+    text = json.dumps(request, indent=1)
     if args.report:
         Path(args.report).write_text(json.dumps(result.report.model_dump(mode="json"), indent=1) + "\n")
     rep = result.report
@@ -111,6 +115,30 @@ def cmd_import(args) -> int:
     return 0
 
 
+def _with_cells(layout: dict, args) -> dict:
+    """The imported layout with the segmentation options given on the command line
+    (``--cell-size`` m, ``--cell-shape``, ``--clearance`` m), checked by the layout's own
+    schema (a bad value exits 2 naming ``layout.cell.size`` etc.)."""
+    from pydantic import ValidationError
+
+    from planner.schema import PARTIAL_LAYOUT, Layout, error_details
+
+    cell = dict(layout.get("cell") or {})
+    if args.cell_size is not None:
+        cell["size"] = args.cell_size
+    if args.cell_shape is not None:
+        cell["shape"] = args.cell_shape
+    out = {**layout, **({"cell": cell} if cell else {})}
+    if args.clearance is not None:
+        out["clearance"] = args.clearance
+    try:
+        Layout.model_validate(out, context=PARTIAL_LAYOUT)
+    except ValidationError as exc:
+        why = "; ".join(f"layout.{d['field']}: {d['message']}" for d in error_details(exc.errors())[:3])
+        raise InputError(f"{args.drawing}: invalid_input: {why}") from None
+    return out
+
+
 def cmd_serve(args) -> int:
     from app.server import serve
     from app.settings import SettingsError, settings
@@ -124,15 +152,24 @@ def cmd_serve(args) -> int:
                  editor=not args.no_editor, allow_unauthenticated=args.allow_unauthenticated)
 
 
-def add_import_parser(sub) -> None:
-    from planner.schema import DRAWING_UNITS, ImportOptions
+def add_import_parser(sub, full: bool = True) -> None:
+    """The ``import`` sub-command; its options (help texts from :class:`planner.schema.ImportOptions`)
+    only when ``full``: ``rangeplan --help`` and the other commands do not load the schema."""
+    pi = sub.add_parser("import", help="turn a DXF or SVG drawing into a plan request with a layout",
+                        description="Closed shapes of the drawing become obstacles (nested ones holes); loose LINE/ARC "
+                        "pieces are joined. Lengths in m, angles in rad (in the robot's workspace).")
+    pi.set_defaults(func=cmd_import)
+    if not full:
+        return
+    from planner.schema import DRAWING_UNITS, ImportOptions, Layout
+    from planner.schema.layout import Cell
 
     def helptext(field: str) -> str:
         return (ImportOptions.model_fields[field].description or "").replace("%", "%%")
 
-    pi = sub.add_parser("import", help="turn a DXF or SVG drawing into a plan request with a layout",
-                        description="Closed shapes of the drawing become obstacles (nested ones holes); loose LINE/ARC "
-                        "pieces are joined. Lengths in m, angles in rad (in the robot's workspace).")
+    def cell_help(field: str) -> str:
+        return (Cell.model_fields[field].description or "").replace("%", "%%")
+
     pi.add_argument("drawing", help="DXF or SVG file ('-' for standard input)")
     pi.add_argument("-o", "--output", help="plan request JSON to write; standard output if omitted")
     pi.add_argument("--layer", action="append", help=helptext("layers") + " (repeat for several)")
@@ -146,9 +183,13 @@ def add_import_parser(sub) -> None:
     pi.add_argument("--flatten-tolerance", type=float, metavar="M", help=helptext("flatten_tolerance"))
     pi.add_argument("--margin", type=float, metavar="M", help=helptext("margin"))
     pi.add_argument("--bounds-layer", metavar="NAME", help=helptext("bounds_layer"))
+    pi.add_argument("--cell-size", type=float, metavar="M", help="layout.cell.size: " + cell_help("size")
+                    + " (a drawing with narrow gaps needs small cells, e.g. 0.01)")
+    pi.add_argument("--cell-shape", choices=("square", "triangle"), help="layout.cell.shape: " + cell_help("shape"))
+    pi.add_argument("--clearance", type=float, metavar="M", help="layout.clearance: "
+                    + (Layout.model_fields["clearance"].description or "").replace("%", "%%"))
     pi.add_argument("--report", metavar="FILE", help="write the import report (shapes, holes, open chains, "
                     "units) as JSON to FILE")
-    pi.set_defaults(func=cmd_import)
 
 
 def _format_name(text: str) -> str:
@@ -162,7 +203,9 @@ def _format_name(text: str) -> str:
     return text
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The whole parser; given the ``command`` about to run, the other commands' options that
+    need heavy imports are left out (``rangeplan --help`` in well under a second)."""
     p = argparse.ArgumentParser(prog="rangeplan", description="Range-space predictive control trajectory planner "
                                 "for planar parallel robots (SI units throughout).")
     sub = p.add_subparsers(dest="command", required=True)
@@ -175,7 +218,7 @@ def build_parser() -> argparse.ArgumentParser:
     pp.add_argument("--forces", action="store_true", help="joints format: add the drive forces (N)")
     pp.add_argument("--compact", action="store_true", help="JSON without indentation")
     pp.set_defaults(func=cmd_plan)
-    add_import_parser(sub)
+    add_import_parser(sub, full=command in (None, "import"))
     ps = sub.add_parser("serve", help="serve the HTTP API and the browser editor")
     ps.add_argument("--host", help="API host (env RANGEPLAN_HOST, default 127.0.0.1)")
     ps.add_argument("--port", type=int, help="API port (env RANGEPLAN_PORT, default 8000)")
@@ -190,7 +233,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else argv
+    # the first word that is no option names the command ("" for `rangeplan --help`)
+    command = next((a for a in argv if not a.startswith("-")), "")
+    parser = build_parser(command)
     args = parser.parse_args(argv)
     try:
         return args.func(args)

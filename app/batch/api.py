@@ -30,6 +30,7 @@ from pydantic import BaseModel, Field
 from starlette.exceptions import HTTPException
 
 from app.errors import error_response, errors_doc
+from app.json_limits import json_error_text
 
 from .service import BatchService, QueueFull
 
@@ -51,9 +52,10 @@ class BatchProgress(BaseModel):
     failed: int = Field(description="Items that failed: a planner error (code in the results) or a lost worker "
                         "(count)")
     cancelled: int = Field(description="Items cancelled before they finished (count)")
-    running: int = Field(description="Items being planned now (count)")
-    pending: int = Field(description="Items waiting (count)")
-    rate_per_s: float | None = Field(description="Items finished per second since the batch started or resumed, 1/s")
+    running: int = Field(description="Items being planned on the workers now, at most the workers' slots (count)")
+    pending: int = Field(description="Items waiting, also those sent ahead to a busy worker (count)")
+    rate_per_s: float | None = Field(description="Items planned (ok or failed, not cancelled) per second since the "
+                                     "batch started or resumed, 1/s")
     eta_s: float | None = Field(description="Estimated time to finish at that rate, s")
     elapsed_s: float | None = Field(description="Time since the batch started or resumed, s")
 
@@ -90,17 +92,40 @@ async def _lifespan(app: FastAPI):
             await asyncio.get_running_loop().run_in_executor(None, svc.close)
 
 
+def _not_an_object(line: bytes) -> str | None:
+    """Why a JSON Lines line is not a JSON object (None if it is one)."""
+    try:
+        doc = orjson.loads(line)
+    except orjson.JSONDecodeError as exc:
+        return f"is not valid JSON ({json_error_text(exc)})"
+    if not isinstance(doc, dict):
+        return f"is a JSON {_JSON_TYPES.get(type(doc), type(doc).__name__)}, not an object"
+    return None
+
+
+_JSON_TYPES = {list: "array", str: "string", int: "number", float: "number", bool: "boolean", type(None): "null"}
+
+
 def _parse_body(body: bytes, content_type: str) -> tuple[list[str], str | None] | JSONResponse:
     """The requests as JSON texts (each validated later, by the worker that plans it)."""
     if content_type in JSONL_TYPES:
-        reqs = [ln.decode("utf-8", "replace") for ln in body.splitlines() if ln.strip()]
+        reqs = []
+        for number, ln in enumerate(body.splitlines(), 1):
+            if not ln.strip():
+                continue
+            problem = _not_an_object(ln)
+            if problem:  # each line is one plan request, a JSON object: anything else is the body's error
+                return error_response(422, "invalid_input", f"line {number} of the JSON Lines body {problem}: each "
+                                      "line must be one plan request, a JSON object (the body of POST /v1/plan)",
+                                      f"requests[{len(reqs)}]")
+            reqs.append(ln.decode("utf-8"))
         if not reqs:
             return error_response(422, "invalid_input", "the JSON Lines body holds no request", "requests")
         return reqs, None
     try:
         doc = orjson.loads(body)
     except orjson.JSONDecodeError as exc:
-        return error_response(422, "invalid_input", f"body is not valid JSON: {exc}")
+        return error_response(422, "invalid_input", f"body is not valid JSON: {json_error_text(exc)}")
     if not isinstance(doc, dict):
         return error_response(422, "invalid_input", "a batch is a JSON object {\"requests\": [...], \"name\": ...}")
     unknown = sorted(set(doc) - {"requests", "name"})
@@ -154,12 +179,13 @@ def batch_router() -> APIRouter:
     def list_batches(request: Request, limit: int = Query(100, ge=1, le=1000, description="At most this many "
                                                                                   "(count), newest first")):
         """The newest batches and their progress."""
-        return _service(request.app).store.list(limit)
+        service = _service(request.app)
+        return [service.at_workers(p) for p in service.store.list(limit)]
 
     @router.get("/v1/batches/{batch_id}", response_model=BatchProgress, responses={404: errs[404], 422: errs[422]})
     def get_batch(batch_id: str, request: Request):
         """State and progress of a batch."""
-        out = _service(request.app).store.progress(batch_id)
+        out = _service(request.app).progress(batch_id)
         if out is None:
             raise HTTPException(404, f"no batch with id {batch_id!r}")
         return out

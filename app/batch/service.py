@@ -69,6 +69,7 @@ class BatchService:
         self._buffer: list[tuple[int, int, dict[str, Any]]] = []
         self._flushed = time.monotonic()
         self._create_lock = threading.Lock()
+        self._lost_before = 0  # lost workers of the runners before the current one
 
     # -- life -----------------------------------------------------------------------------------
     def start(self) -> None:
@@ -92,6 +93,11 @@ class BatchService:
             self.engine = None
         self.store.close()
 
+    def worker_restarts(self) -> int:
+        """Batch worker processes lost and replaced since the service started (count)."""
+        runner = self._runner
+        return self._lost_before + (runner.stats.lost_workers if runner is not None else 0)
+
     def stats(self) -> dict[str, Any]:
         return {"engine": self.engine.describe() if self.engine is not None else None,
                 "workers": self.workers if not self.scheduler else None, "scheduler": self.scheduler,
@@ -107,13 +113,29 @@ class BatchService:
         self._wake.set()
         return out
 
+    def progress(self, id_: str) -> dict[str, Any] | None:
+        """A batch's progress (:meth:`BatchStore.progress`) with ``running`` counting the items
+        being planned on the workers now: at most the engine's slots (workers x threads). Items
+        sent to the engine ahead of a free worker are waiting, so they count as ``pending``."""
+        out = self.store.progress(id_)
+        return None if out is None else self.at_workers(out)
+
+    def at_workers(self, out: dict[str, Any]) -> dict[str, Any]:
+        """``out`` (one batch's progress) with ``running`` capped at the engine's slots."""
+        try:
+            slots = int(self.engine.slots) if self.engine is not None else 0
+        except Exception:  # a Dask cluster that went away: no worker plans anything
+            slots = 0
+        running = min(int(out["running"]), slots)
+        return {**out, "running": running, "pending": int(out["pending"]) + int(out["running"]) - running}
+
     def cancel(self, id_: str) -> dict[str, Any] | None:
         seq = self.store.seq_of(id_)
         if seq is None or not self.store.cancel(id_):
             return None
         if self._runner is not None:
             self._runner.cancel(lambda it: it.tag == seq)
-        return self.store.progress(id_)
+        return self.progress(id_)
 
     def delete(self, id_: str) -> bool:
         if self.cancel(id_) is None:
@@ -213,6 +235,8 @@ class BatchService:
                 self._wake.clear()
                 return not self._stop.is_set()
 
+            if self._runner is not None:
+                self._lost_before += self._runner.stats.lost_workers
             self._runner = Runner(self.engine, on_done, fmt="json", timeout_s=self.timeout_s)
             try:
                 self._runner.run(take, remaining=self.store.pending_total, idle=idle, stop=self._stop,

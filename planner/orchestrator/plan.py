@@ -245,7 +245,10 @@ def warm_up() -> float:
     the compiled kernels of every path by planning tiny corridors: the paper mode; the
     constrained mode with equalities eliminated (psi fixed), with the QP in the inputs (a
     psi range) and the slack problem (too little time). Returns the seconds taken. Servers
-    call it before taking jobs, ``make`` after installing (``python -m planner``)."""
+    call it before taking jobs, ``make`` after installing (``python -m planner``). Compiling is
+    reported on stderr with an estimate of the time left (:mod:`.compiling`)."""
+    from .compiling import compile_progress
+
     t0 = time.perf_counter()
     fixed = [{"lower": [0.0, 0.0, 0.0], "upper": [0.0, 0.0, 0.0]},
              {"lower": [0.0, 0.0, 0.0], "upper": [0.01, 0.01, 0.0]},
@@ -258,6 +261,7 @@ def warm_up() -> float:
         (fixed, {"mode": "paper"}), (fixed, {"mode": "constrained"}),
         (turning, {"mode": "constrained", "samples_per_segment": 30}),
         (turning, {"mode": "constrained", "samples_per_segment": 2})]
-    for segs, extra in runs:
-        plan({"robot": "moving-slide", "segments": segs, "settings": {**base, **extra}})
+    with compile_progress():
+        for segs, extra in runs:
+            plan({"robot": "moving-slide", "segments": segs, "settings": {**base, **extra}})
     return time.perf_counter() - t0
