@@ -43,9 +43,9 @@ from app.failures import degenerate, out_of_memory, timeout, too_much_work
 from planner.schema import ContourRequest, ImportOptions, PlanRequest
 
 __all__ = ["ContourJob", "ContourWork", "Done", "EditorJob", "ErrorDetail", "ExportJob", "Failed", "ImportJob",
-           "ItemTimeout", "Job", "Outcome",
-           "PlanJob", "SegmentJob", "SleepJob", "check_estimate", "clean_spool", "crashed", "estimate", "failed",
-           "run_bounded", "run_job", "segmentation_module", "spool_dir"]
+           "ItemTimeout", "Job", "Outcome", "PlanJob", "SegmentJob", "SleepJob", "bounded", "check_estimate",
+           "clean_spool", "crashed", "estimate", "failed", "run_bounded", "run_job", "segmentation_module",
+           "spool_dir"]
 
 
 class ErrorDetail(BaseModel):

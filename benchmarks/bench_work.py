@@ -1,9 +1,10 @@
 """The work estimate against the measured planning time (issue 15).
 
 A server rejects a request whose estimated compute time
-(:func:`planner.estimate_work`) exceeds its time limit. The estimate is meant to be a *lower*
-estimate: measured / estimated should be >= 1 (a rejected request could not have finished)
-and not far above it (or too much work slips through to the time limit). For each request
+(:func:`planner.estimate_work`) exceeds its time limit. Since issue 20 the estimate bounds the
+work (the whole settling tail counted, a layout estimated again once segmented):
+measured / estimated should be <= 1.5 (the random cases of ``benchmarks/certify.py`` check it
+on thousands of requests) and not far below it (or requests that could finish are refused). For each request
 of a suite (modes, backends, horizons, long corridors, layouts, the fastest-timing search,
 reference tracking) this prints the estimate, the measured wall time of ``planner.plan``
 (median of ``--repeat`` runs; one run for those over a second) and their ratio, and the

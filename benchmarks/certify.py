@@ -30,7 +30,7 @@ from pathlib import Path  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from tests.certify_support import certify_case, draw_cases  # noqa: E402
+from tests.certify_support import certify_case, draw_case  # noqa: E402
 
 #: the machine's speed now against the reference machine of the work estimate: Table I's CPU
 #: time measured in each worker every CALIBRATE cases over its time on the quiet reference
@@ -64,7 +64,9 @@ def _init() -> None:
     warm_up()
 
 
-def _run(case: dict) -> tuple[dict, dict]:
+def _run(job: tuple[int, int]) -> tuple[dict, dict]:
+    seed, i = job
+    case = draw_case(seed, i)  # drawn here: the workers draw in parallel
     if _SINCE[0] >= CALIBRATE:
         _calibrate()
         _SINCE[0] = 0
@@ -87,15 +89,13 @@ def main() -> None:
     ap.add_argument("--problems", type=Path, default=None, help="write the problem cases here (JSON lines)")
     args = ap.parse_args()
     t0 = time.perf_counter()
-    cases = draw_cases(args.cases, args.seed)
-    print(f"{len(cases)} cases drawn (seed {args.seed}) in {time.perf_counter() - t0:.1f} s", flush=True)
     counts: dict[str, collections.Counter] = {"constrained": collections.Counter(), "paper": collections.Counter()}
     problems, worst, done = [], (0.0, None), 0
     ratios: dict[str, list[float]] = {"constrained": [], "paper": []}
     err_ratios: list[float] = []
     deadline = t0 + 60 * args.minutes
     with ProcessPoolExecutor(args.workers, initializer=_init) as pool:
-        for case, out in pool.map(_run, cases, chunksize=4):
+        for case, out in pool.map(_run, [(args.seed, i) for i in range(args.cases)], chunksize=4):
             if time.perf_counter() > deadline:
                 break
             done += 1

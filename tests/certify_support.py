@@ -38,6 +38,9 @@ DATA = Path(__file__).resolve().parents[1] / "planner" / "data"
 TOL_M = 2e-9
 TOL_RAD = 2e-7
 TOL_REL = 1e-6
+#: force-rate excess allowed (relative): the QP solver's primal tolerance, ~1e-6 in the scaled
+#: forces u / force_max, is a few 1e-6 of a 0.01 s rate step (found: 1.000004 x the limit)
+RATE_TOL_REL = 1e-5
 #: overshoot allowed in the constrained mode [m]: a step whose QP is infeasible by less than
 #: 0.8 um is solved with its rows widened by that much (README "Constrained mode")
 OVERSHOOT_TOL_M = 1e-6
@@ -263,7 +266,7 @@ def check_plan(request: dict, result: Any, segments: list[dict] | None = None) -
             limit = (robot.fmax / FORCE_RISE_S if fr is None
                      else np.broadcast_to(np.asarray(fr, float), robot.fmax.shape))
             worst = float((np.abs(dU) / Ts / limit).max(initial=0.0))
-            if worst > 1.0 + TOL_REL:
+            if worst > 1.0 + RATE_TOL_REL:
                 v.fail(f"force rate {worst:.6f} x its limit")
         sratio = float((np.abs(LV) / robot.vmax).max())
         if sratio > 1.0 + 1e-4:  # the leg-speed rows are linearised one sample ahead
@@ -515,27 +518,29 @@ def cases(draw: Any) -> dict:
     return case
 
 
-def draw_cases(n: int, seed: int, start: int = 0) -> list[dict]:
-    """Cases ``start .. start + n - 1`` of the seeded list: case ``i`` is drawn by hypothesis's own
-    provider (its distributions, which favour boundary values: bounds' corners, zero widths)
-    from a random generator seeded with ``(seed, i)``, so that each case is the same in every
-    run and every process, independent of the others. (The ``@given`` engine is not used: its
-    generation adapts to what it saw and to time, so its examples differ between runs.)"""
+def draw_case(seed: int, i: int) -> dict:
+    """Case ``i`` of the seeded list, drawn by hypothesis's own provider (its distributions,
+    which favour boundary values: bounds' corners, zero widths) from a random generator seeded
+    with ``(seed, i)``: the same in every run and every process, independent of the others.
+    (The ``@given`` engine is not used: its generation adapts to what it saw and to time, so
+    its examples differ between runs.)"""
     import random
 
     from hypothesis.errors import StopTest
     from hypothesis.internal.conjecture.data import ConjectureData
 
-    out: list[dict] = []
-    i = start
-    while len(out) < n:
-        data = ConjectureData(random=random.Random(f"certify {seed} {i}"))
-        i += 1
+    for attempt in range(100):  # an overrun of the choice budget: draw again
+        data = ConjectureData(random=random.Random(f"certify {seed} {i} {attempt}"))
         try:
-            out.append(data.draw(cases()))
-        except StopTest:  # an overrun of the choice budget: the next seed
+            return data.draw(cases())
+        except StopTest:
             continue
-    return out
+    raise RuntimeError(f"case {i} of seed {seed} could not be drawn")
+
+
+def draw_cases(n: int, seed: int, start: int = 0) -> list[dict]:
+    """Cases ``start .. start + n - 1`` of the seeded list (:func:`draw_case`)."""
+    return [draw_case(seed, i) for i in range(start, start + n)]
 
 
 # ---------------------------------------------------------------- certifying one case
