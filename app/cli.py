@@ -92,7 +92,9 @@ def cmd_import(args) -> int:
                                 filename=None if args.drawing == "-" else args.drawing)
     except PlannerError as exc:
         raise InputError(f"{args.drawing}: {exc.code}: {exc}") from None
-    text = json.dumps(result.to_request(), indent=1)
+    request = result.to_request()
+    request["layout"] = _with_cells(request["layout"], args)
+    text = json.dumps(request, indent=1)
     if args.report:
         Path(args.report).write_text(json.dumps(result.report.model_dump(mode="json"), indent=1) + "\n")
     rep = result.report
@@ -111,6 +113,30 @@ def cmd_import(args) -> int:
     return 0
 
 
+def _with_cells(layout: dict, args) -> dict:
+    """The imported layout with the segmentation options given on the command line
+    (``--cell-size`` m, ``--cell-shape``, ``--clearance`` m), checked by the layout's own
+    schema (a bad value exits 2 naming ``layout.cell.size`` etc.)."""
+    from pydantic import ValidationError
+
+    from planner.schema import PARTIAL_LAYOUT, Layout, error_details
+
+    cell = dict(layout.get("cell") or {})
+    if args.cell_size is not None:
+        cell["size"] = args.cell_size
+    if args.cell_shape is not None:
+        cell["shape"] = args.cell_shape
+    out = {**layout, **({"cell": cell} if cell else {})}
+    if args.clearance is not None:
+        out["clearance"] = args.clearance
+    try:
+        Layout.model_validate(out, context=PARTIAL_LAYOUT)
+    except ValidationError as exc:
+        why = "; ".join(f"layout.{d['field']}: {d['message']}" for d in error_details(exc.errors())[:3])
+        raise InputError(f"{args.drawing}: invalid_input: {why}") from None
+    return out
+
+
 def cmd_serve(args) -> int:
     from app.server import serve
     from app.settings import SettingsError, settings
@@ -125,10 +151,14 @@ def cmd_serve(args) -> int:
 
 
 def add_import_parser(sub) -> None:
-    from planner.schema import DRAWING_UNITS, ImportOptions
+    from planner.schema import DRAWING_UNITS, ImportOptions, Layout
+    from planner.schema.layout import Cell
 
     def helptext(field: str) -> str:
         return (ImportOptions.model_fields[field].description or "").replace("%", "%%")
+
+    def cell_help(field: str) -> str:
+        return (Cell.model_fields[field].description or "").replace("%", "%%")
 
     pi = sub.add_parser("import", help="turn a DXF or SVG drawing into a plan request with a layout",
                         description="Closed shapes of the drawing become obstacles (nested ones holes); loose LINE/ARC "
@@ -146,6 +176,11 @@ def add_import_parser(sub) -> None:
     pi.add_argument("--flatten-tolerance", type=float, metavar="M", help=helptext("flatten_tolerance"))
     pi.add_argument("--margin", type=float, metavar="M", help=helptext("margin"))
     pi.add_argument("--bounds-layer", metavar="NAME", help=helptext("bounds_layer"))
+    pi.add_argument("--cell-size", type=float, metavar="M", help="layout.cell.size: " + cell_help("size")
+                    + " (a drawing with narrow gaps needs small cells, e.g. 0.01)")
+    pi.add_argument("--cell-shape", choices=("square", "triangle"), help="layout.cell.shape: " + cell_help("shape"))
+    pi.add_argument("--clearance", type=float, metavar="M", help="layout.clearance: "
+                    + (Layout.model_fields["clearance"].description or "").replace("%", "%%"))
     pi.add_argument("--report", metavar="FILE", help="write the import report (shapes, holes, open chains, "
                     "units) as JSON to FILE")
     pi.set_defaults(func=cmd_import)

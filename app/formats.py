@@ -10,7 +10,7 @@ A new machine format is its writer in ``planner/exchange/`` and one entry in
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
 
@@ -27,7 +27,8 @@ class OutputFormat:
     """One output format: ``name``, response ``media_type``, file ``extension`` (and the
     ``suffixes`` that name it), a description (``what``), whether it is a machine format
     (an export of a stored plan, offered by the editor as a download) and its writer
-    ``(result, layout, forces, source) -> bytes``."""
+    ``(result, layout, forces, source, header) -> bytes`` (``header``: provenance lines,
+    the editor's design, plan id and request hash; JSON has none)."""
 
     name: str
     media_type: str
@@ -35,7 +36,7 @@ class OutputFormat:
     suffixes: tuple[str, ...]
     what: str
     machine: bool
-    writer: Callable[[PlanResult, Layout | None, bool, str | None], bytes]
+    writer: Callable[[PlanResult, Layout | None, bool, str | None, Sequence[str]], bytes]
     title: str = ""
     filename: str = ""
 
@@ -43,17 +44,18 @@ class OutputFormat:
 def _machine(name: str) -> OutputFormat:
     spec = EXPORT_FORMATS[name]
     return OutputFormat(name, spec.media_type, spec.extension, spec.suffixes, spec.what, True,
-                        lambda r, layout, forces, source: spec.write(r, layout, forces, source).encode(),
+                        lambda r, layout, forces, source, header: spec.write(r, layout, forces, source,
+                                                                             header).encode(),
                         spec.title, spec.filename)
 
 
 #: name -> format, in the order offered (``json`` first: the default)
 OUTPUT_FORMATS: dict[str, OutputFormat] = {
     "json": OutputFormat("json", "application/json", ".json", (".json",), "the result JSON", False,
-                         lambda r, layout, forces, source: r.to_json()),
+                         lambda r, layout, forces, source, header: r.to_json()),
     "csv": OutputFormat("csv", "text/csv; charset=utf-8", ".csv", (".csv",),
                         "one row per sample, units in the header", False,
-                        lambda r, layout, forces, source: to_csv(r).encode()),
+                        lambda r, layout, forces, source, header: to_csv(r, header).encode()),
     **{name: _machine(name) for name in EXPORT_FORMATS},
 }
 #: the machine formats (exports of a stored plan; the editor's downloads)
@@ -86,9 +88,10 @@ def format_for_path(path: str) -> str:
 
 
 def write(result: PlanResult, fmt: str, *, layout: Layout | None = None, forces: bool = False,
-          source: str | None = None) -> bytes:
-    """``result`` in the output format ``fmt`` (a ValueError names the formats for another)."""
+          source: str | None = None, header: Sequence[str] = ()) -> bytes:
+    """``result`` in the output format ``fmt`` (a ValueError names the formats for another);
+    ``header`` lines go into the file's header (comments) where the format has one."""
     spec = OUTPUT_FORMATS.get(fmt)
     if spec is None:
         raise ValueError(f"unknown output format {fmt!r}; one of {', '.join(OUTPUT_FORMATS)}")
-    return spec.writer(result, layout, forces, source)
+    return spec.writer(result, layout, forces, source, header)

@@ -80,10 +80,11 @@ def test_plan_item_stops_at_the_compute_limit(monkeypatch):
     # planner.orchestrator.simulate.RETURN_EVERY steps (1/6 of them), so it stops well before the end.
     # The work estimate is a lower estimate (what it accepts may still run into the limit):
     # here it accepts everything, so that the plan starts and the limit has to stop it
-    import app.batch.engine as engine
+    import app.jobs as jobs
     from planner import WorkEstimate
 
-    monkeypatch.setattr(engine, "estimate_work", lambda req: WorkEstimate(0.0, 1, 1, "segments", "none"))
+    # (the estimate of every job: batch items are jobs of the service's job model)
+    monkeypatch.setattr(jobs, "estimate", lambda job: WorkEstimate(0.0, 1, 1, "segments", "none"))
     req = variant(0, "constrained")
     req["settings"]["samples_per_segment"] = 1000
     assert plan_item(variant(0, "constrained"))["status"] == "ok"  # the kernels loaded: full_s is the plan's
@@ -728,3 +729,39 @@ def test_progress_bar_counts_done_failed_and_rate():
     text = buf.getvalue()
     assert "b error unreachable: segments[1]: too far" in text and "3/3" in text
     assert make_progress("auto", 1, 0, io.StringIO()).__class__.__name__ == "Progress"  # not a terminal: lines
+
+
+def test_batch_counters_count_what_they_say(tmp_path):
+    """``running`` is what the workers plan now (at most their slots; items sent ahead wait,
+    as ``pending``), ``rate_per_s`` counts planned items, not cancellations, and a resumed
+    CLI batch's bar starts at the items already done."""
+    import io
+    from types import SimpleNamespace
+
+    from app.batch.progress import RichProgress
+    from app.batch.service import BatchService
+    from app.batch.store import BatchStore
+
+    service = BatchService.__new__(BatchService)  # only its engine matters here
+    service.engine = SimpleNamespace(slots=1)
+    out = service.at_workers({"running": 43, "pending": 100, "done": 0})
+    assert (out["running"], out["pending"]) == (1, 142)
+    store = BatchStore(tmp_path / "b.sqlite3")
+    try:
+        batch_id = store.create([json.dumps({"name": f"r{i}"}) for i in range(6)], "rate")["id"]
+        claimed = store.claim(6)
+        time.sleep(0.02)
+        seq = store.seq_of(batch_id)
+        store.save([(seq, item, {"status": "ok", "summary": {}}) for (_, _, item, _) in claimed[:2]])
+        store.cancel(batch_id)  # 4 cancelled at once: not 4 more items per second
+        p = store.progress(batch_id)
+        assert p["ok"] == 2 and p["cancelled"] == 4
+        assert p["rate_per_s"] is not None and p["rate_per_s"] * p["elapsed_s"] == pytest.approx(2.0)
+    finally:
+        store.close()
+    bar = RichProgress(202, 0, io.StringIO())
+    for _ in range(11):
+        bar.skip()  # the items a resumed run finds done, before its first plan
+    bar.start("test")
+    assert bar.bar.tasks[0].completed == 11 and bar.done == 11 and bar.new == 0
+    bar.close()

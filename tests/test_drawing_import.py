@@ -246,7 +246,9 @@ SVG = """<svg xmlns="http://www.w3.org/2000/svg" xmlns:inkscape="http://www.inks
 def test_svg_shapes_units_layers_and_y_up():
     res = import_drawing(SVG.encode(), {"layers": ["Parts"], "bounds_layer": "frame", "flatten_tolerance": 1e-6})
     rep = res.report
-    assert rep.format == "svg" and rep.units == "px" and rep.units_source == "drawing"  # the document is in mm
+    # the document is sized in mm (width="100mm"): the report says the unit the geometry was scaled as
+    assert rep.format == "svg" and rep.units == "mm" and rep.units_source == "drawing"
+    assert rep.metres_per_unit == 1e-3
     kinds = sorted(s.kind for s in rep.shapes)
     assert kinds == ["circle", "polygon", "polygon", "polygon"] and rep.holes == 1
     exact = (20 * 10 + math.pi * 25 + (30 * 40 - 20 * 10) + math.pi * 8 * 4) * 1e-6

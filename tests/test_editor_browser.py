@@ -100,7 +100,7 @@ class Tab:
         assert self.session.wait_idle(60) and self.session.last_result is not None
         time.sleep(1.5)  # first frames, camera placed by the server
         for close in self.page.locator(".mantine-Notification-closeButton").all():  # "software WebGL" notice
-            close.click()
+            close.dispatch_event("click")  # no wait for a still frame: a loaded machine renders slowly
 
     def shot(self, name: str) -> Path:
         path = self.shots / f"{name}.png"
@@ -477,14 +477,112 @@ def test_files_tab_imports_a_drawing_and_downloads_gcode(tab, tmp_path):
     assert wait_for(lambda: len(editor.request["layout"]["obstacles"]) == 3, 20), editor.request["layout"]
     kinds = sorted(o["type"] for o in editor.request["layout"]["obstacles"])
     assert kinds == ["circle", "circle", "polygon"]
-    assert np.allclose(editor.request["layout"]["bounds"]["lower"], [-0.145, -0.145])
+    lower = np.asarray(editor.request["layout"]["bounds"]["lower"])  # placed: the reachable square is the bounds
+    assert np.allclose(lower, lower[0]) and -0.16 < lower[0] < -0.13
     assert wait_for(lambda: editor.plans_done > done) and editor.wait_idle(60)
     assert editor.last_error is None, editor.last_error
+    gcode = page.get_by_role("button", name="Download G-code (LinuxCNC)")
+    gcode.wait_for(state="visible")
+    assert wait_for(gcode.is_enabled, 10)
     with page.expect_download() as download:
-        page.get_by_role("button", name="Download G-code (LinuxCNC)").click()
+        gcode.click()
     assert download.value.suggested_filename == "trajectory.ngc"
     text = Path(download.value.path()).read_text()
-    assert text == to_gcode(PlanResult.model_validate(editor.last_result), source="rangeplan editor")
+    assert text == to_gcode(PlanResult.model_validate(editor.last_result), source="rangeplan editor",
+                            header=editor.files.machine_files().header())
     assert "G93" in text and text.rstrip().endswith("M2")
     from tests.linuxcnc import rs274
     rs274(text)
+
+
+def test_after_a_failed_plan_no_download_of_an_earlier_plan_is_possible(tab):
+    """Real clicks and keys: import a real drawing (placed, it plans at once), download its
+    G-code, then type a start inside the obstacle: the plan fails, every download button is
+    disabled with the reason shown, and clicking them downloads nothing."""
+    import shapely
+
+    from app.editor._geometry import obstacle_shape
+    from tests.drawings import DRAWINGS
+
+    s, page = tab.session, tab.page
+    downloads = []
+    page.on("download", lambda d: downloads.append(d.suggested_filename))
+    tab.tab("Files")
+    done = s.plans_done
+    with page.expect_file_chooser() as chooser:
+        page.get_by_role("button", name="Import drawing (DXF/SVG)").click()
+    chooser.value.set_files(str(DRAWINGS / "Kitchen-cooker-V.dxf"))
+    assert wait_for(lambda: s.plans_done > done and s.wait_idle(1), 60)
+    assert s.last_error is None, s.last_error  # a real drawing, placed, plans at once
+    gcode = page.get_by_role("button", name="Download G-code (LinuxCNC)")
+    assert wait_for(gcode.is_enabled, 10)
+    with page.expect_download() as download:
+        gcode.click()
+    first = Path(download.value.path()).read_text()
+    gen = s.last_plan_generation
+    assert f"(plan id: editor plan #{gen})" in first and "(request sha256: " in first
+    # a start inside the obstacle, typed
+    body = obstacle_shape(s.request["layout"]["obstacles"][0])
+    inside = body.representative_point() if isinstance(body, shapely.Polygon) else body.centroid
+    tab.tab("Edit")
+    tab.type_into("Start x, y (m)", f"{inside.x:.4f}, {inside.y:.4f}, 0")
+    assert wait_for(lambda: s.last_error is not None and s.wait_idle(1), 60), s.last_error
+    tab.tab("Files")
+    buttons = [page.get_by_role("button", name=n) for n in (
+        "Download G-code (LinuxCNC)", "Download leg lengths (halstreamer)",
+        "Download DXF (path, corridor, obstacles)", "Download trajectory CSV")]
+    assert wait_for(lambda: all(b.is_disabled() for b in buttons), 10)
+    assert wait_for(lambda: "the newest plan failed" in page.locator("body").inner_text(), 10)
+    n = len(downloads)
+    for b in buttons:
+        b.click(force=True)  # a disabled button: the browser sends nothing
+    time.sleep(1.0)
+    assert len(downloads) == n == 1
+    tab.shot("09-failed-plan-no-download")
+
+
+def test_plan_undo_and_redo_stay_in_view_however_long_the_tab(tab):
+    """The tabs' content scrolls in its own box: scrolled to its last control (Edit, Files),
+    the Plan, Undo and Redo buttons are still on screen and clickable."""
+    page = tab.page
+    controls = [page.get_by_role("button", name=n, exact=True) for n in ("Plan", "Undo", "Redo")]
+    for name, last in (("Edit", "Grid (m), empty = cell size"), ("Files", "Download trajectory CSV")):
+        tab.tab(name)
+        target = tab.field(last) if name == "Edit" else page.get_by_role("button", name=last)
+        target.scroll_into_view_if_needed()
+        assert wait_for(lambda t=target: (t.bounding_box() or {"y": -1})["y"] >= 0, 5)
+        assert target.bounding_box()["y"] <= H
+        for c in controls:
+            box = c.bounding_box()
+            assert box is not None and 0 <= box["y"] and box["y"] + box["height"] <= H, (name, box)
+    s = tab.session
+    done = s.plans_done
+    controls[0].click()  # still clickable
+    assert wait_for(lambda: s.plans_done > done, 60)
+
+
+def test_readme_screenshot_of_an_imported_drawing_with_holes(tab):
+    """LibreCAD's cooker (a body with four hob holes) imported in the Files tab, placed where the
+    robot reaches, planned at once; the view fits it (written to docs/drawing.png when
+    RANGEPLAN_DOCS_DRAWING_SCREENSHOT names that path)."""
+    from tests.drawings import DRAWINGS
+
+    s, page = tab.session, tab.page
+    tab.tab("Files")
+    done = s.plans_done
+    with page.expect_file_chooser() as chooser:
+        page.get_by_role("button", name="Import drawing (DXF/SVG)").click()
+    chooser.value.set_files(str(DRAWINGS / "Kitchen-cooker-V.dxf"))
+    assert wait_for(lambda: s.plans_done > done and s.wait_idle(1), 60)
+    assert s.last_error is None, s.last_error
+    assert sum(len(o.get("holes", [])) for o in s.request["layout"]["obstacles"]) >= 4
+    s.gui.robot_style.value = "outline"
+    s.gui.time.value = round(0.5 * float(s.last_result["time"][-1]), 2)
+    tab.tab("Result")
+    for close in page.locator(".mantine-Notification-closeButton").all():
+        close.dispatch_event("click")
+    time.sleep(1.5)
+    path = tab.shot("10-drawing")
+    target = os.environ.get("RANGEPLAN_DOCS_DRAWING_SCREENSHOT")
+    if target:
+        Path(target).write_bytes(path.read_bytes())

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import copy
 import json
+import threading
 import time
 
 import numpy as np
@@ -364,3 +365,209 @@ def test_export_is_the_edited_request(tab):
     s.move_handle("end", 0.02, 0.06)
     s.files.export_request(s.client)
     assert json.loads(sent[-1][1]) == s.request
+
+
+# ---------------------------------------------------------------------------- exact obstacles, machine files
+def _drawing_with_a_triangular_hole(path):
+    """A concave (L-shaped) outline in mm with a triangular hole: drawn as a fan from one
+    vertex it would cover free space, drawn without holes it would fill the triangle."""
+    import ezdxf
+
+    doc = ezdxf.new("R2010", units=4)
+    msp = doc.modelspace()
+    msp.add_lwpolyline([(-60, -60), (60, -60), (60, -20), (-20, -20), (-20, 60), (-60, 60)], close=True)
+    msp.add_lwpolyline([(-52, -52), (-28, -52), (-52, -28)], close=True)
+    doc.saveas(path)
+    return path
+
+
+def _received_obstacles(client, expected_faces_min: int = 1):
+    """Triangles (F, 3, 2) of the obstacle mesh and its outline segments, as the tab received them."""
+    mesh = client.scene.mesh("/layout/obstacles")
+    edges = client.scene.lines("/layout/obstacle_edges")
+    if mesh is None or edges is None or len(mesh[1]) < expected_faces_min:
+        return None
+    v, f = mesh
+    return v[f][:, :, :2], v[f][0, 0, 2], edges
+
+
+@pytest.mark.parametrize("name, scale", [("Kitchen-cooker-V.dxf", 0.3), ("Bathroom-bath-E.dxf", 0.15),
+                                         ("l-with-triangular-hole", 1.0)])
+def test_imported_obstacles_are_drawn_exactly_in_the_scene_the_tab_receives(tab, tmp_path, name, scale):
+    """The obstacle triangles the browser gets cover the obstacle exactly: their area is the
+    drawing's (an independent even-odd reference, tests/drawings.py) within 1 %, no
+    triangle lies in a hole or outside the outline, and the outlines (holes too) are drawn
+    above the fill."""
+    from types import SimpleNamespace
+
+    from tests.drawings import DRAWINGS, reference_region
+
+    s, client = tab.session, tab.clients[0]
+    path = DRAWINGS / name if name.endswith(".dxf") else _drawing_with_a_triangular_hole(tmp_path / "l.dxf")
+    data = path.read_bytes()
+    before = client.scene.messages
+    assert s.files.import_drawing(SimpleNamespace(name=path.name, content=data), {"scale": scale})
+    layout = s.request["layout"]
+    assert any(ob.get("holes") for ob in layout["obstacles"]), "the drawing has holes"
+    region = reference_region(data, 1e-4, scale=scale)
+    lo, hi = layout["bounds"]["lower"], layout["bounds"]["upper"]
+    region = region.intersection(shapely.box(*lo, *hi))
+    assert wait_for(lambda: client.scene.messages > before and _received_obstacles(client) is not None, 20)
+
+    def exact():
+        got = _received_obstacles(client)
+        if got is None:
+            return False
+        tris = got[0]
+        a, b = tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
+        area = 0.5 * np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum()
+        return abs(area - region.area) <= 0.01 * region.area
+    assert wait_for(exact, 20), "the obstacle triangles' area differs from the drawing's by more than 1 %"
+    tris, z_fill, edges = _received_obstacles(client)
+    centroids = tris.mean(axis=1)
+    inside = shapely.contains_xy(region.buffer(2e-4), centroids[:, 0], centroids[:, 1])
+    assert inside.all(), f"{int((~inside).sum())} triangle(s) with the centroid outside the obstacle or in a hole"
+    holes = [shapely.Polygon(h) for g in getattr(region, "geoms", [region]) for h in g.interiors]
+    assert holes
+    covered = shapely.union_all(shapely.polygons(tris))
+    for hole in holes:  # a hole is open: what the triangles cover of it is its rim at most
+        assert covered.intersection(hole).area <= 0.01 * hole.area
+    # every outline and hole outline is drawn, above the fill
+    assert np.all(edges[:, :, 2] > z_fill)
+    drawn = shapely.union_all([shapely.LineString(e[:, :2]) for e in edges])
+    for ring in [g.exterior for g in getattr(region, "geoms", [region])] + [h.exterior for h in holes]:
+        assert ring.difference(drawn.buffer(3e-4)).length <= 0.01 * ring.length
+
+
+def test_machine_files_only_for_the_plan_of_the_design_on_screen(tab):
+    """The downloads (G-code, leg lengths, DXF, CSV) are on only while the newest plan
+    succeeded for the design on screen; each file names the design, the plan and its request's
+    hash. A failed plan (start inside an obstacle) or an edit not yet planned switches every
+    download off with the reason shown, and a click then sends nothing."""
+    import hashlib
+
+    s, client = tab.session, tab.clients[0]
+    sent = []
+    s.client.send_file_download = lambda name, content, **kw: sent.append((name, content.decode()))
+    buttons = s.gui.download_buttons
+    assert set(buttons) == {"gcode", "joints", "dxf", "csv"}
+    assert wait_for(lambda: not any(b.disabled for b in buttons.values()))
+    gen = s.last_plan_generation
+    canonical = json.dumps(s.request, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
+    digest = hashlib.sha256(canonical.encode()).hexdigest()
+    for fmt in ("gcode", "joints", "dxf"):
+        s.files.download_export(s.client, fmt)
+    s.files.download_csv(s.client)
+    assert [n for n, _ in sent] == ["trajectory.ngc", "legs.txt", "plan.dxf", "trajectory.csv"]
+    for _, text in sent:
+        assert f"editor plan #{gen}" in text and digest in text and "design: editor example" in text
+    assert "-0.000000" not in sent[1][1]
+    # an edit not planned yet: off at once, with the reason
+    s.gui.auto_replan.value = False
+    s.edit(lambda r: r["layout"]["end"].__setitem__(0, r["layout"]["end"][0] - 0.01))
+    assert all(b.disabled for b in buttons.values())
+    assert f"changed since plan #{gen}" in s.gui.downloads_note.content
+    s.gui.auto_replan.value = True
+    # a start inside the obstacle: the plan fails, nothing of the earlier plan can be downloaded
+    n = len(sent)
+    client.type(s.gui.start.text, "-0.01, -0.05, 0")
+    assert wait_for(lambda: s.last_error is not None and s.wait_idle(30), 30), s.last_error
+    assert s.last_result is not None  # the earlier plan is still kept (its plots are cleared) ...
+    assert all(b.disabled for b in buttons.values())  # ... but no file of it is offered
+    assert "failed" in s.gui.downloads_note.content
+    for button in buttons.values():
+        client.click(button)
+    s.files.download_export(s.client, "gcode")  # even a click the browser sent before the button went grey
+    time.sleep(0.5)
+    assert len(sent) == n
+    assert s.notifications[-1][0] == "No download"
+
+
+def test_every_received_frame_has_the_legs_on_the_platform_pivots(tab):
+    """Playback from two threads at once (the slider's and the Play thread's): in every window
+    of messages the tab receives, each leg ends on its platform pivot as computed from the
+    platform frame's pose (position and quaternion) and the pivots drawn in that frame."""
+    from app.editor._geometry import quat_to_matrix
+
+    s, client = tab.session, tab.clients[0]
+    assert s.last_result is not None and s.last_error is None
+    worst: list[float] = []
+
+    def check(mirror) -> None:
+        frame, pivots, legs = (mirror.props.get(n) for n in ("/robot/platform", "/robot/platform/pivots",
+                                                             "/robot/legs"))
+        if not frame or not pivots or not legs or "position" not in frame:
+            return
+        local = np.asarray(pivots["points"], float).reshape(-1, 3)
+        ends = np.asarray(legs["points"], float).reshape(-1, 2, 3)[:, 1, :2]
+        if len(ends) != len(local):
+            return
+        wxyz = frame.get("wxyz", (1.0, 0.0, 0.0, 0.0))  # viser's default orientation is not sent
+        world = frame["position"] + local @ quat_to_matrix(wxyz).T
+        worst.append(float(np.max(np.hypot(*(world[:, :2] - ends).T))))
+
+    client.scene.watchers.append(check)
+    t_end = float(s.last_result["time"][-1])
+    ts = np.linspace(0.0, t_end, 40)
+    def play(times) -> None:
+        for t in times:
+            s.show_time(float(t))
+            time.sleep(0.01)  # frames spread over many message windows
+
+    other = threading.Thread(target=play, args=(ts[::-1],))
+    other.start()
+    play(ts)
+    other.join()
+    s.show_time(0.5 * t_end)
+    assert wait_for(lambda: len(worst) >= 3, 10), len(worst)
+    time.sleep(0.5)
+    assert max(worst) < 5e-4, f"a frame showed a leg {max(worst) * 1e3:.1f} mm off its platform pivot"
+    # and the last frame is the pose at 0.5 t_end, as the planner computed it
+    from app.editor._geometry import sample_at
+    pose = sample_at(np.asarray(s.last_result["time"]), np.asarray(s.last_result["pose"]), 0.5 * t_end)
+    assert np.allclose(client.scene.node("/robot/platform")["position"][:2], pose[:2], atol=1e-6)
+    # the outline style keeps the robot but drops the platform fill and thins the legs
+    s.scene.set_robot_style("outline")
+    assert wait_for(lambda: client.scene.visible.get("/robot/platform/fill") is False)
+    assert wait_for(lambda: (client.scene.node("/robot/legs") or {}).get("thickness") == 1.5)
+
+
+def test_a_placed_real_drawing_plans_at_once(tab):
+    """A real drawing (LibreCAD's cooker, 0.5 m wide in mm) imported with "place drawing"
+    while the start and end sit where the drawing lands: it is shrunk until it and its margin
+    lie where the robot reaches, the reachable extent (about +-0.146 m) becomes the bounds (it
+    is stated), start and end move to free space next to it (said so) and the design plans at
+    once, with the view on the drawing."""
+    from types import SimpleNamespace
+
+    from app.editor._planning import reachable_points
+    from tests.drawings import DRAWINGS
+
+    s = tab.session
+    s.edit(lambda r: (r["layout"]["start"].__setitem__(slice(0, 2), [0.0, 0.0]),
+                      r["layout"]["end"].__setitem__(slice(0, 2), [0.01, 0.01])))
+    data = (DRAWINGS / "Kitchen-cooker-V.dxf").read_bytes()
+    done = s.plans_done
+    assert s.files.import_drawing(SimpleNamespace(name="Kitchen-cooker-V.dxf", content=data), {"scale": 1.0},
+                                  place_margin=0.03)
+    layout = s.request["layout"]
+    robot = s.robots.of_request(s.request)
+    lo, hi = np.asarray(layout["bounds"]["lower"]), np.asarray(layout["bounds"]["upper"])
+    assert np.all(np.abs(lo + 0.146) < 0.012) and np.all(np.abs(hi - 0.146) < 0.012), (lo, hi)
+    shapes = shapely.union_all([geo.obstacle_shape(ob) for ob in layout["obstacles"]])
+    x0, y0, x1, y1 = shapes.bounds
+    assert 0.08 < x1 - x0 < 0.3  # shrunk from 0.5 m
+    ring = np.asarray(shapely.get_coordinates(shapely.segmentize(shapes.buffer(0.03).boundary, 0.002)))
+    assert reachable_points(robot, ring[:, 0], ring[:, 1], 0.0).all(), "the margin around the drawing is out of reach"
+    note = s.notifications[-1][1]
+    assert "shrunk to fit" in note and "start moved" in note and "end moved" in note, note
+    assert "x -0.14" in note and "0.14" in note  # the reachable extent, stated
+    cell = float(layout["cell"]["size"])
+    for which in ("start", "end"):  # the square cell holding the point is clear of the drawing
+        i, j = np.floor((np.asarray(layout[which][:2]) - lo) / cell)
+        assert not shapely.box(*(lo + cell * np.array([i, j])), *(lo + cell * np.array([i + 1, j + 1]))).intersects(
+            shapes), which
+    assert wait_for(lambda: s.plans_done > done, 60) and s.wait_idle(60)
+    assert s.last_error is None, s.last_error
+    assert np.allclose(s.last_result["pose"][-1][:2], layout["end"][:2], atol=1e-3)
+    assert "Reachable at ψ 0 rad" in s.gui.reach_note.content

@@ -155,8 +155,32 @@ def test_cli_import_then_plan_to_each_machine_format(tmp_path):
     ([str(TABLE1_PATH)], "not a DXF or SVG"),
     ([str(TABLE), "--layer", "NOPE"], "layers: no geometry on layer(s) 'NOPE'"),
     ([str(TABLE), "--scale", "0"], f"scale: must be >= {MIN_SCALE:g}, got 0"),  # the schema's bound
+    ([str(TABLE), "--scale", "0.05", "--cell-size", "-0.01"], "layout.cell.size: must be >= "),
+    ([str(TABLE), "--scale", "0.05", "--clearance", "-1"], "layout.clearance: must be >= 0"),
 ])
 def test_cli_import_errors_exit_2_with_one_line(args, needle):
     r = run("import", *args)
     assert r.returncode == 2 and needle in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert "Traceback" not in r.stderr
+
+
+def test_cli_import_sets_the_cells_and_an_svg_in_mm_says_mm(tmp_path):
+    """--cell-size, --cell-shape and --clearance land in the request's layout, and a plan of a
+    drawing that needs 1 cm cells then works; an SVG sized width="200mm" reports units mm."""
+    req = tmp_path / "table.json"
+    r = run("import", str(TABLE), "--scale", "0.05", "--offset", "0", "0.0225", "--margin", "0.03",
+            "--start", "-0.065", "0", "0", "--end", "0.065", "0", "0", "--cell-size", "0.01", "--cell-shape",
+            "triangle", "--clearance", "0.002", "-o", str(req))
+    assert r.returncode == 0, r.stderr
+    layout = json.loads(req.read_text())["layout"]
+    assert layout["cell"] == {"shape": "triangle", "size": 0.01} and layout["clearance"] == 0.002
+    svg = tmp_path / "plate.svg"
+    svg.write_text('<svg xmlns="http://www.w3.org/2000/svg" width="200mm" height="100mm" viewBox="0 0 200 100">'
+                   '<rect x="80" y="30" width="40" height="40"/></svg>')
+    r = run("import", str(svg), "--scale", "0.5", "-o", str(tmp_path / "plate.json"), "--report",
+            str(tmp_path / "rep.json"))
+    assert r.returncode == 0, r.stderr
+    assert "units mm (drawing)" in r.stderr
+    rep = json.loads((tmp_path / "rep.json").read_text())
+    assert rep["units"] == "mm" and rep["metres_per_unit"] == 1e-3
+    assert abs(rep["area_m2"] - (0.04 * 0.5) ** 2) < 1e-9  # 40 mm square at scale 0.5

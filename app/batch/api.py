@@ -52,9 +52,10 @@ class BatchProgress(BaseModel):
     failed: int = Field(description="Items that failed: a planner error (code in the results) or a lost worker "
                         "(count)")
     cancelled: int = Field(description="Items cancelled before they finished (count)")
-    running: int = Field(description="Items being planned now (count)")
-    pending: int = Field(description="Items waiting (count)")
-    rate_per_s: float | None = Field(description="Items finished per second since the batch started or resumed, 1/s")
+    running: int = Field(description="Items being planned on the workers now, at most the workers' slots (count)")
+    pending: int = Field(description="Items waiting, also those sent ahead to a busy worker (count)")
+    rate_per_s: float | None = Field(description="Items planned (ok or failed, not cancelled) per second since the "
+                                     "batch started or resumed, 1/s")
     eta_s: float | None = Field(description="Estimated time to finish at that rate, s")
     elapsed_s: float | None = Field(description="Time since the batch started or resumed, s")
 
@@ -178,12 +179,13 @@ def batch_router() -> APIRouter:
     def list_batches(request: Request, limit: int = Query(100, ge=1, le=1000, description="At most this many "
                                                                                   "(count), newest first")):
         """The newest batches and their progress."""
-        return _service(request.app).store.list(limit)
+        service = _service(request.app)
+        return [service.at_workers(p) for p in service.store.list(limit)]
 
     @router.get("/v1/batches/{batch_id}", response_model=BatchProgress, responses={404: errs[404], 422: errs[422]})
     def get_batch(batch_id: str, request: Request):
         """State and progress of a batch."""
-        out = _service(request.app).store.progress(batch_id)
+        out = _service(request.app).progress(batch_id)
         if out is None:
             raise HTTPException(404, f"no batch with id {batch_id!r}")
         return out

@@ -9,6 +9,7 @@ finished result and the summary of what finished are kept; the same command resu
 from __future__ import annotations
 
 import argparse
+import itertools
 import os
 import sys
 import time
@@ -130,7 +131,7 @@ class _BatchRun:
                 self.lines[item.key] = (item.index, row_line(row))
                 self.statuses[item.key] = row["status"]
                 self.counts["skipped"] += 1
-                self.prog.done += 1
+                self.prog.skip()
                 continue
             self.shas[item.index] = sha
             yield item
@@ -199,8 +200,11 @@ class _BatchRun:
         runner = Runner(engine, self.on_done, fmt=self.fmt, timeout_s=timeout_s or None,
                         stage=str(self.stage) if self.stage else None)
         try:
+            todo = self.todo()
+            first = next(todo, None)  # items already done before the first to plan: the bar starts past them
             self.prog.start(engine.describe())
-            runner.run(self.todo(), remaining=lambda: max(0, self.total - self.prog.done - runner.running))
+            runner.run(itertools.chain(() if first is None else (first,), todo),
+                       remaining=lambda: max(0, self.total - self.prog.done - runner.running))
         except KeyboardInterrupt:
             interrupted = True
         finally:

@@ -36,6 +36,10 @@ class Progress:
         print(f"rangeplan: batch of {self.total} items on {description}"
               + (f"; {self.done} already done" if self.done else ""), file=self.stream, flush=True)
 
+    def skip(self) -> None:
+        """An item done in an earlier run (resumed batch): counted as done, not as planned now."""
+        self.done += 1
+
     def item(self, key: str, outcome: dict[str, Any]) -> None:
         self.done += 1
         self.new += 1
@@ -84,7 +88,12 @@ class RichProgress(Progress):
     def start(self, description: str) -> None:
         self.console.print(f"rangeplan: batch of {self.total} items on {description}"
                            + (f"; {self.done} already done" if self.done else ""))
+        self.bar.update(self.task, completed=self.done)  # a resumed batch starts at what is done
         self.bar.start()
+
+    def skip(self) -> None:
+        super().skip()
+        self.bar.update(self.task, completed=self.done)
 
     def item(self, key: str, outcome: dict[str, Any]) -> None:
         self.done += 1

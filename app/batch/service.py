@@ -113,13 +113,29 @@ class BatchService:
         self._wake.set()
         return out
 
+    def progress(self, id_: str) -> dict[str, Any] | None:
+        """A batch's progress (:meth:`BatchStore.progress`) with ``running`` counting the items
+        being planned on the workers now: at most the engine's slots (workers x threads). Items
+        sent to the engine ahead of a free worker are waiting, so they count as ``pending``."""
+        out = self.store.progress(id_)
+        return None if out is None else self.at_workers(out)
+
+    def at_workers(self, out: dict[str, Any]) -> dict[str, Any]:
+        """``out`` (one batch's progress) with ``running`` capped at the engine's slots."""
+        try:
+            slots = int(self.engine.slots) if self.engine is not None else 0
+        except Exception:  # a Dask cluster that went away: no worker plans anything
+            slots = 0
+        running = min(int(out["running"]), slots)
+        return {**out, "running": running, "pending": int(out["pending"]) + int(out["running"]) - running}
+
     def cancel(self, id_: str) -> dict[str, Any] | None:
         seq = self.store.seq_of(id_)
         if seq is None or not self.store.cancel(id_):
             return None
         if self._runner is not None:
             self._runner.cancel(lambda it: it.tag == seq)
-        return self.store.progress(id_)
+        return self.progress(id_)
 
     def delete(self, id_: str) -> bool:
         if self.cancel(id_) is None:

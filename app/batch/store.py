@@ -111,8 +111,9 @@ class BatchStore:
 
     def progress(self, id_: str) -> dict[str, Any] | None:
         """State and counts of a batch: ``total``, ``done`` (finished, any outcome), ``ok``,
-        ``failed`` (error or failed), ``cancelled``, ``running``, ``pending``, ``rate_per_s``
-        (items finished per second since it started or resumed), ``eta_s``."""
+        ``failed`` (error or failed), ``cancelled``, ``running`` (items handed to the engine),
+        ``pending``, ``rate_per_s`` (items planned, not cancelled, per second since it started or
+        resumed), ``eta_s``."""
         b = self._batch(id_)
         if b is None:
             return None
@@ -124,8 +125,9 @@ class BatchStore:
         done = ok + error + failed + cancelled
         end = finished if finished is not None else time.time()
         rate = None
-        if started is not None and end > started and done > done_at_start:
-            rate = (done - done_at_start) / (end - started)
+        planned = ok + error + failed  # cancelled items are not work done: not in the rate
+        if started is not None and end > started and planned > done_at_start:
+            rate = (planned - done_at_start) / (end - started)
         left = total - done
         return {"id": id_, "name": name, "state": state, "created": created, "format": fmt, "total": total,
                 "done": done, "ok": ok, "failed": error + failed, "cancelled": cancelled,
@@ -208,7 +210,7 @@ class BatchStore:
                                 ((seq, item) for item, _ in rows))
                 if state == "queued":
                     done = con.execute("SELECT count(*) FROM batch_items WHERE batch_seq = ? AND status IN "
-                                       "('ok', 'error', 'failed', 'cancelled')", (seq,)).fetchone()[0]
+                                       "('ok', 'error', 'failed')", (seq,)).fetchone()[0]  # planned (rate_per_s)
                     con.execute("UPDATE batches SET state = 'running', started = ?, done_at_start = ? WHERE seq = ?",
                                 (now, done, seq))
                 out.extend((seq, id_, item, req) for item, req in rows)

@@ -9,9 +9,15 @@ Failures become notifications naming the cause; they never change the design.
 
 from __future__ import annotations
 
+import hashlib
 import json
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
+from ._geometry import obstacle_shape
+from ._placement import fit_drawing, free_point, reachable_region
 from ._planning import (
     MACHINE_FORMATS,
     OUTPUT_FORMATS,
@@ -19,6 +25,7 @@ from ._planning import (
     drawing_request,
     editable,
     export_result,
+    reachable_points,
     to_csv,
     validate_request,
 )
@@ -26,7 +33,38 @@ from ._planning import (
 if TYPE_CHECKING:
     from ._session import Session
 
-__all__ = ["EditorFiles"]
+__all__ = ["EditorFiles", "MachineFiles", "request_hash"]
+
+
+def request_hash(request: dict) -> str:
+    """SHA-256 (hex) of a plan request as canonical JSON (keys sorted, no spaces, UTF-8):
+    the same design gives the same hash whatever the order it was typed in."""
+    text = json.dumps(request, sort_keys=True, separators=(",", ":"), ensure_ascii=False, allow_nan=False)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _design(request: dict | None) -> dict | None:
+    """What decides a plan: the request without its name (renaming re-plans nothing)."""
+    return None if request is None else {k: v for k, v in request.items() if k != "name"}
+
+
+@dataclass(frozen=True)
+class MachineFiles:
+    """Whether the machine files (G-code, leg lengths, DXF, CSV) may be downloaded now:
+    ``result`` is the plan of the design on screen (``plan`` its number, ``request`` the
+    request it was planned for), or None and ``reason`` says why not."""
+
+    result: dict | None
+    request: dict | None
+    plan: int
+    reason: str
+
+    def header(self) -> tuple[str, ...]:
+        """The provenance lines every downloaded file carries: design, plan id, request hash."""
+        assert self.request is not None
+        return (f"design: {self.request.get('name') or 'unnamed'}",
+                f"plan id: editor plan #{self.plan}",
+                f"request sha256: {request_hash(self.request)} (the request JSON, keys sorted, no spaces)")
 
 
 class EditorFiles:
@@ -121,40 +159,129 @@ class EditorFiles:
         """Send the design to ``client`` as ``corridor.json``."""
         self._download(client, "corridor.json", json.dumps(self._editor.request, indent=2).encode())
 
+    def machine_files(self) -> MachineFiles:
+        """The plan whose files may be downloaded: the newest plan, only when it succeeded and
+        was planned for the design on screen (a failed plan, a pending re-plan or an edit since
+        disable every download: a machine must never get the program of another design)."""
+        state = self._editor.state
+        with state.lock:
+            result, planned, error = state.last_result, state.last_result_request, state.last_error
+            gen, current = state.last_plan_generation, state.request
+        if error is not None:
+            message = str(error.get("message", "")).split("; ")[0]
+            return MachineFiles(None, None, gen, f"the newest plan failed ({error.get('code')}: {message}); no file of "
+                                "an earlier plan is offered — fix the design")
+        if result is None or planned is None:
+            return MachineFiles(None, None, gen, "no plan yet")
+        if _design(planned) != _design(current):
+            return MachineFiles(None, None, gen, f"the design has changed since plan #{gen} — wait for the re-plan "
+                                "(or press Plan)")
+        planned = {**planned, "name": current.get("name")} if current.get("name") else _design(planned) or {}
+        return MachineFiles(result, planned, gen, f"files of plan #{gen}, the design on screen")
+
+    def _current_plan(self, client) -> MachineFiles | None:
+        files = self.machine_files()
+        if files.result is None:
+            self._editor.notify("No download", files.reason, color="yellow", client=client)
+            return None
+        return files
+
     def download_csv(self, client) -> None:
-        """Send the newest trajectory to ``client`` as ``trajectory.csv``."""
-        result = self._editor.last_result
-        if result is None:
-            self._editor.notify("No trajectory", "plan a corridor first", color="yellow", client=client)
-            return
-        self._download(client, "trajectory.csv", to_csv(result).encode())
+        """Send the plan of the design on screen to ``client`` as ``trajectory.csv``."""
+        files = self._current_plan(client)
+        if files is not None:
+            assert files.result is not None
+            self._download(client, "trajectory.csv", to_csv(files.result, files.header()).encode())
 
     # ------------------------------------------------------------------ CAD and machine files
-    def import_drawing(self, upload, options: dict, client=None) -> bool:
+    def import_drawing(self, upload, options: dict, client=None, *, place_margin: float | None = None) -> bool:
         """Replace the layout's bounds and obstacles by an uploaded DXF or SVG drawing's
         (``options``: :class:`planner.schema.ImportOptions`, e.g. scale and offset [m]); the
-        start, end and cell settings stay. Returns whether the design changed."""
+        start, end and cell settings stay. With ``place_margin`` [m] the drawing is placed
+        (:meth:`place`): fitted into the reachable square less that margin, which becomes the
+        bounds, with start and end kept if valid or moved next to the drawing. The view
+        then fits the drawing. Returns whether the design changed."""
+        request = self._editor.request
         try:
-            req, summary = drawing_request(upload.content, upload.name, self._editor.request, options)
+            if place_margin is None:
+                req, summary = drawing_request(upload.content, upload.name, request, options)
+            else:
+                req, summary = self.place(upload, options, request, place_margin)
         except PlannerError as exc:
             self._editor.notify("Drawing not imported", f"{upload.name}: {exc}", client=client)
             return False
         self._editor.set_request(req, immediate=True)
-        self._editor.place_cameras()
+        self._editor.place_cameras(fit_layout=True)
         self._editor.notify("Drawing imported", f"{upload.name}: {summary}", color="green", client=client)
         return True
+
+    def place(self, upload, options: dict, request: dict, margin: float) -> tuple[dict, str]:
+        """The request with the drawing placed where the robot reaches at the start's angle
+        (see :mod:`._placement`) and a summary saying what was done (scale, offset, bounds,
+        start / end kept or moved). Raises :class:`PlannerError` naming the field."""
+        robot = self._editor.robots.of_request(request, fallback=True)
+        assert robot is not None  # fallback: the default robot for a request whose robot is invalid
+        layout = request.get("layout") or {}
+        psi = float((layout.get("start") or [0.0, 0.0, 0.0])[2])
+        try:
+            lower, upper, centre = reachable_region(robot, psi)
+        except ValueError as exc:
+            raise PlannerError("invalid_input", str(exc), "layout.start") from None
+        first, _ = drawing_request(upload.content, upload.name, request, {**options, "offset": [0.0, 0.0],
+                                                                            "margin": 0.0})
+
+        def reach(x, y, a):
+            return reachable_points(robot, x, y, a)
+
+        scale = float(options.get("scale", 1.0))
+        cell_spec = (first["layout"].get("cell") or {})
+        cell, shape = float(cell_spec.get("size") or 0.02), str(cell_spec.get("shape", "square"))
+        room = margin + 1.5 * cell  # a lane of whole reachable cells around the drawing, beyond the margin
+        try:
+            p = fit_drawing([obstacle_shape(ob) for ob in first["layout"]["obstacles"]], centre, room, reach, psi)
+        except ValueError as exc:
+            raise PlannerError("invalid_input", str(exc), "margin") from None
+        req, summary = drawing_request(upload.content, upload.name, request,
+                                       {**options, "scale": scale * p.factor, "offset": list(p.offset), "margin": 0.0})
+        out = req["layout"]
+        placed = out["bounds"]
+        # bounds: the reachable extent, grown to whole cells (cells beyond reach are "unreachable")
+        n = np.ceil((upper - lower) / cell - 1e-9)
+        lo = np.round(0.5 * (lower + upper) - 0.5 * n * cell, 6) + 0.0
+        hi = np.round(lo + n * cell, 6) + 0.0
+        out["bounds"] = {"lower": lo.tolist(), "upper": hi.tolist()}
+        moved, taken = [], None
+        for which, target in (("start", placed["lower"]), ("end", placed["upper"])):
+            try:
+                pose, was_moved = free_point(out[which], out["obstacles"], lo, hi, cell=cell, shape=shape,
+                                             clearance=float(out.get("clearance", 0.0)), reach=reach, target=target,
+                                             taken=taken)
+            except ValueError:
+                raise PlannerError("invalid_input", f"no free, reachable place for the {which} next to the drawing: "
+                                   "give a smaller margin, scale or cell size", "margin") from None
+            if was_moved:
+                moved.append(f"{which} moved to ({pose[0]:.4f}, {pose[1]:.4f}) m (its cell was in or next to an "
+                             "obstacle, or out of reach)")
+            out[which] = pose
+            taken = pose
+        text = (f"{summary}; placed where the robot reaches at ψ {psi:g} rad (x {lower[0]:.3f}…{upper[0]:.3f} m, "
+                f"y {lower[1]:.3f}…{upper[1]:.3f} m, the bounds) with a {margin:g} m margin and a "
+                f"{1.5 * cell:g} m lane for the path around it: scale "
+                f"{scale * p.factor:.4g}{' (shrunk to fit)' if p.shrunk else ''}, offset ({p.offset[0]:.4f}, "
+                f"{p.offset[1]:.4f}) m; " + ("; ".join(moved) if moved else "start and end kept"))
+        return req, text
 
     #: download file name of each machine format (the registry's)
     EXPORTS = {fmt: OUTPUT_FORMATS[fmt].filename for fmt in MACHINE_FORMATS}
 
     def download_export(self, client, fmt: str) -> None:
-        """Send the newest trajectory to ``client`` as G-code, a leg-length stream or DXF."""
-        result = self._editor.last_result
-        if result is None:
-            self._editor.notify("No trajectory", "plan a corridor first", color="yellow", client=client)
-            return
-        text = export_result(result, fmt, self._editor.request)
-        self._download(client, self.EXPORTS[fmt], text.encode())
+        """Send the plan of the design on screen to ``client`` as G-code, a leg-length stream
+        or DXF (refused, with the reason, when there is none: see :meth:`machine_files`)."""
+        files = self._current_plan(client)
+        if files is not None:
+            assert files.result is not None and files.request is not None
+            text = export_result(files.result, fmt, files.request, files.header())
+            self._download(client, self.EXPORTS[fmt], text.encode())
 
     @staticmethod
     def _download(client, filename: str, content: bytes) -> None:

@@ -18,8 +18,8 @@ import shapely
 # Colours (RGB 0-255) of the cell states and the drawing layers.
 CELL_COLOURS = {"free": (222, 235, 247), "blocked": (90, 90, 90), "unreachable": (244, 204, 204)}
 #: z of each layer [m] above the plane so that later layers draw on top
-Z = {"cells": 0.0, "grid": 0.0005, "corridor": 0.001, "obstacles": 0.0015, "reach": 0.002,
-     "trajectory": 0.003, "ticks": 0.0035, "robot": 0.004, "pivots": 0.0045, "handles": 0.006}
+Z = {"cells": 0.0, "grid": 0.0005, "corridor": 0.001, "obstacles": 0.0015, "obstacle_edges": 0.0017,
+     "reach": 0.002, "trajectory": 0.003, "ticks": 0.0035, "robot": 0.004, "pivots": 0.0045, "handles": 0.006}
 
 
 def polygon_mesh(polygons: list, z: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
@@ -42,6 +42,52 @@ def polygon_mesh(polygons: list, z: float = 0.0) -> tuple[np.ndarray, np.ndarray
     if not verts:
         return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int32)
     return np.concatenate(verts), np.concatenate(faces).astype(np.int32)
+
+
+def obstacle_shape(ob: dict) -> shapely.Polygon:
+    """An obstacle of the layout (rectangle, polygon with its ``holes``, or circle) as a
+    shapely polygon [m] (holes as interiors)."""
+    holes = (ob.get("holes") or []) if ob.get("type") == "polygon" else []
+    return shapely.Polygon(obstacle_polygon(ob), [[list(map(float, p)) for p in h] for h in holes])
+
+
+def clip_shapes(shapes: list, lower, upper) -> list[shapely.Polygon]:
+    """Shapely polygons (holes kept) cut to the rectangle [lower, upper] [m]: the parts
+    inside, each a polygon (a cut may split one into several); invalid drawings are
+    repaired with ``make_valid`` first (a self-touching outline)."""
+    box = shapely.box(float(lower[0]), float(lower[1]), float(upper[0]), float(upper[1]))
+    out: list[shapely.Polygon] = []
+    for shape in shapes:
+        if not shape.is_valid:
+            shape = shapely.make_valid(shape)
+        part = shape.intersection(box)
+        geoms = getattr(part, "geoms", [part])
+        out.extend(g for g in geoms if isinstance(g, shapely.Polygon) and not g.is_empty and g.area > 0)
+    return out
+
+
+def shape_mesh(shapes: list, z: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Triangulate shapely polygons with holes exactly (shapely's constrained Delaunay
+    triangulation: the triangles tile the polygon, none lies in a hole, whatever the outline's
+    concavity) into one mesh: vertices (V, 3) [m], faces (F, 3) counter-clockwise from +z."""
+    tris = []
+    for shape in shapes:
+        cdt = shapely.constrained_delaunay_triangles(shape)
+        tris.extend(np.asarray(t.exterior.coords)[:3] for t in getattr(cdt, "geoms", []) if t.area > 0)
+    if not tris:
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int32)
+    t = np.asarray(tris, float)  # (F, 3, 2)
+    a, b = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    area2 = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    t[area2 < 0] = t[area2 < 0][:, ::-1]  # clockwise: flip so the normal points to the camera (+z)
+    verts = np.concatenate((t.reshape(-1, 2), np.full((3 * len(t), 1), z)), axis=1)
+    return verts, np.arange(3 * len(t), dtype=np.int32).reshape(-1, 3)
+
+
+def shape_edges(shapes: list, z: float = 0.0) -> np.ndarray:
+    """Outlines and hole outlines of shapely polygons as line segments (M, 2, 3) [m]."""
+    rings = [np.asarray(r.coords)[:-1, :2] for s in shapes for r in (s.exterior, *s.interiors)]
+    return polygon_edges(rings, z)
 
 
 def polygon_edges(polygons: list, z: float = 0.0) -> np.ndarray:

@@ -45,6 +45,8 @@ if TYPE_CHECKING:
 __all__ = ["PLAY_FPS", "EditorGui", "Playback", "error_body", "error_title"]
 
 PLAY_FPS = 30.0  #: playback frame rate [1/s]
+#: the tab panels scroll on their own (Mantine's role=tabpanel): the controls above stay visible
+PANEL_CSS = "[role=tabpanel]{max-height:max(220px,calc(100vh - 600px));overflow-y:auto;overscroll-behavior:contain}"
 _XY, _XY_PSI = ("x", "y"), ("x", "y", "ψ")
 
 
@@ -132,7 +134,14 @@ class EditorGui:
         self.playback = Playback(self.time, self.play_button,
                                  lambda: session.last_result is not None and session.last_error is None)
         self.play_button.on_click(lambda _: self.playback.toggle())
+        self.robot_style = gui.add_dropdown("Robot drawn", ("solid", "outline", "hidden"), initial_value="solid",
+                                            hint="outline: thin legs, no platform fill, so a narrow corridor under "
+                                                 "the robot stays readable")
+        self.robot_style.on_update(lambda _: session.scene.set_robot_style(self.robot_style.value))
         self.leg_legend = gui.add_html(leg_legend_html(4, None))
+        # The tabs' content scrolls in its own box, so the controls above it (Plan, Undo, Redo,
+        # status, time, Play) stay in view however long the Edit or Files tab is.
+        gui.add_html(f"<style>{PANEL_CSS}</style>")
         tabs = gui.add_tab_group()
         with tabs.add_tab("Edit"):
             self._build_edit_tab(gui)
@@ -168,6 +177,7 @@ class EditorGui:
         session = self._session
         self.layout_folder = gui.add_folder("Layout")
         with self.layout_folder:
+            self.reach_note = gui.add_markdown("")
             self.start = VectorField(gui, "Start x, y (m), ψ (rad)", (0.0, 0.0, 0.0),
                                      self._edit("start", lambda r, v: _state.set_pose(r, "start", v)), names=_XY_PSI)
             self.end = VectorField(gui, "End x, y (m), ψ (rad)", (0.0, 0.0, 0.0),
@@ -254,7 +264,6 @@ class EditorGui:
         upload = gui.add_upload_button("Import request JSON", mime_type="application/json")
         upload.on_upload(lambda e: editor.files.import_upload(upload.value, client=e.client))
         gui.add_button("Export request JSON").on_click(lambda e: editor.files.export_request(e.client))
-        gui.add_button("Download trajectory CSV").on_click(lambda e: editor.files.download_csv(e.client))
         self._build_cad_files(gui)
 
     def _build_cad_files(self, gui) -> None:
@@ -264,14 +273,29 @@ class EditorGui:
             self.drawing_scale = NumberField(gui, "Drawing scale", 1.0, lambda v: None, bounds=Bounds(gt=0.0),
                                              hint="Applied after the drawing's units (mm unless it says)")
             self.drawing_offset = VectorField(gui, "Drawing offset x, y (m)", (0.0, 0.0), lambda v: None, names=_XY)
+            self.place_drawing = gui.add_checkbox(
+                "Place drawing in the reachable region", True,
+                hint="Fit the drawing (shrunk if it does not fit, never enlarged) into the square the robot reaches, "
+                     "less the margin; start and end kept if free, else moved next to the drawing")
+            self.place_margin = NumberField(gui, "Placement margin (m)", 0.03, lambda v: None,
+                                            bounds=Bounds(ge=0.0, le=0.1))
             drawing = gui.add_upload_button("Import drawing (DXF/SVG)", hint="Closed shapes become obstacles")
             drawing.on_upload(lambda e: editor.files.import_drawing(
                 drawing.value, {"scale": float(self.drawing_scale.value or 1.0),
                                 "offset": [float(v) for v in (self.drawing_offset.value or (0.0, 0.0))]},
-                client=e.client))
-            for fmt in MACHINE_FORMATS:
-                gui.add_button(f"Download {OUTPUT_FORMATS[fmt].title}").on_click(
-                    lambda e, f=fmt: editor.files.download_export(e.client, f))
+                client=e.client, place_margin=(float(self.place_margin.value if self.place_margin.value is not None
+                                                      else 0.03) if self.place_drawing.value else None)))
+        with gui.add_folder("Machine files (of the plan on screen)"):
+            self.downloads_note = gui.add_markdown("Downloads: no plan yet")
+            self.download_buttons = {}
+            for fmt in (*MACHINE_FORMATS, "csv"):
+                title = OUTPUT_FORMATS[fmt].title or "trajectory CSV"
+                button = gui.add_button(f"Download {title}", disabled=True)
+                if fmt == "csv":
+                    button.on_click(lambda e: editor.files.download_csv(e.client))
+                else:
+                    button.on_click(lambda e, f=fmt: editor.files.download_export(e.client, f))
+                self.download_buttons[fmt] = button
 
     # ------------------------------------------------------------------ showing values
     def show_request(self, request: dict, selected_segment: int = 0) -> None:
@@ -314,6 +338,16 @@ class EditorGui:
     def show_point(self, which: str, pose) -> None:
         """Show the ``which`` ("start" | "end") pose [x, y, psi] (m, m, rad)."""
         getattr(self, which).show([float(v) for v in pose])
+
+    def show_downloads(self, enabled: bool, reason: str) -> None:
+        """Enable the machine-file downloads (G-code, leg lengths, DXF, CSV) or disable them,
+        with the ``reason`` shown above them."""
+        for button in self.download_buttons.values():
+            if button.disabled == enabled:
+                button.disabled = not enabled
+        text = f"{'✅' if enabled else '⛔'} Downloads: {reason}"
+        if self.downloads_note.content != text:
+            self.downloads_note.content = text
 
     def show_status(self, text: str) -> None:
         """Set the status line (markdown)."""

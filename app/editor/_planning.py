@@ -80,6 +80,7 @@ __all__ = [
     "editable",
     "field_bounds",
     "reachable_mask",
+    "reachable_points",
     "robot_geometry",
     "drawing_request",
     "export_result",
@@ -142,14 +143,21 @@ def reachable_mask(robot: RobotModel, lower, upper, psi: float, n: int = 96):
     xs = np.linspace(lower[0], upper[0], n)
     ys = np.linspace(lower[1], upper[1], n)
     X, Y = np.meshgrid(xs, ys)
-    poses = np.column_stack((X.ravel(), Y.ravel(), np.full(X.size, float(psi))))
+    return xs, ys, reachable_points(robot, X.ravel(), Y.ravel(), psi).reshape(n, n)
+
+
+def reachable_points(robot: RobotModel, x, y, psi: float) -> np.ndarray:
+    """Whether the robot reaches the tool points (``x``, ``y``) [m] (1-D arrays) at angle
+    ``psi`` [rad]: every leg within its stroke and the pose regular (see :func:`reachable_mask`)."""
+    x, y = np.asarray(x, float).ravel(), np.asarray(y, float).ravel()
+    poses = np.column_stack((x, y, np.full(x.size, float(psi))))
     L = kinematics.leg_lengths(robot, poses)
     ok = np.all((L >= robot.length_min) & (L <= robot.length_max), axis=1)
     if ok.any():
         sing = np.zeros(len(poses))
         sing[ok] = kinematics.singularity_measure(robot, poses[ok])
         ok &= sing >= SINGULAR_TOL
-    return xs, ys, ok.reshape(n, n)
+    return ok
 
 
 def robot_geometry(robot: RobotModel, pose) -> dict:
@@ -173,9 +181,9 @@ def editable(req: PlanRequest) -> dict:
     return out
 
 
-def to_csv(result: dict) -> str:
-    """The CSV of a plan result (as JSON types)."""
-    return write(PlanResult.model_validate(result), "csv").decode()
+def to_csv(result: dict, header: tuple[str, ...] = ()) -> str:
+    """The CSV of a plan result (as JSON types), ``header`` as its first comment lines."""
+    return write(PlanResult.model_validate(result), "csv", header=header).decode()
 
 
 def drawing_request(data: bytes, filename: str, request: dict, options: dict) -> tuple[dict, str]:
@@ -209,12 +217,14 @@ def _read_drawing(data: bytes, filename: str, options: dict) -> ImportResult:
     return ImportResult.model_validate_json(out.payload or b"", context=PARTIAL_LAYOUT)
 
 
-def export_result(result: dict, fmt: str, request: dict) -> str:
+def export_result(result: dict, fmt: str, request: dict, header: tuple[str, ...] = ()) -> str:
     """A plan result (JSON types) in a machine format (:data:`MACHINE_FORMATS`: G-code, leg
-    lengths, DXF with the obstacles of ``request``'s layout when it is valid)."""
+    lengths, DXF with the obstacles of ``request``'s layout when it is valid), ``header``
+    lines (design, plan id, request hash) in its header."""
     model, _ = validate_request(request)
     layout = model.layout if model is not None else None
-    return write(PlanResult.model_validate(result), fmt, layout=layout, source="rangeplan editor").decode()
+    return write(PlanResult.model_validate(result), fmt, layout=layout, source="rangeplan editor",
+                 header=header).decode()
 
 
 class RobotCache:

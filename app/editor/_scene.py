@@ -22,6 +22,7 @@ and the pointer on the plane [m]).
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -31,7 +32,7 @@ import viser
 from . import _geometry as geo
 from ._planning import MAX_LEGS, Robot, reachable_mask, robot_geometry
 
-__all__ = ["TICK_EVERY_S", "EditorScene"]
+__all__ = ["ROBOT_STYLES", "TICK_EVERY_S", "EditorScene", "axis_ticks"]
 
 TICK_EVERY_S = 0.1  #: spacing of the time ticks on the trajectory [s]
 EDGE_HANDLE = 0.014  #: width of a segment edge handle, as a fraction of the larger view side
@@ -39,6 +40,9 @@ SEGMENT_HANDLES = ("left", "right", "bottom", "top", "centre")
 REACH_SAMPLES = 120  #: grid samples per side of the reachable-workspace outline
 HANDLE_SCALE = 0.12  #: size of a start/end gizmo, as a fraction of the larger bounds side
 DOT_RADIUS = 0.01  #: radius of a start/end dot, as a fraction of the larger bounds side
+MAX_TICK_LABELS = 8  #: axis labels per axis (a label node each, made once)
+#: how the robot is drawn: legs' width [px], platform fill shown, platform edge width [px]
+ROBOT_STYLES = {"solid": (5.0, True, 2.0), "outline": (1.5, False, 1.0), "hidden": (0.0, False, 0.0)}
 
 # Placeholder geometry of a node created before there is anything to show (it is hidden).
 _NO_SEGMENTS = np.zeros((1, 2, 3))
@@ -97,6 +101,8 @@ class EditorScene:
         self._dragging = {"start": False, "end": False}  # a gizmo the user holds
         self._reach_cache: dict[tuple, np.ndarray] = {}  # outline segments by (robot, bounds, psi)
         self._robot_drawn: Robot | None = None  # robot whose structure the robot nodes show
+        self._robot_lock = threading.Lock()  # one pose at a time: legs and platform of the same frame
+        self.robot_style = "solid"
         scene = client.scene  # up direction and world axes: the server's, set by the editor
         scene.on_click()(on_click)
         scene.on_rect_select(modifier="shift")(on_rect_select)
@@ -128,6 +134,12 @@ class EditorScene:
         self.obstacle_edges = lines("/layout/obstacle_edges", (0, 0, 0), 1.5)
         self.reachable = {which: lines(f"/layout/reachable_{which}", _REACH_COLOURS[which], 2.0)
                           for which in ("start", "end")}
+        # axes along the bounds' lower and left edges, mm ticks, and a scale bar
+        self.axes = lines("/view/axes", (40, 40, 40), 1.2)
+        self.axis_labels = {axis: [scene.add_label(f"/view/{axis}_tick_{i}", "", visible=False)
+                                   for i in range(MAX_TICK_LABELS)] for axis in ("x", "y")}
+        self.scale_bar = lines("/view/scale_bar", (0, 0, 0), 4.0)
+        self.scale_label = scene.add_label("/view/scale_label", "", visible=False)
         # result: trajectory and its time ticks
         self.trajectory = lines("/result/trajectory", (20, 60, 220), 3.0)
         self.ticks = points("/result/ticks", (255, 140, 0), 0.0035, "circle")
@@ -226,16 +238,18 @@ class EditorScene:
         request's ``layout`` dict, or None for a request without one: all hidden)."""
         marker_nodes = [*self.gizmos.values(), *self.dots.values(), *self.labels.values()]
         if layout is None:
-            for node in (self.bounds, self.obstacles, self.obstacle_edges, *self.reachable.values(), *marker_nodes):
+            for node in (self.bounds, self.obstacles, self.obstacle_edges, *self.reachable.values(), *marker_nodes,
+                         self.axes, self.scale_bar, self.scale_label, *self.axis_labels["x"], *self.axis_labels["y"]):
                 node.visible = False
             return
         lo = np.asarray(layout["bounds"]["lower"], float)
         hi = np.asarray(layout["bounds"]["upper"], float)
         span = max(float(np.max(hi - lo)), 1e-3)  # > 0 even while the user types inverted bounds
         _show_lines(self.bounds, geo.polygon_edges([geo.rectangle(lo, hi)], geo.Z["grid"]))
-        polys = geo.clip_polygons([geo.obstacle_polygon(ob) for ob in layout.get("obstacles", [])], lo, hi)
-        _show_mesh(self.obstacles, *geo.polygon_mesh(polys, geo.Z["obstacles"]))
-        _show_lines(self.obstacle_edges, geo.polygon_edges(polys, geo.Z["obstacles"]))
+        self._show_axes(lo, hi)
+        shapes = geo.clip_shapes([geo.obstacle_shape(ob) for ob in layout.get("obstacles", [])], lo, hi)
+        _show_mesh(self.obstacles, *geo.shape_mesh(shapes, geo.Z["obstacles"]))  # exact: holes stay open
+        _show_lines(self.obstacle_edges, geo.shape_edges(shapes, geo.Z["obstacle_edges"]))  # outlines on top
         psi_start, psi_end = float(layout["start"][2]), float(layout["end"][2])
         # one colour per node (per-vertex colours are drawn paler: the outline vanished on the
         # pink unreachable cells)
@@ -256,6 +270,40 @@ class EditorScene:
             self.labels[which].text = f"{which} (ψ {float(p[2]):.2f} rad)"
         for node in marker_nodes:
             node.visible = True
+
+    def _show_axes(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        """x and y axes just outside the bounds' lower and left edges with ticks in mm (a
+        label every major tick) and a scale bar under the lower right corner."""
+        span = float(np.max(hi - lo))
+        minor, major = axis_ticks(span)
+        z, t = geo.Z["grid"], 0.012 * span
+        y0, x0 = lo[1] - 0.02 * span, lo[0] - 0.02 * span
+        segs = [[[lo[0], y0, z], [hi[0], y0, z]], [[x0, lo[1], z], [x0, hi[1], z]]]
+        labels = {"x": [], "y": []}
+        for axis, a, b in (("x", lo[0], hi[0]), ("y", lo[1], hi[1])):
+            for v in minor * np.arange(np.ceil(a / minor - 1e-9), np.floor(b / minor + 1e-9) + 1):
+                is_major = abs(v / major - round(v / major)) < 1e-6
+                length = t * (2.0 if is_major else 1.0)
+                if axis == "x":
+                    segs.append([[v, y0, z], [v, y0 - length, z]])
+                else:
+                    segs.append([[x0, v, z], [x0 - length, v, z]])
+                if is_major:
+                    labels[axis].append(float(v))
+        _show_lines(self.axes, np.asarray(segs, float))
+        for axis, values in labels.items():
+            for i, node in enumerate(self.axis_labels[axis]):
+                if i < len(values):
+                    v = values[i]
+                    node.text = f"{v * 1e3:.0f} mm" if abs(v) > 1e-12 else "0"
+                    node.position = (v, y0 - 3.5 * t, z) if axis == "x" else (x0 - 6.0 * t, v, z)
+                node.visible = i < len(values)
+        bar = major  # one major tick long
+        yb = y0 - 7.0 * t
+        _show_lines(self.scale_bar, np.array([[[hi[0] - bar, yb, z], [hi[0], yb, z]]]))
+        self.scale_label.text = f"{bar * 1e3:.0f} mm"
+        self.scale_label.position = (hi[0] - 0.5 * bar, yb - 2.5 * t, z)
+        self.scale_label.visible = True
 
     def _reach_outline(self, robot: Robot, lo: np.ndarray, hi: np.ndarray, psi: float) -> np.ndarray:
         """Outline (M, 2, 3) [m] of the poses reachable at angle ``psi`` [rad] over the bounds
@@ -380,7 +428,7 @@ class EditorScene:
         ``force`` (n,) [N] relative to the robot's force limit. Per call only the platform
         frame's pose and the legs' points and colours change; the robot's drawing is redone
         only when ``robot`` differs from the last one shown."""
-        with self._client.atomic():  # legs, colours and platform arrive as one update
+        with self._robot_lock, self._client.atomic():  # legs, colours and platform: one pose, one update
             if robot is not self._robot_drawn:
                 self._show_robot_structure(robot)
             z = geo.Z["robot"]
@@ -392,7 +440,22 @@ class EditorScene:
             self.legs.points = ends
             self.platform.position = (float(pose[0]), float(pose[1]), z)
             self.platform.wxyz = geo.yaw_quaternion(float(pose[2]))
-            self.robot.visible = True
+            self.robot.visible = self.robot_style != "hidden"
+
+    def set_robot_style(self, style: str) -> None:
+        """Draw the robot ``solid`` (platform filled, thick legs), as an ``outline`` (thin legs,
+        no fill: the corridor under it stays readable) or ``hidden``."""
+        legs, fill, edge = ROBOT_STYLES[style]
+        with self._robot_lock:
+            self.robot_style = style
+            if legs > 0:
+                self.legs.thickness = legs
+                self.platform_edge.thickness = edge
+            self.platform_fill.visible = fill and self._robot_drawn is not None
+            if style == "hidden":
+                self.robot.visible = False
+            elif self._robot_drawn is not None and self.legs.points.shape[0] > 1:
+                self.robot.visible = True
 
     def _show_robot_structure(self, robot: Robot) -> None:
         """What changes only with the robot: base pivots (world) and the platform's
@@ -400,6 +463,7 @@ class EditorScene:
         self.base_pivots.points = np.column_stack((robot.base, np.full(robot.n_legs, geo.Z["pivots"])))
         local = robot.r0  # platform pivots about the tool point, platform frame
         _show_mesh(self.platform_fill, *geo.polygon_mesh([local], 0.0))
+        self.platform_fill.visible = ROBOT_STYLES[self.robot_style][1]
         _show_lines(self.platform_edge, geo.polygon_edges([local], 0.0))
         self.platform_pivots.points = np.column_stack((local, np.full(robot.n_legs, _PIVOTS_ABOVE_PLATFORM)))
         for node in (self.base_pivots, self.platform_pivots):
@@ -409,3 +473,14 @@ class EditorScene:
                 label.position = (float(robot.base[i, 0]), float(robot.base[i, 1]), geo.Z["pivots"])
             label.visible = i < robot.n_legs
         self._robot_drawn = robot
+
+
+def axis_ticks(span: float) -> tuple[float, float]:
+    """Minor and major tick spacing [m] for an axis ``span`` [m] long: minor ticks 1, 2 or
+    5 x 10^k mm with 10-40 of them, a major tick (labelled, the scale bar's length) every 5
+    minor ticks (2 for a 5 spacing)."""
+    raw = max(span, 1e-6) / 25.0
+    k = 10.0 ** np.floor(np.log10(raw))
+    minor = next(m * k for m in (1.0, 2.0, 5.0, 10.0) if m * k >= raw)
+    factor = 2.0 if round(minor / k) == 5 else 5.0
+    return float(minor), float(minor * factor)

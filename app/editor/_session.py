@@ -31,6 +31,7 @@ from . import _state
 from ._files import EditorFiles
 from ._gui import EditorGui, error_body, error_title
 from ._history import History
+from ._placement import reachable_region
 from ._planning import PlanWorker, compute_plan
 from ._result import leg_legend_html
 from ._scene import EditorScene
@@ -272,6 +273,13 @@ class Session(SegmentEdits):
             robot = self.robots.of_request(r)
             if robot is not None:
                 self.scene.show_layout(layout, robot)
+                if layout is not None:
+                    psi = float(layout["start"][2])
+                    lo, hi, _ = reachable_region(robot, psi)
+                    text = (f"Reachable at ψ {psi:g} rad (red outline): x {lo[0] * 1e3:.0f}…{hi[0] * 1e3:.0f} mm, "
+                            f"y {lo[1] * 1e3:.0f}…{hi[1] * 1e3:.0f} mm")
+                    if self.gui.reach_note.content != text:
+                        self.gui.reach_note.content = text
             if layout is None:
                 segs = r.get("segments") or []
                 self.scene.show_segmentation(None)
@@ -282,6 +290,12 @@ class Session(SegmentEdits):
                 self.scene.show_segments(None)
                 self.scene.set_view_span(float(np.max(np.subtract(layout["bounds"]["upper"],
                                                                   layout["bounds"]["lower"]))))
+        self.show_downloads()
+
+    def show_downloads(self) -> None:
+        """Machine-file downloads on only for the plan of the design on screen (else the reason)."""
+        files = self.files.machine_files()
+        self.gui.show_downloads(files.result is not None, files.reason)
 
     def show_time(self, t: float) -> None:
         """Show the robot of the newest result at time ``t`` [s] (clamped to the plan)."""
@@ -355,13 +369,17 @@ class Session(SegmentEdits):
                 log.debug("notification removal failed", exc_info=True)
         self._error_note, self._error_state = None, None
 
-    def place_cameras(self) -> None:
-        """Frame the design in this tab: a layout's bounds and the robot's base; a segment
+    def place_cameras(self, fit_layout: bool = False) -> None:
+        """Frame the design in this tab: a layout's bounds and the robot's base (only the
+        bounds with ``fit_layout``: an imported drawing fills the view); a segment
         list's boxes with a margin (boxes of 2 cm next to a base of 50 cm would be too small
         to edit; scroll out to see the whole robot)."""
         r = self.state.request
         layout = r.get("layout")
-        if layout is not None:
+        if layout is not None and fit_layout:
+            lo, hi = np.asarray(layout["bounds"]["lower"], float), np.asarray(layout["bounds"]["upper"], float)
+            centre, half = 0.5 * (lo + hi), 0.55 * float(np.max(hi - lo))
+        elif layout is not None:
             lo, hi = layout["bounds"]["lower"], layout["bounds"]["upper"]
             centre, half = geo.view_extent(lo, hi, self.robots.of_request(r, fallback=True))
         else:
@@ -422,6 +440,7 @@ class Session(SegmentEdits):
             self.state.discard_stale()
             return
         self.state.publish(gen, request, outcome.segmentation, outcome.result, outcome.error)
+        self.show_downloads()
         robot = self.robots.of_request(request)
         seg, result, error = outcome.segmentation, outcome.result, outcome.error
         self.scene.show_segmentation(seg if request.get("layout") is not None else None)

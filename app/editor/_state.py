@@ -80,6 +80,7 @@ class EditorState:
         self.plans_done = 0  #: number of plan results published
         self.last_result: dict | None = None  #: newest published plan result
         self.last_result_robot: Any = None  #: robot spec (name or description) of last_result
+        self.last_result_request: dict | None = None  #: the request last_result was planned for
         self.last_segmentation: dict | None = None  #: newest published segmentation (to_dict)
         self.last_error: dict | None = None  #: newest error ({code, message, field}) or None
         self.last_plan_generation = 0  #: generation of the newest published result
@@ -113,6 +114,7 @@ class EditorState:
             if result is not None:
                 self.last_result = result
                 self.last_result_robot = request.get("robot", DEFAULT_ROBOT)
+                self.last_result_request = copy.deepcopy(request)
                 self.plans_done += 1
                 self.last_plan_generation = gen
 

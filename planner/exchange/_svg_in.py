@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import PlannerError
+from ..schema.drawing import DRAWING_UNITS
 from . import _flatten as fl
 from ._budget import svg_expanded_elements
 from ._pieces import Drawing, Piece
@@ -31,9 +32,10 @@ _INKSCAPE_LABEL = "{http://www.inkscape.org/namespaces/inkscape}label"
 _PHYSICAL = re.compile(r"^\s*[-+]?[0-9.eE+-]+\s*(mm|cm|in|pt|pc|q|m)\s*$")
 
 
-def _tag_layers(data: bytes) -> tuple[bytes, bool]:
+def _tag_layers(data: bytes) -> tuple[bytes, str | None]:
     """The document with each top-level group's layer name in an attribute svgelements
-    passes down to the shapes; and whether its size is in physical units."""
+    passes down to the shapes; and the physical unit its size is given in (``width="200mm"``
+    -> ``"mm"``), or None."""
     try:
         root = ET.fromstring(data)
     except ET.ParseError as exc:
@@ -42,7 +44,8 @@ def _tag_layers(data: bytes) -> tuple[bytes, bool]:
         raise PlannerError("invalid_drawing", f"not an SVG drawing: the root element is <{root.tag}>, not <svg>",
                            "drawing")
     svg_expanded_elements(root)  # <use> references bounded before svgelements copies any
-    physical = bool(_PHYSICAL.match(root.get("width", "")) or _PHYSICAL.match(root.get("height", "")))
+    size = _PHYSICAL.match(root.get("width", "")) or _PHYSICAL.match(root.get("height", ""))
+    physical = size.group(1) if size else None
     for child in root:
         if child.tag == "g" or child.tag.endswith("}g"):
             name = child.get(_INKSCAPE_LABEL) or child.get("id")
@@ -75,6 +78,9 @@ def read_svg(data: bytes, units: tuple[str, float] | None, tolerance: Callable[[
         px_per_user = math.sqrt(abs(m.a * m.d - m.b * m.c)) or 1.0
     if units is not None:  # one user unit is units[1] m: coordinates in px are divided by px_per_user below
         name, mpu, source, per_px = units[0], units[1], "option", 1.0 / px_per_user
+    elif physical in DRAWING_UNITS:  # sized in mm, cm, in, pt, m: coordinates in that unit, reported as such
+        name, mpu, source = physical, DRAWING_UNITS[physical], "drawing"
+        per_px = PX_M / mpu
     else:  # CSS px, sized by the document's physical width/height when it has them
         name, mpu, source, per_px = "px", PX_M, ("drawing" if physical else "default"), 1.0
     height = float(svg.height) if getattr(svg, "height", None) else 0.0

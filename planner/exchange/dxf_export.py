@@ -9,6 +9,7 @@ and the workspace bounds on ``BOUNDS``.
 from __future__ import annotations
 
 import io
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -30,14 +31,17 @@ def _ring(points) -> list[tuple[float, float]]:
     return [(float(x), float(y)) for x, y in np.asarray(points, float)[:, :2] * MM]
 
 
-def to_dxf(result: PlanResult, layout: Layout | None = None) -> str:
-    """The DXF text (see the module doc)."""
+def to_dxf(result: PlanResult, layout: Layout | None = None, header: Sequence[str] = ()) -> str:
+    """The DXF text (see the module doc); ``header`` lines go into the DXF header as custom
+    properties ``rangeplan1``, ``rangeplan2``, ... (the editor's design, plan id, request hash)."""
     from ezdxf import units
     from ezdxf.document import Drawing
 
     doc = Drawing.new("R2010")
     doc.units = units.MM
     doc.header["$MEASUREMENT"] = 1  # metric
+    for i, line in enumerate(header):
+        doc.header.custom_vars.append(f"rangeplan{i + 1}", " ".join(str(line).splitlines()))
     for name, colour in DXF_LAYERS.items():
         doc.layers.add(name, color=colour)
     msp = doc.modelspace()

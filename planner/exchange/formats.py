@@ -5,7 +5,7 @@ table through :mod:`app.formats`; a new format is its writer module plus one ent
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -24,8 +24,8 @@ class _Format:
     media_type: str
     extension: str
     what: str
-    #: ``(result, layout, forces, source) -> text``
-    write: Callable[[PlanResult, Layout | None, bool, str | None], str]
+    #: ``(result, layout, forces, source, header) -> text``
+    write: Callable[[PlanResult, Layout | None, bool, str | None, Sequence[str]], str]
     #: file-name endings that name this format (the first is :attr:`extension`)
     suffixes: tuple[str, ...]
     #: a short title (the editor's download button) and the editor's download file name
@@ -37,15 +37,15 @@ class _Format:
 EXPORT_FORMATS: dict[str, _Format] = {
     "gcode": _Format("text/plain; charset=utf-8", ".ngc", "LinuxCNC G-code: X Y in mm, C = psi in degrees, G93 "
                      "inverse-time feed, one G1 per sample time",
-                     lambda r, layout, forces, source: to_gcode(r, source), (".ngc", ".nc", ".gcode"),
+                     lambda r, layout, forces, source, header: to_gcode(r, source, header), (".ngc", ".nc", ".gcode"),
                      "G-code (LinuxCNC)", "trajectory.ngc"),
     "joints": _Format("text/plain; charset=utf-8", ".txt", "leg lengths per sample in mm (with forces in N), "
                       "whitespace-separated, for halstreamer",
-                      lambda r, layout, forces, source: to_joints(r, forces, source), (".txt",),
+                      lambda r, layout, forces, source, header: to_joints(r, forces, source, header), (".txt",),
                       "leg lengths (halstreamer)", "legs.txt"),
     "dxf": _Format("image/vnd.dxf", ".dxf", "DXF in mm: the path on layer PATH, corridor cells on CORRIDOR, "
                    "obstacles on OBSTACLES",
-                   lambda r, layout, forces, source: to_dxf(r, layout), (".dxf",),
+                   lambda r, layout, forces, source, header: to_dxf(r, layout, header), (".dxf",),
                    "DXF (path, corridor, obstacles)", "plan.dxf"),
 }
 
@@ -61,11 +61,12 @@ def export_format_for(path: str) -> ExportFormat | None:
 
 
 def export(result: PlanResult, format: ExportFormat, *, layout: Layout | None = None, forces: bool = False,
-           source: str | None = None) -> str:
+           source: str | None = None, header: Sequence[str] = ()) -> str:
     """The plan in ``format`` as text. ``layout`` adds obstacles and bounds to a DXF,
     ``forces`` drive-force columns to the joint stream, ``source`` names the plan's origin
-    in the G-code and joint headers."""
+    in the G-code and joint headers, ``header`` adds provenance lines to every format's
+    header (comments; DXF custom header properties)."""
     spec = EXPORT_FORMATS.get(format)
     if spec is None:
         raise ValueError(f"unknown export format {format!r}; one of {', '.join(EXPORT_FORMATS)}")
-    return spec.write(result, layout, forces, source)
+    return spec.write(result, layout, forces, source, header)

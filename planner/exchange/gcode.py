@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -37,9 +38,10 @@ def _comment(text: str) -> str:
     return "(" + re.sub(r"[()\r\n]+", " ", text).strip() + ")"
 
 
-def to_gcode(result: PlanResult, source: str | None = None) -> str:
+def to_gcode(result: PlanResult, source: str | None = None, header: Sequence[str] = ()) -> str:
     """The plan's poses as a LinuxCNC program (see the module doc); ``source`` names where
-    the plan came from (a file, a corridor id) in the header."""
+    the plan came from (a file, a corridor id) in the header, ``header`` adds comment lines
+    after it (the editor's design, plan id and request hash)."""
     ts = float(result.settings.Ts)
     if not math.isfinite(ts) or ts <= 0:  # a validated result never has this; a guard for hand-made ones
         raise ValueError("the result's sample time must be a positive number")
@@ -58,6 +60,7 @@ def to_gcode(result: PlanResult, source: str | None = None) -> str:
                  "one sample time"),
         _comment(f"sample time Ts = {ts:g} s, F = 60 / Ts = {60.0 / ts:g} per minute"),
         _comment(f"source: {source or 'rangeplan'}"),
+        *(_comment(h) for h in header),
         "G21 G90 G17",
         f"G0 {rows[0]}",
         "G93",

@@ -12,6 +12,7 @@ with its unit. Leg lengths are in mm (base pivot to platform pivot, as
 from __future__ import annotations
 
 import io
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -26,16 +27,20 @@ def joint_columns(n_legs: int, forces: bool = False) -> list[str]:
     return cols + [f"leg{i + 1}_force_n" for i in range(n_legs)] if forces else cols
 
 
-def to_joints(result: PlanResult, forces: bool = False, source: str | None = None) -> str:
-    """The stream (see the module doc); ``forces`` adds one drive-force column per leg."""
+def to_joints(result: PlanResult, forces: bool = False, source: str | None = None, header: Sequence[str] = ()) -> str:
+    """The stream (see the module doc); ``forces`` adds one drive-force column per leg,
+    ``header`` comment lines after the first (the editor's design, plan id, request hash)."""
     length = np.asarray(result.drives.length, float) * 1e3
     table = np.column_stack((length, np.asarray(result.drives.force, float))) if forces else length
+    table = np.round(table, 6) + 0.0  # + 0.0: "0.000000", never "-0.000000" for a tiny negative
     n_legs = length.shape[1]
     ts = float(result.settings.Ts)
     cols = joint_columns(n_legs, forces)
     buf = io.StringIO()
     buf.write(f"# rangeplan leg-space stream: plan {result.name or 'unnamed'}"
               + (f", id {result.plan_id}" if result.plan_id else "") + f", source {source or 'rangeplan'}\n")
+    for line in header:
+        buf.write("# " + " ".join(str(line).splitlines()) + "\n")
     buf.write(f"# robot {result.robot}: {n_legs} legs, {len(length)} samples, one line per sample time "
               f"Ts = {ts:g} s (the streaming thread's period)\n")
     buf.write(f"# units: leg lengths in mm{', drive forces in N' if forces else ''}; "

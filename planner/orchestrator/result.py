@@ -142,14 +142,17 @@ def csv_columns(n_legs: int) -> list[str]:
     return cols
 
 
-def to_csv(result: PlanResult) -> str:
-    """One row per sample, a header naming each column with its unit. Numbers are written
-    as Python's shortest round-trip ``repr`` (what ``csv.writer`` wrote before; no value
-    needs quoting), joined in C: ~3x faster than the csv module for a large plan."""
+def to_csv(result: PlanResult, header: Sequence[str] = ()) -> str:
+    """One row per sample, a header naming each column with its unit; ``header`` lines come
+    first as ``# `` comment lines (the editor's design, plan id, request hash). Numbers are
+    written as Python's shortest round-trip ``repr`` (what ``csv.writer`` wrote before; no
+    value needs quoting), joined in C: ~3x faster than the csv module for a large plan; a
+    negative zero is written as ``0.0``."""
     d, c = result.drives, result.corridor
     table = np.column_stack((result.time, result.pose, result.velocity, result.acceleration, d.length, d.velocity,
-                             d.force, c.lower, c.upper, c.violation_m))
-    lines = [",".join(csv_columns(np.asarray(d.force).shape[1]))]
+                             d.force, c.lower, c.upper, c.violation_m)) + 0.0  # + 0.0: never "-0.0"
+    lines = ["# " + " ".join(str(line).splitlines()) for line in header]
+    lines.append(",".join(csv_columns(np.asarray(d.force).shape[1])))
     lines += [",".join(map(repr, row)) for row in table.tolist()]
     lines.append("")
     return "\n".join(lines)
