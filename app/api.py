@@ -37,6 +37,7 @@ from contextlib import asynccontextmanager
 from fastapi import FastAPI
 
 from app.batch.api import batch_router
+from app.contour_api import router as contour_router
 from app.docs import install_docs
 from app.handlers import install_error_handlers
 from app.jobs import clean_spool, spool_dir
@@ -132,6 +133,7 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
                              "memory_mb": shared.memory_mb if shared else memory_mb}
     app.add_middleware(BodySizeLimit, limit=max_body_bytes or cfg.max_body_bytes)
     app.include_router(batch_router())  # /v1/batches (app/batch/): batches on their own workers
+    app.include_router(contour_router)  # /v1/contour (app/contour_api.py): G-code programs
     access = access if access is not None else AccessPolicy.from_env()
     install_access_control(app, access)  # outside the body limit: refused before the body is read
     install_observability(app, access_log=cfg.access_log)  # request ids, JSON access lines, GET /metrics

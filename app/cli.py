@@ -1,4 +1,5 @@
 """Command line: ``rangeplan plan INPUT.json [-o OUT.json | .csv | .ngc | .txt | .dxf]``,
+``rangeplan contour PROGRAM.ngc [--origin X,Y] [--tolerance M] [--feed program|fastest] -o OUT``,
 ``rangeplan import DRAWING.dxf|.svg [options] -o request.json`` and ``rangeplan serve``.
 
 Bad input exits with status 2 and one line naming the field and the cause.
@@ -54,11 +55,13 @@ def output_format(args) -> str:
 def cmd_plan(args) -> int:
     from app.formats import write
     from planner import PlannerError, plan
+    from planner.orchestrator.compiling import compile_progress
 
     request = load_request(args.input)
     fmt = output_format(args)
     try:
-        result = plan(request)
+        with compile_progress():  # the first plan after installing compiles the kernels: progress on stderr
+            result = plan(request)
     except PlannerError as exc:
         raise InputError(f"{args.input}: {exc.code}: {exc}") from None
     if fmt == "json":
@@ -73,6 +76,61 @@ def cmd_plan(args) -> int:
               f"compute {m.compute_ms:.0f} ms", file=sys.stderr)
     else:
         sys.stdout.write(text if text.endswith("\n") else text + "\n")
+    return 0
+
+
+def parse_pair(text: str, option: str) -> list[float]:
+    """``X,Y`` (m) -> [x, y]."""
+    try:
+        x, y = (float(v) for v in text.split(","))
+    except ValueError:
+        raise InputError(f"{option}: expected X,Y in m (e.g. -0.04,-0.015), got {text!r}") from None
+    return [x, y]
+
+
+def cmd_contour(args) -> int:
+    """``rangeplan contour PROGRAM.ngc``: plan a G-code program (issue 22)."""
+    from app.formats import write
+    from planner import PlannerError
+    from planner.contour import plan_contour
+    from planner.schema import MAX_PROGRAM_BYTES
+
+    try:
+        path = Path(args.program)
+        if args.program != "-" and path.stat().st_size > MAX_PROGRAM_BYTES:
+            raise InputError(f"{args.program}: too_large: program: the program has {path.stat().st_size} bytes, "
+                             f"more than the limit of {MAX_PROGRAM_BYTES}")
+        text = sys.stdin.read() if args.program == "-" else path.read_text(errors="replace")
+    except OSError as exc:
+        raise InputError(f"{args.program}: cannot read: {exc.strerror or exc}") from None
+    settings = json.loads(args.settings) if args.settings else {}
+    request = {"name": Path(args.program).name, "program": text, "feed": args.feed, "cut_below_m": args.cut_below,
+               "settings": settings}
+    if args.origin is not None:
+        request["origin"] = parse_pair(args.origin, "--origin")
+    if args.tolerance is not None:
+        request["tolerance_m"] = args.tolerance
+    fmt = output_format(args)
+    try:
+        result = plan_contour(request)
+    except PlannerError as exc:
+        raise InputError(f"{args.program}: {exc.code}: {exc}") from None
+    if fmt == "json":
+        out = json.dumps(result.to_json_dict(), indent=None if args.compact else 1)
+    else:
+        out = write(result, fmt, forces=args.forces, source=args.program).decode()
+    c = result.contour
+    assert c is not None
+    if args.output and args.output != "-":
+        Path(args.output).write_text(out + ("" if out.endswith("\n") else "\n"))
+        print(f"wrote {args.output}: {len(c.passes)} passes, cycle {c.cycle_time_s:.2f} s (cutting "
+              f"{c.cut_time_s:.2f} s), deviation {c.max_deviation_m * 1e3:.4f} mm of {c.tolerance_m * 1e3:.4f} mm, "
+              f"max force {result.metrics.max_drive_force_n:.1f} N, compute {result.metrics.compute_ms:.0f} ms",
+              file=sys.stderr)
+        for w in c.warnings:
+            print(f"  warning: {w}", file=sys.stderr)
+    else:
+        sys.stdout.write(out if out.endswith("\n") else out + "\n")
     return 0
 
 
@@ -150,7 +208,15 @@ def cmd_serve(args) -> int:
                  editor=not args.no_editor, allow_unauthenticated=args.allow_unauthenticated)
 
 
-def add_import_parser(sub) -> None:
+def add_import_parser(sub, full: bool = True) -> None:
+    """The ``import`` sub-command; its options (help texts from :class:`planner.schema.ImportOptions`)
+    only when ``full``: ``rangeplan --help`` and the other commands do not load the schema."""
+    pi = sub.add_parser("import", help="turn a DXF or SVG drawing into a plan request with a layout",
+                        description="Closed shapes of the drawing become obstacles (nested ones holes); loose LINE/ARC "
+                        "pieces are joined. Lengths in m, angles in rad (in the robot's workspace).")
+    pi.set_defaults(func=cmd_import)
+    if not full:
+        return
     from planner.schema import DRAWING_UNITS, ImportOptions, Layout
     from planner.schema.layout import Cell
 
@@ -160,9 +226,6 @@ def add_import_parser(sub) -> None:
     def cell_help(field: str) -> str:
         return (Cell.model_fields[field].description or "").replace("%", "%%")
 
-    pi = sub.add_parser("import", help="turn a DXF or SVG drawing into a plan request with a layout",
-                        description="Closed shapes of the drawing become obstacles (nested ones holes); loose LINE/ARC "
-                        "pieces are joined. Lengths in m, angles in rad (in the robot's workspace).")
     pi.add_argument("drawing", help="DXF or SVG file ('-' for standard input)")
     pi.add_argument("-o", "--output", help="plan request JSON to write; standard output if omitted")
     pi.add_argument("--layer", action="append", help=helptext("layers") + " (repeat for several)")
@@ -183,7 +246,6 @@ def add_import_parser(sub) -> None:
                     + (Layout.model_fields["clearance"].description or "").replace("%", "%%"))
     pi.add_argument("--report", metavar="FILE", help="write the import report (shapes, holes, open chains, "
                     "units) as JSON to FILE")
-    pi.set_defaults(func=cmd_import)
 
 
 def _format_name(text: str) -> str:
@@ -197,7 +259,9 @@ def _format_name(text: str) -> str:
     return text
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The whole parser; given the ``command`` about to run, the other commands' options that
+    need heavy imports are left out (``rangeplan --help`` in well under a second)."""
     p = argparse.ArgumentParser(prog="rangeplan", description="Range-space predictive control trajectory planner "
                                 "for planar parallel robots (SI units throughout).")
     sub = p.add_subparsers(dest="command", required=True)
@@ -210,7 +274,26 @@ def build_parser() -> argparse.ArgumentParser:
     pp.add_argument("--forces", action="store_true", help="joints format: add the drive forces (N)")
     pp.add_argument("--compact", action="store_true", help="JSON without indentation")
     pp.set_defaults(func=cmd_plan)
-    add_import_parser(sub)
+    add_import_parser(sub, full=command in (None, "import"))
+    pc = sub.add_parser("contour", help="plan a G-code program (CAM tool path) within its tolerance",
+                        description="Every cut pass (feed moves below the cutting height) is planned within the "
+                        "tolerance of the programmed path, each sample and the straight move to the next; rapids "
+                        "are free moves; plunges, retracts and G4 at rest. One trajectory for the whole program.")
+    pc.add_argument("program", help="G-code file (RS274NGC; '-' for standard input)")
+    pc.add_argument("-o", "--output", help="output file: .json (default), .csv, .ngc, .txt or .dxf")
+    pc.add_argument("--format", type=_format_name, metavar="FORMAT", help="output format (default: from the extension)")
+    pc.add_argument("--origin", metavar="X,Y", help="program zero in the robot frame, m (default 0,0); "
+                    "negative: --origin=-0.04,-0.015")
+    pc.add_argument("--tolerance", type=float, metavar="M", help="largest distance from the programmed path, m "
+                    "(default: the program's G64 P, else 5e-5)")
+    pc.add_argument("--feed", choices=("program", "fastest"), default="program",
+                    help="'program': never faster than F (default); 'fastest': as fast as the drives allow")
+    pc.add_argument("--cut-below", type=float, default=0.0, metavar="Z",
+                    help="feed moves with Z below this cut, m in the program frame (default 0)")
+    pc.add_argument("--settings", metavar="JSON", help='plan settings as JSON, e.g. \'{"Ts": 0.005}\'')
+    pc.add_argument("--forces", action="store_true", help="joints format: add the drive forces (N)")
+    pc.add_argument("--compact", action="store_true", help="JSON without indentation")
+    pc.set_defaults(func=cmd_contour)
     ps = sub.add_parser("serve", help="serve the HTTP API and the browser editor")
     ps.add_argument("--host", help="API host (env RANGEPLAN_HOST, default 127.0.0.1)")
     ps.add_argument("--port", type=int, help="API port (env RANGEPLAN_PORT, default 8000)")
@@ -225,7 +308,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else argv
+    # the first word that is no option names the command ("" for `rangeplan --help`)
+    command = next((a for a in argv if not a.startswith("-")), "")
+    parser = build_parser(command)
     args = parser.parse_args(argv)
     try:
         return args.func(args)

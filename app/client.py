@@ -26,7 +26,15 @@ import httpx
 from pydantic import ValidationError
 
 from app.formats import ExportFormatName
-from planner.schema import PARTIAL_LAYOUT, CorridorRecord, ImportResult, PlanRequest, PlanResult, planner_error
+from planner.schema import (
+    PARTIAL_LAYOUT,
+    ContourRequest,
+    CorridorRecord,
+    ImportResult,
+    PlanRequest,
+    PlanResult,
+    planner_error,
+)
 
 __all__ = ["Client", "RangeplanError"]
 
@@ -113,6 +121,25 @@ class Client:
         if forces:
             params["forces"] = "true"
         return self._call("GET", f"/v1/plans/{plan_id}", params=params).text
+
+    def contour(self, program: str | Path, *, origin: tuple[float, float] | list[float] = (0.0, 0.0),
+                tolerance_m: float | None = None, feed: Literal["program", "fastest"] = "program",
+                cut_below_m: float = 0.0, robot: Any = "moving-slide", settings: dict[str, Any] | None = None,
+                name: str | None = None) -> PlanResult:
+        """Contour a G-code program (its text, or a path to a .ngc file): ``POST /v1/contour``.
+        ``origin``: program zero in the robot frame [m]; ``tolerance_m`` [m] (default the
+        program's G64 P, else 0.05 mm); ``feed``: ``program`` or ``fastest``. The result has its
+        ``contour`` section and a ``plan_id`` for :meth:`export`."""
+        text = program.read_text() if isinstance(program, Path) else program
+        try:
+            body = ContourRequest.model_validate({
+                "program": text, "origin": list(origin), "tolerance_m": tolerance_m, "feed": feed,
+                "cut_below_m": cut_below_m, "robot": robot, "settings": settings or {}, "name": name})
+        except ValidationError as exc:
+            e = planner_error(exc)
+            raise RangeplanError(e.code, e.message, e.field) from None
+        r = self._call("POST", "/v1/contour", json=body.model_dump(mode="json", exclude_none=True))
+        return PlanResult.model_validate_json(r.content)
 
     # ------------------------------------------------------------------ drawings
     def import_drawing(self, drawing: str | Path | bytes, *, format: Literal["dxf", "svg"] | None = None,

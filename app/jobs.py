@@ -40,9 +40,10 @@ import orjson
 from pydantic import BaseModel, Field
 
 from app.failures import degenerate, out_of_memory, timeout, too_much_work
-from planner.schema import ImportOptions, PlanRequest
+from planner.schema import ContourRequest, ImportOptions, PlanRequest
 
-__all__ = ["Done", "EditorJob", "ErrorDetail", "ExportJob", "Failed", "ImportJob", "ItemTimeout", "Job", "Outcome",
+__all__ = ["ContourJob", "ContourWork", "Done", "EditorJob", "ErrorDetail", "ExportJob", "Failed", "ImportJob",
+           "ItemTimeout", "Job", "Outcome",
            "PlanJob", "SegmentJob", "SleepJob", "check_estimate", "clean_spool", "crashed", "estimate", "failed",
            "run_bounded", "run_job", "segmentation_module", "spool_dir"]
 
@@ -121,12 +122,25 @@ class ExportJob:
 
 
 @dataclass(frozen=True)
+class ContourJob:
+    """Contour a G-code program (:func:`planner.contour.plan_contour`; ``POST /v1/contour``),
+    stored and answered like a :class:`PlanJob`."""
+
+    request: ContourRequest
+    format: str = "json"
+    forces: bool = False
+    source: str | None = None
+    store: str | None = None
+    kind: ClassVar[str] = "contour"
+
+
+@dataclass(frozen=True)
 class SleepJob:
     seconds: float
     kind: ClassVar[str] = "sleep"
 
 
-Job = PlanJob | SegmentJob | ImportJob | EditorJob | ExportJob | SleepJob
+Job = PlanJob | SegmentJob | ImportJob | EditorJob | ExportJob | ContourJob | SleepJob
 
 
 # ---------------------------------------------------------------------------------------
@@ -179,7 +193,25 @@ def estimate(job: Job):
         from planner import estimate_work
 
         return estimate_work(job.request)
+    if isinstance(job, ContourJob):
+        from planner.contour import estimate_contour
+
+        return ContourWork(*estimate_contour(job.request))
     return None
+
+
+@dataclass(frozen=True)
+class ContourWork:
+    """The work estimate of a :class:`ContourJob` (:func:`planner.contour.estimate_contour`)."""
+
+    seconds: float
+    detail: str
+    field: str = "program"
+
+    def message(self, limit_s: float) -> str:
+        return (f"this program needs an estimated {self.seconds:.3g} s of planning ({self.detail}), more than this "
+                f"server's limit of {limit_s:g} s; split the program, give a larger tolerance_m or settings.Ts, or "
+                "feed 'program'")
 
 
 def run_job(job: Job, memory_mb: int | None = None) -> Outcome:
@@ -211,6 +243,8 @@ def _execute(job: Job) -> Done:
         return _plan(job)
     if isinstance(job, ExportJob):
         return _export(job)
+    if isinstance(job, ContourJob):
+        return _contour(job)
     if isinstance(job, ImportJob):
         from planner.exchange import import_drawing
 
@@ -250,6 +284,33 @@ def _plan(job: PlanJob) -> Done:
         from app.formats import write  # (imports the machine formats' writers: loaded by the workers at start)
 
         payload = write(result, job.format, layout=req.layout, forces=job.forces, source=job.source)
+    return Done(payload, plan_id, _summary(result))
+
+
+def _contour(job: ContourJob) -> Done:
+    """Contour a G-code program: stored and answered like a plan (the stored request is the
+    contour request)."""
+    from app.storage import new_id
+    from planner.contour import plan_contour
+
+    req = job.request
+    result = plan_contour(req)
+    plan_id = new_id() if job.store else None
+    result.plan_id = plan_id
+    data = result.to_json()
+    store = _store(job.store)
+    if plan_id and store is not None and store.save_plan_json(
+            data.decode(), req.model_dump(mode="json"), None, id=plan_id) is None:
+        plan_id = result.plan_id = None
+        data = result.to_json()
+    if job.format == "json":
+        payload: bytes | None = data
+    elif job.format == "none":
+        payload = None
+    else:
+        from app.formats import write
+
+        payload = write(result, job.format, layout=None, forces=job.forces, source=job.source)
     return Done(payload, plan_id, _summary(result))
 
 

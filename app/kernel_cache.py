@@ -1,7 +1,8 @@
 """The compiled kernels of a read-only installation (the container image, issue 15).
 
-numba caches compiled code beside the sources or in ``NUMBA_CACHE_DIR``, and needs that
-place to be writable even to *load* from it. An image built with ``NUMBA_CPU_NAME=generic``
+The planner caches its compiled kernels in ``NUMBA_CACHE_DIR/rangeplan-<key>`` when that is set
+(:mod:`planner._jit`; the key: the kernel sources' content), and numba needs that place to be
+writable even to *load* from it. An image built with ``NUMBA_CPU_NAME=generic``
 (code for any x86-64, so the cache is not tied to the build machine's CPU) compiles the
 kernels at build time into a read-only seed (``RANGEPLAN_KERNEL_SEED``); at start
 :func:`seed_kernel_cache` copies it into ``NUMBA_CACHE_DIR`` (e.g. on a tmpfs ``/tmp``)

@@ -33,11 +33,37 @@ Glossary (paper symbol -> code name):
 ==============  ==============================================================
 """
 
-from .errors import PlannerError
-from .model import RobotModel, load_robot
-from .orchestrator import WorkEstimate, estimate_work, plan, segment, to_csv, warm_up
-from .schema import PlanRequest, PlanResult, SegmentationResult, Settings, parse_request
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # the names below, for type checkers; at run time they load on first use
+    from .errors import PlannerError
+    from .model import RobotModel, load_robot
+    from .orchestrator import WorkEstimate, estimate_work, plan, segment, to_csv, warm_up
+    from .schema import PlanRequest, PlanResult, SegmentationResult, Settings, parse_request
 
 __all__ = ["plan", "segment", "warm_up", "to_csv", "estimate_work", "WorkEstimate",
            "PlanRequest", "PlanResult", "SegmentationResult", "Settings",
            "parse_request", "RobotModel", "load_robot", "PlannerError"]
+
+#: where each public name lives: ``import planner`` (or ``planner.schema`` alone, e.g. for
+#: ``rangeplan --help``) loads no numba, scipy or shapely until a name that needs them is used
+_HOME = {"plan": "orchestrator", "segment": "orchestrator", "warm_up": "orchestrator", "to_csv": "orchestrator",
+         "estimate_work": "orchestrator", "WorkEstimate": "orchestrator", "PlanRequest": "schema",
+         "PlanResult": "schema", "SegmentationResult": "schema", "Settings": "schema", "parse_request": "schema",
+         "RobotModel": "model", "load_robot": "model", "PlannerError": "errors"}
+
+
+def __getattr__(name: str) -> Any:  # PEP 562: the public names, imported on first use
+    home = _HOME.get(name)
+    if home is None:
+        raise AttributeError(f"module 'planner' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{home}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *__all__])

@@ -1,4 +1,5 @@
-"""``python -m planner``: compile (after installing) or load the planner's kernels."""
+"""``python -m planner``: compile (after installing) or load the planner's kernels; while
+compiling, progress and an estimate of the time left on stderr (:func:`warm_up`)."""
 
 from .orchestrator import warm_up
 

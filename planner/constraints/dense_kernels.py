@@ -11,7 +11,8 @@ Layout as in :mod:`planner.constraints.kernels`.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .._jit import njit
 
 __all__ = ["constraint_matrix", "free_parts", "hessian", "predict", "prediction"]
 

@@ -11,8 +11,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from .._jit import njit
 from .stagewise_kernels import affine, substitute, substitute_many
 
 __all__ = ["INFEASIBLE", "ITERATION_LIMIT", "SOLVED", "dual_solve"]

@@ -27,8 +27,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from .._jit import njit
 from ..model.kernels import leg_jacobians, rk4, state_derivative
 
 __all__ = ["KIND_CORRIDOR", "KIND_RATE", "KIND_SPEED", "KIND_STROKE", "approach_count", "approach_fill",

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import daqp
 import numpy as np
 
 __all__ = ["DAQP_SETTINGS", "SLACK_ITER_LIMIT", "SLACK_RHO1", "SLACK_RHO2", "DenseQP", "QPSolution", "solve_qp"]
@@ -59,6 +58,8 @@ def solve_qp(H: np.ndarray, f: np.ndarray, A: np.ndarray, upper: np.ndarray, low
         kw["iter_limit"] = iter_limit
     if start is not None:
         kw["primal_start"] = start
+    import daqp  # loaded on first use: the compiled stage-wise solve rarely falls back to it
+
     x, _, flag, info = daqp.solve(H, f, A, upper, lower, sense, **kw)
     return QPSolution(x, int(flag), int(info["iterations"]))
 

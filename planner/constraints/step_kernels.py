@@ -15,8 +15,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from .._jit import njit
 from .dual_kernels import SOLVED, dual_solve
 from .kernels import KIND_RATE, assemble, finish, first_legs, offset, plant_step
 from .stagewise_kernels import stage_setup

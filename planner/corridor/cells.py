@@ -29,7 +29,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import shapely
 
 from ..errors import PlannerError, invalid
 from ..schema import MAX_CELLS, SQRT3_2, Settings, cell_count
@@ -204,6 +203,7 @@ def block_obstacles(grid: Grid, ws: Workspace, size: float,
         return state, blocker
     # candidate pairs: cells near each piece's bounding box (grid arithmetic), then the exact
     # test in shapely
+    import shapely  # loaded on first use: plans of given segments never need it
     cand = [grid.near(*b) for b in shapely.bounds(garr)]  # bounds: (G, 4) xmin, ymin, xmax, ymax
     gi = np.repeat(np.arange(len(garr)), [len(c) for c in cand])
     ci = np.concatenate(cand)

@@ -15,7 +15,6 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-import shapely
 
 from ..errors import PlannerError, invalid
 from ..model import SINGULAR_TOL, RobotModel, load_robot
@@ -106,6 +105,7 @@ def reachable_region(robot: Any, bounds: dict | tuple, psi_range: Sequence[float
     ok = boxes_reachable(model, lo, hi, psi_samples(psi_range), lattice, 2 * j, 2 * i)
     if not ok.any():
         return []
+    import shapely  # loaded on first use: plans of given segments never need it
     geom = shapely.coverage_union_all(shapely.box(lo[ok, 0], lo[ok, 1], hi[ok, 0], hi[ok, 1]))
     geom = shapely.simplify(geom, 0.0)  # drop the collinear grid vertices
     return [{"exterior": np.asarray(poly.exterior.coords)[:-1].tolist(),

@@ -16,8 +16,6 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import dijkstra
 
 from .cells import Grid
 
@@ -35,6 +33,9 @@ def fewest_turns_path(grid: Grid, free: np.ndarray, sources: np.ndarray,
     C = len(free)
     e = grid.edges
     e = e[free[e[:, 0]] & free[e[:, 1]]]
+    from scipy.sparse import csr_matrix  # loaded on first use: plans of given segments never need it
+    from scipy.sparse.csgraph import dijkstra
+
     G = csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(C, C))
     ds = dijkstra(G, directed=True, indices=sources, unweighted=True, min_only=True)
     D = ds[targets].min()

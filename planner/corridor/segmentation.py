@@ -45,7 +45,6 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-import shapely
 
 from ..errors import PlannerError
 from ..model import load_robot
@@ -95,6 +94,7 @@ class Segmentation:
         if not self.grown_parts or not len(self.grown_parts[0]):
             return []
         pieces, owner = self.grown_parts
+        import shapely  # loaded on first use: plans of given segments never need it
         return [shapely.union_all(pieces[owner == i]) for i in range(int(owner.max()) + 1)]
 
     @property
@@ -120,6 +120,7 @@ class Segmentation:
             else:
                 A, b = halfplanes(seg.polygon)
                 hps.append({"A": A.tolist(), "b": b.tolist()})
+        import shapely  # loaded on first use: plans of given segments never need it
         grown = [np.asarray(part.exterior.coords)[:-1].tolist() for g in self.grown for part in shapely.get_parts(g)]
         return {
             "cell": {"shape": self.shape, "size": self.size},
@@ -260,6 +261,8 @@ def _remedies(ws: Workspace, model: Any, s: float, field_path: str) -> list[str]
 def _separation(ws: Workspace) -> str | None:
     """Which grown obstacles (with the bounds) cut the start off from the end in the free
     space itself (no cells), said with their extent; None when the free space joins them."""
+    import shapely  # loaded on first use: plans of given segments never need it
+
     box = shapely.box(ws.lower[0], ws.lower[1], ws.upper[0], ws.upper[1])
     pieces, owner = ws.grown_parts()
     if not len(pieces):
@@ -297,6 +300,8 @@ def _endpoint_blocker(ws: Workspace, key: str) -> str | None:
     """Why every cell holding the start or end (``key``) meets an obstacle: the point touches
     an obstacle grown by the clearance (a cell holding it reaches into it at any size), said
     with the obstacle; None if it does not."""
+    import shapely  # loaded on first use: plans of given segments never need it
+
     p = ws.start if key == "start" else ws.end
     pieces, owner = ws.grown_parts()
     if not len(pieces):

@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import shapely
 from pydantic import ValidationError
 
 from ..errors import invalid
@@ -77,6 +76,7 @@ def discs(centres: np.ndarray, radius: float) -> np.ndarray:
     extreme sides (left, right, bottom, top) are exact. Returns (k,) shapely polygons."""
     a = (np.arange(4 * QUAD_SEGS) + 0.5) * (math.pi / (2 * QUAD_SEGS))
     ring = (radius * _GROW) * np.column_stack((np.cos(a), np.sin(a)))
+    import shapely  # loaded on first use: plans of given segments never need it
     return np.asarray(shapely.polygons(centres[:, None, :] + ring[None]))
 
 
@@ -89,6 +89,7 @@ def parse_layout(raw: Layout | dict[str, Any], path: str = "layout") -> Workspac
         except ValidationError as exc:
             raise planner_error(exc, path) from None
     obstacles, circles = [], {}
+    import shapely  # loaded on first use: plans of given segments never need it
     for i, o in enumerate(raw.obstacles):
         if o.type == "rectangle":
             obstacles.append(shapely.box(o.lower[0], o.lower[1], o.upper[0], o.upper[1]))
@@ -116,6 +117,7 @@ def check_endpoint(ws: Workspace, model: RobotModel, key: str, path: str = "layo
     if not (ws.lower[0] <= x <= ws.upper[0] and ws.lower[1] <= y <= ws.upper[1]):
         raise invalid(f"{path}.{key}", f"the {key} {format_point(pose)} is outside the bounds "
                       f"{format_point(ws.lower)} .. {format_point(ws.upper)}")
+    import shapely  # loaded on first use: plans of given segments never need it
     for i, ob in enumerate(ws.obstacles):
         if i in ws.circles:  # exact circle
             c, r = ws.circles[i]

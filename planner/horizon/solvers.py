@@ -23,16 +23,21 @@ Two solvers give the same minimiser:
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache, lru_cache
 from typing import Any, cast
 
 import numpy as np
-from scipy.linalg import get_lapack_funcs, solve_triangular
 
 from .kernels import riccati
 from .prediction import prediction_matrices
 
-_gbsv = cast(Any, get_lapack_funcs("gbsv", dtype=np.float64))
+
+@cache
+def _gbsv() -> Any:
+    """LAPACK ``dgbsv`` (scipy loaded on first use: the compiled planner never needs it)."""
+    from scipy.linalg import get_lapack_funcs
+
+    return cast(Any, get_lapack_funcs("gbsv", dtype=np.float64))
 
 
 def square_root_solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -41,6 +46,8 @@ def square_root_solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     ``u = R1^T c1``; it is ``u = R1^-1 c1``)."""
     Q, R1 = np.linalg.qr(A, mode="reduced")
     c1 = Q.T @ b
+    from scipy.linalg import solve_triangular  # loaded on first use (the paper's QR solver only)
+
     return solve_triangular(R1, c1, lower=False, check_finite=False)
 
 
@@ -142,7 +149,7 @@ def solve_structured(Ad, Bd, C, x0, qa, qb, qu, ra, rb) -> np.ndarray:
     rhs = np.zeros(dim)
     rhs[:n] = -(Ad @ x0)
     rhs[x_rows] = (qa2 * ra + qb2 * rb).ravel()
-    _, _, sol, info = _gbsv(kl, ku, ab.reshape(2 * kl + ku + 1, dim), rhs, overwrite_ab=1, overwrite_b=1)
+    _, _, sol, info = _gbsv()(kl, ku, ab.reshape(2 * kl + ku + 1, dim), rhs, overwrite_ab=1, overwrite_b=1)
     if info != 0:
         raise np.linalg.LinAlgError(f"banded KKT solve failed (gbsv info {info})")
     lam = sol.reshape(N, 2 * n)[:, :n]

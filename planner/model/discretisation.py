@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg import expm
 
 
 def zoh(A: np.ndarray, B: np.ndarray, Ts: float) -> tuple[np.ndarray, np.ndarray]:
@@ -16,6 +15,8 @@ def zoh(A: np.ndarray, B: np.ndarray, Ts: float) -> tuple[np.ndarray, np.ndarray
     M = np.zeros((n + m, n + m))
     M[:n, :n] = A * Ts
     M[:n, n:] = B * Ts
+    from scipy.linalg import expm  # loaded on first use: the compiled planner never needs it
+
     E = expm(M)
     return E[:n, :n], E[:n, n:]
 

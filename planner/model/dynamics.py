@@ -9,10 +9,10 @@ The hot functions have compiled twins in :mod:`planner.model.kernels` (tested eq
 from __future__ import annotations
 
 import math
+from functools import cache
 from typing import Any, cast
 
 import numpy as np
-from scipy.linalg import get_lapack_funcs
 
 from .kinematics import leg_rows, legs
 from .robot import RobotModel
@@ -21,13 +21,18 @@ __all__ = ["R_matrix", "physical_coordinates", "loop_closure", "constraint_jacob
            "generalised_forces", "acceleration", "state_derivative", "factorised_blocks", "factorised",
            "kinetic_energy"]
 
-_gesv = cast(Any, get_lapack_funcs("gesv", dtype=np.float64))
+@cache
+def _gesv() -> Any:
+    """LAPACK ``dgesv`` (scipy loaded on first use: the compiled planner never needs it)."""
+    from scipy.linalg import get_lapack_funcs
+
+    return cast(Any, get_lapack_funcs("gesv", dtype=np.float64))
 
 
 def _solve(M: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Solve a small dense system with LAPACK gesv directly (numpy's wrapper costs 5x more
     than the solve itself at 3x3); raises on a singular matrix."""
-    _, _, x, info = _gesv(M, b)
+    _, _, x, info = _gesv()(M, b)
     if info != 0:
         raise np.linalg.LinAlgError("singular reduced mass matrix")
     return x

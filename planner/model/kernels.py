@@ -21,7 +21,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from .._jit import njit
 
 # layout of the robot array: 7 per-leg rows of n values, then 5 scalars
 _R0X, _R0Y, _BX, _BY, _MROD, _ACOM, _FRIC, _JCONST = range(8)

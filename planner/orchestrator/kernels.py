@@ -11,8 +11,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from .._jit import njit
 from ..constraints.dual_kernels import SOLVED
 from ..constraints.step_kernels import constrained_step
 from ..horizon.kernels import riccati

@@ -38,7 +38,7 @@ from .simulate import Resume, Simulation, simulate
 from .timing import method_of, resolve_timing, timing_info
 from .work import check_work, estimate_work
 
-__all__ = ["plan", "segment", "warm_up"]
+__all__ = ["plan", "plan_timed", "segment", "warm_up"]
 
 
 def _robot(req: PlanRequest, robot: RobotModel | None) -> RobotModel:
@@ -215,6 +215,20 @@ def _run(name: str | None, model: RobotModel, st: Settings, segments: Sequence[S
     return result, sim
 
 
+def plan_timed(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment],
+               counts: Sequence[int], *, abandon: bool = True) -> PlanResult:
+    """One constrained plan of ``segments`` held ``counts`` samples each (a caller's own
+    timing search, e.g. :mod:`planner.contour`). ``abandon``: raise ``infeasible`` at the first
+    step that needs slack instead of planning on. The segments' reach is the caller's check."""
+    t0 = time.perf_counter()
+    sub = st.model_copy(update={"fastest": False, "segment_samples": [int(c) for c in counts],
+                                "samples_per_segment": int(max(counts)), "require_settled": True})
+    result = _run(name, model, sub, segments, None, abandon=abandon,
+                  timing={"method": "segment_samples"})[0]
+    result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3
+    return result
+
+
 def _fastest(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment]) -> PlanResult:
     """The plan at the fastest feasible timing (:mod:`.fastest`)."""
     gaps = corridor_gaps(segments, 2 * MARGIN_M, 2 * MARGIN_RAD)
@@ -245,7 +259,10 @@ def warm_up() -> float:
     the compiled kernels of every path by planning tiny corridors: the paper mode; the
     constrained mode with equalities eliminated (psi fixed), with the QP in the inputs (a
     psi range) and the slack problem (too little time). Returns the seconds taken. Servers
-    call it before taking jobs, ``make`` after installing (``python -m planner``)."""
+    call it before taking jobs, ``make`` after installing (``python -m planner``). Compiling is
+    reported on stderr with an estimate of the time left (:mod:`.compiling`)."""
+    from .compiling import compile_progress
+
     t0 = time.perf_counter()
     fixed = [{"lower": [0.0, 0.0, 0.0], "upper": [0.0, 0.0, 0.0]},
              {"lower": [0.0, 0.0, 0.0], "upper": [0.01, 0.01, 0.0]},
@@ -258,6 +275,7 @@ def warm_up() -> float:
         (fixed, {"mode": "paper"}), (fixed, {"mode": "constrained"}),
         (turning, {"mode": "constrained", "samples_per_segment": 30}),
         (turning, {"mode": "constrained", "samples_per_segment": 2})]
-    for segs, extra in runs:
-        plan({"robot": "moving-slide", "segments": segs, "settings": {**base, **extra}})
+    with compile_progress():
+        for segs, extra in runs:
+            plan({"robot": "moving-slide", "segments": segs, "settings": {**base, **extra}})
     return time.perf_counter() - t0

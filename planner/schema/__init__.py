@@ -6,9 +6,24 @@
 - :class:`PlanResult` (with :class:`Metrics`, :class:`Timing`, :class:`Drives`,
   :class:`CorridorSamples`): the result, and :class:`SegmentationResult`.
 - :class:`ImportOptions`, :class:`ImportReport`, :class:`ImportResult`: drawing import.
+- :class:`ContourRequest`, :class:`Program`, :class:`ContourSection`: contouring a G-code program.
 - :mod:`~planner.schema.limits`: the bounds on work and the mode defaults.
 """
 
+from .contour import (
+                     CONTOUR_FEEDS,
+                     DEFAULT_CONTOUR_TOLERANCE_M,
+                     MAX_PROGRAM_BYTES,
+                     MIN_CONTOUR_TOLERANCE_M,
+                     ContourRequest,
+                     ContourSection,
+                     PassSummary,
+                     PathElement,
+                     Program,
+                     ProgramBlock,
+                     ProgramComment,
+                     ProgramWord,
+)
 from .drawing import (
                      DRAWING_UNITS,
                      PARTIAL_LAYOUT,
@@ -77,6 +92,8 @@ __all__ = [
     "SegmentationResult", "SegmentationCell", "HalfPlanes", "RobotSummary",
     "CorridorRecord", "ImportOptions", "ImportReport", "ImportResult", "DrawingShape", "OpenChain", "DRAWING_UNITS",
     "PARTIAL_LAYOUT",
+    "CONTOUR_FEEDS", "DEFAULT_CONTOUR_TOLERANCE_M", "MAX_PROGRAM_BYTES", "MIN_CONTOUR_TOLERANCE_M", "ContourRequest",
+    "ContourSection", "PassSummary", "PathElement", "Program", "ProgramBlock", "ProgramComment", "ProgramWord",
     "error_details", "field_path", "format_validation_error", "planner_error",
     "DEFAULT_FORCE_RISE_S", "DEFAULT_LAYOUT_SPEED_M_S", "DEFAULT_MODE",
     "DEFAULT_ROBOT", "DEFAULT_SAMPLES_PER_SEGMENT", "MAX_CELLS", "MAX_HORIZON", "MAX_LEGS", "MAX_OBSTACLES",

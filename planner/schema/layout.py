@@ -10,11 +10,13 @@ reachable needs the robot and is checked by :mod:`planner.corridor`.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import numpy as np
-import shapely
 from pydantic import Discriminator, Field, Tag, ValidationInfo, field_validator, model_validator
+
+if TYPE_CHECKING:
+    import shapely
 
 from ._types import Finite, Point2, PointPair, Pose3, Strict, array_of, fail
 from .limits import MAX_CELLS, MAX_COORDINATE, MAX_HOLES, MAX_OBSTACLES, MAX_POLYGON_POINTS, MIN_CELL_SIZE
@@ -73,6 +75,7 @@ class Polygon(Strict):
     @field_validator("points")
     @classmethod
     def _simple(cls, v: np.ndarray) -> np.ndarray:
+        import shapely  # loaded on first use: plans of given segments never need it
         poly = shapely.Polygon(v)
         if not poly.is_valid:
             raise fail(f"degenerate polygon: {shapely.is_valid_reason(poly)} (the outline must not cross or touch "
@@ -87,6 +90,7 @@ class Polygon(Strict):
         if n > MAX_POLYGON_POINTS:
             raise fail(f"the polygon has {n} vertices in its outline and holes, more than the limit of "
                        f"{MAX_POLYGON_POINTS}", "holes", code="too_large")
+        import shapely  # loaded on first use: plans of given segments never need it
         if self.holes:
             poly = shapely.Polygon(self.points, [np.asarray(h) for h in self.holes])
             if not poly.is_valid:
@@ -97,6 +101,7 @@ class Polygon(Strict):
     @property
     def shape(self) -> shapely.Polygon:
         """The obstacle as a shapely polygon (with its holes) [m]."""
+        import shapely  # loaded on first use: plans of given segments never need it
         return shapely.Polygon(self.points, [np.asarray(h) for h in self.holes] or None)
 
 

@@ -14,6 +14,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from ._types import FloatArray, Points2, Rows, Rows3, Vec2, Vec3
+from .contour import ContourSection
 from .request import Settings
 
 __all__ = ["CorridorSamples", "CorridorSegment", "Drives", "Metrics", "PlanResult", "Timing", "UNITS",
@@ -160,6 +161,9 @@ class PlanResult(_Out):
     corridor: CorridorSamples
     metrics: Metrics
     timing: Timing
+    contour: ContourSection | None = Field(None, description="Contour plans (POST /v1/contour, rangeplan contour): "
+                                           "per sample whether it cuts and the source line, the deviation from the "
+                                           "programmed path, per-pass summaries, the cycle time; null otherwise")
 
     def to_json_dict(self) -> dict[str, Any]:
         """The result as JSON types (lists, not arrays)."""

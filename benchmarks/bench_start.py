@@ -1,0 +1,200 @@
+"""Start-up costs (issue 24), side by side with another revision: wall and CPU seconds.
+
+    python benchmarks/bench_start.py [--base REV] [--rounds 3] [--cold] [--install]
+    python benchmarks/bench_start.py --profile-compile      # each kernel's compile time
+
+Every figure is one child process (``OPENBLAS_NUM_THREADS=1``), timed by wall clock and by
+the CPU seconds it used (``resource.getrusage(RUSAGE_CHILDREN)``: on a shared machine the
+CPU time is the steadier figure); the table gives the median over ``--rounds``.
+
+- ``--help``: ``python -m app.cli --help``
+- ``import planner``: ``python -c "import planner"``
+- ``plan warm``: ``python -m app.cli plan static/examples/table1.json -o OUT.json``, kernels cached
+- ``worker ready``: ``import planner; planner.warm_up()`` (what a service or batch worker does)
+- ``--cold``: ``plan cold``, the first plan with an empty kernel cache (compiles; once per round)
+- ``--install``: ``pip install --no-deps .`` into a new venv (the runtime dependencies of this
+  venv reached by a ``.pth`` file, as after installing the lock) and the first plan from it,
+  with this machine's kernel cache (``install + plan``) and with an empty one (``--cold`` too)
+
+``--base REV`` checks REV out in a temporary git worktree and runs the same commands there
+(its kernels compile there first, ~1-3 minutes), alternating base and head in each round.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+TABLE1 = ROOT / "static" / "examples" / "table1.json"
+PY = sys.executable
+
+
+def timed(cmd: list[str], cwd: Path, env: dict | None = None) -> tuple[float, float]:
+    """Run ``cmd``; (wall s, CPU s of the child). Raises on failure, with its stderr."""
+    e = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", **(env or {})}
+    e.pop("PYTHONPATH", None)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    out = subprocess.run(cmd, cwd=cwd, env=e, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if out.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} in {cwd}: exit {out.returncode}\n{out.stderr[-2000:]}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, cpu
+
+
+def cases(tree: Path, tmp: Path, cold: bool) -> dict[str, list[str]]:
+    out = str(tmp / "x.json")
+    c = {"--help": [PY, "-m", "app.cli", "--help"],
+         "import planner": [PY, "-c", "import planner"],
+         "plan warm": [PY, "-m", "app.cli", "plan", str(TABLE1), "-o", out],
+         "worker ready": [PY, "-c", "import planner; planner.warm_up()"]}
+    if cold:
+        c["plan cold"] = c["plan warm"]
+    return c
+
+
+def cold_env(tmp: Path, round_: int, tree: Path) -> dict[str, str]:
+    """An empty kernel cache for this tree (before issue 24 numba's cache beside the sources:
+    NUMBA_CACHE_DIR moves it)."""
+    d = tmp / f"cold-{tree.name}-{round_}"
+    return {"NUMBA_CACHE_DIR": str(d), "RANGEPLAN_KERNEL_CACHE": str(d)}
+
+
+def install_rounds(rounds: int, tmp: Path, cold: bool) -> dict[str, list[tuple[float, float]]]:
+    """``pip install --no-deps .`` into a new venv, then its first plan of Table I."""
+    site = next(Path(sys.prefix).glob("lib/python3*/site-packages"))
+    res: dict[str, list[tuple[float, float]]] = {}
+    for r in range(rounds):
+        for label, env in [("install + plan", {})] + ([("install + plan, cold cache", {
+                "RANGEPLAN_KERNEL_CACHE": str(tmp / f"icold-{r}")})] if cold else []):
+            venv = tmp / f"venv-{r}-{len(label)}"
+            subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
+            vsite = next(venv.glob("lib/python3*/site-packages"))
+            (vsite / "deps.pth").write_text(str(site) + "\n")  # the locked dependencies of this venv
+            wall0, cpu0 = timed([PY, "-m", "pip", "--python", str(venv / "bin" / "python"), "install", "--quiet",
+                                 "--no-deps", str(ROOT)], tmp)
+            wall1, cpu1 = timed([str(venv / "bin" / "rangeplan"), "plan", str(TABLE1), "-o", str(tmp / "i.json")],
+                                tmp, env)
+            res.setdefault(label, []).append((wall0 + wall1, cpu0 + cpu1))
+            res.setdefault(label + ": install only", []).append((wall0, cpu0))
+            shutil.rmtree(venv)
+    return res
+
+
+def profile_compile() -> None:
+    """Each kernel's compile time in a full warm-up with an empty cache, own and inclusive."""
+    code = r"""
+import json, sys, time
+from numba.core import event as ev
+stack, rows = [], []
+class L(ev.Listener):
+    def on_start(self, e):
+        stack.append([e.data["dispatcher"].py_func.__name__, time.perf_counter(), 0.0])
+    def on_end(self, e):
+        name, t0, child = stack.pop()
+        dt = time.perf_counter() - t0
+        if stack:
+            stack[-1][2] += dt
+        rows.append((name, dt, dt - child))
+ev.register("numba:compile", L())
+import planner
+t = time.perf_counter()
+planner.warm_up()
+print(json.dumps({"total": time.perf_counter() - t, "rows": rows}))
+"""
+    with tempfile.TemporaryDirectory() as tmp:
+        e = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "NUMBA_CACHE_DIR": tmp, "RANGEPLAN_KERNEL_CACHE": tmp}
+        out = subprocess.run([PY, "-c", code], cwd=ROOT, env=e, capture_output=True, text=True, check=True)
+    data = json.loads(out.stdout.strip().splitlines()[-1])
+    own: dict[str, float] = {}
+    for name, _, excl in data["rows"]:
+        own[name] = own.get(name, 0.0) + excl
+    print(f"# warm-up with an empty cache: {data['total']:.1f} s, {len(data['rows'])} compiles; load {load()}")
+    print("| kernel | own compile [s] | inclusive [s] |\n|---|---:|---:|")
+    for name, incl, excl in sorted(data["rows"], key=lambda r: -r[2]):
+        print(f"| {name} | {excl:.2f} | {incl:.2f} |")
+    print("\nCOMPILE_COST = " + json.dumps({k: round(v, 2) for k, v in sorted(own.items(), key=lambda kv: -kv[1])}))
+
+
+def load() -> str:
+    return " ".join(f"{x:.2f}" for x in os.getloadavg())
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--base", help="git revision to compare with (a temporary worktree)")
+    ap.add_argument("--base-tree", type=Path, help="an existing checkout of the base instead of --base")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--cold", action="store_true", help="also the first plan with an empty kernel cache")
+    ap.add_argument("--install", action="store_true", help="also pip install --no-deps . + first plan")
+    ap.add_argument("--profile-compile", action="store_true", help="each kernel's compile time, then exit")
+    args = ap.parse_args()
+    if args.profile_compile:
+        profile_compile()
+        return
+    print(f"# {os.cpu_count()} CPUs; load average before: {load()}")
+    t_start = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmpdir:
+        tmp = Path(tmpdir)
+        trees = [("head", ROOT)]
+        if args.base_tree:
+            trees.insert(0, ("base", args.base_tree.resolve()))
+        elif args.base:
+            base = tmp / "base"
+            subprocess.run(["git", "worktree", "add", "--detach", str(base), args.base], cwd=ROOT, check=True,
+                           capture_output=True)
+            trees.insert(0, ("base", base))
+        try:
+            for _, tree in trees:  # the kernels of each tree compiled (or loaded) once before timing
+                timed([PY, "-c", "import planner; planner.warm_up()"], tree)
+            results: dict[tuple[str, str], list[tuple[float, float]]] = {}
+            for r in range(args.rounds):
+                for name, tree in trees:
+                    for label, cmd in cases(tree, tmp, args.cold).items():
+                        env = cold_env(tmp, r, tree) if label == "plan cold" else None
+                        results.setdefault((label, name), []).append(timed(cmd, tree, env))
+                print(f"# round {r + 1}: load {load()}", flush=True)
+            if args.install:
+                for label, v in install_rounds(args.rounds, tmp, args.cold).items():
+                    results[(label, "head")] = v
+        finally:
+            if args.base:
+                subprocess.run(["git", "worktree", "remove", "--force", str(tmp / "base")], cwd=ROOT,
+                               capture_output=True)
+    labels = list(dict.fromkeys(k[0] for k in results))
+    names = [n for n, _ in trees]
+    head = " | ".join(f"{n} wall [s] | {n} CPU [s]" for n in names)
+    ratio = " | head / base wall | head / base CPU" if len(names) == 2 else ""
+    print(f"\n| what | {head}{ratio} |")
+    print("|---|" + "---:|" * (2 * len(names) + (2 if len(names) == 2 else 0)))
+    for label in labels:
+        cells, med = [], {}
+        for n in names:
+            v = results.get((label, n))
+            if v is None:
+                cells += ["", ""]
+                continue
+            med[n] = (statistics.median(w for w, _ in v), statistics.median(c for _, c in v))
+            cells += [f"{med[n][0]:.2f}", f"{med[n][1]:.2f}"]
+        if len(names) == 2 and len(med) == 2:
+            cells += [f"{med['head'][0] / med['base'][0]:.2f}x", f"{med['head'][1] / med['base'][1]:.2f}x"]
+        elif len(names) == 2:
+            cells += ["", ""]
+        print(f"| {label} | " + " | ".join(cells) + " |")
+    print(f"\n# load average after: {load()}; {(time.perf_counter() - t_start) / 60:.1f} min")
+
+
+if __name__ == "__main__":
+    main()

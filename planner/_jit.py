@@ -1,0 +1,119 @@
+"""``njit`` for the planner's kernels: numba's, with the on-disk cache keyed by the content of
+*all* the kernel sources and kept in one place per machine (issue 24).
+
+numba (>= 0.61) keys a cached kernel by the content of its own source file only: a kernel
+compiled with its callees from other files inlined stays "valid" when only a callee's file
+changes, and the cache lives beside the sources, so every new venv, clone or worktree
+compiles again (a minute or more). Here the cache of every kernel is keyed by the hash of
+all the kernel modules' sources (:data:`KERNEL_SOURCES`) and numba's version, and lives in
+
+1. ``$NUMBA_CACHE_DIR/rangeplan-<key>`` when ``NUMBA_CACHE_DIR`` is set (the container's
+   read-only seed, ``app/kernel_cache.py``), else
+2. ``$RANGEPLAN_KERNEL_CACHE/<key>``, else ``$XDG_CACHE_HOME/rangeplan/kernels/<key>``
+   (``~/.cache/rangeplan/kernels/<key>``), else
+3. beside the sources (numba's default) when neither is writable.
+
+So a fresh install of the same source on a machine that compiled it once loads the kernels
+instead of compiling them, and any change of a kernel file recompiles every kernel. numba
+still checks the CPU (and its features) per entry, as for its own cache.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import numba
+from numba.core import caching
+
+__all__ = ["njit", "KERNEL_SOURCES", "kernel_cache_dir", "kernel_key"]
+
+_ROOT = Path(__file__).resolve().parent
+#: the kernel modules (relative to ``planner/``) whose content keys the cache
+KERNEL_SOURCES = ("model/kernels.py", "horizon/kernels.py", "corridor/kernels.py", "constraints/kernels.py",
+                  "constraints/dense_kernels.py", "constraints/stagewise_kernels.py",
+                  "constraints/dual_kernels.py", "constraints/step_kernels.py", "orchestrator/kernels.py")
+
+
+@lru_cache(maxsize=1)
+def kernel_key() -> str:
+    """sha256 of numba's and llvmlite's versions, a non-default ``NUMBA_OPT`` (numba's own cache
+    ignores it) and every kernel source (hex, 64 digits)."""
+    import llvmlite
+    from numba.core import config
+
+    opt = int(getattr(config, "OPT", 3))
+    h = hashlib.sha256(f"numba {numba.__version__} llvmlite {llvmlite.__version__}{'' if opt == 3 else f' opt {opt}'}\n"
+                       .encode())
+    for rel in KERNEL_SOURCES:
+        h.update(rel.encode() + b"\0" + (_ROOT / rel).read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def kernel_cache_dir(environ: dict | None = None) -> Path:
+    """The directory of this source's kernel cache (not created)."""
+    env = os.environ if environ is None else environ
+    tag = kernel_key()[:16]
+    if env.get("NUMBA_CACHE_DIR"):
+        return Path(env["NUMBA_CACHE_DIR"]) / f"rangeplan-{tag}"
+    if env.get("RANGEPLAN_KERNEL_CACHE"):
+        return Path(env["RANGEPLAN_KERNEL_CACHE"]) / tag
+    base = env.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "rangeplan" / "kernels" / tag
+
+
+class _KernelLocator(caching._SourceFileBackedLocatorMixin, caching._CacheLocator):
+    """The planner's kernels: cache in :func:`kernel_cache_dir`, stamped by :func:`kernel_key`."""
+
+    def __init__(self, py_func: Any, py_file: str) -> None:
+        self._py_file = py_file
+        self._lineno = py_func.__code__.co_firstlineno
+        rel = Path(py_file).resolve().relative_to(_ROOT)
+        self._cache_path = str(kernel_cache_dir() / rel.parent)
+
+    def get_cache_path(self) -> str:
+        return self._cache_path
+
+    def get_source_stamp(self) -> str:
+        return kernel_key()
+
+    @classmethod
+    def from_function(cls, py_func: Any, py_file: str) -> Any:
+        try:
+            Path(py_file).resolve().relative_to(_ROOT)
+        except ValueError:
+            return None
+        self = cls(py_func, py_file)
+        try:
+            self.ensure_cache_path()
+        except OSError:
+            return None  # not writable: numba's own locators (beside the sources)
+        return self
+
+
+class _KernelCacheImpl(caching.CompileResultCacheImpl):
+    _locator_classes = [_KernelLocator, *caching.CompileResultCacheImpl._locator_classes]
+
+
+class _KernelCache(caching.FunctionCache):
+    _impl_class = _KernelCacheImpl
+
+
+def njit(*args: Any, **options: Any) -> Any:
+    """``numba.njit`` (same arguments); with ``cache=True`` the cache described above."""
+    cache = options.pop("cache", False)
+
+    def wrap(func: Any) -> Any:
+        dispatcher: Any = numba.njit(**options)(func)
+        if cache:
+            dispatcher._cache = _KernelCache(dispatcher.py_func)
+        return dispatcher
+
+    if args and callable(args[0]) and len(args) == 1:
+        return wrap(args[0])
+    if args:
+        raise TypeError("planner._jit.njit takes no positional signature; declare none (one dispatch per call)")
+    return wrap

@@ -1,0 +1,14 @@
+"""Contouring CAM programs (issue 22): the top layer, above the orchestrator and the exchange.
+
+- :func:`plan_contour`: a :class:`~planner.schema.ContourRequest` (a G-code program, its
+  origin in the robot frame, the tolerance and the feed) -> one
+  :class:`~planner.schema.PlanResult` for the whole program with its ``contour`` section;
+- :func:`tube`: a pass's lines and arcs -> a tube corridor of convex cells whose every chord
+  between consecutive samples stays within the tolerance; :class:`PathGeometry`: distances
+  to the programmed path.
+"""
+
+from .plan import estimate_contour, parse_contour_request, plan_contour
+from .tube import PathGeometry, Tube, tube
+
+__all__ = ["PathGeometry", "Tube", "estimate_contour", "parse_contour_request", "plan_contour", "tube"]

@@ -1,0 +1,506 @@
+"""Contour a CAM program (issue 22): :func:`plan_contour` turns a
+:class:`~planner.schema.ContourRequest` into ONE :class:`~planner.schema.PlanResult` for the
+whole program, with its ``contour`` section.
+
+Each cut pass becomes a tube corridor of convex cells (:mod:`.tube`) planned in the
+constrained mode from rest to rest, so every sample and every straight move between two
+samples is within the tolerance of the programmed path. Timing: a speed profile along the
+pass (the cell speed ``v``, the curvature and corner limits ``sqrt(a R)``, acceleration ``a``
+forwards and backwards), turned into sample counts per cell; ``program`` feed caps ``v`` at
+each move's F and lowers the profile until the plan is feasible and no sample is faster than
+F; ``fastest`` scales the profile (``v = lambda v0``, ``a = lambda^2 a0``) by bisection to the
+largest feasible ``lambda`` (each candidate abandoned at its first step that needs slack).
+Rapids and feed moves above the cutting height are free moves inside a box about the
+straight move (the ``fastest`` timing of :func:`planner.plan`); plunges, retracts, G4 and
+M0 are the robot at rest. The parts are joined sample to sample: each part starts at the pose
+where the previous one settled.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from ..errors import PlannerError
+from ..exchange import read_gcode
+from ..model import RobotModel, load_robot
+from ..model.reach import check_segments
+from ..orchestrator import feasible, plan, plan_timed
+from ..schema import (
+    DEFAULT_CONTOUR_TOLERANCE_M,
+    MAX_SEGMENTS,
+    MAX_TOTAL_STEPS,
+    ContourRequest,
+    ContourSection,
+    CorridorSamples,
+    CorridorSegment,
+    Drives,
+    Metrics,
+    PassSummary,
+    PathElement,
+    PlanResult,
+    Program,
+    Segment,
+    Settings,
+    Timing,
+    planner_error,
+)
+from .tube import PathGeometry, Tube, tube
+
+__all__ = ["CONTOUR_STEP_S", "estimate_contour", "parse_contour_request", "plan_contour"]
+
+#: fastest: the reference cell speed and acceleration the scale multiplies [m/s, m/s^2]
+V0_M_S = 0.1
+A0_M_S2 = 1.0
+#: program feed: the acceleration of the profile [m/s^2]
+A_PROGRAM_M_S2 = 2.0
+#: program feed: the profile's cell speed starts at this fraction of F (the robot, pulled to the
+#: cells' centres, runs a little faster than the profile between them)
+PROGRAM_MARGIN = 0.9
+#: fastest: bisection steps on the scale
+SCALE_STEPS = 6
+#: the longest cell along the path, in samples at the cell speed (short cells keep the
+#: criterion's pull on the cell centre near the path's progress)
+CELL_SAMPLES = 4
+#: room for the box about a rapid [m]
+RAPID_MARGIN_M = 0.002
+
+
+def parse_contour_request(request: Any) -> ContourRequest:
+    """Validate a contour request (dict or model); errors name the field."""
+    if isinstance(request, ContourRequest):
+        return request
+    from pydantic import ValidationError
+
+    try:
+        return ContourRequest.model_validate(request)
+    except ValidationError as exc:
+        raise planner_error(exc) from None
+
+
+def plan_contour(request: Any, *, program: Program | None = None) -> PlanResult:
+    """Plan a whole G-code program (module docstring). ``program``: the parsed program, if the
+    caller has read it already. Raises :class:`~planner.errors.PlannerError` naming the
+    field (``program`` with the line, ``tolerance_m``, ``origin``, ``settings.*``)."""
+    t0 = time.perf_counter()
+    req = parse_contour_request(request)
+    st = req.plan_settings()
+    if program is None:
+        program = read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
+    tol = req.tolerance_m if req.tolerance_m is not None else (program.tolerance_m or DEFAULT_CONTOUR_TOLERANCE_M)
+    if req.tolerance_m is None and program.tolerance_m is not None and not 1e-5 <= tol <= 0.01:
+        raise PlannerError("invalid_input", f"the program's G64 P gives a tolerance of {tol * 1e3:g} mm, outside "
+                           "0.01..10 mm; give tolerance_m", "tolerance_m")
+    model = load_robot(req.robot)
+    origin = np.array(req.origin, float)
+    warnings = list(program.warnings)
+    psi = 0.0
+    pos = program.start + origin
+    parts: list[_Part] = []
+    pass_summaries: list[PassSummary] = []
+    blocks = program.blocks
+    i = 0
+    while i < len(blocks):
+        b = blocks[i]
+        if b.kind == "travel":
+            j = i
+            while j + 1 < len(blocks) and blocks[j + 1].kind == "travel":
+                j += 1
+            target = blocks[j].elements[-1].end + origin
+            if np.hypot(*(target - pos)) > 1e-9:
+                part = _travel(req, model, st, pos, target, psi, b.line)
+                parts.append(part)
+                pos = part.result.pose[-1, :2].copy()
+            i = j + 1
+            continue
+        if b.kind == "dwell":
+            parts.append(_dwell(pos, psi, b.duration_s, st.Ts))
+            i += 1
+            continue
+        start_pose = pos.copy()
+        gap = float(np.hypot(*(b.elements[0].start + origin - pos)))
+        if gap > 0.5 * tol:
+            # a cut that starts away from where the tool is: travel there first (at rest)
+            part = _travel(req, model, st, pos, b.elements[0].start + origin, psi, b.line)
+            parts.append(part)
+            pos = part.result.pose[-1, :2].copy()
+            start_pose = pos.copy()
+        first = len(parts)
+        geo = PathGeometry(b.elements, origin)
+        for chunk in _chunks(b.elements):
+            part = _cut(req, model, st, chunk, origin, tol, psi, pos, geo, b.elements)
+            parts.append(part)
+            pos = part.result.pose[-1, :2].copy()
+        cut_parts = parts[first:]
+        t_pass = sum(p.result.time[-1] for p in cut_parts)
+        dev = max(float(p.deviation.max()) for p in cut_parts)
+        speed = max(float(np.hypot(*p.result.velocity[:, :2].T).max()) for p in cut_parts)
+        pass_summaries.append(PassSummary(
+            index=len(pass_summaries), first_line=b.elements[0].line, last_line=b.elements[-1].line,
+            elements=len(b.elements), cells=sum(p.cells for p in cut_parts),
+            length_m=float(sum(e.length_m for e in b.elements)), time_s=float(t_pass), max_deviation_m=dev,
+            max_speed_m_s=speed, max_programmed_feed_m_s=max(e.feed_m_s for e in b.elements)))
+        del start_pose
+        i += 1
+    result = _join(parts, req, st, model)
+    cutting = np.concatenate([p.cutting if k == 0 else p.cutting[1:] for k, p in enumerate(parts)])
+    lines = np.concatenate([p.line if k == 0 else p.line[1:] for k, p in enumerate(parts)])
+    deviation = np.concatenate([p.deviation if k == 0 else p.deviation[1:] for k, p in enumerate(parts)])
+    Ts = st.Ts
+    result.contour = ContourSection(
+        cutting=[bool(c) for c in cutting], program_line=[int(x) if x > 0 else None for x in lines],
+        tolerance_m=tol, max_deviation_m=float(deviation.max()), deviation_m=deviation, feed=req.feed,
+        cycle_time_s=float(result.time[-1]), cut_time_s=float(cutting.sum() * Ts), passes=pass_summaries,
+        origin=[float(x) for x in origin], words=program.words, comments=program.comments, warnings=warnings)
+    result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3
+    return result
+
+
+class _Part:
+    """A planned piece of the program: a plan result (or rest) with its per-sample contour data."""
+
+    def __init__(self, result: PlanResult, cutting: np.ndarray, line: np.ndarray, deviation: np.ndarray,
+                 cells: int = 0, segments: list[Segment] | None = None):
+        self.result, self.cutting, self.line, self.deviation = result, cutting, line, deviation
+        self.cells = cells
+        self.segments = segments or []
+
+
+def _chunks(elements: list[PathElement]) -> list[list[int]]:
+    """The element indices of a pass in pieces the robot plans rest to rest: split after each
+    exact-stop move (G61)."""
+    out: list[list[int]] = [[]]
+    for k, e in enumerate(elements):
+        out[-1].append(k)
+        if e.exact_stop and k < len(elements) - 1:
+            out.append([])
+    return out
+
+
+def _profile(t: Tube, v_cap: np.ndarray, a: float, Ts: float) -> np.ndarray:
+    """Sample counts per segment of the tube from a speed profile: cell speed at most
+    ``v_cap`` (per segment), ``sqrt(a R)`` on arcs, ``sqrt(a R_corner)`` at junctions, reached
+    with acceleration ``a`` from rest and back to rest."""
+    n = len(t.segments)
+    v = v_cap.astype(float).copy()
+    finite = np.isfinite(t.radius)
+    v[finite] = np.minimum(v[finite], np.sqrt(a * t.radius[finite]))
+    j = t.turn > 0
+    half = np.clip((math.pi - t.turn[j]) / 2, 1e-6, math.pi / 2)
+    r_corner = t.rho * np.sin(half) / np.maximum(1 - np.sin(half), 1e-12)
+    v[j] = np.minimum(v[j], np.sqrt(a * r_corner))
+    # speeds at the nodes between segments, from rest to rest
+    node = np.empty(n + 1)
+    node[0] = 0.0
+    for k in range(n):
+        node[k + 1] = min(v[k], math.sqrt(node[k] ** 2 + 2 * a * t.length[k]))
+    node[n] = 0.0
+    for k in range(n - 1, -1, -1):
+        node[k] = min(node[k], math.sqrt(node[k + 1] ** 2 + 2 * a * t.length[k]))
+    counts = np.ones(n, np.int64)
+    cells = t.length > 0
+    mean = np.maximum(0.5 * (node[:-1] + node[1:]), 1e-9)
+    tm = np.maximum(t.length / np.minimum(v, np.maximum(mean, 0.25 * v)), 0.0)
+    counts[cells] = np.maximum(1, np.ceil(tm[cells] / Ts - 1e-9)).astype(np.int64)
+    return counts
+
+
+def _cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int], origin: np.ndarray, tol: float,
+         psi: float, pos: np.ndarray, geo: PathGeometry, elements: list[PathElement]) -> _Part:
+    els = [elements[k] for k in chunk]
+    feed = np.array([e.feed_m_s for e in els])
+    v_ref = float(feed.max()) if req.feed == "program" else V0_M_S
+    piece_max = max(v_ref * st.Ts * CELL_SAMPLES, 4 * tol)
+    t = tube(els, origin, tol, psi, piece_max)
+    t.element = np.asarray(chunk)[t.element]
+    # the first point: where the robot is (within the tube)
+    here = [float(pos[0]), float(pos[1]), psi]
+    t.segments[0] = Segment.model_validate({"lower": here, "upper": here})
+    if len(t.segments) > MAX_SEGMENTS:
+        raise PlannerError("too_large", f"line {els[0].line}: the pass needs {len(t.segments)} tube cells at a "
+                           f"tolerance of {tol * 1e3:g} mm, more than the limit of {MAX_SEGMENTS}; split the pass "
+                           "or give a larger tolerance_m", "program")
+    try:
+        check_segments(model, t.segments)
+    except PlannerError as err:
+        k = int(err.field.split("[")[1].split("]")[0]) if err.field and err.field.startswith("segments[") else 0
+        line = elements[int(t.element[min(k, len(t.element) - 1)])].line
+        raise PlannerError(err.code, f"line {line}: the path leaves the robot's reach at origin "
+                           f"[{origin[0]:g}, {origin[1]:g}] m: {err.message}", "program") from None
+    st = st.model_copy(update={"settle_speed_m_s": min(st.settle_speed_m_s, 1e-4)})
+    name = f"line {els[0].line}"
+    feed_of = feed[np.searchsorted(chunk, t.element)]
+    if req.feed == "program":
+        result = None
+        scale = PROGRAM_MARGIN
+        for _ in range(8):
+            counts = _profile(t, feed_of * scale, A_PROGRAM_M_S2 * scale * scale, st.Ts)
+            _check_counts(counts, els[0].line)
+            try:
+                res = plan_timed(name, model, st, t.segments, counts.tolist())
+            except PlannerError as err:
+                if err.code not in ("infeasible", "not_settled"):
+                    raise
+                scale *= 0.7
+                continue
+            over = _overspeed(res, t, counts, feed_of)
+            if feasible(res) and over <= 1.0:
+                result = res
+                break
+            scale *= min(0.95 / max(over, 1e-9), 0.9) if over > 1.0 else 0.7
+        if result is None:
+            raise _infeasible(els[0].line, tol, st)
+    else:
+        v_cap = np.full(len(t.segments), V0_M_S)
+        best: PlanResult | None = None
+        tried: dict[float, PlanResult | None] = {}
+
+        def run(lam: float) -> PlanResult | None:
+            if lam not in tried:
+                counts = _profile(t, v_cap * lam, A0_M_S2 * lam * lam, st.Ts)
+                _check_counts(counts, els[0].line)
+                try:
+                    res = plan_timed(name, model, st, t.segments, counts.tolist())
+                    tried[lam] = res if feasible(res) else None
+                except PlannerError as err:
+                    if err.code not in ("infeasible", "not_settled"):
+                        raise
+                    tried[lam] = None
+            return tried[lam]
+
+        lo, hi = 0.0, 1.0
+        if run(1.0) is not None:
+            lo, hi = 1.0, 2.0
+            while hi < 64 and run(hi) is not None:
+                lo, hi = hi, hi * 2
+        else:
+            while hi > 1 / 64:
+                hi, lo = hi / 2, 0.0
+                if run(hi) is not None:
+                    lo, hi = hi, hi * 2
+                    break
+        if lo == 0.0:
+            raise _infeasible(els[0].line, tol, st)
+        for _ in range(SCALE_STEPS):
+            mid = 0.5 * (lo + hi)
+            if run(mid) is not None:
+                lo = mid
+            else:
+                hi = mid
+        best = tried[lo]
+        assert best is not None
+        result = best
+    K = len(result.time)
+    seg = _segment_of(counts_of(result, len(t.segments)), K)
+    elem = t.element[seg]
+    cutting = np.ones(K, bool)
+    line = geo.line[elem].astype(np.int64)
+    dev = _deviation(result.pose[:, :2], elem, geo, tol)
+    return _Part(result, cutting, line, dev, cells=len(t.segments) - 2, segments=t.segments)
+
+
+def counts_of(res: PlanResult, n: int) -> np.ndarray:
+    ss = res.settings.segment_samples
+    return np.asarray(ss if ss is not None else [res.settings.samples_per_segment] * n, np.int64)
+
+
+def _check_counts(counts: np.ndarray, line: int) -> None:
+    if counts.sum() > MAX_TOTAL_STEPS // 2:
+        raise PlannerError("too_large", f"line {line}: the pass needs {int(counts.sum())} samples, more than the "
+                           f"limit of {MAX_TOTAL_STEPS // 2}; give a larger settings.Ts or split the program",
+                           "program")
+
+
+def _infeasible(line: int, tol: float, st: Settings) -> PlannerError:
+    return PlannerError("infeasible", f"line {line}: no timing keeps the tool within {tol * 1e3:g} mm of the path "
+                        f"within the drive limits at a sample time of {st.Ts:g} s; give a larger tolerance_m or a "
+                        "smaller settings.Ts", "tolerance_m")
+
+
+def _segment_of(counts: np.ndarray, K: int) -> np.ndarray:
+    """Segment index of every sample 0..K-1 (sample 0: the start point; past the sequence: the end point)."""
+    seg = np.repeat(np.arange(len(counts)), counts)
+    idx = np.clip(np.arange(K) - 1, 0, len(seg) - 1)
+    out = seg[idx]
+    out[0] = 0
+    return out
+
+
+def _overspeed(res: PlanResult, t: Tube, counts: np.ndarray, feed: np.ndarray) -> float:
+    """Largest tool speed / the programmed F of the move being cut (samples and chords)."""
+    K = len(res.time)
+    seg = _segment_of(counts, K)
+    speed = np.hypot(*res.velocity[:, :2].T)
+    chord = np.zeros(K)
+    chord[:-1] = np.hypot(*np.diff(res.pose[:, :2], axis=0).T) / res.settings.Ts
+    f = feed[seg]
+    return float(np.max(np.maximum(speed, chord) / np.maximum(f, 1e-12)))
+
+
+def _deviation(pose: np.ndarray, elem: np.ndarray, geo: PathGeometry, tol: float) -> np.ndarray:
+    """Per sample: the largest distance from the programmed path of the sample and of the
+    straight move to the next, measured on points ``h = tol / 10`` apart along the move plus
+    ``h / 2`` (the distance is 1-Lipschitz, so this bounds the maximum from above; the cells
+    keep 0.95 tol, so the bound stays within the tolerance) [m]. Candidates: the elements of
+    both ends and their neighbours along the pass (samples move forwards through the cells)."""
+    K = len(pose)
+    h = tol / 10
+    a, b = pose[:-1], pose[1:]
+    L = np.hypot(*(b - a).T)
+    m = np.maximum(np.ceil(L / h).astype(np.int64), 1) + 1
+    owner = np.repeat(np.arange(K - 1), m)
+    start = np.repeat(np.cumsum(m) - m, m)
+    frac = (np.arange(owner.size) - start) / np.repeat(m - 1, m)
+    pts = a[owner] + frac[:, None] * (b - a)[owner]
+    e0, e1 = elem[:-1][owner], elem[1:][owner]
+    cand = np.stack((e0 - 1, e0, e1, e1 + 1), axis=1)
+    d = geo.distance(pts, cand)
+    dev = np.zeros(K)
+    np.maximum.at(dev, owner, d + np.where(m[owner] > 1, 0.5 * h, 0.0))
+    last = geo.distance(pose[-1:], np.array([[elem[-1] - 1, elem[-1], elem[-1] + 1]]))
+    dev[-1] = max(dev[-1], float(last[0]))
+    return dev
+
+
+def _travel(req: ContourRequest, model: RobotModel, st: Settings, a: np.ndarray, b: np.ndarray, psi: float,
+            line: int) -> _Part:
+    """A free move from ``a`` to ``b`` (at rest at both) inside a box about the straight move."""
+    lo = np.minimum(a, b) - RAPID_MARGIN_M
+    hi = np.maximum(a, b) + RAPID_MARGIN_M
+    segs = [{"lower": [a[0], a[1], psi], "upper": [a[0], a[1], psi]},
+            {"lower": [lo[0], lo[1], psi], "upper": [hi[0], hi[1], psi]},
+            {"lower": [b[0], b[1], psi], "upper": [b[0], b[1], psi]}]
+    settings = st.model_dump(exclude_none=True, exclude={"samples_per_segment", "segment_samples", "speed_m_s",
+                                                         "total_time_s"})
+    settings["fastest"] = True
+    settings["settle_speed_m_s"] = min(st.settle_speed_m_s, 1e-4)
+    try:
+        res = plan({"name": f"travel line {line}", "robot": req.robot, "segments": segs, "settings": settings},
+                   robot=model)
+    except PlannerError as err:
+        raise PlannerError(err.code, f"line {line}: the move from [{a[0]:.4f}, {a[1]:.4f}] to [{b[0]:.4f}, "
+                           f"{b[1]:.4f}] m (robot frame): {err.message}", "program") from None
+    K = len(res.time)
+    return _Part(res, np.zeros(K, bool), np.zeros(K, np.int64), np.zeros(K),
+                 segments=[Segment.model_validate(s) for s in segs])
+
+
+def _dwell(pos: np.ndarray, psi: float, duration: float, Ts: float) -> _Part:
+    """The robot at rest for ``duration`` (a plunge, retract, G4 or pause)."""
+    n = max(int(math.ceil(duration / Ts - 1e-9)), 1)
+    K = n + 1
+    pose = np.tile([pos[0], pos[1], psi], (K, 1))
+    res = _rest_result(pose)
+    return _Part(res, np.zeros(K, bool), np.zeros(K, np.int64), np.zeros(K))
+
+
+def _rest_result(pose: np.ndarray) -> PlanResult:
+    """A placeholder result of rest samples; :func:`_join` fills the drive columns."""
+    K = len(pose)
+    z = np.zeros((K, 3))
+    return PlanResult.model_construct(time=np.arange(K, dtype=float), pose=pose, velocity=z, acceleration=z,
+                                      drives=None, corridor=None, metrics=None)
+
+
+def _join(parts: list[_Part], req: ContourRequest, st: Settings, model: RobotModel) -> PlanResult:
+    """One result: the parts' samples in order (each part's first sample, the previous part's
+    last, dropped), the metrics combined over the parts."""
+    from ..model import kinematics
+
+    planned = [p.result for p in parts if p.result.metrics is not None]
+    first = planned[0]
+    Ts = st.Ts
+    cols: dict[str, list[np.ndarray]] = {k: [] for k in ("pose", "velocity", "acceleration", "length", "legv",
+                                                         "force", "lower", "upper", "viol")}
+    for k, p in enumerate(parts):
+        r = p.result
+        sl = slice(0 if k == 0 else 1, None)
+        cols["pose"].append(r.pose[sl])
+        cols["velocity"].append(r.velocity[sl])
+        cols["acceleration"].append(r.acceleration[sl])
+        if r.metrics is not None:
+            cols["length"].append(r.drives.length[sl])
+            cols["legv"].append(r.drives.velocity[sl])
+            cols["force"].append(r.drives.force[sl])
+            cols["lower"].append(r.corridor.lower[sl])
+            cols["upper"].append(r.corridor.upper[sl])
+            cols["viol"].append(r.corridor.violation_m[sl])
+        else:
+            poses = r.pose[sl]
+            cols["length"].append(kinematics.leg_lengths(model, poses))
+            cols["legv"].append(np.zeros((len(poses), model.n_legs)))
+            cols["force"].append(np.zeros((len(poses), model.n_legs)))
+            cols["lower"].append(poses.copy())
+            cols["upper"].append(poses.copy())
+            cols["viol"].append(np.zeros(len(poses)))
+    a = {k: np.concatenate(v) for k, v in cols.items()}
+    K = len(a["pose"])
+    mts = [r.metrics for r in planned]
+    md: dict[str, Any] = first.metrics.model_dump()
+    for f in md:
+        vals = [getattr(m, f) for m in mts if getattr(m, f) is not None]
+        if not vals:
+            continue
+        if isinstance(vals[0], bool):
+            md[f] = all(vals)
+        elif f.startswith("max_") or f in ("overshoot_m", "time_indexed_violation_m", "time_indexed_violation_rad",
+                                           "qp_iterations_median", "qp_iterations_max", "constraint_slack_max_m",
+                                           "speed_slack_max_m_s", "predicted_violation_max_m",
+                                           "model_mismatch_max_m", "model_mismatch_max_rad"):
+            md[f] = max(vals)
+        elif f.startswith("min_"):
+            md[f] = min(vals)
+        elif f in ("energy", "path_length_m", "infeasible_steps", "qp_fallbacks", "qp_relaxed_steps",
+                   "qp_refinements", "qp_failures", "qp_time_ms"):
+            md[f] = sum(vals)
+        elif f in ("end_error_m", "end_error_rad", "end_speed_m_s", "settled", "force_limit_n", "qp_solver"):
+            md[f] = getattr(mts[-1], f)
+    md["duration_s"] = (K - 1) * Ts
+    md["steps"] = K - 1
+    md["compute_ms"] = 0.0
+    md["max_force_rate_n_s"] = float(np.abs(np.diff(np.vstack((np.zeros((1, a["force"].shape[1])), a["force"])),
+                                                    axis=0)).max() / Ts)
+    segments = [s for p in parts for s in p.segments]
+    timing = Timing(method="fastest" if req.feed == "fastest" else "segment_samples",
+                    samples_per_segment=first.settings.samples_per_segment, segment_samples=None,
+                    sequence_time_s=(K - 1) * Ts, moving_time_s=None,
+                    path_length_m=float(md["path_length_m"]), evaluations=None, feasible=None,
+                    one_fewer_sample_infeasible=None)
+    settings = st.model_copy(update={"segment_samples": None})
+    return PlanResult(plan_id=None, contour=None, name=req.name, robot=first.robot, mode="constrained",
+                      criterion="range-space",
+                      settings=settings, units=first.units, time=np.arange(K) * Ts, pose=a["pose"],
+                      velocity=a["velocity"], acceleration=a["acceleration"],
+                      drives=Drives(length=a["length"], velocity=a["legv"], force=a["force"]),
+                      corridor=CorridorSamples(lower=a["lower"], upper=a["upper"], violation_m=a["viol"],
+                                               segments=[CorridorSegment(lower=s.lower, upper=s.upper,
+                                                                         polygon=s.polygon) for s in segments]),
+                      metrics=Metrics(**md), timing=timing)
+
+
+#: seconds per receding-horizon step of a tube plan (polygon cells with eight half-planes,
+#: junctions): measured ~0.5-1.3 ms per step on the benchmark programs (benchmarks/bench_contour.py);
+#: the estimate takes the low end, so it errs on the side of accepting
+CONTOUR_STEP_S = 3e-4
+
+
+def estimate_contour(request: Any, program: Program | None = None) -> tuple[float, str]:
+    """A lower estimate of the compute time of :func:`plan_contour` [s] and the arithmetic in
+    words: the cut samples at the programmed feed (``program``; ~1.5 plans) or at the
+    reference speed (``fastest``: ~10 candidate plans) times the step cost."""
+    req = parse_contour_request(request)
+    st = req.plan_settings()
+    if program is None:
+        program = read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
+    samples = 0.0
+    for b in program.passes:
+        for e in b.elements:
+            v = e.feed_m_s if req.feed == "program" else V0_M_S * 2
+            samples += e.length_m / max(v, 1e-9) / st.Ts
+    plans = 1.5 if req.feed == "program" else SCALE_STEPS + 3
+    seconds = samples * plans * CONTOUR_STEP_S
+    return seconds, (f"{len(program.passes)} passes, ~{samples:.0f} cut samples at Ts = {st.Ts:g} s x {plans:g} "
+                     f"plans x ~{CONTOUR_STEP_S * 1e6:.0f} us per step")

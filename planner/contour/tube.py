@@ -1,0 +1,195 @@
+"""A cut pass as a tube corridor of convex cells, and the distance of points to the
+programmed path (lines and arcs), both in the robot frame [m].
+
+**Cells.** Each arc is replaced by chords whose sagitta is at most ``s_a = tol / 4`` (so the
+chord polyline is within ``s_a`` of the arc); long pieces are split to at most ``piece_max``.
+Each piece ``[p0, p1]`` gets the convex cell spanned by eight points on the circles of radius
+``rho`` about its ends (at +-90 and +-30 degrees from the piece's direction, forward at ``p1``,
+backward at ``p0``): it lies in ``piece + disk(rho)``, hence within ``rho + s_a`` of the path,
+and contains the disk of radius ``rho cos 30`` about each end. Where the direction changes, the
+intersection of the two neighbouring cells is a cell of its own between them (it contains the
+disk of radius ``0.87 rho`` about the shared vertex). So consecutive samples of the
+time-indexed range sequence always lie in ONE convex cell (the same cell, a cell and a
+junction inside it, or two collinear cells whose union is convex), and the straight move
+from one sample to the next stays inside it: every chord is within ``rho + s_a <= tol`` of
+the programmed path, which is what the exported G93 program runs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..schema import PathElement, Segment
+
+__all__ = ["SAGITTA_FRACTION", "TUBE_FRACTION", "PathGeometry", "Tube", "tube"]
+
+#: chord sagitta of the arcs' polylines, as a fraction of the tolerance
+SAGITTA_FRACTION = 0.25
+#: the cells' radius about the (chord) path, as a fraction of the tolerance, before the sagitta
+TUBE_FRACTION = 0.95
+_CAP = np.radians([-90.0, -30.0, 30.0, 90.0])
+_BACK = np.radians([90.0, 150.0, 210.0, 270.0])
+
+
+@dataclass
+class Tube:
+    segments: list[Segment]  #: start point, cells and junctions, end point
+    element: np.ndarray  #: (n,) index of the pass's element each segment belongs to
+    length: np.ndarray  #: (n,) path length a segment stands for (0: junctions and points) [m]
+    turn: np.ndarray  #: (n,) turn angle at a junction (0 elsewhere) [rad]
+    radius: np.ndarray  #: (n,) curvature radius of the piece (inf for lines) [m]
+    rho: float  #: the cells' radius about the chord path [m]
+
+
+def _cell(p0: np.ndarray, p1: np.ndarray, rho: float) -> np.ndarray:
+    d = p1 - p0
+    d = d / np.hypot(*d)
+    n = np.array([-d[1], d[0]])
+    fw = p1 + rho * (np.cos(_CAP)[:, None] * d + np.sin(_CAP)[:, None] * n)
+    bw = p0 + rho * (np.cos(_BACK)[:, None] * d + np.sin(_BACK)[:, None] * n)
+    return np.vstack((fw, bw))
+
+
+def _clip(poly: np.ndarray, clip: np.ndarray) -> np.ndarray:
+    """Sutherland-Hodgman: the convex polygon ``poly`` cut by the convex CCW polygon ``clip``."""
+    out = poly
+    for i in range(len(clip)):
+        a, b = clip[i], clip[(i + 1) % len(clip)]
+        e = b - a
+        side = e[0] * (out[:, 1] - a[1]) - e[1] * (out[:, 0] - a[0])  # >= 0 inside (left of a->b)
+        res = []
+        for j in range(len(out)):
+            p, q = out[j], out[(j + 1) % len(out)]
+            sp, sq = side[j], side[(j + 1) % len(out)]
+            if sp >= 0:
+                res.append(p)
+            if (sp >= 0) != (sq >= 0):
+                res.append(p + (q - p) * (sp / (sp - sq)))
+        if not res:
+            return np.zeros((0, 2))
+        out = np.array(res)
+    keep = np.ones(len(out), bool)
+    for j in range(1, len(out)):
+        if np.hypot(*(out[j] - out[j - 1])) < 1e-10:
+            keep[j] = False
+    out = out[keep]
+    if len(out) > 1 and np.hypot(*(out[0] - out[-1])) < 1e-10:
+        out = out[:-1]
+    return out
+
+
+def _pieces(elements: list[PathElement], origin: np.ndarray, s_a: float, piece_max: float):
+    """(p0, p1, element index, curvature radius) per piece, robot frame."""
+    out = []
+    for i, e in enumerate(elements):
+        if e.length_m < 1e-9:
+            continue
+        if e.kind == "arc":
+            assert e.radius_m is not None and e.sweep_rad is not None and e.start_angle_rad is not None
+            r = e.radius_m
+            step = 2 * math.acos(max(1 - s_a / r, -1.0)) if s_a < r else math.pi / 2
+            step = min(step, piece_max / r, math.pi / 2)
+            n = max(1, math.ceil(abs(e.sweep_rad) / step))
+            a = e.start_angle_rad + e.sweep_rad * np.arange(n + 1) / n
+            assert e.centre is not None
+            pts = e.centre + r * np.stack((np.cos(a), np.sin(a)), axis=1) + origin
+            pts[-1] = e.end + origin if abs(abs(e.sweep_rad) - 2 * math.pi) > 1e-9 else pts[0]
+            for k in range(n):
+                out.append((pts[k], pts[k + 1], i, r))
+        else:
+            n = max(1, math.ceil(e.length_m / piece_max))
+            pts = (e.start + origin) + np.arange(n + 1)[:, None] / n * (e.end - e.start)
+            for k in range(n):
+                out.append((pts[k], pts[k + 1], i, math.inf))
+    return out
+
+
+def tube(elements: list[PathElement], origin: np.ndarray, tol: float, psi: float, piece_max: float) -> Tube:
+    """The tube corridor of a pass (module docstring): point, cells (and junctions), point."""
+    s_a = SAGITTA_FRACTION * tol
+    pieces = _pieces(elements, origin, s_a, piece_max)
+    rho_arc = TUBE_FRACTION * tol - s_a
+    rho_line = TUBE_FRACTION * tol
+    segs: list[Segment] = []
+    elem, length, turn, radius = [], [], [], []
+
+    def add(poly: np.ndarray | None, point: np.ndarray | None, e: int, ln: float, tr: float, r: float) -> None:
+        if poly is not None:
+            lo, hi = poly.min(axis=0), poly.max(axis=0)
+            segs.append(Segment.model_validate({"lower": [lo[0], lo[1], psi], "upper": [hi[0], hi[1], psi],
+                                                "polygon": poly.tolist()}))
+        else:
+            assert point is not None
+            p = [float(point[0]), float(point[1]), psi]
+            segs.append(Segment.model_validate({"lower": p, "upper": p}))
+        elem.append(e)
+        length.append(ln)
+        turn.append(tr)
+        radius.append(r)
+
+    add(None, pieces[0][0], pieces[0][2], 0.0, 0.0, math.inf)
+    prev: np.ndarray | None = None
+    prev_dir: np.ndarray | None = None
+    # all cells of one pass share one radius: the junction of a line and a chord then still
+    # contains a disk of 0.87 rho about the vertex
+    rho = rho_arc if any(p[3] < math.inf for p in pieces) else rho_line
+    for p0, p1, e, r in pieces:
+        cell = _cell(p0, p1, rho)
+        d = (p1 - p0) / np.hypot(*(p1 - p0))
+        if prev is not None and prev_dir is not None:
+            ang = math.atan2(prev_dir[0] * d[1] - prev_dir[1] * d[0], float(prev_dir @ d))
+            if abs(ang) > 1e-9:
+                junction = _clip(prev, cell)
+                if len(junction) < 3:  # pragma: no cover - the disk about the vertex is in both
+                    raise AssertionError("empty junction")
+                add(junction, None, e, 0.0, abs(ang), math.inf)
+        add(cell, None, e, float(np.hypot(*(p1 - p0))), 0.0, r)
+        prev, prev_dir = cell, d
+    add(None, pieces[-1][1], pieces[-1][2], 0.0, 0.0, math.inf)
+    return Tube(segs, np.array(elem), np.array(length), np.array(turn), np.array(radius), rho)
+
+
+def _norm(v: np.ndarray) -> np.ndarray:
+    """Length of the last axis' 2-vectors (cheaper than numpy.linalg.norm here)."""
+    return np.sqrt(v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1])
+
+
+class PathGeometry:
+    """The programmed path of a pass (lines and arcs, robot frame) as arrays, for the distance
+    of many points to a few candidate elements each (vectorised)."""
+
+    def __init__(self, elements: list[PathElement], origin: np.ndarray):
+        n = len(elements)
+        self.n = n
+        self.arc = np.array([e.kind == "arc" for e in elements])
+        self.p0 = np.array([e.start for e in elements]) + origin
+        self.p1 = np.array([e.end for e in elements]) + origin
+        self.c = np.array([e.centre if e.centre is not None else e.start for e in elements]) + origin
+        self.r = np.array([e.radius_m or 0.0 for e in elements])
+        self.a0 = np.array([e.start_angle_rad or 0.0 for e in elements])
+        self.sweep = np.array([e.sweep_rad or 0.0 for e in elements])
+        self.line = np.array([e.line for e in elements])
+
+    def distance(self, pts: np.ndarray, cand: np.ndarray) -> np.ndarray:
+        """Distance of ``pts`` (M, 2) to the union of the candidate elements ``cand`` (M, C)
+        (indices clipped to the pass) [m]."""
+        cand = np.clip(cand, 0, self.n - 1)
+        P = pts[:, None, :]
+        a, b = self.p0[cand], self.p1[cand]
+        ab = b - a
+        L2 = np.maximum(np.einsum("mcj,mcj->mc", ab, ab), 1e-300)
+        t = np.clip(np.einsum("mcj,mcj->mc", P - a, ab) / L2, 0.0, 1.0)
+        d_line = _norm(P - (a + t[..., None] * ab))
+        c, r = self.c[cand], self.r[cand]
+        v = P - c
+        rad = _norm(v)
+        ang = np.arctan2(v[..., 1], v[..., 0])
+        sw = self.sweep[cand]
+        off = np.mod((ang - self.a0[cand]) * np.sign(sw), 2 * np.pi)
+        inside = (off <= np.abs(sw) + 1e-12) | (np.abs(sw) >= 2 * np.pi - 1e-12)
+        d_ends = np.minimum(_norm(P - a), _norm(P - b))
+        d_arc = np.where(inside, np.abs(rad - r), d_ends)
+        return np.where(self.arc[cand], d_arc, d_line).min(axis=1)

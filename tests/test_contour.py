@@ -1,0 +1,175 @@
+"""Contour plans of G-code programs (issue 22): the deviation of every sample and of every
+straight move between samples from the path LinuxCNC's interpreter (rs274) makes of the
+program, measured here with shapely on that path (independent of the planner's geometry),
+the programmed feed never exceeded, the drive limits, rest at plunges, the bad programs."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import shapely
+
+from planner.contour import plan_contour
+from planner.errors import PlannerError
+from tests.test_gcode_in import canonical_moves
+
+SMALL = """(a small contour: lines and arcs, mm)
+G21 G90 G17
+G64 P0.05
+F1200
+G0 X0 Y0 Z2
+G1 Z-1 F300
+G1 X20 F1200
+G3 X30 Y10 I0 J10
+G1 Y20 F900
+G2 X20 Y30 R10
+G1 X0
+G1 Y0
+G0 Z2
+G0 X-10 Y-10
+M2
+"""
+ORIGIN = [-0.01, -0.01]
+
+
+def rs274_cut_path(program: str, origin) -> shapely.MultiLineString:
+    """The cutting moves (feed, Z < 0) of rs274's canonical program as polylines, arcs densified
+    to 1e-8 m sagitta, in the robot frame [m]."""
+    moves, _ = canonical_moves(program)
+    prev = np.zeros(3)
+    lines = []
+    for mv in moves:
+        if mv[0] == "dwell":
+            continue
+        if mv[0] == "line":
+            end = np.array(mv[1:4])
+            if not mv[4] and min(prev[2], end[2]) < 0 and np.hypot(*(end[:2] - prev[:2])) > 0:
+                lines.append(np.array([prev[:2], end[:2]]))
+        else:
+            end = np.array([mv[1], mv[2], mv[6]])
+            c = np.array(mv[3:5])
+            r = np.hypot(*(prev[:2] - c))
+            a0 = math.atan2(prev[1] - c[1], prev[0] - c[0])
+            a1 = math.atan2(end[1] - c[1], end[0] - c[0])
+            sweep = a1 - a0
+            if mv[5] > 0:
+                while sweep <= 1e-12:
+                    sweep += 2 * math.pi
+            else:
+                while sweep >= -1e-12:
+                    sweep -= 2 * math.pi
+            n = max(2, math.ceil(abs(sweep) / (2 * math.acos(1 - 1e-8 / r))))
+            a = a0 + sweep * np.linspace(0, 1, n + 1)
+            lines.append(c + r * np.stack((np.cos(a), np.sin(a)), axis=1))
+        prev = end
+    return shapely.MultiLineString([ln + np.asarray(origin) for ln in lines])
+
+
+def chord_deviation(result, path: shapely.MultiLineString, step: float) -> float:
+    """Largest distance from ``path`` of the cutting samples and of the straight moves from each
+    cutting sample to the next, on points ``step`` apart (plus step / 2: a bound from above)."""
+    cut = np.asarray(result.contour.cutting)
+    pose = result.pose[:, :2]
+    worst = 0.0
+    idx = np.nonzero(cut[:-1] & cut[1:])[0]
+    a, b = pose[idx], pose[idx + 1]
+    L = np.hypot(*(b - a).T)
+    m = np.maximum(np.ceil(L / step).astype(int), 1) + 1
+    owner = np.repeat(np.arange(len(idx)), m)
+    start = np.repeat(np.cumsum(m) - m, m)
+    frac = (np.arange(owner.size) - start) / np.repeat(m - 1, m)
+    pts = a[owner] + frac[:, None] * (b - a)[owner]
+    d = shapely.distance(shapely.points(pts), path)
+    worst = float(d.max()) + step / 2
+    return worst
+
+
+@pytest.fixture(scope="module")
+def small():
+    return plan_contour({"program": SMALL, "origin": ORIGIN, "feed": "program"})
+
+
+def test_small_program_within_tolerance_of_rs274_path(small):
+    c = small.contour
+    assert c.tolerance_m == pytest.approx(5e-5)  # G64 P0.05
+    path = rs274_cut_path(SMALL, ORIGIN)
+    measured = chord_deviation(small, path, c.tolerance_m / 50)
+    assert measured <= c.tolerance_m
+    # the planner's own figure agrees with the independent one
+    assert c.max_deviation_m <= c.tolerance_m
+    assert abs(c.max_deviation_m - measured) < c.tolerance_m / 20
+    # the whole programmed path is realised: the cut samples reach both ends of every move
+    cut = small.pose[np.asarray(c.cutting), :2]
+    assert shapely.distance(shapely.points(cut), path).max() <= c.tolerance_m
+    assert np.hypot(*(cut[0] - np.array(ORIGIN))) < 1e-5
+    hull = shapely.MultiPoint(cut).buffer(c.tolerance_m)
+    assert hull.covers(shapely.Point(np.array([0.03, 0.01]) + ORIGIN))  # a corner of the part
+
+
+def test_small_program_feed_and_limits(small):
+    c, mt = small.contour, small.metrics
+    assert mt.within_limits and mt.contained and mt.infeasible_steps == 0
+    assert mt.max_force_ratio <= 1.0 + 1e-9
+    lines = np.array([x if x is not None else 0 for x in c.program_line])
+    cut = np.asarray(c.cutting)
+    speed = np.hypot(*small.velocity[:, :2].T)
+    feed = {7: 0.02, 8: 0.02, 9: 0.015, 10: 0.015, 11: 0.015, 12: 0.015}  # m/s per line
+    f = np.array([feed.get(int(x), np.inf) for x in lines])
+    assert np.all(speed[cut] <= f[cut] + 1e-9)
+    assert set(lines[cut]) == set(feed)
+    assert not np.any(lines[~cut])
+    # plunge (Z 2 -> -1 at F300: 0.6 s) and retract: at rest
+    rest = ~cut & (speed < 1e-9)
+    assert rest.sum() * small.settings.Ts >= 0.6
+    assert len(c.passes) == 1 and c.passes[0].first_line == 7 and c.passes[0].last_line == 12
+    assert c.cycle_time_s == pytest.approx(small.time[-1])
+    assert c.passes[0].length_m == pytest.approx(0.02 + 0.01 * math.pi / 2 + 0.01 + 0.01 * math.pi / 2 + 0.02 + 0.03)
+
+
+@pytest.mark.slow
+def test_fastest_is_faster_and_within_tolerance(small):
+    fast = plan_contour({"program": SMALL, "origin": ORIGIN, "feed": "fastest"})
+    assert fast.contour.passes[0].time_s < small.contour.passes[0].time_s
+    path = rs274_cut_path(SMALL, ORIGIN)
+    assert chord_deviation(fast, path, fast.contour.tolerance_m / 50) <= fast.contour.tolerance_m
+    assert fast.metrics.within_limits and fast.metrics.contained
+
+
+@pytest.mark.parametrize("body, code, words", [
+    ({"origin": [0.2, 0.0]}, "unreachable", ["line 7", "reach"]),
+    ({"tolerance_m": 0.02}, "invalid_input", ["at most"]),
+    ({"program": SMALL.replace("G1 X0", "G41 X0")}, "invalid_input", ["line 11", "G41"]),
+    ({"program": "G1 X1\n" * 400_000}, "too_large", ["bytes"]),
+    ({"settings": {"speed_m_s": 0.1}}, "invalid_input", ["feed"]),
+    ({"feed": "max"}, "invalid_input", []),
+])
+def test_bad_requests_name_the_cause(body, code, words):
+    req = {"program": SMALL, "origin": ORIGIN, **body}
+    with pytest.raises(PlannerError) as err:
+        plan_contour(req)
+    assert err.value.code == code, err.value
+    for w in words:
+        assert w in err.value.message, err.value.message
+
+
+def test_tolerance_below_what_the_planner_can_hold():
+    with pytest.raises(PlannerError) as err:
+        plan_contour({"program": SMALL, "origin": ORIGIN, "tolerance_m": 5e-6})
+    assert err.value.field == "tolerance_m" and "below what the planner can hold" in err.value.message
+
+
+def test_program_tolerance_is_used_and_a_too_small_one_refused():
+    with pytest.raises(PlannerError) as err:
+        plan_contour({"program": SMALL.replace("P0.05", "P0.001"), "origin": ORIGIN})
+    assert err.value.field == "tolerance_m" and "G64 P" in err.value.message
+
+
+def test_bad_settings_name_the_field():
+    with pytest.raises(PlannerError) as err:
+        plan_contour({"program": SMALL, "origin": ORIGIN, "settings": {"Ts": -1}})
+    assert err.value.field == "settings.Ts"
+    with pytest.raises(PlannerError) as err:
+        plan_contour({"program": SMALL, "origin": ORIGIN, "settings": {"bogus": 1}})
+    assert err.value.field is not None and err.value.field.startswith("settings")
