@@ -49,14 +49,26 @@ SPIRAL = [(0, 0), (1, 0), (2, 0), (3, 0), (3, 1), (3, 2), (2, 2), (1, 2), (0, 2)
 
 
 def approach(segments: list[dict]) -> np.ndarray:
-    """The approach direction computed here: from the centre of the last cell whose centre
-    is not the end point to the end point."""
+    """The approach direction computed here, as README "Metrics" defines it: from the centre of
+    the last cell whose centre is not the end point to the end point, unless the middle of the
+    segment the robot comes from (the one before the last cell) lies past the end point along
+    it (an end point on the entry side of its cell); then from the next centre back behind
+    which that middle lies."""
+    centre = lambda s: 0.5 * (np.array(s["lower"][:2]) + np.array(s["upper"][:2]))  # noqa: E731
     end = np.array(segments[-1]["lower"][:2])
+    entry = centre(segments[-3]) - end if len(segments) >= 3 else None
+    best, best_excess = None, np.inf
     for s in reversed(segments[:-1]):
-        c = 0.5 * (np.array(s["lower"][:2]) + np.array(s["upper"][:2]))
-        if np.hypot(*(end - c)) > 1e-9:
-            return (end - c) / np.hypot(*(end - c))
-    raise AssertionError("no direction")
+        d = end - centre(s)
+        if np.hypot(*d) <= 1e-9:
+            continue
+        d = d / np.hypot(*d)
+        if entry is None or entry @ d <= 0.0:
+            return d
+        if entry @ d < best_excess:
+            best, best_excess = d, entry @ d
+    assert best is not None, "no direction"
+    return best
 
 
 def overshoot_here(res, req: dict) -> float:
@@ -236,7 +248,11 @@ def test_geometric_infeasibility_does_not_ask_for_more_time():
         e = exc.value
         assert e.code == "infeasible" and e.field == field
         assert "more time" not in e.message and "do not touch" in e.message
-    # an infeasible timing of a connected corridor still advises more time
+    # an infeasible timing of a connected corridor still advises more time: the multiple of the
+    # time that the planner checked, which then plans
+    short = with_settings(TABLE1, mode="constrained", samples_per_segment=3)
     with pytest.raises(PlannerError) as exc:
-        plan(with_settings(TABLE1, mode="constrained", samples_per_segment=3))
-    assert "more time" in exc.value.message and exc.value.field == "settings"
+        plan(short)
+    assert exc.value.field == "settings" and "x the time plans (settings.samples_per_segment = " in exc.value.message
+    n = int(exc.value.message.split("settings.samples_per_segment = ")[1].split(",")[0])
+    assert n > 3 and plan(with_settings(TABLE1, mode="constrained", samples_per_segment=n)).metrics.contained
