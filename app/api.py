@@ -41,6 +41,7 @@ from app.docs import install_docs
 from app.handlers import install_error_handlers
 from app.jobs import clean_spool, spool_dir
 from app.middleware import BodySizeLimit
+from app.observability import install_observability
 from app.routers import corridors, planning, robots
 from app.routers import service as service_routes
 from app.routers.pages import STATIC_DIR, install_pages
@@ -133,6 +134,7 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
     app.include_router(batch_router())  # /v1/batches (app/batch/): batches on their own workers
     access = access if access is not None else AccessPolicy.from_env()
     install_access_control(app, access)  # outside the body limit: refused before the body is read
+    install_observability(app, access_log=cfg.access_log)  # request ids, JSON access lines, GET /metrics
     app.state.access = access
     install_error_handlers(app)
     for routes in (service_routes, robots, planning, corridors):

@@ -11,6 +11,7 @@ from fastapi.exceptions import RequestValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from app.errors import CODES_BY_STATUS, error_response, validation_response
+from app.json_limits import body_error_text
 from app.storage import NameTaken, QuotaError, StoreFull, TooLarge
 from planner.errors import PlannerError
 
@@ -25,8 +26,9 @@ async def _on_validation(request: Request, exc: Exception):
 async def _on_http(request: Request, exc: Exception):
     assert isinstance(exc, StarletteHTTPException)
     if exc.status_code == 400 and exc.detail == "There was an error parsing the body":
-        # FastAPI's answer to a body that is not UTF-8: invalid JSON like any other
-        return error_response(422, "invalid_input", "body is not valid JSON (it must be UTF-8 text)")
+        # FastAPI's answer to a body that is not UTF-8, nested too deep or with a too long
+        # number: invalid JSON like any other, naming the limit it hit (app.json_limits)
+        return error_response(422, "invalid_input", body_error_text(exc.__cause__))
     code = CODES_BY_STATUS.get(exc.status_code, "http_error")
     msg = exc.detail if isinstance(exc.detail, str) else json.dumps(exc.detail)
     headers = getattr(exc, "headers", None)

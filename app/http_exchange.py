@@ -98,6 +98,8 @@ async def read_drawing(request: Request) -> tuple[bytes, str | None, str | None]
     if ct == _MULTIPART:
         try:
             form = await request.form()
+        except StarletteHTTPException:  # the body limit (413, app.middleware) while the form was read
+            raise
         except Exception as exc:  # a malformed multipart body
             raise PlannerError("invalid_input", f"malformed multipart body: {exc}", "file") from None
         upload = next((v for v in form.values() if not isinstance(v, str)), None)

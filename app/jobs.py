@@ -26,6 +26,7 @@ No web framework or editor import: workers import this module.
 from __future__ import annotations
 
 import ctypes
+import dataclasses
 import json
 import math
 import os
@@ -76,6 +77,9 @@ class PlanJob:
     source: str | None = None
     store: str | None = None
     corridor_id: str | None = None
+    #: a layout's corridor, once segmented, is estimated again and refused over this [s]
+    #: (:func:`planner.plan`'s ``work_limit_s``; set from the time limit by :func:`bounded`)
+    work_limit_s: float | None = None
     kind: ClassVar[str] = "plan"
 
 
@@ -229,7 +233,7 @@ def _plan(job: PlanJob) -> Done:
     from planner import plan
 
     req = job.request
-    result = plan(req)
+    result = plan(req, work_limit_s=job.work_limit_s)
     plan_id = new_id() if job.store else None
     result.plan_id = plan_id
     data = result.to_json()
@@ -413,6 +417,14 @@ def check_estimate(job: Job, timeout_s: float | None) -> Failed | None:
     return None
 
 
+def bounded(job: Job, timeout_s: float | None) -> Job:
+    """``job`` with the time limit as its work limit (a plan job whose layout, once segmented,
+    is estimated again before it is simulated: issue 20)."""
+    if isinstance(job, PlanJob) and job.work_limit_s is None and timeout_s and timeout_s > 0:
+        return dataclasses.replace(job, work_limit_s=float(timeout_s))
+    return job
+
+
 def run_bounded(job: Job, timeout_s: float | None = None, memory_mb: int | None = None) -> Outcome:
     """Run ``job`` in this thread under the same bounds as the service's workers: refused
     before it starts if its work estimate exceeds ``timeout_s`` (``too_much_work``), stopped
@@ -420,6 +432,7 @@ def run_bounded(job: Job, timeout_s: float | None = None, memory_mb: int | None 
     refused = check_estimate(job, timeout_s)
     if refused is not None:
         return refused
+    job = bounded(job, timeout_s)
     try:
         with _Deadline(timeout_s):
             return run_job(job, memory_mb)

@@ -35,10 +35,10 @@ from dataclasses import dataclass, field
 from http.cookies import SimpleCookie
 from pathlib import Path
 from typing import Any
-from urllib.parse import parse_qsl, urlencode, urlsplit
+from urllib.parse import parse_qsl, quote, urlencode, urlsplit
 
 __all__ = ["AccessPolicy", "AccessControl", "ConfigError", "Verdict", "decide", "install_access_control",
-           "is_loopback", "LOOPBACK_HOSTS", "OPEN_PATHS", "TOKEN_COOKIE", "MIN_TOKEN_LENGTH"]
+           "is_loopback", "protected_path", "LOOPBACK_HOSTS", "OPEN_PATHS", "TOKEN_COOKIE", "MIN_TOKEN_LENGTH"]
 
 LOOPBACK_HOSTS = frozenset({"localhost", "127.0.0.1", "::1"})
 #: answered for any Host and without a token (they show no data)
@@ -187,6 +187,13 @@ def _same_origin(origin: str, host: str | None) -> bool:
     return parts.scheme in ("http", "https") and bool(host) and parts.netloc.lower() == (host or "").lower()
 
 
+def local_location(path: str) -> str:
+    """A ``Location`` for a request path that stays on this server: one leading slash (a
+    path ``//evil.example/`` or ``/\\evil.example`` is a network-path reference to another
+    host in a browser), percent-encoded (no control characters in the header)."""
+    return "/" + quote(path.lstrip("/\\"), safe="/!$&'()*+,;=:@")
+
+
 def decide(policy: AccessPolicy, *, path: str, query: str, headers: Mapping[str, str],
            protected: Callable[[str], bool], websocket: bool = False) -> Verdict | None:
     """Apply the rules to one request (``headers`` with lower-case names); None lets it
@@ -209,7 +216,7 @@ def decide(policy: AccessPolicy, *, path: str, query: str, headers: Mapping[str,
                 return Verdict(401, "unauthorized", "the token in the address is not this server's token",
                                (("www-authenticate", 'Bearer realm="rangeplan"'),))
             rest = urlencode([(k, v) for k, v in pairs if k != "token"])
-            hdrs: list[tuple[str, str]] = [("location", path + (f"?{rest}" if rest else "")),
+            hdrs: list[tuple[str, str]] = [("location", local_location(path) + (f"?{rest}" if rest else "")),
                                            ("cache-control", "no-store"), ("referrer-policy", "no-referrer")]
             if policy.auth_required:
                 hdrs.append(("set-cookie", f"{TOKEN_COOKIE}={policy.cookie_value}; HttpOnly; SameSite=Strict; "
@@ -232,12 +239,17 @@ def decide(policy: AccessPolicy, *, path: str, query: str, headers: Mapping[str,
                    (("www-authenticate", 'Bearer realm="rangeplan"'),))
 
 
+def protected_path(path: str) -> bool:
+    """Whether an API path needs the token: ``/v1`` and below, and ``/metrics``."""
+    return path == "/v1" or path.startswith("/v1/") or path == "/metrics"
+
+
 class AccessControl:
     """ASGI middleware applying :func:`decide` to the API: the token on ``/v1`` paths."""
 
     def __init__(self, app, policy: AccessPolicy, protected: Callable[[str], bool] | None = None):
         self.app, self.policy = app, policy
-        self.protected = protected or (lambda p: p == "/v1" or p.startswith("/v1/"))
+        self.protected = protected or protected_path
 
     async def __call__(self, scope, receive, send):
         if scope["type"] not in ("http", "websocket"):

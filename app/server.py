@@ -123,7 +123,12 @@ def _run_api(app, host: str, port: int, log_level: str = "info", access_log: boo
 
     stop_signal = _StopSignal.install()
     try:
-        config = uvicorn.Config(app, host=host, port=port, log_level=log_level, access_log=access_log)
+        from app.observability import log_config
+
+        # JSON lines (app.observability); the access lines are the app's own, with request ids
+        # (``access_log``: RANGEPLAN_ACCESS_LOG), not uvicorn's
+        config = uvicorn.Config(app, host=host, port=port, log_level=log_level, access_log=False,
+                                log_config=log_config(log_level))
         server = uvicorn.Server(config)
         server.run()
         # uvicorn returns (does not raise) when it cannot bind

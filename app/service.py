@@ -23,7 +23,7 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 from app.failures import import_timeout, out_of_memory, timeout
-from app.jobs import ExportJob, Failed, ImportJob, Job, Outcome, check_estimate, failed, run_bounded
+from app.jobs import ExportJob, Failed, ImportJob, Job, Outcome, bounded, check_estimate, failed, run_bounded
 from app.workers import JobTimeout, PlanPool, PoolBusy, WorkerCrashed, WorkerOutOfMemory
 
 __all__ = ["JobService", "describe_failure"]
@@ -74,6 +74,7 @@ class JobService:
         if refused is not None:
             return refused
         limit = self.export_timeout_s if isinstance(job, ExportJob) else self.timeout_s
+        job = bounded(job, limit)
         if self.pool is None:
             return run_bounded(job, limit, self.memory_mb)
         try:

@@ -50,8 +50,9 @@ class Settings(BaseSettings):
     host: str = _f("127.0.0.1", "Address the API binds (a non-loopback address needs a token)", cli="serve --host")
     port: int = _f(8000, "TCP port of the API", cli="serve --port", ge=0, le=65535)
     editor_port: int = _f(8080, "TCP port of the browser editor", cli="serve --editor-port", ge=0, le=65535)
-    log_level: str = _f("info", "uvicorn's log level (critical, error, warning, info, debug, trace)")
-    access_log: bool = _f(True, "uvicorn's access log (0: off)")
+    log_level: str = _f("info", "Log level of the server's JSON log lines (critical, error, warning, info, debug, "
+                        "trace)")
+    access_log: bool = _f(True, "One JSON log line per request, with its request id (0: off)")
     static_dir: Path | None = _f(None, "Landing page directory (index.html, examples/)",
                                  default_text="the repository's static/")
     # -- planning

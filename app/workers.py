@@ -75,7 +75,11 @@ DEFAULT_MEMORY_MB = 2048
 WORKER_NICE = 5
 
 
-def _worker_main(conn, memory_mb: int | None = None) -> None:
+def _worker_main(conn, memory_mb: int | None = None, parent: int | None = None, pdeathsig: bool = False) -> None:
+    if parent is not None:  # end with the server, even a kill -9 of it (app.lifeline)
+        from app.lifeline import exit_with_parent
+
+        exit_with_parent(parent, thread_bound=pdeathsig)
     try:
         os.nice(WORKER_NICE)
     except OSError:
@@ -122,15 +126,18 @@ STARTUP_TIMEOUT_S = 120.0
 
 
 class _Worker:
-    """A worker process started as ``python -m app.workers FD [MEMORY_MB]`` (a fresh
+    """A worker process started as ``python -m app.workers FD MEMORY_MB PARENT_PID PDEATHSIG`` (a fresh
     interpreter that never re-imports the server's ``__main__``), talking over a socket
     pair. A thread waits for its first message (ready, or failed with a reason)."""
 
     def __init__(self, memory_mb: int | None = None):
         parent, child = socket.socketpair()
         try:
+            # the parent's pid, and whether this thread lives as long as the server (the kernel's
+            # parent-death signal is tied to it; app.lifeline)
+            bound = int(threading.current_thread() is threading.main_thread())
             self.proc = subprocess.Popen([sys.executable, "-m", "app.workers", str(child.fileno()),
-                                          str(int(memory_mb or 0))],
+                                          str(int(memory_mb or 0)), str(os.getpid()), str(bound)],
                                          pass_fds=(child.fileno(),), stdin=subprocess.DEVNULL,
                                          close_fds=True)
         finally:
@@ -329,4 +336,5 @@ class PlanPool:
 
 
 if __name__ == "__main__":
-    _worker_main(Connection(int(sys.argv[1])), int(sys.argv[2]) if len(sys.argv) > 2 else None)
+    _worker_main(Connection(int(sys.argv[1])), int(sys.argv[2]) if len(sys.argv) > 2 else None,
+                 int(sys.argv[3]) if len(sys.argv) > 3 else None, len(sys.argv) > 4 and sys.argv[4] == "1")

@@ -30,6 +30,7 @@ from pydantic import BaseModel, Field
 from starlette.exceptions import HTTPException
 
 from app.errors import error_response, errors_doc
+from app.json_limits import json_error_text
 
 from .service import BatchService, QueueFull
 
@@ -91,17 +92,40 @@ async def _lifespan(app: FastAPI):
             await asyncio.get_running_loop().run_in_executor(None, svc.close)
 
 
+def _not_an_object(line: bytes) -> str | None:
+    """Why a JSON Lines line is not a JSON object (None if it is one)."""
+    try:
+        doc = orjson.loads(line)
+    except orjson.JSONDecodeError as exc:
+        return f"is not valid JSON ({json_error_text(exc)})"
+    if not isinstance(doc, dict):
+        return f"is a JSON {_JSON_TYPES.get(type(doc), type(doc).__name__)}, not an object"
+    return None
+
+
+_JSON_TYPES = {list: "array", str: "string", int: "number", float: "number", bool: "boolean", type(None): "null"}
+
+
 def _parse_body(body: bytes, content_type: str) -> tuple[list[str], str | None] | JSONResponse:
     """The requests as JSON texts (each validated later, by the worker that plans it)."""
     if content_type in JSONL_TYPES:
-        reqs = [ln.decode("utf-8", "replace") for ln in body.splitlines() if ln.strip()]
+        reqs = []
+        for number, ln in enumerate(body.splitlines(), 1):
+            if not ln.strip():
+                continue
+            problem = _not_an_object(ln)
+            if problem:  # each line is one plan request, a JSON object: anything else is the body's error
+                return error_response(422, "invalid_input", f"line {number} of the JSON Lines body {problem}: each "
+                                      "line must be one plan request, a JSON object (the body of POST /v1/plan)",
+                                      f"requests[{len(reqs)}]")
+            reqs.append(ln.decode("utf-8"))
         if not reqs:
             return error_response(422, "invalid_input", "the JSON Lines body holds no request", "requests")
         return reqs, None
     try:
         doc = orjson.loads(body)
     except orjson.JSONDecodeError as exc:
-        return error_response(422, "invalid_input", f"body is not valid JSON: {exc}")
+        return error_response(422, "invalid_input", f"body is not valid JSON: {json_error_text(exc)}")
     if not isinstance(doc, dict):
         return error_response(422, "invalid_input", "a batch is a JSON object {\"requests\": [...], \"name\": ...}")
     unknown = sorted(set(doc) - {"requests", "name"})

@@ -82,14 +82,20 @@ def where() -> dict[str, Any]:
     return {"engine": _ENGINE["name"], "worker": f"{host}:{pid}", "host": host, "pid": pid}
 
 
-def warm_worker(engine: str = "local", nice: int = 0, memory_mb: int | None = None) -> float:
+def warm_worker(engine: str = "local", nice: int = 0, memory_mb: int | None = None,
+                parent: int | None = None) -> float:
     """Load the compiled kernels (``planner.warm_up``) and mark this process as ``engine``;
     ``nice`` > 0 lowers its CPU priority (the service's batch workers yield to interactive
     plans); ``memory_mb`` caps its address space after the warm-up, as the API's planning
     workers (an item that needs more fails with ``too_much_memory``). Runs once per worker
-    process, never per item. Returns the seconds taken."""
+    process, never per item. ``parent``: the pid of the process that started this one (a
+    local pool's worker ends when it does: :mod:`app.lifeline`). Returns the seconds taken."""
     import signal
 
+    if parent is not None:
+        from app.lifeline import exit_with_parent
+
+        exit_with_parent(parent)
     _ENGINE["name"] = engine
     if threading.current_thread() is threading.main_thread() and engine == "local":
         # Ctrl-C reaches the whole process group: the parent decides what stops

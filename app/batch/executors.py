@@ -101,7 +101,7 @@ class LocalEngine(Engine):
 
     def _start(self) -> ProcessPoolExecutor:
         return ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=warm_worker, initargs=("local", self.nice, self.memory_mb))
+                                   initializer=warm_worker, initargs=("local", self.nice, self.memory_mb, os.getpid()))
 
     @property
     def executor(self) -> Executor:

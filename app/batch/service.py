@@ -69,6 +69,7 @@ class BatchService:
         self._buffer: list[tuple[int, int, dict[str, Any]]] = []
         self._flushed = time.monotonic()
         self._create_lock = threading.Lock()
+        self._lost_before = 0  # lost workers of the runners before the current one
 
     # -- life -----------------------------------------------------------------------------------
     def start(self) -> None:
@@ -91,6 +92,11 @@ class BatchService:
             self.engine.close(cancel=True)
             self.engine = None
         self.store.close()
+
+    def worker_restarts(self) -> int:
+        """Batch worker processes lost and replaced since the service started (count)."""
+        runner = self._runner
+        return self._lost_before + (runner.stats.lost_workers if runner is not None else 0)
 
     def stats(self) -> dict[str, Any]:
         return {"engine": self.engine.describe() if self.engine is not None else None,
@@ -229,6 +235,8 @@ class BatchService:
                 self._wake.clear()
                 return not self._stop.is_set()
 
+            if self._runner is not None:
+                self._lost_before += self._runner.stats.lost_workers
             self._runner = Runner(self.engine, on_done, fmt="json", timeout_s=self.timeout_s)
             try:
                 self._runner.run(take, remaining=self.store.pending_total, idle=idle, stop=self._stop,

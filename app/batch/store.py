@@ -145,6 +145,14 @@ class BatchStore:
                                    "WHERE b.state IN ('queued', 'running') AND i.status IN ('pending', 'running')"
                                    ).fetchone()[0]
 
+    def status_counts(self) -> dict[str, dict[str, int]]:
+        """``{"items": {status: count}, "batches": {state: count}}`` over every stored batch
+        (the service's metrics)."""
+        con = self._con()
+        items = dict(con.execute("SELECT status, count(*) FROM batch_items GROUP BY status").fetchall())
+        batches = dict(con.execute("SELECT state, count(*) FROM batches GROUP BY state").fetchall())
+        return {"items": items, "batches": batches}
+
     def cancel(self, id_: str) -> bool:
         """Mark a batch cancelled and its pending items cancelled (running ones are cancelled
         by the service). False if there is no such batch."""

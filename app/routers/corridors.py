@@ -1,15 +1,15 @@
 """Saved corridors: ``POST/GET /v1/corridors``, ``GET/PUT/DELETE /v1/corridors/{id}`` and
-``POST /v1/corridors/{id}/plan``."""
+``POST /v1/corridors/{id}/plan``. The store is read and written on executors of its own
+(:mod:`app.storage_io`), never on the shared thread pool."""
 
 from __future__ import annotations
-
-import asyncio
 
 from fastapi import APIRouter, Query, Request
 from fastapi.responses import Response
 from pydantic import BaseModel, Field, ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from app import storage_io
 from app.errors import error_response, errors_doc
 from app.formats import PlanFormat
 from app.routers.deps import Forces, Format, store
@@ -46,8 +46,8 @@ def _saved(body: PlanRequest) -> dict:
     return body.to_json_dict()
 
 
-def _get_or_404(st: Store, corridor_id: str) -> dict:
-    rec = st.get_corridor(corridor_id)
+async def _get_or_404(st: Store, corridor_id: str) -> dict:
+    rec = await storage_io.read(st.get_corridor, corridor_id)
     if rec is None:
         raise StarletteHTTPException(404, f"no corridor with id {corridor_id!r}")
     return rec
@@ -59,10 +59,10 @@ def _get_or_404(st: Store, corridor_id: str) -> dict:
                               "headers": {"Location": {"description": "The corridor's address",
                                                        "schema": {"type": "string"}}}},
                         **errors_doc(409, 413, 422, 507)})
-def create_corridor(body: PlanRequest, request: Request, response: Response):
+async def create_corridor(body: PlanRequest, request: Request, response: Response):
     """Save a plan request as a corridor; its name is the request's ``name``, unique among
     corridors (409 if another has it: replace that one with PUT)."""
-    rec = store(request).create_corridor(_saved(body), body.name)
+    rec = await storage_io.write(store(request).create_corridor, _saved(body), body.name)
     response.headers["Location"] = f"/v1/corridors/{rec['id']}"
     return rec
 
@@ -71,13 +71,13 @@ def create_corridor(body: PlanRequest, request: Request, response: Response):
             responses={200: {"description": "A page of corridors", "links": {"NextPage": {
                 "operationId": "list_corridors", "parameters": {"cursor": "$response.body#/next_cursor"}}}},
                        **errors_doc(422)})
-def list_corridors(request: Request,
+async def list_corridors(request: Request,
                    limit: int = Query(DEFAULT_PAGE_SIZE, ge=1, le=MAX_PAGE_SIZE, description="Corridors per page"),
                    cursor: str | None = Query(None, pattern=CURSOR_PATTERN,
                                               description="next_cursor of the previous page")):
     """Saved corridors a page at a time, oldest first, as summaries."""
     try:
-        items, nxt = store(request).corridor_page(limit, cursor)
+        items, nxt = await storage_io.read(store(request).corridor_page, limit, cursor)
     except BadCursor as exc:
         return error_response(422, "invalid_input", str(exc), "cursor")
     return {"items": items, "next_cursor": nxt}
@@ -85,15 +85,15 @@ def list_corridors(request: Request,
 
 @router.get("/v1/corridors/{corridor_id}", response_model=CorridorRecord, response_model_exclude_unset=True,
             operation_id="get_corridor", responses=errors_doc(404))
-def get_corridor(corridor_id: str, request: Request):
-    return _get_or_404(store(request), corridor_id)
+async def get_corridor(corridor_id: str, request: Request):
+    return await _get_or_404(store(request), corridor_id)
 
 
 @router.put("/v1/corridors/{corridor_id}", response_model=CorridorRecord, response_model_exclude_unset=True,
             operation_id="update_corridor", responses=errors_doc(404, 409, 413, 422, 507))
-def update_corridor(corridor_id: str, body: PlanRequest, request: Request):
+async def update_corridor(corridor_id: str, body: PlanRequest, request: Request):
     """Replace a saved corridor's request (and name: 409 if another corridor has it)."""
-    rec = store(request).update_corridor(corridor_id, _saved(body), body.name)
+    rec = await storage_io.write(store(request).update_corridor, corridor_id, _saved(body), body.name)
     if rec is None:
         raise StarletteHTTPException(404, f"no corridor with id {corridor_id!r}")
     return rec
@@ -101,8 +101,8 @@ def update_corridor(corridor_id: str, body: PlanRequest, request: Request):
 
 @router.delete("/v1/corridors/{corridor_id}", status_code=204, response_class=Response,
                operation_id="delete_corridor", responses=errors_doc(404))
-def delete_corridor(corridor_id: str, request: Request):
-    if not store(request).delete_corridor(corridor_id):
+async def delete_corridor(corridor_id: str, request: Request):
+    if not await storage_io.write(store(request).delete_corridor, corridor_id):
         raise StarletteHTTPException(404, f"no corridor with id {corridor_id!r}")
     return Response(status_code=204)
 
@@ -112,7 +112,7 @@ def delete_corridor(corridor_id: str, request: Request):
 async def plan_corridor(corridor_id: str, request: Request, format: PlanFormat | None = Format,
                         forces: bool = Forces):
     """Plan a saved corridor; the result is stored with a link to the corridor."""
-    rec = await asyncio.get_running_loop().run_in_executor(None, store(request).get_corridor, corridor_id)
+    rec = await storage_io.read(store(request).get_corridor, corridor_id)
     if rec is None:
         raise StarletteHTTPException(404, f"no corridor with id {corridor_id!r}")
     try:

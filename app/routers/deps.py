@@ -4,6 +4,7 @@ and the one translation of a job's outcome into an HTTP response."""
 from __future__ import annotations
 
 import os
+import time
 
 from fastapi import Query, Request
 from fastapi.responses import FileResponse, Response
@@ -12,6 +13,7 @@ from starlette.background import BackgroundTask
 from app.errors import error_response
 from app.formats import OUTPUT_FORMATS, format_help
 from app.jobs import Failed, Job, Outcome
+from app.observability import observe_job
 from app.service import JobService
 from app.storage import Store
 
@@ -79,5 +81,8 @@ def _unlink(path: str) -> None:
 
 
 async def submit(request: Request, job: Job, fmt: str = "json", name: str | None = None) -> Response:
-    """Run ``job`` on the app's job service and answer its outcome."""
-    return outcome_response(await service(request).arun(job), fmt, name)
+    """Run ``job`` on the app's job service and answer its outcome (counted in the metrics)."""
+    t0 = time.perf_counter()
+    outcome = await service(request).arun(job)
+    observe_job(request.app, job, time.perf_counter() - t0, outcome)
+    return outcome_response(outcome, fmt, name)

@@ -324,16 +324,15 @@ class ConstrainedController:
     def infeasible_error(self, what: str, also: str = "") -> PlannerError:
         """``PlannerError("infeasible")`` saying ``what`` and the remedy: where consecutive
         segments do not touch (:func:`~planner.corridor.geometry.corridor_gaps`) that is the
-        cause, which more time does not cure, and the error names the segment; otherwise more
-        time or a wider corridor. ``also``: a further remedy."""
+        cause, which more time does not cure, and the error names the segment; otherwise the
+        orchestrator adds the advice it checked (more time). ``also``: a further remedy."""
         gaps = self.gaps
         if gaps:
             g = gaps[0]
             return PlannerError("infeasible", f"{what}: {g.describe()}; the robot would have to jump between them "
                                 "within one sample, which no timing allows: connect or widen the segments"
                                 + (f", or {also}" if also else ""), f"segments[{g.index + 1}]")
-        return PlannerError("infeasible", f"{what}; give it more time (samples_per_segment, speed_m_s, "
-                            "total_time_s) or widen the corridor" + (f", or {also}" if also else ""), "settings")
+        return PlannerError("infeasible", what + (f"; {also}" if also else ""), "settings")
 
     def _previous_plan(self, zmax: np.ndarray) -> np.ndarray:
         """The previous step's moves shifted by one sample (zero before the first), the first
@@ -364,8 +363,8 @@ class ConstrainedController:
         self.stats.infeasible += 1
         if self.st.require_settled:  # strict: stop at the first step that cannot keep the corridor
             raise self.infeasible_error(
-                f"at t = {k * self.st.Ts:.3f} s the robot cannot keep the corridor within its drive limits (the "
-                f"corridor needs {slack * 1e3:.4f} mm of slack, the leg speeds {sl[2] * 1e3:.4f} mm/s)",
+                f"at t = {k * self.st.Ts:.3f} s (segment {int(self.seq.segment[min(k, self.seq.K - 1)])}) the robot "
+                f"cannot keep the corridor within its drive limits ({_slack_words(sol.ok, slack, float(sl[2]))})",
                 "set require_settled to false to get the plan with its violations reported")
         return zs[:nz], sol.iterations
 
@@ -389,3 +388,17 @@ class ConstrainedController:
             "model_mismatch_max_m": s.mismatch_m,
             "model_mismatch_max_rad": s.mismatch_rad,
         }
+
+
+def _slack_words(solved: bool, slack_m: float, speed_m_s: float) -> str:
+    """What the slack problem of an infeasible step found, in figures that are not zero (a
+    figure below 1 nm or 1 nm/s is left out: the rows it softened were not the cause)."""
+    if not solved:
+        return "its QP has no solution with the drive forces and force rates held, even with the corridor softened"
+    parts = []
+    if slack_m >= 1e-9:
+        parts.append(f"the corridor would be left by {slack_m * 1e3:.3g} mm" if slack_m >= 1e-3
+                     else f"the corridor would be left by {slack_m * 1e6:.3g} um")
+    if speed_m_s >= 1e-9:
+        parts.append(f"a leg or the arrival would be {speed_m_s * 1e3:.3g} mm/s too fast")
+    return "; ".join(parts) if parts else "its QP is infeasible by less than 1 nm, a numerical failure"

@@ -100,14 +100,37 @@ def approach_direction(segments: Sequence) -> np.ndarray | None:
     centre): from the centre of the last segment before it whose centre is not the end point
     (farther than :data:`APPROACH_MIN_M`), usually the last cell's; where the end point is that
     cell's centre, the cell before it. None if every centre is the end point. The
-    constrained mode's no-overshoot rows and the ``overshoot_m`` metric both use it."""
+    constrained mode's no-overshoot rows and the ``overshoot_m`` metric both use it.
+
+    The robot enters the last cell from the segment before it, whose middle must lie behind the
+    end point along the direction (the rows hold from its last sample on). An end point near
+    its cell's centre but on the side the robot enters from (a jittered end) turns the
+    direction from that centre against the way the robot comes, and the rows would cut the
+    segment before away (issue 20: ``infeasible``); then the direction is taken from the next
+    centres back, the first behind which that middle lies (else the one it lies least beyond).
+    """
     end = np.asarray(segments[-1].centre[:2], float)
+    entry = None
+    if len(segments) >= 3:
+        poly = getattr(segments[-3], "polygon", None)
+        # the middle of the segment before the last cell (of its exact cell if it has one)
+        entry = (np.asarray(poly, float).mean(axis=0) if poly is not None
+                 else np.asarray(segments[-3].centre[:2], float)) - end
+    best, best_excess = None, np.inf
     for seg in reversed(segments[:-1]):
         d = end - np.asarray(seg.centre[:2], float)
         n = float(np.hypot(d[0], d[1]))
-        if n > APPROACH_MIN_M:
-            return d / n
-    return None
+        if n <= APPROACH_MIN_M:
+            continue
+        d = d / n
+        if entry is None:
+            return d
+        excess = float(entry @ d)  # how far the middle of the segment before lies past the end point
+        if excess <= 0.0:
+            return d
+        if excess < best_excess:
+            best, best_excess = d, excess
+    return best
 
 
 def psi_violation(poses: np.ndarray, segments: Sequence) -> np.ndarray:

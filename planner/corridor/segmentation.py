@@ -41,7 +41,7 @@ planner's segment check does), so a triangle near the edge of the reachable work
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -50,12 +50,15 @@ import shapely
 from ..errors import PlannerError
 from ..model import load_robot
 from ..schema import (
+    MAX_CELLS,
     MAX_SEGMENTS,
     MAX_TOTAL_STEPS,
+    MIN_CELL_SIZE,
     Layout,
     Segment,
     SegmentationResult,
     Settings,
+    cell_count,
 )
 from .cells import FREE, STATE_NAMES, UNREACHABLE, Grid, block_obstacles, build_grid, count_states, default_cell_size
 from .geometry import halfplanes
@@ -157,17 +160,179 @@ def _endpoint_cells(grid: Grid, state: np.ndarray, blocker: np.ndarray, ws: Work
     if state[c] == UNREACHABLE:
         raise PlannerError("unreachable", f"the {key} {format_point(p)} is reachable, but its cell {c} is not wholly "
                            f"reachable (a leg leaves its stroke or the robot is singular somewhere in the cell at "
-                           f"some angle in psi_range [{ws.psi_range[0]:g}, {ws.psi_range[1]:g}] rad); use smaller "
-                           "cells, a narrower psi_range or move the point", f"{path}.{key}")
-    why = (f"overlaps obstacle {blocker[c]} grown by the clearance ({ws.clearance:g} m)" if blocker[c] >= 0
-           else "extends past the bounds")
-    raise PlannerError("no_path", f"the cell {c} holding the {key} {format_point(p)} is not wholly free: it {why}; "
-                       "use smaller cells, a smaller clearance or move the point", f"{path}.{key}")
+                           f"some angle in psi_range [{ws.psi_range[0]:g}, {ws.psi_range[1]:g}] rad)", f"{path}.{key}")
+    grown = f" grown by the clearance ({ws.clearance:g} m)" if ws.clearance > 0 else ""
+    why = f"overlaps obstacle {blocker[c]}{grown}" if blocker[c] >= 0 else "extends past the bounds"
+    raise PlannerError("no_path", f"the cell {c} holding the {key} {format_point(p)} is not wholly free: it {why}",
+                       f"{path}.{key}")
 
 
 def _cell_segment(lower: np.ndarray, upper: np.ndarray, polygon: np.ndarray | None = None) -> Segment:
     """A corridor segment built from the grid (valid by construction: not re-validated)."""
     return Segment.model_construct(lower=lower, upper=upper, q_ra=None, q_rb=None, polygon=polygon)
+
+
+def _cells_and_path(ws: Workspace, model: Any, s: float, grown: tuple, field_path: str,
+                    size_path: str) -> tuple[Grid, np.ndarray, tuple[list[int], int]]:
+    """Cells of edge ``s``, their states (obstacles, bounds, reach) and the path; a
+    PlannerError (``no_path``, ``unreachable``) without advice when there is none."""
+    grid = build_grid(ws, s, size_path)
+    state, blocker = block_obstacles(grid, ws, s, grown)
+    # robot reach and singularity over each free cell's box, at every allowed angle
+    cand = np.nonzero(state == FREE)[0]
+    if cand.size:
+        ok = boxes_reachable(model, grid.lo[cand], grid.hi[cand], psi_samples(ws.psi_range), grid.lattice,
+                             grid.win_rows[cand], grid.win_cols[cand])
+        state[cand[~ok]] = UNREACHABLE
+    sources = _endpoint_cells(grid, state, blocker, ws, "start", field_path)
+    targets = _endpoint_cells(grid, state, blocker, ws, "end", field_path)
+    found = fewest_turns_path(grid, state == FREE, sources, targets)
+    if found is None:
+        cnt = count_states(state)
+        raise PlannerError("no_path", f"no chain of free {ws.shape} cells (sharing edges) joins the start "
+                           f"{format_point(ws.start)} to the end {format_point(ws.end)}: {cnt['free']} of "
+                           f"{len(state)} cells are free, {cnt['blocked']} blocked by obstacles"
+                           f"{f' (grown by the clearance {ws.clearance:g} m)' if ws.clearance > 0 else ''} or the "
+                           f"bounds, {cnt['unreachable']} unreachable by the robot", field_path)
+    return grid, state, found
+
+
+#: the remedy search of a failed segmentation tries at most this many cells in all (x MAX_CELLS)
+REMEDY_CELL_BUDGET = 3
+#: and cells down to this fraction of the requested size
+REMEDY_SMALLEST = 1 / 8
+
+
+def _has_path(ws: Workspace, model: Any, s: float, field_path: str) -> bool:
+    try:
+        _cells_and_path(ws, model, s, ws.grown_parts(), field_path, f"{field_path}.cell.size")
+    except PlannerError:
+        return False
+    return True
+
+
+def _remedies(ws: Workspace, model: Any, s: float, field_path: str) -> list[str]:
+    """The changes of the layout that were tried and give a path (checked by segmenting
+    again, within a budget of cells): smaller cells, a narrower psi_range, a smaller
+    clearance. Empty: none of the tried changes helps."""
+    W, H = ws.upper - ws.lower
+    budget = REMEDY_CELL_BUDGET * MAX_CELLS
+
+    def cells(size: float) -> int:
+        return cell_count(ws.lower, ws.upper, ws.shape, size)[0]
+
+    sizes = []
+    size = s
+    while size > s * REMEDY_SMALLEST * 1.0001:
+        size *= 0.5
+        if size < MIN_CELL_SIZE or cells(size) > MAX_CELLS:
+            break
+        sizes.append(size)
+    out: list[str] = []
+    spent = 0
+    for size in sizes:
+        spent += cells(size)
+        if spent > budget:
+            break
+        if _has_path(ws, model, size, field_path):
+            out.append(f"cells of {size:g} m ({field_path}.cell.size; now {s:g} m) give a path")
+            break
+    default_psi = np.array([min(ws.start[2], ws.end[2]), max(ws.start[2], ws.end[2])])
+    if np.any(np.abs(ws.psi_range - default_psi) > 1e-12):
+        narrow = replace(ws, psi_range=default_psi)
+        for size in [s, *sizes[:2]]:
+            if _has_path(narrow, model, size, field_path):
+                out.append(f"psi_range [{default_psi[0]:g}, {default_psi[1]:g}] rad"
+                           + (f" with cells of {size:g} m" if size != s else "") + " gives a path")
+                break
+    if ws.clearance > 0:
+        for c in (0.5 * ws.clearance, 0.0):
+            less = replace(ws, clearance=c)
+            ok = next((size for size in [s, *sizes[:2]] if _has_path(less, model, size, field_path)), None)
+            if ok is not None:
+                out.append(f"a clearance of {c:g} m ({field_path}.clearance; now {ws.clearance:g} m)"
+                           + (f" with cells of {ok:g} m" if ok != s else "") + " gives a path")
+                break
+    del W, H
+    return out
+
+
+def _separation(ws: Workspace) -> str | None:
+    """Which grown obstacles (with the bounds) cut the start off from the end in the free
+    space itself (no cells), said with their extent; None when the free space joins them."""
+    box = shapely.box(ws.lower[0], ws.lower[1], ws.upper[0], ws.upper[1])
+    pieces, owner = ws.grown_parts()
+    if not len(pieces):
+        return None
+    a, b = shapely.Point(ws.start[0], ws.start[1]), shapely.Point(ws.end[0], ws.end[1])
+
+    def apart(blocked: Any) -> bool:
+        free = shapely.difference(box, blocked)
+        return not any(p.covers(a) and p.covers(b) for p in shapely.get_parts(free))
+
+    union = shapely.union_all(pieces)
+    if not apart(union):
+        return None
+    for comp in shapely.get_parts(union):
+        if apart(comp):
+            ids = sorted({int(i) for i in owner[shapely.intersects(pieces, comp)]})
+            names = ", ".join(f"{i} (layout.obstacles[{i}])" for i in ids)
+            x0, y0, x1, y1 = shapely.bounds(shapely.intersection(comp, box)).tolist()
+            tol = 1e-9 * max(float(np.max(ws.upper - ws.lower)), 1e-9)
+            if y0 <= ws.lower[1] + tol and y1 >= ws.upper[1] - tol:
+                where = f"spans the bounds from y = {y0:.4f} m to {y1:.4f} m (at x = {x0:.4f} .. {x1:.4f} m)"
+            elif x0 <= ws.lower[0] + tol and x1 >= ws.upper[0] - tol:
+                where = f"spans the bounds from x = {x0:.4f} m to {x1:.4f} m (at y = {y0:.4f} .. {y1:.4f} m)"
+            else:
+                where = (f"cuts the start off from the end (it covers x = {x0:.4f} .. {x1:.4f} m, "
+                         f"y = {y0:.4f} .. {y1:.4f} m)")
+            grown = f" grown by the clearance {ws.clearance:g} m" if ws.clearance > 0 else ""
+            return f"obstacle{'s' if len(ids) > 1 else ''} {names}{grown} {where}"
+    ids = sorted({int(i) for i in owner})
+    return (f"obstacles {', '.join(str(i) for i in ids)} grown by the clearance {ws.clearance:g} m together with "
+            "the bounds cut the start off from the end")
+
+
+def _endpoint_blocker(ws: Workspace, key: str) -> str | None:
+    """Why every cell holding the start or end (``key``) meets an obstacle: the point touches
+    an obstacle grown by the clearance (a cell holding it reaches into it at any size), said
+    with the obstacle; None if it does not."""
+    p = ws.start if key == "start" else ws.end
+    pieces, owner = ws.grown_parts()
+    if not len(pieces):
+        return None
+    d = shapely.distance(pieces, shapely.Point(p[0], p[1]))
+    i = int(np.argmin(d))
+    if d[i] > 1e-9 * max(float(np.max(ws.upper - ws.lower)), 1e-9):
+        return None
+    grown = f" grown by the clearance {ws.clearance:g} m" if ws.clearance > 0 else ""
+    return f"the {key} lies on the edge of obstacle {int(owner[i])} (layout.obstacles[{int(owner[i])}]){grown}"
+
+
+def _no_path_error(exc: PlannerError, ws: Workspace, model: Any, s: float, field_path: str) -> PlannerError:
+    """The failed segmentation's error with advice that works: the remedies checked by
+    segmenting again, or the obstacle that makes every cell size hopeless."""
+    fixes = _remedies(ws, model, s, field_path)
+    if fixes:
+        return PlannerError(exc.code, f"{exc.message}; " + "; or ".join(fixes), exc.field)
+    cut = _separation(ws)
+    if cut is not None:
+        bare = replace(ws, clearance=0.0)
+        hopeless = "no cell size can pass it" + (
+            ", nor any clearance" if ws.clearance == 0 or _separation(bare) is not None else
+            "; a smaller clearance opens a gap narrower than the smallest cells tried")
+        return PlannerError(exc.code, f"{exc.message}; the {cut}: {hopeless}; move the start or the end",
+                            exc.field)
+    if exc.field is not None and exc.field.endswith((".start", ".end")):
+        key = exc.field.rsplit(".", 1)[1]
+        why = _endpoint_blocker(ws, key)
+        if why is not None:
+            return PlannerError(exc.code, f"{exc.message}; {why}: no cell holding it is wholly free, at any size "
+                                "(tried down to " f"{s * REMEDY_SMALLEST:g} m); move the {key}", exc.field)
+    return PlannerError(exc.code, f"{exc.message}; cells down to {s * REMEDY_SMALLEST:g} m, a smaller clearance "
+                        "and the narrowest psi_range were tried and give no path: the free space that joins them "
+                        "is narrower than that, or the robot cannot reach it; move the start or the end",
+                        exc.field)
 
 
 def segment(layout: Layout | dict[str, Any], robot: Any, settings: Settings | None = None,
@@ -188,28 +353,14 @@ def segment(layout: Layout | dict[str, Any], robot: Any, settings: Settings | No
         check_endpoint(ws, model, key, field_path)
     size_path = f"{field_path}.cell.size"
     s = ws.size if ws.size is not None else default_cell_size(ws, settings)
-    grid = build_grid(ws, s, size_path)
     grown = ws.grown_parts()
-    state, blocker = block_obstacles(grid, ws, s, grown)
-
-    # robot reach and singularity over each free cell's box, at every allowed angle
-    cand = np.nonzero(state == FREE)[0]
-    if cand.size:
-        ok = boxes_reachable(model, grid.lo[cand], grid.hi[cand], psi_samples(ws.psi_range), grid.lattice,
-                             grid.win_rows[cand], grid.win_cols[cand])
-        state[cand[~ok]] = UNREACHABLE
-
-    sources = _endpoint_cells(grid, state, blocker, ws, "start", field_path)
-    targets = _endpoint_cells(grid, state, blocker, ws, "end", field_path)
-    found = fewest_turns_path(grid, state == FREE, sources, targets)
-    if found is None:
-        cnt = count_states(state)
-        raise PlannerError("no_path", f"no chain of free {ws.shape} cells (sharing edges) joins the start "
-                           f"{format_point(ws.start)} to the end {format_point(ws.end)}: {cnt['free']} of "
-                           f"{len(state)} cells are free, {cnt['blocked']} blocked by obstacles (grown by the "
-                           f"clearance {ws.clearance:g} m) or the bounds, {cnt['unreachable']} unreachable by the "
-                           f"robot; try smaller cells (now {s:g} m), a smaller clearance or a narrower psi_range",
-                           field_path)
+    try:
+        grid, state, found = _cells_and_path(ws, model, s, grown, field_path, size_path)
+    except PlannerError as exc:
+        if exc.code not in ("no_path", "unreachable") or exc.field not in (field_path, f"{field_path}.start",
+                                                                              f"{field_path}.end"):
+            raise
+        raise _no_path_error(exc, ws, model, s, field_path) from None
     path, turns = found
     n_seg = len(path) + 2
     S = settings.samples_per_segment

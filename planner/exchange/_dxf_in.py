@@ -13,6 +13,7 @@ import numpy as np
 
 from ..errors import PlannerError
 from . import _flatten as fl
+from ._budget import MAX_BLOCK_DEPTH, charge, dxf_expanded_entities
 from ._pieces import Drawing, Piece
 
 __all__ = ["INSUNITS", "read_dxf"]
@@ -24,7 +25,6 @@ INSUNITS: dict[int, tuple[str, float]] = {
     12: ("nm", 1e-9), 13: ("um", 1e-6), 14: ("dm", 0.1), 15: ("dam", 10.0), 16: ("hm", 100.0),
     21: ("us-ft", 1200 / 3937), 22: ("us-in", 100 / 3937), 23: ("us-yd", 3600 / 3937),
 }
-_MAX_BLOCK_DEPTH = 8
 _OUTLINES = {"LINE", "ARC", "CIRCLE", "ELLIPSE", "LWPOLYLINE", "POLYLINE", "SPLINE", "HATCH", "MPOLYGON"}
 
 
@@ -54,6 +54,7 @@ def read_dxf(data: bytes, units: tuple[str, float] | None,
             raise PlannerError("invalid_drawing", f"units unknown: the drawing's $INSUNITS is {code}, which is not a "
                                "length unit rangeplan converts; give the drawing's unit with the units option "
                                "(e.g. units=mm)", "units")
+    dxf_expanded_entities(doc)  # block references bounded before any is exploded
     tol = tolerance(mpu)
     pieces: list[Piece] = []
     ignored: Counter[str] = Counter()
@@ -84,11 +85,12 @@ def _entities(space: Any, insert_layer: str | None, depth: int, ignored: Counter
         if insert_layer is not None and layer == "0":
             layer = insert_layer
         if e.dxftype() == "INSERT":
-            if depth >= _MAX_BLOCK_DEPTH:
+            if depth >= MAX_BLOCK_DEPTH:
                 ignored["INSERT (nested too deep)"] += 1
                 continue
-            try:
-                virtual = list(e.virtual_entities())  # type: ignore[attr-defined]
+            try:  # a MINSERT is a grid of references: each cell's copy
+                refs = list(e.multi_insert()) if int(getattr(e, "mcount", 1)) > 1 else [e]  # type: ignore[attr-defined]
+                virtual = [v for r in refs for v in r.virtual_entities()]
             except Exception:
                 ignored["INSERT (not explodable)"] += 1
                 continue
@@ -105,6 +107,7 @@ def _flattened(curve, tol: float) -> np.ndarray:
         pts.append((float(p[0]), float(p[1])))
         if len(pts) > fl.MAX_POLYGON_POINTS + 1:
             raise fl.too_many_vertices()
+    charge(len(pts))
     return np.array(pts, dtype=float).reshape(-1, 2)
 
 

@@ -12,8 +12,9 @@ One rule for every smooth curve ``c(t)``: ``n`` chords of equal parameter step k
 Arcs also get at least one chord per 45 degrees (a coarse tolerance never turns a circle
 into a line). The chords' vertices lie on the curve (inscribed). A curve that would need
 more chords than a shape may have vertices (``MAX_POLYGON_POINTS``) is refused before any
-point is made (``too_large``, field ``flatten_tolerance``): the work of a drawing is bounded
-by its size, not by how fine a tolerance is asked for.
+point is made (``too_large``, field ``flatten_tolerance``), and so is a curve that would
+take the drawing past its budget of vertices in all (:mod:`planner.exchange._budget`): the
+work of a drawing is bounded by its size, not by how fine a tolerance is asked for.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import numpy as np
 
 from ..errors import PlannerError
 from ..schema import MAX_POLYGON_POINTS
+from ._budget import charge
 
 __all__ = ["arc", "bezier", "bulge_polyline", "chords", "ellipse", "too_many_vertices"]
 
@@ -36,7 +38,9 @@ def chords(bound: float, tol: float, sweep: float = 0.0) -> int:
     x = math.sqrt(max(bound, 0.0) / (8.0 * tol)) if bound > 0 else 1.0
     if not x <= MAX_POLYGON_POINTS:  # also inf and nan (a tolerance that underflowed)
         raise too_many_vertices()
-    return max(math.ceil(x), math.ceil(abs(sweep) / MAX_CHORD_ANGLE - 1e-9), 1)
+    n = max(math.ceil(x), math.ceil(abs(sweep) / MAX_CHORD_ANGLE - 1e-9), 1)
+    charge(n)  # the drawing's budget of vertices (all its curves together)
+    return n
 
 
 def too_many_vertices() -> PlannerError:

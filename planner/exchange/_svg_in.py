@@ -21,6 +21,7 @@ import numpy as np
 from ..errors import PlannerError
 from ..schema.drawing import DRAWING_UNITS
 from . import _flatten as fl
+from ._budget import svg_expanded_elements
 from ._pieces import Drawing, Piece
 
 __all__ = ["read_svg"]
@@ -42,6 +43,7 @@ def _tag_layers(data: bytes) -> tuple[bytes, str | None]:
     if not (root.tag == "svg" or root.tag.endswith("}svg")):
         raise PlannerError("invalid_drawing", f"not an SVG drawing: the root element is <{root.tag}>, not <svg>",
                            "drawing")
+    svg_expanded_elements(root)  # <use> references bounded before svgelements copies any
     size = _PHYSICAL.match(root.get("width", "")) or _PHYSICAL.match(root.get("height", ""))
     physical = size.group(1) if size else None
     for child in root:

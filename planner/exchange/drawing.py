@@ -34,6 +34,7 @@ from ..schema import (
     Layout,
     planner_error,
 )
+from ._budget import vertex_budget
 from ._dxf_in import read_dxf
 from ._pieces import Drawing, Piece
 from ._regions import Chain, Region, regions
@@ -159,7 +160,8 @@ def import_drawing(data: bytes, options: ImportOptions | dict[str, Any] | None =
     def tolerance(metres_per_unit: float) -> float:  # flattening tolerance in drawing units
         return opt.flatten_tolerance / (opt.scale * metres_per_unit)
 
-    drawing = read_dxf(data, units, tolerance) if fmt == "dxf" else read_svg(data, units, tolerance)
+    with vertex_budget():  # every curve of the drawing together (planner.exchange._budget)
+        drawing = read_dxf(data, units, tolerance) if fmt == "dxf" else read_svg(data, units, tolerance)
     if not drawing.pieces:
         found = ", ".join(f"{n} {k}" for k, n in sorted(drawing.ignored.items())) or "nothing"
         raise PlannerError("invalid_drawing", f"no closed shape: the drawing has no outlines (lines, arcs, circles, "

@@ -22,11 +22,21 @@ from ..corridor.geometry import corridor_gaps
 from ..errors import PlannerError, invalid
 from ..model import RobotModel, load_robot
 from ..model.reach import check_pose, check_segments
-from ..schema import PlanRequest, PlanResult, Reference, Segment, Settings, parse_request
+from ..schema import (
+    MAX_SAMPLES_PER_SEGMENT,
+    MAX_TOTAL_STEPS,
+    PlanRequest,
+    PlanResult,
+    Reference,
+    Segment,
+    Settings,
+    parse_request,
+)
 from .fastest import search as search_fastest
 from .result import build_result
 from .simulate import Resume, Simulation, simulate
 from .timing import method_of, resolve_timing, timing_info
+from .work import check_work, estimate_work
 
 __all__ = ["plan", "segment", "warm_up"]
 
@@ -51,10 +61,14 @@ def segment(request: Any, *, robot: RobotModel | None = None) -> Segmentation:
     return segment_layout(req.layout, _robot(req, robot), req.settings)
 
 
-def plan(request: Any, *, robot: RobotModel | None = None, segments: Sequence[Segment] | None = None) -> PlanResult:
+def plan(request: Any, *, robot: RobotModel | None = None, segments: Sequence[Segment] | None = None,
+         work_limit_s: float | None = None) -> PlanResult:
     """Plan a trajectory for ``request`` (a dict in the one JSON shape or a validated
     :class:`~planner.schema.PlanRequest`). ``robot`` overrides the request's robot model,
-    ``segments`` its corridor. Raises :class:`~planner.errors.PlannerError` naming the cause."""
+    ``segments`` its corridor. ``work_limit_s``: a layout's corridor, once segmented, is
+    estimated again (:func:`~planner.orchestrator.work.check_work`) and refused with
+    ``too_much_work`` over this many seconds. Raises :class:`~planner.errors.PlannerError`
+    naming the cause."""
     t0 = time.perf_counter()
     req = parse_request(request)
     model = _robot(req, robot)
@@ -63,6 +77,7 @@ def plan(request: Any, *, robot: RobotModel | None = None, segments: Sequence[Se
         segments = req.segments
     if segments is None and req.layout is not None:
         segments = segment_layout(req.layout, model, st).segments
+        check_work(req, segments, work_limit_s)
     if segments is not None:
         check_segments(model, segments)
         if st.fastest:
@@ -70,8 +85,18 @@ def plan(request: Any, *, robot: RobotModel | None = None, segments: Sequence[Se
             result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3
             return result
     method = method_of(st)
+    given = st
     st = resolve_timing(st, segments)  # speed_m_s / total_time_s -> samples_per_segment
-    result = _plan_once(req.name, model, st, segments, req.reference, method=method)
+    try:
+        result = _plan_once(req.name, model, st, segments, req.reference, method=method)
+    except PlannerError as exc:
+        if exc.code == "infeasible" and exc.field == "settings" and segments is not None:
+            budget = None
+            if work_limit_s is not None and work_limit_s > 0:  # what the limit leaves for the checks
+                budget = work_limit_s - (time.perf_counter() - t0)
+            raise _more_time_advice(exc, req.name, model, given, st, segments, budget,
+                                    estimate_work(req, segments).seconds) from None
+        raise
     result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3  # everything, result arrays included
     mt = result.metrics
     if not mt.settled and st.require_settled:
@@ -80,6 +105,76 @@ def plan(request: Any, *, robot: RobotModel | None = None, segments: Sequence[Se
                            f"speed {mt.end_speed_m_s * 1e3:.3f} mm/s); lengthen settings.tail_max_s, "
                            "add samples per segment or raise k_r", "settings.tail_max_s")
     return result
+
+
+#: the time factors the advice of an infeasible plan tries (each planned until its first
+#: infeasible step)
+MORE_TIME = (2, 4, 8, 16)
+
+
+def _more_time_advice(exc: PlannerError, name: str | None, model: RobotModel, given: Settings, st: Settings,
+                      segments: Sequence[Segment], budget_s: float | None = None,
+                      estimate_s: float = 0.0) -> PlannerError:
+    """``exc`` (an infeasible constrained plan) with advice that was checked: the corridor
+    planned again with :data:`MORE_TIME` times the samples of every segment (each candidate
+    abandoned at its first infeasible step); the first that plans is named in the timing field
+    the request used. If none plans, the error says that more time does not help.
+    ``budget_s``: the compute time the checks may take (None: no bound); a candidate whose
+    estimate (``estimate_s`` of the request times the factor) does not fit is not planned."""
+    counts = np.asarray(st.segment_samples if st.segment_samples is not None
+                        else [st.samples_per_segment] * len(segments), dtype=np.int64)
+    tried: list[int] = []
+    stop = ""  # why the search stopped early
+    for factor in MORE_TIME:
+        new = counts * factor
+        if int(new.max()) > MAX_SAMPLES_PER_SEGMENT or int(new.sum()) + st.tail_steps > MAX_TOTAL_STEPS:
+            stop = "more time exceeds the limits on samples"
+            break
+        # the settings advised, in the timing field the request used, resolved as a request would be
+        if given.speed_m_s is not None:
+            advised = given.model_copy(update={"speed_m_s": given.speed_m_s / factor})
+            how = f"settings.speed_m_s = {given.speed_m_s / factor:.6g} m/s"
+        elif given.total_time_s is not None:
+            advised = given.model_copy(update={"total_time_s": given.total_time_s * factor})
+            how = f"settings.total_time_s = {given.total_time_s * factor:.6g} s"
+        elif given.segment_samples is not None:
+            advised = st.model_copy(update={"segment_samples": [int(c) for c in new],
+                                            "samples_per_segment": int(new.max())})
+            how = f"settings.segment_samples x {factor}"
+        else:
+            advised = st.model_copy(update={"samples_per_segment": int(st.samples_per_segment * factor)})
+            how = f"settings.samples_per_segment = {st.samples_per_segment * factor}"
+        try:
+            sub = resolve_timing(advised, segments).model_copy(update={"require_settled": True})
+        except PlannerError:
+            stop = "more time exceeds the limits on samples"
+            break
+        if budget_s is not None and estimate_s * factor > budget_s:
+            stop = "more was not tried within the work limit"
+            break
+        t_try = time.perf_counter()
+        tried.append(factor)
+        try:
+            settled = _run(name, model, sub, segments, None, abandon=True)[0].metrics.settled
+        except PlannerError as again:
+            if budget_s is not None:
+                budget_s -= time.perf_counter() - t_try
+            if again.code == "infeasible":
+                continue
+            stop = f"{factor}x the time fails otherwise ({again.code})"
+            break
+        if not settled:
+            stop = f"{factor}x the time keeps the corridor but does not settle within settings.tail_max_s"
+            break
+        return PlannerError("infeasible", f"{exc.message}; {factor}x the time plans ({how}, checked)", exc.field)
+    if not tried:
+        return PlannerError("infeasible", f"{exc.message}; more time was not tried ({stop})", exc.field)
+    times = ", ".join(f"{f}x" for f in tried)
+    if stop:
+        return PlannerError("infeasible", f"{exc.message}; {times} the time do not help either (checked; {stop})",
+                            exc.field)
+    return PlannerError("infeasible", f"{exc.message}; {times} the time do not help either (checked): the "
+                        "corridor is too narrow there for the robot's drive limits", exc.field)
 
 
 def _plan_once(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment] | None,

@@ -7,7 +7,8 @@ the validated request alone (no robot model, no segmentation, no simulation):
 * the corridor's length: ``n`` segments (given; or, for a layout, the start point, the
   cells of the shortest possible path between start and end, and the end point; or one per
   reference pose) held ``S`` samples each (``samples_per_segment``, or what ``speed_m_s`` /
-  ``total_time_s`` resolve to), plus a settling tail of at most half a second;
+  ``total_time_s`` resolve to), plus the whole settling tail the request allows
+  (``tail_max_s``: its own bound on the work the model cannot predict, issue 20);
 * the cost of one receding-horizon step for the mode, backend, solver and horizon ``N``
   (``a + b N + c N^2 + d N^3``; the compiled constrained step about linearly in N, its numpy
   reference with DAQP about ``N^2.2``) and the RK4 substeps;
@@ -17,28 +18,30 @@ the validated request alone (no robot model, no segmentation, no simulation):
 * the ``fastest`` timing search: about ``2 + log2(N)`` plans at ``S = N``.
 
 Unit costs are :data:`planner.schema.WORK_COSTS` (seconds on the reference machine,
-``benchmarks/bench_work.py``). They are rounded towards the fast runs, and the unknowns
-(the layout's path, the settling, the search) are taken at their likely low end: the
-estimate is a *lower* estimate, so a request it accepts may still run into the server's
-time limit, but one it rejects could not have finished.
+``benchmarks/bench_work.py``). The settling is counted in full (``tail_max_s``), so the
+estimate bounds the work of a request whose corridor it knows: measured <= 1.5x the estimate
+(``benchmarks/certify.py``). A layout's path is unknown until it is segmented: the estimate
+takes the shortest possible one, and :func:`~planner.orchestrator.plan` with ``work_limit_s``
+estimates again from the segmented corridor before simulating (:func:`check_work`), so a long
+serpentine corridor is refused before its simulation starts.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ..corridor import cell_size_rule
+from ..errors import PlannerError
 from ..schema import SQRT3_2, WORK_COSTS, PlanRequest, cell_count, parse_request
 from .timing import centre_path_length, method_of, moving_segments
 
-__all__ = ["WorkEstimate", "estimate_work"]
+__all__ = ["WorkEstimate", "check_work", "estimate_work"]
 
-#: settling time the estimate counts after the corridor [s] (Table I settles in ~0.5 s)
-TAIL_S = 0.5
 
 
 @dataclass(frozen=True)
@@ -101,11 +104,12 @@ def _samples_per_segment(req: PlanRequest, n: int) -> int:
     return st.samples_per_segment
 
 
-def estimate_work(request: Any) -> WorkEstimate:
+def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEstimate:
     """The estimated compute time of planning ``request`` (a validated
     :class:`~planner.schema.PlanRequest` or a dict in the one JSON shape); see the module
     docstring. Costs microseconds (a layout: its cell count; ``speed_m_s``: one pass over
-    the segments)."""
+    the segments). ``segments``: a layout's corridor once segmented (its length is then
+    known: the estimate :func:`check_work` bounds the simulation with)."""
     req = parse_request(request)
     st = req.settings
     c = WORK_COSTS
@@ -119,6 +123,11 @@ def estimate_work(request: Any) -> WorkEstimate:
         n = len(req.segments)
         S = _samples_per_segment(req, n)
         corridor_field = "segments"
+    elif segments is not None:  # a layout, segmented
+        n = len(segments)
+        S = _samples_per_segment(req.model_copy(update={"segments": list(segments)}), n)
+        cells, obstacles = _layout_corridor(req, S)[1:]
+        corridor_field = "layout.cell.size"
     else:
         S = _samples_per_segment(req, 0) if method != "speed_m_s" else st.N
         n, cells, obstacles = _layout_corridor(req, S if method != "total_time_s" else st.N)
@@ -132,7 +141,7 @@ def estimate_work(request: Any) -> WorkEstimate:
         corridor_field = "layout.cell.size"
     polygons = req.layout is not None or any(s.polygon is not None for s in (req.segments or ()))
     plans = 2 + max(1, math.ceil(math.log2(max(st.N, 2)))) if st.fastest else 1
-    steps_one = n * S + min(st.tail_steps, math.ceil(TAIL_S / st.Ts))
+    steps_one = n * S + st.tail_steps
     step_s = _step_cost(st.mode, st.backend, st.solver, st.N, st.plant_substeps)
     loop_s = plans * steps_one * step_s
     metrics_s = plans * steps_one * (c["sample"] + (c["sample_polygon"] if polygons else 0.0))
@@ -148,8 +157,9 @@ def estimate_work(request: Any) -> WorkEstimate:
     else:
         field = corridor_field if not st.fastest else "settings.fastest"
     what = ("reference poses" if req.reference is not None else "segments" if req.segments is not None
+            else f"segments (the path through {cells} cells)" if segments is not None
             else f"segments (shortest path through {cells} cells)")
-    detail = (f"{n} {what} x {S} samples + settling = {steps_one} steps"
+    detail = (f"{n} {what} x {S} samples + settling (at most {st.tail_max_s:g} s) = {steps_one} steps"
               f"{f' x {plans} plans of the fastest-timing search' if plans > 1 else ''}, "
               f"~{step_s * 1e6:.0f} us per step in {st.mode} mode at N = {st.N}"
               f"{'' if st.backend == 'compiled' else f' ({st.backend} backend, {st.solver} solver)'}, "
@@ -157,3 +167,14 @@ def estimate_work(request: Any) -> WorkEstimate:
     if segment_s > 0.01:
         detail += f", {segment_s:.2g} s of segmentation"
     return WorkEstimate(seconds=seconds, steps=plans * steps_one, plans=plans, field=field, detail=detail)
+
+
+def check_work(request: Any, segments: Any, limit_s: float | None) -> None:
+    """Raise ``PlannerError("too_much_work")`` if planning ``request`` on the corridor
+    ``segments`` (a layout's, once segmented) is estimated over ``limit_s`` [s] (None: no limit)."""
+    if limit_s is None or limit_s <= 0:
+        return
+    est = estimate_work(request, segments)
+    if est.seconds > limit_s:
+        raise PlannerError("too_much_work", f"the segmented layout's corridor ({len(segments)} segments): "
+                           + est.message(limit_s), est.field)

@@ -67,12 +67,21 @@ def _to_templates(received: Counter, operations: list[str]) -> dict[str, int]:
     return dict(out)
 
 
-def _received(log_text: str) -> Counter:
-    """Requests per "METHOD /path" in a uvicorn access log."""
-    out: Counter = Counter()
-    for m in re.finditer(r'"([A-Z]+) ([^ ?"]+)[^ "]* HTTP/1\.[01]"', log_text):
-        out[f"{m.group(1)} {m.group(2)}"] += 1
+def _access_lines(log_text: str) -> list[dict]:
+    """The server's JSON access lines (app.observability: method, path, status, ...)."""
+    out = []
+    for line in log_text.splitlines():
+        if line.startswith("{") and '"rangeplan.access"' in line:
+            try:
+                out.append(json.loads(line))
+            except ValueError:
+                continue
     return out
+
+
+def _received(log_text: str) -> Counter:
+    """Requests per "METHOD /path" in the server's access lines."""
+    return Counter(f"{a['method']} {a['path']}" for a in _access_lines(log_text))
 
 
 def _schemathesis(url: str, cwd: Path, report_dir: Path, *args: str) -> subprocess.CompletedProcess:
@@ -160,8 +169,8 @@ def run(max_examples: int = 100, seed: int = 1, timeout_s: float = 3.0, workers:
         log.close()
         received = _received(text)
         # 5xx answers, but not /ready's 503 while the workers start (the probe doing its job)
-        errors = [line for line in text.splitlines()
-                  if re.search(r'HTTP/1\.[01]" 5\d\d ', line) and '"GET /ready ' not in line]
+        errors = [json.dumps(a) for a in _access_lines(text)
+                  if int(a["status"]) >= 500 and not (a["method"] == "GET" and a["path"] == "/ready")]
         return FuzzReport(exit_code=max([st.returncode] + [t.returncode for t in top_ups]),
                           generated=summary["test_cases"]["generated"] + generated, failures=failures,
                           errors=run_errors, top_ups=len(top_ups),
