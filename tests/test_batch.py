@@ -80,10 +80,11 @@ def test_plan_item_stops_at_the_compute_limit(monkeypatch):
     # planner.orchestrator.simulate.RETURN_EVERY steps (1/6 of them), so it stops well before the end.
     # The work estimate is a lower estimate (what it accepts may still run into the limit):
     # here it accepts everything, so that the plan starts and the limit has to stop it
-    import app.batch.engine as engine
+    import app.jobs as jobs
     from planner import WorkEstimate
 
-    monkeypatch.setattr(engine, "estimate_work", lambda req: WorkEstimate(0.0, 1, 1, "segments", "none"))
+    # (the estimate of every job: batch items are jobs of the service's job model)
+    monkeypatch.setattr(jobs, "estimate", lambda job: WorkEstimate(0.0, 1, 1, "segments", "none"))
     req = variant(0, "constrained")
     req["settings"]["samples_per_segment"] = 1000
     assert plan_item(variant(0, "constrained"))["status"] == "ok"  # the kernels loaded: full_s is the plan's
