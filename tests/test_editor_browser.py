@@ -92,6 +92,9 @@ class Tab:
         self.editor, self.shots = editor, shots
         known = {id(s) for s in editor.sessions}
         self.page = context.new_page()
+        # a loaded machine renders the software-WebGL page slowly: a click can wait many seconds
+        # for a still frame; the tests wait on state, so a long limit costs nothing when all is well
+        self.page.set_default_timeout(120_000)
         self.page.on("websocket", lambda ws: None)
         self.page.goto(editor.url)
         self.page.wait_for_selector("canvas", timeout=30_000)

@@ -45,8 +45,11 @@ if TYPE_CHECKING:
 __all__ = ["PLAY_FPS", "EditorGui", "Playback", "error_body", "error_title"]
 
 PLAY_FPS = 30.0  #: playback frame rate [1/s]
-#: the tab panels scroll on their own (Mantine's role=tabpanel): the controls above stay visible
-PANEL_CSS = "[role=tabpanel]{max-height:max(220px,calc(100vh - 600px));overflow-y:auto;overscroll-behavior:contain}"
+#: the tab group's content (viser puts it in a Mantine ScrollArea nested in the panel's own) scrolls
+#: in a box of its own: the controls above the tabs (Plan, Undo, Redo, status, time) stay visible
+PANEL_CSS = (".mantine-ScrollArea-root .mantine-ScrollArea-root{max-height:max(220px,calc(100vh - 620px))}"
+             ".mantine-ScrollArea-root .mantine-ScrollArea-root>.mantine-ScrollArea-viewport"
+             "{max-height:max(220px,calc(100vh - 620px));overscroll-behavior:contain}")
 _XY, _XY_PSI = ("x", "y"), ("x", "y", "ψ")
 
 

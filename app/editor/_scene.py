@@ -299,7 +299,7 @@ class EditorScene:
                     node.position = (v, y0 - 3.5 * t, z) if axis == "x" else (x0 - 6.0 * t, v, z)
                 node.visible = i < len(values)
         bar = major  # one major tick long
-        yb = y0 - 7.0 * t
+        yb = y0 - 9.0 * t
         _show_lines(self.scale_bar, np.array([[[hi[0] - bar, yb, z], [hi[0], yb, z]]]))
         self.scale_label.text = f"{bar * 1e3:.0f} mm"
         self.scale_label.position = (hi[0] - 0.5 * bar, yb - 2.5 * t, z)

@@ -378,7 +378,8 @@ class Session(SegmentEdits):
         layout = r.get("layout")
         if layout is not None and fit_layout:
             lo, hi = np.asarray(layout["bounds"]["lower"], float), np.asarray(layout["bounds"]["upper"], float)
-            centre, half = 0.5 * (lo + hi), 0.55 * float(np.max(hi - lo))
+            side = float(np.max(hi - lo))  # the bounds and, under them, the axis labels and the scale bar
+            centre, half = 0.5 * (lo + hi) - np.array([0.0, 0.03 * side]), 0.6 * side
         elif layout is not None:
             lo, hi = layout["bounds"]["lower"], layout["bounds"]["upper"]
             centre, half = geo.view_extent(lo, hi, self.robots.of_request(r, fallback=True))
