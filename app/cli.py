@@ -53,7 +53,6 @@ def output_format(args) -> str:
 
 
 def cmd_plan(args) -> int:
-    from app.formats import write
     from planner import PlannerError, plan
     from planner.orchestrator.compiling import compile_progress
 
@@ -64,19 +63,30 @@ def cmd_plan(args) -> int:
             result = plan(request)
     except PlannerError as exc:
         raise InputError(f"{args.input}: {exc.code}: {exc}") from None
+    m = result.metrics
+    emit(result, args, fmt, layout=request.layout,
+         summary=f"{m.steps} steps, {m.duration_s:.2f} s, end error {m.end_error_m * 1e3:.3f} mm, "
+         f"max force {m.max_drive_force_n:.1f} N, compute {m.compute_ms:.0f} ms")
+    return 0
+
+
+def emit(result, args, fmt: str, *, summary: str, layout=None, warnings: tuple[str, ...] = ()) -> None:
+    """Write a plan result in ``fmt`` to ``args.output`` (a one-line ``summary`` and any
+    ``warnings`` on stderr) or to standard output (``args.output`` unset or ``-``)."""
+    from app.formats import write
+
     if fmt == "json":
         text = json.dumps(result.to_json_dict(), indent=None if args.compact else 1)
     else:
-        text = write(result, fmt, layout=request.layout, forces=args.forces, source=args.input).decode()
+        text = write(result, fmt, layout=layout, forces=args.forces, source=getattr(args, "input", None)
+                     or getattr(args, "program", None)).decode()
     if args.output and args.output != "-":
         Path(args.output).write_text(text + ("" if text.endswith("\n") else "\n"))
-        m = result.metrics
-        print(f"wrote {args.output}: {m.steps} steps, {m.duration_s:.2f} s, end error "
-              f"{m.end_error_m * 1e3:.3f} mm, max force {m.max_drive_force_n:.1f} N, "
-              f"compute {m.compute_ms:.0f} ms", file=sys.stderr)
+        print(f"wrote {args.output}: {summary}", file=sys.stderr)
+        for w in warnings:
+            print(f"  warning: {w}", file=sys.stderr)
     else:
         sys.stdout.write(text if text.endswith("\n") else text + "\n")
-    return 0
 
 
 def parse_pair(text: str, option: str) -> list[float]:
@@ -90,7 +100,6 @@ def parse_pair(text: str, option: str) -> list[float]:
 
 def cmd_contour(args) -> int:
     """``rangeplan contour PROGRAM.ngc``: plan a G-code program (issue 22)."""
-    from app.formats import write
     from planner import PlannerError
     from planner.contour import plan_contour
     from planner.schema import MAX_PROGRAM_BYTES
@@ -103,7 +112,10 @@ def cmd_contour(args) -> int:
         text = sys.stdin.read() if args.program == "-" else path.read_text(errors="replace")
     except OSError as exc:
         raise InputError(f"{args.program}: cannot read: {exc.strerror or exc}") from None
-    settings = json.loads(args.settings) if args.settings else {}
+    try:
+        settings = json.loads(args.settings) if args.settings else {}
+    except json.JSONDecodeError as exc:
+        raise InputError(f"--settings: not valid JSON: {exc}") from None
     request = {"name": Path(args.program).name, "program": text, "feed": args.feed, "cut_below_m": args.cut_below,
                "settings": settings}
     if args.origin is not None:
@@ -115,22 +127,12 @@ def cmd_contour(args) -> int:
         result = plan_contour(request)
     except PlannerError as exc:
         raise InputError(f"{args.program}: {exc.code}: {exc}") from None
-    if fmt == "json":
-        out = json.dumps(result.to_json_dict(), indent=None if args.compact else 1)
-    else:
-        out = write(result, fmt, forces=args.forces, source=args.program).decode()
     c = result.contour
     assert c is not None
-    if args.output and args.output != "-":
-        Path(args.output).write_text(out + ("" if out.endswith("\n") else "\n"))
-        print(f"wrote {args.output}: {len(c.passes)} passes, cycle {c.cycle_time_s:.2f} s (cutting "
-              f"{c.cut_time_s:.2f} s), deviation {c.max_deviation_m * 1e3:.4f} mm of {c.tolerance_m * 1e3:.4f} mm, "
-              f"max force {result.metrics.max_drive_force_n:.1f} N, compute {result.metrics.compute_ms:.0f} ms",
-              file=sys.stderr)
-        for w in c.warnings:
-            print(f"  warning: {w}", file=sys.stderr)
-    else:
-        sys.stdout.write(out if out.endswith("\n") else out + "\n")
+    emit(result, args, fmt, warnings=tuple(c.warnings),
+         summary=f"{len(c.passes)} passes, cycle {c.cycle_time_s:.2f} s (cutting {c.cut_time_s:.2f} s), deviation "
+         f"{c.max_deviation_m * 1e3:.4f} mm of {c.tolerance_m * 1e3:.4f} mm, max force "
+         f"{result.metrics.max_drive_force_n:.1f} N, compute {result.metrics.compute_ms:.0f} ms")
     return 0
 
 
