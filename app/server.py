@@ -106,7 +106,7 @@ def serve(host: str = "127.0.0.1", port: int = 8000, editor_port: int = 8080, ed
         app = create_app(store, editor_port=handle.port if handle is not None else None, access=policy,
                          service=service)
         _log(f"API: http://{host}:{port} (OpenAPI at /docs)")
-        return _run_api(app, host, port, cfg.log_level, cfg.access_log)
+        return _run_api(app, host, port, cfg.log_level, cfg.access_log, cfg.keep_alive_s)
     finally:
         if handle is not None:
             try:
@@ -118,7 +118,8 @@ def serve(host: str = "127.0.0.1", port: int = 8000, editor_port: int = 8080, ed
         service.close()
 
 
-def _run_api(app, host: str, port: int, log_level: str = "info", access_log: bool = True) -> int:
+def _run_api(app, host: str, port: int, log_level: str = "info", access_log: bool = True,
+             keep_alive_s: float = 65.0) -> int:
     import uvicorn
 
     stop_signal = _StopSignal.install()
@@ -127,8 +128,10 @@ def _run_api(app, host: str, port: int, log_level: str = "info", access_log: boo
 
         # JSON lines (app.observability); the access lines are the app's own, with request ids
         # (``access_log``: RANGEPLAN_ACCESS_LOG), not uvicorn's
+        # an idle connection outlives the clients' keep-alive expiry (httpx 5 s = uvicorn's default):
+        # with equal timeouts a client may send on a connection the server is just closing (ReadError)
         config = uvicorn.Config(app, host=host, port=port, log_level=log_level, access_log=False,
-                                log_config=log_config(log_level))
+                                log_config=log_config(log_level), timeout_keep_alive=keep_alive_s)
         server = uvicorn.Server(config)
         server.run()
         # uvicorn returns (does not raise) when it cannot bind

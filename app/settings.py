@@ -52,6 +52,9 @@ class Settings(BaseSettings):
     editor_port: int = _f(8080, "TCP port of the browser editor", cli="serve --editor-port", ge=0, le=65535)
     log_level: str = _f("info", "Log level of the server's JSON log lines (critical, error, warning, info, debug, "
                         "trace)")
+    keep_alive_s: float = _f(65.0, "Seconds an idle HTTP connection is kept open; longer than clients' own idle "
+                             "expiry (httpx 5 s, proxies 60 s), so no client reuses a connection the server is "
+                             "closing", gt=0)
     access_log: bool = _f(True, "One JSON log line per request, with its request id (0: off)")
     static_dir: Path | None = _f(None, "Landing page directory (index.html, examples/)",
                                  default_text="the repository's static/")
