@@ -92,7 +92,7 @@ def main() -> None:
     counts: dict[str, collections.Counter] = {"constrained": collections.Counter(), "paper": collections.Counter()}
     problems, worst, done = [], (0.0, None), 0
     ratios: dict[str, list[float]] = {"constrained": [], "paper": []}
-    err_ratios: list[float] = []
+    err_ratios: dict[str, list[float]] = collections.defaultdict(list)
     deadline = t0 + 60 * args.minutes
     with ProcessPoolExecutor(args.workers, initializer=_init) as pool:
         for case, out in pool.map(_run, [(args.seed, i) for i in range(args.cases)], chunksize=4):
@@ -110,8 +110,9 @@ def main() -> None:
                     ratios[mode].append(ratio)
                     if ratio > worst[0]:
                         worst = (ratio, (mode, sec, est, case))
-                elif est and sec:
-                    err_ratios.append(sec / rec["speed"] / est)
+                elif est and sec:  # an error: its advice checks are bounded by the estimate's advice part
+                    est += rec.get("advice") or 0.0
+                    err_ratios[f"{mode} {rec['outcome']}"].append(sec / rec["speed"] / est)
             if done % 500 == 0:
                 print(f"  {done} cases, {time.perf_counter() - t0:.0f} s, {len(problems)} problems", flush=True)
         pool.shutdown(cancel_futures=True)
@@ -132,9 +133,9 @@ def main() -> None:
             a = sorted(r)
             print(f"| {mode} | {len(a)} | {a[len(a) // 2]:.2f} | {a[min(len(a) - 1, int(0.99 * len(a)))]:.2f} | "
                   f"{a[-1]:.2f} | {sum(x > 1.5 for x in a)} |")
-    if err_ratios:
-        a = sorted(err_ratios)
-        print(f"| errors (remedy checks included) | {len(a)} | {a[len(a) // 2]:.2f} | "
+    for what, r in sorted(err_ratios.items()):
+        a = sorted(r)
+        print(f"| {what} (with its advice checks, over estimate + advice bound) | {len(a)} | {a[len(a) // 2]:.2f} | "
               f"{a[min(len(a) - 1, int(0.99 * len(a)))]:.2f} | {a[-1]:.2f} | {sum(x > 1.5 for x in a)} |")
     if worst[1] is not None:
         mode, sec, est, case = worst[1]
