@@ -91,6 +91,7 @@ def main() -> None:
     t0 = time.perf_counter()
     counts: dict[str, collections.Counter] = {"constrained": collections.Counter(), "paper": collections.Counter()}
     problems, worst, done = [], (0.0, None), 0
+    high: list[tuple] = []  # plans over 1.3x their estimate
     ratios: dict[str, list[float]] = {"constrained": [], "paper": []}
     err_ratios: dict[str, list[float]] = collections.defaultdict(list)
     deadline = t0 + 60 * args.minutes
@@ -110,6 +111,8 @@ def main() -> None:
                     ratios[mode].append(ratio)
                     if ratio > worst[0]:
                         worst = (ratio, (mode, sec, est, case))
+                    if ratio > 1.3:
+                        high.append((ratio, mode, sec, est, case))
                 elif est and sec:  # an error: its advice checks are bounded by the estimate's advice part
                     est += rec.get("advice") or 0.0
                     err_ratios[f"{mode} {rec['outcome']}"].append(sec / rec["speed"] / est)
@@ -140,6 +143,10 @@ def main() -> None:
     if worst[1] is not None:
         mode, sec, est, case = worst[1]
         print(f"\nlargest: {worst[0]:.2f} ({mode}: {sec:.3f} s CPU, {est:.3f} s estimated): {json.dumps(case)[:400]}")
+    for ratio, mode, sec, est, case in sorted(high, key=lambda h: -h[0])[:10]:
+        what = "layout" if case.get("layout") else f"{len(case['segments'])} segments"
+        print(f"  {ratio:.2f}x {mode} {case['robot']} {what} {json.dumps(case.get('settings', {}))}: "
+              f"{sec:.3f} s CPU, {est:.3f} s estimated")
     if args.problems:
         with args.problems.open("w") as f:
             for mode, code, what, case in problems:
