@@ -87,9 +87,14 @@ def _smooth_pieces(elements: list[PathElement]) -> list[list[PathElement]]:
     return out
 
 
-def topp_time(elements: list[PathElement], origin: np.ndarray) -> float:
+def topp_time(elements: list[PathElement], origin: np.ndarray, leg_speed: bool = False, Ts: float | None = None,
+              tol: float = TOL) -> float:
     """Time-optimal traversal of the exact path (rest at both ends and at every corner) under
-    the drive-force box, by TOPP-RA."""
+    the drive-force box, by TOPP-RA. ``leg_speed``: the legs' speed limit too (``|J_l q'(s)| sdot
+    <= speed_max``, a bound on ``sdot^2``); ``Ts``: the output's chord bound too: a controller
+    that interpolates linearly between samples ``Ts`` apart runs a chord of length ``sdot Ts``
+    whose sagitta on an arc of radius R, ``(sdot Ts)^2 / (8 R)``, must stay within the tolerance:
+    ``sdot <= sqrt(8 R tol) / Ts`` (a bound for an exact tracker; any tracking error takes from it)."""
     import toppra as ta
     import toppra.algorithm as algo
     import toppra.constraint as constraint
@@ -159,6 +164,30 @@ def topp_time(elements: list[PathElement], origin: np.ndarray) -> float:
     def cg(q):
         return facets(q)[1]
 
+    class PathSpeed(constraint.LinearConstraint):
+        """An upper bound on sdot^2 along the path (leg speeds, the chord bound)."""
+
+        def __init__(self, els: list[PathElement]):
+            super().__init__()
+            self.els = els
+
+        def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
+            x_max = np.full(len(gridpoints), np.inf)
+            if leg_speed:
+                q, dq = path(gridpoints), path(gridpoints, 1)
+                for k in range(len(gridpoints)):
+                    _, _, J = generalised_forces(model, q[k], np.zeros(3))
+                    x_max[k] = float(np.min(model.speed_max / np.maximum(np.abs(J @ dq[k]), 1e-12))) ** 2
+            if Ts is not None:
+                for k, s in enumerate(gridpoints):
+                    i = int(np.clip(np.searchsorted(path.cum, s, side="right") - 1, 0, len(self.els) - 1))
+                    for e in {i, max(i - 1, 0)} if abs(s - path.cum[i]) < 1e-12 else {i}:
+                        if self.els[e].kind == "arc":
+                            assert self.els[e].radius_m is not None
+                            x_max[k] = min(x_max[k], 8 * self.els[e].radius_m * tol / Ts ** 2)
+            xbound = np.column_stack((np.zeros(len(gridpoints)), x_max))
+            return None, None, None, None, None, None, xbound
+
     total = 0.0
     for piece in _smooth_pieces(elements):
         path = Piecewise(piece)
@@ -166,7 +195,8 @@ def topp_time(elements: list[PathElement], origin: np.ndarray) -> float:
         grid = np.unique(np.concatenate((np.linspace(0, L, max(60, int(L / 2e-4))), path.cum)))
         pc = constraint.SecondOrderConstraint(inv_dyn, cF, cg, dof=3,
                                               discretization_scheme=constraint.DiscretizationType.Interpolation)
-        inst = algo.TOPPRA([pc], path, gridpoints=grid, parametrizer="ParametrizeConstAccel")
+        cons = [pc] + ([PathSpeed(piece)] if leg_speed or Ts is not None else [])
+        inst = algo.TOPPRA(cons, path, gridpoints=grid, parametrizer="ParametrizeConstAccel")
         traj = inst.compute_trajectory(0, 0)
         assert traj is not None, "TOPP-RA found no parametrisation"
         total += float(traj.duration)

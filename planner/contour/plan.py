@@ -57,6 +57,8 @@ __all__ = ["CONTOUR_STEP_S", "estimate_contour", "largest_feasible", "parse_cont
 #: fastest: the reference cell speed and acceleration the scale multiplies [m/s, m/s^2]
 V0_M_S = 0.1
 A0_M_S2 = 1.0
+#: fastest: the reference jerk of the start and stop [m/s^3] (the scale's cube multiplies it)
+J0_M_S3 = 50.0
 #: program feed: the acceleration of the profile [m/s^2]
 A_PROGRAM_M_S2 = 2.0
 #: program feed: the profile's cell speed starts at this fraction of F (the robot, pulled to the
@@ -106,7 +108,7 @@ def plan_contour(request: Any, *, program: Program | None = None) -> PlanResult:
     parts: list[_Part] = []
     pass_summaries: list[PassSummary] = []
     blocks = program.blocks
-    hint: float | None = None  # fastest: the scale of the cut before
+    hint: tuple[float, float] | None = None  # fastest: the scales of the cut before
     i = 0
     while i < len(blocks):
         b = blocks[i]
@@ -173,8 +175,8 @@ class _Part:
         self.result, self.cutting, self.line, self.deviation = result, cutting, line, deviation
         self.cells = cells
         self.segments = segments or []
-        #: fastest: the profile's scale found for a cut (the next cut's search starts there)
-        self.scale: float | None = None
+        #: fastest: the profile's scales found for a cut (the next cut's search starts there)
+        self.scale: tuple[float, float] | None = None
 
 
 def _chunks(elements: list[PathElement]) -> list[list[int]]:
@@ -188,18 +190,26 @@ def _chunks(elements: list[PathElement]) -> list[list[int]]:
     return out
 
 
-def _profile(t: Tube, v_cap: np.ndarray, a: float, Ts: float) -> np.ndarray:
+def _profile(t: Tube, v_cap: np.ndarray, a: float, Ts: float, a_turn: float | None = None,
+             jerk: float | None = None) -> np.ndarray:
     """Sample counts per segment of the tube from a speed profile: cell speed at most
-    ``v_cap`` (per segment), ``sqrt(a R)`` on arcs, ``sqrt(a R_corner)`` at junctions, reached
-    with acceleration ``a`` from rest and back to rest."""
+    ``v_cap`` (per segment), ``sqrt(a_turn R)`` on arcs, ``sqrt(a_turn R_corner)`` at junctions
+    (``a_turn``: ``a`` if not given), reached with acceleration ``a`` from rest and back to rest;
+    ``jerk``: within ``(jerk / 2)^(1/3) (3 d)^(2/3)`` at a distance ``d`` from the rest at either
+    end (the speed of a start from rest at that jerk: the drive forces rise at a bounded rate)."""
     n = len(t.segments)
+    a_turn = a if a_turn is None else a_turn
     v = v_cap.astype(float).copy()
     finite = np.isfinite(t.radius)
-    v[finite] = np.minimum(v[finite], np.sqrt(a * t.radius[finite]))
+    v[finite] = np.minimum(v[finite], np.sqrt(a_turn * t.radius[finite]))
     j = t.turn > 0
     half = np.clip((math.pi - t.turn[j]) / 2, 1e-6, math.pi / 2)
     r_corner = t.rho * np.sin(half) / np.maximum(1 - np.sin(half), 1e-12)
-    v[j] = np.minimum(v[j], np.sqrt(a * r_corner))
+    v[j] = np.minimum(v[j], np.sqrt(a_turn * r_corner))
+    if jerk is not None:
+        d = np.concatenate(([0.0], np.cumsum(t.length)))
+        d = np.minimum(d[:-1] + t.length, d[-1] - d[:-1])  # the cell's far end from the nearer rest
+        v = np.minimum(v, np.cbrt(jerk / 2) * np.cbrt(3 * d) ** 2)
     # speeds at the nodes between segments, from rest to rest
     node = np.empty(n + 1)
     node[0] = 0.0
@@ -218,7 +228,7 @@ def _profile(t: Tube, v_cap: np.ndarray, a: float, Ts: float) -> np.ndarray:
 
 def _cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int], origin: np.ndarray, tol: float,
          psi: float, pos: np.ndarray, geo: PathGeometry, elements: list[PathElement],
-         hint: float | None = None) -> _Part:
+         hint: tuple[float, float] | None = None) -> _Part:
     """One piece of a pass planned rest to rest. ``hint``: the ``fastest`` scale found for the
     piece before (where its search starts; the search's result is bracketed the same way from
     any start)."""
@@ -268,27 +278,34 @@ def _cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int],
             raise _infeasible(els[0].line, tol, st)
     else:
         v_cap = np.full(len(t.segments), V0_M_S)
-        best: PlanResult | None = None
-        tried: dict[float, PlanResult | None] = {}
+        tried: dict[bytes, PlanResult | None] = {}  # by the sample counts (scales often give the same)
 
-        def run(lam: float) -> PlanResult | None:
-            if lam not in tried:
-                counts = _profile(t, v_cap * lam, A0_M_S2 * lam * lam, st.Ts)
+        def run(lam: float, mu: float = 1.0) -> PlanResult | None:
+            counts = _profile(t, v_cap * lam * mu, A0_M_S2 * lam * lam, st.Ts, A0_M_S2 * (lam * mu) ** 2,
+                              J0_M_S3 * lam ** 3)
+            key = counts.tobytes()
+            if key not in tried:
                 _check_counts(counts, els[0].line)
                 try:
                     res = plan_timed(name, model, st, t.segments, counts.tolist())
-                    tried[lam] = res if feasible(res) else None
+                    tried[key] = res if feasible(res) else None
                 except PlannerError as err:
                     if err.code not in ("infeasible", "not_settled"):
                         raise
-                    tried[lam] = None
-            return tried[lam]
+                    tried[key] = None
+            return tried[key]
 
-        lam = largest_feasible(lambda x: run(x) is not None, hint if hint is not None else 1.0)
+        # 1. the whole profile (speeds, accelerations); 2. the speeds alone (cell speed and the
+        # curvature and corner limits), the accelerations between them as found: where the
+        # start and the stop bound the first scale, the path between them can go faster
+        lam0, mu0 = hint if hint is not None else (1.0, 1.0)
+        lam = largest_feasible(lambda x: run(x) is not None, lam0)
         if lam is None:
             raise _infeasible(els[0].line, tol, st)
-        scale_found = lam
-        best = tried[lam]
+        mu = largest_feasible(lambda x: run(lam, x) is not None, max(mu0, 1.0), low=1.0)
+        assert mu is not None  # mu = 1 is lam's plan
+        scale_found = (lam, mu)
+        best = run(lam, mu)
         assert best is not None
         result = best
     K = len(result.time)
