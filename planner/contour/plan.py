@@ -221,8 +221,8 @@ def _profile(t: Tube, v_cap: np.ndarray, a: float, Ts: float, a_turn: float | No
     counts = np.ones(n, np.int64)
     cells = t.length > 0
     mean = np.maximum(0.5 * (node[:-1] + node[1:]), 1e-9)
-    tm = np.maximum(t.length / np.minimum(v, np.maximum(mean, 0.25 * v)), 0.0)
-    counts[cells] = np.maximum(1, np.ceil(tm[cells] / Ts - 1e-9)).astype(np.int64)
+    speed = np.minimum(v, np.maximum(mean, 0.25 * v))[cells]
+    counts[cells] = np.maximum(1, np.ceil(t.length[cells] / np.maximum(speed, 1e-12) / Ts - 1e-9)).astype(np.int64)
     return counts
 
 
