@@ -208,3 +208,30 @@ def test_consecutive_cells_hull_within_tolerance():
     inner = np.isin(t.element, arcs) & (np.roll(t.element, 1) == t.element) & (np.roll(t.element, -1) == t.element)
     assert not np.any((t.turn > 0) & inner)
     assert (np.isin(t.element, arcs) & (t.length > 0)).sum() > 10
+
+
+@pytest.mark.parametrize("start", [1 / 64, 0.3, 1.0, 1.37, 1.3701, 5.0, 64.0])
+@pytest.mark.parametrize("threshold", [0.02, 0.5, 1.37, 1.3705, 40.0])
+def test_largest_feasible_brackets_the_threshold(start, threshold):
+    """fastest's scale search: from any start, ok(lam) and not ok(lam (1 + 1/64)) for a
+    monotone feasibility; from a start at the answer, two plans."""
+    from planner.contour.plan import SCALE_RESOLUTION, largest_feasible
+
+    calls = []
+
+    def ok(x):
+        calls.append(x)
+        return x <= threshold
+
+    lam = largest_feasible(ok, start)
+    assert lam is not None and lam <= threshold < lam * (1 + SCALE_RESOLUTION) * (1 + 1e-9)
+    assert len(calls) < 25
+    calls.clear()
+    assert largest_feasible(ok, lam) == pytest.approx(lam) and len(calls) == 2
+
+
+def test_largest_feasible_at_the_limits():
+    from planner.contour.plan import SCALE_MAX, SCALE_MIN, largest_feasible
+
+    assert largest_feasible(lambda x: True, 1.0) == SCALE_MAX
+    assert largest_feasible(lambda x: x < SCALE_MIN, 1.0) is None
