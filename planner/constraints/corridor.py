@@ -81,6 +81,26 @@ ARRIVAL_SPEED_M_S = 1e-4
 ARRIVAL_RATE_RAD_S = 1e-3
 
 
+#: half-planes of recently seen cell polygons, by their vertices' bytes: the candidate timings of
+#: one corridor (``fastest``, contouring) map the same cells to the same polygons at most samples
+_HP_CACHE: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+_HP_CACHE_MAX = 1 << 14
+
+
+def _halfplanes(V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`~planner.corridor.geometry.halfplanes` of ``V``, remembered (read-only arrays)."""
+    key = V.tobytes()
+    hit = _HP_CACHE.get(key)
+    if hit is None:
+        if len(_HP_CACHE) >= _HP_CACHE_MAX:
+            _HP_CACHE.clear()
+        A, b = halfplanes(V)
+        A.flags.writeable = False
+        b.flags.writeable = False
+        hit = _HP_CACHE[key] = (A, b)
+    return hit
+
+
 class CorridorConstraint(RowConstraint):
     """``lo_s <= pose_j <= hi_s`` (boxes) or ``A_s (x, y)_j <= b_s`` (half-planes, with the
     angle row of the box) for every sample ``j`` of the horizon, ``s`` its sequence index:
@@ -143,7 +163,7 @@ class CorridorConstraint(RowConstraint):
                     if np.all(sw > 0) and np.all(w[j, :2] > 4 * MARGIN_M):
                         # the same per-axis affine map that tapers the box
                         V = seq.lower[j, :2] + (np.asarray(poly, float) - seg.lower[:2]) * (w[j, :2] / sw)
-                        A, b = halfplanes(V)
+                        A, b = _halfplanes(V)
                         self.hp[j] = (A, b - MARGIN_M)
         self.lo, self.hi = lo, hi
         extra = np.minimum(np.array([RECOURSE_M, RECOURSE_M, RECOURSE_RAD]), 0.5 * (hi - lo))
