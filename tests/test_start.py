@@ -159,3 +159,12 @@ def test_no_progress_output_when_nothing_compiles():
     with compiling.compile_progress(out):
         pass
     assert out.getvalue() == ""
+
+
+def test_writing_a_plan_loads_no_drawing_reader():
+    """``rangeplan plan`` writes its output through ``app.formats``: the machine writers, not the
+    drawing and G-code readers (shapely, scipy.spatial: ~0.2 CPU s), which load on first use."""
+    mods = loaded_after("import app.formats, planner.orchestrator, planner.exchange", top=False)
+    assert not {m for m in mods if m.split(".")[0] in ("shapely", "ezdxf")
+                or m.startswith(("scipy.spatial", "scipy.linalg", "scipy.sparse"))}
+    assert "shapely" in loaded_after("from planner.exchange import import_drawing, read_gcode")
