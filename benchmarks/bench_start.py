@@ -3,7 +3,7 @@
     python benchmarks/bench_start.py [--base REV] [--rounds 3] [--cold] [--install]
     python benchmarks/bench_start.py --profile-compile      # each kernel's compile time
     python benchmarks/bench_start.py --workers [--rounds 5]  # the service's workers, by start method
-    python benchmarks/bench_start.py --breakdown            # where a warm plan's time goes
+    python benchmarks/bench_start.py --breakdown [--refresh] # where a warm plan's time goes
 
 Every figure is one child process (``OPENBLAS_NUM_THREADS=1``), timed by wall clock and by
 the CPU seconds it used (``resource.getrusage(RUSAGE_CHILDREN)``: on a shared machine the
@@ -189,8 +189,11 @@ mark("import numpy")
 import numba
 mark("import numba")
 from numba.core.registry import cpu_target
-cpu_target.target_context.refresh()
-mark("numba's CPU target: typing and lowering registries")
+cpu_target.target_context
+mark("numba's CPU target context")
+if "--refresh" in sys.argv:
+    cpu_target.target_context.refresh()
+    mark("numba's refresh: every typing and lowering registry")
 import pydantic, planner.schema
 mark("import pydantic, planner.schema (the models)")
 from planner import plan
@@ -198,7 +201,7 @@ import planner.orchestrator.plan
 mark("import the planner (scipy, shapely, the kernel modules)")
 from numba.core import caching
 loaded = {}
-_load = caching.Cache.load_overload
+_load = caching.Cache._load_overload
 def load_overload(self, sig, ctx):
     t = time.process_time()
     try:
@@ -206,7 +209,7 @@ def load_overload(self, sig, ctx):
     finally:
         name = self._py_func.__name__
         loaded[name] = loaded.get(name, 0.0) + time.process_time() - t
-caching.Cache.load_overload = load_overload
+caching.Cache._load_overload = load_overload
 req = json.loads(open(sys.argv[1]).read())
 planner.schema.PlanRequest.model_validate(req)
 mark("read and validate the request")
@@ -220,14 +223,17 @@ print(json.dumps({"rows": rows, "loaded": loaded}))
 """
 
 
-def breakdown(rounds: int) -> None:
+def breakdown(rounds: int, refresh: bool) -> None:
     """Where a warm ``rangeplan plan table1.json`` spends its time, step by step in one process
-    (median of ``rounds`` processes), and the CPU seconds of each kernel's load from the cache."""
+    (median of ``rounds`` processes), and the CPU seconds of each kernel's load from the cache;
+    ``refresh``: numba's own order (its whole target context refreshed before the first load)."""
     print(f"# load average before: {load()}")
     runs = []
     for _ in range(rounds):
-        out = subprocess.run([PY, "-c", BREAKDOWN_CODE, str(TABLE1)], cwd=ROOT, capture_output=True, text=True,
-                             env={**os.environ, "OPENBLAS_NUM_THREADS": "1"}, check=True)
+        out = subprocess.run([PY, "-c", BREAKDOWN_CODE, str(TABLE1)] + (["--refresh"] if refresh else []), cwd=ROOT,
+                             capture_output=True, text=True, check=True,
+                             env={**os.environ, "OPENBLAS_NUM_THREADS": "1",
+                                  "RANGEPLAN_KERNEL_REFRESH": "1" if refresh else "0"})
         runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
     start = [timed([PY, "-c", "pass"], ROOT) for _ in range(rounds)]
     print("\n| step | wall [s] | CPU [s] |\n|---|---:|---:|")
@@ -257,6 +263,7 @@ def main() -> None:
     ap.add_argument("--profile-compile", action="store_true", help="each kernel's compile time, then exit")
     ap.add_argument("--workers", action="store_true", help="the planning pool's workers by start method, then exit")
     ap.add_argument("--breakdown", action="store_true", help="where a warm plan's time goes, then exit")
+    ap.add_argument("--refresh", action="store_true", help="with --breakdown: numba's own order of loading")
     args = ap.parse_args()
     if args.profile_compile:
         profile_compile()
@@ -265,7 +272,7 @@ def main() -> None:
         bench_workers(args.rounds)
         return
     if args.breakdown:
-        breakdown(args.rounds)
+        breakdown(args.rounds, args.refresh)
         return
     print(f"# {os.cpu_count()} CPUs; load average before: {load()}")
     t_start = time.perf_counter()
