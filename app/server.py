@@ -87,7 +87,8 @@ def serve(host: str = "127.0.0.1", port: int = 8000, editor_port: int = 8080, ed
          f"{', '.join(sorted(policy.allowed_hosts))}; CORS {', '.join(policy.cors_origins) or 'off'}")
     # one job service for the API and the editor: the same workers, estimate, limits, errors
     service = JobService.start(cfg.workers, cfg.plan_timeout_s, cfg.max_queue, mode=cfg.executor,
-                               memory_mb=cfg.worker_memory_mb, export_timeout_s=cfg.export_timeout_s)
+                               memory_mb=cfg.worker_memory_mb, export_timeout_s=cfg.export_timeout_s,
+                               start=cfg.worker_start)
     handle = None
     try:
         if editor:
