@@ -4,6 +4,7 @@
     python benchmarks/bench_start.py --profile-compile      # each kernel's compile time
     python benchmarks/bench_start.py --workers [--rounds 5]  # the service's workers, by start method
     python benchmarks/bench_start.py --breakdown [--refresh] # where a warm plan's time goes
+    python benchmarks/bench_start.py --load-order --rounds 7 # kernels loaded with/without numba's refresh
 
 Every figure is one child process (``OPENBLAS_NUM_THREADS=1``), timed by wall clock and by
 the CPU seconds it used (``resource.getrusage(RUSAGE_CHILDREN)``: on a shared machine the
@@ -249,6 +250,35 @@ def breakdown(rounds: int, refresh: bool) -> None:
     print(f"# load average after: {load()}")
 
 
+LOAD_ORDER_CODE = r"""
+import json, sys, time, planner, planner.orchestrator.plan
+from numba.core.registry import cpu_target
+cpu_target.target_context
+req = json.load(open(sys.argv[1]))
+t = time.process_time()
+planner.plan(req)
+print(time.process_time() - t)
+"""
+
+
+def load_order(rounds: int) -> None:
+    """CPU seconds of the first Table I plan of a new process (the planner imported: loading
+    its kernels, dispatching, planning), loading the kernels in numba's own order (the whole
+    target context refreshed first) and in planner._jit's (no refresh), alternating."""
+    print(f"# load average before: {load()}")
+    res: dict[str, list[float]] = {"numba's order (refresh)": [], "planner._jit (no refresh)": []}
+    for _ in range(rounds):
+        for label, flag in zip(res, ("1", "0")):
+            out = subprocess.run([PY, "-c", LOAD_ORDER_CODE, str(TABLE1)], cwd=ROOT, capture_output=True, text=True,
+                                 check=True, env={**os.environ, "OPENBLAS_NUM_THREADS": "1",
+                                                  "RANGEPLAN_KERNEL_REFRESH": flag})
+            res[label].append(float(out.stdout.strip().splitlines()[-1]))
+    print("\n| loading | first plan CPU [s], median | min | max |\n|---|---:|---:|---:|")
+    for label, v in res.items():
+        print(f"| {label} | {statistics.median(v):.3f} | {min(v):.3f} | {max(v):.3f} |")
+    print(f"# load average after: {load()}")
+
+
 def load() -> str:
     return " ".join(f"{x:.2f}" for x in os.getloadavg())
 
@@ -264,6 +294,7 @@ def main() -> None:
     ap.add_argument("--workers", action="store_true", help="the planning pool's workers by start method, then exit")
     ap.add_argument("--breakdown", action="store_true", help="where a warm plan's time goes, then exit")
     ap.add_argument("--refresh", action="store_true", help="with --breakdown: numba's own order of loading")
+    ap.add_argument("--load-order", action="store_true", help="first plan's CPU, numba's order against ours")
     args = ap.parse_args()
     if args.profile_compile:
         profile_compile()
@@ -273,6 +304,9 @@ def main() -> None:
         return
     if args.breakdown:
         breakdown(args.rounds, args.refresh)
+        return
+    if args.load_order:
+        load_order(args.rounds)
         return
     print(f"# {os.cpu_count()} CPUs; load average before: {load()}")
     t_start = time.perf_counter()
