@@ -132,7 +132,9 @@ def _run_api(app, host: str, port: int, log_level: str = "info", access_log: boo
         # an idle connection outlives the clients' keep-alive expiry (httpx 5 s = uvicorn's default):
         # with equal timeouts a client may send on a connection the server is just closing (ReadError)
         config = uvicorn.Config(app, host=host, port=port, log_level=log_level, access_log=False,
-                                log_config=log_config(log_level), timeout_keep_alive=keep_alive_s)
+                                log_config=log_config(log_level),
+                                # uvicorn annotates int but passes the seconds to loop.call_later: a float works
+                                timeout_keep_alive=keep_alive_s)  # pyright: ignore[reportArgumentType]
         server = uvicorn.Server(config)
         server.run()
         # uvicorn returns (does not raise) when it cannot bind
