@@ -167,7 +167,9 @@ class _Worker:
 
     * ``"forkserver"``: forked by multiprocessing's fork server, a process started once per
       server that imported the planner and loaded its kernels (:mod:`app.worker_template`):
-      ready in milliseconds; the first one waits for the fork server's own warm-up;
+      ready in milliseconds; the first one waits for the fork server's own warm-up. Its
+      workers see the environment the server had when the fork server started (its first
+      pool), not a later ``os.environ`` change (one fork server per server process);
     * ``"exec"``: ``python -m app.workers FD MEMORY_MB PARENT_PID PDEATHSIG``, a fresh
       interpreter that never re-imports the server's ``__main__`` and loads the planner
       itself (1-3 s), over a socket pair.
