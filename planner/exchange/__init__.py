@@ -3,7 +3,8 @@
 - :func:`import_drawing`: a DXF or SVG drawing (its own units) -> a
   :class:`~planner.schema.Layout` in m with an :class:`~planner.schema.ImportReport`;
 - :func:`read_gcode`: a CAM program (RS274NGC) -> a :class:`~planner.schema.Program` of lines
-  and arcs in m, cut passes, travel and dwells;
+  and arcs in m, cut passes, travel and dwells (``readback=True``: the planner's own G-code
+  read back, G93 and the C axis; :func:`toolpath`: a program's path as a timed polyline);
 - :func:`export`: a :class:`~planner.schema.PlanResult` (SI) -> LinuxCNC G-code (mm,
   degrees, inverse-time feed: :func:`to_gcode`), a leg-length stream for ``halstreamer``
   (mm: :func:`to_joints`) or a DXF of the path, the corridor and the obstacles (mm:
@@ -14,8 +15,9 @@ from .drawing import DRAWING_FORMATS, drawing_format, import_drawing
 from .dxf_export import DXF_LAYERS, to_dxf
 from .formats import EXPORT_FORMATS, ExportFormat, export, export_format_for
 from .gcode import to_gcode
-from .gcode_in import read_gcode
+from .gcode_in import Toolpath, read_gcode, toolpath
 from .joints import joint_columns, to_joints
 
-__all__ = ["DRAWING_FORMATS", "DXF_LAYERS", "EXPORT_FORMATS", "ExportFormat", "drawing_format", "export",
-           "export_format_for", "import_drawing", "joint_columns", "read_gcode", "to_dxf", "to_gcode", "to_joints"]
+__all__ = ["DRAWING_FORMATS", "DXF_LAYERS", "EXPORT_FORMATS", "ExportFormat", "Toolpath", "drawing_format", "export",
+           "export_format_for", "import_drawing", "joint_columns", "read_gcode", "to_dxf", "to_gcode", "to_joints",
+           "toolpath"]
