@@ -122,12 +122,13 @@ class Previewer:
     def _compute(self, files: MachineFiles, key: tuple[int, str]) -> None:
         session = self._session
         try:
-            preview = build_preview(files)
-        except PlannerError as exc:  # the reader refused our own program: say so, show nothing
+            preview, error = build_preview(files), None
+        except PlannerError as exc:  # the reader refused the program (e.g. too large): say so, show nothing
             log.warning("G-code preview failed: %s", exc)
             preview, error = None, str(exc)
-        else:
-            error = None
+        except Exception as exc:  # never leave the toggle waiting: the cause goes to the panel and the log
+            log.exception("G-code preview failed")
+            preview, error = None, f"{type(exc).__name__}: {exc}"
         with self._lock:
             if self._busy == key:
                 self._busy = None
