@@ -90,14 +90,16 @@ def server(tmp_path_factory):
 class Tab:
     """One browser tab of the editor and its session on the server."""
 
-    def __init__(self, editor, context, shots: Path):
+    def __init__(self, editor, context, shots: Path, *, mirror: bool = False):
         self.editor, self.shots = editor, shots
         known = {id(s) for s in editor.sessions}
         self.page = context.new_page()
-        #: the scene as this page receives it (viser's websocket frames, decoded)
+        #: with ``mirror``: the scene as this page receives it (viser's websocket frames, decoded in
+        #: the test's thread while Playwright runs a call: only for the tests that look at it)
         self.scene = SceneMirror()
-        self.page.on("websocket", lambda ws: ws.on(
-            "framereceived", lambda payload: self.scene.feed(payload) if isinstance(payload, bytes) else None))
+        if mirror:
+            self.page.on("websocket", lambda ws: ws.on(
+                "framereceived", lambda payload: self.scene.feed(payload) if isinstance(payload, bytes) else None))
         # a loaded machine renders the software-WebGL page slowly: a click can wait many seconds
         # for a still frame; the tests wait on state, so a long limit costs nothing when all is well
         self.page.set_default_timeout(120_000)
@@ -628,11 +630,23 @@ def _on_segments(points: np.ndarray, segments: np.ndarray) -> float:
     return float(np.max(np.min(np.linalg.norm(points[:, None] - (a + t[..., None] * d), axis=2), axis=1)))
 
 
-def test_gcode_preview_draws_the_downloaded_program_over_the_plan(tab):
+@pytest.fixture
+def mirrored_tab(server):
+    """A tab whose received scene is decoded (:attr:`Tab.scene`)."""
+    editor, context, _, shots = server
+    t = Tab(editor, context, shots, mirror=True)
+    try:
+        yield t
+    finally:
+        t.close()
+
+
+def test_gcode_preview_draws_the_downloaded_program_over_the_plan(mirrored_tab):
     """Real clicks and keys: switch the G-code preview on (Files tab); the line segments the
     page receives are the downloaded program's moves (read by rs274 in the test), on the
     planned trajectory; the panel states the program's lines and duration. A failed plan
     disables it and takes it off the view; the next plan brings it back, of that plan."""
+    tab = mirrored_tab
     s, page = tab.session, tab.page
     tab.tab("Files")
     toggle = tab.field("G-code preview")
