@@ -9,7 +9,8 @@ with Ctrl+Z / Ctrl+Shift+Z; drags and drawn rectangles snap to the grid and the 
 readout says where the mouse is; the plots' time axis reads seconds (the value uPlot renders
 in its legend while the mouse is over the plot); a Table I segment corridor is edited in
 the view and the panel and re-planned; the panel answers while a plan runs; no request
-leaves 127.0.0.1. Screenshots of each step go to ``$RANGEPLAN_SHOTS`` (default: the test's
+leaves 127.0.0.1; the G-code preview draws the downloaded program over the plan (checked in
+the scene the page receives). Screenshots of each step go to ``$RANGEPLAN_SHOTS`` (default: the test's
 tmp dir) to be looked at; ``RANGEPLAN_DOCS_SCREENSHOT=docs/editor.png`` also writes the
 README's screenshot. The browser is closed before the viser server stops.
 """
@@ -28,6 +29,7 @@ import pytest
 
 import app.editor._session as session_module
 from tests.support import TABLE1_PATH
+from tests.viser_client import SceneMirror
 
 pytestmark = pytest.mark.browser
 
@@ -88,14 +90,19 @@ def server(tmp_path_factory):
 class Tab:
     """One browser tab of the editor and its session on the server."""
 
-    def __init__(self, editor, context, shots: Path):
+    def __init__(self, editor, context, shots: Path, *, mirror: bool = False):
         self.editor, self.shots = editor, shots
         known = {id(s) for s in editor.sessions}
         self.page = context.new_page()
+        #: with ``mirror``: the scene as this page receives it (viser's websocket frames, decoded in
+        #: the test's thread while Playwright runs a call: only for the tests that look at it)
+        self.scene = SceneMirror()
+        if mirror:
+            self.page.on("websocket", lambda ws: ws.on(
+                "framereceived", lambda payload: self.scene.feed(payload) if isinstance(payload, bytes) else None))
         # a loaded machine renders the software-WebGL page slowly: a click can wait many seconds
         # for a still frame; the tests wait on state, so a long limit costs nothing when all is well
         self.page.set_default_timeout(120_000)
-        self.page.on("websocket", lambda ws: None)
         self.page.goto(editor.url)
         self.page.wait_for_selector("canvas", timeout=30_000)
         assert wait_for(lambda: any(id(s) not in known for s in editor.sessions), 30), "the tab got no session"
@@ -104,6 +111,12 @@ class Tab:
         time.sleep(1.5)  # first frames, camera placed by the server
         for close in self.page.locator(".mantine-Notification-closeButton").all():  # "software WebGL" notice
             close.dispatch_event("click")  # no wait for a still frame: a loaded machine renders slowly
+
+    def lines(self, name: str):
+        """The line-segment node ``name`` as this page received it (None: hidden). Playwright's
+        sync API delivers the websocket frames while it runs a call: a short wait first."""
+        self.page.wait_for_timeout(20)
+        return self.scene.lines(name)
 
     def shot(self, name: str) -> Path:
         path = self.shots / f"{name}.png"
@@ -589,3 +602,88 @@ def test_readme_screenshot_of_an_imported_drawing_with_holes(tab):
     target = os.environ.get("RANGEPLAN_DOCS_DRAWING_SCREENSHOT")
     if target:
         Path(target).write_bytes(path.read_bytes())
+
+
+# ---------------------------------------------------------------------------- G-code preview
+def _program_moves(text: str) -> tuple[np.ndarray, np.ndarray]:
+    """The feed moves (M, 2, 2) and rapids (R, 2, 2) [m] in XY of a program as LinuxCNC's
+    interpreter (rs274) runs it, without moves of C alone: independent of the editor's reader."""
+    from tests.linuxcnc import rs274
+
+    feed, rapid, prev = [], [], np.zeros(2)
+    for line in rs274(text):
+        for name, out in (("STRAIGHT_FEED(", feed), ("STRAIGHT_TRAVERSE(", rapid)):
+            if name in line:
+                v = [float(a) for a in line.split(name)[1].rstrip(")").split(",")]
+                end = np.array(v[:2]) * 1e-3
+                if np.any(end != prev):
+                    out.append((prev, end))
+                prev = end
+    return np.array(feed).reshape(-1, 2, 2), np.array(rapid).reshape(-1, 2, 2)
+
+
+def _on_segments(points: np.ndarray, segments: np.ndarray) -> float:
+    """Largest distance [m] of ``points`` (n, 2) from the segments (M, 2, 2)."""
+    a, b = segments[:, 0][None], segments[:, 1][None]
+    d = b - a
+    t = np.clip(np.sum((points[:, None] - a) * d, axis=2) / np.maximum(np.sum(d * d, axis=2), 1e-300), 0, 1)
+    return float(np.max(np.min(np.linalg.norm(points[:, None] - (a + t[..., None] * d), axis=2), axis=1)))
+
+
+@pytest.fixture
+def mirrored_tab(server):
+    """A tab whose received scene is decoded (:attr:`Tab.scene`)."""
+    editor, context, _, shots = server
+    t = Tab(editor, context, shots, mirror=True)
+    try:
+        yield t
+    finally:
+        t.close()
+
+
+def test_gcode_preview_draws_the_downloaded_program_over_the_plan(mirrored_tab):
+    """Real clicks and keys: switch the G-code preview on (Files tab); the line segments the
+    page receives are the downloaded program's moves (read by rs274 in the test), on the
+    planned trajectory; the panel states the program's lines and duration. A failed plan
+    disables it and takes it off the view; the next plan brings it back, of that plan."""
+    tab = mirrored_tab
+    s, page = tab.session, tab.page
+    tab.tab("Files")
+    toggle = tab.field("G-code preview")
+    assert wait_for(toggle.is_enabled, 10)
+    toggle.click()
+    assert wait_for(lambda: tab.lines("/preview/feed") is not None and s.preview.preview is not None, 30)
+    gcode = page.get_by_role("button", name="Download G-code (LinuxCNC)")
+    with page.expect_download() as download:
+        gcode.click()
+    text = Path(download.value.path()).read_text()
+    feed, rapid = _program_moves(text)
+    got = tab.lines("/preview/feed")
+    assert got is not None and got.shape == (len(feed), 2, 3)
+    f32 = 1e-8  # viser sends the points as float32: half a unit in the last place at 0.16 m is 7.5e-9 m
+    assert np.max(np.abs(got[:, :, :2] - feed)) <= f32  # the program's points, in order
+    dashes = tab.lines("/preview/rapid")
+    assert dashes is not None and len(rapid) == 1 and _on_segments(dashes[:, :, :2].reshape(-1, 2), rapid) <= f32
+    pose = np.asarray(s.last_result["pose"], float)[:, :2]
+    planned = np.stack((pose[:-1], pose[1:]), axis=1)
+    assert _on_segments(got[:, :, :2].reshape(-1, 2), planned) <= 0.75e-7 + f32  # printed to 0.1 um
+    body = page.locator("body")
+    duration = (len(pose) - 1) * float(s.last_result["settings"]["Ts"])
+    assert wait_for(lambda: f"G-code preview: {len(text.splitlines())} lines, duration {duration:.3f} s"
+                    in body.inner_text(), 10)
+    tab.shot("11-gcode-preview")
+    # a failed plan: the preview leaves the view and the toggle is disabled, with the reason
+    tab.tab("Edit")
+    tab.type_into("Start x, y (m)", "0.5, 0, 0")
+    assert wait_for(lambda: s.last_error is not None and s.wait_idle(1), 60), s.last_error
+    tab.tab("Files")
+    assert wait_for(lambda: tab.lines("/preview/feed") is None and tab.lines("/preview/rapid") is None, 10)
+    assert wait_for(toggle.is_disabled, 10)
+    assert wait_for(lambda: "G-code preview: no preview: the newest plan failed" in body.inner_text(), 10)
+    # fixed: the next plan's program is previewed (the toggle stayed on)
+    tab.tab("Edit")
+    tab.type_into("Start x, y (m)", "-0.08, -0.04, 0")
+    assert wait_for(lambda: s.last_error is None and s.wait_idle(1), 60), s.last_error
+    assert wait_for(lambda: (tab.lines("/preview/feed") is not None
+                             and np.allclose(tab.lines("/preview/feed")[0, 0, :2], [-0.08, -0.04], atol=1e-8)), 30)
+    assert toggle.is_enabled()

@@ -483,6 +483,47 @@ def test_machine_files_only_for_the_plan_of_the_design_on_screen(tab):
     assert s.notifications[-1][0] == "No download"
 
 
+def test_gcode_preview_follows_the_plan_of_the_design_on_screen(tab):
+    """The G-code preview: on, it is the download's program read back (its path's vertices
+    are the exported program's G0/G1 points, parsed here by a regular expression), its
+    duration the plan's; an edit not yet planned hides it and disables the toggle with the
+    reason; the next plan brings it back (a new program); off, it leaves the view."""
+    import re
+
+    s, client = tab.session, tab.clients[0]
+    sent = []
+    s.client.send_file_download = lambda name, content, **kw: sent.append(content.decode())
+    assert wait_for(lambda: not s.gui.preview.disabled)
+    client.type(s.gui.preview, True)
+    assert wait_for(lambda: s.preview.preview is not None and client.scene.lines("/preview/feed") is not None, 30)
+    s.files.download_export(s.client, "gcode")
+    moves = [(float(m[1]), float(m[2])) for m in re.finditer(r"^G[01] X(\S+) Y(\S+)", sent[0], re.M)]
+    pts = np.vstack(([0.0, 0.0], np.array(moves) * 1e-3))  # from X0 Y0, where a program starts
+
+    def corners(p):  # without repeats (dwells, moves of C alone)
+        return p[np.r_[True, np.any(p[1:] != p[:-1], axis=1)]]
+
+    shown = s.preview.preview
+    assert np.array_equal(corners(shown.points), corners(pts))
+    assert shown.lines == len(sent[0].splitlines())
+    ts = float(s.last_result["settings"]["Ts"])
+    assert shown.duration_s == pytest.approx((len(s.last_result["pose"]) - 1) * ts, abs=1e-9)
+    assert shown.path_deviation_m <= 0.75e-7 and shown.time_deviation_m <= 0.75e-7
+    assert f"{shown.lines} lines" in s.gui.preview_note.content
+    gen = s.last_plan_generation
+    s.gui.auto_replan.value = False
+    s.edit(lambda r: r["layout"]["end"].__setitem__(1, r["layout"]["end"][1] - 0.02))
+    assert s.gui.preview.disabled and s.preview.preview is None
+    assert f"changed since plan #{gen}" in s.gui.preview_note.content
+    assert wait_for(lambda: client.scene.lines("/preview/feed") is None)
+    s.plan_now()
+    assert wait_for(lambda: s.preview.preview is not None and s.preview.preview.key[0] > gen, 30)
+    assert np.allclose(s.preview.preview.points[-1], np.asarray(s.request["layout"]["end"][:2]), atol=1e-3)
+    client.type(s.gui.preview, False)
+    assert wait_for(lambda: client.scene.lines("/preview/feed") is None and s.preview.preview is None)
+    s.gui.auto_replan.value = True
+
+
 def test_every_received_frame_has_the_legs_on_the_platform_pivots(tab):
     """Playback from two threads at once (the slider's and the Play thread's): in every window
     of messages the tab receives, each leg ends on its platform pivot as computed from the

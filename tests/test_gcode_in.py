@@ -56,10 +56,12 @@ G1 X1000 (after the end: ignored)
 
 
 def canonical_moves(program: str) -> tuple[list[tuple], float]:
-    """rs274's canonical moves in m: ('line', x, y, z, rapid) / ('arc', x, y, cx, cy, turn, z) /
-    ('dwell', s), and the unit it printed them in (per move)."""
+    """rs274's canonical moves in m: ('line', x, y, z, rapid, c, rate) / ('arc', x, y, cx, cy, turn,
+    z, c, rate) / ('dwell', s), each move followed by the unit it printed it in; c the C axis
+    [degree], rate the feed rate in force [unit / minute] (0 for a rapid)."""
     unit = 1e-3
     moves: list[tuple] = []
+    rate = 0.0
     for ln in rs274(program):
         m = re.search(r"(\w+)\((.*)\)", ln)
         if not m:
@@ -68,12 +70,16 @@ def canonical_moves(program: str) -> tuple[list[tuple], float]:
         if name == "USE_LENGTH_UNITS":
             unit = 0.0254 if "INCHES" in args else 1e-3
             continue
-        if name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
+        if name == "SET_FEED_RATE":
+            rate = float(args)
+        elif name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
             v = [float(a) for a in args.split(",")]
-            moves.append(("line", v[0] * unit, v[1] * unit, v[2] * unit, name == "STRAIGHT_TRAVERSE", unit))
+            rapid = name == "STRAIGHT_TRAVERSE"
+            moves.append(("line", v[0] * unit, v[1] * unit, v[2] * unit, rapid, v[5], 0.0 if rapid else rate, unit))
         elif name == "ARC_FEED":
             v = [float(a) for a in args.split(",")]
-            moves.append(("arc", v[0] * unit, v[1] * unit, v[2] * unit, v[3] * unit, int(v[4]), v[5] * unit, unit))
+            moves.append(("arc", v[0] * unit, v[1] * unit, v[2] * unit, v[3] * unit, int(v[4]), v[5] * unit, v[8], rate,
+                          unit))
         elif name == "DWELL":
             moves.append(("dwell", float(args)))
     return moves, unit
@@ -88,28 +94,42 @@ def parsed_moves(p: Program) -> list:
     return out
 
 
-def compare_with_rs274(text: str) -> Program:
+def compare_with_rs274(text: str, readback: bool = False) -> Program:
     """Parse ``text`` and check every XY move against rs274's canonical moves: end points,
-    arc centres, directions and full turns (to the printed precision: 4 decimals of the unit)."""
-    p = read_gcode(text)
+    arc centres, directions and full turns (to the printed precision: 4 decimals of the unit).
+    ``readback``: read as the planner's own export (G93, the C axis): C and each move's
+    inverse-time duration are checked too (the duration against the feed rate rs274 makes of
+    F: its length / rate)."""
+    p = read_gcode(text, readback=readback)
     canon, _ = canonical_moves(text)
     xy_canon = []
-    prev = np.zeros(3)
+    prev, prev_c = np.zeros(3), 0.0
     for mv in canon:
         if mv[0] == "dwell":
             continue
         digits_m = 0.51e-4 * mv[-1]
-        end = np.array([mv[1], mv[2], mv[5] if mv[0] == "line" else mv[6]]) if mv[0] == "arc" else \
-            np.array(mv[1:4])
-        if mv[0] == "line" and np.all(np.abs(end[:2] - prev[:2]) < digits_m) and mv[0] == "line":
+        end = np.array([mv[1], mv[2], mv[6]]) if mv[0] == "arc" else np.array(mv[1:4])
+        c = mv[7] if mv[0] == "arc" else mv[5]
+        if mv[0] == "line" and np.all(np.abs(end[:2] - prev[:2]) < digits_m) and not (readback and c != prev_c):
             prev = end  # a Z-only move: a plunge or retract, not an XY element
             continue
-        xy_canon.append((mv, prev.copy()))
-        prev = end
+        xy_canon.append((mv, prev.copy(), prev_c))
+        prev, prev_c = end, c
     ours = parsed_moves(p)
     assert len(ours) == len(xy_canon), (len(ours), len(xy_canon))
-    for (e, rapid), (mv, start) in zip(ours, xy_canon):
+    for (e, rapid), (mv, start, c0) in zip(ours, xy_canon):
         digits_m = 1.02e-4 * mv[-1]  # both ends printed
+        if readback:
+            c1 = mv[7] if mv[0] == "arc" else mv[5]
+            assert e.c_start_rad is not None and e.c_end_rad is not None
+            assert abs(math.degrees(e.c_start_rad) - c0) <= 1.02e-4 and abs(math.degrees(e.c_end_rad) - c1) <= 1.02e-4
+            if rapid:
+                assert e.duration_s is None
+            else:
+                rate = mv[-2]  # unit per minute; LinuxCNC: the XYZ length, else the rotary one
+                length = e.length_m / mv[-1] if e.length_m > 0 else abs(c1 - c0)
+                assert e.duration_s is not None and rate > 0
+                assert abs(e.duration_s - 60.0 * length / rate) <= e.duration_s * (0.51e-4 / rate + 1e-9), e.line
         assert np.allclose(e.start, start[:2], atol=digits_m), (e.line, e.start, start)
         if mv[0] == "line":
             assert e.kind == "line" and rapid == mv[4], e.line
@@ -129,7 +149,14 @@ def compare_with_rs274(text: str) -> Program:
             else:
                 assert abs(e.sweep_rad) < 2 * math.pi
             assert math.isclose(e.length_m, e.radius_m * abs(e.sweep_rad))
-    dwells = [mv[1] for mv in canon if mv[0] == "dwell"]
+    dwells: list[float] = []  # consecutive G4s (no move between) read as one dwell
+    after_dwell = False
+    for mv in canon:
+        if mv[0] == "dwell" and after_dwell:
+            dwells[-1] += mv[1]
+        elif mv[0] == "dwell":
+            dwells.append(mv[1])
+        after_dwell = mv[0] == "dwell"
     g4 = [b.duration_s for b in p.blocks if b.kind == "dwell" and b.reason == "G4"]
     assert np.allclose(dwells, g4)
     return p
@@ -172,6 +199,7 @@ def test_linuxcnc_samples_match_rs274(name):
     ("G41 X1", "G41"), ("G42 D1", "G42"), ("G81 X1 Y1 Z-1 R1", "G81"), ("G18", "G18"), ("G19", "G19"),
     ("O100 sub", "O-word"), ("#1 = 2", "parameters"), ("G1 A5", "A5"), ("G90.1", "G90.1"), ("M98", "M98"),
     ("G1 X[1+2]", "expressions"), ("G2 X1 Y0", "I and J"), ("G2 X10 Y0 R2", "diameter"), ("G1 Q2", "Q2"),
+    ("G93", "inverse-time feed (G93)"), ("G1 X2 C5", "C5 is another axis"),  # the read-back's words: not for contour
 ])
 def test_unsupported_words_name_the_line_and_word(line, word):
     text = f"G21 G90\nF100\nG0 X0 Y0\n{line}\nG1 Z-1\nG1 X5\nM2\n"
@@ -204,3 +232,47 @@ def test_numbers_out_of_range_or_not_numbers_are_refused(line):
     with pytest.raises(PlannerError) as err:
         read_gcode(f"G21 F100\nG1 Z-1\n{line}\nM2\n")
     assert "line 3" in err.value.message
+
+
+#: hand-written in the export's dialect: inverse time, the C axis, an arc, a C-only move, dwells
+READBACK = """(rangeplan plan: by hand)
+G21 G90 G17
+G0 X1.0000 Y2.0000 C10.0000
+G93
+G1 X3.0000 Y2.0000 C12.0000 F6000.000000
+G4 P0.010000
+G4 P0.010000
+G1 X3.0000 Y2.0000 C13.5000 F6000.000000
+G3 X1.0000 Y4.0000 R2 C15.0000 F3000.000000
+G91 G1 X-1.0000 C-15.0000 F1500.000000
+G90
+G94
+M2
+"""
+
+
+def test_readback_reads_inverse_time_and_the_c_axis_as_rs274():
+    """The read-back mode against rs274: end points, C and each move's G93 time (checked
+    against the feed rate rs274 makes of F) agree; the durations are 60 / F."""
+    p = compare_with_rs274(READBACK, readback=True)
+    moves = [e for b in p.blocks for e in b.elements]
+    assert moves[0].duration_s is None  # the rapid: the machine's own speed
+    assert [e.duration_s for e in moves[1:]] == pytest.approx([0.01, 0.01, 0.02, 0.04])
+    assert math.degrees(moves[2].c_end_rad or 0.0) == pytest.approx(13.5) and moves[2].length_m == 0.0
+    assert moves[-1].c_end_rad == pytest.approx(0.0, abs=1e-12)  # G91: C incremental
+    assert [b.duration_s for b in p.blocks if b.kind == "dwell"] == pytest.approx([0.02])
+    assert not p.passes and not p.warnings  # no cut: fine for a read-back
+    assert p.comments[0].text == "rangeplan plan: by hand"
+
+
+@pytest.mark.parametrize("text, message", [
+    ("G21 G93\nG1 X1 Y1\nM2\n", "line 2: G1 in inverse-time feed (G93) needs a positive F"),
+    ("G21 G93\nG1 X1 F100\nG1 X2\nM2\n", "line 3: G1 in inverse-time feed"),  # F is per line under G93
+    ("G21 G93 G94\nM2\n", "line 1: G93 and G94 on one line"),
+    ("G21 G93\nG1 X1 F100\nG94\nG1 X2\nM2\n", "line 4: G1 with no feed"),  # back in G94: a new F first
+    ("G21\nG1 X1 B2 F100\nM2\n", "line 2: the word B2 is another axis"),
+])
+def test_readback_refusals_name_the_line(text, message):
+    with pytest.raises(PlannerError) as err:
+        read_gcode(text, readback=True)
+    assert message in err.value.message, err.value.message

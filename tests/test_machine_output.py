@@ -19,12 +19,13 @@ import pytest
 import shapely
 
 from planner import plan
-from planner.exchange import export, import_drawing, to_dxf, to_gcode, to_joints
+from planner.exchange import export, import_drawing, read_gcode, to_dxf, to_gcode, to_joints, toolpath
 from planner.exchange.gcode import DECIMALS
 from planner.model import kinematics, load_robot
 from tests.drawings import DRAWINGS, obstacle_region
 from tests.linuxcnc import RS274, rs274
 from tests.support import PSI_TURN, TABLE1, with_settings
+from tests.test_gcode_in import compare_with_rs274
 
 HALRUN = "/usr/bin/halrun"
 PRINTED = 0.5 * 10 ** -DECIMALS  # half the last printed digit (mm, degree)
@@ -100,6 +101,35 @@ def test_gcode_runs_in_rs274_and_reproduces_the_plan(plans, name):
     assert ("PROGRAM_END", []) in canon
     if name == "psi-turn constrained":  # the platform turns: C moves
         assert np.ptp(pose[:, 2]) > 5.0
+
+
+@pytest.mark.parametrize("name", ["table1", "psi-turn constrained", "drawing layout"])
+def test_gcode_reads_back_as_the_plan(plans, name):
+    """The exported program read back (read_gcode(readback=True), the contour issue's reader):
+    at each sample time the read-back path is at the plan's tool point and angle to the
+    printed precision, its G93 durations add up to the plan's duration, every header line is
+    read as a comment; and rs274 makes the same moves, angles and times of the program."""
+    result = plans[name]
+    header = ("design: round trip", "plan id: test", "request sha256: 0123abcd")
+    program = to_gcode(result, source=name, header=header)
+    p = read_gcode(program, readback=True)
+    path = toolpath(p)
+    ts, n = float(result.settings.Ts), len(result.pose)
+    assert p.lines == len(program.splitlines()) and not p.warnings
+    assert [c.text for c in p.comments][-3:] == list(header) and p.comments[0].text.startswith("rangeplan plan:")
+    assert path.rapid[0] and not path.rapid[1:].any()  # the rapid to the first pose, then feed moves
+    assert abs(path.duration_s - (n - 1) * ts) <= n * 1e-9
+    # after the rapid the program's time is the plan's: sample k at k Ts (the path interpolated at that time)
+    t = np.arange(n) * ts
+    fed = slice(1, None)
+    at = np.column_stack([np.interp(t, path.time[fed], v[fed]) for v in (*path.points.T, path.psi)])
+    assert np.max(np.abs(at[:, :2] - result.pose[:, :2])) <= PRINTED * 1e-3 + 1e-12
+    assert np.max(np.abs(np.degrees(at[:, 2] - result.pose[:, 2]))) <= PRINTED + 1e-9
+    # every read-back point is a planned sample (the program's corners are the samples)
+    k = np.rint(path.time[fed] / ts).astype(int)
+    assert np.max(np.abs(path.time[fed] - k * ts)) <= n * 1e-9
+    assert np.max(np.abs(path.points[fed] - result.pose[k, :2])) <= PRINTED * 1e-3 + 1e-12
+    compare_with_rs274(program, readback=True)
 
 
 def test_gcode_bad_program_fails_in_rs274(tmp_path):

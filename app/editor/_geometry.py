@@ -19,7 +19,8 @@ import shapely
 CELL_COLOURS = {"free": (222, 235, 247), "blocked": (90, 90, 90), "unreachable": (244, 204, 204)}
 #: z of each layer [m] above the plane so that later layers draw on top
 Z = {"cells": 0.0, "grid": 0.0005, "corridor": 0.001, "obstacles": 0.0015, "obstacle_edges": 0.0017,
-     "reach": 0.002, "trajectory": 0.003, "ticks": 0.0035, "robot": 0.004, "pivots": 0.0045, "handles": 0.006}
+     "reach": 0.002, "trajectory": 0.003, "ticks": 0.0035, "preview": 0.0037, "robot": 0.004, "pivots": 0.0045,
+     "handles": 0.006}
 
 
 def polygon_mesh(polygons: list, z: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
@@ -288,3 +289,28 @@ def clip_segments(segments: np.ndarray, lower, upper) -> np.ndarray:
     keep &= t0 <= t1
     out = np.stack((a + t0[:, None] * d, a + t1[:, None] * d), axis=1)[keep]
     return out[np.linalg.norm(out[:, 1, :2] - out[:, 0, :2], axis=1) > 1e-12]
+
+
+def dashes(segments: np.ndarray, dash: float) -> np.ndarray:
+    """Segments (M, 2, 2) [m] cut into dashes ``dash`` [m] long with gaps as long (a short
+    segment keeps one dash), as (K, 2, 2): how a rapid move is drawn."""
+    out = []
+    for a, b in np.asarray(segments, float).reshape(-1, 2, 2):
+        length = float(np.hypot(*(b - a)))
+        n = max(1, math.floor(length / (2 * dash)))
+        s0 = np.arange(n) * 2 * dash / max(length, 1e-300)
+        s1 = np.minimum(s0 + dash / max(length, 1e-300), 1.0)
+        s0, s1 = (np.zeros(1), np.ones(1)) if length <= 2 * dash else (s0, s1)
+        out.append(np.stack((a + s0[:, None] * (b - a), a + s1[:, None] * (b - a)), axis=1))
+    return np.concatenate(out) if out else np.zeros((0, 2, 2))
+
+
+def polyline_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """Largest distance [m] of a vertex of polyline ``a`` (n, 2) from polyline ``b`` (m, 2)
+    and of a vertex of ``b`` from ``a`` (a symmetric Hausdorff distance on the vertices)."""
+    def line(p: np.ndarray):
+        return shapely.LineString(p) if len(p) > 1 and np.ptp(p, axis=0).any() else shapely.Point(p[0])
+    la, lb = line(a), line(b)
+    d_ab = shapely.distance(shapely.points(a), lb)
+    d_ba = shapely.distance(shapely.points(b), la)
+    return float(max(np.max(d_ab), np.max(d_ba)))

@@ -290,6 +290,12 @@ class EditorGui:
                                                       else 0.03) if self.place_drawing.value else None)))
         with gui.add_folder("Machine files (of the plan on screen)"):
             self.downloads_note = gui.add_markdown("Downloads: no plan yet")
+            self.preview = gui.add_checkbox(
+                "G-code preview", False, disabled=True,
+                hint="Draw the program the G-code download gives, read back, over the plan (as LinuxCNC's AXIS "
+                     "previews a program): feed moves in teal, rapids dashed red")
+            self._on_input(self.preview, editor.preview.refresh)
+            self.preview_note = gui.add_markdown("")
             self.download_buttons = {}
             for fmt in (*MACHINE_FORMATS, "csv"):
                 title = OUTPUT_FORMATS[fmt].title or "trajectory CSV"
@@ -351,6 +357,16 @@ class EditorGui:
         text = f"{'✅' if enabled else '⛔'} Downloads: {reason}"
         if self.downloads_note.content != text:
             self.downloads_note.content = text
+
+    def show_preview(self, enabled: bool, text: str | None) -> None:
+        """Enable the G-code preview toggle (a plan of the design on screen) or disable it;
+        ``text`` (markdown, None: unchanged) under it: what the preview measured, or why none."""
+        if self.preview.disabled == enabled:
+            self.preview.disabled = not enabled
+        if text is not None:
+            content = f"G-code preview: {text}"
+            if self.preview_note.content != content:
+                self.preview_note.content = content
 
     def show_status(self, text: str) -> None:
         """Set the status line (markdown)."""

@@ -38,6 +38,7 @@ from app.jobs import EditorJob, Failed, ImportJob
 from app.service import JobService
 from app.settings import settings
 from planner import PlannerError, PlanRequest, PlanResult, RobotModel, load_robot
+from planner.exchange import Toolpath, read_gcode, toolpath
 from planner.model import SINGULAR_TOL, kinematics
 from planner.schema import (
     DEFAULT_LAYOUT_SPEED_M_S,
@@ -69,6 +70,7 @@ __all__ = [
     "PlanOutcome",
     "PlanWorker",
     "PlannerError",
+    "Toolpath",
     "Robot",
     "RobotCache",
     "builtin_robot_names",
@@ -84,6 +86,8 @@ __all__ = [
     "robot_geometry",
     "drawing_request",
     "export_result",
+    "read_gcode",
+    "toolpath",
 ]
 
 log = logging.getLogger("rangeplan.editor")

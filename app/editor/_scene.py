@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import viser
@@ -32,7 +32,10 @@ import viser
 from . import _geometry as geo
 from ._planning import MAX_LEGS, Robot, reachable_mask, robot_geometry
 
-__all__ = ["ROBOT_STYLES", "TICK_EVERY_S", "EditorScene", "axis_ticks"]
+if TYPE_CHECKING:
+    from ._preview import GcodePreview
+
+__all__ = ["PREVIEW_COLOURS", "ROBOT_STYLES", "TICK_EVERY_S", "EditorScene", "axis_ticks"]
 
 TICK_EVERY_S = 0.1  #: spacing of the time ticks on the trajectory [s]
 EDGE_HANDLE = 0.014  #: width of a segment edge handle, as a fraction of the larger view side
@@ -51,6 +54,8 @@ _NO_VERTICES, _NO_FACES = np.zeros((3, 3)), np.array([[0, 1, 2]], np.int32)
 #: outline of the reachable workspace at the start / end angle (RGB 0-255)
 _PIVOTS_ABOVE_PLATFORM = geo.Z["pivots"] - geo.Z["robot"]  #: z of pivots and tool in the platform frame [m]
 _REACH_COLOURS = {"start": (210, 20, 20), "end": (230, 110, 0)}
+#: the G-code preview: feed moves and (dashed) rapids, as AXIS draws a program (RGB 0-255)
+PREVIEW_COLOURS = {"feed": (0, 170, 170), "rapid": (220, 0, 0)}
 
 
 def _show_lines(handle: viser.LineSegmentsHandle, segments: np.ndarray) -> None:
@@ -143,6 +148,9 @@ class EditorScene:
         # result: trajectory and its time ticks
         self.trajectory = lines("/result/trajectory", (20, 60, 220), 3.0)
         self.ticks = points("/result/ticks", (255, 140, 0), 0.0035, "circle")
+        # the G-code preview (the exported program read back): feed moves, rapids dashed
+        self.preview_feed = lines("/preview/feed", PREVIEW_COLOURS["feed"], 2.0)
+        self.preview_rapid = lines("/preview/rapid", PREVIEW_COLOURS["rapid"], 2.0)
         # segment-list corridor: boxes, the selected box and its drag handles, snapping grid
         self.seg_grid = lines("/segments/grid", (205, 205, 205), 0.5)
         self.seg_boxes = lines("/segments/boxes", (0, 120, 0), 1.5)
@@ -417,6 +425,22 @@ class EditorScene:
         ticks = geo.time_ticks(t, pose, TICK_EVERY_S)
         self.ticks.points = np.column_stack((ticks, np.full(len(ticks), geo.Z["ticks"])))
         self.ticks.visible = True
+
+    def show_preview(self, preview: GcodePreview | None) -> None:
+        """The G-code preview over the trajectory: the read-back program's feed moves as
+        line segments through its points, its rapids dashed; None hides it."""
+        if preview is None:
+            self.preview_feed.visible = self.preview_rapid.visible = False
+            return
+        z = geo.Z["preview"]
+
+        def lift(segs: np.ndarray) -> np.ndarray:
+            return np.concatenate((segs, np.full((*segs.shape[:2], 1), z)), axis=2)
+
+        feed, rapid = preview.segments(rapid=False), preview.segments(rapid=True)
+        span = float(np.max(np.ptp(preview.points, axis=0))) if len(preview.points) > 1 else 0.0
+        _show_lines(self.preview_feed, lift(feed))
+        _show_lines(self.preview_rapid, lift(geo.dashes(rapid, max(span, 0.01) / 60.0)))
 
     # ------------------------------------------------------------------ robot
     def hide_robot(self) -> None:

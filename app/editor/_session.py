@@ -33,6 +33,7 @@ from ._gui import EditorGui, error_body, error_title
 from ._history import History
 from ._placement import reachable_region
 from ._planning import PlanWorker, compute_plan
+from ._preview import Previewer
 from ._result import leg_legend_html
 from ._scene import EditorScene
 from ._session_segments import SegmentEdits
@@ -65,6 +66,7 @@ class Session(SegmentEdits):
         self.scene = EditorScene(client, on_click=self._on_scene_click, on_rect_select=self._on_rect_select,
                                  on_handle_moved=self.move_handle, on_segment_drag=self.drag_segment)
         self.files = EditorFiles(self, editor.store)
+        self.preview = Previewer(self)
         self.gui = EditorGui(client.gui, self, has_store=editor.store is not None)
         self.files.refresh_stored()
         self.place_cameras()
@@ -293,9 +295,11 @@ class Session(SegmentEdits):
         self.show_downloads()
 
     def show_downloads(self) -> None:
-        """Machine-file downloads on only for the plan of the design on screen (else the reason)."""
+        """Machine-file downloads and the G-code preview on only for the plan of the design on
+        screen (else the reason)."""
         files = self.files.machine_files()
         self.gui.show_downloads(files.result is not None, files.reason)
+        self.preview.refresh()  # the G-code preview follows the same rule
 
     def show_time(self, t: float) -> None:
         """Show the robot of the newest result at time ``t`` [s] (clamped to the plan)."""

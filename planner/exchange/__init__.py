@@ -3,7 +3,8 @@
 - :func:`import_drawing`: a DXF or SVG drawing (its own units) -> a
   :class:`~planner.schema.Layout` in m with an :class:`~planner.schema.ImportReport`;
 - :func:`read_gcode`: a CAM program (RS274NGC) -> a :class:`~planner.schema.Program` of lines
-  and arcs in m, cut passes, travel and dwells;
+  and arcs in m, cut passes, travel and dwells (``readback=True``: the planner's own G-code
+  read back, G93 and the C axis; :func:`toolpath`: a program's path as a timed polyline);
 - :func:`export`: a :class:`~planner.schema.PlanResult` (SI) -> LinuxCNC G-code (mm,
   degrees, inverse-time feed: :func:`to_gcode`), a leg-length stream for ``halstreamer``
   (mm: :func:`to_joints`) or a DXF of the path, the corridor and the obstacles (mm:
@@ -23,15 +24,16 @@ from .joints import joint_columns, to_joints
 
 if TYPE_CHECKING:  # the readers, for type checkers; at run time they load on first use
     from .drawing import DRAWING_FORMATS, drawing_format, import_drawing
-    from .gcode_in import read_gcode
+    from .gcode_in import Toolpath, read_gcode, toolpath
 
 #: the readers load on first use (PEP 562): writing a plan's output (``app.formats``, every
 #: ``rangeplan plan``) needs neither shapely nor scipy.spatial, which the drawing reader imports
 _LAZY = {"DRAWING_FORMATS": "drawing", "drawing_format": "drawing", "import_drawing": "drawing",
-         "read_gcode": "gcode_in"}
+         "read_gcode": "gcode_in", "Toolpath": "gcode_in", "toolpath": "gcode_in"}
 
-__all__ = ["DRAWING_FORMATS", "DXF_LAYERS", "EXPORT_FORMATS", "ExportFormat", "drawing_format", "export",
-           "export_format_for", "import_drawing", "joint_columns", "read_gcode", "to_dxf", "to_gcode", "to_joints"]
+__all__ = ["DRAWING_FORMATS", "DXF_LAYERS", "EXPORT_FORMATS", "ExportFormat", "Toolpath", "drawing_format", "export",
+           "export_format_for", "import_drawing", "joint_columns", "read_gcode", "to_dxf", "to_gcode", "to_joints",
+           "toolpath"]
 
 
 def __getattr__(name: str) -> Any:

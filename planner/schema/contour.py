@@ -38,7 +38,8 @@ class _Out(BaseModel):
 
 
 class PathElement(_Out):
-    """One programmed XY move: a straight line or a circular arc (XY plane, G17)."""
+    """One programmed XY move: a straight line or a circular arc (XY plane, G17); read back
+    (``read_gcode(readback=True)``) also a move of the C axis alone (a line of length 0)."""
 
     kind: Literal["line", "arc"] = Field(description="'line' (G0/G1) or 'arc' (G2/G3)")
     line: int = Field(description="Source line number (1-based)")
@@ -54,6 +55,12 @@ class PathElement(_Out):
     z_end_m: float = Field(description="Z at the end, m")
     feed_m_s: float = Field(description="Programmed feed F, m/s")
     exact_stop: bool = Field(default=False, description="G61 active: the tool stops at the end of this move")
+    c_start_rad: float | None = Field(default=None, description="The C axis (the platform angle psi) at the start, rad "
+                                      "(degrees in the program); null: a program read without readback (no C axis)")
+    c_end_rad: float | None = Field(default=None, description="The C axis (the platform angle psi) at the end, rad; "
+                                    "null without readback")
+    duration_s: float | None = Field(default=None, description="G93 inverse time: the time the move takes, 60 / F s; "
+                                     "null for a rapid or a move in units per minute (G94)")
 
     def point_at(self, s: np.ndarray) -> np.ndarray:
         """Points at arc length ``s`` (n,) from the start, (n, 2) [m]."""
