@@ -16,6 +16,7 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
+import math  # noqa: E402
 import sys  # noqa: E402
 
 
@@ -131,7 +132,8 @@ def _run_api(app, host: str, port: int, log_level: str = "info", access_log: boo
         # an idle connection outlives the clients' keep-alive expiry (httpx 5 s = uvicorn's default):
         # with equal timeouts a client may send on a connection the server is just closing (ReadError)
         config = uvicorn.Config(app, host=host, port=port, log_level=log_level, access_log=False,
-                                log_config=log_config(log_level), timeout_keep_alive=keep_alive_s)
+                                log_config=log_config(log_level),
+                                timeout_keep_alive=math.ceil(keep_alive_s))  # whole seconds, none shorter
         server = uvicorn.Server(config)
         server.run()
         # uvicorn returns (does not raise) when it cannot bind

@@ -130,11 +130,10 @@ def default_data_dir() -> Path:
     else ``~/.local/share/rangeplan`` (created on first use by :class:`Store`)."""
     from app.settings import settings
 
-    configured = settings().data_dir
-    if configured is not None:
-        return configured.expanduser()
-    xdg = os.environ.get("XDG_DATA_HOME")
-    base = Path(xdg).expanduser() if xdg else Path.home() / ".local" / "share"
+    cfg = settings()
+    if cfg.data_dir is not None:
+        return cfg.data_dir.expanduser()
+    base = cfg.xdg_data_home.expanduser() if cfg.xdg_data_home is not None else Path.home() / ".local" / "share"
     return base / "rangeplan"
 
 

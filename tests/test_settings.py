@@ -3,12 +3,13 @@ environment, and a value that does not parse names its variable."""
 
 from __future__ import annotations
 
+import ast
 import re
 from pathlib import Path
 
 import pytest
 
-from app.settings import Settings, SettingsError, settings, settings_table
+from app.settings import Settings, SettingsError, env_name, settings, settings_table
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -20,8 +21,10 @@ def test_readme_table_is_the_settings_object():
     assert m, "README has no generated settings table"
     assert m.group(1) == settings_table()
     # every field is one row, named as the environment variable it reads
-    rows = [r for r in m.group(1).splitlines() if r.startswith("| `RANGEPLAN_")]
-    assert [r.split("`")[1] for r in rows] == [f"RANGEPLAN_{k.upper()}" for k in Settings.model_fields]
+    rows = [r for r in m.group(1).splitlines() if r.startswith("| `")]
+    assert [r.split("`")[1] for r in rows] == [env_name(k) for k in Settings.model_fields]
+    assert {env_name(k) for k in Settings.model_fields if not env_name(k).startswith("RANGEPLAN_")} == {
+        "XDG_DATA_HOME", "NUMBA_CACHE_DIR"}
 
 
 def test_values_come_from_the_environment(monkeypatch):
@@ -42,3 +45,51 @@ def test_a_bad_value_names_its_variable(monkeypatch, name, value, cause):
     with pytest.raises(SettingsError) as e:
         settings()
     assert str(e.value).startswith(f"{name}: ") and cause in str(e.value) and repr(value) in str(e.value)
+
+
+def test_a_mapping_is_read_alone_and_a_bad_value_names_its_variable(monkeypatch):
+    """settings(environ) reads only that mapping (not the process environment), by the
+    variables' own names, other programs' variables included."""
+    monkeypatch.setenv("RANGEPLAN_PORT", "9999")
+    cfg = settings({"RANGEPLAN_WORKERS": "2", "XDG_DATA_HOME": "/srv/data", "NUMBA_CACHE_DIR": "", "OTHER": "x"})
+    assert (cfg.workers, cfg.port, cfg.xdg_data_home, cfg.numba_cache_dir) == (2, 8000, Path("/srv/data"), None)
+    with pytest.raises(SettingsError, match=r"^RANGEPLAN_MAX_QUEUE: .*'many'"):
+        settings({"RANGEPLAN_MAX_QUEUE": "many"})
+
+
+#: environment reads outside app/settings.py that are not configuration, with the reason
+_NOT_CONFIGURATION = {
+    # glibc's trim threshold as Dask's nanny set it for this worker process: process state
+    ("app/batch/cluster.py", "MALLOC_TRIM_THRESHOLD_"),
+}
+
+
+def _environment_reads(path: Path) -> list[tuple[str, str]]:
+    """(file, variable) of each ``os.environ[...]``, ``os.environ.get(...)``,
+    ``os.getenv(...)`` read in ``path``."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        key = None
+        if isinstance(node, ast.Subscript) and ast.unparse(node.value) == "os.environ":
+            key = node.slice
+        elif isinstance(node, ast.Call) and ast.unparse(node.func) in ("os.environ.get", "os.getenv"):
+            key = node.args[0] if node.args else ast.Constant("?")
+        if key is not None:
+            name = key.value if isinstance(key, ast.Constant) else ast.unparse(key)
+            out.append((path.relative_to(ROOT).as_posix(), str(name)))
+    return out
+
+
+def test_only_the_settings_module_reads_the_environment():
+    """Configuration is read in one place: no module of app/ but app/settings.py reads an
+    environment variable, apart from the listed process state; every other mention of
+    ``os.environ`` is a ``setdefault`` (the BLAS thread counts cli, server and workers set),
+    so no module hands the environment on to be read elsewhere."""
+    files = [p for p in sorted((ROOT / "app").rglob("*.py")) if p.name != "settings.py"]
+    reads = [r for p in files for r in _environment_reads(p)]
+    assert set(reads) == _NOT_CONFIGURATION
+    for p in files:
+        text = p.read_text()
+        n_reads = sum(1 for r in reads if r[0] == p.relative_to(ROOT).as_posix())
+        assert text.count("os.environ") == text.count("os.environ.setdefault") + n_reads, p
+        assert "getenv" not in text.replace("os.getenv", ""), p
