@@ -661,7 +661,8 @@ def certify_case(case: dict, modes: tuple[str, ...] = ("constrained", "paper")) 
     ``{mode: {"outcome": "ok" | code, "problem": str | None, "seconds": s, "estimate": s}}``.
     ``seconds`` is the process's CPU time of the plan (robust to other load on the machine);
     ``estimate`` the work estimate the planner bounds the plan with before simulating (a
-    layout's once segmented, :func:`planner.estimate_work` with its segments)."""
+    layout's once segmented, :func:`planner.estimate_work` with its segments); ``advice`` the
+    estimate's bound on checking an error's advice (``advice_seconds``)."""
     from planner import PlannerError, estimate_work, plan
 
     out: dict[str, dict] = {}
@@ -669,7 +670,8 @@ def certify_case(case: dict, modes: tuple[str, ...] = ("constrained", "paper")) 
         req = _with(case, mode=mode)
         rec: dict[str, Any] = {"outcome": None, "problem": None}
         try:
-            rec["estimate"] = estimate_work(req).seconds
+            est = estimate_work(req)
+            rec["estimate"], rec["advice"] = est.seconds, est.advice_seconds
         except PlannerError as exc:
             rec.update(outcome=exc.code, estimate=None, seconds=0.0)
             out[mode] = rec
@@ -681,6 +683,12 @@ def certify_case(case: dict, modes: tuple[str, ...] = ("constrained", "paper")) 
             rec["seconds"] = time.process_time() - t0
             rec["outcome"] = exc.code
             rec["message"] = str(exc)
+            if exc.code == "infeasible" and req.get("layout") is not None:
+                # planned on the segmented corridor: estimated from it, as the planner does
+                from planner import segment
+
+                est = estimate_work(req, segment(req).segments)
+                rec["estimate"], rec["advice"] = est.seconds, est.advice_seconds
             if mode == "constrained":
                 rec["problem"] = confirm_error(req, exc.code, exc.message, exc.field)
             out[mode] = rec

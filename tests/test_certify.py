@@ -176,3 +176,33 @@ def test_certification_slice():
             if rec.get("problem"):
                 problems.append((mode, rec["outcome"], rec["problem"], case))
     assert not problems, problems[:3]
+
+
+def test_the_advice_bound_counts_every_cell_the_remedy_search_segments(monkeypatch):
+    """``estimate_work(...).advice_seconds`` bounds an error's advice checks by the cells the
+    remedy search may segment (:func:`planner.corridor.remedy_cells`): with no remedy that
+    works (a wall across the bounds, a clearance, a psi range wider than the end angles) every
+    candidate is tried, and the cells segmented are exactly that count."""
+    from planner.corridor import remedy_cells, segmentation
+
+    seen: list[int] = []
+    real = segmentation._cells_and_path
+
+    def counting(ws, model, s, *args, **kw):
+        from planner.schema import cell_count
+
+        seen.append(cell_count(ws.lower, ws.upper, ws.shape, s)[0])
+        return real(ws, model, s, *args, **kw)
+
+    lay = copy.deepcopy(WALL)
+    lay["psi_range"] = [-0.1, 0.1]
+    req = {"robot": "moving-slide", "layout": lay}
+    monkeypatch.setattr(segmentation, "_cells_and_path", counting)
+    err = _error(req)
+    assert err.code == "no_path" and "no cell size can pass it" in err.message
+    first, remedies = seen[0], seen[1:]
+    cells, runs = remedy_cells(np.array(lay["bounds"]["lower"]), np.array(lay["bounds"]["upper"]), "square",
+                               lay["cell"]["size"], lay["clearance"], True)
+    assert first == 16 * 12 and (sum(remedies), len(remedies)) == (cells, runs)
+    est = estimate_work(req)
+    assert est.advice_seconds > 0.0

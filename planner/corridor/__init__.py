@@ -13,7 +13,7 @@ from .cells import cell_size_rule
 from .ranges import RangeSequence, range_sequence, reference_sequence, segment_counts
 from .reach_region import reachable_region
 from .search import count_turns
-from .segmentation import Segmentation, segment
+from .segmentation import Segmentation, remedy_cells, segment
 
 __all__ = ["RangeSequence", "Segmentation", "cell_size_rule", "count_turns", "range_sequence", "segment_counts",
-           "reachable_region", "reference_sequence", "segment"]
+           "reachable_region", "reference_sequence", "remedy_cells", "segment"]

@@ -65,7 +65,7 @@ from .reach_region import boxes_reachable, psi_samples
 from .search import fewest_turns_path
 from .workspace import Workspace, check_endpoint, format_point, parse_layout
 
-__all__ = ["Segmentation", "segment"]
+__all__ = ["Segmentation", "remedy_cells", "segment"]
 
 
 @dataclass
@@ -212,29 +212,51 @@ def _has_path(ws: Workspace, model: Any, s: float, field_path: str) -> bool:
     return True
 
 
-def _remedies(ws: Workspace, model: Any, s: float, field_path: str) -> list[str]:
-    """The changes of the layout that were tried and give a path (checked by segmenting
-    again, within a budget of cells): smaller cells, a narrower psi_range, a smaller
-    clearance. Empty: none of the tried changes helps."""
-    W, H = ws.upper - ws.lower
-    budget = REMEDY_CELL_BUDGET * MAX_CELLS
-
-    def cells(size: float) -> int:
-        return cell_count(ws.lower, ws.upper, ws.shape, size)[0]
-
-    sizes = []
+def _remedy_sizes(lower: np.ndarray, upper: np.ndarray, shape: str, s: float) -> tuple[list[float], int]:
+    """The smaller cell sizes the remedy search considers (halving down to
+    :data:`REMEDY_SMALLEST` of ``s``, each within :data:`MAX_CELLS`) and how many of them,
+    smallest last, fit the budget of :data:`REMEDY_CELL_BUDGET` x ``MAX_CELLS`` cells in all."""
+    sizes: list[float] = []
     size = s
     while size > s * REMEDY_SMALLEST * 1.0001:
         size *= 0.5
-        if size < MIN_CELL_SIZE or cells(size) > MAX_CELLS:
+        if size < MIN_CELL_SIZE or cell_count(lower, upper, shape, size)[0] > MAX_CELLS:
             break
         sizes.append(size)
-    out: list[str] = []
-    spent = 0
+    spent = tried = 0
     for size in sizes:
-        spent += cells(size)
-        if spent > budget:
+        spent += cell_count(lower, upper, shape, size)[0]
+        if spent > REMEDY_CELL_BUDGET * MAX_CELLS:
             break
+        tried += 1
+    return sizes, tried
+
+
+def remedy_cells(lower: np.ndarray, upper: np.ndarray, shape: str, s: float, clearance: float,
+                 psi_narrows: bool) -> tuple[int, int]:
+    """(cells, segmentations): the most that :func:`_remedies` segments when a layout of cells
+    of edge ``s`` has no path; the bound of the advice's work, known before the request starts
+    (:func:`planner.orchestrator.estimate_work`). ``psi_narrows``: the layout's psi_range is
+    wider than its start and end angles (a narrower one is tried)."""
+    sizes, tried = _remedy_sizes(lower, upper, shape, s)
+    counts = [cell_count(lower, upper, shape, size)[0] for size in [s, *sizes]]
+    cells, runs = sum(counts[1:1 + tried]), tried
+    again = sum(counts[:3])  # psi_range and clearance: the given size and the next two
+    k = len(counts[:3])
+    if psi_narrows:
+        cells, runs = cells + again, runs + k
+    if clearance > 0:
+        cells, runs = cells + 2 * again, runs + 2 * k
+    return cells, runs
+
+
+def _remedies(ws: Workspace, model: Any, s: float, field_path: str) -> list[str]:
+    """The changes of the layout that were tried and give a path (checked by segmenting
+    again, within a budget of cells, :func:`remedy_cells`): smaller cells, a narrower
+    psi_range, a smaller clearance. Empty: none of the tried changes helps."""
+    sizes, tried = _remedy_sizes(ws.lower, ws.upper, ws.shape, s)
+    out: list[str] = []
+    for size in sizes[:tried]:
         if _has_path(ws, model, size, field_path):
             out.append(f"cells of {size:g} m ({field_path}.cell.size; now {s:g} m) give a path")
             break
@@ -254,7 +276,6 @@ def _remedies(ws: Workspace, model: Any, s: float, field_path: str) -> list[str]
                 out.append(f"a clearance of {c:g} m ({field_path}.clearance; now {ws.clearance:g} m)"
                            + (f" with cells of {ok:g} m" if ok != s else "") + " gives a path")
                 break
-    del W, H
     return out
 
 

@@ -36,7 +36,7 @@ from .fastest import search as search_fastest
 from .result import build_result
 from .simulate import Resume, Simulation, simulate
 from .timing import method_of, resolve_timing, timing_info
-from .work import check_work, estimate_work
+from .work import MORE_TIME, check_work, estimate_work
 
 __all__ = ["plan", "plan_timed", "segment", "warm_up"]
 
@@ -105,11 +105,6 @@ def plan(request: Any, *, robot: RobotModel | None = None, segments: Sequence[Se
                            f"speed {mt.end_speed_m_s * 1e3:.3f} mm/s); lengthen settings.tail_max_s, "
                            "add samples per segment or raise k_r", "settings.tail_max_s")
     return result
-
-
-#: the time factors the advice of an infeasible plan tries (each planned until its first
-#: infeasible step)
-MORE_TIME = (2, 4, 8, 16)
 
 
 def _more_time_advice(exc: PlannerError, name: str | None, model: RobotModel, given: Settings, st: Settings,

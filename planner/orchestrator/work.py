@@ -15,12 +15,19 @@ the validated request alone (no robot model, no segmentation, no simulation):
 * the range sequence, the corridor metrics and the result, per sample (linear in the
   samples; more with exact cell polygons);
 * a layout's segmentation (per cell and per obstacle);
-* the ``fastest`` timing search: about ``2 + log2(N)`` plans at ``S = N``.
+* the ``fastest`` timing search: about ``2 + log2(N)`` plans at ``S = N``;
+* the advice an error may carry, checked before it is given (issue 20), bounded by its own
+  parameters and estimated apart (``advice_seconds``): a layout without a path is segmented
+  again with smaller cells, a narrower psi range and less clearance (at most
+  :func:`planner.corridor.remedy_cells`); an infeasible constrained plan is planned again with
+  :data:`MORE_TIME` times the samples (each at most that multiple of the plan).
 
 Unit costs are :data:`planner.schema.WORK_COSTS` (seconds on the reference machine,
 ``benchmarks/bench_work.py``). The settling is counted in full (``tail_max_s``), so the
 estimate bounds the work of a request whose corridor it knows: measured <= 1.5x the estimate
-(``benchmarks/certify.py``). A layout's path is unknown until it is segmented: the estimate
+(``benchmarks/certify.py``), and an error's with its advice checks <= 1.5x the estimate plus
+``advice_seconds``. A server admits a request by ``seconds`` and stops the advice checks at its
+time limit. A layout's path is unknown until it is segmented: the estimate
 takes the shortest possible one, and :func:`~planner.orchestrator.plan` with ``work_limit_s``
 estimates again from the segmented corridor before simulating (:func:`check_work`), so a long
 serpentine corridor is refused before its simulation starts.
@@ -35,12 +42,24 @@ from typing import Any
 
 import numpy as np
 
-from ..corridor import cell_size_rule
+from ..corridor import cell_size_rule, remedy_cells
 from ..errors import PlannerError
-from ..schema import SQRT3_2, WORK_COSTS, PlanRequest, cell_count, parse_request
+from ..schema import (
+    MAX_SAMPLES_PER_SEGMENT,
+    MAX_TOTAL_STEPS,
+    SQRT3_2,
+    WORK_COSTS,
+    PlanRequest,
+    cell_count,
+    parse_request,
+)
 from .timing import centre_path_length, method_of, moving_segments
 
-__all__ = ["WorkEstimate", "check_work", "estimate_work"]
+__all__ = ["MORE_TIME", "WorkEstimate", "check_work", "estimate_work"]
+
+#: the time factors the advice of an infeasible constrained plan tries, in this order (each
+#: planned until its first infeasible step; the first that plans is advised)
+MORE_TIME = (2, 4, 8, 16)
 
 
 
@@ -53,6 +72,9 @@ class WorkEstimate:
     plans: int  #: plans the request runs (more than one for ``fastest``)
     field: str  #: the request field that contributes most
     detail: str  #: the arithmetic, in words
+    #: the most that checking an error's advice adds (a layout's remedies segmented, an
+    #: infeasible plan's :data:`MORE_TIME`), on the reference machine [s]; not part of ``seconds``
+    advice_seconds: float = 0.0
 
     def message(self, limit_s: float) -> str:
         """Why a server with the time limit ``limit_s`` [s] rejects this request."""
@@ -166,7 +188,22 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
               f"{metrics_s:.2g} s of corridor metrics")
     if segment_s > 0.01:
         detail += f", {segment_s:.2g} s of segmentation"
-    return WorkEstimate(seconds=seconds, steps=plans * steps_one, plans=plans, field=field, detail=detail)
+    advice_s = 0.0
+    if req.layout is not None and segments is None:  # no path: the remedies segmented
+        lay = req.layout
+        size = lay.cell.size if lay.cell.size is not None else cell_size_rule(
+            lay.bounds.lower, lay.bounds.upper, lay.start_pose, lay.end_pose, lay.cell.shape, st)
+        psi_narrows = lay.psi_range is not None and bool(
+            np.any(np.abs(np.asarray(lay.psi_range) - np.sort([lay.start_pose[2], lay.end_pose[2]])) > 1e-12))
+        r_cells, r_runs = remedy_cells(lay.bounds.lower, lay.bounds.upper, lay.cell.shape, size, lay.clearance,
+                                       psi_narrows)
+        advice_s = r_cells * c["cell"] + r_runs * (obstacles * c["obstacle"] + c["fixed"])
+    if st.mode == "constrained" and not st.fastest and req.reference is None:  # infeasible: more time
+        more = [f for f in MORE_TIME
+                if S * f <= MAX_SAMPLES_PER_SEGMENT and n * S * f + st.tail_steps <= MAX_TOTAL_STEPS]
+        advice_s = max(advice_s, sum(more) * seconds)
+    return WorkEstimate(seconds=seconds, steps=plans * steps_one, plans=plans, field=field, detail=detail,
+                        advice_seconds=advice_s)
 
 
 def check_work(request: Any, segments: Any, limit_s: float | None) -> None:
