@@ -99,7 +99,7 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
     def make() -> JobService:
         queue = max_queue if max_queue is not None else cfg.max_queue
         return JobService.start(workers or cfg.workers, timeout_s, queue, mode=executor or cfg.executor,
-                                memory_mb=memory_mb, export_timeout_s=cfg.export_timeout_s)
+                                memory_mb=memory_mb, export_timeout_s=cfg.export_timeout_s, start=cfg.worker_start)
 
     holder: _ServiceHolder
 

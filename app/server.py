@@ -16,7 +16,6 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-import math  # noqa: E402
 import sys  # noqa: E402
 
 
@@ -88,7 +87,8 @@ def serve(host: str = "127.0.0.1", port: int = 8000, editor_port: int = 8080, ed
          f"{', '.join(sorted(policy.allowed_hosts))}; CORS {', '.join(policy.cors_origins) or 'off'}")
     # one job service for the API and the editor: the same workers, estimate, limits, errors
     service = JobService.start(cfg.workers, cfg.plan_timeout_s, cfg.max_queue, mode=cfg.executor,
-                               memory_mb=cfg.worker_memory_mb, export_timeout_s=cfg.export_timeout_s)
+                               memory_mb=cfg.worker_memory_mb, export_timeout_s=cfg.export_timeout_s,
+                               start=cfg.worker_start)
     handle = None
     try:
         if editor:
@@ -133,7 +133,8 @@ def _run_api(app, host: str, port: int, log_level: str = "info", access_log: boo
         # with equal timeouts a client may send on a connection the server is just closing (ReadError)
         config = uvicorn.Config(app, host=host, port=port, log_level=log_level, access_log=False,
                                 log_config=log_config(log_level),
-                                timeout_keep_alive=math.ceil(keep_alive_s))  # whole seconds, none shorter
+                                # uvicorn annotates int but passes the seconds to loop.call_later: a float works
+                                timeout_keep_alive=keep_alive_s)  # pyright: ignore[reportArgumentType]
         server = uvicorn.Server(config)
         server.run()
         # uvicorn returns (does not raise) when it cannot bind

@@ -62,9 +62,11 @@ class JobService:
 
     @classmethod
     def start(cls, workers: int, timeout_s: float, max_queue: int, mode: str = "process",
-              memory_mb: int | None = None, export_timeout_s: float | None = None) -> JobService:
-        """A service with a new pool of its own (:meth:`close` ends it)."""
-        return cls(PlanPool(workers, timeout_s, max_queue, mode=mode, memory_mb=memory_mb),
+              memory_mb: int | None = None, export_timeout_s: float | None = None,
+              start: str | None = None) -> JobService:
+        """A service with a new pool of its own (:meth:`close` ends it); ``start``: how its
+        worker processes start (:data:`app.workers.START_METHODS`)."""
+        return cls(PlanPool(workers, timeout_s, max_queue, mode=mode, memory_mb=memory_mb, start=start),
                    export_timeout_s=export_timeout_s)
 
     def run(self, job: Job) -> Outcome:

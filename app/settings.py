@@ -72,6 +72,9 @@ class Settings(BaseSettings):
     export_timeout_s: float = _f(120.0, "Time limit of writing a stored plan in an export format (GET /v1/plans/{id}?"
                                  "format=) [s]; at least RANGEPLAN_PLAN_TIMEOUT_S", gt=0)
     worker_memory_mb: int = _f(2048, "Address-space limit of each planning process [MiB] (0: none)", ge=0)
+    worker_start: Literal["forkserver", "exec"] = _f("forkserver", "How a planning process starts: forked from one "
+                                                     "that loaded the planner once (ready in ~0.1 s), or a fresh "
+                                                     "interpreter loading it (1-6 s each)")
     max_queue: int = _f(64, "Jobs waiting for a worker beyond which the API answers 503 busy", ge=0)
     max_body_bytes: int = _f(2 * MiB, "Largest request body [bytes] (413 above)", default_text="2 MiB", gt=0)
     # -- storage

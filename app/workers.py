@@ -46,6 +46,7 @@ import sys  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
 from multiprocessing.connection import Connection  # noqa: E402
+from typing import Any  # noqa: E402
 
 from app.failures import limit_memory, out_of_memory  # noqa: E402
 from app.jobs import Failed, Job, Outcome, run_job  # noqa: E402
@@ -76,6 +77,7 @@ WORKER_NICE = 5
 
 
 def _worker_main(conn, memory_mb: int | None = None, parent: int | None = None, pdeathsig: bool = False) -> None:
+    """A worker started as a fresh interpreter (``start="exec"``)."""
     if parent is not None:  # end with the server, even a kill -9 of it (app.lifeline)
         from app.lifeline import exit_with_parent
 
@@ -84,16 +86,39 @@ def _worker_main(conn, memory_mb: int | None = None, parent: int | None = None, 
         os.nice(WORKER_NICE)
     except OSError:
         pass
-    # import the planner and load its compiled kernels before the first job, not during it
-    # (and the storage and the export writers: imported before the first job, not during it)
+    _serve(conn, memory_mb, load_planner())
+
+
+def load_planner() -> tuple[str, str | None]:
+    """Import the planner and load its compiled kernels (before the first job, not during it;
+    and the storage and the export writers): ``("ready", None)`` or ``("failed", reason)``."""
     import app.formats
     import app.storage  # noqa: F401
     import planner
-    status: tuple = ("ready", None)
     try:
         planner.warm_up()  # ~0.3 s from numba's on-disk cache; compiles after an install
     except Exception as exc:  # the worker cannot plan: say why (the pool reports it, /ready stays 503)
-        status = ("failed", f"{type(exc).__name__}: {exc}")
+        return ("failed", f"{type(exc).__name__}: {exc}")
+    return ("ready", None)
+
+
+def _forked_worker(conn, memory_mb: int | None = None) -> None:
+    """A worker forked by multiprocessing's fork server (``start="forkserver"``), which has
+    already loaded the planner (:mod:`app.worker_template`): ready at once. It ends with the
+    fork server (the kernel's parent-death signal and the watch thread of
+    :mod:`app.lifeline`), which ends with the server (its pipe to the server closes)."""
+    from app import worker_template
+    from app.lifeline import exit_with_parent
+
+    # the fork server's pid (the template was imported there); if this process imported it
+    # itself (a fork server started with other preloads), its parent is the fork server
+    template = worker_template.PID if worker_template.PID != os.getpid() else os.getppid()
+    exit_with_parent(template, thread_bound=True)  # the fork server forks from its only thread
+    _serve(conn, memory_mb, worker_template.STATUS)
+
+
+def _serve(conn, memory_mb: int | None, status: tuple[str, str | None]) -> None:
+    """Report ``status`` to the pool, then run jobs until told to stop."""
     try:
         conn.send(status)  # the job clock starts only after this
     except (OSError, ValueError):
@@ -125,28 +150,85 @@ def _worker_main(conn, memory_mb: int | None = None, parent: int | None = None, 
 STARTUP_TIMEOUT_S = 120.0
 
 
-class _Worker:
-    """A worker process started as ``python -m app.workers FD MEMORY_MB PARENT_PID PDEATHSIG`` (a fresh
-    interpreter that never re-imports the server's ``__main__``), talking over a socket
-    pair. A thread waits for its first message (ready, or failed with a reason)."""
+#: how the pool starts a worker process (:class:`PlanPool`'s ``start``)
+START_METHODS = ("forkserver", "exec")
 
-    def __init__(self, memory_mb: int | None = None):
-        parent, child = socket.socketpair()
+
+def default_start() -> str:
+    """``"forkserver"`` where multiprocessing has a fork server (Linux, macOS), else ``"exec"``."""
+    import multiprocessing
+
+    return "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "exec"
+
+
+class _Worker:
+    """One planning process and the server's end of its pipe. A thread starts it and waits
+    for its first message (ready, or failed with a reason). Two ways to start it:
+
+    * ``"forkserver"``: forked by multiprocessing's fork server, a process started once per
+      server that imported the planner and loaded its kernels (:mod:`app.worker_template`):
+      ready in milliseconds; the first one waits for the fork server's own warm-up. Its
+      workers see the environment the server had when the fork server started (its first
+      pool), not a later ``os.environ`` change (one fork server per server process);
+    * ``"exec"``: ``python -m app.workers FD MEMORY_MB PARENT_PID PDEATHSIG``, a fresh
+      interpreter that never re-imports the server's ``__main__`` and loads the planner
+      itself (1-3 s), over a socket pair.
+    """
+
+    def __init__(self, memory_mb: int | None = None, start: str = "exec"):
+        self.started = threading.Event()  #: the worker reported (ready or failed)
+        self.ready = False
+        self.failure: str | None = None
+        self._lock = threading.Lock()
+        self._killed = False
+        self.proc: subprocess.Popen | None = None
+        self.process: Any = None  # a multiprocessing.Process (start="forkserver")
+        if start == "forkserver":
+            import multiprocessing
+
+            ctx = multiprocessing.get_context("forkserver")
+            ctx.set_forkserver_preload(["app.worker_template"])  # before the fork server starts
+            self.conn, child = ctx.Pipe(duplex=True)
+            self.process = ctx.Process(target=_forked_worker, args=(child, memory_mb), daemon=True,
+                                       name="rangeplan-worker")
+            threading.Thread(target=self._start_forked, args=(child,), name="rangeplan-worker-start",
+                             daemon=True).start()
+            return
+        parent, child_sock = socket.socketpair()
         try:
             # the parent's pid, and whether this thread lives as long as the server (the kernel's
             # parent-death signal is tied to it; app.lifeline)
             bound = int(threading.current_thread() is threading.main_thread())
-            self.proc = subprocess.Popen([sys.executable, "-m", "app.workers", str(child.fileno()),
+            self.proc = subprocess.Popen([sys.executable, "-m", "app.workers", str(child_sock.fileno()),
                                           str(int(memory_mb or 0)), str(os.getpid()), str(bound)],
-                                         pass_fds=(child.fileno(),), stdin=subprocess.DEVNULL,
+                                         pass_fds=(child_sock.fileno(),), stdin=subprocess.DEVNULL,
                                          close_fds=True)
         finally:
-            child.close()
+            child_sock.close()
         self.conn = Connection(parent.detach())
-        self.started = threading.Event()  #: the worker reported (ready or failed)
-        self.ready = False
-        self.failure: str | None = None
         threading.Thread(target=self._wait_ready, name="rangeplan-worker-start", daemon=True).start()
+
+    def _start_forked(self, child: Connection) -> None:
+        # blocks until the fork server has loaded the planner (the first worker: the whole warm-up)
+        try:
+            with self._lock:
+                if self._killed:
+                    raise OSError("stopped before it started")
+            self.process.start()
+        except Exception as exc:
+            self.failure = f"the planning process could not start ({type(exc).__name__}: {exc})"
+            self.started.set()
+            return
+        finally:
+            child.close()
+        with self._lock:
+            killed = self._killed
+        if killed:  # kill() came while the fork server was starting
+            self._end_process()
+            self.failure = "stopped before it started"
+            self.started.set()
+            return
+        self._wait_ready()
 
     def _wait_ready(self) -> None:
         try:
@@ -156,7 +238,7 @@ class _Worker:
                 status, reason = self.conn.recv()
                 self.ready, self.failure = status == "ready", reason
         except (EOFError, OSError, ValueError, TypeError) as exc:
-            self.failure = f"exited while starting ({type(exc).__name__}; status {self.proc.poll()})"
+            self.failure = f"exited while starting ({type(exc).__name__}; status {self.poll()})"
         finally:
             self.started.set()
 
@@ -170,17 +252,54 @@ class _Worker:
                 raise JobTimeout
             return self.conn.recv()
         except (EOFError, OSError) as exc:
-            raise WorkerCrashed(f"worker exited with status {self.proc.poll()} ({exc})") from None
+            raise WorkerCrashed(f"worker exited with status {self.poll()} ({exc})") from None
+
+    def poll(self) -> int | None:
+        """The exit status (negative: the signal), None while it runs or has not started."""
+        if self.proc is not None:
+            return self.proc.poll()
+        return None if self.process.pid is None else self.process.exitcode
 
     def alive(self) -> bool:
-        return self.proc.poll() is None
+        if self.proc is not None:
+            return self.proc.poll() is None
+        if self.process.pid is None:  # the fork server is still loading the planner
+            return not self.started.is_set()
+        return self.process.is_alive()
+
+    def exit_status(self, timeout: float = 2.0) -> int | None:
+        """Wait up to ``timeout`` s for the process to end; its exit status (None: still running)."""
+        if self.proc is not None:
+            try:
+                return self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                return None
+        if self.process.pid is None:
+            return None
+        self.process.join(timeout)
+        return self.process.exitcode
+
+    def _end_process(self) -> None:
+        if self.proc is not None:
+            try:
+                self.proc.kill()
+                self.proc.wait(5)
+            except (OSError, subprocess.TimeoutExpired):
+                pass
+            return
+        with self._lock:
+            self._killed = True
+            if self.process.pid is None:
+                return  # not started: _start_forked ends it once started
+        try:
+            self.process.kill()
+            self.process.join(5)
+        except (OSError, ValueError):
+            pass
 
     def kill(self) -> None:
         try:
-            self.proc.kill()
-            self.proc.wait(5)
-        except (OSError, subprocess.TimeoutExpired):
-            pass
+            self._end_process()
         finally:
             self.conn.close()
 
@@ -189,11 +308,8 @@ class _Worker:
             self.conn.send(None)
         except (OSError, ValueError):
             pass
-        try:
-            self.proc.wait(2)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait(2)
+        if self.exit_status(2) is None:
+            self._end_process()
         self.conn.close()
 
 
@@ -202,23 +318,21 @@ class _Worker:
 _ALLOCATION_FAILURE = (-6, -9)
 
 
-def _exit_status(w: _Worker) -> int | None:
-    try:
-        return w.proc.wait(2)
-    except subprocess.TimeoutExpired:
-        return None
-
-
 class PlanPool:
     """``workers`` planning processes (``mode="process"``) or inline execution
     (``mode="thread"``); ``timeout_s`` bounds each job's compute time (and, through the work
     estimate, what is accepted); at most ``max_queue`` jobs wait for a worker (more:
-    :class:`PoolBusy`); ``memory_mb`` is each worker's address-space limit [MiB] (0: none)."""
+    :class:`PoolBusy`); ``memory_mb`` is each worker's address-space limit [MiB] (0: none);
+    ``start`` how a worker process starts (:data:`START_METHODS`; default :func:`default_start`):
+    forked from a process that has loaded the planner, or a fresh interpreter."""
 
     def __init__(self, workers: int | None = None, timeout_s: float = 30.0, max_queue: int = 64,
-                 mode: str = "process", memory_mb: int | None = DEFAULT_MEMORY_MB):
+                 mode: str = "process", memory_mb: int | None = DEFAULT_MEMORY_MB, start: str | None = None):
         if mode not in ("process", "thread"):
             raise ValueError("mode must be 'process' or 'thread'")
+        self.start = start or default_start()
+        if self.start not in START_METHODS:
+            raise ValueError(f"start must be one of {', '.join(START_METHODS)}")
         self.mode = mode
         self.n = max(1, int(workers or os.cpu_count() or 1))
         self.timeout_s = float(timeout_s)
@@ -234,7 +348,7 @@ class PlanPool:
         self.replaced = 0
         if mode == "process":
             for _ in range(self.n):
-                w = _Worker(self.memory_mb)
+                w = _Worker(self.memory_mb, self.start)
                 self._workers.append(w)
                 self._idle.put(w)
         else:
@@ -301,12 +415,12 @@ class PlanPool:
                     replacement = w = self._replace(w)
                 out = w.call(job, limit)
                 if isinstance(out, Failed) and out.error.code == "too_much_memory":
-                    _exit_status(w)  # it exits after a memory error (or is killed): replace it now
+                    w.exit_status()  # it exits after a memory error (or is killed): replace it now
                     w.kill()
                     replacement = self._replace(w)
                 return out
             except (JobTimeout, WorkerCrashed, OSError) as exc:
-                status = _exit_status(w) if not isinstance(exc, JobTimeout) else None
+                status = w.exit_status() if not isinstance(exc, JobTimeout) else None
                 w.kill()
                 replacement = self._replace(w)
                 if self.memory_mb and status in _ALLOCATION_FAILURE:
@@ -321,7 +435,7 @@ class PlanPool:
                 self._inflight -= 1
 
     def _replace(self, old: _Worker) -> _Worker:
-        new = _Worker(self.memory_mb)
+        new = _Worker(self.memory_mb, self.start)
         with self._lock:
             self.replaced += 1
             self._workers = [new if w is old else w for w in self._workers]

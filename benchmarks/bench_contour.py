@@ -1,22 +1,26 @@
 """Contouring (issue 22): deviation, cycle time against the exact-path time optimum (TOPP-RA),
 planning cost of a 15-pass program and cost against program length.
 
-    .venv/bin/python benchmarks/bench_contour.py [--quick]
+    .venv/bin/python benchmarks/bench_contour.py [--quick] [--fine-ts 0.002]
 
 Program: a notched rounded rectangle (26 x 15 mm, 3 mm corner arcs, a 10 mm semicircular notch),
 cut in 15 depth passes of 0.5 mm at F1200, G64 P0.02 (0.02 mm): 180 lines and arcs, 1358 mm of
 cut. Tables:
 
-1. per feed (``program``, ``fastest``): planning CPU time and wall time, peak memory (RSS of
-   this process), the largest deviation of a sample or a chord from the programmed path
-   (the planner's figure, checked against shapely on the same path in tests/test_contour.py),
-   the cut time per pass and the whole cycle time;
-2. the same pass's time: ``fastest``, the exact path's time optimum under the same drive-force
+1. per feed (``program`` at Ts = 0.01 s, ``fastest`` at 0.01 s and at the finer ``--fine-ts``):
+   planning CPU time and wall time, peak memory (RSS of this process), the largest deviation
+   of a sample or a chord from the programmed path (the planner's figure, checked against
+   shapely on the same path in tests/test_contour.py), the cut time and the whole cycle time;
+2. one pass's time from rest to rest: the exact path's time optimum under the same drive-force
    limits (TOPP-RA 0.6: the redundant drives' force box mapped through the leg Jacobian is a
    zonotope of generalised forces, whose 12 facet inequalities are the second-order
    constraint; the exact path stops at its two 90-degree corners; viscous friction enters
-   TOPP-RA's b(s) term, force-rate and leg-speed limits are not in TOPP-RA), the programmed
-   feed's nominal time L / F and the ``program`` plan's;
+   TOPP-RA's b(s) term; no force-rate limit: TOPP-RA's constraints are of second order), the
+   same with the legs' speed limit, and with the chord bound of an output sampled every Ts
+   (a controller interpolating linearly between samples runs chords of ``v Ts``, whose
+   sagitta on an arc of radius R must stay within the tolerance: ``v <= sqrt(8 R tol) / Ts``);
+   ``fastest`` at each Ts, with the default force-rate limit and without it (TOPP-RA's
+   limits); the programmed feed's nominal time L / F and the ``program`` plan's;
 3. CPU time against program length (1, 2, 4, 8 passes).
 """
 
@@ -61,9 +65,10 @@ def program(passes: int = 15, step: float = 0.5, feed: float = 1200.0, tol_mm: f
     return "\n".join(out) + "\n"
 
 
-def run(text: str, feed: str) -> tuple[object, float, float]:
+def run(text: str, feed: str, settings: dict | None = None) -> tuple[object, float, float]:
     c0, w0 = time.process_time(), time.perf_counter()
-    res = plan_contour({"program": text, "origin": ORIGIN, "feed": feed, "tolerance_m": TOL})
+    res = plan_contour({"program": text, "origin": ORIGIN, "feed": feed, "tolerance_m": TOL,
+                        "settings": settings or {}})
     return res, time.process_time() - c0, time.perf_counter() - w0
 
 
@@ -87,9 +92,14 @@ def _smooth_pieces(elements: list[PathElement]) -> list[list[PathElement]]:
     return out
 
 
-def topp_time(elements: list[PathElement], origin: np.ndarray) -> float:
+def topp_time(elements: list[PathElement], origin: np.ndarray, leg_speed: bool = False, Ts: float | None = None,
+              tol: float = TOL) -> float:
     """Time-optimal traversal of the exact path (rest at both ends and at every corner) under
-    the drive-force box, by TOPP-RA."""
+    the drive-force box, by TOPP-RA. ``leg_speed``: the legs' speed limit too (``|J_l q'(s)| sdot
+    <= speed_max``, a bound on ``sdot^2``); ``Ts``: the output's chord bound too: a controller
+    that interpolates linearly between samples ``Ts`` apart runs a chord of length ``sdot Ts``
+    whose sagitta on an arc of radius R, ``(sdot Ts)^2 / (8 R)``, must stay within the tolerance:
+    ``sdot <= sqrt(8 R tol) / Ts`` (a bound for an exact tracker; any tracking error takes from it)."""
     import toppra as ta
     import toppra.algorithm as algo
     import toppra.constraint as constraint
@@ -159,6 +169,30 @@ def topp_time(elements: list[PathElement], origin: np.ndarray) -> float:
     def cg(q):
         return facets(q)[1]
 
+    class PathSpeed(constraint.LinearConstraint):
+        """An upper bound on sdot^2 along the path (leg speeds, the chord bound)."""
+
+        def __init__(self, els: list[PathElement]):
+            super().__init__()
+            self.els = els
+
+        def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
+            x_max = np.full(len(gridpoints), np.inf)
+            if leg_speed:
+                q, dq = path(gridpoints), path(gridpoints, 1)
+                for k in range(len(gridpoints)):
+                    _, _, J = generalised_forces(model, q[k], np.zeros(3))
+                    x_max[k] = float(np.min(model.speed_max / np.maximum(np.abs(J @ dq[k]), 1e-12))) ** 2
+            if Ts is not None:
+                for k, s in enumerate(gridpoints):
+                    i = int(np.clip(np.searchsorted(path.cum, s, side="right") - 1, 0, len(self.els) - 1))
+                    for e in {i, max(i - 1, 0)} if abs(s - path.cum[i]) < 1e-12 else {i}:
+                        if self.els[e].kind == "arc":
+                            assert self.els[e].radius_m is not None
+                            x_max[k] = min(x_max[k], 8 * self.els[e].radius_m * tol / Ts ** 2)
+            xbound = np.column_stack((np.zeros(len(gridpoints)), x_max))
+            return None, None, None, None, None, None, xbound
+
     total = 0.0
     for piece in _smooth_pieces(elements):
         path = Piecewise(piece)
@@ -166,7 +200,8 @@ def topp_time(elements: list[PathElement], origin: np.ndarray) -> float:
         grid = np.unique(np.concatenate((np.linspace(0, L, max(60, int(L / 2e-4))), path.cum)))
         pc = constraint.SecondOrderConstraint(inv_dyn, cF, cg, dof=3,
                                               discretization_scheme=constraint.DiscretizationType.Interpolation)
-        inst = algo.TOPPRA([pc], path, gridpoints=grid, parametrizer="ParametrizeConstAccel")
+        cons = [pc] + ([PathSpeed(piece)] if leg_speed or Ts is not None else [])
+        inst = algo.TOPPRA(cons, path, gridpoints=grid, parametrizer="ParametrizeConstAccel")
         traj = inst.compute_trajectory(0, 0)
         assert traj is not None, "TOPP-RA found no parametrisation"
         total += float(traj.duration)
@@ -177,6 +212,8 @@ def topp_time(elements: list[PathElement], origin: np.ndarray) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="1x and 2x only in the length table")
+    ap.add_argument("--fine-ts", type=float, default=0.002,
+                    help="the finer output sample time the tables compare with the default 0.01 s")
     args = ap.parse_args()
     print(f"load: {os.getloadavg()[0]:.1f} (1-min average) on {os.cpu_count()} cores")
     text = program()
@@ -187,27 +224,40 @@ def main() -> None:
           f"{TOL * 1e3:g} mm\n")
     plan_contour({"program": program(1), "origin": ORIGIN, "tolerance_m": TOL})  # load the kernels
     results = {}
-    print("| feed | CPU s | wall s | peak RSS MB | max deviation mm | within tolerance | cut time s | cycle s |")
-    print("|---|---|---|---|---|---|---|---|")
-    for feed in ("program", "fastest"):
-        res, cpu, wall = run(text, feed)
+    print("| feed | Ts s | CPU s | wall s | peak RSS MB | max deviation mm | within tolerance | cut time s | cycle s |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for feed, Ts in (("program", 0.01), ("fastest", 0.01), ("fastest", args.fine_ts)):
+        res, cpu, wall = run(text, feed, {"Ts": Ts})
         c = res.contour  # type: ignore[attr-defined]
-        results[feed] = res
+        results[feed, Ts] = res
         rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-        print(f"| {feed} | {cpu:.1f} | {wall:.1f} | {rss:.0f} | {c.max_deviation_m * 1e3:.4f} | "
+        print(f"| {feed} | {Ts:g} | {cpu:.1f} | {wall:.1f} | {rss:.0f} | {c.max_deviation_m * 1e3:.4f} | "
               f"{c.max_deviation_m <= c.tolerance_m} | {c.cut_time_s:.2f} | {c.cycle_time_s:.2f} |")
     p0 = prog.passes[0].elements
-    topp = topp_time(p0, np.array(ORIGIN))
-    fast = results["fastest"].contour.passes[0].time_s  # type: ignore[attr-defined]
-    progp = results["program"].contour.passes[0].time_s  # type: ignore[attr-defined]
+    origin = np.array(ORIGIN)
+    topp = topp_time(p0, origin)
+    one = program(1)
     nominal = sum(e.length_m / e.feed_m_s for e in p0)
-    print("\none pass (" f"{sum(e.length_m for e in p0) * 1e3:.1f} mm):\n")
-    print("| | time s | vs TOPP-RA |")
-    print("|---|---|---|")
-    for name, t in (("fastest (tube, drive forces, force rates, leg speeds)", fast),
-                    ("TOPP-RA exact path, drive-force zonotope", topp), ("programmed feed L / F", nominal),
-                    ("program feed plan", progp)):
-        print(f"| {name} | {t:.3f} | {t / topp:.2f}x |")
+    print(f"\none pass ({sum(e.length_m for e in p0) * 1e3:.1f} mm), from rest to rest; 'vs same Ts': against "
+          "TOPP-RA with the leg speeds and the chord bound at that output sample time:\n")
+    print("| | Ts s | time s | vs TOPP-RA | vs same Ts |")
+    print("|---|---|---|---|---|")
+    print(f"| TOPP-RA 0.6, exact path, drive-force zonotope | - | {topp:.3f} | 1.00x | |")
+    t_leg = topp_time(p0, origin, leg_speed=True)
+    print(f"| TOPP-RA + leg speeds | - | {t_leg:.3f} | {t_leg / topp:.2f}x | |")
+    for Ts in (0.01, 0.005, args.fine_ts):
+        bound = topp_time(p0, origin, leg_speed=True, Ts=Ts)
+        print(f"| TOPP-RA + leg speeds + chord bound (sagitta <= tolerance) | {Ts:g} | {bound:.3f} | "
+              f"{bound / topp:.2f}x | 1.00x |")
+        for rate, label in ((None, "fastest (tube, drive forces, force rates 3000 N/s, leg speeds)"),
+                            ("off", "fastest, force rates off (TOPP-RA's limits)")):
+            st: dict = {"Ts": Ts} if rate is None else {"Ts": Ts, "force_rate_n_s": rate}
+            res, cpu, _ = run(one, "fastest", st)
+            t = res.contour.passes[0].time_s  # type: ignore[attr-defined]
+            print(f"| {label} | {Ts:g} | {t:.3f} | {t / topp:.2f}x | {t / bound:.2f}x |")
+    progp = results["program", 0.01].contour.passes[0].time_s  # type: ignore[attr-defined]
+    print(f"| programmed feed L / F | - | {nominal:.3f} | {nominal / topp:.2f}x | |")
+    print(f"| program feed plan | 0.01 | {progp:.3f} | {progp / topp:.2f}x | |")
     print("\ncost against program length (feed program):\n")
     print("| passes | cut mm | samples | CPU s | CPU ms per sample | CPU s / pass |")
     print("|---|---|---|---|---|---|")

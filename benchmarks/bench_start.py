@@ -2,6 +2,9 @@
 
     python benchmarks/bench_start.py [--base REV] [--rounds 3] [--cold] [--install]
     python benchmarks/bench_start.py --profile-compile      # each kernel's compile time
+    python benchmarks/bench_start.py --workers [--rounds 5]  # the service's workers, by start method
+    python benchmarks/bench_start.py --breakdown [--refresh] # where a warm plan's time goes
+    python benchmarks/bench_start.py --load-order --rounds 7 # kernels loaded with/without numba's refresh
 
 Every figure is one child process (``OPENBLAS_NUM_THREADS=1``), timed by wall clock and by
 the CPU seconds it used (``resource.getrusage(RUSAGE_CHILDREN)``: on a shared machine the
@@ -128,6 +131,154 @@ print(json.dumps({"total": time.perf_counter() - t, "rows": rows}))
     print("\nCOMPILE_COST = " + json.dumps({k: round(v, 2) for k, v in sorted(own.items(), key=lambda kv: -kv[1])}))
 
 
+WORKERS_CODE = r"""
+import json, sys, time
+from app.workers import PlanPool
+t = time.perf_counter()
+pool = PlanPool(workers=1, timeout_s=60, start=sys.argv[1])
+def ready(w):
+    w.started.wait(300)
+    assert w.ready, w.failure
+ready(pool._workers[0])
+first = time.perf_counter() - t
+again = []
+for _ in range(int(sys.argv[2])):
+    old = pool._workers[0]
+    t = time.perf_counter()
+    ready(pool._replace(old))
+    again.append(time.perf_counter() - t)
+    old.kill()
+pool.close()
+print(json.dumps({"first": first, "again": again}))
+"""
+
+
+def bench_workers(rounds: int) -> None:
+    """The service's planning pool (:class:`app.workers.PlanPool`) by start method, one child
+    process per method and round: its first worker ready (for the fork server: the fork
+    server's own start and warm-up included), then a new worker (what replaces a worker after
+    a time limit, a memory error or a crash) ready, ``rounds`` times."""
+    print(f"# {os.cpu_count()} CPUs; load average before: {load()}")
+    res: dict[str, dict[str, list[float]]] = {}
+    for _ in range(rounds):
+        for method in ("exec", "forkserver"):
+            out = subprocess.run([PY, "-c", WORKERS_CODE, method, "3"], cwd=ROOT, capture_output=True, text=True,
+                                 env={**os.environ, "OPENBLAS_NUM_THREADS": "1"}, check=True)
+            d = json.loads(out.stdout.strip().splitlines()[-1])
+            res.setdefault(method, {"first": [], "again": []})
+            res[method]["first"].append(d["first"])
+            res[method]["again"] += d["again"]
+    print("\n| start | pool's first worker ready [s] | a new worker ready [s] (median) | max [s] |")
+    print("|---|---:|---:|---:|")
+    for method, v in res.items():
+        print(f"| {method} | {statistics.median(v['first']):.2f} | {statistics.median(v['again']):.3f} | "
+              f"{max(v['again']):.3f} |")
+    print(f"\n# load average after: {load()}")
+
+
+BREAKDOWN_CODE = r"""
+import json, sys, time
+rows = []
+w0, c0 = time.perf_counter(), time.process_time()
+def mark(label):
+    global w0, c0
+    w, c = time.perf_counter(), time.process_time()
+    rows.append((label, w - w0, c - c0))
+    w0, c0 = w, c
+import numpy
+mark("import numpy")
+import numba
+mark("import numba")
+from numba.core.registry import cpu_target
+cpu_target.target_context
+mark("numba's CPU target context")
+if "--refresh" in sys.argv:
+    cpu_target.target_context.refresh()
+    mark("numba's refresh: every typing and lowering registry")
+import pydantic, planner.schema
+mark("import pydantic, planner.schema (the models)")
+from planner import plan
+import planner.orchestrator.plan
+mark("import the planner (scipy, shapely, the kernel modules)")
+from numba.core import caching
+loaded = {}
+_load = caching.Cache._load_overload
+def load_overload(self, sig, ctx):
+    t = time.process_time()
+    try:
+        return _load(self, sig, ctx)
+    finally:
+        name = self._py_func.__name__
+        loaded[name] = loaded.get(name, 0.0) + time.process_time() - t
+caching.Cache._load_overload = load_overload
+req = json.loads(open(sys.argv[1]).read())
+planner.schema.PlanRequest.model_validate(req)
+mark("read and validate the request")
+plan(req)
+mark("first plan: load the kernels it needs, dispatch, plan")
+plan(req)
+mark("the same plan again (kernels loaded)")
+import app.formats
+mark("import app.formats (the output writers)")
+print(json.dumps({"rows": rows, "loaded": loaded}))
+"""
+
+
+def breakdown(rounds: int, refresh: bool) -> None:
+    """Where a warm ``rangeplan plan table1.json`` spends its time, step by step in one process
+    (median of ``rounds`` processes), and the CPU seconds of each kernel's load from the cache;
+    ``refresh``: numba's own order (its whole target context refreshed before the first load)."""
+    print(f"# load average before: {load()}")
+    runs = []
+    for _ in range(rounds):
+        out = subprocess.run([PY, "-c", BREAKDOWN_CODE, str(TABLE1)] + (["--refresh"] if refresh else []), cwd=ROOT,
+                             capture_output=True, text=True, check=True,
+                             env={**os.environ, "OPENBLAS_NUM_THREADS": "1",
+                                  "RANGEPLAN_KERNEL_REFRESH": "1" if refresh else "0"})
+        runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
+    start = [timed([PY, "-c", "pass"], ROOT) for _ in range(rounds)]
+    print("\n| step | wall [s] | CPU [s] |\n|---|---:|---:|")
+    print(f"| python start | {statistics.median(w for w, _ in start):.3f} | "
+          f"{statistics.median(c for _, c in start):.3f} |")
+    for i, (label, _, _) in enumerate(runs[0]["rows"]):
+        print(f"| {label} | {statistics.median(r['rows'][i][1] for r in runs):.3f} | "
+              f"{statistics.median(r['rows'][i][2] for r in runs):.3f} |")
+    names = sorted({k for r in runs for k in r["loaded"]})
+    print("\nkernels loaded from the cache by the first plan, CPU s: " + ", ".join(
+        f"{n} {statistics.median(r['loaded'].get(n, 0.0) for r in runs):.3f}"
+        for n in names))
+    print(f"# load average after: {load()}")
+
+
+LOAD_ORDER_CODE = r"""
+import json, sys, time, planner, planner.orchestrator.plan
+from numba.core.registry import cpu_target
+cpu_target.target_context
+req = json.load(open(sys.argv[1]))
+t = time.process_time()
+planner.plan(req)
+print(time.process_time() - t)
+"""
+
+
+def load_order(rounds: int) -> None:
+    """CPU seconds of the first Table I plan of a new process (the planner imported: loading
+    its kernels, dispatching, planning), loading the kernels in numba's own order (the whole
+    target context refreshed first) and in planner._jit's (no refresh), alternating."""
+    print(f"# load average before: {load()}")
+    res: dict[str, list[float]] = {"numba's order (refresh)": [], "planner._jit (no refresh)": []}
+    for _ in range(rounds):
+        for label, flag in zip(res, ("1", "0")):
+            out = subprocess.run([PY, "-c", LOAD_ORDER_CODE, str(TABLE1)], cwd=ROOT, capture_output=True, text=True,
+                                 check=True, env={**os.environ, "OPENBLAS_NUM_THREADS": "1",
+                                                  "RANGEPLAN_KERNEL_REFRESH": flag})
+            res[label].append(float(out.stdout.strip().splitlines()[-1]))
+    print("\n| loading | first plan CPU [s], median | min | max |\n|---|---:|---:|---:|")
+    for label, v in res.items():
+        print(f"| {label} | {statistics.median(v):.3f} | {min(v):.3f} | {max(v):.3f} |")
+    print(f"# load average after: {load()}")
+
+
 def load() -> str:
     return " ".join(f"{x:.2f}" for x in os.getloadavg())
 
@@ -140,9 +291,22 @@ def main() -> None:
     ap.add_argument("--cold", action="store_true", help="also the first plan with an empty kernel cache")
     ap.add_argument("--install", action="store_true", help="also pip install --no-deps . + first plan")
     ap.add_argument("--profile-compile", action="store_true", help="each kernel's compile time, then exit")
+    ap.add_argument("--workers", action="store_true", help="the planning pool's workers by start method, then exit")
+    ap.add_argument("--breakdown", action="store_true", help="where a warm plan's time goes, then exit")
+    ap.add_argument("--refresh", action="store_true", help="with --breakdown: numba's own order of loading")
+    ap.add_argument("--load-order", action="store_true", help="first plan's CPU, numba's order against ours")
     args = ap.parse_args()
     if args.profile_compile:
         profile_compile()
+        return
+    if args.workers:
+        bench_workers(args.rounds)
+        return
+    if args.breakdown:
+        breakdown(args.rounds, args.refresh)
+        return
+    if args.load_order:
+        load_order(args.rounds)
         return
     print(f"# {os.cpu_count()} CPUs; load average before: {load()}")
     t_start = time.perf_counter()

@@ -29,7 +29,11 @@ from typing import Any
 import numba
 from numba.core import caching
 
-__all__ = ["njit", "KERNEL_SOURCES", "kernel_cache_dir", "kernel_key"]
+__all__ = ["njit", "KERNEL_SOURCES", "kernel_cache_dir", "kernel_key", "STRICT_REFRESH"]
+
+#: numba's own order: refresh the whole target context before loading a cached kernel
+#: (``RANGEPLAN_KERNEL_REFRESH=1``; measured by ``benchmarks/bench_start.py``)
+STRICT_REFRESH = os.environ.get("RANGEPLAN_KERNEL_REFRESH", "") == "1"
 
 _ROOT = Path(__file__).resolve().parent
 #: the kernel modules (relative to ``planner/``) whose content keys the cache
@@ -100,6 +104,24 @@ class _KernelCacheImpl(caching.CompileResultCacheImpl):
 
 class _KernelCache(caching.FunctionCache):
     _impl_class = _KernelCacheImpl
+
+    def load_overload(self, sig: Any, target_context: Any) -> Any:
+        """numba's load of a cached kernel without its ``target_context.refresh()``: that imports
+        and installs every typing and lowering registry of numba (~0.4 CPU s, the largest part
+        of a warm plan's start, issue 24) which only compiling needs; a cached kernel is object
+        code linked against numba's runtime (NRT), which is all this sets up first. A
+        kernel that is not in the cache compiles, and numba's compiler refreshes the context
+        itself first (``CompilerBase.__init__``)."""
+        if not STRICT_REFRESH:
+            from numba.core.runtime.nrt import rtsys
+
+            rtsys.initialize(target_context)  # numba's runtime (NRT): what refresh() sets up first
+            try:
+                with self._guard_against_spurious_io_errors():
+                    return self._load_overload(sig, target_context)
+            except Exception:  # e.g. a symbol only a registry provides: load it the way numba does
+                pass
+        return super().load_overload(sig, target_context)
 
 
 def njit(*args: Any, **options: Any) -> Any:

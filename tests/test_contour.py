@@ -173,3 +173,65 @@ def test_bad_settings_name_the_field():
     with pytest.raises(PlannerError) as err:
         plan_contour({"program": SMALL, "origin": ORIGIN, "settings": {"bogus": 1}})
     assert err.value.field is not None and err.value.field.startswith("settings")
+
+
+@pytest.mark.slow
+def test_consecutive_cells_hull_within_tolerance():
+    """The tube's guarantee (planner.contour.tube): the convex hull of any two consecutive cells
+    (where two consecutive samples and the straight move between them lie) is within 0.95 tol
+    of the path; measured with shapely on the rs274 path at the points of a grid (tol / 4)
+    inside each hull and at points tol / 16 apart on its boundary; the chords of one arc share
+    no junction."""
+    from planner.contour.tube import tube
+    from planner.exchange import read_gcode
+
+    els = read_gcode(SMALL).passes[0].elements
+    tol = 2e-5
+    t = tube(els, np.array(ORIGIN), tol, 0.0, 0.002)
+    path = rs274_cut_path(SMALL, ORIGIN)
+    polys = [np.asarray(s.polygon) for s in t.segments if s.polygon is not None]
+    h = tol / 4
+    worst = 0.0
+    for a, b in zip(polys, polys[1:]):
+        hull = shapely.MultiPoint(np.vstack((a, b))).convex_hull
+        local = path.intersection(hull.buffer(2 * tol))
+        x0, y0, x1, y1 = hull.bounds
+        gx, gy = np.meshgrid(np.arange(x0, x1 + h, h), np.arange(y0, y1 + h, h))
+        pts = shapely.points(np.column_stack((gx.ravel(), gy.ravel())))
+        pts = pts[shapely.intersects(hull, pts)]
+        edge = shapely.points(np.asarray(shapely.segmentize(hull.exterior, h / 4).coords))
+        d = shapely.distance(np.concatenate((pts, edge)), local)
+        worst = max(worst, float(d.max()))
+    assert worst <= 0.95 * tol + 1e-10
+    assert worst >= 0.5 * tol  # the tube uses the room it has
+    arcs = [k for k, e in enumerate(els) if e.kind == "arc"]
+    inner = np.isin(t.element, arcs) & (np.roll(t.element, 1) == t.element) & (np.roll(t.element, -1) == t.element)
+    assert not np.any((t.turn > 0) & inner)
+    assert (np.isin(t.element, arcs) & (t.length > 0)).sum() > 10
+
+
+@pytest.mark.parametrize("start", [1 / 64, 0.3, 1.0, 1.37, 1.3701, 5.0, 64.0])
+@pytest.mark.parametrize("threshold", [0.02, 0.5, 1.37, 1.3705, 40.0])
+def test_largest_feasible_brackets_the_threshold(start, threshold):
+    """fastest's scale search: from any start, ok(lam) and not ok(lam (1 + 1/64)) for a
+    monotone feasibility; from a start at the answer, two plans."""
+    from planner.contour.plan import SCALE_RESOLUTION, largest_feasible
+
+    calls = []
+
+    def ok(x):
+        calls.append(x)
+        return x <= threshold
+
+    lam = largest_feasible(ok, start)
+    assert lam is not None and lam <= threshold < lam * (1 + SCALE_RESOLUTION) * (1 + 1e-9)
+    assert len(calls) < 25
+    calls.clear()
+    assert largest_feasible(ok, lam) == pytest.approx(lam) and len(calls) == 2
+
+
+def test_largest_feasible_at_the_limits():
+    from planner.contour.plan import SCALE_MAX, SCALE_MIN, largest_feasible
+
+    assert largest_feasible(lambda x: True, 1.0) == SCALE_MAX
+    assert largest_feasible(lambda x: x < SCALE_MIN, 1.0) is None

@@ -68,7 +68,11 @@ def test_kill_9_of_the_server_leaves_no_child_alive(tmp_path):
         assert 'rangeplan_batch_items{status="ok"} 2.0' in metrics
         children = [p.pid for p in psutil.Process(server.pid).children(recursive=True)]
         cmdlines = " | ".join(" ".join(psutil.Process(p).cmdline()) for p in children)
-        assert "app.workers" in cmdlines and "multiprocessing" in cmdlines, cmdlines  # plan and batch workers
+        # the planning workers are forks of multiprocessing's fork server (app.worker_template),
+        # the batch workers spawned processes of multiprocessing
+        assert "forkserver" in cmdlines and "spawn_main" in cmdlines, cmdlines
+        fork_servers = [p for p in psutil.Process(server.pid).children() if "forkserver" in " ".join(p.cmdline())]
+        assert len(fork_servers) == 1 and len(fork_servers[0].children()) == 1, cmdlines  # RANGEPLAN_WORKERS=1
         assert "resource_tracker" in cmdlines, cmdlines
     finally:
         server.send_signal(signal.SIGKILL)

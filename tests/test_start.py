@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -159,3 +160,35 @@ def test_no_progress_output_when_nothing_compiles():
     with compiling.compile_progress(out):
         pass
     assert out.getvalue() == ""
+
+
+def test_writing_a_plan_loads_no_drawing_reader():
+    """``rangeplan plan`` writes its output through ``app.formats``: the machine writers, not the
+    drawing and G-code readers (shapely, scipy.spatial: ~0.2 CPU s), which load on first use."""
+    mods = loaded_after("import app.formats, planner.orchestrator, planner.exchange", top=False)
+    assert not {m for m in mods if m.split(".")[0] in ("shapely", "ezdxf")
+                or m.startswith(("scipy.spatial", "scipy.linalg", "scipy.sparse"))}
+    assert "shapely" in loaded_after("from planner.exchange import import_drawing, read_gcode")
+
+
+def test_cached_kernels_load_without_numbas_full_refresh_and_plan_alike():
+    """A new process loads every cached kernel without numba's refresh of its whole target
+    context (planner._jit: ~0.4 CPU s less per process; numba's polynomial registry, one it
+    installs there, stays unloaded) and plans both modes exactly as with numba's own order."""
+    code = ("import json, sys, planner\nplanner.warm_up()\n"
+            "req = json.load(open('static/examples/table1.json'))\nout = []\n"
+            "for mode in ('paper', 'constrained'):\n"
+            "    r = planner.plan({**req, 'settings': {**req.get('settings', {}), 'mode': mode}})\n"
+            "    d = json.loads(r.to_json())\n"
+            "    [d['metrics'].pop(k, None) for k in ('compute_ms', 'qp_time_ms')]\n"
+            "    out.append(d)\n"
+            "print(json.dumps({'refreshed': 'numba.np.polynomial.polynomial_core' in sys.modules, 'out': out}))")
+    runs = {}
+    for strict in ("1", "0"):  # numba's order first: it compiles whatever is not cached yet
+        p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=900,
+                           cwd=Path(__file__).resolve().parents[1],
+                           env={**os.environ, "RANGEPLAN_KERNEL_REFRESH": strict})
+        assert p.returncode == 0, p.stderr
+        runs[strict] = json.loads(p.stdout.strip().splitlines()[-1])
+    assert runs["1"]["refreshed"] and not runs["0"]["refreshed"]
+    assert runs["0"]["out"] == runs["1"]["out"] and len(runs["0"]["out"][1]["pose"]) > 100  # every sample

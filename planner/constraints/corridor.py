@@ -50,11 +50,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
 from ..corridor import RangeSequence
-from ..corridor.geometry import approach_direction, halfplanes
+from ..corridor.geometry import approach_direction, clip_halfplanes, halfplanes
 from ..schema import Segment
 from .rows import RowBlock, RowConstraint, RowKind, StepContext
 
@@ -80,6 +81,26 @@ ARRIVAL_SPEED_M_S = 1e-4
 ARRIVAL_RATE_RAD_S = 1e-3
 
 
+#: half-planes of recently seen cell polygons, by their vertices' bytes: the candidate timings of
+#: one corridor (``fastest``, contouring) map the same cells to the same polygons at most samples
+_HP_CACHE: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+_HP_CACHE_MAX = 1 << 14
+
+
+def _halfplanes(V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`~planner.corridor.geometry.halfplanes` of ``V``, remembered (read-only arrays)."""
+    key = V.tobytes()
+    hit = _HP_CACHE.get(key)
+    if hit is None:
+        if len(_HP_CACHE) >= _HP_CACHE_MAX:
+            _HP_CACHE.clear()
+        A, b = halfplanes(V)
+        A.flags.writeable = False
+        b.flags.writeable = False
+        hit = _HP_CACHE[key] = (A, b)
+    return hit
+
+
 class CorridorConstraint(RowConstraint):
     """``lo_s <= pose_j <= hi_s`` (boxes) or ``A_s (x, y)_j <= b_s`` (half-planes, with the
     angle row of the box) for every sample ``j`` of the horizon, ``s`` its sequence index:
@@ -101,7 +122,7 @@ class CorridorConstraint(RowConstraint):
         shrink = np.minimum(marg, 0.5 * w)
         lo += shrink
         hi -= shrink
-        self.hp: list[tuple[np.ndarray, np.ndarray] | None] = [None] * K
+        self.hp: list[Any] = [None] * K  # (A, b) of the samples with half-planes
         #: the samples whose point range became the stop box
         self.stop = np.zeros(K, bool)
         if segments is not None:
@@ -120,6 +141,10 @@ class CorridorConstraint(RowConstraint):
                                 lo[j, :2] = np.maximum(p - END_TOL_M, blo)
                                 hi[j, :2] = np.minimum(p + END_TOL_M, bhi)
                                 self.stop[j] = True
+                                self.hp[j] = _stop_in_cell(segments[h], lo[j, :2], hi[j, :2])
+                                if self.hp[j] is not None:  # the box cut to the exact cell
+                                    lo[j, :2], hi[j, :2] = self.hp[j][2], self.hp[j][3]
+                                    self.hp[j] = self.hp[j][:2]
                                 # a point angle too: an equality on psi at every sample
                                 # cannot damp a residual rotation (with one constant move per
                                 # sample the rate only flips sign), so give it the same kind
@@ -138,7 +163,7 @@ class CorridorConstraint(RowConstraint):
                     if np.all(sw > 0) and np.all(w[j, :2] > 4 * MARGIN_M):
                         # the same per-axis affine map that tapers the box
                         V = seq.lower[j, :2] + (np.asarray(poly, float) - seg.lower[:2]) * (w[j, :2] / sw)
-                        A, b = halfplanes(V)
+                        A, b = _halfplanes(V)
                         self.hp[j] = (A, b - MARGIN_M)
         self.lo, self.hi = lo, hi
         extra = np.minimum(np.array([RECOURSE_M, RECOURSE_M, RECOURSE_RAD]), 0.5 * (hi - lo))
@@ -192,6 +217,29 @@ class CorridorConstraint(RowConstraint):
     @property
     def kernel_args(self) -> tuple:
         return self.lo, self.hi, self.lo_deep, self.hi_deep, self.has_hp, self.hp_ptr, self.hp_A, self.hp_b, RECOURSE_M
+
+
+def _stop_in_cell(cell: Segment, lo: np.ndarray, hi: np.ndarray) -> tuple | None:
+    """The stop box ``[lo, hi]`` (x, y) cut to ``cell``'s exact polygon shrunk by the margin,
+    where the box reaches outside it (an end point near a triangle's slanted edge or acute
+    corner: the box alone let the robot settle up to a few tenths of a micrometre outside the
+    corridor): ``(A, b, lo, hi)``, the half-planes of the polygon and of the cut box's bounding
+    box, and that box. None where the box is inside the polygon, or the polygon leaves no room."""
+    if cell.polygon is None:
+        return None
+    A, b = halfplanes(np.asarray(cell.polygon, float))
+    b = b - MARGIN_M
+    box = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
+    if np.all(box @ A.T <= b[None, :]):
+        return None
+    cut = clip_halfplanes(box, A, b)
+    if len(cut) < 3:
+        return None
+    clo, chi = cut.min(axis=0), cut.max(axis=0)
+    if np.any(chi - clo <= 2 * RECOURSE_M):  # no room for the recourse of the later samples
+        return None
+    eye = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
+    return np.vstack((A, eye)), np.concatenate((b, chi, -clo)), clo, chi
 
 
 class EndApproachConstraint(RowConstraint):

@@ -8,8 +8,9 @@ samples is within the tolerance of the programmed path. Timing: a speed profile 
 pass (the cell speed ``v``, the curvature and corner limits ``sqrt(a R)``, acceleration ``a``
 forwards and backwards), turned into sample counts per cell; ``program`` feed caps ``v`` at
 each move's F and lowers the profile until the plan is feasible and no sample is faster than
-F; ``fastest`` scales the profile (``v = lambda v0``, ``a = lambda^2 a0``) by bisection to the
-largest feasible ``lambda`` (each candidate abandoned at its first step that needs slack).
+F; ``fastest`` scales the profile (``v = lambda v0``, ``a = lambda^2 a0``) to the largest feasible
+``lambda`` (:func:`largest_feasible`, from the scale of the cut before; each candidate
+abandoned at its first step that needs slack).
 Rapids and feed moves above the cutting height are free moves inside a box about the
 straight move (the ``fastest`` timing of :func:`planner.plan`); plunges, retracts, G4 and
 M0 are the robot at rest. The parts are joined sample to sample: each part starts at the pose
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -50,18 +52,22 @@ from ..schema import (
 )
 from .tube import PathGeometry, Tube, tube
 
-__all__ = ["CONTOUR_STEP_S", "estimate_contour", "parse_contour_request", "plan_contour"]
+__all__ = ["CONTOUR_STEP_S", "estimate_contour", "largest_feasible", "parse_contour_request", "plan_contour"]
 
 #: fastest: the reference cell speed and acceleration the scale multiplies [m/s, m/s^2]
 V0_M_S = 0.1
 A0_M_S2 = 1.0
+#: fastest: the reference jerk of the start and stop [m/s^3] (the scale's cube multiplies it)
+J0_M_S3 = 50.0
 #: program feed: the acceleration of the profile [m/s^2]
 A_PROGRAM_M_S2 = 2.0
 #: program feed: the profile's cell speed starts at this fraction of F (the robot, pulled to the
 #: cells' centres, runs a little faster than the profile between them)
 PROGRAM_MARGIN = 0.9
-#: fastest: bisection steps on the scale
-SCALE_STEPS = 6
+#: fastest: the scale is found to this relative resolution: ``lam`` feasible, ``lam (1 + r)`` not
+SCALE_RESOLUTION = 1 / 64
+#: fastest: the range of scales searched
+SCALE_MIN, SCALE_MAX = 1 / 64, 64.0
 #: the longest cell along the path, in samples at the cell speed (short cells keep the
 #: criterion's pull on the cell centre near the path's progress)
 CELL_SAMPLES = 4
@@ -102,6 +108,7 @@ def plan_contour(request: Any, *, program: Program | None = None) -> PlanResult:
     parts: list[_Part] = []
     pass_summaries: list[PassSummary] = []
     blocks = program.blocks
+    hint: tuple[float, float] | None = None  # fastest: the scales of the cut before
     i = 0
     while i < len(blocks):
         b = blocks[i]
@@ -131,7 +138,8 @@ def plan_contour(request: Any, *, program: Program | None = None) -> PlanResult:
         first = len(parts)
         geo = PathGeometry(b.elements, origin)
         for chunk in _chunks(b.elements):
-            part = _cut(req, model, st, chunk, origin, tol, psi, pos, geo, b.elements)
+            part = _cut(req, model, st, chunk, origin, tol, psi, pos, geo, b.elements, hint)
+            hint = part.scale if part.scale is not None else hint
             parts.append(part)
             pos = part.result.pose[-1, :2].copy()
         cut_parts = parts[first:]
@@ -167,6 +175,8 @@ class _Part:
         self.result, self.cutting, self.line, self.deviation = result, cutting, line, deviation
         self.cells = cells
         self.segments = segments or []
+        #: fastest: the profile's scales found for a cut (the next cut's search starts there)
+        self.scale: tuple[float, float] | None = None
 
 
 def _chunks(elements: list[PathElement]) -> list[list[int]]:
@@ -180,18 +190,26 @@ def _chunks(elements: list[PathElement]) -> list[list[int]]:
     return out
 
 
-def _profile(t: Tube, v_cap: np.ndarray, a: float, Ts: float) -> np.ndarray:
+def _profile(t: Tube, v_cap: np.ndarray, a: float, Ts: float, a_turn: float | None = None,
+             jerk: float | None = None) -> np.ndarray:
     """Sample counts per segment of the tube from a speed profile: cell speed at most
-    ``v_cap`` (per segment), ``sqrt(a R)`` on arcs, ``sqrt(a R_corner)`` at junctions, reached
-    with acceleration ``a`` from rest and back to rest."""
+    ``v_cap`` (per segment), ``sqrt(a_turn R)`` on arcs, ``sqrt(a_turn R_corner)`` at junctions
+    (``a_turn``: ``a`` if not given), reached with acceleration ``a`` from rest and back to rest;
+    ``jerk``: within ``(jerk / 2)^(1/3) (3 d)^(2/3)`` at a distance ``d`` from the rest at either
+    end (the speed of a start from rest at that jerk: the drive forces rise at a bounded rate)."""
     n = len(t.segments)
+    a_turn = a if a_turn is None else a_turn
     v = v_cap.astype(float).copy()
     finite = np.isfinite(t.radius)
-    v[finite] = np.minimum(v[finite], np.sqrt(a * t.radius[finite]))
+    v[finite] = np.minimum(v[finite], np.sqrt(a_turn * t.radius[finite]))
     j = t.turn > 0
     half = np.clip((math.pi - t.turn[j]) / 2, 1e-6, math.pi / 2)
     r_corner = t.rho * np.sin(half) / np.maximum(1 - np.sin(half), 1e-12)
-    v[j] = np.minimum(v[j], np.sqrt(a * r_corner))
+    v[j] = np.minimum(v[j], np.sqrt(a_turn * r_corner))
+    if jerk is not None:
+        d = np.concatenate(([0.0], np.cumsum(t.length)))
+        d = np.minimum(d[:-1] + t.length, d[-1] - d[:-1])  # the cell's far end from the nearer rest
+        v = np.minimum(v, np.cbrt(jerk / 2) * np.cbrt(3 * d) ** 2)
     # speeds at the nodes between segments, from rest to rest
     node = np.empty(n + 1)
     node[0] = 0.0
@@ -203,13 +221,17 @@ def _profile(t: Tube, v_cap: np.ndarray, a: float, Ts: float) -> np.ndarray:
     counts = np.ones(n, np.int64)
     cells = t.length > 0
     mean = np.maximum(0.5 * (node[:-1] + node[1:]), 1e-9)
-    tm = np.maximum(t.length / np.minimum(v, np.maximum(mean, 0.25 * v)), 0.0)
-    counts[cells] = np.maximum(1, np.ceil(tm[cells] / Ts - 1e-9)).astype(np.int64)
+    speed = np.minimum(v, np.maximum(mean, 0.25 * v))[cells]
+    counts[cells] = np.maximum(1, np.ceil(t.length[cells] / np.maximum(speed, 1e-12) / Ts - 1e-9)).astype(np.int64)
     return counts
 
 
 def _cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int], origin: np.ndarray, tol: float,
-         psi: float, pos: np.ndarray, geo: PathGeometry, elements: list[PathElement]) -> _Part:
+         psi: float, pos: np.ndarray, geo: PathGeometry, elements: list[PathElement],
+         hint: tuple[float, float] | None = None) -> _Part:
+    """One piece of a pass planned rest to rest. ``hint``: the ``fastest`` scale found for the
+    piece before (where its search starts; the search's result is bracketed the same way from
+    any start)."""
     els = [elements[k] for k in chunk]
     feed = np.array([e.feed_m_s for e in els])
     v_ref = float(feed.max()) if req.feed == "program" else V0_M_S
@@ -235,6 +257,7 @@ def _cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int],
     feed_of = feed[np.searchsorted(chunk, t.element)]
     if req.feed == "program":
         result = None
+        scale_found = None
         scale = PROGRAM_MARGIN
         for _ in range(8):
             counts = _profile(t, feed_of * scale, A_PROGRAM_M_S2 * scale * scale, st.Ts)
@@ -255,42 +278,34 @@ def _cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int],
             raise _infeasible(els[0].line, tol, st)
     else:
         v_cap = np.full(len(t.segments), V0_M_S)
-        best: PlanResult | None = None
-        tried: dict[float, PlanResult | None] = {}
+        tried: dict[bytes, PlanResult | None] = {}  # by the sample counts (scales often give the same)
 
-        def run(lam: float) -> PlanResult | None:
-            if lam not in tried:
-                counts = _profile(t, v_cap * lam, A0_M_S2 * lam * lam, st.Ts)
+        def run(lam: float, mu: float = 1.0) -> PlanResult | None:
+            counts = _profile(t, v_cap * lam * mu, A0_M_S2 * lam * lam, st.Ts, A0_M_S2 * (lam * mu) ** 2,
+                              J0_M_S3 * lam ** 3)
+            key = counts.tobytes()
+            if key not in tried:
                 _check_counts(counts, els[0].line)
                 try:
                     res = plan_timed(name, model, st, t.segments, counts.tolist())
-                    tried[lam] = res if feasible(res) else None
+                    tried[key] = res if feasible(res) else None
                 except PlannerError as err:
                     if err.code not in ("infeasible", "not_settled"):
                         raise
-                    tried[lam] = None
-            return tried[lam]
+                    tried[key] = None
+            return tried[key]
 
-        lo, hi = 0.0, 1.0
-        if run(1.0) is not None:
-            lo, hi = 1.0, 2.0
-            while hi < 64 and run(hi) is not None:
-                lo, hi = hi, hi * 2
-        else:
-            while hi > 1 / 64:
-                hi, lo = hi / 2, 0.0
-                if run(hi) is not None:
-                    lo, hi = hi, hi * 2
-                    break
-        if lo == 0.0:
+        # 1. the whole profile (speeds, accelerations); 2. the speeds alone (cell speed and the
+        # curvature and corner limits), the accelerations between them as found: where the
+        # start and the stop bound the first scale, the path between them can go faster
+        lam0, mu0 = hint if hint is not None else (1.0, 1.0)
+        lam = largest_feasible(lambda x: run(x) is not None, lam0)
+        if lam is None:
             raise _infeasible(els[0].line, tol, st)
-        for _ in range(SCALE_STEPS):
-            mid = 0.5 * (lo + hi)
-            if run(mid) is not None:
-                lo = mid
-            else:
-                hi = mid
-        best = tried[lo]
+        mu = largest_feasible(lambda x: run(lam, x) is not None, max(mu0, 1.0), low=1.0)
+        assert mu is not None  # mu = 1 is lam's plan
+        scale_found = (lam, mu)
+        best = run(lam, mu)
         assert best is not None
         result = best
     K = len(result.time)
@@ -299,7 +314,51 @@ def _cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int],
     cutting = np.ones(K, bool)
     line = geo.line[elem].astype(np.int64)
     dev = _deviation(result.pose[:, :2], elem, geo, tol)
-    return _Part(result, cutting, line, dev, cells=len(t.segments) - 2, segments=t.segments)
+    part = _Part(result, cutting, line, dev, cells=len(t.segments) - 2, segments=t.segments)
+    part.scale = scale_found
+    return part
+
+
+def largest_feasible(ok: Callable[[float], bool], start: float, resolution: float = SCALE_RESOLUTION,
+                     low: float = SCALE_MIN, high: float = SCALE_MAX) -> float | None:
+    """The largest scale ``lam`` in ``[low, high]`` with ``ok(lam)`` and not ``ok(lam (1 + resolution))``
+    (or ``lam`` at ``high``), found from ``start``: steps growing geometrically (``resolution``,
+    twice that, ...) up from a feasible start or down from an infeasible one bracket it, then
+    bisection (in the logarithm) narrows the bracket to ``1 + resolution``. From the scale of
+    the piece before (identical depth passes), that is two plans: ``start`` and the step above.
+    ``None``: nothing from ``low`` up is feasible (assumes slower is never worse, as the
+    bisection it replaces did)."""
+    start = min(max(start, low), high)
+    step = resolution
+    if ok(start):
+        lo = start
+        while True:
+            if lo >= high:
+                return lo
+            cand = min(lo * (1 + step), high)
+            if not ok(cand):
+                hi = cand
+                break
+            lo = cand
+            step *= 2
+    else:
+        hi = start
+        while True:
+            if hi <= low:
+                return None
+            cand = max(hi / (1 + step), low)
+            if ok(cand):
+                lo = cand
+                break
+            hi = cand
+            step *= 2
+    while hi > lo * (1 + resolution) * (1 + 1e-12):
+        mid = math.sqrt(lo * hi)
+        if ok(mid):
+            lo = mid
+        else:
+            hi = mid
+    return lo
 
 
 def counts_of(res: PlanResult, n: int) -> np.ndarray:
@@ -490,7 +549,8 @@ CONTOUR_STEP_S = 3e-4
 def estimate_contour(request: Any, program: Program | None = None) -> tuple[float, str]:
     """A lower estimate of the compute time of :func:`plan_contour` [s] and the arithmetic in
     words: the cut samples at the programmed feed (``program``; ~1.5 plans) or at the
-    reference speed (``fastest``: ~10 candidate plans) times the step cost."""
+    reference speed (``fastest``: ~10 candidate plans for the first pass, ~2.5 for the next)
+    times the step cost."""
     req = parse_contour_request(request)
     st = req.plan_settings()
     if program is None:
@@ -500,7 +560,9 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
         for e in b.elements:
             v = e.feed_m_s if req.feed == "program" else V0_M_S * 2
             samples += e.length_m / max(v, 1e-9) / st.Ts
-    plans = 1.5 if req.feed == "program" else SCALE_STEPS + 3
+    # fastest: ~10 candidate plans for the first cut, ~2.5 for each next (its search starts at the
+    # scale found before: two plans when the passes are alike)
+    plans = 1.5 if req.feed == "program" else 2.5 + 7.5 / max(len(program.passes), 1)
     seconds = samples * plans * CONTOUR_STEP_S
     return seconds, (f"{len(program.passes)} passes, ~{samples:.0f} cut samples at Ts = {st.Ts:g} s x {plans:g} "
                      f"plans x ~{CONTOUR_STEP_S * 1e6:.0f} us per step")

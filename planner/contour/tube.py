@@ -1,18 +1,25 @@
 """A cut pass as a tube corridor of convex cells, and the distance of points to the
 programmed path (lines and arcs), both in the robot frame [m].
 
-**Cells.** Each arc is replaced by chords whose sagitta is at most ``s_a = tol / 4`` (so the
+**Cells.** Each arc is replaced by chords whose sagitta is at most ``s_a = 0.18 tol`` (so the
 chord polyline is within ``s_a`` of the arc); long pieces are split to at most ``piece_max``.
 Each piece ``[p0, p1]`` gets the convex cell spanned by eight points on the circles of radius
 ``rho`` about its ends (at +-90 and +-30 degrees from the piece's direction, forward at ``p1``,
-backward at ``p0``): it lies in ``piece + disk(rho)``, hence within ``rho + s_a`` of the path,
-and contains the disk of radius ``rho cos 30`` about each end. Where the direction changes, the
-intersection of the two neighbouring cells is a cell of its own between them (it contains the
-disk of radius ``0.87 rho`` about the shared vertex). So consecutive samples of the
-time-indexed range sequence always lie in ONE convex cell (the same cell, a cell and a
-junction inside it, or two collinear cells whose union is convex), and the straight move
-from one sample to the next stays inside it: every chord is within ``rho + s_a <= tol`` of
-the programmed path, which is what the exported G93 program runs.
+backward at ``p0``): it lies in ``piece + disk(rho)`` and contains the disk of radius
+``rho cos 30`` about each end. Consecutive samples of the time-indexed range sequence lie in
+the same cell or in two consecutive ones; the straight move between them lies in the convex
+hull of the two cells, ``triangle(p0, v, p1) + disk(rho)`` (``v`` the shared vertex), which is
+within ``bend + rho`` of the path, ``bend`` the height of ``v`` over ``p0 p1`` (two chords of
+one arc: the arc passes through the three points and the triangle lies inside the circle, so
+no point of it is farther than the bend, 4 sagittas of one chord; elsewhere the bend plus the
+chords' sagitta ``s_a``). Where that exceeds ``0.95 tol`` (corners, where a line meets an
+arc), the intersection of the two cells is a **junction** cell of its own between them (it
+contains the disk of radius ``0.87 rho`` about the shared vertex), so the two samples on
+either side of it lie in one convex cell. A pass with arcs has ``rho = 0.95 tol - 4 s_a``
+(0.23 tol; the chords of an arc then need no junctions: half as many cells as with one
+between every two chords, so a sample time can pass twice as much of an arc; a line-only pass
+``rho = 0.95 tol``). Every chord is then within ``0.95 tol`` of the programmed path, which
+is what the exported G93 program runs.
 """
 
 from __future__ import annotations
@@ -24,10 +31,14 @@ import numpy as np
 
 from ..schema import PathElement, Segment
 
-__all__ = ["SAGITTA_FRACTION", "TUBE_FRACTION", "PathGeometry", "Tube", "tube"]
+__all__ = ["BEND_SAGITTAS", "SAGITTA_FRACTION", "TUBE_FRACTION", "PathGeometry", "Tube", "tube"]
 
 #: chord sagitta of the arcs' polylines, as a fraction of the tolerance
-SAGITTA_FRACTION = 0.25
+SAGITTA_FRACTION = 0.18
+#: the bend of two consecutive chords of an arc (the height of their triangle over the chord of
+#: both: the sagitta of twice the angle) is 4 sagittas of one: the cells of a pass with arcs
+#: leave room for it, so that consecutive chords of an arc need no junction cell between them
+BEND_SAGITTAS = 4.0
 #: the cells' radius about the (chord) path, as a fraction of the tolerance, before the sagitta
 TUBE_FRACTION = 0.95
 _CAP = np.radians([-90.0, -30.0, 30.0, 90.0])
@@ -42,6 +53,16 @@ class Tube:
     turn: np.ndarray  #: (n,) turn angle at a junction (0 elsewhere) [rad]
     radius: np.ndarray  #: (n,) curvature radius of the piece (inf for lines) [m]
     rho: float  #: the cells' radius about the chord path [m]
+
+
+def _bend(a: np.ndarray, v: np.ndarray, b: np.ndarray) -> float:
+    """Distance of the vertex ``v`` from the line ``a b``: the farthest the triangle ``a v b`` (the
+    convex hull of two consecutive pieces) lies from the pieces [m]."""
+    e = b - a
+    n = float(np.hypot(*e))
+    if n < 1e-15:
+        return float(np.hypot(*(v - a)))
+    return abs(float(e[0] * (v[1] - a[1]) - e[1] * (v[0] - a[0]))) / n
 
 
 def _cell(p0: np.ndarray, p1: np.ndarray, rho: float) -> np.ndarray:
@@ -111,7 +132,7 @@ def tube(elements: list[PathElement], origin: np.ndarray, tol: float, psi: float
     """The tube corridor of a pass (module docstring): point, cells (and junctions), point."""
     s_a = SAGITTA_FRACTION * tol
     pieces = _pieces(elements, origin, s_a, piece_max)
-    rho_arc = TUBE_FRACTION * tol - s_a
+    rho_arc = TUBE_FRACTION * tol - BEND_SAGITTAS * s_a * (1 + 1e-9)
     rho_line = TUBE_FRACTION * tol
     segs: list[Segment] = []
     elem, length, turn, radius = [], [], [], []
@@ -133,21 +154,28 @@ def tube(elements: list[PathElement], origin: np.ndarray, tol: float, psi: float
     add(None, pieces[0][0], pieces[0][2], 0.0, 0.0, math.inf)
     prev: np.ndarray | None = None
     prev_dir: np.ndarray | None = None
+    prev_p0: np.ndarray | None = None
+    prev_e = -1
     # all cells of one pass share one radius: the junction of a line and a chord then still
     # contains a disk of 0.87 rho about the vertex
     rho = rho_arc if any(p[3] < math.inf for p in pieces) else rho_line
     for p0, p1, e, r in pieces:
         cell = _cell(p0, p1, rho)
         d = (p1 - p0) / np.hypot(*(p1 - p0))
-        if prev is not None and prev_dir is not None:
+        if prev is not None and prev_dir is not None and prev_p0 is not None:
             ang = math.atan2(prev_dir[0] * d[1] - prev_dir[1] * d[0], float(prev_dir @ d))
-            if abs(ang) > 1e-9:
+            # the two pieces' cells without a junction between them: their convex hull is the
+            # triangle of the pieces grown by rho, within the bend (pieces of one arc: the arc
+            # passes through the vertex and stays outside the triangle) or the bend plus the
+            # chords' sagitta (elsewhere) plus rho of the path
+            same_arc = e == prev_e and r < math.inf
+            if abs(ang) > 1e-9 and _bend(prev_p0, p0, p1) + (0.0 if same_arc else s_a) + rho > TUBE_FRACTION * tol:
                 junction = _clip(prev, cell)
                 if len(junction) < 3:  # pragma: no cover - the disk about the vertex is in both
                     raise AssertionError("empty junction")
                 add(junction, None, e, 0.0, abs(ang), math.inf)
         add(cell, None, e, float(np.hypot(*(p1 - p0))), 0.0, r)
-        prev, prev_dir = cell, d
+        prev, prev_dir, prev_p0, prev_e = cell, d, p0, e
     add(None, pieces[-1][1], pieces[-1][2], 0.0, 0.0, math.inf)
     return Tube(segs, np.array(elem), np.array(length), np.array(turn), np.array(radius), rho)
 

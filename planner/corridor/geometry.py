@@ -33,6 +33,26 @@ def halfplanes(polygon: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return n, np.einsum("ij,ij->i", n, P[keep])
 
 
+def clip_halfplanes(P: np.ndarray, A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The convex polygon ``P`` (k, 2) cut by the half-planes ``A p <= b`` (Sutherland-Hodgman,
+    one half-plane at a time); its vertices (possibly none) [m]."""
+    P = np.asarray(P, dtype=float)
+    for a, c in zip(A, b, strict=True):
+        if not len(P):
+            break
+        d = P @ a - c  # > 0: outside
+        Q = np.roll(P, -1, axis=0)
+        dq = np.roll(d, -1)
+        out = []
+        for p, q, dp_, dq_ in zip(P, Q, d, dq, strict=True):
+            if dp_ <= 0:
+                out.append(p)
+            if (dp_ <= 0) != (dq_ <= 0):  # the edge crosses the line
+                out.append(p + (q - p) * (dp_ / (dp_ - dq_)))
+        P = np.asarray(out, dtype=float).reshape(-1, 2)
+    return P
+
+
 def box_distance(p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Euclidean distance of points ``p`` (..., d) outside boxes ``[lo, hi]`` (0 inside)."""
     return np.linalg.norm(np.maximum(np.maximum(lo - p, 0.0), p - hi), axis=-1)

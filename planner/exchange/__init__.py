@@ -10,12 +10,34 @@
   :func:`to_dxf`).
 """
 
-from .drawing import DRAWING_FORMATS, drawing_format, import_drawing
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
 from .dxf_export import DXF_LAYERS, to_dxf
 from .formats import EXPORT_FORMATS, ExportFormat, export, export_format_for
 from .gcode import to_gcode
-from .gcode_in import read_gcode
 from .joints import joint_columns, to_joints
+
+if TYPE_CHECKING:  # the readers, for type checkers; at run time they load on first use
+    from .drawing import DRAWING_FORMATS, drawing_format, import_drawing
+    from .gcode_in import read_gcode
+
+#: the readers load on first use (PEP 562): writing a plan's output (``app.formats``, every
+#: ``rangeplan plan``) needs neither shapely nor scipy.spatial, which the drawing reader imports
+_LAZY = {"DRAWING_FORMATS": "drawing", "drawing_format": "drawing", "import_drawing": "drawing",
+         "read_gcode": "gcode_in"}
 
 __all__ = ["DRAWING_FORMATS", "DXF_LAYERS", "EXPORT_FORMATS", "ExportFormat", "drawing_format", "export",
            "export_format_for", "import_drawing", "joint_columns", "read_gcode", "to_dxf", "to_gcode", "to_joints"]
+
+
+def __getattr__(name: str) -> Any:
+    home = _LAZY.get(name)
+    if home is None:
+        raise AttributeError(f"module 'planner.exchange' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{home}", __name__), name)
+    globals()[name] = value
+    return value

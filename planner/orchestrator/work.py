@@ -14,7 +14,7 @@ the validated request alone (no robot model, no segmentation, no simulation):
   reference with DAQP about ``N^2.2``) and the RK4 substeps;
 * the range sequence, the corridor metrics and the result, per sample (linear in the
   samples; more with exact cell polygons);
-* a layout's segmentation (per cell and per obstacle);
+* a layout's segmentation (per cell, per obstacle and a fixed part);
 * the ``fastest`` timing search: about ``2 + log2(N)`` plans at ``S = N``;
 * the advice an error may carry, checked before it is given (issue 20), bounded by its own
   parameters and estimated apart (``advice_seconds``): a layout without a path is segmented
@@ -167,7 +167,7 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
     step_s = _step_cost(st.mode, st.backend, st.solver, st.N, st.plant_substeps)
     loop_s = plans * steps_one * step_s
     metrics_s = plans * steps_one * (c["sample"] + (c["sample_polygon"] if polygons else 0.0))
-    segment_s = cells * c["cell"] + obstacles * c["obstacle"]
+    segment_s = (c["segmentation"] if req.layout is not None else 0.0) + cells * c["cell"] + obstacles * c["obstacle"]
     seconds = c["fixed"] + loop_s + metrics_s + segment_s
     # the field to change: the horizon if a step costs more than at the mode's default N,
     # else what makes the corridor long (its segments, or its samples per segment)
@@ -197,7 +197,7 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
             np.any(np.abs(np.asarray(lay.psi_range) - np.sort([lay.start_pose[2], lay.end_pose[2]])) > 1e-12))
         r_cells, r_runs = remedy_cells(lay.bounds.lower, lay.bounds.upper, lay.cell.shape, size, lay.clearance,
                                        psi_narrows)
-        advice_s = r_cells * c["cell"] + r_runs * (obstacles * c["obstacle"] + c["fixed"])
+        advice_s = r_cells * c["cell"] + r_runs * (obstacles * c["obstacle"] + c["segmentation"])
     if st.mode == "constrained" and not st.fastest and req.reference is None:  # infeasible: more time
         more = [f for f in MORE_TIME
                 if S * f <= MAX_SAMPLES_PER_SEGMENT and n * S * f + st.tail_steps <= MAX_TOTAL_STEPS]

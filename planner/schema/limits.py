@@ -86,8 +86,10 @@ DEFAULT_LAYOUT_SPEED_M_S = 0.05
 #: 26 / 51 / 88 us per step at N = 10 / 30 / 60; its numpy reference with DAQP about N^2.2),
 #: per extra RK4 substep,
 #: per sample of the range sequence, the corridor metrics and the result (linear in the samples
-#: since issue 17; more with cell polygons), per cell and per obstacle of a segmentation,
-#: and a fixed part per request (parsing, reach checks, the result).
+#: since issue 17; more with cell polygons), per cell and per obstacle of a segmentation and
+#: a fixed part per segmentation (the workspace, the reach region: ~2.5-4 ms for 24-900 cells,
+#: found by the certification run, issue 20), and a fixed part per request (parsing, reach
+#: checks, the result).
 WORK_COSTS: dict[str, float] = {
     "paper_compiled_a": 6e-6, "paper_compiled_b": 0.25e-6, "paper_compiled_c": 0.0, "paper_compiled_d": 0.0,
     "paper_reference_a": 110e-6, "paper_reference_b": 1.5e-6, "paper_reference_c": 0.0, "paper_reference_d": 0.0,
@@ -99,5 +101,5 @@ WORK_COSTS: dict[str, float] = {
     "constrained_reference_d": 0.001e-6,
     "substep_compiled": 1.5e-6, "substep_reference": 150e-6,
     "sample": 2.5e-6, "sample_polygon": 1e-6,
-    "cell": 4e-6, "obstacle": 1e-4, "fixed": 1.5e-3,
+    "cell": 5e-6, "obstacle": 1e-4, "segmentation": 3e-3, "fixed": 1.5e-3,
 }
