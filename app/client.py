@@ -17,7 +17,6 @@ service answers (4xx, 5xx) is raised as :class:`RangeplanError` with its ``code`
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
@@ -26,6 +25,7 @@ import httpx
 from pydantic import ValidationError
 
 from app.formats import ExportFormatName
+from app.settings import client_token
 from planner.schema import (
     PARTIAL_LAYOUT,
     ContourRequest,
@@ -71,7 +71,7 @@ class Client:
     def __init__(self, base_url: str = "http://127.0.0.1:8000", *, token: str | None = None, timeout: float = 120.0,
                  transport: httpx.BaseTransport | None = None):
         # the client's own environment (it may run on another machine than the service)
-        token = token if token is not None else os.environ.get("RANGEPLAN_API_TOKEN") or None
+        token = token if token is not None else client_token()
         headers = {"Authorization": f"Bearer {token}"} if token else None
         self._http = httpx.Client(base_url=base_url, timeout=timeout, transport=transport, headers=headers)
 

@@ -40,12 +40,12 @@ import orjson
 from pydantic import BaseModel, Field
 
 from app.failures import degenerate, out_of_memory, timeout, too_much_work
-from planner.schema import ContourRequest, ImportOptions, PlanRequest
+from planner.schema import ContourRequest, ImportOptions, PlanRequest, PlanResult, SegmentationResult
 
-__all__ = ["ContourJob", "ContourWork", "Done", "EditorJob", "ErrorDetail", "ExportJob", "Failed", "ImportJob",
-           "ItemTimeout", "Job", "Outcome", "PlanJob", "SegmentJob", "SleepJob", "bounded", "check_estimate",
-           "clean_spool", "crashed", "estimate", "failed", "run_bounded", "run_job", "segmentation_module",
-           "spool_dir"]
+__all__ = ["ContourJob", "ContourWork", "Done", "EditorJob", "EditorPlan", "ErrorDetail", "ExportJob", "Failed",
+           "ImportJob", "ItemTimeout", "Job", "Outcome", "PlanJob", "SegmentJob", "SleepJob", "bounded",
+           "check_estimate", "clean_spool", "crashed", "estimate", "failed", "run_bounded", "run_job",
+           "segmentation_module", "spool_dir"]
 
 
 class ErrorDetail(BaseModel):
@@ -61,6 +61,16 @@ class ErrorDetail(BaseModel):
     def to_dict(self) -> dict[str, Any]:
         """``{code, message, field}`` (the planner's error dict)."""
         return {"code": self.code, "message": self.message, "field": self.field}
+
+
+class EditorPlan(BaseModel):
+    """What an :class:`EditorJob` answers (its JSON payload, parsed once by the editor):
+    the layout's segmentation (kept when the plan then fails; null for a segment list or
+    when segmenting failed), the plan result and the error (each may be null)."""
+
+    segmentation: SegmentationResult | None = None
+    result: PlanResult | None = None
+    error: ErrorDetail | None = None
 
 
 # ---------------------------------------------------------------------------------------
@@ -101,7 +111,7 @@ class ImportJob:
 
 @dataclass(frozen=True)
 class EditorJob:
-    """The editor's re-plan: JSON ``{"segmentation", "result", "error"}`` (each may be null)."""
+    """The editor's re-plan: JSON of an :class:`EditorPlan` ``{"segmentation", "result", "error"}``."""
 
     request: PlanRequest
     kind: ClassVar[str] = "editor"

@@ -12,21 +12,22 @@ loads the kernels in a second instead of compiling them for minutes.
 
 from __future__ import annotations
 
-import os
 import shutil
-from pathlib import Path
+from collections.abc import Mapping
 
 __all__ = ["seed_kernel_cache"]
 
 
-def seed_kernel_cache(environ: dict | None = None) -> str | None:
-    """Copy ``RANGEPLAN_KERNEL_SEED`` into ``NUMBA_CACHE_DIR`` (files it lacks only);
-    returns what was done, for the log, or None when neither is set."""
-    env = os.environ if environ is None else environ
-    seed, cache = env.get("RANGEPLAN_KERNEL_SEED"), env.get("NUMBA_CACHE_DIR")
-    if not seed or not cache:
+def seed_kernel_cache(environ: Mapping[str, str] | None = None) -> str | None:
+    """Copy ``RANGEPLAN_KERNEL_SEED`` into ``NUMBA_CACHE_DIR`` (files it lacks only; both
+    read through :func:`app.settings.settings`, of the environment or of ``environ``);
+    returns what was done, for the log, or None when either is unset."""
+    from app.settings import settings
+
+    cfg = settings(environ)
+    if cfg.kernel_seed is None or cfg.numba_cache_dir is None:
         return None
-    src, dst = Path(seed), Path(cache)
+    src, dst = cfg.kernel_seed, cfg.numba_cache_dir
     if not src.is_dir():
         return f"kernel seed {src} not found: the kernels compile on first use"
     copied = 0

@@ -34,8 +34,11 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from http.cookies import SimpleCookie
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qsl, quote, urlencode, urlsplit
+
+if TYPE_CHECKING:
+    from app.settings import Settings
 
 __all__ = ["AccessPolicy", "AccessControl", "ConfigError", "Verdict", "decide", "install_access_control",
            "is_loopback", "protected_path", "LOOPBACK_HOSTS", "OPEN_PATHS", "TOKEN_COOKIE", "MIN_TOKEN_LENGTH"]
@@ -95,24 +98,24 @@ class AccessPolicy:
 
     @classmethod
     def from_env(cls, environ: Mapping[str, str] | None = None, bind_host: str | None = None) -> AccessPolicy:
-        """The policy of ``RANGEPLAN_API_TOKEN`` / ``RANGEPLAN_API_TOKEN_FILE``,
+        """The policy of the settings (:func:`app.settings.settings` of the environment, or of
+        ``environ``): ``RANGEPLAN_API_TOKEN`` / ``RANGEPLAN_API_TOKEN_FILE``,
         ``RANGEPLAN_ALLOWED_HOSTS`` and ``RANGEPLAN_CORS_ORIGINS``; ``bind_host`` (the
         server's address, unless a wildcard) is allowed as a Host too. Raises
         :class:`ConfigError`."""
-        if environ is None:  # the settings object's view of the environment
-            from app.settings import SettingsError, settings
+        from app.settings import SettingsError, settings
 
-            try:
-                cfg = settings()
-            except SettingsError as exc:
-                raise ConfigError(str(exc)) from None
-            env: Mapping[str, str] = {f"RANGEPLAN_{k.upper()}": str(getattr(cfg, k)) for k in
-                                      ("api_token", "api_token_file", "allowed_hosts", "cors_origins")
-                                      if getattr(cfg, k) is not None}
-        else:
-            env = environ
-        token = env.get("RANGEPLAN_API_TOKEN") or None
-        path = env.get("RANGEPLAN_API_TOKEN_FILE")
+        try:
+            cfg = settings(environ)
+        except SettingsError as exc:
+            raise ConfigError(str(exc)) from None
+        return cls.from_settings(cfg, bind_host)
+
+    @classmethod
+    def from_settings(cls, cfg: Settings, bind_host: str | None = None) -> AccessPolicy:
+        """The policy of the settings object ``cfg`` (see :meth:`from_env`)."""
+        token = cfg.api_token or None
+        path = cfg.api_token_file
         if path:
             if token:
                 raise ConfigError("set RANGEPLAN_API_TOKEN or RANGEPLAN_API_TOKEN_FILE, not both")
@@ -123,11 +126,11 @@ class AccessPolicy:
             if not token:
                 raise ConfigError(f"RANGEPLAN_API_TOKEN_FILE: {path} is empty")
         hosts = set(LOOPBACK_HOSTS)
-        hosts |= {h.strip().lower() for h in env.get("RANGEPLAN_ALLOWED_HOSTS", "").split(",") if h.strip()}
+        hosts |= {h.strip().lower() for h in cfg.allowed_hosts.split(",") if h.strip()}
         if bind_host and bind_host not in ("0.0.0.0", "::", ""):
             hosts.add(bind_host.strip("[]").lower())
         origins = []
-        for o in (o.strip().rstrip("/") for o in env.get("RANGEPLAN_CORS_ORIGINS", "").split(",")):
+        for o in (o.strip().rstrip("/") for o in cfg.cors_origins.split(",")):
             if not o:
                 continue
             parts = urlsplit(o)

@@ -1,22 +1,27 @@
-"""The service's one settings object: every ``RANGEPLAN_*`` environment variable, its CLI
-flag where there is one, its default and its meaning, in one table (:class:`Settings`).
+"""The service's one settings object: every ``RANGEPLAN_*`` environment variable (and the
+two variables of other programs the service follows, ``XDG_DATA_HOME`` and numba's
+``NUMBA_CACHE_DIR``), its CLI flag where there is one, its default and its meaning, in one
+table (:class:`Settings`).
 
-Read with :func:`settings` (the environment at the time of the call; a value that does not
-parse is a :class:`SettingsError` naming the variable and the cause, never a silent
-default). The README's configuration table is :func:`settings_table` (a test keeps them
-equal; ``python -m app.settings`` prints it). No web framework, planner or editor import.
+Read with :func:`settings` (the environment at the time of the call, or a given mapping; a
+value that does not parse is a :class:`SettingsError` naming the variable and the cause,
+never a silent default). This module is the only one of ``app/`` that reads the environment
+for configuration (a test checks it); the typed client's token is :func:`client_token`. The
+README's configuration table is :func:`settings_table` (a test keeps them equal;
+``python -m app.settings`` prints it). No web framework, planner or editor import.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
 from pydantic import Field, JsonValue, ValidationError
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-__all__ = ["Settings", "SettingsError", "settings", "settings_table"]
+__all__ = ["Settings", "SettingsError", "client_token", "env_name", "settings", "settings_table"]
 
 MiB = 1024 * 1024
 
@@ -98,21 +103,61 @@ class Settings(BaseSettings):
     dask_malloc: str = _f("relax", "glibc malloc tuning of Dask workers (relax | keep)")
     # -- kernels
     kernel_seed: Path | None = _f(None, "Compiled-kernel cache copied into NUMBA_CACHE_DIR before the planner loads")
+    # -- other programs' variables the service follows (named as they are, no prefix)
+    numba_cache_dir: Path | None = _f(None, "numba's compiled-kernel cache directory (numba's own variable; the "
+                                      "kernel seed is copied there)", validation_alias="NUMBA_CACHE_DIR",
+                                      default_text="unset (the planner picks its cache)")
+    xdg_data_home: Path | None = _f(None, "Base directory of user data (the XDG variable); the store defaults to "
+                                    "its rangeplan/", validation_alias="XDG_DATA_HOME",
+                                    default_text="~/.local/share")
+
+
+def env_name(field: str) -> str:
+    """The environment variable of a :class:`Settings` field: ``RANGEPLAN_<FIELD>``, or the
+    other program's own name (``XDG_DATA_HOME``, ``NUMBA_CACHE_DIR``)."""
+    alias = Settings.model_fields[field].validation_alias
+    return alias if isinstance(alias, str) else f"RANGEPLAN_{field.upper()}"
+
+
+_BY_ENV = {env_name(f): f for f in Settings.model_fields}
+
+
+class _Given(Settings):
+    """:class:`Settings` from given values only (no environment, no dotenv)."""
+
+    @classmethod
+    def settings_customise_sources(cls, settings_cls, init_settings, env_settings, dotenv_settings,
+                                   file_secret_settings):
+        return (init_settings,)
 
 
 class SettingsError(ValueError):
     """An environment variable whose value does not parse (its name and the cause)."""
 
 
-def settings() -> Settings:
-    """The settings of the current environment; raises :class:`SettingsError` for a value
-    that does not parse."""
+def settings(environ: Mapping[str, str] | None = None) -> Settings:
+    """The settings of the current environment (or of the variables in ``environ``: a
+    policy or a path computed for another environment, tests); raises
+    :class:`SettingsError` for a value that does not parse."""
     try:
-        return Settings()
+        if environ is None:
+            return Settings()
+        values: dict[str, Any] = {str(Settings.model_fields[f].validation_alias or f): v for name, v in environ.items()
+                  if (f := _BY_ENV.get(name)) is not None and v != ""}
+        return _Given(**values)
     except ValidationError as exc:
         e = exc.errors()[0]
-        name = f"RANGEPLAN_{str(e['loc'][0]).upper()}" if e.get("loc") else "RANGEPLAN_*"
+        loc = str(e["loc"][0]) if e.get("loc") else ""
+        name = env_name(loc) if loc in Settings.model_fields else loc if loc in _BY_ENV else "RANGEPLAN_*"
         raise SettingsError(f"{name}: {e['msg']} (got {e.get('input')!r})") from None
+
+
+def client_token(environ: Mapping[str, str] | None = None) -> str | None:
+    """The token the typed client (:class:`app.client.Client`) sends by default:
+    ``RANGEPLAN_API_TOKEN`` of the client's own environment, read alone (the client may run
+    where the server's other variables are unset or mean something else); None when unset."""
+    env = os.environ if environ is None else environ
+    return env.get("RANGEPLAN_API_TOKEN") or None
 
 
 def settings_table() -> str:
@@ -125,7 +170,7 @@ def settings_table() -> str:
             d = f.default
             default = "none" if d is None else ("1" if d is True else "0" if d is False else str(d))
         cli = f"`{extra['cli']}`" if extra.get("cli") else ""
-        rows.append(f"| `RANGEPLAN_{name.upper()}` | {cli} | {default} | {f.description} |")
+        rows.append(f"| `{env_name(name)}` | {cli} | {default} | {f.description} |")
     return "\n".join(rows) + "\n"
 
 

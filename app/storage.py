@@ -53,6 +53,9 @@ DB_NAME = "rangeplan.sqlite3"
 DEFAULT_PAGE_SIZE = 50
 MAX_PAGE_SIZE = 200
 BUSY_TIMEOUT_S = 30.0
+#: how long a read on the event loop's read-only connection may wait for SQLite's lock [s]
+#: before it is handed to the read threads instead (:meth:`Store.corridor_page`, ``quick``)
+QUICK_BUSY_TIMEOUT_S = 0.005
 PAGE_SIZE = 16384
 
 _SCHEMA = """
@@ -111,6 +114,10 @@ class BadCursor(ValueError):
     """A list cursor this store did not make."""
 
 
+class StoreBusy(Exception):
+    """A quick read found the database locked (it does not wait: read it on a thread)."""
+
+
 #: what a cursor looks like (a row position; any such string is a valid cursor)
 CURSOR_PATTERN = r"^[0-9]{1,18}$"
 
@@ -130,11 +137,10 @@ def default_data_dir() -> Path:
     else ``~/.local/share/rangeplan`` (created on first use by :class:`Store`)."""
     from app.settings import settings
 
-    configured = settings().data_dir
-    if configured is not None:
-        return configured.expanduser()
-    xdg = os.environ.get("XDG_DATA_HOME")
-    base = Path(xdg).expanduser() if xdg else Path.home() / ".local" / "share"
+    cfg = settings()
+    if cfg.data_dir is not None:
+        return cfg.data_dir.expanduser()
+    base = cfg.xdg_data_home.expanduser() if cfg.xdg_data_home is not None else Path.home() / ".local" / "share"
     return base / "rangeplan"
 
 
@@ -196,6 +202,20 @@ class Connections:
         if getattr(self._local, "sync", None) != synchronous:
             con.execute(f"PRAGMA synchronous = {synchronous}")
             self._local.sync = synchronous
+        return con
+
+    def reader(self) -> sqlite3.Connection:
+        """This thread's read-only connection (``mode=ro``, ``query_only``), which waits at
+        most :data:`QUICK_BUSY_TIMEOUT_S` for a lock: for short bounded reads on a thread
+        that must not wait (the event loop's)."""
+        con = getattr(self._local, "ro", None)
+        if con is None:
+            con = sqlite3.connect(f"{self.path.resolve().as_uri()}?mode=ro", uri=True, timeout=QUICK_BUSY_TIMEOUT_S,
+                                  isolation_level=None, check_same_thread=False)
+            con.execute("PRAGMA query_only = 1")
+            self._local.ro = con
+            with self._all_lock:
+                self._all.append(con)
         return con
 
     @contextmanager
@@ -391,15 +411,31 @@ class Store:
             rows = con.execute("SELECT id, name, created, updated, request FROM corridors ORDER BY seq").fetchall()
         return [self._record(r) for r in rows]
 
-    def corridor_page(self, limit: int = DEFAULT_PAGE_SIZE, cursor: str | None = None) -> tuple[list[dict], str | None]:
+    def corridor_page(self, limit: int = DEFAULT_PAGE_SIZE, cursor: str | None = None, *,
+                      quick: bool = False) -> tuple[list[dict], str | None]:
         """Up to ``limit`` corridors after ``cursor`` (None: from the first), oldest first, as
         summaries ``{"id", "name", "created", "updated", "bytes"}``; and the cursor of the
-        next page (None after the last). Raises :class:`BadCursor`."""
+        next page (None after the last). Raises :class:`BadCursor`. With ``quick``: on this
+        thread's read-only connection (:meth:`Connections.reader`), raising
+        :class:`StoreBusy` instead of waiting for a lock (a read of at most
+        :data:`MAX_PAGE_SIZE` rows of the primary key's index, without the requests: short
+        enough for the event loop)."""
         after = decode_cursor(cursor) if cursor else 0
         limit = max(1, min(int(limit), MAX_PAGE_SIZE))
+        if quick:
+            try:
+                rows = self._db.reader().execute("SELECT seq, id, name, created, updated, size FROM corridors "
+                                                 "WHERE seq > ? ORDER BY seq LIMIT ?", (after, limit + 1)).fetchall()
+            except sqlite3.OperationalError as exc:  # locked (a checkpoint, recovery) or not created yet
+                raise StoreBusy(str(exc)) from None
+            return self._page(rows, limit)
         with self._connect() as con:
             rows = con.execute("SELECT seq, id, name, created, updated, size FROM corridors WHERE seq > ? "
                                "ORDER BY seq LIMIT ?", (after, limit + 1)).fetchall()
+        return self._page(rows, limit)
+
+    @staticmethod
+    def _page(rows: list, limit: int) -> tuple[list[dict], str | None]:
         more = len(rows) > limit
         rows = rows[:limit]
         items = [{"id": r[1], "name": r[2], "created": r[3], "updated": r[4], "bytes": r[5]} for r in rows]

@@ -2,13 +2,16 @@
 clients mix plans (Table I), saves and corridor list pages against a real ``rangeplan serve``
 on 127.0.0.1 (a free port, no token, 2 planning workers).
 
-    python benchmarks/bench_load.py [--clients 200] [--per-client 6] [--base-src DIR]
+    python benchmarks/bench_load.py [--clients 200] [--per-client 6] [--base-src DIR] [--rounds N]
 
 The load runs in a process of its own (bounded: ``clients x per_client`` requests, each
 client one after another as answers come back); this process probes ``/ready`` every 50 ms
 meanwhile. With ``--base-src`` the same load runs against the service of another source
-tree first (e.g. main's ``app/`` over a copy of this tree), then against this one: one table,
-side by side. Prints per request kind: count, statuses, p50, p99, max [ms].
+tree first (e.g. main's checkout), then against this one, ``--rounds`` times alternating: one
+table, side by side. A tree's server runs on that tree's own ``.venv`` interpreter when it has
+one (its own dependencies). Prints per request kind: count, statuses, p50, p99, max [ms]; and
+the server process's own CPU time per request (its event loop and threads, not the planning
+workers), a figure the machine's other load changes little.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ import argparse
 import asyncio
 import json
 import os
+import resource
 import socket
 import statistics
 import subprocess
@@ -39,12 +43,24 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def python_of(src: Path) -> str:
+    """The interpreter of the tree ``src``: its own ``.venv`` when it has one."""
+    own = src / ".venv" / "bin" / "python"
+    return str(own) if own.exists() else sys.executable
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of process ``pid`` so far [s] (Linux ``/proc``)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def start_server(src: Path, data: Path, workers: int) -> tuple[subprocess.Popen, str]:
     port = free_port()
     env = {k: v for k, v in os.environ.items() if not k.startswith("RANGEPLAN_")}
     env.update({"RANGEPLAN_DATA_DIR": str(data), "RANGEPLAN_WORKERS": str(workers), "RANGEPLAN_ACCESS_LOG": "0",
                 "PYTHONPATH": str(src), "OPENBLAS_NUM_THREADS": "1"})
-    proc = subprocess.Popen([sys.executable, "-m", "app.cli", "serve", "--host", "127.0.0.1", "--port", str(port),
+    proc = subprocess.Popen([python_of(src), "-m", "app.cli", "serve", "--host", "127.0.0.1", "--port", str(port),
                              "--no-editor"], cwd=src, env=env, stdout=subprocess.DEVNULL,
                             stderr=open(data / "server.log", "w"))
     url = f"http://127.0.0.1:{port}"
@@ -98,18 +114,23 @@ def run(src: Path, clients: int, per_client: int, workers: int) -> dict[str, lis
         try:
             # the clients in LOAD_PROCESSES processes: one Python process reading 200 connections
             # (plan results are ~120 kB each) is itself a bottleneck that delays every answer
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
             share = [clients // LOAD_PROCESSES + (i < clients % LOAD_PROCESSES) for i in range(LOAD_PROCESSES)]
             loads = [subprocess.Popen([sys.executable, __file__, "--child", url, str(n), str(per_client), str(i)],
                                       cwd=ROOT, stdout=subprocess.PIPE, text=True) for i, n in enumerate(share) if n]
             ready = []
+            cpu0 = cpu_seconds(server.pid)
             with httpx.Client(base_url=url, timeout=60) as c:
                 while any(p.poll() is None for p in loads):
                     t0 = time.perf_counter()
                     status = c.get("/ready").status_code
                     ready.append(("ready", status, time.perf_counter() - t0))
                     time.sleep(0.05)
+                server_cpu = cpu_seconds(server.pid) - cpu0
                 server_side = c.get("/metrics").text if c.get("/metrics").status_code == 200 else ""
             rows = [row for p in loads for row in json.loads(p.communicate()[0])]
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)  # the load processes (waited for above)
+            load_cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
         finally:
             server.terminate()
             server.wait(60)
@@ -117,6 +138,7 @@ def run(src: Path, clients: int, per_client: int, workers: int) -> dict[str, lis
     for kind, status, s in rows:
         out.setdefault(kind, []).append((kind, status, s))
     out["server"] = server_quantiles(server_side)
+    out["cpu"] = [("cpu", len(rows) + len(ready), server_cpu, load_cpu)]
     return out
 
 
@@ -183,17 +205,27 @@ def main() -> None:
     ap.add_argument("--per-client", type=int, default=3)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--base-src", type=Path, help="another source tree to measure first (side by side)")
+    ap.add_argument("--rounds", type=int, default=1, help="rounds, base and this alternating in each")
     a = ap.parse_args()
-    results = {}
-    if a.base_src:
-        results["base"] = run(a.base_src.resolve(), a.clients, a.per_client, a.workers)
-    results["this"] = run(ROOT, a.clients, a.per_client, a.workers)
+    results: dict[str, dict[str, list]] = {}
+    loads = [os.getloadavg()[0]]
+    for r in range(a.rounds):
+        trees = ([("base", a.base_src.resolve())] if a.base_src else []) + [("this", ROOT)]
+        for name, src in trees:
+            res = run(src, a.clients, a.per_client, a.workers)
+            tree = f"{name} r{r + 1}" if a.rounds > 1 else name
+            results[tree] = res
+            loads.append(os.getloadavg()[0])
+            print(f"# {tree}: {python_of(src)} on {src}; load average {loads[-1]:.1f}", flush=True)
     print(f"{a.clients} clients x {a.per_client} requests (plan, save, list in turn), {a.workers} planning workers; "
-          f"/ready probed every 50 ms; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+          f"/ready probed every 50 ms; load average {min(loads):.1f}-{max(loads):.1f} on {os.cpu_count()} cores")
     print(table(results))
     for tree, res in results.items():
-        med = {k: statistics.median(s for _, _, s in v) for k, v in res.items() if v and k != "server"}
-        print(tree, json.dumps({k: round(v * 1e3, 1) for k, v in med.items()}))
+        med = {k: statistics.median(s for _, _, s in v) for k, v in res.items() if v and k not in ("server", "cpu")}
+        (_, n, cpu, load_cpu), = res["cpu"]
+        print(tree, json.dumps({k: round(v * 1e3, 1) for k, v in med.items()}),
+              f"server process CPU {cpu:.2f} s for {n} requests ({cpu / n * 1e3:.2f} ms a request); "
+              f"the {LOAD_PROCESSES} load processes' CPU {load_cpu:.2f} s")
 
 
 if __name__ == "__main__":

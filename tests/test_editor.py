@@ -194,7 +194,11 @@ class FakeSegmentation:
         d = {"cell": {"shape": "square", "size": h}, "bounds": layout["bounds"], "cells": cells,
              "path": [j * nx + i for (i, j) in path],
              "segments": [{"lower": sg.lower.tolist(), "upper": sg.upper.tolist()} for sg in segs],
-             "start": start.tolist(), "end": end.tolist()}
+             "start": start.tolist(), "end": end.tolist(),
+             # the rest of planner.schema.SegmentationResult (the editor reads it typed)
+             "clearance": 0.0, "psi_range": [0.0, 0.0], "turns": 0, "grown_obstacles": [], "compute_ms": 0.0,
+             "counts": {st: sum(c["state"] == st for c in cells) for st in ("free", "blocked", "unreachable")},
+             "halfplanes": [None] * len(segs)}
         return _FakeSeg(cells, path, segs, d)
 
 
@@ -288,15 +292,15 @@ def test_initial_plan_reaches_the_end_inside_the_corridor(editor):
     assert editor.plans_done == 1
     res, seg = editor.last_result, editor.last_segmentation
     end = np.array(editor.request["layout"]["end"])
-    pose = np.array(res["pose"])
+    pose = np.array(res.pose)
     assert np.linalg.norm(pose[-1, :2] - end[:2]) < 1e-3
-    assert res["metrics"]["max_corridor_violation_m"] < 5e-3
+    assert res.metrics.max_corridor_violation_m < 5e-3
     # the planned path runs through the segmentation's path cells, none blocked
-    states = {c["id"]: c["state"] for c in seg["cells"]}
-    assert seg["path"] and all(states[i] == "free" for i in seg["path"])
+    states = {c.id: c.state for c in seg.cells}
+    assert seg.path and all(states[i] == "free" for i in seg.path)
     # the metrics panel and the slider show this result
-    assert f"{res['metrics']['duration_s']:.3f} s" in editor.gui.result.metrics.content
-    assert math.isclose(editor.gui.time.max, res["time"][-1])
+    assert f"{res.metrics.duration_s:.3f} s" in editor.gui.result.metrics.content
+    assert math.isclose(editor.gui.time.max, res.time[-1])
 
 
 def test_edits_are_debounced_into_one_plan(editor):
@@ -307,7 +311,7 @@ def test_edits_are_debounced_into_one_plan(editor):
     assert editor.wait_idle(60)
     assert editor.plans_done == n0 + 1
     assert editor.request["layout"]["end"][:2] == [0.06, 0.06]
-    assert np.linalg.norm(np.array(editor.last_result["pose"][-1][:2]) - [0.06, 0.06]) < 1e-3
+    assert np.linalg.norm(np.array(editor.last_result.pose[-1][:2]) - [0.06, 0.06]) < 1e-3
     assert list(editor.gui.end.value[:2]) == [0.06, 0.06]
 
 
@@ -323,7 +327,7 @@ def test_stale_result_never_overwrites_a_newer_one(seg_impl, monkeypatch):
         assert time.monotonic() - t0 < 0.2, "an edit must return at once while a plan runs"
         assert h.wait_idle(60)
         assert h.stale_discarded >= 1
-        assert np.linalg.norm(np.array(h.last_result["pose"][-1][:2]) - [0.02, 0.10]) < 1e-3
+        assert np.linalg.norm(np.array(h.last_result.pose[-1][:2]) - [0.02, 0.10]) < 1e-3
     finally:
         t.stop()
 
@@ -332,7 +336,7 @@ def test_errors_become_notifications_and_the_editor_recovers(editor):
     good = editor.last_result
     editor.move_handle("end", 0.15, 0.15)  # outside the reachable workspace
     assert editor.wait_idle(60)
-    assert editor.last_error is not None and editor.last_error["code"] in ("unreachable", "no_path")
+    assert editor.last_error is not None and editor.last_error.code in ("unreachable", "no_path")
     assert editor.notifications and editor.notifications[-1][1]
     assert editor.last_result is good, "a failed plan keeps the last good trajectory"
     # a wall across the whole workspace between start and end: no path
@@ -340,18 +344,18 @@ def test_errors_become_notifications_and_the_editor_recovers(editor):
     editor.edit(lambda r: r["layout"]["obstacles"].append({"type": "rectangle", "lower": [-0.04, -0.16],
                                                             "upper": [-0.03, 0.16]}))
     assert editor.wait_idle(60)
-    assert editor.last_error["code"] == "no_path"
+    assert editor.last_error.code == "no_path"
     # an obstacle over the start: the error names the start
     editor.edit(lambda r: r["layout"]["obstacles"].__setitem__(-1, {"type": "rectangle", "lower": [-0.1, -0.02],
                                                                      "upper": [-0.06, 0.02]}))
     assert editor.wait_idle(60)
-    assert editor.last_error["code"] == "invalid_input" and editor.last_error["field"] == "layout.start"
+    assert editor.last_error.code == "invalid_input" and editor.last_error.field == "layout.start"
     assert "obstacle" in editor.notifications[-1][1]
     # bad input names the field
     editor.edit(lambda r: r["settings"].__setitem__("Ts", -1.0))
     assert editor.wait_idle(60)
-    assert editor.last_error["code"] == "invalid_input" and editor.last_error["field"] == "settings.Ts"
-    assert "must be >= 0.0001, got -1" in editor.last_error["message"] and "settings.Ts" in editor.notifications[-1][1]
+    assert editor.last_error.code == "invalid_input" and editor.last_error.field == "settings.Ts"
+    assert "must be >= 0.0001, got -1" in editor.last_error.message and "settings.Ts" in editor.notifications[-1][1]
     # fix everything: planning works again
     editor.edit(lambda r: (r["settings"].__setitem__("Ts", 0.01), r["layout"]["obstacles"].pop()))
     assert editor.wait_idle(60)
@@ -360,21 +364,21 @@ def test_errors_become_notifications_and_the_editor_recovers(editor):
 
 def test_toggling_a_cell_blocks_it_and_toggling_again_frees_it(editor):
     seg = editor.last_segmentation
-    free = [c for c in seg["cells"] if c["state"] == "free" and c["id"] in seg["path"][2:-2]]
+    free = [c for c in seg.cells if c.state == "free" and c.id in seg.path[2:-2]]
     cell = free[0]
-    cx, cy = np.mean(cell["polygon"], axis=0)
+    cx, cy = np.mean(cell.polygon, axis=0)
     n_obs = len(editor.request["layout"]["obstacles"])
     assert editor.toggle_cell_at(float(cx), float(cy))
     assert editor.wait_idle(60)
-    states = {c["id"]: c["state"] for c in editor.last_segmentation["cells"]}
-    assert states[cell["id"]] == "blocked"
+    states = {c.id: c.state for c in editor.last_segmentation.cells}
+    assert states[cell.id] == "blocked"
     # only that cell: its neighbours keep their state
-    assert sum(states[i] == "blocked" for i in states) == sum(c["state"] == "blocked" for c in seg["cells"]) + 1
-    assert cell["id"] not in editor.last_segmentation["path"]
+    assert sum(states[i] == "blocked" for i in states) == sum(c.state == "blocked" for c in seg.cells) + 1
+    assert cell.id not in editor.last_segmentation.path
     assert editor.toggle_cell_at(float(cx), float(cy))
     assert editor.wait_idle(60)
     assert len(editor.request["layout"]["obstacles"]) == n_obs
-    assert {c["id"]: c["state"] for c in editor.last_segmentation["cells"]}[cell["id"]] == "free"
+    assert {c.id: c.state for c in editor.last_segmentation.cells}[cell.id] == "free"
 
 
 def test_settings_controls_change_the_request(editor):
@@ -386,7 +390,7 @@ def test_settings_controls_change_the_request(editor):
     r = editor.request
     assert r["settings"]["N"] == 30 and r["settings"]["k_u"] == 1e-4
     assert "size" not in r["layout"]["cell"]
-    assert editor.last_result["settings"]["N"] == 30
+    assert editor.last_result.settings.N == 30
 
 
 def test_mode_switch_moves_untouched_penalties_to_the_mode_defaults(editor):
@@ -403,8 +407,8 @@ def test_mode_switch_moves_untouched_penalties_to_the_mode_defaults(editor):
     assert (st["mode"], st["N"], st["k_r"], st["k_u"]) == ("constrained", con["N"], con["k_r"], 3e-4)
     assert (editor.gui.N.value, editor.gui.k_r.value, editor.gui.k_u.value) == (con["N"], con["k_r"], 3e-4)
     assert editor.wait_idle(60)
-    used = editor.last_result["settings"]
-    assert (used["mode"], used["N"], used["k_r"], used["k_u"]) == ("constrained", con["N"], con["k_r"], 3e-4)
+    used = editor.last_result.settings
+    assert (used.mode, used.N, used.k_r, used.k_u) == ("constrained", con["N"], con["k_r"], 3e-4)
     editor.gui.mode.value = "paper"
     st = editor.request["settings"]
     assert (st["N"], st["k_r"], st["k_u"]) == (paper["N"], paper["k_r"], 3e-4)
@@ -446,7 +450,7 @@ def test_segments_only_request_is_planned(editor):
     assert editor.last_error is None
     assert editor.last_segmentation is None
     end = np.array(data["segments"][-1]["lower"][:2])
-    assert np.linalg.norm(np.array(editor.last_result["pose"][-1][:2]) - end) < 1e-3
+    assert np.linalg.norm(np.array(editor.last_result.pose[-1][:2]) - end) < 1e-3
 
 
 def _table1():

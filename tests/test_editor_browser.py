@@ -205,7 +205,7 @@ def test_plan_button_replans_on_the_server(tab):
     assert wait_for(lambda: s.plans_done > done and s.last_plan_generation > gen)
     assert s.wait_idle(60)
     end = s.request["layout"]["end"]
-    assert np.linalg.norm(np.array(s.last_result["pose"][-1][:2]) - end[:2]) < 1e-4
+    assert np.linalg.norm(np.array(s.last_result.pose[-1][:2]) - end[:2]) < 1e-4
     assert wait_for(lambda: f"plan #{s.last_plan_generation}" in tab.page.locator("body").inner_text(), 10)
 
 
@@ -218,7 +218,7 @@ def test_negative_and_exponent_numbers_typed_with_real_keys(tab):
     tab.type_into("End x, y (m)", "6e-2, 4E-2, -0")
     assert wait_for(lambda: s.request["layout"]["end"] == [0.06, 0.04, 0.0], 10)
     assert s.wait_idle(60) and s.last_error is None
-    assert np.allclose(s.last_result["pose"][0][:2], [-0.09, 0.02], atol=1e-9)
+    assert np.allclose(s.last_result.pose[0][:2], [-0.09, 0.02], atol=1e-9)
     tab.tab("Settings")
     tab.type_into("k_u, force penalty", "2.5e-4")
     assert wait_for(lambda: s.request["settings"]["k_u"] == 2.5e-4, 10)
@@ -233,7 +233,7 @@ def test_negative_and_exponent_numbers_typed_with_real_keys(tab):
     tab.shot("02-field-error")
     tab.type_into("Sample time Ts", "0.01")
     assert wait_for(lambda: line.count() == 0 or not line.first.is_visible(), 10)
-    assert s.wait_idle(60) and s.last_error is None and s.last_result["settings"]["k_u"] == 2.5e-4
+    assert s.wait_idle(60) and s.last_error is None and s.last_result.settings.k_u == 2.5e-4
 
 
 # ---------------------------------------------------------------------------- tabs
@@ -248,7 +248,7 @@ def test_two_tabs_are_independent(server, tab):
         assert wait_for(lambda: a.request["layout"]["end"] == [0.02, 0.06, 0.0], 10) and a.wait_idle(60)
         other.page.bring_to_front()
         assert other.field("End x, y (m)").input_value() == "0.06, 0.04, 0"
-        assert b.request == before and b.last_result["pose"][-1][:2] == pytest.approx([0.06, 0.04], abs=1e-3)
+        assert b.request == before and b.last_result.pose[-1][:2] == pytest.approx([0.06, 0.04], abs=1e-3)
         other.type_into("Start x, y (m)", "-0.1, 0, 0")
         assert wait_for(lambda: b.request["layout"]["start"] == [-0.1, 0.0, 0.0], 10)
         assert a.request["layout"]["start"] == [-0.08, 0.0, 0.0]
@@ -295,7 +295,7 @@ def test_undo_and_redo_a_drag_and_an_obstacle_with_keys(tab):
     tab.page.get_by_role("button", name="Redo", exact=True).click()
     assert wait_for(lambda: s.request == r2, 10), "the Redo button redoes the obstacle"
     assert settled(s) and s.last_error is None
-    assert np.allclose(s.last_result["pose"][-1][:2], r1["layout"]["end"][:2], atol=1e-4)
+    assert np.allclose(s.last_result.pose[-1][:2], r1["layout"]["end"][:2], atol=1e-4)
 
 
 def test_snapping_and_the_cursor_readout(tab):
@@ -326,7 +326,7 @@ def test_snapping_and_the_cursor_readout(tab):
 def test_plot_time_axis_reads_seconds(tab):
     s, page = tab.session, tab.page
     tab.tab("Result")
-    duration = float(s.last_result["time"][-1])
+    duration = float(s.last_result.time[-1])
     over = page.locator(".u-over").first
     over.scroll_into_view_if_needed()
     bb = over.bounding_box()
@@ -369,7 +369,7 @@ def test_table1_segment_corridor_is_edited_and_replanned(tab):
     tab.drag(tab.screen(-0.03, 0.02), tab.screen(-0.03, 0.043), steps=15)
     assert wait_for(lambda: s.request["segments"][3]["upper"][1] == 0.04, 10), s.request["segments"][3]
     assert settled(s) and s.last_error is None
-    assert s.last_result["corridor"]["segments"][3]["upper"][1] == pytest.approx(0.04)
+    assert s.last_result.corridor.segments[3].upper[1] == pytest.approx(0.04)
     tab.shot("06-table1-edge-dragged")
     # type the lower corner with a psi range, insert a copy and remove it
     tab.type_into("Lower x, y (m)", "-0.04, 0, -0.1")
@@ -381,9 +381,9 @@ def test_table1_segment_corridor_is_edited_and_replanned(tab):
     page.get_by_role("button", name="Remove this box").click()
     assert wait_for(lambda: len(s.request["segments"]) == 12, 10)
     assert settled(s) and s.last_error is None
-    planned = s.last_result["corridor"]["segments"]
-    assert np.allclose([p["lower"] for p in planned], [g["lower"] for g in s.request["segments"]])
-    pose = np.asarray(s.last_result["pose"])
+    planned = s.last_result.corridor.segments
+    assert np.allclose([p.lower for p in planned], [g["lower"] for g in s.request["segments"]])
+    pose = np.asarray(s.last_result.pose)
     assert np.linalg.norm(pose[-1, :2] - [0.06, 0.04]) < 1e-3
     tab.shot("07-table1-replanned")
 
@@ -452,7 +452,7 @@ def test_readme_screenshot_of_a_real_session(tab):
     assert s.wait_idle(60) and s.last_error is None, s.last_error
     tab.tab("Result")
     page.locator(".u-over").first.scroll_into_view_if_needed()
-    s.gui.time.value = round(0.45 * float(s.last_result["time"][-1]), 2)
+    s.gui.time.value = round(0.45 * float(s.last_result.time[-1]), 2)
     page.mouse.move(*tab.screen(-0.06, 0.1))
     time.sleep(1.0)
     path = tab.shot("08-readme")
@@ -481,7 +481,6 @@ def test_files_tab_imports_a_drawing_and_downloads_gcode(tab, tmp_path):
     """Files tab: upload a DXF through the browser's file chooser (its closed shapes become
     the layout's obstacles and the design re-plans), then download the plan's G-code."""
     from planner.exchange import to_gcode
-    from planner.schema import PlanResult
 
     editor, page = tab.session, tab.page
     assert editor.wait_idle(60)
@@ -504,7 +503,7 @@ def test_files_tab_imports_a_drawing_and_downloads_gcode(tab, tmp_path):
         gcode.click()
     assert download.value.suggested_filename == "trajectory.ngc"
     text = Path(download.value.path()).read_text()
-    assert text == to_gcode(PlanResult.model_validate(editor.last_result), source="rangeplan editor",
+    assert text == to_gcode(editor.last_result, source="rangeplan editor",
                             header=editor.files.machine_files().header())
     assert "G93" in text and text.rstrip().endswith("M2")
     from tests.linuxcnc import rs274
@@ -593,7 +592,7 @@ def test_readme_screenshot_of_an_imported_drawing_with_holes(tab):
     assert s.last_error is None, s.last_error
     assert sum(len(o.get("holes", [])) for o in s.request["layout"]["obstacles"]) >= 4
     s.gui.robot_style.value = "outline"
-    s.gui.time.value = round(0.5 * float(s.last_result["time"][-1]), 2)
+    s.gui.time.value = round(0.5 * float(s.last_result.time[-1]), 2)
     tab.tab("Result")
     for close in page.locator(".mantine-Notification-closeButton").all():
         close.dispatch_event("click")
@@ -664,11 +663,11 @@ def test_gcode_preview_draws_the_downloaded_program_over_the_plan(mirrored_tab):
     assert np.max(np.abs(got[:, :, :2] - feed)) <= f32  # the program's points, in order
     dashes = tab.lines("/preview/rapid")
     assert dashes is not None and len(rapid) == 1 and _on_segments(dashes[:, :, :2].reshape(-1, 2), rapid) <= f32
-    pose = np.asarray(s.last_result["pose"], float)[:, :2]
+    pose = np.asarray(s.last_result.pose, float)[:, :2]
     planned = np.stack((pose[:-1], pose[1:]), axis=1)
     assert _on_segments(got[:, :, :2].reshape(-1, 2), planned) <= 0.75e-7 + f32  # printed to 0.1 um
     body = page.locator("body")
-    duration = (len(pose) - 1) * float(s.last_result["settings"]["Ts"])
+    duration = (len(pose) - 1) * float(s.last_result.settings.Ts)
     assert wait_for(lambda: f"G-code preview: {len(text.splitlines())} lines, duration {duration:.3f} s"
                     in body.inner_text(), 10)
     tab.shot("11-gcode-preview")

@@ -162,7 +162,7 @@ def test_typed_numbers_reach_the_request_and_bad_ones_stay_on_the_field(tab):
     assert wait_for(lambda: s.request["layout"]["start"] == [-0.09, 0.02, 0.0])
     client.type(s.gui.Ts.text, "5e-3")
     assert wait_for(lambda: s.request["settings"]["Ts"] == 0.005)
-    assert s.wait_idle(60) and s.last_error is None and s.last_result["settings"]["Ts"] == 0.005
+    assert s.wait_idle(60) and s.last_error is None and s.last_result.settings.Ts == 0.005
     done = s.plans_done
     client.type(s.gui.cell_size.text, "-0.02")
     # the field checks the schema's own bound on the cell size, and says it as validation does
@@ -176,7 +176,7 @@ def test_typed_numbers_reach_the_request_and_bad_ones_stay_on_the_field(tab):
     assert s.plans_done == done and s.wait_idle(10)
     client.type(s.gui.cell_size.text, "0.0005")  # valid for the field; the planner: too many cells
     assert wait_for(lambda: s.request["layout"]["cell"]["size"] == 0.0005) and s.wait_idle(60)
-    assert s.last_error["code"] == "too_large" and s.last_error["field"] == "layout.cell.size"
+    assert s.last_error.code == "too_large" and s.last_error.field == "layout.cell.size"
     assert s.gui.cell_size.error and "409600 square cells" in s.gui.cell_size.error
     client.type(s.gui.cell_size.text, "0.01")
     assert wait_for(lambda: s.request["layout"]["cell"]["size"] == 0.01) and s.wait_idle(60)
@@ -192,7 +192,7 @@ def test_two_tabs_never_change_each_other(tab):
     a.add_rectangle([0.04, -0.1], [0.06, -0.04])
     assert wait_for(lambda: a.request["layout"]["end"] == [0.02, 0.06, 0.0]) and a.wait_idle(60)
     assert b.request == before_b and b.plans_done == plans_b and b.gui.end.text.value == "0.06, 0.04, 0"
-    assert b.last_result["pose"][-1][:2] == pytest.approx([0.06, 0.04], abs=1e-3)
+    assert b.last_result.pose[-1][:2] == pytest.approx([0.06, 0.04], abs=1e-3)
     # sharing is explicit: save in one tab, load by name in the other
     a.files.save(new=True)
     assert wait_for(lambda: b.gui.stored.options[0] != "(none)"), "the other tab's list is refreshed"
@@ -229,7 +229,7 @@ def test_undo_and_redo_every_kind_of_edit(tab):
         assert s.redo() and s.request == expected
     assert not s.redo()
     assert s.wait_idle(60) and s.last_error is None
-    assert s.last_result["corridor"]["segments"][3]["upper"][:2] == table1["segments"][3]["upper"][:2]
+    assert s.last_result.corridor.segments[3].upper[:2].tolist() == table1["segments"][3]["upper"][:2]
 
 
 def test_snapping_toggle_and_grid(tab):
@@ -258,7 +258,7 @@ def test_one_notification_per_error_state_updated_while_typing(tab, monkeypatch)
     for text in ("0.5", "0.45", "0.4"):  # typed one after another: each too large for the 0.32 m bounds
         client.type(s.gui.cell_size.text, text)
         assert wait_for(lambda t=text: s.request["layout"]["cell"]["size"] == float(t)) and s.wait_idle(60)
-        assert s.last_error is not None and s.last_error["field"] == "layout.cell.size"
+        assert s.last_error is not None and s.last_error.field == "layout.cell.size"
         updates.append((s._error_note.title, s._error_note.body))
     assert len(shown) == 1, "one notification for the one error state, its text updated"
     assert len({b for _, b in updates}) == 3 and "0.4 m" in updates[-1][1]
@@ -286,7 +286,7 @@ def test_a_segment_list_corridor_is_edited_box_by_box(tab):
         s.drag_segment("top", phase, -0.03, y)
     assert s.request["segments"][3]["upper"][1] == 0.04 and s.history.depth[0] == 2
     assert s.wait_idle(60) and s.last_error is None
-    assert s.last_result["corridor"]["segments"][3]["upper"][1] == pytest.approx(0.04)
+    assert s.last_result.corridor.segments[3].upper[1] == pytest.approx(0.04)
     # the centre moves the whole box; typed corners and the psi range of every box
     s.drag_segment("centre", "start", -0.03, 0.02)
     s.drag_segment("centre", "end", -0.01, 0.02)
@@ -306,14 +306,14 @@ def test_a_segment_list_corridor_is_edited_box_by_box(tab):
     assert s.wait_idle(60)
     # every edit re-planned: the plan is the request's corridor
     assert s.last_error is None
-    planned = s.last_result["corridor"]["segments"]
-    assert np.allclose([p["upper"] for p in planned], [g["upper"] for g in s.request["segments"]])
-    assert np.allclose([p["lower"] for p in planned], [g["lower"] for g in s.request["segments"]])
+    planned = s.last_result.corridor.segments
+    assert np.allclose([p.upper for p in planned], [g["upper"] for g in s.request["segments"]])
+    assert np.allclose([p.lower for p in planned], [g["lower"] for g in s.request["segments"]])
     # a box turned inside out by typing: the planner's message on that box's field
     s.select_segment(3)
     tab.clients[0].type(s.gui.segments.lower.text, "0.05, 0, 0")
     assert wait_for(lambda: s.request["segments"][3]["lower"][0] == 0.05) and s.wait_idle(60)
-    assert s.last_error["field"].startswith("segments[3]")
+    assert s.last_error.field.startswith("segments[3]")
     assert "must be <= upper" in (s.gui.segments.lower.error or "")
 
 
@@ -321,13 +321,13 @@ def test_plots_read_in_seconds_scaled_to_the_data_and_cleared_after_a_failure(ta
     s = tab.session
     res, robot = s.last_result, s.robots.get("moving-slide")
     panel = s.gui.result
-    force = np.asarray(res["drives"]["force"])
+    force = np.asarray(res.drives.force)
     f_max = float(np.min(robot.force_max))
     assert panel.force_plot.scales["x"]["time"] is False and panel.length_plot.scales["x"]["time"] is False
     lo, hi = panel.force_plot.scales["y"]["range"]
     assert lo <= force.min() and hi >= force.max()
     assert hi - lo < 0.5 * f_max, "scaled to the forces (~10 N), not to the +-150 N limits"
-    assert np.array_equal(panel.force_plot.data[0], np.asarray(res["time"]))
+    assert np.array_equal(panel.force_plot.data[0], np.asarray(res.time))
     assert f"plan #{s.last_plan_generation}" in panel.force_plot.title
     panel.include_limits.value = True
     lo, hi = panel.force_plot.scales["y"]["range"]
@@ -506,8 +506,8 @@ def test_gcode_preview_follows_the_plan_of_the_design_on_screen(tab):
     shown = s.preview.preview
     assert np.array_equal(corners(shown.points), corners(pts))
     assert shown.lines == len(sent[0].splitlines())
-    ts = float(s.last_result["settings"]["Ts"])
-    assert shown.duration_s == pytest.approx((len(s.last_result["pose"]) - 1) * ts, abs=1e-9)
+    ts = float(s.last_result.settings.Ts)
+    assert shown.duration_s == pytest.approx((len(s.last_result.pose) - 1) * ts, abs=1e-9)
     assert shown.path_deviation_m <= 0.75e-7 and shown.time_deviation_m <= 0.75e-7
     assert f"{shown.lines} lines" in s.gui.preview_note.content
     gen = s.last_plan_generation
@@ -548,7 +548,7 @@ def test_every_received_frame_has_the_legs_on_the_platform_pivots(tab):
         worst.append(float(np.max(np.hypot(*(world[:, :2] - ends).T))))
 
     client.scene.watchers.append(check)
-    t_end = float(s.last_result["time"][-1])
+    t_end = float(s.last_result.time[-1])
     ts = np.linspace(0.0, t_end, 40)
     def play(times) -> None:
         for t in times:
@@ -565,7 +565,7 @@ def test_every_received_frame_has_the_legs_on_the_platform_pivots(tab):
     assert max(worst) < 5e-4, f"a frame showed a leg {max(worst) * 1e3:.1f} mm off its platform pivot"
     # and the last frame is the pose at 0.5 t_end, as the planner computed it
     from app.editor._geometry import sample_at
-    pose = sample_at(np.asarray(s.last_result["time"]), np.asarray(s.last_result["pose"]), 0.5 * t_end)
+    pose = sample_at(np.asarray(s.last_result.time), np.asarray(s.last_result.pose), 0.5 * t_end)
     assert np.allclose(client.scene.node("/robot/platform")["position"][:2], pose[:2], atol=1e-6)
     # the outline style keeps the robot but drops the platform fill and thins the legs
     s.scene.set_robot_style("outline")
@@ -610,5 +610,5 @@ def test_a_placed_real_drawing_plans_at_once(tab):
             shapes), which
     assert wait_for(lambda: s.plans_done > done, 60) and s.wait_idle(60)
     assert s.last_error is None, s.last_error
-    assert np.allclose(s.last_result["pose"][-1][:2], layout["end"][:2], atol=1e-3)
+    assert np.allclose(s.last_result.pose[-1][:2], layout["end"][:2], atol=1e-3)
     assert "Reachable at ψ 0 rad" in s.gui.reach_note.content

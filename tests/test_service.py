@@ -175,14 +175,14 @@ def test_editor_plans_on_the_pool_under_the_same_limits():
                              "end": [0.06, -0.04, 0.0]}}
         out = _planning.compute_plan(layout, robots)
         assert out.error is None and out.segmentation is not None and pool.jobs_run == 1
-        pose = np.array(out.result["pose"])
+        pose = np.array(out.result.pose)
         assert np.hypot(*(pose[-1, :2] - [0.06, -0.04])) < 1e-3
         heavy = {**TABLE1, "settings": {"mode": "constrained", "N": 150, "backend": "reference"}}
         out = _planning.compute_plan(heavy, robots)
-        assert out.error["code"] == "too_much_work" and out.error["field"] == "settings.N"
-        assert "limit of 5 s" in out.error["message"]
+        assert out.error.code == "too_much_work" and out.error.field == "settings.N"
+        assert "limit of 5 s" in out.error.message
         bad = _planning.compute_plan({**TABLE1, "settings": {"Ts": -1}}, robots)
-        assert bad.error["code"] == "invalid_input"
+        assert bad.error.code == "invalid_input"
     finally:
         _planning.use_pool(None)
         pool.close()

@@ -3,12 +3,13 @@ environment, and a value that does not parse names its variable."""
 
 from __future__ import annotations
 
+import ast
 import re
 from pathlib import Path
 
 import pytest
 
-from app.settings import Settings, SettingsError, settings, settings_table
+from app.settings import Settings, SettingsError, env_name, settings, settings_table
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -20,8 +21,10 @@ def test_readme_table_is_the_settings_object():
     assert m, "README has no generated settings table"
     assert m.group(1) == settings_table()
     # every field is one row, named as the environment variable it reads
-    rows = [r for r in m.group(1).splitlines() if r.startswith("| `RANGEPLAN_")]
-    assert [r.split("`")[1] for r in rows] == [f"RANGEPLAN_{k.upper()}" for k in Settings.model_fields]
+    rows = [r for r in m.group(1).splitlines() if r.startswith("| `")]
+    assert [r.split("`")[1] for r in rows] == [env_name(k) for k in Settings.model_fields]
+    assert {env_name(k) for k in Settings.model_fields if not env_name(k).startswith("RANGEPLAN_")} == {
+        "XDG_DATA_HOME", "NUMBA_CACHE_DIR"}
 
 
 def test_values_come_from_the_environment(monkeypatch):
@@ -42,3 +45,61 @@ def test_a_bad_value_names_its_variable(monkeypatch, name, value, cause):
     with pytest.raises(SettingsError) as e:
         settings()
     assert str(e.value).startswith(f"{name}: ") and cause in str(e.value) and repr(value) in str(e.value)
+
+
+def test_a_mapping_is_read_alone_and_a_bad_value_names_its_variable(monkeypatch):
+    """settings(environ) reads only that mapping (not the process environment), by the
+    variables' own names, other programs' variables included."""
+    monkeypatch.setenv("RANGEPLAN_PORT", "9999")
+    cfg = settings({"RANGEPLAN_WORKERS": "2", "XDG_DATA_HOME": "/srv/data", "NUMBA_CACHE_DIR": "", "OTHER": "x"})
+    assert (cfg.workers, cfg.port, cfg.xdg_data_home, cfg.numba_cache_dir) == (2, 8000, Path("/srv/data"), None)
+    with pytest.raises(SettingsError, match=r"^RANGEPLAN_MAX_QUEUE: .*'many'"):
+        settings({"RANGEPLAN_MAX_QUEUE": "many"})
+
+
+#: environment reads outside app/settings.py that are not configuration, with the reason
+_NOT_CONFIGURATION = {
+    # glibc's trim threshold as Dask's nanny set it for this worker process: process state
+    ("app/batch/cluster.py", "MALLOC_TRIM_THRESHOLD_"),
+}
+
+
+def _environment_uses(path: Path) -> list[tuple[str, str]]:
+    """(file, what) of each use of ``os.environ`` / ``os.getenv`` in the code of ``path``
+    (not its docstrings): the variable read (``os.environ[...]``, ``os.environ.get(...)``,
+    ``os.getenv(...)``), ``"setdefault"`` (a write), or ``"other"`` (the environment handed on)."""
+    tree = ast.parse(path.read_text())
+    parent = {child: node for node in ast.walk(tree) for child in ast.iter_child_nodes(node)}
+    out = []
+
+    def name(node):
+        return str(node.value) if isinstance(node, ast.Constant) else ast.unparse(node)
+
+    for node in ast.walk(tree):
+        dotted = ast.unparse(node) if isinstance(node, ast.Attribute) else ""
+        if dotted not in ("os.environ", "os.getenv"):
+            continue
+        up = parent.get(node)
+        if dotted == "os.getenv" and isinstance(up, ast.Call) and up.args:
+            what = name(up.args[0])
+        elif isinstance(up, ast.Subscript):
+            what = name(up.slice)
+        elif isinstance(up, ast.Attribute) and up.attr == "setdefault":
+            what = "setdefault"
+        elif isinstance(up, ast.Attribute) and up.attr == "get" and isinstance(parent.get(up), ast.Call):
+            call = parent[up]
+            what = name(call.args[0]) if isinstance(call, ast.Call) and call.args else "other"
+        else:
+            what = "other"
+        out.append((path.relative_to(ROOT).as_posix(), what))
+    return out
+
+
+def test_only_the_settings_module_reads_the_environment():
+    """Configuration is read in one place: no module of app/ but app/settings.py reads an
+    environment variable or hands the environment on, apart from the listed process state;
+    the only other use is ``setdefault`` (the BLAS thread counts cli, server and workers set)."""
+    uses = [u for p in sorted((ROOT / "app").rglob("*.py")) if p.name != "settings.py"
+            for u in _environment_uses(p)]
+    assert {u for u in uses if u[1] != "setdefault"} == _NOT_CONFIGURATION
+    assert {u[0] for u in uses if u[1] == "setdefault"} == {"app/cli.py", "app/server.py", "app/workers.py"}

@@ -194,6 +194,41 @@ def test_pages_visit_every_corridor_once_in_order_while_others_are_added(tmp_pat
             st.corridor_page(cursor=bad)
 
 
+def test_a_quick_page_is_the_same_page_read_only_and_never_waits_for_a_lock(tmp_path):
+    """The event loop's page read (read-only connection) gives what the read threads give,
+    cannot write, and raises StoreBusy at once while another connection holds the database
+    exclusively (the route then reads on a thread)."""
+    import time
+
+    from app.storage import QUICK_BUSY_TIMEOUT_S, StoreBusy
+    st = Store(tmp_path)
+    for i in range(7):
+        st.create_corridor({"i": i}, name=f"c{i}")
+    cursor = None
+    while True:
+        quick = st.corridor_page(limit=3, cursor=cursor, quick=True)
+        assert quick == st.corridor_page(limit=3, cursor=cursor)
+        cursor = quick[1]
+        if cursor is None:
+            break
+    with pytest.raises(sqlite3.OperationalError, match="readonly"):
+        st._db.reader().execute("DELETE FROM corridors")
+    st.close()  # the store's connections closed: the other connection can take the database
+    other = sqlite3.connect(st.path, isolation_level=None)
+    other.execute("PRAGMA locking_mode = EXCLUSIVE")
+    other.execute("BEGIN EXCLUSIVE")
+    other.execute("UPDATE corridors SET name = name")
+    try:
+        t0 = time.monotonic()
+        with pytest.raises(StoreBusy):
+            st.corridor_page(quick=True)
+        assert time.monotonic() - t0 < 0.5 + 20 * QUICK_BUSY_TIMEOUT_S
+    finally:
+        other.execute("COMMIT")
+        other.close()
+    assert len(st.corridor_page(quick=True)[0]) == 7
+
+
 def test_names_are_unique_among_corridors(tmp_path):
     from app.storage import NameTaken
     st = Store(tmp_path)

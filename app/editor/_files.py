@@ -22,6 +22,8 @@ from ._planning import (
     MACHINE_FORMATS,
     OUTPUT_FORMATS,
     PlannerError,
+    PlanRequest,
+    PlanResult,
     drawing_request,
     editable,
     export_result,
@@ -52,12 +54,14 @@ def _design(request: dict | None) -> dict | None:
 class MachineFiles:
     """Whether the machine files (G-code, leg lengths, DXF, CSV) may be downloaded now:
     ``result`` is the plan of the design on screen (``plan`` its number, ``request`` the
-    request it was planned for), or None and ``reason`` says why not."""
+    request it was planned for, ``model`` that request validated), or None and ``reason``
+    says why not."""
 
-    result: dict | None
+    result: PlanResult | None
     request: dict | None
     plan: int
     reason: str
+    model: PlanRequest | None = None
 
     def header(self) -> tuple[str, ...]:
         """The provenance lines every downloaded file carries: design, plan id, request hash."""
@@ -166,10 +170,10 @@ class EditorFiles:
         state = self._editor.state
         with state.lock:
             result, planned, error = state.last_result, state.last_result_request, state.last_error
-            gen, current = state.last_plan_generation, state.request
+            gen, current, model = state.last_plan_generation, state.request, state.last_result_model
         if error is not None:
-            message = str(error.get("message", "")).split("; ")[0]
-            return MachineFiles(None, None, gen, f"the newest plan failed ({error.get('code')}: {message}); no file of "
+            message = error.message.split("; ")[0]
+            return MachineFiles(None, None, gen, f"the newest plan failed ({error.code}: {message}); no file of "
                                 "an earlier plan is offered — fix the design")
         if result is None or planned is None:
             return MachineFiles(None, None, gen, "no plan yet")
@@ -177,7 +181,7 @@ class EditorFiles:
             return MachineFiles(None, None, gen, f"the design has changed since plan #{gen} — wait for the re-plan "
                                 "(or press Plan)")
         planned = {**planned, "name": current.get("name")} if current.get("name") else _design(planned) or {}
-        return MachineFiles(result, planned, gen, f"files of plan #{gen}, the design on screen")
+        return MachineFiles(result, planned, gen, f"files of plan #{gen}, the design on screen", model)
 
     def _current_plan(self, client) -> MachineFiles | None:
         files = self.machine_files()
@@ -280,7 +284,7 @@ class EditorFiles:
         files = self._current_plan(client)
         if files is not None:
             assert files.result is not None and files.request is not None
-            text = export_result(files.result, fmt, files.request, files.header())
+            text = export_result(files.result, fmt, files.model or files.request, files.header())
             self._download(client, self.EXPORTS[fmt], text.encode())
 
     @staticmethod

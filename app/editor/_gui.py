@@ -40,6 +40,7 @@ from ._planning import (
 from ._result import ResultPanel, leg_legend_html
 
 if TYPE_CHECKING:
+    from ._planning import ErrorDetail
     from ._session import Session
 
 __all__ = ["PLAY_FPS", "EditorGui", "Playback", "error_body", "error_title"]
@@ -407,13 +408,13 @@ _ERROR_TITLES = {"no_path": "No path", "unreachable": "Unreachable", "invalid_in
                  "diverged": "Diverged"}
 
 
-def error_title(error: dict) -> str:
-    """Notification title of a planner error ``{code, message, field}``."""
-    code = str(error.get("code") or "Error")
+def error_title(error: ErrorDetail) -> str:
+    """Notification title of a planner error."""
+    code = error.code or "Error"
     return _ERROR_TITLES.get(code, code)
 
 
-def error_body(error: dict) -> str:
+def error_body(error: ErrorDetail) -> str:
     """Notification text of a planner error: its message and the field to fix."""
-    field = f" (field {error['field']})" if error.get("field") else ""
-    return f"{error.get('message', '')}{field}"
+    field = f" (field {error.field})" if error.field else ""
+    return f"{error.message}{field}"

@@ -34,7 +34,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from app.formats import MACHINE_FORMATS, OUTPUT_FORMATS, write
-from app.jobs import EditorJob, Failed, ImportJob
+from app.jobs import EditorJob, EditorPlan, ErrorDetail, Failed, ImportJob
 from app.service import JobService
 from app.settings import settings
 from planner import PlannerError, PlanRequest, PlanResult, RobotModel, load_robot
@@ -51,6 +51,7 @@ from planner.schema import (
     ImportOptions,
     ImportResult,
     Layout,
+    SegmentationResult,
     Settings,
     builtin_robot_names,
     format_validation_error,
@@ -61,6 +62,7 @@ __all__ = [
     "DEFAULT_LAYOUT_SPEED_M_S",
     "DEFAULT_MODE",
     "DEFAULT_ROBOT",
+    "ErrorDetail",
     "HAS_SPEED_SETTING",
     "MACHINE_FORMATS",
     "OUTPUT_FORMATS",
@@ -68,8 +70,11 @@ __all__ = [
     "MODE_DEFAULTS",
     "SINGULAR_TOL",
     "PlanOutcome",
+    "PlanRequest",
+    "PlanResult",
     "PlanWorker",
     "PlannerError",
+    "SegmentationResult",
     "Toolpath",
     "Robot",
     "RobotCache",
@@ -185,9 +190,9 @@ def editable(req: PlanRequest) -> dict:
     return out
 
 
-def to_csv(result: dict, header: tuple[str, ...] = ()) -> str:
-    """The CSV of a plan result (as JSON types), ``header`` as its first comment lines."""
-    return write(PlanResult.model_validate(result), "csv", header=header).decode()
+def to_csv(result: PlanResult, header: tuple[str, ...] = ()) -> str:
+    """The CSV of a plan result, ``header`` as its first comment lines."""
+    return write(result, "csv", header=header).decode()
 
 
 def drawing_request(data: bytes, filename: str, request: dict, options: dict) -> tuple[dict, str]:
@@ -198,9 +203,9 @@ def drawing_request(data: bytes, filename: str, request: dict, options: dict) ->
     :class:`PlannerError` naming the cause for a bad drawing (or too much work)."""
     res = _read_drawing(data, filename, options)
     layout = dict(request.get("layout") or {})
-    imported = res.to_json_dict()["layout"]
-    layout["bounds"], layout["obstacles"] = imported["bounds"], imported["obstacles"]
-    lo, hi = np.asarray(imported["bounds"]["lower"]), np.asarray(imported["bounds"]["upper"])
+    imported = res.layout.model_dump(mode="json", include={"bounds", "obstacles"}, exclude_unset=True)
+    layout.update(imported)  # the draft (a dict) takes the drawing's bounds and obstacles
+    lo, hi = np.asarray(res.layout.bounds.lower), np.asarray(res.layout.bounds.upper)
     for key, corner in (("start", lo + 0.05 * (hi - lo)), ("end", hi - 0.05 * (hi - lo))):
         layout.setdefault(key, [float(corner[0]), float(corner[1]), 0.0])  # a design without a layout: corners
     request = {k: v for k, v in request.items() if k not in ("segments", "reference")}
@@ -221,14 +226,15 @@ def _read_drawing(data: bytes, filename: str, options: dict) -> ImportResult:
     return ImportResult.model_validate_json(out.payload or b"", context=PARTIAL_LAYOUT)
 
 
-def export_result(result: dict, fmt: str, request: dict, header: tuple[str, ...] = ()) -> str:
-    """A plan result (JSON types) in a machine format (:data:`MACHINE_FORMATS`: G-code, leg
-    lengths, DXF with the obstacles of ``request``'s layout when it is valid), ``header``
-    lines (design, plan id, request hash) in its header."""
-    model, _ = validate_request(request)
+def export_result(result: PlanResult, fmt: str, request: PlanRequest | dict,
+                  header: tuple[str, ...] = ()) -> str:
+    """A plan result in a machine format (:data:`MACHINE_FORMATS`: G-code, leg lengths, DXF
+    with the obstacles of ``request``'s layout: the validated request the result was planned
+    for, or a draft dict, validated here), ``header`` lines (design, plan id, request hash)
+    in its header."""
+    model = request if isinstance(request, PlanRequest) else validate_request(request)[0]
     layout = model.layout if model is not None else None
-    return write(PlanResult.model_validate(result), fmt, layout=layout, source="rangeplan editor",
-                 header=header).decode()
+    return write(result, fmt, layout=layout, source="rangeplan editor", header=header).decode()
 
 
 class RobotCache:
@@ -261,14 +267,16 @@ class RobotCache:
 
 @dataclass(frozen=True)
 class PlanOutcome:
-    """What one re-plan produced: the segmentation (``Segmentation.to_dict()``, or None for
-    a request without a layout or when segmenting failed), the plan result (or None) and
-    the error ``{code, message, field}`` (or None); ``seconds`` is the wall time [s]."""
+    """What one re-plan produced, typed: the segmentation (None for a request without a
+    layout or when segmenting failed), the plan result (or None) and the error (or None);
+    ``seconds`` is the wall time [s]; ``request`` the validated request it planned (None:
+    the request was invalid)."""
 
-    segmentation: dict | None
-    result: dict | None
-    error: dict | None
+    segmentation: SegmentationResult | None
+    result: PlanResult | None
+    error: ErrorDetail | None
     seconds: float
+    request: PlanRequest | None = None
 
 
 def compute_plan(request: dict, robots: RobotCache) -> PlanOutcome:
@@ -278,20 +286,20 @@ def compute_plan(request: dict, robots: RobotCache) -> PlanOutcome:
     (``robots``: the editor's cache, for drawing; the job loads its own.)"""
     t0 = time.perf_counter()
 
-    def outcome(seg, result, error) -> PlanOutcome:
-        return PlanOutcome(seg, result, error, time.perf_counter() - t0)
+    def outcome(plan: EditorPlan, req: PlanRequest | None = None) -> PlanOutcome:
+        return PlanOutcome(plan.segmentation, plan.result, plan.error, time.perf_counter() - t0, req)
 
     try:
         req = PlanRequest.model_validate(request)
     except ValidationError as exc:  # the first failing field names the error; the message lists up to three
-        first = planner_error(exc).to_dict()
-        message = format_validation_error(exc).removeprefix(f"{first['field']}: ")
-        return outcome(None, None, {**first, "message": message})
+        first = planner_error(exc)
+        message = format_validation_error(exc).removeprefix(f"{first.field}: ")
+        return outcome(EditorPlan(error=ErrorDetail(code=first.code, message=message, field=first.field, details=None)))
     out = _service().run(EditorJob(req))
     if isinstance(out, Failed):
-        return outcome(None, None, out.error.to_dict())
-    body = json.loads(out.payload or b"{}")
-    return outcome(body["segmentation"], body["result"], body["error"])
+        return outcome(EditorPlan(error=out.error), req)
+    # the worker's JSON parsed once into the result models (it crossed a process boundary)
+    return outcome(EditorPlan.model_validate_json(out.payload or b"{}"), req)
 
 
 class PlanWorker(threading.Thread):

@@ -72,11 +72,11 @@ def build_preview(files: MachineFiles) -> GcodePreview:
     """The preview of the plan ``files`` offers (its result must be set): the G-code exactly
     as the download writes it, read back and measured against the plan."""
     assert files.result is not None and files.request is not None
-    text = export_result(files.result, "gcode", files.request, files.header())
+    text = export_result(files.result, "gcode", files.model or files.request, files.header())
     path = toolpath(read_gcode(text, readback=True))
     res = files.result
-    pose = np.asarray(res["pose"], float)
-    t = np.asarray(res["time"], float) - float(res["time"][0])
+    pose = np.asarray(res.pose, float)
+    t = np.asarray(res.time, float) - float(res.time[0])
     fed = slice(1, None) if path.rapid.size and path.rapid[0] else slice(None)  # after the rapid to the start
     at = np.column_stack([np.interp(t, path.time[fed], v[fed]) for v in (*path.points.T, path.psi)])
     return GcodePreview(

@@ -15,9 +15,12 @@ Units: s, N, m.
 from __future__ import annotations
 
 import html
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from ._planning import PlanResult
 
 __all__ = ["LEG_GRADIENT", "PLOT_COLOURS", "ResultPanel", "leg_legend_html", "metrics_markdown"]
 
@@ -69,20 +72,18 @@ class ResultPanel:
                                          scales=cast(Any, {"x": {"time": False}}), aspect=1.5)
         self.metrics = gui.add_markdown("")
         self.plan: int | None = None  #: generation of the plan the plots show (None: none)
-        self._last: tuple[dict, Any, int] | None = None
+        self._last: tuple[PlanResult, Any, int] | None = None
         self.include_limits.on_update(lambda _: self._redraw())
 
     def _redraw(self) -> None:
         if self._last is not None:
             self.show(*self._last)
 
-    def show(self, result: dict, robot, plan: int) -> None:
+    def show(self, result: PlanResult, robot, plan: int) -> None:
         """Plots and metrics of ``result`` (plan ``plan``), for ``robot`` (its limits)."""
         self._last = (result, robot, plan)
         self.plan = plan
-        t = np.asarray(result["time"], float)
-        force = np.asarray(result["drives"]["force"], float)
-        length = np.asarray(result["drives"]["length"], float)
+        t, force, length = result.time, result.drives.force, result.drives.length
         n = force.shape[1]
         f_max = float(np.min(robot.force_max))
         l_min, l_max = float(np.max(robot.length_min)), float(np.min(robot.length_max))
@@ -125,29 +126,29 @@ class ResultPanel:
         self.metrics.content = ""
 
 
-def metrics_markdown(result: dict) -> str:
+def metrics_markdown(result: PlanResult) -> str:
     """The result's metrics as a markdown table, with the limits it violates."""
-    m = result["metrics"]
+    m = result.metrics
     lines = [
         "| metric | value |", "|---|---|",
-        f"| duration | {m['duration_s']:.3f} s |",
-        f"| end error | {m['end_error_m']:.2e} m, {m['end_error_rad']:.2e} rad |",
-        (f"| max drive force | {m['max_drive_force_n']:.1f} N of {m['force_limit_n']:.0f} N "
-         f"({100 * m['max_force_ratio']:.0f} %) |"),
-        f"| max drive speed | {m['max_drive_speed_m_s']:.3f} m/s ({100 * m['max_speed_ratio']:.0f} % of limit) |",
-        f"| corridor violation | {m['max_corridor_violation_m']:.2e} m |",
-        f"| time-indexed range violation | {m['time_indexed_violation_m']:.2e} m |",
-        f"| stroke violation | {m['max_stroke_violation_m']:.2e} m |",
-        f"| overshoot | {m['overshoot_m']:.2e} m |",
-        f"| path length | {m['path_length_m']:.3f} m |",
-        f"| mode, compute | {result.get('mode', 'paper')}, {m['compute_ms']:.0f} ms |",
+        f"| duration | {m.duration_s:.3f} s |",
+        f"| end error | {m.end_error_m:.2e} m, {m.end_error_rad:.2e} rad |",
+        (f"| max drive force | {m.max_drive_force_n:.1f} N of {m.force_limit_n:.0f} N "
+         f"({100 * m.max_force_ratio:.0f} %) |"),
+        f"| max drive speed | {m.max_drive_speed_m_s:.3f} m/s ({100 * m.max_speed_ratio:.0f} % of limit) |",
+        f"| corridor violation | {m.max_corridor_violation_m:.2e} m |",
+        f"| time-indexed range violation | {m.time_indexed_violation_m:.2e} m |",
+        f"| stroke violation | {m.max_stroke_violation_m:.2e} m |",
+        f"| overshoot | {m.overshoot_m:.2e} m |",
+        f"| path length | {m.path_length_m:.3f} m |",
+        f"| mode, compute | {result.mode}, {m.compute_ms:.0f} ms |",
     ]
     warn = []
-    if m["max_force_ratio"] > 1:
+    if m.max_force_ratio > 1:
         warn.append("drive force above the limit")
-    if m["max_corridor_violation_m"] > 1e-3:
+    if m.max_corridor_violation_m > 1e-3:
         warn.append("leaves the corridor by more than 1 mm")
-    if m["max_stroke_violation_m"] > 0:
+    if m.max_stroke_violation_m > 0:
         warn.append("a leg leaves its stroke")
     if warn:
         lines.append("\n**Violations:** " + "; ".join(warn))

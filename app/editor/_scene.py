@@ -33,6 +33,7 @@ from . import _geometry as geo
 from ._planning import MAX_LEGS, Robot, reachable_mask, robot_geometry
 
 if TYPE_CHECKING:
+    from ._planning import PlanResult, SegmentationResult
     from ._preview import GcodePreview
 
 __all__ = ["PREVIEW_COLOURS", "ROBOT_STYLES", "TICK_EVERY_S", "EditorScene", "axis_ticks"]
@@ -329,24 +330,23 @@ class EditorScene:
         return outline
 
     # ------------------------------------------------------------------ segmentation
-    def show_segmentation(self, seg: dict | None) -> None:
-        """Cells (by state), grid and corridor of a segmentation (``Segmentation.to_dict()``),
-        or hide them (None)."""
+    def show_segmentation(self, seg: SegmentationResult | None) -> None:
+        """Cells (by state), grid and corridor of a segmentation, or hide them (None)."""
         if seg is None:
             for node in (*self.cells.values(), self.grid, self.corridor_fill, self.corridor):
                 node.visible = False
             return
-        cells = seg["cells"]
-        lo, hi = seg["bounds"]["lower"], seg["bounds"]["upper"]
+        cells = seg.cells
+        lo, hi = seg.bounds["lower"], seg.bounds["upper"]
         for state, node in self.cells.items():
-            polys = geo.clip_polygons([c["polygon"] for c in cells if c["state"] == state], lo, hi)
+            polys = geo.clip_polygons([c.polygon for c in cells if c.state == state], lo, hi)
             _show_mesh(node, *geo.polygon_mesh(polys, geo.Z["cells"]))
-        _show_lines(self.grid, geo.polygon_edges(geo.clip_polygons([c["polygon"] for c in cells], lo, hi),
+        _show_lines(self.grid, geo.polygon_edges(geo.clip_polygons([c.polygon for c in cells], lo, hi),
                                                  geo.Z["grid"]))
-        by_id = {c["id"]: c for c in cells}
-        path = geo.clip_polygons([by_id[i]["polygon"] for i in seg.get("path", []) if i in by_id], lo, hi)
+        by_id = {c.id: c for c in cells}
+        path = geo.clip_polygons([by_id[i].polygon for i in seg.path if i in by_id], lo, hi)
         _show_mesh(self.corridor_fill, *geo.polygon_mesh(path, geo.Z["corridor"]))
-        self.show_corridor(seg.get("segments", []))
+        self.show_corridor(seg.segments)
 
     def show_corridor(self, segments: list[dict]) -> None:
         """Outline the corridor's boxes (``[{lower, upper}, ...]``, [m, m, rad]) in x, y."""
@@ -411,15 +411,14 @@ class EditorScene:
         _show_lines(self.seg_grid, np.asarray(v, float).reshape(-1, 2, 3))
 
     # ------------------------------------------------------------------ result
-    def show_result(self, result: dict | None) -> None:
+    def show_result(self, result: PlanResult | None) -> None:
         """The planned trajectory and its time ticks (every :data:`TICK_EVERY_S` s), or
         hide them and the robot (None). The robot's pose is :meth:`show_robot`'s."""
         if result is None:
             self.trajectory.visible = self.ticks.visible = False
             self.hide_robot()
             return
-        t = np.asarray(result["time"], float)
-        pose = np.asarray(result["pose"], float)
+        t, pose = result.time, result.pose
         pts = np.column_stack((pose[:, :2], np.full(len(pose), geo.Z["trajectory"])))
         _show_lines(self.trajectory, np.stack((pts[:-1], pts[1:]), axis=1))
         ticks = geo.time_ticks(t, pose, TICK_EVERY_S)

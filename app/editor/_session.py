@@ -40,6 +40,7 @@ from ._session_segments import SegmentEdits
 
 if TYPE_CHECKING:
     from ._editor import Editor
+    from ._planning import ErrorDetail, PlanResult, SegmentationResult
 
 __all__ = ["Session"]
 
@@ -94,18 +95,18 @@ class Session(SegmentEdits):
         return self.state.plans_done
 
     @property
-    def last_result(self) -> dict | None:
+    def last_result(self) -> PlanResult | None:
         """Newest published plan result."""
         return self.state.last_result
 
     @property
-    def last_segmentation(self) -> dict | None:
-        """Newest published segmentation (``Segmentation.to_dict()``)."""
+    def last_segmentation(self) -> SegmentationResult | None:
+        """Newest published segmentation."""
         return self.state.last_segmentation
 
     @property
-    def last_error(self) -> dict | None:
-        """Newest error ``{code, message, field}``, or None after a successful plan."""
+    def last_error(self) -> ErrorDetail | None:
+        """Newest error (code, message, field), or None after a successful plan."""
         return self.state.last_error
 
     @property
@@ -190,8 +191,8 @@ class Session(SegmentEdits):
         layout = r.get("layout")
         if layout is not None:
             origin = (float(layout["bounds"]["lower"][0]), float(layout["bounds"]["lower"][1]))
-            seg = self.state.last_segmentation or {}
-            step = step or (layout.get("cell") or {}).get("size") or (seg.get("cell") or {}).get("size") or 0.01
+            seg = self.state.last_segmentation
+            step = step or (layout.get("cell") or {}).get("size") or (seg.cell.get("size") if seg else None) or 0.01
             return float(step), origin
         sides = [float(s["upper"][k]) - float(s["lower"][k]) for s in r.get("segments") or [] for k in (0, 1)]
         sides = [d for d in sides if d > 1e-9]
@@ -227,10 +228,10 @@ class Session(SegmentEdits):
         seg = self.state.last_segmentation
         if not seg:
             return False
-        cell = next((c for c in seg["cells"] if geo.point_in_convex((x, y), c["polygon"])), None)
+        cell = next((c for c in seg.cells if geo.point_in_convex((x, y), c.polygon)), None)
         if cell is None:
             return False
-        polygon = np.asarray(cell["polygon"], dtype=float)
+        polygon = cell.polygon
         self.edit(lambda r: _state.toggle_cell_obstacle(r, polygon))
         return True
 
@@ -309,10 +310,9 @@ class Session(SegmentEdits):
         if res is None or failed:
             return
         robot = self.robots.get(robot_spec)  # the robot it was planned for, even if changed since
-        time_ = np.asarray(res["time"], float)
-        pose = geo.sample_at(time_, np.asarray(res["pose"], float), t)
-        k = int(np.clip(round(t / res["settings"]["Ts"]), 0, len(time_) - 1))
-        self.scene.show_robot(robot, pose, np.asarray(res["drives"]["force"][k], float))
+        pose = geo.sample_at(res.time, res.pose, t)
+        k = int(np.clip(round(t / res.settings.Ts), 0, len(res.time) - 1))
+        self.scene.show_robot(robot, pose, res.drives.force[k])
 
     def _mark_outdated(self) -> None:
         shown = self.gui.result.plan
@@ -333,13 +333,13 @@ class Session(SegmentEdits):
         except Exception:  # a tab that went away must not break the session
             log.debug("notification failed", exc_info=True)
 
-    def _show_plan_error(self, error: dict) -> None:
+    def _show_plan_error(self, error: ErrorDetail) -> None:
         """The one notification of the current plan error: updated in place while the
         error state (code, field) stays, replaced when it changes; and on its field."""
         self.gui.clear_plan_errors()
         self._show_error_on_field(error)
         title, body = error_title(error), error_body(error)
-        state = (error.get("code"), error.get("field"))
+        state = (error.code, error.field)
         note = self._error_note
         if note is not None and state == self._error_state:
             if (note.title, note.body) != (title, body):
@@ -351,8 +351,8 @@ class Session(SegmentEdits):
         self._error_note = self.client.add_notification(title, body, color="red", with_close_button=True)
         self._error_state = state
 
-    def _show_error_on_field(self, error: dict) -> None:
-        field, message = error.get("field") or "", error.get("message") or ""
+    def _show_error_on_field(self, error: ErrorDetail) -> None:
+        field, message = error.field or "", error.message
         message = message.split("; ")[0]  # the field's own message (validation may list more fields)
         if field.startswith("segments["):
             try:
@@ -444,7 +444,7 @@ class Session(SegmentEdits):
         if not self.worker.is_current(gen) or self._closed:  # a newer edit arrived: drop this stale result
             self.state.discard_stale()
             return
-        self.state.publish(gen, request, outcome.segmentation, outcome.result, outcome.error)
+        self.state.publish(gen, request, outcome.segmentation, outcome.result, outcome.error, outcome.request)
         self.show_downloads()
         robot = self.robots.of_request(request)
         seg, result, error = outcome.segmentation, outcome.result, outcome.error
@@ -453,27 +453,28 @@ class Session(SegmentEdits):
         self.gui.cursor.set_grid(grid[0] if grid else None, grid[1] if grid else (0.0, 0.0))
         if error is not None:
             self.scene.show_result(None)
-            message = error.get("message", "")
+            message = error.message
             self.gui.result.clear(f"**No plan**: plan #{gen} failed — {error_title(error)}: {message}. "
                                   "The plots stay empty until a plan succeeds.")
-            self.gui.show_status(f"**plan #{gen} failed** ({error['code']}) — {message}")
+            self.gui.show_status(f"**plan #{gen} failed** ({error.code}) — {message}")
             self._show_plan_error(error)
             return
         assert result is not None  # a plan without an error has a result
         self._clear_error_note()
         self.gui.clear_plan_errors()
         self.scene.show_result(result)
-        self.gui.show_time_range(float(result["time"][-1]), float(result["settings"]["Ts"]))
-        m = result["metrics"]
+        duration = float(result.time[-1])
+        self.gui.show_time_range(duration, result.settings.Ts)
         if robot is not None:
             self.gui.result.show(result, robot, gen)
             self.gui.leg_legend.content = leg_legend_html(robot.n_legs, float(np.min(robot.force_max)))
         self.gui.result.header.content = (f"**Plan #{gen}** (the current design): planned in {outcome.seconds:.2f} s, "
-                                          f"duration {m['duration_s']:.2f} s")
-        self.show_time(float(result["time"][-1]))
-        what = (f"{len(seg['path'])} cells in the corridor" if seg else
+                                          f"duration {result.metrics.duration_s:.2f} s")
+        self.show_time(duration)
+        what = (f"{len(seg.path)} cells in the corridor" if seg else
                 f"{len(request.get('segments') or [])} boxes in the corridor")
-        self.gui.show_status(f"plan #{gen} in {outcome.seconds:.2f} s — duration {m['duration_s']:.2f} s, {what}")
+        self.gui.show_status(f"plan #{gen} in {outcome.seconds:.2f} s — duration {result.metrics.duration_s:.2f} s, "
+                             f"{what}")
 
     def _on_plan_crash(self, exc: Exception) -> None:
         self.notify("Internal error", f"{type(exc).__name__}: {exc}", color="red")

@@ -17,10 +17,13 @@ from __future__ import annotations
 import copy
 import threading
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from . import _geometry as geo
 from ._planning import DEFAULT_MODE, DEFAULT_ROBOT, MODE_DEFAULTS
+
+if TYPE_CHECKING:
+    from ._planning import ErrorDetail, PlanRequest, PlanResult, SegmentationResult
 
 __all__ = [
     "DEFAULT_REQUEST",
@@ -78,11 +81,12 @@ class EditorState:
         self._request = copy.deepcopy(request if request is not None else DEFAULT_REQUEST)
         self.corridor_id: str | None = None  #: id of the stored corridor the design came from / was saved as
         self.plans_done = 0  #: number of plan results published
-        self.last_result: dict | None = None  #: newest published plan result
+        self.last_result: PlanResult | None = None  #: newest published plan result
         self.last_result_robot: Any = None  #: robot spec (name or description) of last_result
-        self.last_result_request: dict | None = None  #: the request last_result was planned for
-        self.last_segmentation: dict | None = None  #: newest published segmentation (to_dict)
-        self.last_error: dict | None = None  #: newest error ({code, message, field}) or None
+        self.last_result_request: dict | None = None  #: the request draft last_result was planned for
+        self.last_result_model: PlanRequest | None = None  #: that request, validated
+        self.last_segmentation: SegmentationResult | None = None  #: newest published segmentation
+        self.last_error: ErrorDetail | None = None  #: newest error (code, message, field) or None
         self.last_plan_generation = 0  #: generation of the newest published result
         self.stale_discarded = 0  #: results dropped because a newer edit arrived
 
@@ -102,11 +106,11 @@ class EditorState:
         with self.lock:
             edit(self._request)
 
-    def publish(self, gen: int, request: dict, segmentation: dict | None, result: dict | None,
-                error: dict | None) -> None:
-        """Record the outcome of the current re-plan ``gen`` of ``request``. A failed plan
-        keeps the last good result; a failed segmentation of a layout keeps the last
-        segmentation (the cells stay clickable)."""
+    def publish(self, gen: int, request: dict, segmentation: SegmentationResult | None,
+                result: PlanResult | None, error: ErrorDetail | None, model: PlanRequest | None = None) -> None:
+        """Record the outcome of the current re-plan ``gen`` of ``request`` (the draft;
+        ``model``: it validated). A failed plan keeps the last good result; a failed
+        segmentation of a layout keeps the last segmentation (the cells stay clickable)."""
         with self.lock:
             if segmentation is not None or error is None or request.get("layout") is None:
                 self.last_segmentation = segmentation
@@ -115,6 +119,7 @@ class EditorState:
                 self.last_result = result
                 self.last_result_robot = request.get("robot", DEFAULT_ROBOT)
                 self.last_result_request = copy.deepcopy(request)
+                self.last_result_model = model
                 self.plans_done += 1
                 self.last_plan_generation = gen
 
