@@ -3,8 +3,9 @@ clients mix plans (Table I), saves and corridor list pages against a real ``rang
 on 127.0.0.1 (a free port, no token, 2 planning workers).
 
     python benchmarks/bench_load.py [--clients 200] [--per-client 6] [--base-src DIR] [--rounds N]
+                                    [--client lean|httpx]
 
-The load runs in a process of its own (bounded: ``clients x per_client`` requests, each
+The load runs in processes of their own (bounded: ``clients x per_client`` requests, each
 client one after another as answers come back); this process probes ``/ready`` every 50 ms
 meanwhile. With ``--base-src`` the same load runs against the service of another source
 tree first (e.g. main's checkout), then against this one, ``--rounds`` times alternating: one
@@ -98,17 +99,88 @@ async def _client(http: httpx.AsyncClient, i: int, n: int, out: list, tag: str) 
         out.append((kind, status, time.perf_counter() - t0))
 
 
-async def _load(url: str, clients: int, per_client: int, tag: str) -> list:
+async def _load(url: str, clients: int, per_client: int, tag: str, lean: bool) -> list:
     out: list = []
+    if lean:
+        await asyncio.gather(*(_lean_client(url, i, per_client, out, tag) for i in range(clients)))
+        return out
     limits = httpx.Limits(max_connections=clients, max_keepalive_connections=clients)
     async with httpx.AsyncClient(base_url=url, timeout=300, limits=limits) as http:
         await asyncio.gather(*(_client(http, i, per_client, out, tag) for i in range(clients)))
     return out
 
 
+class _Conn:
+    """One keep-alive HTTP/1.1 connection on asyncio streams: what a client on another machine
+    costs the server, without httpx's per-request CPU in the load processes (which on 2 shared
+    cores took 2.5x the server's CPU and queued every answer behind it)."""
+
+    def __init__(self, host: str, port: int):
+        self.host, self.port = host, port
+        self.reader: asyncio.StreamReader | None = None
+        self.writer: asyncio.StreamWriter | None = None
+
+    async def request(self, method: str, path: str, body: bytes | None = None) -> int:
+        if self.writer is None:
+            self.reader, self.writer = await asyncio.open_connection(self.host, self.port)
+        assert self.reader is not None
+        head = f"{method} {path} HTTP/1.1\r\nHost: {self.host}:{self.port}\r\n"
+        if body is not None:
+            head += f"Content-Type: application/json\r\nContent-Length: {len(body)}\r\n"
+        self.writer.write(head.encode() + b"\r\n" + (body or b""))
+        await self.writer.drain()
+        status_line = await self.reader.readline()
+        if not status_line:
+            raise ConnectionError("closed")
+        status = int(status_line.split()[1])
+        length, chunked, close = 0, False, False
+        while (line := await self.reader.readline()) not in (b"\r\n", b""):
+            name, _, value = line.decode("latin-1").partition(":")
+            name, value = name.strip().lower(), value.strip().lower()
+            if name == "content-length":
+                length = int(value)
+            elif name == "transfer-encoding" and "chunked" in value:
+                chunked = True
+            elif name == "connection" and value == "close":
+                close = True
+        if chunked:
+            while (size := int((await self.reader.readline()).split(b";")[0], 16)) > 0:
+                await self.reader.readexactly(size + 2)
+            await self.reader.readline()
+        else:
+            await self.reader.readexactly(length)
+        if close:
+            self.writer.close()
+            self.writer = None
+        return status
+
+
+async def _lean_client(url: str, i: int, n: int, out: list, tag: str) -> None:
+    host, port = url.split("//", 1)[1].rsplit(":", 1)
+    conn = _Conn(host, int(port))
+    plan_body = json.dumps(TABLE1).encode()
+    for k in range(n):
+        kind = ("plan", "save", "list")[(i + k) % 3]
+        t0 = time.perf_counter()
+        try:
+            if kind == "plan":
+                status = await conn.request("POST", "/v1/plan", plan_body)
+            elif kind == "save":
+                body = json.dumps({**TABLE1, "name": f"load {tag}-{i}-{k}-{time.time_ns()}"}).encode()
+                status = await conn.request("POST", "/v1/corridors", body)
+            else:
+                status = await conn.request("GET", "/v1/corridors?limit=50")
+        except (OSError, ValueError, asyncio.IncompleteReadError) as exc:
+            status = type(exc).__name__
+            conn = _Conn(host, int(port))
+        out.append((kind, status, time.perf_counter() - t0))
+    if conn.writer is not None:
+        conn.writer.close()
+
+
 # -- the run ---------------------------------------------------------------------------------
 
-def run(src: Path, clients: int, per_client: int, workers: int) -> dict[str, list]:
+def run(src: Path, clients: int, per_client: int, workers: int, client: str = "lean") -> dict[str, list]:
     with tempfile.TemporaryDirectory(prefix="rangeplan-load-") as tmp:
         server, url = start_server(src, Path(tmp), workers)
         try:
@@ -116,8 +188,9 @@ def run(src: Path, clients: int, per_client: int, workers: int) -> dict[str, lis
             # (plan results are ~120 kB each) is itself a bottleneck that delays every answer
             before = resource.getrusage(resource.RUSAGE_CHILDREN)
             share = [clients // LOAD_PROCESSES + (i < clients % LOAD_PROCESSES) for i in range(LOAD_PROCESSES)]
-            loads = [subprocess.Popen([sys.executable, __file__, "--child", url, str(n), str(per_client), str(i)],
-                                      cwd=ROOT, stdout=subprocess.PIPE, text=True) for i, n in enumerate(share) if n]
+            loads = [subprocess.Popen([sys.executable, __file__, "--child", url, str(n), str(per_client), str(i),
+                                       client], cwd=ROOT, stdout=subprocess.PIPE, text=True)
+                     for i, n in enumerate(share) if n]
             ready = []
             cpu0 = cpu_seconds(server.pid)
             with httpx.Client(base_url=url, timeout=60) as c:
@@ -198,7 +271,7 @@ def table(results: dict[str, dict[str, list]]) -> str:
 def main() -> None:
     if len(sys.argv) > 1 and sys.argv[1] == "--child":
         url, clients, per_client, tag = sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), sys.argv[5]
-        print(json.dumps(asyncio.run(_load(url, clients, per_client, tag))))
+        print(json.dumps(asyncio.run(_load(url, clients, per_client, tag, sys.argv[6] == "lean"))))
         return
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--clients", type=int, default=200)
@@ -206,18 +279,21 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--base-src", type=Path, help="another source tree to measure first (side by side)")
     ap.add_argument("--rounds", type=int, default=1, help="rounds, base and this alternating in each")
+    ap.add_argument("--client", choices=("lean", "httpx"), default="lean",
+                    help="the load's HTTP client: keep-alive HTTP/1.1 on asyncio streams (default), or httpx")
     a = ap.parse_args()
     results: dict[str, dict[str, list]] = {}
     loads = [os.getloadavg()[0]]
     for r in range(a.rounds):
         trees = ([("base", a.base_src.resolve())] if a.base_src else []) + [("this", ROOT)]
         for name, src in trees:
-            res = run(src, a.clients, a.per_client, a.workers)
+            res = run(src, a.clients, a.per_client, a.workers, a.client)
             tree = f"{name} r{r + 1}" if a.rounds > 1 else name
             results[tree] = res
             loads.append(os.getloadavg()[0])
             print(f"# {tree}: {python_of(src)} on {src}; load average {loads[-1]:.1f}", flush=True)
-    print(f"{a.clients} clients x {a.per_client} requests (plan, save, list in turn), {a.workers} planning workers; "
+    print(f"{a.clients} clients x {a.per_client} requests (plan, save, list in turn; {a.client} client), "
+          f"{a.workers} planning workers; "
           f"/ready probed every 50 ms; load average {min(loads):.1f}-{max(loads):.1f} on {os.cpu_count()} cores")
     print(table(results))
     for tree, res in results.items():

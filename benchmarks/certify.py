@@ -77,7 +77,33 @@ def _run(job: tuple[int, int]) -> tuple[dict, dict]:
         return case, {"constrained": {"outcome": "crash", "problem": repr(exc)}, "paper": {"outcome": "skipped"}}
     for mode, rec in out.items():
         rec["speed"] = _SPEED.get(mode, 1.0)
+        _retime(case, mode, rec)
     return case, out
+
+
+def _retime(case: dict, mode: str, rec: dict) -> None:
+    """A case measured over 1.5x its estimate (with its advice bound for an error) is timed
+    twice more and keeps the least CPU time: a single timing on a shared machine catches
+    page faults, collections and the other processes' cache misses; ``first`` keeps the
+    first timing, reported beside it."""
+    from planner import PlannerError, plan
+    from tests.certify_support import _with
+
+    est, sec = rec.get("estimate"), rec.get("seconds")
+    if not est or not sec:
+        return
+    bound = est if rec["outcome"] == "ok" else est + (rec.get("advice") or 0.0)
+    if sec / rec["speed"] / bound <= 1.5:
+        return
+    rec["first"] = sec
+    req = _with(case, mode=mode)
+    for _ in range(2):
+        t0 = time.process_time()
+        try:
+            plan(req)
+        except PlannerError:
+            pass
+        rec["seconds"] = min(rec["seconds"], time.process_time() - t0)
 
 
 def main() -> None:
@@ -92,6 +118,7 @@ def main() -> None:
     counts: dict[str, collections.Counter] = {"constrained": collections.Counter(), "paper": collections.Counter()}
     problems, worst, done = [], (0.0, None), 0
     high: list[tuple] = []  # plans over 1.3x their estimate
+    first_over: collections.Counter = collections.Counter()  # over 1.5x at the first timing
     ratios: dict[str, list[float]] = {"constrained": [], "paper": []}
     err_ratios: dict[str, list[float]] = collections.defaultdict(list)
     deadline = t0 + 60 * args.minutes
@@ -105,6 +132,8 @@ def main() -> None:
                 if rec.get("problem"):
                     problems.append((mode, rec["outcome"], rec["problem"], case))
                 est, sec = rec.get("estimate"), rec.get("seconds")
+                if rec.get("first"):
+                    first_over[mode if rec["outcome"] == "ok" else f"{mode} {rec['outcome']}"] += 1
                 if est and sec and rec["outcome"] == "ok":
                     # measured / estimated on the reference machine (the time now over the speed now)
                     ratio = sec / rec["speed"] / est
@@ -130,16 +159,19 @@ def main() -> None:
         print(f"  {mode} {code}: {what[:300]}")
     print("\nmeasured CPU time / work estimate of the plans, on the reference machine (the CPU time over the "
           "machine's speed now: Table I's time now over its quiet time, REFERENCE_S)")
-    print("| mode | plans | median | 99th percentile | largest | over 1.5 |\n|---|---|---|---|---|---|")
+    print("(a case over 1.5x is timed twice more and keeps its least time; 'first over 1.5': at its first timing)")
+    print("| mode | plans | median | 99th percentile | largest | over 1.5 | first over 1.5 |\n"
+          "|---|---|---|---|---|---|---|")
     for mode, r in ratios.items():
         if r:
             a = sorted(r)
             print(f"| {mode} | {len(a)} | {a[len(a) // 2]:.2f} | {a[min(len(a) - 1, int(0.99 * len(a)))]:.2f} | "
-                  f"{a[-1]:.2f} | {sum(x > 1.5 for x in a)} |")
+                  f"{a[-1]:.2f} | {sum(x > 1.5 for x in a)} | {first_over[mode]} |")
     for what, r in sorted(err_ratios.items()):
         a = sorted(r)
         print(f"| {what} (with its advice checks, over estimate + advice bound) | {len(a)} | {a[len(a) // 2]:.2f} | "
-              f"{a[min(len(a) - 1, int(0.99 * len(a)))]:.2f} | {a[-1]:.2f} | {sum(x > 1.5 for x in a)} |")
+              f"{a[min(len(a) - 1, int(0.99 * len(a)))]:.2f} | {a[-1]:.2f} | {sum(x > 1.5 for x in a)} | "
+              f"{first_over[what]} |")
     if worst[1] is not None:
         mode, sec, est, case = worst[1]
         print(f"\nlargest: {worst[0]:.2f} ({mode}: {sec:.3f} s CPU, {est:.3f} s estimated): {json.dumps(case)[:400]}")

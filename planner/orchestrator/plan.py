@@ -253,7 +253,8 @@ def warm_up() -> float:
     """Compile (first run after installing) or load (afterwards, from numba's on-disk cache)
     the compiled kernels of every path by planning tiny corridors: the paper mode; the
     constrained mode with equalities eliminated (psi fixed), with the QP in the inputs (a
-    psi range) and the slack problem (too little time). Returns the seconds taken. Servers
+    psi range) and the slack problem (too little time); and segments a small layout in both
+    cell shapes. Returns the seconds taken. Servers
     call it before taking jobs, ``make`` after installing (``python -m planner``). Compiling is
     reported on stderr with an estimate of the time left (:mod:`.compiling`)."""
     from .compiling import compile_progress
@@ -273,4 +274,12 @@ def warm_up() -> float:
     with compile_progress():
         for segs, extra in runs:
             plan({"robot": "moving-slide", "segments": segs, "settings": {**base, **extra}})
+        # and a layout's segmentation in both cell shapes: the first layout a process planned
+        # took ~80 ms more (shapely and the grid's modules loading), 5x its estimate (issue 20)
+        for shape in ("square", "triangle"):
+            segment({"robot": "moving-slide", "layout": {
+                "bounds": {"lower": [-0.02, -0.02], "upper": [0.02, 0.02]},
+                "obstacles": [{"type": "rectangle", "lower": [-0.005, -0.005], "upper": [0.005, 0.005]},
+                              {"type": "circle", "center": [0.01, -0.01], "radius": 0.003}],
+                "cell": {"shape": shape, "size": 0.005}, "start": [-0.015, -0.015, 0.0], "end": [0.015, 0.015, 0.0]}})
     return time.perf_counter() - t0
