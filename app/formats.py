@@ -18,8 +18,8 @@ from planner.exchange import EXPORT_FORMATS
 from planner.orchestrator import to_csv
 from planner.schema import Layout, PlanResult
 
-__all__ = ["MACHINE_FORMATS", "OUTPUT_FORMATS", "ExportFormatName", "OutputFormat", "PlanFormat", "format_for_path",
-           "format_help", "write"]
+__all__ = ["GCODE_FORMAT", "MACHINE_FORMATS", "OUTPUT_FORMATS", "ExportFormatName", "OutputFormat", "PlanFormat",
+           "format_for_path", "format_help", "write"]
 
 
 @dataclass(frozen=True)
@@ -60,6 +60,8 @@ OUTPUT_FORMATS: dict[str, OutputFormat] = {
 }
 #: the machine formats (exports of a stored plan; the editor's downloads)
 MACHINE_FORMATS: tuple[str, ...] = tuple(k for k, v in OUTPUT_FORMATS.items() if v.machine)
+#: the LinuxCNC program (``.ngc``), the machine format ``read_gcode`` reads back (the editor's preview)
+GCODE_FORMAT: str = next(k for k, v in OUTPUT_FORMATS.items() if v.machine and v.extension == ".ngc")
 
 if TYPE_CHECKING:
     PlanFormat = str

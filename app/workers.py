@@ -254,6 +254,13 @@ class _Worker:
         except (EOFError, OSError) as exc:
             raise WorkerCrashed(f"worker exited with status {self.poll()} ({exc})") from None
 
+    @property
+    def pid(self) -> int | None:
+        """The planning process's id (None while a forked one is not started yet)."""
+        if self.process is not None:
+            return self.process.pid
+        return self.proc.pid if self.proc is not None else None
+
     def poll(self) -> int | None:
         """The exit status (negative: the signal), None while it runs or has not started."""
         if self.proc is not None:

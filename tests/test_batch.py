@@ -675,7 +675,8 @@ def test_api_batch_survives_a_restart_and_never_takes_the_interactive_pool(tmp_p
         svc = app.state.batches
         batch_pids = svc.engine.pids()
         assert batch_pids and all(os.getpriority(os.PRIO_PROCESS, pid) >= 10 for pid in batch_pids)
-        pool_pids = [w.proc.pid for w in app.state.pool._workers]
+        pool_pids = [w.pid for w in app.state.pool._workers]
+        assert all(pid is not None for pid in pool_pids)
         assert not set(batch_pids) & set(pool_pids)
         # interactive workers run below the server (WORKER_NICE: it answers /ready while they plan),
         # batch workers below the interactive ones (a batch yields to single plans)

@@ -23,6 +23,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from app.formats import GCODE_FORMAT
+
 from . import _geometry as geo
 from ._files import MachineFiles, request_hash
 from ._planning import PlannerError, export_result, read_gcode, toolpath
@@ -72,7 +74,7 @@ def build_preview(files: MachineFiles) -> GcodePreview:
     """The preview of the plan ``files`` offers (its result must be set): the G-code exactly
     as the download writes it, read back and measured against the plan."""
     assert files.result is not None and files.request is not None
-    text = export_result(files.result, "gcode", files.model or files.request, files.header())
+    text = export_result(files.result, GCODE_FORMAT, files.model or files.request, files.header())
     path = toolpath(read_gcode(text, readback=True))
     res = files.result
     pose = np.asarray(res.pose, float)
