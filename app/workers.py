@@ -161,6 +161,32 @@ def default_start() -> str:
     return "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "exec"
 
 
+class _Exec:
+    """A ``subprocess.Popen`` seen through the part of ``multiprocessing.Process`` that
+    :class:`_Worker` uses (``pid``, ``exitcode``, ``is_alive``, ``join``, ``kill``), so that
+    both start methods are handled by one code path."""
+
+    def __init__(self, proc: subprocess.Popen):
+        self.proc = proc
+        self.pid: int | None = proc.pid
+
+    @property
+    def exitcode(self) -> int | None:
+        return self.proc.poll()
+
+    def is_alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def join(self, timeout: float | None = None) -> None:
+        try:
+            self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            pass
+
+    def kill(self) -> None:
+        self.proc.kill()
+
+
 class _Worker:
     """One planning process and the server's end of its pipe. A thread starts it and waits
     for its first message (ready, or failed with a reason). Two ways to start it:
@@ -181,8 +207,9 @@ class _Worker:
         self.failure: str | None = None
         self._lock = threading.Lock()
         self._killed = False
-        self.proc: subprocess.Popen | None = None
-        self.process: Any = None  # a multiprocessing.Process (start="forkserver")
+        #: a ``multiprocessing.Process`` (forkserver; its ``pid`` is None until the fork server
+        #: has started it) or an :class:`_Exec`
+        self.process: Any = None
         if start == "forkserver":
             import multiprocessing
 
@@ -199,10 +226,10 @@ class _Worker:
             # the parent's pid, and whether this thread lives as long as the server (the kernel's
             # parent-death signal is tied to it; app.lifeline)
             bound = int(threading.current_thread() is threading.main_thread())
-            self.proc = subprocess.Popen([sys.executable, "-m", "app.workers", str(child_sock.fileno()),
-                                          str(int(memory_mb or 0)), str(os.getpid()), str(bound)],
-                                         pass_fds=(child_sock.fileno(),), stdin=subprocess.DEVNULL,
-                                         close_fds=True)
+            self.process = _Exec(subprocess.Popen([sys.executable, "-m", "app.workers", str(child_sock.fileno()),
+                                                   str(int(memory_mb or 0)), str(os.getpid()), str(bound)],
+                                                  pass_fds=(child_sock.fileno(),), stdin=subprocess.DEVNULL,
+                                                  close_fds=True))
         finally:
             child_sock.close()
         self.conn = Connection(parent.detach())
@@ -257,43 +284,25 @@ class _Worker:
     @property
     def pid(self) -> int | None:
         """The planning process's id (None while a forked one is not started yet)."""
-        if self.process is not None:
-            return self.process.pid
-        return self.proc.pid if self.proc is not None else None
+        return self.process.pid
 
     def poll(self) -> int | None:
         """The exit status (negative: the signal), None while it runs or has not started."""
-        if self.proc is not None:
-            return self.proc.poll()
         return None if self.process.pid is None else self.process.exitcode
 
     def alive(self) -> bool:
-        if self.proc is not None:
-            return self.proc.poll() is None
         if self.process.pid is None:  # the fork server is still loading the planner
             return not self.started.is_set()
         return self.process.is_alive()
 
     def exit_status(self, timeout: float = 2.0) -> int | None:
         """Wait up to ``timeout`` s for the process to end; its exit status (None: still running)."""
-        if self.proc is not None:
-            try:
-                return self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                return None
         if self.process.pid is None:
             return None
         self.process.join(timeout)
         return self.process.exitcode
 
     def _end_process(self) -> None:
-        if self.proc is not None:
-            try:
-                self.proc.kill()
-                self.proc.wait(5)
-            except (OSError, subprocess.TimeoutExpired):
-                pass
-            return
         with self._lock:
             self._killed = True
             if self.process.pid is None:

@@ -35,8 +35,9 @@ Glossary (paper symbol -> code name):
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from ._lazy import lazy_getattr
 
 if TYPE_CHECKING:  # the names below, for type checkers; at run time they load on first use
     from .errors import PlannerError
@@ -56,13 +57,7 @@ _HOME = {"plan": "orchestrator", "segment": "orchestrator", "warm_up": "orchestr
          "RobotModel": "model", "load_robot": "model", "PlannerError": "errors"}
 
 
-def __getattr__(name: str) -> Any:  # PEP 562: the public names, imported on first use
-    home = _HOME.get(name)
-    if home is None:
-        raise AttributeError(f"module 'planner' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{home}", __name__), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_getattr(__name__, _HOME)  # PEP 562: the public names, imported on first use
 
 
 def __dir__() -> list[str]:

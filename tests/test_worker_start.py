@@ -30,8 +30,7 @@ def _ready(pool: PlanPool, timeout: float = 300.0) -> None:
 
 
 def _worker_pids(pool: PlanPool) -> list[int]:
-    pids = [w.process.pid if w.process is not None else w.proc.pid if w.proc is not None else None
-            for w in pool._workers]
+    pids = [w.pid for w in pool._workers]
     assert all(pids), pids
     return [int(p) for p in pids if p]
 

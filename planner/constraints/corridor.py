@@ -50,7 +50,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import replace
-from typing import Any
 
 import numpy as np
 
@@ -122,7 +121,7 @@ class CorridorConstraint(RowConstraint):
         shrink = np.minimum(marg, 0.5 * w)
         lo += shrink
         hi -= shrink
-        self.hp: list[Any] = [None] * K  # (A, b) of the samples with half-planes
+        self.hp: list[tuple[np.ndarray, np.ndarray] | None] = [None] * K
         #: the samples whose point range became the stop box
         self.stop = np.zeros(K, bool)
         if segments is not None:
@@ -141,10 +140,10 @@ class CorridorConstraint(RowConstraint):
                                 lo[j, :2] = np.maximum(p - END_TOL_M, blo)
                                 hi[j, :2] = np.minimum(p + END_TOL_M, bhi)
                                 self.stop[j] = True
-                                self.hp[j] = _stop_in_cell(segments[h], lo[j, :2], hi[j, :2])
-                                if self.hp[j] is not None:  # the box cut to the exact cell
-                                    lo[j, :2], hi[j, :2] = self.hp[j][2], self.hp[j][3]
-                                    self.hp[j] = self.hp[j][:2]
+                                cut = _stop_in_cell(segments[h], lo[j, :2], hi[j, :2])
+                                if cut is not None:  # the box cut to the exact cell
+                                    A, b, lo[j, :2], hi[j, :2] = cut
+                                    self.hp[j] = (A, b)
                                 # a point angle too: an equality on psi at every sample
                                 # cannot damp a residual rotation (with one constant move per
                                 # sample the rate only flips sign), so give it the same kind
@@ -219,7 +218,8 @@ class CorridorConstraint(RowConstraint):
         return self.lo, self.hi, self.lo_deep, self.hi_deep, self.has_hp, self.hp_ptr, self.hp_A, self.hp_b, RECOURSE_M
 
 
-def _stop_in_cell(cell: Segment, lo: np.ndarray, hi: np.ndarray) -> tuple | None:
+def _stop_in_cell(cell: Segment, lo: np.ndarray, hi: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """The stop box ``[lo, hi]`` (x, y) cut to ``cell``'s exact polygon shrunk by the margin,
     where the box reaches outside it (an end point near a triangle's slanted edge or acute
     corner: the box alone let the robot settle up to a few tenths of a micrometre outside the

@@ -14,9 +14,9 @@
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
+from .._lazy import lazy_getattr
 from .dxf_export import DXF_LAYERS, to_dxf
 from .formats import EXPORT_FORMATS, ExportFormat, export, export_format_for
 from .gcode import to_gcode
@@ -36,10 +36,4 @@ __all__ = ["DRAWING_FORMATS", "DXF_LAYERS", "EXPORT_FORMATS", "ExportFormat", "T
            "toolpath"]
 
 
-def __getattr__(name: str) -> Any:
-    home = _LAZY.get(name)
-    if home is None:
-        raise AttributeError(f"module 'planner.exchange' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{home}", __name__), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_getattr(__name__, _LAZY)
