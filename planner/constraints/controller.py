@@ -95,6 +95,8 @@ class Assembly(Protocol):
 
     def solve(self, qp: Any, start: np.ndarray | None) -> QPSolution: ...
 
+    def relax(self, qp: Any) -> None: ...
+
     def one_step_error(self, qp: Any, u: np.ndarray) -> tuple[np.ndarray, float, float]: ...
 
     def dense(self, qp: Any) -> DenseQP: ...
@@ -110,7 +112,7 @@ class ControllerStats:
 
     iterations: list[int] = field(default_factory=list)  #: solver iterations per step
     fallbacks: int = 0  #: steps the stage-wise solver handed to DAQP
-    relaxed: int = 0  #: steps solved with the rows widened by ``RELAX_M`` (compiled backend)
+    relaxed: int = 0  #: steps solved with the rows widened by ``RELAX_M``
     solve_s: float = 0.0  #: time in the controller [s]
     failures: int = 0  #: steps whose slack problem failed too
     refinements: int = 0  #: re-solves at a refined offset
@@ -254,8 +256,14 @@ class ConstrainedController:
                 raise self.infeasible_error(f"at t = {k * self.st.Ts:.3f} s the step's QP is infeasible")
             stats.fallbacks += 1
         qp = asm.build(k, x, Ad, Bd, self.y_nom, self.u_prev, self.guess())
-        sol = asm.solve(qp, self.warm_start())
+        start = self.warm_start()
+        sol = asm.solve(qp, start)
         iterations = sol.iterations
+        if not sol.ok:  # as the compiled step: once more with the rows widened by RELAX_M
+            asm.relax(qp)
+            sol = asm.solve(qp, start)
+            iterations += sol.iterations
+            stats.relaxed += 1 if sol.ok else 0
         # while the plant under the solution's first move lands farther from the prediction
         # than the tolerance, recompute the offset at that move and solve again
         for _ in range(REFINE_MAX):

@@ -134,9 +134,12 @@ class CorridorConstraint(RowConstraint):
                 if np.all(w[j, :2] <= 2 * MARGIN_M) and si >= n - 2:
                     p = 0.5 * (seq.lower[j, :2] + seq.upper[j, :2])
                     for h in (si, si - 1, si + 1, n - 2):
-                        if 0 <= h < n and not segments[h].is_point:
+                        # a cell with room inside its margins in x and y (not the end point
+                        # itself, also where that has a psi range: cut to it, the box was
+                        # inverted, lo = p + margin > hi = p - margin, rows no pose meets)
+                        if 0 <= h < n and not segments[h].is_xy_point:
                             blo, bhi = boxes[h][0] + MARGIN_M, boxes[h][1] - MARGIN_M
-                            if np.all(blo - END_TOL_M <= p) and np.all(p <= bhi + END_TOL_M):
+                            if np.all(blo < bhi) and np.all(blo - END_TOL_M <= p) and np.all(p <= bhi + END_TOL_M):
                                 lo[j, :2] = np.maximum(p - END_TOL_M, blo)
                                 hi[j, :2] = np.minimum(p + END_TOL_M, bhi)
                                 self.stop[j] = True
@@ -257,7 +260,7 @@ class EndApproachConstraint(RowConstraint):
         #: first sequence index with the row
         self.start_index = seq.K
         n = 0 if segments is None else len(segments)
-        if segments is not None and n >= 2 and segments[-1].is_point:
+        if segments is not None and n >= 2 and segments[-1].is_xy_point:
             d = approach_direction(segments)
             if d is not None:
                 self.half_plane = (d, float(d @ segments[-1].centre[:2]))
@@ -293,7 +296,7 @@ class ArrivalConstraint(RowConstraint):
         #: the bounds [m/s, m/s, rad/s]
         self.limit = np.array([ARRIVAL_SPEED_M_S, ARRIVAL_SPEED_M_S, ARRIVAL_RATE_RAD_S])
         n = 0 if segments is None else len(segments)
-        if segments is not None and n >= 2 and segments[-1].is_point:
+        if segments is not None and n >= 2 and segments[-1].is_xy_point:
             w = seq.upper[:, :2] - seq.lower[:, :2]
             at_end = (seq.segment >= n - 2) & np.all(w <= 2 * MARGIN_M, axis=1)
             if at_end.any():

@@ -110,6 +110,13 @@ class Segment(Strict):
         lo, hi = self.lower, self.upper
         return bool(hi[0] - lo[0] <= 1e-12 and hi[1] - lo[1] <= 1e-12 and hi[2] - lo[2] <= 1e-12)
 
+    @property
+    def is_xy_point(self) -> bool:
+        """A range of zero size in x and y (a point, possibly with a psi range: an end point
+        at which the robot may settle at any angle of that range)."""
+        lo, hi = self.lower, self.upper
+        return bool(hi[0] - lo[0] <= 1e-12 and hi[1] - lo[1] <= 1e-12)
+
 
 class Reference(Strict):
     """A trajectory to track (the paper's criterion (12)): one pose per sample."""
