@@ -543,6 +543,48 @@ def draw_cases(n: int, seed: int, start: int = 0) -> list[dict]:
     return [draw_case(seed, i) for i in range(start, start + n)]
 
 
+def tiny_corridor(rng: np.random.Generator) -> dict:
+    """A small segment corridor (issue 20, defect of the end point at a box corner): 2-4
+    boxes of 0.5-4 mm (each starting at a corner, the middle or a random point of the one
+    before), with or without a start point, the end point at a corner, on an edge or inside
+    the last box, a point or (one in three) a point in x/y with the box's psi range; psi
+    ranges of 0 to 0.1 rad; 1-10 samples per segment; both robots. ``rng``: a numpy generator."""
+    robot = ["moving-slide", "tri-slide"][int(rng.integers(2))]
+    n = int(rng.integers(2, 5))
+    scale = [0.001, 0.003, 0.01][int(rng.integers(3))]
+    psi_w = [0.0, 0.002, 0.01, 0.1][int(rng.integers(4))]
+    p = rng.uniform(-0.02, 0.02, 2)
+    pc = 0.0
+    boxes = []
+    for _ in range(n):
+        half = scale * (0.3 + rng.random(2)) / 2
+        lo, hi = p - half, p + half
+        boxes.append((np.array([*lo, pc - psi_w / 2]), np.array([*hi, pc + psi_w / 2])))
+        p = lo + (hi - lo) * rng.choice([0.0, 0.5, 1.0, float(rng.random())], 2)
+        pc = float(pc + psi_w * rng.uniform(-0.45, 0.45))
+    lo, hi = boxes[-1]
+    where = int(rng.integers(3))
+    if where == 0:  # a corner
+        f = rng.choice([0.0, 1.0], 2)
+    elif where == 1:  # an edge
+        f = np.array([float(rng.choice([0.0, 1.0])), float(rng.random())])
+        rng.shuffle(f)
+    else:
+        f = rng.random(2)
+    exy = lo[:2] + (hi[:2] - lo[:2]) * f
+    if rng.integers(3) == 0:  # a point in x/y with the box's psi range
+        end = ([*exy, lo[2]], [*exy, hi[2]])
+    else:
+        q = float(lo[2] + (hi[2] - lo[2]) * [0.0, 1.0, float(rng.random())][int(rng.integers(3))])
+        end = ([*exy, q], [*exy, q])
+    segs = [{"lower": [float(v) for v in a], "upper": [float(v) for v in b]} for a, b in boxes]
+    if rng.random() < 0.5:
+        s = [*(0.5 * (boxes[0][0][:2] + boxes[0][1][:2])), float(boxes[0][0][2] + psi_w * rng.random())]
+        segs.insert(0, {"lower": [float(v) for v in s], "upper": [float(v) for v in s]})
+    segs.append({"lower": [float(v) for v in end[0]], "upper": [float(v) for v in end[1]]})
+    return {"robot": robot, "segments": segs, "settings": {"samples_per_segment": int(rng.integers(1, 11))}}
+
+
 # ---------------------------------------------------------------- certifying one case
 
 import copy  # noqa: E402

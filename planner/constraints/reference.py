@@ -96,7 +96,6 @@ class ReferenceAssembly:
         """The one-step offset ``d = Phi(x, u) - Ad x - Bd u`` (``x1 = Phi(x, u)``: the plant's
         next state under the move ``u`` [N]), sample 0's leg rows at the pose ``x1[:3]``, and
         the QP at them."""
-        N = self.N
         qp.x1 = x1
         qp.d = x1 - qp.Ad @ qp.x - qp.Bd @ u
         y1 = x1[:3]
