@@ -473,7 +473,8 @@ def layout_case(draw: Any) -> dict:
 @hst.composite
 def segments_case(draw: Any) -> dict:
     """A corridor of random boxes, each overlapping the one before (narrow or wide, psi ranges
-    or a fixed angle), between a start point in the first box and an end point in the last."""
+    or a fixed angle), between a start point in the first box and an end point in the last (at
+    a corner, on an edge or inside; one in four a point in x/y with the last box's psi range)."""
     robot = draw(hst.sampled_from(["moving-slide", "tri-slide"]))
     R = _REACH[robot]
     n = draw(hst.integers(1, 8))
@@ -500,7 +501,22 @@ def segments_case(draw: Any) -> dict:
         return (lo + (hi - lo) * np.array([_frac(draw), _frac(draw), _frac(draw)])).tolist()
 
     s, e = inside(boxes[0]), inside(boxes[-1])
-    segs = [{"lower": s, "upper": s}] + [{"lower": lo, "upper": hi} for lo, hi in boxes] + [{"lower": e, "upper": e}]
+    e_hi = e
+    # the end point at a corner or on an edge of the last box as often as inside it (issue 20: an
+    # end point at a box corner with short timing left the corridor), and one in four a point in
+    # x/y only, with the last box's psi range
+    where = draw(hst.sampled_from(["inside", "corner", "edge"]))
+    blo, bhi = boxes[-1]
+    if where != "inside":
+        f = [float(draw(hst.booleans())), float(draw(hst.booleans()))]
+        if where == "edge":
+            f[draw(hst.integers(0, 1))] = _frac(draw)
+        e = [blo[0] + (bhi[0] - blo[0]) * f[0], blo[1] + (bhi[1] - blo[1]) * f[1], e[2]]
+        e_hi = e
+    if draw(hst.integers(0, 3)) == 0:
+        e, e_hi = [e[0], e[1], blo[2]], [e[0], e[1], bhi[2]]
+    segs = [{"lower": s, "upper": s}] + [{"lower": lo, "upper": hi} for lo, hi in boxes] + \
+        [{"lower": e, "upper": e_hi}]
     return {"robot": robot, "segments": segs}
 
 
@@ -513,7 +529,9 @@ def cases(draw: Any) -> dict:
     if timing == "speed":
         settings["speed_m_s"] = draw(hst.sampled_from([0.02, 0.05, 0.1]))
     elif timing == "samples":
-        settings["samples_per_segment"] = draw(hst.sampled_from([5, 10, 20, 40]))
+        # down to 1-3 samples: short timing, where the end point's stop box, the arrival and
+        # the no-overshoot rows meet within a sample or two
+        settings["samples_per_segment"] = draw(hst.sampled_from([1, 2, 3, 5, 10, 20, 40]))
     case["settings"] = settings
     return case
 
