@@ -113,7 +113,11 @@ def slack_suite() -> list[tuple[str, dict]]:
             for sps, psi in ((1, 0.0), (1, 0.01), (2, 0.0)):
                 cases.append((f"corner, {robot}, N = {N}, S = {sps}, psi [0, {psi:g}]",
                               {**corner(sps, psi, N=N), "robot": robot}))
-    cases += [("Table I, constrained, speed 0.5 m/s", with_settings(TABLE1, mode="constrained", speed_m_s=0.5,
+    cases += [("Table I, constrained, 3 samples per segment (336 of 336 steps infeasible, 42 s unbounded)",
+               with_settings(TABLE1, mode="constrained", samples_per_segment=3, require_settled=False)),
+              ("Table I, constrained, 8 samples per segment (13 steps infeasible)",
+               with_settings(TABLE1, mode="constrained", samples_per_segment=8, require_settled=False)),
+              ("Table I, constrained, speed 0.5 m/s", with_settings(TABLE1, mode="constrained", speed_m_s=0.5,
                                                                    require_settled=False)),
               ("Table I, constrained, speed 0.5 m/s, reference",
                with_settings(TABLE1, mode="constrained", speed_m_s=0.5, require_settled=False, backend="reference"))]

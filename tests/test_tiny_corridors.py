@@ -27,7 +27,8 @@ from tests.support import TABLE1, with_settings
 
 #: the box x, y in [0, 1 mm], psi in [0, 0.01], and its corner (1 mm, 1 mm) as the end point
 CORNER = {"segments": [{"lower": [0.0, 0.0, 0.0], "upper": [0.001, 0.001, 0.01]},
-                       {"lower": [0.001, 0.001, 0.0], "upper": [0.001, 0.001, 0.01]}]}
+                       {"lower": [0.001, 0.001, 0.0],
+                        "upper": [0.001, 0.001, 0.01]}]}
 
 
 def _both(req: dict):
@@ -170,3 +171,40 @@ def test_a_displaced_robot_returns_to_the_end_point_and_settles():
     assert mt.steps < 100
     v = check_plan(req, res, req["segments"])
     assert v.ok, v.problems
+
+
+#: certification case 656 of seed 21 (benchmarks/certify.py): the end point at a corner of the
+#: last box, the no-overshoot direction taken from a cell before it (the middle of the segment
+#: before the last cell lies past the end point) runs across that box and cut the whole stop box
+#: off (by 0.3-2.7 um): every step at the end was infeasible and solved relaxed (37 of 37 steps,
+#: ~200 active-set changes each: 3.4x the work estimate)
+APPROACH_ACROSS_THE_STOP_BOX = {"robot": "moving-slide", "segments": [
+        {"lower": [0.05513851478731091, -0.001262087438680597, -0.03491187288607715],
+         "upper": [0.05513851478731091, -0.001262087438680597, -0.03491187288607715]},
+        {"lower": [0.054906827818731886, -0.0015889769518132068, -0.046035150878183675],
+         "upper": [0.05818252263546634, 0.0015889769518132068, -0.02603515087818367]},
+        {"lower": [0.05460179380794662, -0.0010039459135125729, -0.0394905176873228],
+         "upper": [0.05521186182951715, -0.0004519459135125728, -0.0194905176873228]},
+        {"lower": [0.05329160494581375, -0.002420691549521764, -0.03928824081294855],
+         "upper": [0.055926958888867034, 0.00041279972249661846, -0.019288240812948547]},
+        {"lower": [0.053143724541809004, -0.0033498553443953643, -0.033484650640975576],
+         "upper": [0.05560508026487805, -0.0014915277546481637, -0.013484650640975574]},
+        {"lower": [0.05127794300222563, -0.005043985956927868, -0.02738865064097557],
+         "upper": [0.05500950608139238, -0.0015715574003251766, -0.007388650640975573]},
+        {"lower": [0.054037559459785, -0.0038469632463749215, -0.02738865064097557],
+         "upper": [0.054437559475785005, -0.0031039271907014774, -0.007388650640975573]},
+        {"lower": [0.054037559459785, -0.0031039271907014774, -0.02738865064097557],
+         "upper": [0.054037559459785, -0.0031039271907014774, -0.007388650640975573]}]}
+
+
+@pytest.mark.parametrize("sps", [3, 20])
+def test_a_no_overshoot_plane_across_the_stop_box_leaves_it_room(sps):
+    req = with_settings(APPROACH_ACROSS_THE_STOP_BOX, samples_per_segment=sps)
+    fast, ref = _both(req)
+    for res in (fast, ref):
+        assert not isinstance(res, PlannerError), res
+        assert res.metrics.qp_relaxed_steps == 0 and res.metrics.infeasible_steps == 0
+        assert res.metrics.contained and res.metrics.settled and res.metrics.overshoot_m <= 1e-9
+        v = check_plan(req, res, req["segments"])
+        assert v.ok, v.problems
+    assert np.abs(fast.pose - ref.pose).max() < 1e-9
