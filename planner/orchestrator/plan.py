@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from .._jit import numpy_only
 from ..constraints import MARGIN_M, MARGIN_RAD, ConstrainedController
 from ..corridor import RangeSequence, Segmentation, range_sequence, reference_sequence
 from ..corridor import segment as segment_layout
@@ -68,9 +69,16 @@ def plan(request: Any, *, robot: RobotModel | None = None, segments: Sequence[Se
     ``segments`` its corridor. ``work_limit_s``: a layout's corridor, once segmented, is
     estimated again (:func:`~planner.orchestrator.work.check_work`) and refused with
     ``too_much_work`` over this many seconds. Raises :class:`~planner.errors.PlannerError`
-    naming the cause."""
+    naming the cause. ``settings.backend = "reference"`` runs numpy only (no kernel is
+    compiled or loaded: :func:`planner._jit.numpy_only`)."""
     t0 = time.perf_counter()
     req = parse_request(request)
+    with numpy_only(req.settings.backend == "reference"):
+        return _plan(req, t0, robot, segments, work_limit_s)
+
+
+def _plan(req: PlanRequest, t0: float, robot: RobotModel | None, segments: Sequence[Segment] | None,
+          work_limit_s: float | None) -> PlanResult:
     model = _robot(req, robot)
     st = req.settings
     if segments is None:
@@ -218,8 +226,9 @@ def plan_timed(name: str | None, model: RobotModel, st: Settings, segments: Sequ
     t0 = time.perf_counter()
     sub = st.model_copy(update={"fastest": False, "segment_samples": [int(c) for c in counts],
                                 "samples_per_segment": int(max(counts)), "require_settled": True})
-    result = _run(name, model, sub, segments, None, abandon=abandon,
-                  timing={"method": "segment_samples"})[0]
+    with numpy_only(st.backend == "reference"):
+        result = _run(name, model, sub, segments, None, abandon=abandon,
+                      timing={"method": "segment_samples"})[0]
     result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3
     return result
 
