@@ -263,9 +263,10 @@ def warm_up() -> float:
     the compiled kernels of every path by planning tiny corridors: the paper mode; the
     constrained mode with equalities eliminated (psi fixed), with the QP in the inputs (a
     psi range) and the slack problem (too little time); and segments a small layout in both
-    cell shapes. Returns the seconds taken. Servers
+    cell shapes. Returns the seconds taken, and marks the cache compiled (:func:`.background.mark_compiled`). Servers
     call it before taking jobs, ``make`` after installing (``python -m planner``). Compiling is
     reported on stderr with an estimate of the time left (:mod:`.compiling`)."""
+    from .background import mark_compiled
     from .compiling import compile_progress
 
     t0 = time.perf_counter()
@@ -291,4 +292,5 @@ def warm_up() -> float:
                 "obstacles": [{"type": "rectangle", "lower": [-0.005, -0.005], "upper": [0.005, 0.005]},
                               {"type": "circle", "center": [0.01, -0.01], "radius": 0.003}],
                 "cell": {"shape": shape, "size": 0.005}, "start": [-0.015, -0.015, 0.0], "end": [0.015, 0.015, 0.0]}})
+    mark_compiled()  # every kernel is in the cache now: the done-marker (.background.kernels_ready)
     return time.perf_counter() - t0
