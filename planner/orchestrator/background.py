@@ -74,9 +74,10 @@ def kernels_ready(mode: str | None = None) -> bool:
     runs loads from the on-disk cache instead of compiling."""
     if (kernel_cache_dir() / MARKER).exists():
         return True
-    from .compiling import _cached, kernel_dispatchers
+    from .compiling import _cached, _inlined, kernel_dispatchers
 
-    return all(_cached(d) is not False for d in kernel_dispatchers().values() if _mode_kernel(d, mode))
+    return all(_cached(d) is not False for d in kernel_dispatchers().values()
+               if _mode_kernel(d, mode) and not _inlined(d))
 
 
 @dataclass(frozen=True)

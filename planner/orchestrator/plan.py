@@ -59,7 +59,8 @@ def segment(request: Any, *, robot: RobotModel | None = None) -> Segmentation:
     req = parse_request(request)
     if req.layout is None:
         raise invalid("layout", "the request has no layout to segment")
-    return segment_layout(req.layout, _robot(req, robot), req.settings)
+    with numpy_only(req.settings.backend == "reference"):
+        return segment_layout(req.layout, _robot(req, robot), req.settings)
 
 
 def plan(request: Any, *, robot: RobotModel | None = None, segments: Sequence[Segment] | None = None,
@@ -258,14 +259,17 @@ def _fastest(name: str | None, model: RobotModel, st: Settings, segments: Sequen
     return res
 
 
-def warm_up() -> float:
+def warm_up(backend: str = "compiled") -> float:
     """Compile (first run after installing) or load (afterwards, from numba's on-disk cache)
     the compiled kernels of every path by planning tiny corridors: the paper mode; the
     constrained mode with equalities eliminated (psi fixed), with the QP in the inputs (a
     psi range) and the slack problem (too little time); and segments a small layout in both
     cell shapes. Returns the seconds taken, and marks the cache compiled (:func:`.background.mark_compiled`). Servers
     call it before taking jobs, ``make`` after installing (``python -m planner``). Compiling is
-    reported on stderr with an estimate of the time left (:mod:`.compiling`)."""
+    reported on stderr with an estimate of the time left (:mod:`.compiling`).
+    ``backend="reference"``: the same on the numpy reference (imports and first calls; nothing
+    compiles, no marker): a service's workers while the kernels compile in the background
+    (:mod:`.background`)."""
     from .background import mark_compiled
     from .compiling import compile_progress
 
@@ -276,7 +280,7 @@ def warm_up() -> float:
     turning = [{"lower": [0.0, 0.0, 0.0], "upper": [0.0, 0.0, 0.0]},
                {"lower": [0.0, 0.0, 0.0], "upper": [0.04, 0.01, 0.02]},
                {"lower": [0.04, 0.01, 0.02], "upper": [0.04, 0.01, 0.02]}]
-    base = {"N": 5, "require_settled": False, "tail_max_s": 0.05}
+    base = {"N": 5, "require_settled": False, "tail_max_s": 0.05, "backend": backend}
     runs: list[tuple[list, dict]] = [
         (fixed, {"mode": "paper"}), (fixed, {"mode": "constrained"}),
         (turning, {"mode": "constrained", "samples_per_segment": 30}),
@@ -291,6 +295,8 @@ def warm_up() -> float:
                 "bounds": {"lower": [-0.02, -0.02], "upper": [0.02, 0.02]},
                 "obstacles": [{"type": "rectangle", "lower": [-0.005, -0.005], "upper": [0.005, 0.005]},
                               {"type": "circle", "center": [0.01, -0.01], "radius": 0.003}],
-                "cell": {"shape": shape, "size": 0.005}, "start": [-0.015, -0.015, 0.0], "end": [0.015, 0.015, 0.0]}})
-    mark_compiled()  # every kernel is in the cache now: the done-marker (.background.kernels_ready)
+                "cell": {"shape": shape, "size": 0.005}, "start": [-0.015, -0.015, 0.0], "end": [0.015, 0.015, 0.0]},
+                "settings": {"backend": backend}})
+    if backend == "compiled":
+        mark_compiled()  # every kernel is in the cache now: the done-marker (.background.kernels_ready)
     return time.perf_counter() - t0
