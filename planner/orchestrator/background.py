@@ -106,11 +106,18 @@ def _eta(info: dict) -> float:
 
 
 def _read_info(fd: int) -> dict:
-    try:
-        os.lseek(fd, 0, os.SEEK_SET)
-        return json.loads(os.read(fd, 4096).decode() or "{}")
-    except (OSError, ValueError):
-        return {}
+    """The running compile's record (its starter writes it just after starting it: waited for,
+    up to 2 s)."""
+    deadline = time.monotonic() + 2.0
+    while True:
+        try:
+            os.lseek(fd, 0, os.SEEK_SET)
+            info = json.loads(os.read(fd, 4096).decode() or "{}")
+        except (OSError, ValueError):
+            info = {}
+        if info.get("pid") or time.monotonic() > deadline:
+            return info
+        time.sleep(0.02)
 
 
 def _reap() -> None:
