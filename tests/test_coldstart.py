@@ -144,9 +144,8 @@ def test_cli_and_service_plan_on_the_reference_while_the_kernels_compile(partial
     ref = [json.loads((tmp_path / f"{x}.json").read_text()) for x in "ab"]
     assert all(r["settings"]["backend"] == "reference" for r in ref)
 
-    from tests.test_server_process import Server, free_port
-
     import planner
+    from tests.test_server_process import Server, free_port
     big = {**TABLE1, "settings": {"samples_per_segment": 20}}
     limit = 8.0
     while planner.estimate_work({**big, "settings": {**big["settings"], "backend": "reference"}}).seconds <= limit:
@@ -198,7 +197,7 @@ def test_cli_and_service_plan_on_the_reference_while_the_kernels_compile(partial
 def test_reference_backend_compiles_nothing(tmp_path):
     """A reference plan in an empty kernel cache compiles no kernel (numba's compile events)."""
     code = """
-import json
+import json, sys
 from numba.core import event
 seen = []
 class L(event.Listener):
@@ -206,15 +205,16 @@ class L(event.Listener):
     def on_end(self, e): pass
 event.register("numba:compile", L())
 import planner
-req = json.load(open(%r))
+req = json.load(open(sys.argv[1]))
 for mode in ("paper", "constrained"):
     planner.plan({**req, "settings": {"mode": mode, "backend": "reference"}})
 planner.warm_up(backend="reference")
 print(json.dumps(seen))
-""" % str(TABLE1_PATH)
+"""
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
     env["RANGEPLAN_KERNEL_CACHE"] = str(tmp_path)
-    out = subprocess.run([sys.executable, "-c", code], env=env, cwd=ROOT, capture_output=True, text=True, timeout=120)
+    out = subprocess.run([sys.executable, "-c", code, str(TABLE1_PATH)], env=env, cwd=ROOT, capture_output=True,
+                         text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert json.loads(out.stdout.strip().splitlines()[-1]) == []
 

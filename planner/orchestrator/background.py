@@ -182,10 +182,10 @@ def compile_in_background() -> BackgroundCompile | None:
         os.close(fd)  # the child holds the lock (the same open file) until it ends
 
 
-def while_compiling(backend: str, mode: str) -> BackgroundCompile | None:
-    """The fallback policy of the edges: None when a plan on ``backend`` in ``mode`` runs as
-    asked (the reference backend; or the mode's kernels are compiled; or they cannot compile
-    in the background); else the background compile of the kernels (started if none runs),
+def while_compiling(backend: str, mode: str | None) -> BackgroundCompile | None:
+    """The fallback policy of the edges: None when a plan on ``backend`` in ``mode`` (None:
+    every mode) runs as asked (the reference backend; or the mode's kernels are compiled; or
+    they cannot compile in the background); else the background compile of the kernels (started if none runs),
     and the caller plans with ``settings.backend = "reference"`` meanwhile."""
     if backend != "compiled" or kernels_ready(mode):
         return None
