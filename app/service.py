@@ -69,13 +69,15 @@ class KernelCompile:
     """The service's view of the background compile of the kernels (issue 24;
     :mod:`planner.orchestrator.background`): :meth:`running` is the compile while it runs
     (its done-marker is looked for at most every ``poll_s`` seconds: one ``stat``; a compile
-    that died unfinished is started again), None once the kernels are compiled, when
-    ``on_done`` is called once (from a watch thread too, so it happens without traffic)."""
+    that ended unfinished leaves the service on the reference, ``ended``), None once the
+    kernels are compiled, when ``on_done`` is called once (from a watch thread too, so it
+    happens without traffic)."""
 
     def __init__(self, running: Any, on_done: Any = None, poll_s: float = 0.5):
         self._running = running
         self._on_done = on_done
         self._poll_s = poll_s
+        self.ended = False  #: the compile ended without finishing
         self._checked = time.monotonic()
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -89,13 +91,15 @@ class KernelCompile:
                 return self._running
             self._checked = time.monotonic()
             from planner._jit import kernel_cache_dir
-            from planner.orchestrator.background import MARKER, compile_in_background, running_compile
+            from planner.orchestrator.background import MARKER, running_compile
 
             if (kernel_cache_dir() / MARKER).exists():
                 self._running, done = None, True
-            else:
-                self._running = running_compile() or compile_in_background()
-                done = self._running is None
+            elif running_compile() is None:  # ended without finishing (killed, or an error: its log says)
+                if not self.ended:
+                    print(f"rangeplan: the background compile ended without finishing (log {self._running.log}); "
+                          "plans keep running on the numpy reference", file=sys.stderr, flush=True)
+                self.ended = True
         if done:
             print("rangeplan: kernels compiled: new workers plan on them", file=sys.stderr, flush=True)
             if self._on_done is not None:
@@ -104,7 +108,7 @@ class KernelCompile:
 
     def _watch(self) -> None:
         while not self._stop.wait(self._poll_s):
-            if self.running() is None:
+            if self.running() is None or self.ended:
                 return
 
     def close(self) -> None:
@@ -179,10 +183,12 @@ class JobService:
         refused = check_estimate(job, self.timeout_s)
         if refused is not None:
             if running is not None and refused.error.code == "too_much_work":
+                when = ("are not compiled (the background compile ended without finishing)"
+                        if self.kernels is not None and self.kernels.ended
+                        else f"are compiling in the background, ready in {running.ready_in()}: retry then")
                 error = refused.error.model_copy(update={"message": (
                     f"{refused.error.message}; the compiled kernels (~100x faster than the numpy reference this "
-                    f"server plans on until then) are compiling in the background, ready in {running.ready_in()}: "
-                    "retry then")})
+                    f"server plans on until then) {when}")})
                 return dataclasses.replace(refused, error=error)
             return refused
         limit = self.export_timeout_s if isinstance(job, ExportJob) else self.timeout_s
@@ -208,9 +214,14 @@ class JobService:
         state = {"ready": True, "workers_ready": 1, "workers": 1, "failures": []} if self.pool is None \
             else self.pool.readiness()
         running = self.kernels.running() if self.kernels is not None else None
-        state["kernels"] = "compiled" if running is None else (
-            f"compiling in the background, {running.ready_in()} left (pid {running.pid}); plans run on the numpy "
-            "reference meanwhile")
+        if running is None:
+            state["kernels"] = "compiled"
+        elif self.kernels is not None and self.kernels.ended:
+            state["kernels"] = (f"not compiled: the background compile ended without finishing (log {running.log}); "
+                                "plans run on the numpy reference")
+        else:
+            state["kernels"] = (f"compiling in the background, {running.ready_in()} left (pid {running.pid}); plans "
+                                "run on the numpy reference meanwhile")
         return state
 
     def close(self, pool: bool = True) -> None:

@@ -95,12 +95,13 @@ def load_planner() -> tuple[str, str | None]:
     import app.formats
     import app.storage  # noqa: F401
     import planner
-    from planner.orchestrator.background import kernels_ready
+    from planner.orchestrator.background import kernels_ready, running_compile
     try:
-        if kernels_ready():
-            planner.warm_up()  # ~0.3 s from numba's on-disk cache
-        else:  # they compile in the background (app.service.JobService): plan on the reference meanwhile
+        if not kernels_ready() and running_compile() is not None:
+            # they compile in the background (app.service.JobService): jobs plan on the reference meanwhile
             planner.warm_up(backend="reference")
+        else:
+            planner.warm_up()  # ~0.3 s from numba's on-disk cache; compiles after an install
     except Exception as exc:  # the worker cannot plan: say why (the pool reports it, /ready stays 503)
         return ("failed", f"{type(exc).__name__}: {exc}")
     return ("ready", None)
