@@ -3,6 +3,7 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
+RUNTIME := $(VENV)/.runtime-stamp
 
 # Small dense matrices: single-threaded BLAS is much faster on these machines.
 export OPENBLAS_NUM_THREADS := 1
@@ -12,24 +13,28 @@ export MKL_NUM_THREADS := 1
 .PHONY: run test lint install kernels browser linuxcnc bench clean lock container-test
 
 # the runtime dependencies from the lock first (the versions the container image runs), then
-# rangeplan and its test tools around them
-$(STAMP): pyproject.toml container/requirements.lock
+# rangeplan (all `make run` needs), then its test tools around them
+$(RUNTIME): pyproject.toml container/requirements.lock
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet --require-hashes -r container/requirements.lock
+	$(PY) -m pip install --quiet --no-deps -e .
+	touch $(RUNTIME)
+
+$(STAMP): $(RUNTIME)
 	$(PY) -m pip install --quiet -e '.[test]'
 	touch $(STAMP)
 
 # compile the planner's kernels in the foreground (minutes once after installing, with progress;
 # ~2 s when they are cached)
-kernels: $(STAMP)
+kernels: $(RUNTIME)
 	$(PY) -m planner
 
 install: $(STAMP) kernels
 
 # the service starts at once: while the kernels are not compiled it compiles them in the
 # background and plans on the numpy reference meanwhile (README "First run")
-run: $(STAMP)
+run: $(RUNTIME)
 	$(VENV)/bin/rangeplan serve
 
 # Browser tests drive Debian's Chromium (never a browser download of Playwright's own).
