@@ -17,8 +17,8 @@ export MKL_NUM_THREADS := 1
 $(RUNTIME): pyproject.toml container/requirements.lock
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet --require-hashes -r container/requirements.lock
-	$(PY) -m pip install --quiet --no-deps -e .
+	$(PY) -m pip install --quiet --no-compile --require-hashes -r container/requirements.lock
+	$(PY) -m pip install --quiet --no-compile --no-deps -e .
 	touch $(RUNTIME)
 
 $(STAMP): $(RUNTIME)
