@@ -180,7 +180,8 @@ async def _lean_client(url: str, i: int, n: int, out: list, tag: str) -> None:
 
 # -- the run ---------------------------------------------------------------------------------
 
-def run(src: Path, clients: int, per_client: int, workers: int, client: str = "lean") -> dict[str, list]:
+def run(src: Path, clients: int, per_client: int, workers: int, client: str = "lean",
+        load_nice: int = 0) -> dict[str, list]:
     with tempfile.TemporaryDirectory(prefix="rangeplan-load-") as tmp:
         server, url = start_server(src, Path(tmp), workers)
         try:
@@ -189,7 +190,8 @@ def run(src: Path, clients: int, per_client: int, workers: int, client: str = "l
             before = resource.getrusage(resource.RUSAGE_CHILDREN)
             share = [clients // LOAD_PROCESSES + (i < clients % LOAD_PROCESSES) for i in range(LOAD_PROCESSES)]
             loads = [subprocess.Popen([sys.executable, __file__, "--child", url, str(n), str(per_client), str(i),
-                                       client], cwd=ROOT, stdout=subprocess.PIPE, text=True)
+                                       client], cwd=ROOT, stdout=subprocess.PIPE, text=True,
+                                      preexec_fn=(lambda: os.nice(load_nice)) if load_nice else None)
                      for i, n in enumerate(share) if n]
             ready = []
             cpu0 = cpu_seconds(server.pid)
@@ -281,19 +283,22 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=1, help="rounds, base and this alternating in each")
     ap.add_argument("--client", choices=("lean", "httpx"), default="lean",
                     help="the load's HTTP client: keep-alive HTTP/1.1 on asyncio streams (default), or httpx")
+    ap.add_argument("--load-nice", type=int, default=0,
+                    help="run the load processes at this CPU priority offset (> 0: they yield to the server "
+                         "and its workers, as clients on other machines would; the /ready probe stays at 0)")
     a = ap.parse_args()
     results: dict[str, dict[str, list]] = {}
     loads = [os.getloadavg()[0]]
     for r in range(a.rounds):
         trees = ([("base", a.base_src.resolve())] if a.base_src else []) + [("this", ROOT)]
         for name, src in trees:
-            res = run(src, a.clients, a.per_client, a.workers, a.client)
+            res = run(src, a.clients, a.per_client, a.workers, a.client, a.load_nice)
             tree = f"{name} r{r + 1}" if a.rounds > 1 else name
             results[tree] = res
             loads.append(os.getloadavg()[0])
             print(f"# {tree}: {python_of(src)} on {src}; load average {loads[-1]:.1f}", flush=True)
     print(f"{a.clients} clients x {a.per_client} requests (plan, save, list in turn; {a.client} client), "
-          f"{a.workers} planning workers; "
+          f"{a.workers} planning workers; load processes at nice {a.load_nice}; "
           f"/ready probed every 50 ms; load average {min(loads):.1f}-{max(loads):.1f} on {os.cpu_count()} cores")
     print(table(results))
     for tree, res in results.items():
