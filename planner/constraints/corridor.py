@@ -129,6 +129,7 @@ class CorridorConstraint(RowConstraint):
             boxes = [(s.lower[:2], s.upper[:2]) for s in segments]
             # the no-overshoot half-plane (EndApproachConstraint's): the stop box is cut to it too
             approach = None
+            cuts: dict[tuple[int, bytes], tuple | None] = {}
             if n >= 2 and segments[-1].is_xy_point:
                 d = approach_direction(segments)
                 if d is not None:
@@ -149,7 +150,10 @@ class CorridorConstraint(RowConstraint):
                                 lo[j, :2] = np.maximum(p - END_TOL_M, blo)
                                 hi[j, :2] = np.minimum(p + END_TOL_M, bhi)
                                 self.stop[j] = True
-                                cut = _stop_in_cell(segments[h], p, blo, bhi, approach)
+                                key = (h, p.tobytes())  # the same for every sample at the end point
+                                if key not in cuts:
+                                    cuts[key] = _stop_in_cell(segments[h], p, blo, bhi, approach)
+                                cut = cuts[key]
                                 if cut is not None:  # the box cut to the exact cell
                                     A, b, lo[j, :2], hi[j, :2] = cut
                                     self.hp[j] = (A, b)
