@@ -473,7 +473,8 @@ def layout_case(draw: Any) -> dict:
 @hst.composite
 def segments_case(draw: Any) -> dict:
     """A corridor of random boxes, each overlapping the one before (narrow or wide, psi ranges
-    or a fixed angle), between a start point in the first box and an end point in the last."""
+    or a fixed angle), between a start point in the first box and an end point in the last (at
+    a corner, on an edge or inside; one in four a point in x/y with the last box's psi range)."""
     robot = draw(hst.sampled_from(["moving-slide", "tri-slide"]))
     R = _REACH[robot]
     n = draw(hst.integers(1, 8))
@@ -500,7 +501,22 @@ def segments_case(draw: Any) -> dict:
         return (lo + (hi - lo) * np.array([_frac(draw), _frac(draw), _frac(draw)])).tolist()
 
     s, e = inside(boxes[0]), inside(boxes[-1])
-    segs = [{"lower": s, "upper": s}] + [{"lower": lo, "upper": hi} for lo, hi in boxes] + [{"lower": e, "upper": e}]
+    e_hi = e
+    # the end point at a corner or on an edge of the last box as often as inside it (issue 20: an
+    # end point at a box corner with short timing left the corridor), and one in four a point in
+    # x/y only, with the last box's psi range
+    where = draw(hst.sampled_from(["inside", "corner", "edge"]))
+    blo, bhi = boxes[-1]
+    if where != "inside":
+        f = [float(draw(hst.booleans())), float(draw(hst.booleans()))]
+        if where == "edge":
+            f[draw(hst.integers(0, 1))] = _frac(draw)
+        e = [blo[0] + (bhi[0] - blo[0]) * f[0], blo[1] + (bhi[1] - blo[1]) * f[1], e[2]]
+        e_hi = e
+    if draw(hst.integers(0, 3)) == 0:
+        e, e_hi = [e[0], e[1], blo[2]], [e[0], e[1], bhi[2]]
+    segs = [{"lower": s, "upper": s}] + [{"lower": lo, "upper": hi} for lo, hi in boxes] + \
+        [{"lower": e, "upper": e_hi}]
     return {"robot": robot, "segments": segs}
 
 
@@ -513,7 +529,9 @@ def cases(draw: Any) -> dict:
     if timing == "speed":
         settings["speed_m_s"] = draw(hst.sampled_from([0.02, 0.05, 0.1]))
     elif timing == "samples":
-        settings["samples_per_segment"] = draw(hst.sampled_from([5, 10, 20, 40]))
+        # down to 1-3 samples: short timing, where the end point's stop box, the arrival and
+        # the no-overshoot rows meet within a sample or two
+        settings["samples_per_segment"] = draw(hst.sampled_from([1, 2, 3, 5, 10, 20, 40]))
     case["settings"] = settings
     return case
 
@@ -541,6 +559,48 @@ def draw_case(seed: int, i: int) -> dict:
 def draw_cases(n: int, seed: int, start: int = 0) -> list[dict]:
     """Cases ``start .. start + n - 1`` of the seeded list (:func:`draw_case`)."""
     return [draw_case(seed, i) for i in range(start, start + n)]
+
+
+def tiny_corridor(rng: np.random.Generator) -> dict:
+    """A small segment corridor (issue 20, defect of the end point at a box corner): 2-4
+    boxes of 0.5-4 mm (each starting at a corner, the middle or a random point of the one
+    before), with or without a start point, the end point at a corner, on an edge or inside
+    the last box, a point or (one in three) a point in x/y with the box's psi range; psi
+    ranges of 0 to 0.1 rad; 1-10 samples per segment; both robots. ``rng``: a numpy generator."""
+    robot = ["moving-slide", "tri-slide"][int(rng.integers(2))]
+    n = int(rng.integers(2, 5))
+    scale = [0.001, 0.003, 0.01][int(rng.integers(3))]
+    psi_w = [0.0, 0.002, 0.01, 0.1][int(rng.integers(4))]
+    p = rng.uniform(-0.02, 0.02, 2)
+    pc = 0.0
+    boxes = []
+    for _ in range(n):
+        half = scale * (0.3 + rng.random(2)) / 2
+        lo, hi = p - half, p + half
+        boxes.append((np.array([*lo, pc - psi_w / 2]), np.array([*hi, pc + psi_w / 2])))
+        p = lo + (hi - lo) * rng.choice([0.0, 0.5, 1.0, float(rng.random())], 2)
+        pc = float(pc + psi_w * rng.uniform(-0.45, 0.45))
+    lo, hi = boxes[-1]
+    where = int(rng.integers(3))
+    if where == 0:  # a corner
+        f = rng.choice([0.0, 1.0], 2)
+    elif where == 1:  # an edge
+        f = np.array([float(rng.choice([0.0, 1.0])), float(rng.random())])
+        rng.shuffle(f)
+    else:
+        f = rng.random(2)
+    exy = lo[:2] + (hi[:2] - lo[:2]) * f
+    if rng.integers(3) == 0:  # a point in x/y with the box's psi range
+        end = ([*exy, lo[2]], [*exy, hi[2]])
+    else:
+        q = float(lo[2] + (hi[2] - lo[2]) * [0.0, 1.0, float(rng.random())][int(rng.integers(3))])
+        end = ([*exy, q], [*exy, q])
+    segs = [{"lower": [float(v) for v in a], "upper": [float(v) for v in b]} for a, b in boxes]
+    if rng.random() < 0.5:
+        s = [*(0.5 * (boxes[0][0][:2] + boxes[0][1][:2])), float(boxes[0][0][2] + psi_w * rng.random())]
+        segs.insert(0, {"lower": [float(v) for v in s], "upper": [float(v) for v in s]})
+    segs.append({"lower": [float(v) for v in end[0]], "upper": [float(v) for v in end[1]]})
+    return {"robot": robot, "segments": segs, "settings": {"samples_per_segment": int(rng.integers(1, 11))}}
 
 
 # ---------------------------------------------------------------- certifying one case

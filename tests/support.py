@@ -53,3 +53,37 @@ def api_client(app: Any, **kwargs: Any):
     from fastapi.testclient import TestClient
 
     return TestClient(app, base_url=LOCAL_URL, **kwargs)
+
+
+#: Python run at the start of every process with it on PYTHONPATH (a ``sitecustomize``): the
+#: slack work of a constrained plan with ``require_settled: false`` made ~free in the work
+#: estimate, and so (its bound being what the estimate counts) unbounded: a work estimate far
+#: below the time a request takes, as the tests of the compute limit need (a safety net for an
+#: estimate that is wrong; since issue 20 the estimate bounds the slack work, which was the
+#: runaway these tests used)
+MISCALIBRATED_SLACK = """
+from planner.schema import limits as _limits
+_limits.WORK_COSTS.update(slack_step_a=1e-9, slack_step_d=0.0, slack_iteration_a=1e-12, slack_iteration_c=0.0)
+import planner.orchestrator.work as _work
+_work.SLACK_BUDGET_S = 1e-3
+"""
+
+
+def miscalibrate_slack(monkeypatch: Any, tmp_path: Path) -> dict[str, str]:
+    """:data:`MISCALIBRATED_SLACK` in this process (monkeypatched) and the environment that
+    gives it to the processes started from here (returned; also set in ``os.environ``)."""
+    import os
+
+    from planner.orchestrator import work
+    from planner.schema import limits
+
+    for key, value in (("slack_step_a", 1e-9), ("slack_step_d", 0.0), ("slack_iteration_a", 1e-12),
+                       ("slack_iteration_c", 0.0)):
+        monkeypatch.setitem(limits.WORK_COSTS, key, value)
+    monkeypatch.setattr(work, "SLACK_BUDGET_S", 1e-3)
+    site = tmp_path / "miscalibrated-site"
+    site.mkdir(exist_ok=True)
+    (site / "sitecustomize.py").write_text(MISCALIBRATED_SLACK)
+    path = os.pathsep.join(p for p in (str(site), os.environ.get("PYTHONPATH", "")) if p)
+    monkeypatch.setenv("PYTHONPATH", path)
+    return {"PYTHONPATH": path}

@@ -22,7 +22,7 @@ from app.api import create_app
 from app.storage import Store
 from planner.errors import PlannerError
 from planner.schema import field_path
-from tests.support import api_client, robot_description
+from tests.support import api_client, miscalibrate_slack, robot_description
 
 ROOT = Path(__file__).resolve().parent.parent
 TABLE1_PATH = ROOT / "static" / "examples" / "table1.json"
@@ -294,16 +294,21 @@ def test_pool_time_limit_replaces_worker():
 
 def slow_corridor(n: int = 40) -> dict:
     """A random walk of point segments in the constrained mode: the corridor cannot be kept
-    within the limits, every step solves the slack problem (~10 ms instead of ~0.3 ms), so
-    the work estimate (~0.1 s) is far below the time it takes (seconds)."""
+    within the limits, every step solves the slack problem (~10 ms instead of ~0.3 ms). Since
+    issue 20 the estimate counts (and the plan keeps to) the slack work it allows: with the
+    slack costs miscalibrated (:func:`tests.support.miscalibrate_slack`) the work estimate
+    (~0.1 s) is far below the time it takes (seconds)."""
     pts = np.cumsum(np.random.default_rng(0).uniform(-0.001, 0.001, (n, 2)), axis=0)
     return {"segments": [{"lower": [float(x), float(y), 0.0], "upper": [float(x), float(y), 0.0]} for x, y in pts],
             "settings": {"mode": "constrained", "require_settled": False}}
 
 
-def test_compute_limit_stops_runaway_plan(store):
-    """A plan longer than the limit answers 422 `timeout` promptly; the killed worker is
-    replaced and the next plan succeeds; /health answered meanwhile."""
+def test_compute_limit_stops_runaway_plan(store, monkeypatch, tmp_path):
+    """A plan longer than the limit (its estimate miscalibrated) answers 422 `timeout`
+    promptly; the killed worker is replaced and the next plan succeeds; /health answered
+    meanwhile."""
+    miscalibrate_slack(monkeypatch, tmp_path)
+    monkeypatch.setenv("RANGEPLAN_WORKER_START", "exec")  # workers started now, with that environment
     app = create_app(store, workers=1, timeout_s=1.0)
     with api_client(app) as c:
         done = {}

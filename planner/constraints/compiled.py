@@ -21,7 +21,7 @@ from .composed import Constraints
 from .corridor import ArrivalConstraint, CorridorConstraint, EndApproachConstraint
 from .drives import DriveForceRateConstraint, LegSpeedConstraint, LegStrokeConstraint
 from .qp import DenseQP, QPSolution
-from .rows import ROW_UNIT_M, Rows
+from .rows import RELAX_M, ROW_UNIT_M, Rows
 from .stagewise import DEPENDENT_TOL, SOLVE_TOL, WARM_TOL
 from .step import FullQP, StepQP
 from .step_kernels import constrained_step
@@ -30,10 +30,6 @@ __all__ = ["KERNEL_SECTIONS", "MAX_ITERATIONS", "RELAX_M", "AssemblyInputs", "Co
 
 #: most active-set changes of one stage-wise solve before the step goes to DAQP
 MAX_ITERATIONS = 400
-#: a QP found infeasible is solved again with its rows widened by this [m, m/s, rad, N]:
-#: inside the corridor margin (MARGIN_M, MARGIN_RAD: 0.2 um is left, 200 times the one-step
-#: mismatch), so the actual corridor is still kept; the leg-speed margin is 5e-6 m/s
-RELAX_M = 8e-7
 
 #: the row constraints :func:`kernels.assemble` fuses, in its (the row) order
 KERNEL_SECTIONS = (CorridorConstraint, EndApproachConstraint, ArrivalConstraint, LegSpeedConstraint,
@@ -163,6 +159,12 @@ class CompiledAssembly:
         qp.x1 = x1
         qp.d = ck.offset(x1, qp.x, u, qp.Ad, qp.Bd)
         qp.rows.relinearise_first_legs(x1, *self._legs)
+        if qp.full is not None:
+            qp.full.set_free(qp.x, qp.d, qp.W, qp.tgt, qp.rows)
+
+    def relax(self, qp: StepQP) -> None:
+        """The hard rows widened by :data:`RELAX_M` (:meth:`Rows.widen`), and the QP at them."""
+        qp.rows.widen(RELAX_M / ROW_UNIT_M)
         if qp.full is not None:
             qp.full.set_free(qp.x, qp.d, qp.W, qp.tgt, qp.rows)
 

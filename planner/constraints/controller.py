@@ -41,7 +41,12 @@ softened by slack variables (:meth:`~planner.constraints.qp.DenseQP.solve_slack`
 hard). With ``settings.require_settled`` (default) the plan stops there with
 ``PlannerError("infeasible")`` (time and slack in the message); otherwise every such step is
 counted (``infeasible_steps``), its slack reported (``constraint_slack_max_m``,
-``speed_slack_max_m_s``) and the result marks the plan not contained.
+``speed_slack_max_m_s``) and the result marks the plan not contained, within ``slack`` (the
+steps and slack-problem iterations the work estimate counts,
+:func:`planner.orchestrator.work.slack_allowance`: a slack step costs 100-3000x a compiled
+step); the plan stops with ``infeasible`` where either runs out.
+An infeasible step is first solved again with its rows widened by
+:data:`~planner.constraints.rows.RELAX_M` (both backends, as the compiled step does).
 """
 
 from __future__ import annotations
@@ -63,9 +68,9 @@ from ..schema import Segment, Settings
 from .compiled import CompiledAssembly
 from .composed import Constraints
 from .corridor import MARGIN_M, MARGIN_RAD
-from .qp import DenseQP, QPSolution
+from .qp import SLACK_ITER_LIMIT, DenseQP, QPSolution
 from .reference import ReferenceAssembly
-from .rows import ROW_UNIT_M
+from .rows import ROW_UNIT_M, RowKind
 from .stagewise import SOLVED, shifted
 
 __all__ = ["CONTAIN_TOL_M", "CONTAIN_TOL_RAD", "REFINE_MAX", "REFINE_TOL_M", "REFINE_TOL_RAD", "Assembly",
@@ -95,6 +100,8 @@ class Assembly(Protocol):
 
     def solve(self, qp: Any, start: np.ndarray | None) -> QPSolution: ...
 
+    def relax(self, qp: Any) -> None: ...
+
     def one_step_error(self, qp: Any, u: np.ndarray) -> tuple[np.ndarray, float, float]: ...
 
     def dense(self, qp: Any) -> DenseQP: ...
@@ -110,11 +117,13 @@ class ControllerStats:
 
     iterations: list[int] = field(default_factory=list)  #: solver iterations per step
     fallbacks: int = 0  #: steps the stage-wise solver handed to DAQP
-    relaxed: int = 0  #: steps solved with the rows widened by ``RELAX_M`` (compiled backend)
+    relaxed: int = 0  #: steps solved with the rows widened by ``RELAX_M``
     solve_s: float = 0.0  #: time in the controller [s]
     failures: int = 0  #: steps whose slack problem failed too
     refinements: int = 0  #: re-solves at a refined offset
     infeasible: int = 0  #: steps that needed the slack problem
+    first_infeasible_s: float = 0.0  #: the time of the first of them [s]
+    slack_iterations: int = 0  #: DAQP iterations of their slack problems
     slack_max_m: float = 0.0  #: largest corridor or stroke slack [m]
     speed_slack_max_m_s: float = 0.0  #: largest leg-speed slack [m/s]
     violation_max_m: float = 0.0  #: largest violation of a hard row at the solutions [m, m/s or rad]
@@ -183,8 +192,12 @@ class ConstrainedController:
     compiled_loop: ClassVar[bool] = True
 
     def __init__(self, model: RobotModel, seq: RangeSequence, st: Settings,
-                 segments: Sequence[Segment] | None = None, abandon: bool = False):
+                 segments: Sequence[Segment] | None = None, abandon: bool = False,
+                 slack: tuple[int, int] = (0, 0)):
         self.model, self.seq, self.st = model, seq, st
+        #: with ``require_settled`` false: the infeasible steps and the slack-problem iterations
+        #: the plan may take (the work estimate's, :func:`planner.orchestrator.work.slack_allowance`)
+        self.slack_steps, self.slack_iterations = slack
         #: raise ``infeasible`` at the first step the compiled solve finds infeasible, without the
         #: DAQP fallback and the slack problem (a ``fastest`` candidate needs only the verdict)
         self.abandon = abandon
@@ -254,8 +267,14 @@ class ConstrainedController:
                 raise self.infeasible_error(f"at t = {k * self.st.Ts:.3f} s the step's QP is infeasible")
             stats.fallbacks += 1
         qp = asm.build(k, x, Ad, Bd, self.y_nom, self.u_prev, self.guess())
-        sol = asm.solve(qp, self.warm_start())
+        start = self.warm_start()
+        sol = asm.solve(qp, start)
         iterations = sol.iterations
+        if not sol.ok:  # as the compiled step: once more with the rows widened by RELAX_M
+            asm.relax(qp)
+            sol = asm.solve(qp, start)
+            iterations += sol.iterations
+            stats.relaxed += 1 if sol.ok else 0
         # while the plant under the solution's first move lands farther from the prediction
         # than the tolerance, recompute the offset at that move and solve again
         for _ in range(REFINE_MAX):
@@ -274,7 +293,9 @@ class ConstrainedController:
             # how well the solver met the rows it was given (m, m/s, rad)
             stats.violation_max_m = max(stats.violation_max_m, float(asm.violation(qp, sol) * ROW_UNIT_M))
         else:
-            z, slack_iterations = self._slack_step(k, asm.dense(qp))
+            rows = qp.rows  # the arrival rows: the speed rows before the legs' (kernels.assemble's order)
+            arrival = (rows.kinds == RowKind.SPEED) & (np.arange(rows.n_rows) < rows.speed0)
+            z, slack_iterations = self._slack_step(k, asm.dense(qp), arrival)
             hard = None
             iterations += slack_iterations
         stats.iterations.append(iterations)
@@ -346,25 +367,44 @@ class ConstrainedController:
             z[:m] = np.clip(z[:m], z0 - rate / self.constraints.forces.umax, z0 + rate / self.constraints.forces.umax)
         return np.clip(z, -zmax, zmax)
 
-    def _slack_step(self, k: int, dense: DenseQP) -> tuple[np.ndarray, int]:
-        """The step's moves from the slack problem and its iterations; counts the step and its
-        slack, raises ``infeasible`` with ``require_settled``."""
+    def _slack_step(self, k: int, dense: DenseQP, arrival: np.ndarray) -> tuple[np.ndarray, int]:
+        """The step's moves from the slack problem (``arrival``: the mask of the arrival rows,
+        softened apart) and its iterations; counts the step and its slack, raises
+        ``infeasible`` with ``require_settled`` or past :attr:`slack_steps`."""
         nz = len(dense.f)
-        sol = dense.solve_slack()
+        stats = self.stats
+        left = self.slack_iterations - stats.slack_iterations
+        if not self.st.require_settled and (stats.infeasible >= self.slack_steps or left <= 0):
+            # a slack step costs 100-3000x a compiled step: their work is bounded (the work
+            # estimate counts it), the plan stops here with what they found so far
+            spent = (f"{self.slack_steps} steps" if stats.infeasible >= self.slack_steps
+                     else f"{self.slack_iterations} iterations of its slack problems ({stats.infeasible} steps)")
+            raise self.infeasible_error(
+                f"with settings.require_settled false a plan may take {self.slack_steps} steps that cannot keep the "
+                f"corridor and {self.slack_iterations} slack-problem iterations (the work estimate's bound: each such "
+                f"step costs 100x a normal one or more); this plan took {spent} from t = "
+                f"{stats.first_infeasible_s:.3f} s and stops at t = {k * self.st.Ts:.3f} s (segment "
+                f"{int(self.seq.segment[min(k, self.seq.K - 1)])}; "
+                f"{_slack_words(stats.failures < stats.infeasible, stats.slack_max_m, stats.speed_slack_max_m_s)})")
+        if stats.infeasible == 0:
+            stats.first_infeasible_s = k * self.st.Ts
+        sol = dense.solve_slack(arrival, None if self.st.require_settled else int(min(left, SLACK_ITER_LIMIT)))
+        stats.slack_iterations += sol.iterations
         zs = sol.z
         if not sol.ok:  # even the slack problem failed: go on with the previous plan's moves
             self.stats.failures += 1
-            zs = np.zeros(nz + 3)
+            zs = np.zeros(nz + 4)
             zs[:nz] = self._previous_plan(dense.zmax)
-        sl = zs[nz:] * ROW_UNIT_M  # corridor [m], stroke [m], leg speed [m/s]
+        sl = zs[nz:] * ROW_UNIT_M  # corridor [m], stroke [m], leg speed [m/s], arrival speed [m/s]
         slack = float(max(sl[0], sl[1]))
+        speed = float(max(sl[2], sl[3]))
         self.stats.slack_max_m = max(self.stats.slack_max_m, slack)
-        self.stats.speed_slack_max_m_s = max(self.stats.speed_slack_max_m_s, float(sl[2]))
+        self.stats.speed_slack_max_m_s = max(self.stats.speed_slack_max_m_s, speed)
         self.stats.infeasible += 1
         if self.st.require_settled:  # strict: stop at the first step that cannot keep the corridor
             raise self.infeasible_error(
                 f"at t = {k * self.st.Ts:.3f} s (segment {int(self.seq.segment[min(k, self.seq.K - 1)])}) the robot "
-                f"cannot keep the corridor within its drive limits ({_slack_words(sol.ok, slack, float(sl[2]))})",
+                f"cannot keep the corridor within its drive limits ({_slack_words(sol.ok, slack, speed)})",
                 "set require_settled to false to get the plan with its violations reported")
         return zs[:nz], sol.iterations
 

@@ -127,6 +127,13 @@ class CorridorConstraint(RowConstraint):
         if segments is not None:
             n = len(segments)
             boxes = [(s.lower[:2], s.upper[:2]) for s in segments]
+            # the no-overshoot half-plane (EndApproachConstraint's): the stop box is cut to it too
+            approach = None
+            cuts: dict[tuple[int, bytes], tuple | None] = {}
+            if n >= 2 and segments[-1].is_xy_point:
+                d = approach_direction(segments)
+                if d is not None:
+                    approach = (d, float(d @ segments[-1].centre[:2]))
             for j in range(K):
                 si = int(seq.segment[j])
                 seg = segments[si]
@@ -134,13 +141,19 @@ class CorridorConstraint(RowConstraint):
                 if np.all(w[j, :2] <= 2 * MARGIN_M) and si >= n - 2:
                     p = 0.5 * (seq.lower[j, :2] + seq.upper[j, :2])
                     for h in (si, si - 1, si + 1, n - 2):
-                        if 0 <= h < n and not segments[h].is_point:
+                        # a cell with room inside its margins in x and y (not the end point
+                        # itself, also where that has a psi range: cut to it, the box was
+                        # inverted, lo = p + margin > hi = p - margin, rows no pose meets)
+                        if 0 <= h < n and not segments[h].is_xy_point:
                             blo, bhi = boxes[h][0] + MARGIN_M, boxes[h][1] - MARGIN_M
-                            if np.all(blo - END_TOL_M <= p) and np.all(p <= bhi + END_TOL_M):
+                            if np.all(blo < bhi) and np.all(blo - END_TOL_M <= p) and np.all(p <= bhi + END_TOL_M):
                                 lo[j, :2] = np.maximum(p - END_TOL_M, blo)
                                 hi[j, :2] = np.minimum(p + END_TOL_M, bhi)
                                 self.stop[j] = True
-                                cut = _stop_in_cell(segments[h], lo[j, :2], hi[j, :2])
+                                key = (h, p.tobytes())  # the same for every sample at the end point
+                                if key not in cuts:
+                                    cuts[key] = _stop_in_cell(segments[h], p, blo, bhi, approach)
+                                cut = cuts[key]
                                 if cut is not None:  # the box cut to the exact cell
                                     A, b, lo[j, :2], hi[j, :2] = cut
                                     self.hp[j] = (A, b)
@@ -218,28 +231,57 @@ class CorridorConstraint(RowConstraint):
         return self.lo, self.hi, self.lo_deep, self.hi_deep, self.has_hp, self.hp_ptr, self.hp_A, self.hp_b, RECOURSE_M
 
 
-def _stop_in_cell(cell: Segment, lo: np.ndarray, hi: np.ndarray
+def _stop_in_cell(cell: Segment, p: np.ndarray, blo: np.ndarray, bhi: np.ndarray,
+                  approach: tuple[np.ndarray, float] | None
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
-    """The stop box ``[lo, hi]`` (x, y) cut to ``cell``'s exact polygon shrunk by the margin,
-    where the box reaches outside it (an end point near a triangle's slanted edge or acute
-    corner: the box alone let the robot settle up to a few tenths of a micrometre outside the
-    corridor): ``(A, b, lo, hi)``, the half-planes of the polygon and of the cut box's bounding
-    box, and that box. None where the box is inside the polygon, or the polygon leaves no room."""
-    if cell.polygon is None:
-        return None
-    A, b = halfplanes(np.asarray(cell.polygon, float))
-    b = b - MARGIN_M
-    box = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
-    if np.all(box @ A.T <= b[None, :]):
-        return None
-    cut = clip_halfplanes(box, A, b)
-    if len(cut) < 3:
-        return None
-    clo, chi = cut.min(axis=0), cut.max(axis=0)
-    if np.any(chi - clo <= 2 * RECOURSE_M):  # no room for the recourse of the later samples
-        return None
+    """The stop box about the end point ``p`` (x, y), ``p +- END_TOL_M`` within the cell's box
+    shrunk by the margin ``[blo, bhi]``, cut to the cell's exact polygon shrunk by the margin
+    (an end point near a triangle's slanted edge or acute corner: the box alone let the robot
+    settle up to a few tenths of a micrometre outside the corridor) and to the no-overshoot
+    half-plane ``approach = (d, b)``, ``d . x <= b`` (an approach direction taken from a cell
+    before the last one can cut the whole box off: the end point on the last cell's edge, the
+    direction across it; every step at the end was then infeasible by ~0.5 um and solved
+    relaxed, at 15x the work, issue 20): ``(A, b, lo, hi)``, the half-planes and those of the cut
+    box's bounding box, and that box. Where the cut leaves no room for the later samples'
+    recourse, the box about ``p`` is doubled (up to 16 times; the robot then stops within
+    that of the end point, still short of it along ``d``). None where the box is inside every
+    half-plane, or none leaves room."""
     eye = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
-    return np.vstack((A, eye)), np.concatenate((b, chi, -clo)), clo, chi
+
+    def corners(r: float) -> np.ndarray:
+        lo, hi = np.maximum(p - r, blo), np.minimum(p + r, bhi)
+        return np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
+
+    def roomy(P: np.ndarray) -> bool:  # room for the later samples' recourse
+        return len(P) >= 3 and bool(np.all(P.max(axis=0) - P.min(axis=0) > 2 * RECOURSE_M))
+
+    box = corners(END_TOL_M)
+    out = None
+    region = box
+    if cell.polygon is not None:  # the box cut to the exact cell
+        A, b = halfplanes(np.asarray(cell.polygon, float))
+        b = b - MARGIN_M
+        if not np.all(box @ A.T <= b[None, :]):
+            cut = clip_halfplanes(box, A, b)
+            if len(cut) >= 3 and np.all(cut.max(axis=0) - cut.min(axis=0) > 2 * RECOURSE_M):
+                clo, chi = cut.min(axis=0), cut.max(axis=0)
+                out = np.vstack((A, eye)), np.concatenate((b, chi, -clo)), clo, chi
+                region = cut
+    else:
+        A, b = np.zeros((0, 2)), np.zeros(0)
+    if approach is None or roomy(clip_halfplanes(region, approach[0][None, :], np.array([approach[1] - RECOURSE_M]))):
+        return out
+    # the no-overshoot half-plane leaves no room in the box: cut to it too, the box doubled
+    A, b = np.vstack((A, approach[0][None, :])), np.concatenate((b, [approach[1]]))
+    r = END_TOL_M
+    for _ in range(5):
+        box = corners(r)
+        if roomy(clip_halfplanes(box, A, b - RECOURSE_M)):
+            cut = clip_halfplanes(box, A, b)
+            clo, chi = cut.min(axis=0), cut.max(axis=0)
+            return np.vstack((A, eye)), np.concatenate((b, chi, -clo)), clo, chi
+        r *= 2
+    return out
 
 
 class EndApproachConstraint(RowConstraint):
@@ -257,7 +299,7 @@ class EndApproachConstraint(RowConstraint):
         #: first sequence index with the row
         self.start_index = seq.K
         n = 0 if segments is None else len(segments)
-        if segments is not None and n >= 2 and segments[-1].is_point:
+        if segments is not None and n >= 2 and segments[-1].is_xy_point:
             d = approach_direction(segments)
             if d is not None:
                 self.half_plane = (d, float(d @ segments[-1].centre[:2]))
@@ -293,7 +335,7 @@ class ArrivalConstraint(RowConstraint):
         #: the bounds [m/s, m/s, rad/s]
         self.limit = np.array([ARRIVAL_SPEED_M_S, ARRIVAL_SPEED_M_S, ARRIVAL_RATE_RAD_S])
         n = 0 if segments is None else len(segments)
-        if segments is not None and n >= 2 and segments[-1].is_point:
+        if segments is not None and n >= 2 and segments[-1].is_xy_point:
             w = seq.upper[:, :2] - seq.lower[:, :2]
             at_end = (seq.segment >= n - 2) & np.all(w <= 2 * MARGIN_M, axis=1)
             if at_end.any():

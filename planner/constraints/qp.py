@@ -17,7 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["DAQP_SETTINGS", "SLACK_ITER_LIMIT", "SLACK_RHO1", "SLACK_RHO2", "DenseQP", "QPSolution", "solve_qp"]
+__all__ = ["ARRIVAL_SLACK_WEIGHT", "DAQP_SETTINGS", "SLACK_ITER_LIMIT", "SLACK_RHO1", "SLACK_RHO2", "DenseQP",
+           "QPSolution", "solve_qp"]
 
 #: DAQP's tolerances (rows in row units: 1e-9 of a millimetre) and iteration limit
 DAQP_SETTINGS = {"primal_tol": 1e-9, "dual_tol": 1e-12, "iter_limit": 2000}
@@ -27,6 +28,13 @@ SLACK_ITER_LIMIT = 20000
 #: penalty weights of the slack variables (relative to the scaled criterion, which is O(1))
 SLACK_RHO2 = 1e8
 SLACK_RHO1 = 1e6
+#: the arrival rows' slack (a fourth variable) costs this fraction of the others: a robot
+#: displaced from the end point by an infeasible step cannot be back in the stop box and slower
+#: than the arrival speed (0.1 mm/s) at once, and with the arrival rows softened like the leg
+#: speeds (1 mm/s of slack costing as much as 1 mm of corridor) every move back cost ~100x
+#: the corridor slack it saved over a sample: the plan stood still 0.39 mm off the end point
+#: until its tail ran out (issue 20); at this weight it moves back as fast as the drives allow
+ARRIVAL_SLACK_WEIGHT = 1e-3
 #: sense of an equality row for DAQP
 EQUALITY = 5
 
@@ -97,20 +105,26 @@ class DenseQP:
         r = self.A[:nh] @ z
         return float(np.maximum(np.maximum(self.lower[:nh] - r, r - self.upper[:nh]), 0.0).max(initial=0.0))
 
-    def solve_slack(self) -> QPSolution:
-        """Every row (corridor, speed and stroke) softened by three slacks ``s >= 0`` (row
-        units: corridor m and rad, stroke m, speed m/s, by :class:`RowKind`), penalised by
-        ``SLACK_RHO2 |s|^2 / 2 + SLACK_RHO1 sum(s)``; forces and force rates stay hard. The
-        solution is ``(z, s)``."""
+    def solve_slack(self, arrival: np.ndarray | None = None, iter_limit: int | None = None) -> QPSolution:
+        """Every row (corridor, speed and stroke) softened by four slacks ``s >= 0`` (row
+        units: corridor m and rad, stroke m, leg speed m/s by :class:`RowKind`; the rows where
+        ``arrival`` (a mask) is true, the arrival speed, m/s), penalised by
+        ``SLACK_RHO2 |w s|^2 / 2 + SLACK_RHO1 w . s`` with ``w = (1, 1, 1,``
+        :data:`ARRIVAL_SLACK_WEIGHT` ``)``; forces and force rates stay hard. The solution is
+        ``(z, s)``. ``iter_limit``: DAQP's iteration limit (default :data:`SLACK_ITER_LIMIT`)."""
         nz, kinds = len(self.f), self.kinds
-        ns = 3
+        ns = 4
+        w = np.array([1.0, 1.0, 1.0, ARRIVAL_SLACK_WEIGHT])
         Hs = np.zeros((nz + ns, nz + ns))
         Hs[:nz, :nz] = self.H
-        Hs[nz:, nz:] = np.eye(ns) * SLACK_RHO2
-        fs = np.concatenate((self.f, np.full(ns, SLACK_RHO1)))
+        Hs[nz:, nz:] = np.diag(w * w) * SLACK_RHO2
+        fs = np.concatenate((self.f, w * SLACK_RHO1))
         S = np.zeros((len(kinds), ns))
-        soft = kinds < ns  # the rate rows (kind 3) are never softened
-        S[np.nonzero(soft)[0], kinds[soft]] = 1.0
+        soft = kinds < 3  # the rate rows (kind 3) are never softened
+        slot = kinds.copy()
+        if arrival is not None:
+            slot[arrival] = 3
+        S[np.nonzero(soft)[0], slot[soft]] = 1.0
         # two one-sided rows per two-sided row: A z - s <= bu ; bl <= A z + s
         As = np.vstack((np.hstack((self.A, -S)), np.hstack((self.A, S))))
         bu = np.concatenate((self.upper, np.full(len(kinds), np.inf)))
@@ -119,4 +133,5 @@ class DenseQP:
         As, bu, bl = As[keep], np.where(np.isfinite(bu), bu, 1e30)[keep], np.where(np.isfinite(bl), bl, -1e30)[keep]
         ub = np.concatenate((self.zmax, np.full(ns, 1e30), bu))
         lb = np.concatenate((-self.zmax, np.zeros(ns), bl))
-        return solve_qp(Hs, fs, As, ub, lb, np.zeros(len(ub), dtype=np.int32), iter_limit=SLACK_ITER_LIMIT)
+        return solve_qp(Hs, fs, As, ub, lb, np.zeros(len(ub), dtype=np.int32),
+                        iter_limit=SLACK_ITER_LIMIT if iter_limit is None else iter_limit)

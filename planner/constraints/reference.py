@@ -17,7 +17,7 @@ from ..model.plant import rk4_sample
 from ..schema import Settings
 from .composed import Constraints
 from .qp import DenseQP, QPSolution
-from .rows import Rows, StepContext
+from .rows import RELAX_M, ROW_UNIT_M, Rows, StepContext
 
 __all__ = ["ReferenceAssembly", "ReferenceQP"]
 
@@ -96,13 +96,22 @@ class ReferenceAssembly:
         """The one-step offset ``d = Phi(x, u) - Ad x - Bd u`` (``x1 = Phi(x, u)``: the plant's
         next state under the move ``u`` [N]), sample 0's leg rows at the pose ``x1[:3]``, and
         the QP at them."""
-        N = self.N
         qp.x1 = x1
         qp.d = x1 - qp.Ad @ qp.x - qp.Bd @ u
         y1 = x1[:3]
         J0 = kinematics.leg_jacobians(self.model, y1)[0]
         self.constraints.leg_speed.first_sample(qp.rows, J0)
         self.constraints.stroke.first_sample(qp.rows, J0, kinematics.leg_lengths(self.model, y1)[0], y1)
+        self._form(qp)
+
+    def relax(self, qp: ReferenceQP) -> None:
+        """The hard rows widened by ``RELAX_M`` (:meth:`Rows.widen`), and the QP at them."""
+        qp.rows.widen(RELAX_M / ROW_UNIT_M)
+        self._form(qp)
+
+    def _form(self, qp: ReferenceQP) -> None:
+        """The QP at the offset ``qp.d`` and the rows ``qp.rows``."""
+        N = self.N
         free = qp.P[1:] @ qp.x
         free += qp.P[:N] @ qp.d
         qp.free = free.ravel()

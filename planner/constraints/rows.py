@@ -32,10 +32,15 @@ import numpy as np
 
 from . import kernels as ck
 
-__all__ = ["ROW_UNIT_M", "RowBlock", "RowConstraint", "RowKind", "Rows", "StepContext"]
+__all__ = ["RELAX_M", "ROW_UNIT_M", "RowBlock", "RowConstraint", "RowKind", "Rows", "StepContext"]
 
 #: rows are scaled so that 1 unit = this many metres before the solver sees them
 ROW_UNIT_M = 1e-3
+#: a QP found infeasible is solved again with its rows widened by this [m, m/s, rad; of force_max
+#: for the force rates] (both backends):
+#: inside the corridor margin (MARGIN_M, MARGIN_RAD: 0.2 um is left, 200 times the one-step
+#: mismatch), so the actual corridor is still kept; the leg-speed margin is 5e-6 m/s
+RELAX_M = 8e-7
 
 
 class RowKind(IntEnum):
@@ -121,6 +126,17 @@ class Rows:
         r, k = np.nonzero(self.col >= 0)
         Sel[r, self.col[r, k]] = self.val[r, k]
         return Sel
+
+    def widen(self, relax: float) -> None:
+        """Every hard row that is not an equality widened by ``relax`` on both sides (row
+        units; ``relax * ROW_UNIT_M`` of force_max for the force-rate rows, which are in the
+        scaled moves), in place: the relaxation of an infeasible step (the compiled twin is in
+        ``step_kernels.constrained_step``, where the equalities are eliminated)."""
+        nh = self.n_hard
+        r = np.where(self.kinds[:nh] == RowKind.RATE, relax * ROW_UNIT_M, relax)
+        r[self.lower[:nh] >= self.upper[:nh]] = 0.0
+        self.lower[:nh] -= r
+        self.upper[:nh] += r
 
     def relinearise_first_legs(self, x1: np.ndarray, r0: np.ndarray, base: np.ndarray, lmin: np.ndarray,
                                lmax: np.ndarray) -> None:

@@ -37,7 +37,7 @@ from .fastest import search as search_fastest
 from .result import build_result
 from .simulate import Resume, Simulation, simulate
 from .timing import method_of, resolve_timing, timing_info
-from .work import MORE_TIME, check_work, estimate_work
+from .work import MORE_TIME, check_work, estimate_work, slack_allowance
 
 __all__ = ["plan", "plan_timed", "segment", "warm_up"]
 
@@ -206,7 +206,8 @@ def _run(name: str | None, model: RobotModel, st: Settings, segments: Sequence[S
     check_pose(model, seq.start, "segments[0]" if segments is not None else "reference.pose[0]")
     controller: ConstrainedController | None = None
     if st.mode == "constrained":
-        controller = ConstrainedController(model, seq, st, segments, abandon=abandon)
+        controller = ConstrainedController(model, seq, st, segments, abandon=abandon,
+                                           slack=slack_allowance(st, seq.K + st.tail_steps))
     sim = simulate(model, seq, st, controller, resume, keep)
     report = controller.report() if controller is not None else {}
     result = build_result(model, name, st, seq, segments, sim, report, timing_info(st, segments, **(timing or {})))

@@ -20,7 +20,11 @@ the validated request alone (no robot model, no segmentation, no simulation):
   parameters and estimated apart (``advice_seconds``): a layout without a path is segmented
   again with smaller cells, a narrower psi range and less clearance (at most
   :func:`planner.corridor.remedy_cells`); an infeasible constrained plan is planned again with
-  :data:`MORE_TIME` times the samples (each at most that multiple of the plan).
+  :data:`MORE_TIME` times the samples (each at most that multiple of the plan);
+* a constrained plan with ``require_settled: false``: the infeasible steps and slack-problem
+  iterations it may take (:func:`slack_allowance`: :data:`~planner.schema.SLACK_BUDGET_S` of
+  them, or the plan's own loop time if more; :func:`slack_costs`); the controller stops the plan
+  with ``infeasible`` where either runs out, so this bound holds too.
 
 Unit costs are :data:`planner.schema.WORK_COSTS` (seconds on the reference machine,
 ``benchmarks/bench_work.py``). The settling is counted in full (``tail_max_s``), so the
@@ -47,15 +51,17 @@ from ..errors import PlannerError
 from ..schema import (
     MAX_SAMPLES_PER_SEGMENT,
     MAX_TOTAL_STEPS,
+    SLACK_BUDGET_S,
     SQRT3_2,
     WORK_COSTS,
     PlanRequest,
+    Settings,
     cell_count,
     parse_request,
 )
 from .timing import centre_path_length, method_of, moving_segments
 
-__all__ = ["MORE_TIME", "WorkEstimate", "check_work", "estimate_work"]
+__all__ = ["MORE_TIME", "WorkEstimate", "check_work", "estimate_work", "slack_allowance", "slack_costs"]
 
 #: the time factors the advice of an infeasible constrained plan tries, in this order (each
 #: planned until its first infeasible step; the first that plans is advised)
@@ -91,6 +97,29 @@ def _step_cost(mode: str, backend: str, solver: str, N: int, substeps: int) -> f
     c = WORK_COSTS
     step = c[f"{key}_a"] + c[f"{key}_b"] * N + c[f"{key}_c"] * N ** 2 + c[f"{key}_d"] * N ** 3
     return step + (substeps - 1) * c[f"substep_{backend}"]
+
+
+def slack_costs(N: int) -> tuple[float, float]:
+    """Seconds of one infeasible constrained step besides its slack problem's iterations (the
+    hard QP on the Python path by DAQP, relaxed, the slack problem formed; about ``N^3``) and of
+    one DAQP iteration of the slack problem (about ``N^2``): ``WORK_COSTS`` ``slack_*``."""
+    c = WORK_COSTS
+    return c["slack_step_a"] + c["slack_step_d"] * N ** 3, c["slack_iteration_a"] + c["slack_iteration_c"] * N ** 2
+
+
+def slack_allowance(st: Settings, steps: int) -> tuple[int, int]:
+    """``(infeasible steps, slack-problem iterations)`` a constrained plan with
+    ``require_settled: false`` may take ((0, 0) otherwise: it stops at the first): half of
+    :data:`~planner.schema.SLACK_BUDGET_S`, or of the plan's own estimated loop time (``steps``
+    receding-horizon steps, the settling tail included) if more, pays for each at
+    :func:`slack_costs` (at least one step). The estimate counts both; the controller stops the
+    plan with ``infeasible`` where either runs out (the last slack problem's iteration limit is
+    what is left)."""
+    if st.mode != "constrained" or st.require_settled:
+        return 0, 0
+    budget = max(SLACK_BUDGET_S, steps * _step_cost(st.mode, st.backend, st.solver, st.N, st.plant_substeps))
+    step_s, iteration_s = slack_costs(st.N)
+    return max(1, int(0.5 * budget / step_s)), int(0.5 * budget / iteration_s)
 
 
 def _layout_corridor(req: PlanRequest, S: int) -> tuple[int, int, int]:
@@ -169,6 +198,10 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
     metrics_s = plans * steps_one * (c["sample"] + (c["sample_polygon"] if polygons else 0.0))
     segment_s = (c["segmentation"] if req.layout is not None else 0.0) + cells * c["cell"] + obstacles * c["obstacle"]
     seconds = c["fixed"] + loop_s + metrics_s + segment_s
+    plan_s = seconds  # without the slack steps (the advice's candidates take none)
+    slack_n, slack_it = slack_allowance(st, steps_one)
+    slack_s = float(np.dot((slack_n, slack_it), slack_costs(st.N)))
+    seconds += plans * slack_s
     # the field to change: the horizon if a step costs more than at the mode's default N,
     # else what makes the corridor long (its segments, or its samples per segment)
     default_step = _step_cost(st.mode, st.backend, st.solver, 20 if st.mode == "paper" else 30, st.plant_substeps)
@@ -188,6 +221,9 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
               f"{metrics_s:.2g} s of corridor metrics")
     if segment_s > 0.01:
         detail += f", {segment_s:.2g} s of segmentation"
+    if slack_n:
+        detail += (f", {slack_s:.3g} s for up to {slack_n} infeasible steps and {slack_it} slack-problem iterations "
+                   "(settings.require_settled false)")
     advice_s = 0.0
     if req.layout is not None and segments is None:  # no path: the remedies segmented
         lay = req.layout
@@ -201,7 +237,7 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
     if st.mode == "constrained" and not st.fastest and req.reference is None:  # infeasible: more time
         more = [f for f in MORE_TIME
                 if S * f <= MAX_SAMPLES_PER_SEGMENT and n * S * f + st.tail_steps <= MAX_TOTAL_STEPS]
-        advice_s = max(advice_s, sum(more) * seconds)
+        advice_s = max(advice_s, sum(more) * plan_s)
     return WorkEstimate(seconds=seconds, steps=plans * steps_one, plans=plans, field=field, detail=detail,
                         advice_seconds=advice_s)
 

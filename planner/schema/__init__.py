@@ -58,6 +58,7 @@ from .limits import (
                      MIN_SPEED,
                      MIN_TS,
                      MODE_DEFAULTS,
+                     SLACK_BUDGET_S,
                      WORK_COSTS,
 )
 from .records import CorridorRecord
@@ -98,6 +99,6 @@ __all__ = [
     "DEFAULT_FORCE_RISE_S", "DEFAULT_LAYOUT_SPEED_M_S", "DEFAULT_MODE",
     "DEFAULT_ROBOT", "DEFAULT_SAMPLES_PER_SEGMENT", "MAX_CELLS", "MAX_HORIZON", "MAX_LEGS", "MAX_OBSTACLES",
     "MAX_HOLES", "MAX_POLYGON_POINTS", "MAX_SAMPLES_PER_SEGMENT", "MAX_SEGMENTS", "MAX_TOTAL_STEPS", "MIN_TS",
-    "MODE_DEFAULTS",
+    "MODE_DEFAULTS", "SLACK_BUDGET_S",
     "MAX_COORDINATE", "MAX_PENALTY", "MAX_PENALTY_RATIO", "MAX_PHYSICAL", "MIN_CELL_SIZE", "MIN_SPEED", "WORK_COSTS",
 ]

@@ -11,7 +11,7 @@ __all__ = [
     "MAX_OBSTACLES", "MAX_POLYGON_POINTS", "MAX_HOLES", "MAX_LEGS", "MIN_TS", "MAX_COORDINATE", "MIN_CELL_SIZE",
     "MIN_SPEED", "MAX_PENALTY", "MAX_PENALTY_RATIO", "MAX_PHYSICAL", "MODE_DEFAULTS",
     "DEFAULT_SAMPLES_PER_SEGMENT", "DEFAULT_ROBOT", "WORK_COSTS", "DEFAULT_FORCE_RISE_S",
-    "DEFAULT_LAYOUT_SPEED_M_S", "DEFAULT_MODE",
+    "DEFAULT_LAYOUT_SPEED_M_S", "DEFAULT_MODE", "SLACK_BUDGET_S",
 ]
 
 #: longest prediction horizon N [samples]
@@ -102,4 +102,17 @@ WORK_COSTS: dict[str, float] = {
     "substep_compiled": 1.5e-6, "substep_reference": 150e-6,
     "sample": 2.5e-6, "sample_polygon": 1e-6,
     "cell": 5e-6, "obstacle": 1e-4, "segmentation": 3e-3, "fixed": 1.5e-3,
+    "slack_step_a": 2e-3, "slack_step_d": 0.6e-6, "slack_iteration_a": 5e-6, "slack_iteration_c": 0.04e-6,
 }
+
+#: the compute [s, on the reference machine] a constrained plan with ``require_settled: false``
+#: may spend on infeasible steps beyond its own estimate (issue 20). Such a step is done on the
+#: Python path (the hard QP by DAQP, relaxed, then the dense slack problem by DAQP): ``slack_step_a
+#: + slack_step_d N^3`` in :data:`WORK_COSTS` besides the slack problem's DAQP iterations,
+#: ``slack_iteration_a + slack_iteration_c N^2`` each (~18 ms + 100-18 000 x 0.04 ms at N = 30,
+#: 100-3000x a compiled step), so a corridor infeasible at every step (Table I at 3 samples per
+#: segment: 336 steps, 42 s) was not bounded by its estimate. Half of this (or of the plan's own
+#: estimated loop time, if more) pays for the steps, half for the iterations
+#: (:func:`planner.orchestrator.work.slack_allowance`); the estimate counts both, the controller
+#: stops the plan with ``infeasible`` where either runs out
+SLACK_BUDGET_S = 1.0

@@ -110,6 +110,13 @@ class Segment(Strict):
         lo, hi = self.lower, self.upper
         return bool(hi[0] - lo[0] <= 1e-12 and hi[1] - lo[1] <= 1e-12 and hi[2] - lo[2] <= 1e-12)
 
+    @property
+    def is_xy_point(self) -> bool:
+        """A range of zero size in x and y (a point, possibly with a psi range: an end point
+        at which the robot may settle at any angle of that range)."""
+        lo, hi = self.lower, self.upper
+        return bool(hi[0] - lo[0] <= 1e-12 and hi[1] - lo[1] <= 1e-12)
+
 
 class Reference(Strict):
     """A trajectory to track (the paper's criterion (12)): one pose per sample."""
@@ -166,7 +173,9 @@ class Settings(Strict):
     tail_max_s: Finite = Field(3.0, ge=0, le=600, description="Longest time in s the end point is held for settling")
     plant_substeps: Count = Field(1, ge=1, le=50, description="RK4 steps of the nonlinear model per sample (count)")
     require_settled: StrictBool = Field(True, description="Fail with code not_settled instead of returning an "
-                                        "unsettled plan")
+                                        "unsettled plan, and (constrained mode) with code infeasible at the first step "
+                                        "that cannot keep the corridor; false: such steps are taken with slack (at "
+                                        "most what the work estimate counts) and reported")
     speed_m_s: Finite | None = Field(None, ge=MIN_SPEED, le=100,
                                      description="Target mean tool speed along the corridor "
                                      "in m/s; sets samples_per_segment (exclusive with it, total_time_s, fastest); a "
