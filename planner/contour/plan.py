@@ -223,6 +223,7 @@ def _profile(t: Tube, v_cap: np.ndarray, a: float, Ts: float, a_turn: float | No
     mean = np.maximum(0.5 * (node[:-1] + node[1:]), 1e-9)
     speed = np.minimum(v, np.maximum(mean, 0.25 * v))[cells]
     counts[cells] = np.maximum(1, np.ceil(t.length[cells] / np.maximum(speed, 1e-12) / Ts - 1e-9)).astype(np.int64)
+    counts[t.lead] = 1  # the lead cells at the pass's ends (planner.contour.tube)
     return counts
 
 
