@@ -35,6 +35,7 @@ from ..schema import (
     DEFAULT_CONTOUR_TOLERANCE_M,
     MAX_SEGMENTS,
     MAX_TOTAL_STEPS,
+    MIN_TS,
     ContourRequest,
     ContourSection,
     CorridorSamples,
@@ -71,6 +72,17 @@ SCALE_MIN, SCALE_MAX = 1 / 64, 64.0
 #: the longest cell along the path, in samples at the cell speed (short cells keep the
 #: criterion's pull on the cell centre near the path's progress)
 CELL_SAMPLES = 4
+#: program feed: the profile's scales tried (from PROGRAM_MARGIN down by 0.7 each)
+PROGRAM_TRIES = 8
+#: an infeasible piece's advice, checked: the tolerance times this, then the sample time times this
+ADVICE_TOLERANCE = 2.0
+ADVICE_TS = 0.5
+#: the checks of the advice take at most this many times the piece's estimate (estimate_contour
+#: adds it for the largest pass), and at least ADVICE_MIN_S [s]
+ADVICE_WORK = 3.0
+ADVICE_MIN_S = 2.0
+#: the largest tolerance a request may give [m] (ContourRequest.tolerance_m)
+MAX_CONTOUR_TOLERANCE_M = 0.01
 #: room for the box about a rapid [m]
 RAPID_MARGIN_M = 0.002
 
@@ -138,7 +150,8 @@ def plan_contour(request: Any, *, program: Program | None = None) -> PlanResult:
         first = len(parts)
         geo = PathGeometry(b.elements, origin)
         for chunk in _chunks(b.elements):
-            part = _cut(req, model, st, chunk, origin, tol, psi, pos, geo, b.elements, hint)
+            part = _cut(req, model, st, chunk, origin, tol, psi, pos, geo, b.elements, hint,
+                        len(program.passes))
             hint = part.scale if part.scale is not None else hint
             parts.append(part)
             pos = part.result.pose[-1, :2].copy()
@@ -229,14 +242,49 @@ def _profile(t: Tube, v_cap: np.ndarray, a: float, Ts: float, a_turn: float | No
 
 def _cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int], origin: np.ndarray, tol: float,
          psi: float, pos: np.ndarray, geo: PathGeometry, elements: list[PathElement],
-         hint: tuple[float, float] | None = None) -> _Part:
+         hint: tuple[float, float] | None = None, passes: int = 1) -> _Part:
     """One piece of a pass planned rest to rest. ``hint``: the ``fastest`` scale found for the
     piece before (where its search starts; the search's result is bracketed the same way from
-    any start)."""
+    any start). No timing found: the ``infeasible`` error with its advice checked
+    (:func:`_confirmed`)."""
     els = [elements[k] for k in chunk]
-    feed = np.array([e.feed_m_s for e in els])
-    v_ref = float(feed.max()) if req.feed == "program" else V0_M_S
-    piece_max = max(v_ref * st.Ts * CELL_SAMPLES, 4 * tol)
+    st = st.model_copy(update={"settle_speed_m_s": min(st.settle_speed_m_s, 1e-4)})
+    found = _search(req.feed, model, st, _tubes(model, st, chunk, els, origin, tol, psi, pos, elements), chunk,
+                    els, hint)
+    if found.result is None:
+        raise _confirmed(req, model, st, chunk, els, origin, tol, psi, pos, elements, found, hint, passes)
+    result, t = found.result, found.tube
+    assert t is not None
+    K = len(result.time)
+    seg = _segment_of(counts_of(result, len(t.segments)), K)
+    elem = t.element[seg]
+    cutting = np.ones(K, bool)
+    line = geo.line[elem].astype(np.int64)
+    dev = _deviation(result.pose[:, :2], elem, geo, tol)
+    part = _Part(result, cutting, line, dev, cells=len(t.segments) - 2, segments=t.segments)
+    part.scale = found.scale
+    return part
+
+
+def _tubes(model: RobotModel, st: Settings, chunk: list[int], els: list[PathElement], origin: np.ndarray,
+           tol: float, psi: float, pos: np.ndarray, elements: list[PathElement]) -> Callable[[float], Tube]:
+    """The tube of a piece with cells sized for a speed [m/s] (:data:`CELL_SAMPLES` samples at
+    it, at least 4 tolerances long), each size built once."""
+    made: dict[float, Tube] = {}
+
+    def at(v: float) -> Tube:
+        piece_max = max(v * st.Ts * CELL_SAMPLES, 4 * tol)
+        key = round(math.log(piece_max) * 8)  # sizes within 13 % share a tube
+        if key not in made:
+            made[key] = _tube(model, chunk, els, origin, tol, psi, pos, elements, piece_max)
+        return made[key]
+
+    return at
+
+
+def _tube(model: RobotModel, chunk: list[int], els: list[PathElement], origin: np.ndarray, tol: float, psi: float,
+          pos: np.ndarray, elements: list[PathElement], piece_max: float) -> Tube:
+    """The tube of a piece, starting where the robot is, its reach checked."""
     t = tube(els, origin, tol, psi, piece_max)
     t.element = np.asarray(chunk)[t.element]
     # the first point: where the robot is (within the tube)
@@ -253,32 +301,85 @@ def _cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int],
         line = elements[int(t.element[min(k, len(t.element) - 1)])].line
         raise PlannerError(err.code, f"line {line}: the path leaves the robot's reach at origin "
                            f"[{origin[0]:g}, {origin[1]:g}] m: {err.message}", "program") from None
-    st = st.model_copy(update={"settle_speed_m_s": min(st.settle_speed_m_s, 1e-4)})
+    return t
+
+
+class _Found:
+    """A timing search's outcome: the plan (None: none found), the ``fastest`` scales, and
+    where the candidates stopped (the source line of the first step that needed slack, the
+    latest of them)."""
+
+    def __init__(self, Ts: float) -> None:
+        self.Ts = Ts
+        self.result: PlanResult | None = None
+        self.tube: Tube | None = None  #: the tube of the result
+        self.scale: tuple[float, float] | None = None
+        self.stop_line: int | None = None
+        self.plans = 0
+
+    def failed(self, err: PlannerError, t: Tube, counts: np.ndarray, els_line: Callable[[int], int]) -> None:
+        """Note where a candidate stopped (``at t = ... s`` in the controller's message)."""
+        self.plans += 1
+        try:
+            ts = float(err.message.split("at t = ")[1].split(" s")[0])
+        except (IndexError, ValueError):
+            return
+        k = int(round(ts / self.Ts))
+        seg = _segment_of(counts, k + 1)[-1] if k > 0 else 0
+        self.stop_line = els_line(int(t.element[min(int(seg), len(t.element) - 1)]))
+
+
+def _search(feed_mode: str, model: RobotModel, st: Settings, tube_at: Callable[[float], Tube], chunk: list[int],
+            els: list[PathElement], hint: tuple[float, float] | None, deadline: float | None = None) -> _Found:
+    """A timing of the piece for the feed mode, in the tube ``tube_at(v)`` with cells sized for
+    the profile's speed ``v`` (``program``: the programmed F times the profile's scale, so that
+    a slower profile has shorter cells: the criterion pulls the robot toward each cell's
+    centre, and a cell of many samples let it run ahead of the profile, faster than F, at
+    every scale; ``fastest``: :data:`V0_M_S`). If the mode's own search finds none, the
+    other mode's (a timing under the programmed F is one ``fastest`` may use; ``program``
+    retries the ``fastest`` profile capped by F, kept where no sample exceeds F).
+    ``deadline`` (``time.perf_counter``): candidates after it are not planned."""
+    feed = np.array([e.feed_m_s for e in els])
     name = f"line {els[0].line}"
-    feed_of = feed[np.searchsorted(chunk, t.element)]
-    if req.feed == "program":
-        result = None
-        scale_found = None
+    found = _Found(st.Ts)
+    lines = dict(zip(chunk, (e.line for e in els)))
+
+    def feed_on(t: Tube) -> np.ndarray:
+        return feed[np.searchsorted(chunk, t.element)]
+
+    def attempt(t: Tube, counts: np.ndarray) -> PlanResult | None:
+        if deadline is not None and time.perf_counter() > deadline:
+            return None
+        _check_counts(counts, els[0].line)
+        try:
+            res = plan_timed(name, model, st, t.segments, counts.tolist())
+        except PlannerError as err:
+            if err.code not in ("infeasible", "not_settled"):
+                raise
+            found.failed(err, t, counts, lines.__getitem__)
+            return None
+        found.plans += 1
+        return res if feasible(res) else None
+
+    def program_loop() -> tuple[PlanResult, Tube] | None:
         scale = PROGRAM_MARGIN
-        for _ in range(8):
+        for _ in range(PROGRAM_TRIES):
+            t = tube_at(float(feed.max()) * scale)
+            feed_of = feed_on(t)
             counts = _profile(t, feed_of * scale, A_PROGRAM_M_S2 * scale * scale, st.Ts)
-            _check_counts(counts, els[0].line)
-            try:
-                res = plan_timed(name, model, st, t.segments, counts.tolist())
-            except PlannerError as err:
-                if err.code not in ("infeasible", "not_settled"):
-                    raise
+            res = attempt(t, counts)
+            if res is None:
                 scale *= 0.7
                 continue
             over = _overspeed(res, t, counts, feed_of)
-            if feasible(res) and over <= 1.0:
-                result = res
-                break
-            scale *= min(0.95 / max(over, 1e-9), 0.9) if over > 1.0 else 0.7
-        if result is None:
-            raise _infeasible(els[0].line, tol, st)
-    else:
-        v_cap = np.full(len(t.segments), V0_M_S)
+            if over <= 1.0:
+                return res, t
+            scale *= min(0.95 / max(over, 1e-9), 0.9)
+        return None
+
+    def scaled(t: Tube, v_cap: np.ndarray, capped: bool, lam0: float, mu0: float, high: float
+               ) -> tuple[PlanResult, tuple[float, float]] | None:
+        feed_of = feed_on(t)
         tried: dict[bytes, PlanResult | None] = {}  # by the sample counts (scales often give the same)
 
         def run(lam: float, mu: float = 1.0) -> PlanResult | None:
@@ -286,38 +387,91 @@ def _cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int],
                               J0_M_S3 * lam ** 3)
             key = counts.tobytes()
             if key not in tried:
-                _check_counts(counts, els[0].line)
-                try:
-                    res = plan_timed(name, model, st, t.segments, counts.tolist())
-                    tried[key] = res if feasible(res) else None
-                except PlannerError as err:
-                    if err.code not in ("infeasible", "not_settled"):
-                        raise
-                    tried[key] = None
+                res = attempt(t, counts)
+                if res is not None and capped and _overspeed(res, t, counts, feed_of) > 1.0:
+                    res = None
+                tried[key] = res
             return tried[key]
 
         # 1. the whole profile (speeds, accelerations); 2. the speeds alone (cell speed and the
         # curvature and corner limits), the accelerations between them as found: where the
         # start and the stop bound the first scale, the path between them can go faster
-        lam0, mu0 = hint if hint is not None else (1.0, 1.0)
-        lam = largest_feasible(lambda x: run(x) is not None, lam0)
+        lam = largest_feasible(lambda x: run(x) is not None, lam0, high=high)
         if lam is None:
-            raise _infeasible(els[0].line, tol, st)
-        mu = largest_feasible(lambda x: run(lam, x) is not None, max(mu0, 1.0), low=1.0)
+            return None
+        mu = largest_feasible(lambda x: run(lam, x) is not None, max(mu0, 1.0), low=1.0, high=max(high / lam, 1.0))
         assert mu is not None  # mu = 1 is lam's plan
-        scale_found = (lam, mu)
         best = run(lam, mu)
         assert best is not None
-        result = best
-    K = len(result.time)
-    seg = _segment_of(counts_of(result, len(t.segments)), K)
-    elem = t.element[seg]
-    cutting = np.ones(K, bool)
-    line = geo.line[elem].astype(np.int64)
-    dev = _deviation(result.pose[:, :2], elem, geo, tol)
-    part = _Part(result, cutting, line, dev, cells=len(t.segments) - 2, segments=t.segments)
-    part.scale = scale_found
-    return part
+        return best, (lam, mu)
+
+    if feed_mode == "program":
+        got_p = program_loop()
+        if got_p is None:  # the fastest profile under F
+            t = tube_at(float(feed.max()) * 0.5)
+            got = scaled(t, feed_on(t) * PROGRAM_MARGIN, True, 0.5, 1.0, 1.0)
+            got_p = (got[0], t) if got is not None else None
+        if got_p is not None:
+            found.result, found.tube = got_p
+    else:
+        lam0, mu0 = hint if hint is not None else (1.0, 1.0)
+        t = tube_at(V0_M_S)
+        got = scaled(t, np.full(len(t.segments), V0_M_S), False, lam0, mu0, SCALE_MAX)
+        if got is not None:
+            (found.result, found.scale), found.tube = got, t
+        else:  # a timing under the programmed F
+            got_p = program_loop()
+            if got_p is not None:
+                found.result, found.tube = got_p
+    return found
+
+
+def _confirmed(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int], els: list[PathElement],
+               origin: np.ndarray, tol: float, psi: float, pos: np.ndarray, elements: list[PathElement],
+               found: _Found, hint: tuple[float, float] | None, passes: int) -> PlannerError:
+    """The ``infeasible`` error of a piece no timing plans, its advice checked (issue 22, as
+    :func:`planner.orchestrator.plan._more_time_advice` does for plans): the piece planned
+    again, by the same search, at :data:`ADVICE_TOLERANCE` times the tolerance, then at
+    :data:`ADVICE_TS` times the sample time; the first that plans is named ("tolerance_m
+    0.02 mm plans, checked"), else the error says neither helps and where the plans stop.
+    Bounded: the checks together take at most :data:`ADVICE_WORK` times the piece's own
+    estimate (:func:`estimate_contour` counts it), at least :data:`ADVICE_MIN_S`; a candidate
+    not planned within that is said so."""
+    line = els[0].line
+    where = f"line {found.stop_line}" if found.stop_line is not None else f"line {line}"
+    head = (f"line {line}: no timing keeps the tool within {tol * 1e3:g} mm of the path within the drive limits "
+            f"at a sample time of {st.Ts:g} s (the plans stop at {where})")
+    budget = max(ADVICE_WORK * _piece_estimate(req.feed, els, st.Ts, passes), ADVICE_MIN_S)
+    deadline = time.perf_counter() + budget
+    candidates: list[tuple[str, float, float]] = []
+    if tol * ADVICE_TOLERANCE <= MAX_CONTOUR_TOLERANCE_M:
+        candidates.append((f"tolerance_m {tol * ADVICE_TOLERANCE:g} ({tol * ADVICE_TOLERANCE * 1e3:g} mm)",
+                           tol * ADVICE_TOLERANCE, st.Ts))
+    if st.Ts * ADVICE_TS >= MIN_TS:
+        candidates.append((f"settings.Ts {st.Ts * ADVICE_TS:g} s", tol, st.Ts * ADVICE_TS))
+    tried: list[str] = []
+    for what, tol2, Ts2 in candidates:
+        if time.perf_counter() > deadline:
+            break
+        st2 = st.model_copy(update={"Ts": Ts2})
+        try:
+            got = _search(req.feed, model, st2, _tubes(model, st2, chunk, els, origin, tol2, psi, pos, elements),
+                          chunk, els, hint, deadline)
+        except PlannerError:
+            got = None
+        if got is not None and got.result is not None:
+            return PlannerError("infeasible", f"{head}; {what} plans (checked)", "tolerance_m" if tol2 != tol
+                                else "settings.Ts")
+        if time.perf_counter() <= deadline:
+            tried.append(what)
+    not_tried = [w for w, _, _ in candidates if w not in tried]
+    if tried and not not_tried:
+        return PlannerError("infeasible", f"{head}; neither {' nor '.join(tried)} plans either (checked): the "
+                            f"path at {where} asks more of the drives than a tube of that width allows",
+                            "tolerance_m")
+    msg = f"{head}; {' and '.join(tried)} do not plan either (checked); " if tried else f"{head}; "
+    return PlannerError("infeasible", msg + f"{' and '.join(not_tried)} not checked within the work bound "
+                        f"({budget:.2g} s); give a larger tolerance_m or a smaller settings.Ts", "tolerance_m")
 
 
 def largest_feasible(ok: Callable[[float], bool], start: float, resolution: float = SCALE_RESOLUTION,
@@ -372,12 +526,6 @@ def _check_counts(counts: np.ndarray, line: int) -> None:
         raise PlannerError("too_large", f"line {line}: the pass needs {int(counts.sum())} samples, more than the "
                            f"limit of {MAX_TOTAL_STEPS // 2}; give a larger settings.Ts or split the program",
                            "program")
-
-
-def _infeasible(line: int, tol: float, st: Settings) -> PlannerError:
-    return PlannerError("infeasible", f"line {line}: no timing keeps the tool within {tol * 1e3:g} mm of the path "
-                        f"within the drive limits at a sample time of {st.Ts:g} s; give a larger tolerance_m or a "
-                        "smaller settings.Ts", "tolerance_m")
 
 
 def _segment_of(counts: np.ndarray, K: int) -> np.ndarray:
@@ -551,19 +699,35 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
     """A lower estimate of the compute time of :func:`plan_contour` [s] and the arithmetic in
     words: the cut samples at the programmed feed (``program``; ~1.5 plans) or at the
     reference speed (``fastest``: ~10 candidate plans for the first pass, ~2.5 for the next)
-    times the step cost."""
+    times the step cost; plus the bound on the check of an infeasible verdict's advice
+    (:func:`_confirmed`: :data:`ADVICE_WORK` times the largest pass, at least
+    :data:`ADVICE_MIN_S`)."""
     req = parse_contour_request(request)
     st = req.plan_settings()
     if program is None:
         program = read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
-    samples = 0.0
-    for b in program.passes:
-        for e in b.elements:
-            v = e.feed_m_s if req.feed == "program" else V0_M_S * 2
-            samples += e.length_m / max(v, 1e-9) / st.Ts
-    # fastest: ~10 candidate plans for the first cut, ~2.5 for each next (its search starts at the
-    # scale found before: two plans when the passes are alike)
-    plans = 1.5 if req.feed == "program" else 2.5 + 7.5 / max(len(program.passes), 1)
-    seconds = samples * plans * CONTOUR_STEP_S
-    return seconds, (f"{len(program.passes)} passes, ~{samples:.0f} cut samples at Ts = {st.Ts:g} s x {plans:g} "
-                     f"plans x ~{CONTOUR_STEP_S * 1e6:.0f} us per step")
+    n = len(program.passes)
+    per_pass = [_piece_estimate(req.feed, b.elements, st.Ts, n) for b in program.passes]
+    samples = sum(_samples(req.feed, b.elements, st.Ts) for b in program.passes)
+    plans = _plans(req.feed, n)
+    check = max(ADVICE_WORK * max(per_pass, default=0.0), ADVICE_MIN_S)
+    seconds = samples * plans * CONTOUR_STEP_S + check
+    return seconds, (f"{n} passes, ~{samples:.0f} cut samples at Ts = {st.Ts:g} s x {plans:g} "
+                     f"plans x ~{CONTOUR_STEP_S * 1e6:.0f} us per step, + {check:.2g} s to check the advice of an "
+                     "infeasible pass")
+
+
+def _samples(feed: str, elements: list[PathElement], Ts: float) -> float:
+    """The cut samples of ``elements`` at the programmed feed or the reference speed."""
+    return sum(e.length_m / max(e.feed_m_s if feed == "program" else V0_M_S * 2, 1e-9) for e in elements) / Ts
+
+
+def _plans(feed: str, passes: int) -> float:
+    """Candidate plans per pass: ~1.5 (``program``); ``fastest``: ~10 for the first pass, ~2.5 for
+    each next (its search starts at the scale found before: two plans when the passes are alike)."""
+    return 1.5 if feed == "program" else 2.5 + 7.5 / max(passes, 1)
+
+
+def _piece_estimate(feed: str, elements: list[PathElement], Ts: float, passes: int = 1) -> float:
+    """:func:`estimate_contour`'s share of one pass (or piece) [s]."""
+    return _samples(feed, elements, Ts) * _plans(feed, passes) * CONTOUR_STEP_S
