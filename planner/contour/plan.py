@@ -80,7 +80,7 @@ ADVICE_TS = 0.5
 #: the checks of the advice take at most this many times the piece's estimate (estimate_contour
 #: adds it for the largest pass), and at least ADVICE_MIN_S [s]
 ADVICE_WORK = 3.0
-ADVICE_MIN_S = 2.0
+ADVICE_MIN_S = 4.0
 #: the largest tolerance a request may give [m] (ContourRequest.tolerance_m)
 MAX_CONTOUR_TOLERANCE_M = 0.01
 #: room for the box about a rapid [m]
@@ -338,7 +338,8 @@ def _search(feed_mode: str, model: RobotModel, st: Settings, tube_at: Callable[[
     every scale; ``fastest``: :data:`V0_M_S`). If the mode's own search finds none, the
     other mode's (a timing under the programmed F is one ``fastest`` may use; ``program``
     retries the ``fastest`` profile capped by F, kept where no sample exceeds F).
-    ``deadline`` (``time.perf_counter``): candidates after it are not planned."""
+    ``deadline`` (``time.process_time``: compute time, as :func:`estimate_contour` counts it):
+    candidates after it are not planned."""
     feed = np.array([e.feed_m_s for e in els])
     name = f"line {els[0].line}"
     found = _Found(st.Ts)
@@ -348,7 +349,7 @@ def _search(feed_mode: str, model: RobotModel, st: Settings, tube_at: Callable[[
         return feed[np.searchsorted(chunk, t.element)]
 
     def attempt(t: Tube, counts: np.ndarray) -> PlanResult | None:
-        if deadline is not None and time.perf_counter() > deadline:
+        if deadline is not None and time.process_time() > deadline:
             return None
         _check_counts(counts, els[0].line)
         try:
@@ -433,7 +434,7 @@ def _confirmed(req: ContourRequest, model: RobotModel, st: Settings, chunk: list
     :func:`planner.orchestrator.plan._more_time_advice` does for plans): the piece planned
     again, by the same search, at :data:`ADVICE_TOLERANCE` times the tolerance, then at
     :data:`ADVICE_TS` times the sample time; the first that plans is named ("tolerance_m
-    0.02 mm plans, checked"), else the error says neither helps and where the plans stop.
+    0.02 plans, checked"), else the error says neither helps and where the plans stop.
     Bounded: the checks together take at most :data:`ADVICE_WORK` times the piece's own
     estimate (:func:`estimate_contour` counts it), at least :data:`ADVICE_MIN_S`; a candidate
     not planned within that is said so."""
@@ -442,7 +443,7 @@ def _confirmed(req: ContourRequest, model: RobotModel, st: Settings, chunk: list
     head = (f"line {line}: no timing keeps the tool within {tol * 1e3:g} mm of the path within the drive limits "
             f"at a sample time of {st.Ts:g} s (the plans stop at {where})")
     budget = max(ADVICE_WORK * _piece_estimate(req.feed, els, st.Ts, passes), ADVICE_MIN_S)
-    deadline = time.perf_counter() + budget
+    deadline = time.process_time() + budget
     candidates: list[tuple[str, float, float]] = []
     if tol * ADVICE_TOLERANCE <= MAX_CONTOUR_TOLERANCE_M:
         candidates.append((f"tolerance_m {tol * ADVICE_TOLERANCE:g} ({tol * ADVICE_TOLERANCE * 1e3:g} mm)",
@@ -451,7 +452,7 @@ def _confirmed(req: ContourRequest, model: RobotModel, st: Settings, chunk: list
         candidates.append((f"settings.Ts {st.Ts * ADVICE_TS:g} s", tol, st.Ts * ADVICE_TS))
     tried: list[str] = []
     for what, tol2, Ts2 in candidates:
-        if time.perf_counter() > deadline:
+        if time.process_time() > deadline:
             break
         st2 = st.model_copy(update={"Ts": Ts2})
         try:
@@ -460,9 +461,10 @@ def _confirmed(req: ContourRequest, model: RobotModel, st: Settings, chunk: list
         except PlannerError:
             got = None
         if got is not None and got.result is not None:
-            return PlannerError("infeasible", f"{head}; {what} plans (checked)", "tolerance_m" if tol2 != tol
-                                else "settings.Ts")
-        if time.perf_counter() <= deadline:
+            before = "".join(f"{w} does not plan; " for w in tried)
+            return PlannerError("infeasible", f"{head}; {before}{what} plans, checked",
+                                "tolerance_m" if tol2 != tol else "settings.Ts")
+        if time.process_time() <= deadline:
             tried.append(what)
     not_tried = [w for w, _, _ in candidates if w not in tried]
     if tried and not not_tried:
