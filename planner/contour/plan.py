@@ -83,6 +83,10 @@ ADVICE_WORK = 3.0
 ADVICE_MIN_S = 4.0
 #: the largest tolerance a request may give [m] (ContourRequest.tolerance_m)
 MAX_CONTOUR_TOLERANCE_M = 0.01
+#: the deviation's candidate elements: those within this many tolerances along the pass of the
+#: sample's own (and its neighbours), at most NEAR_MAX of them
+NEAR_TOLERANCES = 2.0
+NEAR_MAX = 32
 #: room for the box about a rapid [m]
 RAPID_MARGIN_M = 0.002
 
@@ -555,7 +559,9 @@ def _deviation(pose: np.ndarray, elem: np.ndarray, geo: PathGeometry, tol: float
     straight move to the next, measured on points ``h = tol / 10`` apart along the move plus
     ``h / 2`` (the distance is 1-Lipschitz, so this bounds the maximum from above; the cells
     keep 0.95 tol, so the bound stays within the tolerance) [m]. Candidates: the elements of
-    both ends and their neighbours along the pass (samples move forwards through the cells)."""
+    both ends and those within :data:`NEAR_TOLERANCES` tolerances of them along the pass (a
+    move shorter than the tolerance may be nearer than its neighbour; at most
+    :data:`NEAR_MAX` candidates, beyond which the figure can only be too large)."""
     K = len(pose)
     h = tol / 10
     a, b = pose[:-1], pose[1:]
@@ -565,13 +571,17 @@ def _deviation(pose: np.ndarray, elem: np.ndarray, geo: PathGeometry, tol: float
     start = np.repeat(np.cumsum(m) - m, m)
     frac = (np.arange(owner.size) - start) / np.repeat(m - 1, m)
     pts = a[owner] + frac[:, None] * (b - a)[owner]
-    e0, e1 = elem[:-1][owner], elem[1:][owner]
-    cand = np.stack((e0 - 1, e0, e1, e1 + 1), axis=1)
+    lo, hi = geo.near(NEAR_TOLERANCES * tol)
+    first = np.minimum(lo[elem[:-1]], lo[elem[1:]])
+    last = np.maximum(hi[elem[:-1]], hi[elem[1:]])
+    width = int(min(int((last - first).max(initial=0)) + 1, NEAR_MAX))
+    cand = np.minimum(first[:, None] + np.arange(width), last[:, None])[owner]
     d = geo.distance(pts, cand)
     dev = np.zeros(K)
     np.maximum.at(dev, owner, d + np.where(m[owner] > 1, 0.5 * h, 0.0))
-    last = geo.distance(pose[-1:], np.array([[elem[-1] - 1, elem[-1], elem[-1] + 1]]))
-    dev[-1] = max(dev[-1], float(last[0]))
+    e = int(elem[-1])
+    end = geo.distance(pose[-1:], np.minimum(lo[e] + np.arange(min(hi[e] - lo[e] + 1, NEAR_MAX)), hi[e])[None, :])
+    dev[-1] = max(dev[-1], float(end[0]))
     return dev
 
 

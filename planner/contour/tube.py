@@ -239,6 +239,16 @@ class PathGeometry:
         self.a0 = np.array([e.start_angle_rad or 0.0 for e in elements])
         self.sweep = np.array([e.sweep_rad or 0.0 for e in elements])
         self.line = np.array([e.line for e in elements])
+        self.length = np.array([e.length_m for e in elements])
+
+    def near(self, reach: float) -> tuple[np.ndarray, np.ndarray]:
+        """Per element ``k``: the first and the last element index within ``reach`` of it
+        along the pass (its neighbours always included) (n,), (n,)."""
+        cum = np.concatenate(([0.0], np.cumsum(self.length)))
+        k = np.arange(self.n)
+        lo = np.searchsorted(cum, cum[:-1] - reach, side="left") - 1
+        hi = np.searchsorted(cum, cum[1:] + reach, side="right") - 1
+        return np.clip(np.minimum(lo, k - 1), 0, self.n - 1), np.clip(np.maximum(hi, k + 1), 0, self.n - 1)
 
     def distance(self, pts: np.ndarray, cand: np.ndarray) -> np.ndarray:
         """Distance of ``pts`` (M, 2) to the union of the candidate elements ``cand`` (M, C)
