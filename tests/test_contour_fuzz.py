@@ -61,3 +61,12 @@ def test_infeasible_advice_is_checked():
             req["tolerance_m"] = float(msg.split("tolerance_m ")[-1].split(" ")[0])
         res = plan_contour(req)
         assert res.contour is not None and res.contour.max_deviation_m <= res.contour.tolerance_m
+
+
+def test_estimate_counts_the_advice_check():
+    """estimate_contour adds the bound on the advice check (at least ADVICE_MIN_S) to the
+    planning estimate, and says so."""
+    from planner.contour.plan import ADVICE_MIN_S
+
+    seconds, detail = estimate_contour({"program": SMALL, "origin": ORIGIN})
+    assert seconds >= ADVICE_MIN_S and "advice" in detail
