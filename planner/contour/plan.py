@@ -558,31 +558,47 @@ def _deviation(pose: np.ndarray, elem: np.ndarray, geo: PathGeometry, tol: float
     """Per sample: the largest distance from the programmed path of the sample and of the
     straight move to the next, measured on points ``h = tol / 10`` apart along the move plus
     ``h / 2`` (the distance is 1-Lipschitz, so this bounds the maximum from above; the cells
-    keep 0.95 tol, so the bound stays within the tolerance) [m]. Candidates: the elements of
+    keep 0.95 tol, so the bound stays within the tolerance) [m]; the moves whose bound exceeds
+    the largest distance measured are measured again on points ``h / 8`` apart (so the pass's
+    largest figure is within ``h / 16`` of the true maximum). Candidates: the elements of
     both ends and those within :data:`NEAR_TOLERANCES` tolerances of them along the pass (a
     move shorter than the tolerance may be nearer than its neighbour; at most
     :data:`NEAR_MAX` candidates, beyond which the figure can only be too large)."""
     K = len(pose)
     h = tol / 10
-    a, b = pose[:-1], pose[1:]
-    L = np.hypot(*(b - a).T)
-    m = np.maximum(np.ceil(L / h).astype(np.int64), 1) + 1
-    owner = np.repeat(np.arange(K - 1), m)
-    start = np.repeat(np.cumsum(m) - m, m)
-    frac = (np.arange(owner.size) - start) / np.repeat(m - 1, m)
-    pts = a[owner] + frac[:, None] * (b - a)[owner]
     lo, hi = geo.near(NEAR_TOLERANCES * tol)
     first = np.minimum(lo[elem[:-1]], lo[elem[1:]])
     last = np.maximum(hi[elem[:-1]], hi[elem[1:]])
     width = int(min(int((last - first).max(initial=0)) + 1, NEAR_MAX))
-    cand = np.minimum(first[:, None] + np.arange(width), last[:, None])[owner]
-    d = geo.distance(pts, cand)
+    cand = np.minimum(first[:, None] + np.arange(width), last[:, None])
+    a, b = pose[:-1], pose[1:]
     dev = np.zeros(K)
-    np.maximum.at(dev, owner, d + np.where(m[owner] > 1, 0.5 * h, 0.0))
+    seen, bound = _chords(a, b, cand, geo, h)
+    dev[:-1] = bound
+    again = np.nonzero(bound > seen.max(initial=0.0))[0]
+    if again.size:
+        dev[again] = _chords(a[again], b[again], cand[again], geo, h / 8)[1]
     e = int(elem[-1])
     end = geo.distance(pose[-1:], np.minimum(lo[e] + np.arange(min(hi[e] - lo[e] + 1, NEAR_MAX)), hi[e])[None, :])
     dev[-1] = max(dev[-1], float(end[0]))
     return dev
+
+
+def _chords(a: np.ndarray, b: np.ndarray, cand: np.ndarray, geo: PathGeometry, h: float
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """Per straight move ``a -> b``: the largest distance to the candidate elements ``cand``
+    on points at most ``h`` apart, and that plus ``h / 2`` where the move has more than one
+    point (a bound from above) [m]."""
+    L = np.hypot(*(b - a).T)
+    m = np.maximum(np.ceil(L / h).astype(np.int64), 1) + 1
+    owner = np.repeat(np.arange(len(a)), m)
+    start = np.repeat(np.cumsum(m) - m, m)
+    frac = (np.arange(owner.size) - start) / np.repeat(m - 1, m)
+    pts = a[owner] + frac[:, None] * (b - a)[owner]
+    d = geo.distance(pts, cand[owner])
+    seen = np.zeros(len(a))
+    np.maximum.at(seen, owner, d)
+    return seen, seen + np.where(m > 1, 0.5 * h, 0.0)
 
 
 def _travel(req: ContourRequest, model: RobotModel, st: Settings, a: np.ndarray, b: np.ndarray, psi: float,
