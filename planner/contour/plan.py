@@ -10,7 +10,9 @@ forwards and backwards), turned into sample counts per cell; ``program`` feed ca
 each move's F and lowers the profile until the plan is feasible and no sample is faster than
 F; ``fastest`` scales the profile (``v = lambda v0``, ``a = lambda^2 a0``) to the largest feasible
 ``lambda`` (:func:`largest_feasible`, from the scale of the cut before; each candidate
-abandoned at its first step that needs slack).
+abandoned at its first step that needs slack). Where a feed's own search finds no timing the
+other's is tried (:func:`_search`), so a pass one feed plans is planned by both; an
+``infeasible`` verdict's advice is checked before it is given (:func:`_confirmed`).
 Rapids and feed moves above the cutting height are free moves inside a box about the
 straight move (the ``fastest`` timing of :func:`planner.plan`); plunges, retracts, G4 and
 M0 are the robot at rest. The parts are joined sample to sample: each part starts at the pose
