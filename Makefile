@@ -3,27 +3,38 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
+RUNTIME := $(VENV)/.runtime-stamp
 
 # Small dense matrices: single-threaded BLAS is much faster on these machines.
 export OPENBLAS_NUM_THREADS := 1
 export OMP_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 
-.PHONY: run test lint install browser linuxcnc bench clean lock container-test
+.PHONY: run test lint install kernels browser linuxcnc bench clean lock container-test
 
 # the runtime dependencies from the lock first (the versions the container image runs), then
-# rangeplan and its test tools around them
-$(STAMP): pyproject.toml container/requirements.lock
+# rangeplan (all `make run` needs), then its test tools around them
+$(RUNTIME): pyproject.toml container/requirements.lock
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet --require-hashes -r container/requirements.lock
+	$(PY) -m pip install --quiet --no-compile --require-hashes -r container/requirements.lock
+	$(PY) -m pip install --quiet --no-compile --no-deps -e .
+	touch $(RUNTIME)
+
+$(STAMP): $(RUNTIME)
 	$(PY) -m pip install --quiet -e '.[test]'
-	$(PY) -m planner
 	touch $(STAMP)
 
-install: $(STAMP)
+# compile the planner's kernels in the foreground (minutes once after installing, with progress;
+# ~2 s when they are cached)
+kernels: $(RUNTIME)
+	$(PY) -m planner
 
-run: $(STAMP)
+install: $(STAMP) kernels
+
+# the service starts at once: while the kernels are not compiled it compiles them in the
+# background and plans on the numpy reference meanwhile (README "First run")
+run: $(RUNTIME)
 	$(VENV)/bin/rangeplan serve
 
 # Browser tests drive Debian's Chromium (never a browser download of Playwright's own).
@@ -45,10 +56,10 @@ lint: $(STAMP)
 	$(VENV)/bin/pyright
 	$(VENV)/bin/lint-imports
 
-test: $(STAMP) browser linuxcnc lint
+test: $(STAMP) kernels browser linuxcnc lint
 	$(PY) -m pytest -q
 
-bench: $(STAMP)
+bench: $(STAMP) kernels
 	$(PY) benchmarks/bench_planner.py
 
 # re-pin the runtime dependencies of pyproject.toml (with hashes) for the image and `make install`

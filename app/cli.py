@@ -58,6 +58,9 @@ def cmd_plan(args) -> int:
 
     request = load_request(args.input)
     fmt = output_format(args)
+    st = request.settings
+    if not args.compile and on_reference_while_compiling(st.backend, st.mode):
+        request = request.model_copy(update={"settings": st.model_copy(update={"backend": "reference"})})
     try:
         with compile_progress():  # the first plan after installing compiles the kernels: progress on stderr
             result = plan(request)
@@ -68,6 +71,19 @@ def cmd_plan(args) -> int:
          summary=f"{m.steps} steps, {m.duration_s:.2f} s, end error {m.end_error_m * 1e3:.3f} mm, "
          f"max force {m.max_drive_force_n:.1f} N, compute {m.compute_ms:.0f} ms")
     return 0
+
+
+def on_reference_while_compiling(backend: str, mode: str) -> bool:
+    """The CLI's fallback after installing (:func:`planner.orchestrator.background.while_compiling`):
+    True when the plan should run on the numpy reference because its kernels are not compiled
+    yet (they compile in a background process meanwhile; one line on stderr says so)."""
+    from planner.orchestrator.background import while_compiling
+
+    running = while_compiling(backend, mode)
+    if running is None:
+        return False
+    print(running.note(), file=sys.stderr, flush=True)
+    return True
 
 
 def emit(result, args, fmt: str, *, summary: str, layout=None, warnings: tuple[str, ...] = ()) -> None:
@@ -101,7 +117,7 @@ def parse_pair(text: str, option: str) -> list[float]:
 def cmd_contour(args) -> int:
     """``rangeplan contour PROGRAM.ngc``: plan a G-code program (issue 22)."""
     from planner import PlannerError
-    from planner.contour import plan_contour
+    from planner.contour import parse_contour_request, plan_contour
     from planner.schema import MAX_PROGRAM_BYTES
 
     try:
@@ -123,6 +139,12 @@ def cmd_contour(args) -> int:
     if args.tolerance is not None:
         request["tolerance_m"] = args.tolerance
     fmt = output_format(args)
+    try:
+        st = parse_contour_request(request).plan_settings()
+    except PlannerError:
+        st = None  # plan_contour names the fault
+    if st is not None and not args.compile and on_reference_while_compiling(st.backend, st.mode):
+        request["settings"] = {**settings, "backend": "reference"}
     try:
         result = plan_contour(request)
     except PlannerError as exc:
@@ -275,6 +297,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                     "format as -o names them (default: from the output file's extension, else json)")
     pp.add_argument("--forces", action="store_true", help="joints format: add the drive forces (N)")
     pp.add_argument("--compact", action="store_true", help="JSON without indentation")
+    pp.add_argument("--compile", action="store_true", help="compile the kernels first if they are not compiled yet "
+                    "(minutes, once after installing) instead of planning on the numpy reference while they compile "
+                    "in the background")
     pp.set_defaults(func=cmd_plan)
     add_import_parser(sub, full=command in (None, "import"))
     pc = sub.add_parser("contour", help="plan a G-code program (CAM tool path) within its tolerance",
@@ -295,6 +320,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     pc.add_argument("--settings", metavar="JSON", help='plan settings as JSON, e.g. \'{"Ts": 0.005}\'')
     pc.add_argument("--forces", action="store_true", help="joints format: add the drive forces (N)")
     pc.add_argument("--compact", action="store_true", help="JSON without indentation")
+    pc.add_argument("--compile", action="store_true", help="compile the kernels first if they are not compiled yet "
+                    "(minutes, once after installing) instead of planning on the numpy reference while they compile "
+                    "in the background")
     pc.set_defaults(func=cmd_contour)
     ps = sub.add_parser("serve", help="serve the HTTP API and the browser editor")
     ps.add_argument("--host", help="API host (env RANGEPLAN_HOST, default 127.0.0.1)")

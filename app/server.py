@@ -88,7 +88,10 @@ def serve(host: str = "127.0.0.1", port: int = 8000, editor_port: int = 8080, ed
     # one job service for the API and the editor: the same workers, estimate, limits, errors
     service = JobService.start(cfg.workers, cfg.plan_timeout_s, cfg.max_queue, mode=cfg.executor,
                                memory_mb=cfg.worker_memory_mb, export_timeout_s=cfg.export_timeout_s,
-                               start=cfg.worker_start)
+                               start=cfg.worker_start, reference_while_compiling=True)
+    if service.kernels is not None and (running := service.kernels.running()) is not None:
+        _log(f"kernels: not compiled yet: compiling them in the background, {running.ready_in()} (pid {running.pid}, "
+             f"log {running.log}); plans run on the numpy reference meanwhile (same trajectories, ~100x slower)")
     handle = None
     try:
         if editor:

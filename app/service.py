@@ -19,14 +19,100 @@ same estimate, limit and mapping in the process that runs them.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
+import sys
+import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 from app.failures import import_timeout, out_of_memory, timeout
-from app.jobs import ExportJob, Failed, ImportJob, Job, Outcome, bounded, check_estimate, failed, run_bounded
+from app.jobs import (
+    ContourJob,
+    EditorJob,
+    ExportJob,
+    Failed,
+    ImportJob,
+    Job,
+    Outcome,
+    PlanJob,
+    SegmentJob,
+    bounded,
+    check_estimate,
+    failed,
+    run_bounded,
+)
 from app.workers import JobTimeout, PlanPool, PoolBusy, WorkerCrashed, WorkerOutOfMemory
 
-__all__ = ["JobService", "describe_failure"]
+__all__ = ["JobService", "KernelCompile", "describe_failure", "on_reference"]
+
+
+def on_reference(job: Job) -> Job:
+    """``job`` planning on the numpy reference (``settings.backend = "reference"``) where it
+    would plan on the compiled kernels; other jobs as they are."""
+    if isinstance(job, (PlanJob, EditorJob, SegmentJob)):
+        st = job.request.settings
+        if st.backend != "compiled":
+            return job
+        return dataclasses.replace(job, request=job.request.model_copy(
+            update={"settings": st.model_copy(update={"backend": "reference"})}))
+    if isinstance(job, ContourJob):
+        given = job.request.settings
+        if given.get("backend") not in (None, "compiled") or given.get("solver", "riccati") != "riccati":
+            return job
+        return dataclasses.replace(job, request=job.request.model_copy(
+            update={"settings": {**given, "backend": "reference"}}))
+    return job
+
+
+class KernelCompile:
+    """The service's view of the background compile of the kernels (issue 24;
+    :mod:`planner.orchestrator.background`): :meth:`running` is the compile while it runs
+    (its done-marker is looked for at most every ``poll_s`` seconds: one ``stat``; a compile
+    that ended unfinished leaves the service on the reference, ``ended``), None once the
+    kernels are compiled, when ``on_done`` is called once (from a watch thread too, so it
+    happens without traffic)."""
+
+    def __init__(self, running: Any, on_done: Any = None, poll_s: float = 0.5):
+        self._running = running
+        self._on_done = on_done
+        self._poll_s = poll_s
+        self.ended = False  #: the compile ended without finishing
+        self._checked = time.monotonic()
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        threading.Thread(target=self._watch, name="rangeplan-kernel-compile", daemon=True).start()
+
+    def running(self) -> Any:
+        """The background compile (a :class:`~planner.orchestrator.background.BackgroundCompile`), or None."""
+        done = False
+        with self._lock:
+            if self._running is None or time.monotonic() - self._checked < self._poll_s:
+                return self._running
+            self._checked = time.monotonic()
+            from planner._jit import kernel_cache_dir
+            from planner.orchestrator.background import MARKER, running_compile
+
+            if (kernel_cache_dir() / MARKER).exists():
+                self._running, done = None, True
+            elif running_compile() is None:  # ended without finishing (killed, or an error: its log says)
+                if not self.ended:
+                    print(f"rangeplan: the background compile ended without finishing (log {self._running.log}); "
+                          "plans keep running on the numpy reference", file=sys.stderr, flush=True)
+                self.ended = True
+        if done:
+            print("rangeplan: kernels compiled: new workers plan on them", file=sys.stderr, flush=True)
+            if self._on_done is not None:
+                self._on_done()
+        return self._running
+
+    def _watch(self) -> None:
+        while not self._stop.wait(self._poll_s):
+            if self.running() is None or self.ended:
+                return
+
+    def close(self) -> None:
+        self._stop.set()
 
 
 def describe_failure(exc: Exception, job: Job, timeout_s: float, memory_mb: int | None = None) -> Failed:
@@ -52,8 +138,14 @@ class JobService:
     it from an event loop on a thread pool sized to the pool's capacity."""
 
     def __init__(self, pool: PlanPool | None = None, *, timeout_s: float = 30.0, memory_mb: int | None = None,
-                 export_timeout_s: float | None = None):
+                 export_timeout_s: float | None = None, compiling: Any = None):
         self.pool = pool
+        #: the background compile of the kernels while it runs (``compiling``: a
+        #: :class:`~planner.orchestrator.background.BackgroundCompile`): jobs then plan on the
+        #: numpy reference, estimated at its costs; once it is done the pool's workers are renewed
+        self.kernels: KernelCompile | None = None
+        if compiling is not None:
+            self.kernels = KernelCompile(compiling, self._kernels_compiled)
         self.timeout_s = pool.timeout_s if pool is not None else float(timeout_s)
         self.memory_mb = pool.memory_mb if pool is not None else memory_mb
         #: the time limit of an export (a stored plan is bounded by its size, not its work)
@@ -63,17 +155,41 @@ class JobService:
     @classmethod
     def start(cls, workers: int, timeout_s: float, max_queue: int, mode: str = "process",
               memory_mb: int | None = None, export_timeout_s: float | None = None,
-              start: str | None = None) -> JobService:
+              start: str | None = None, reference_while_compiling: bool = False) -> JobService:
         """A service with a new pool of its own (:meth:`close` ends it); ``start``: how its
-        worker processes start (:data:`app.workers.START_METHODS`)."""
+        worker processes start (:data:`app.workers.START_METHODS`). ``reference_while_compiling``:
+        when the kernels are not compiled, compile them in the background
+        (:func:`planner.orchestrator.background.while_compiling`) and plan on the numpy
+        reference meanwhile (the workers start at once, on the reference)."""
+        compiling = None
+        if reference_while_compiling:
+            from planner.orchestrator.background import while_compiling
+
+            compiling = while_compiling("compiled", None)
         return cls(PlanPool(workers, timeout_s, max_queue, mode=mode, memory_mb=memory_mb, start=start),
-                   export_timeout_s=export_timeout_s)
+                   export_timeout_s=export_timeout_s, compiling=compiling)
+
+    def _kernels_compiled(self) -> None:
+        if self.pool is not None:
+            threading.Thread(target=self.pool.renew, name="rangeplan-pool-renew", daemon=True).start()
 
     def run(self, job: Job) -> Outcome:
         """Estimate, bound, run ``job`` on a worker; never raises for the input's fault, a
-        limit, a full queue or a dead worker: those are :class:`Failed`."""
+        limit, a full queue or a dead worker: those are :class:`Failed`. While the kernels
+        compile in the background a planning job runs on the numpy reference."""
+        running = self.kernels.running() if self.kernels is not None else None
+        if running is not None:
+            job = on_reference(job)
         refused = check_estimate(job, self.timeout_s)
         if refused is not None:
+            if running is not None and refused.error.code == "too_much_work":
+                when = ("are not compiled (the background compile ended without finishing)"
+                        if self.kernels is not None and self.kernels.ended
+                        else f"are compiling in the background, ready in {running.ready_in()}: retry then")
+                error = refused.error.model_copy(update={"message": (
+                    f"{refused.error.message}; the compiled kernels (~100x faster than the numpy reference this "
+                    f"server plans on until then) {when}")})
+                return dataclasses.replace(refused, error=error)
             return refused
         limit = self.export_timeout_s if isinstance(job, ExportJob) else self.timeout_s
         job = bounded(job, limit)
@@ -95,12 +211,23 @@ class JobService:
         return self.pool.stats() if self.pool is not None else {}
 
     def readiness(self) -> dict[str, Any]:
-        if self.pool is None:
-            return {"ready": True, "workers_ready": 1, "workers": 1, "failures": []}
-        return self.pool.readiness()
+        state = {"ready": True, "workers_ready": 1, "workers": 1, "failures": []} if self.pool is None \
+            else self.pool.readiness()
+        running = self.kernels.running() if self.kernels is not None else None
+        if running is None:
+            state["kernels"] = "compiled"
+        elif self.kernels is not None and self.kernels.ended:
+            state["kernels"] = (f"not compiled: the background compile ended without finishing (log {running.log}); "
+                                "plans run on the numpy reference")
+        else:
+            state["kernels"] = (f"compiling in the background, {running.ready_in()} left (pid {running.pid}); plans "
+                                "run on the numpy reference meanwhile")
+        return state
 
     def close(self, pool: bool = True) -> None:
         """Stop the waiting threads and (``pool``) the pool's workers."""
+        if self.kernels is not None:
+            self.kernels.close()
         if self._threads is not None:
             self._threads.shutdown(wait=False, cancel_futures=True)
             self._threads = None

@@ -95,8 +95,13 @@ def load_planner() -> tuple[str, str | None]:
     import app.formats
     import app.storage  # noqa: F401
     import planner
+    from planner.orchestrator.background import kernels_ready, running_compile
     try:
-        planner.warm_up()  # ~0.3 s from numba's on-disk cache; compiles after an install
+        if not kernels_ready() and running_compile() is not None:
+            # they compile in the background (app.service.JobService): jobs plan on the reference meanwhile
+            planner.warm_up(backend="reference")
+        else:
+            planner.warm_up()  # ~0.3 s from numba's on-disk cache; compiles after an install
     except Exception as exc:  # the worker cannot plan: say why (the pool reports it, /ready stays 503)
         return ("failed", f"{type(exc).__name__}: {exc}")
     return ("ready", None)
@@ -362,6 +367,8 @@ class PlanPool:
         self._workers: list[_Worker] = []
         self._closed = False
         self.replaced = 0
+        self.renewed = 0  #: times every worker was renewed (:meth:`renew`)
+        self._renew_lock = threading.Lock()
         if mode == "process":
             for _ in range(self.n):
                 w = _Worker(self.memory_mb, self.start)
@@ -378,8 +385,9 @@ class PlanPool:
 
     def _warm_up_inline(self) -> None:
         try:
-            import planner
-            planner.warm_up()
+            load = load_planner()
+            if load[0] != "ready":
+                raise RuntimeError(load[1])
             self._thread_ready = True
         except Exception:
             self._thread_ready = False
@@ -449,6 +457,32 @@ class PlanPool:
         finally:
             with self._lock:
                 self._inflight -= 1
+
+    def renew(self) -> None:
+        """Replace every worker by a new one (after the background compile of the kernels: the
+        new ones load the compiled kernels, issue 24). Waits for each worker's running job;
+        jobs that come meanwhile wait for a new worker. With ``start="forkserver"`` the fork
+        server (:mod:`app.worker_template`, which loaded the planner before the kernels were
+        compiled) is stopped and started again. Thread mode: nothing to do (the next plans
+        load the compiled kernels in this process)."""
+        if self.mode != "process":
+            return
+        with self._renew_lock:
+            old = [self._idle.get() for _ in range(self.n)]  # each free, in turn
+            for w in old:
+                w.stop()
+            if self.start == "forkserver":
+                from multiprocessing import forkserver
+
+                stop = getattr(forkserver._forkserver, "_stop", None)  # CPython's own (its tests use it)
+                if stop is not None:
+                    stop()
+            new = [_Worker(self.memory_mb, self.start) for _ in range(self.n)]
+            with self._lock:
+                self._workers = new
+                self.renewed += 1
+            for w in new:
+                self._idle.put(w)
 
     def _replace(self, old: _Worker) -> _Worker:
         new = _Worker(self.memory_mb, self.start)

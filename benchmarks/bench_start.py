@@ -5,6 +5,7 @@
     python benchmarks/bench_start.py --workers [--rounds 5]  # the service's workers, by start method
     python benchmarks/bench_start.py --breakdown [--refresh] # where a warm plan's time goes
     python benchmarks/bench_start.py --load-order --rounds 7 # kernels loaded with/without numba's refresh
+    python benchmarks/bench_start.py --make-run              # make run on a fresh clone to the first answer
 
 Every figure is one child process (``OPENBLAS_NUM_THREADS=1``), timed by wall clock and by
 the CPU seconds it used (``resource.getrusage(RUSAGE_CHILDREN)``: on a shared machine the
@@ -14,10 +15,15 @@ CPU time is the steadier figure); the table gives the median over ``--rounds``.
 - ``import planner``: ``python -c "import planner"``
 - ``plan warm``: ``python -m app.cli plan static/examples/table1.json -o OUT.json``, kernels cached
 - ``worker ready``: ``import planner; planner.warm_up()`` (what a service or batch worker does)
-- ``--cold``: ``plan cold``, the first plan with an empty kernel cache (compiles; once per round)
+- ``--cold``: ``plan cold``, the first plan with an empty kernel cache (before issue 24's
+  fallback: compiles; since: plans on the numpy reference while a background compile starts,
+  which is ended after the plan)
 - ``--install``: ``pip install --no-deps .`` into a new venv (the runtime dependencies of this
   venv reached by a ``.pth`` file, as after installing the lock) and the first plan from it,
-  with this machine's kernel cache (``install + plan``) and with an empty one (``--cold`` too)
+  with this machine's kernel cache (``install + plan``) and with an empty one (``--cold`` too):
+  as the CLI plans by default (on the numpy reference, the kernels compiling in the background)
+  and with ``--compile`` (compiled in the foreground first)
+- ``--make-run``: ``make run`` on a fresh clone (:func:`make_run`)
 
 ``--base REV`` checks REV out in a temporary git worktree and runs the same commands there
 (its kernels compile there first, ~1-3 minutes), alternating base and head in each round.
@@ -75,25 +81,121 @@ def cold_env(tmp: Path, round_: int, tree: Path) -> dict[str, str]:
     return {"NUMBA_CACHE_DIR": str(d), "RANGEPLAN_KERNEL_CACHE": str(d)}
 
 
+def stop_background_compile(cache_root: Path) -> None:
+    """End the background compile a cold-cache plan started (its pid in the lock file of
+    :mod:`planner.orchestrator.background`; its own session: its process group)."""
+    import signal
+
+    for lock in cache_root.glob("*/compile.lock"):
+        try:
+            pid = json.loads(lock.read_text() or "{}").get("pid")
+            if pid:
+                os.killpg(int(pid), signal.SIGKILL)
+        except (OSError, ValueError):
+            pass
+
+
 def install_rounds(rounds: int, tmp: Path, cold: bool) -> dict[str, list[tuple[float, float]]]:
-    """``pip install --no-deps .`` into a new venv, then its first plan of Table I."""
+    """``pip install --no-deps .`` into a new venv, then its first plan of Table I: with this
+    machine's kernel cache; with an empty one (``cold``) as the CLI does by default (it plans
+    on the numpy reference and compiles the kernels in the background: the issue's goal), and
+    with ``--compile`` (compiled in the foreground first). The background compile's CPU is not
+    in the CPU column (it is no child waited for; it competes for the CPU meanwhile); it is
+    ended after the plan."""
     site = next(Path(sys.prefix).glob("lib/python3*/site-packages"))
     res: dict[str, list[tuple[float, float]]] = {}
+    variants: list[tuple[str, str | None, list[str]]] = [("install + plan", None, [])]
+    if cold:
+        variants += [("install + plan, cold cache (reference meanwhile)", "icold", []),
+                     ("install + plan, cold cache, --compile (foreground)", "icomp", ["--compile"])]
     for r in range(rounds):
-        for label, env in [("install + plan", {})] + ([("install + plan, cold cache", {
-                "RANGEPLAN_KERNEL_CACHE": str(tmp / f"icold-{r}")})] if cold else []):
+        for label, cache, flags in variants:
+            env = {"RANGEPLAN_KERNEL_CACHE": str(tmp / f"{cache}-{r}")} if cache else {}
             venv = tmp / f"venv-{r}-{len(label)}"
             subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
             vsite = next(venv.glob("lib/python3*/site-packages"))
             (vsite / "deps.pth").write_text(str(site) + "\n")  # the locked dependencies of this venv
             wall0, cpu0 = timed([PY, "-m", "pip", "--python", str(venv / "bin" / "python"), "install", "--quiet",
                                  "--no-deps", str(ROOT)], tmp)
-            wall1, cpu1 = timed([str(venv / "bin" / "rangeplan"), "plan", str(TABLE1), "-o", str(tmp / "i.json")],
-                                tmp, env)
+            try:
+                wall1, cpu1 = timed([str(venv / "bin" / "rangeplan"), "plan", str(TABLE1), "-o",
+                                     str(tmp / "i.json"), *flags], tmp, env)
+            finally:
+                if cache:
+                    stop_background_compile(tmp / f"{cache}-{r}")
             res.setdefault(label, []).append((wall0 + wall1, cpu0 + cpu1))
             res.setdefault(label + ": install only", []).append((wall0, cpu0))
             shutil.rmtree(venv)
     return res
+
+
+def make_run(tmp: Path) -> None:
+    """``make run`` on a fresh clone (``git clone`` of this checkout's committed HEAD), an empty
+    kernel cache and data directory, the API and editor on free ports: the seconds to the venv
+    installed (pip, from the registry or pip's cache), to ``/ready`` 200 and to the first
+    200 of ``POST /v1/plan`` (Table I); then the server and its background compile are ended."""
+    import signal
+    import socket
+    import urllib.error
+    import urllib.request
+
+    def port() -> int:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            return s.getsockname()[1]
+
+    clone = tmp / "clone"
+    subprocess.run(["git", "clone", "--quiet", str(ROOT), str(clone)], check=True)
+    api = port()
+    env = {**os.environ, "RANGEPLAN_PORT": str(api), "RANGEPLAN_EDITOR_PORT": str(port()),
+           "RANGEPLAN_DATA_DIR": str(tmp / "data"), "RANGEPLAN_KERNEL_CACHE": str(tmp / "kernels"),
+           "RANGEPLAN_ACCESS_LOG": "0"}
+    env.pop("NUMBA_CACHE_DIR", None)
+    env.pop("VIRTUAL_ENV", None)
+    log = open(tmp / "make-run.log", "w+")
+    body = TABLE1.read_bytes()
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(["make", "run"], cwd=clone, env=env, stdout=log, stderr=subprocess.STDOUT,
+                            start_new_session=True)
+    marks: dict[str, float] = {}
+    try:
+        while "plan 200" not in marks:
+            if proc.poll() is not None:
+                log.seek(0)
+                raise RuntimeError(f"make run exited {proc.returncode}: {log.read()[-3000:]}")
+            now = time.perf_counter() - t0
+            if "installed" not in marks and (clone / ".venv" / ".runtime-stamp").exists():
+                marks["installed"] = now
+            if "installed" in marks:
+                try:
+                    if "ready 200" not in marks:
+                        with urllib.request.urlopen(f"http://127.0.0.1:{api}/ready", timeout=2) as r:
+                            if r.status == 200:
+                                marks["ready 200"] = time.perf_counter() - t0
+                    req = urllib.request.Request(f"http://127.0.0.1:{api}/v1/plan", data=body, method="POST",
+                                                 headers={"Content-Type": "application/json"})
+                    with urllib.request.urlopen(req, timeout=60) as r:
+                        if r.status == 200:
+                            marks["plan 200"] = time.perf_counter() - t0
+                            marks["backend"] = json.loads(r.read())["settings"]["backend"] == "compiled"
+                except (urllib.error.URLError, OSError):
+                    pass
+            time.sleep(0.2)
+    finally:
+        os.killpg(proc.pid, signal.SIGINT)
+        try:
+            proc.wait(20)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+        stop_background_compile(tmp / "kernels")
+    log.seek(0)
+    text = log.read()
+    print("\n| make run, fresh clone (empty kernel cache) | s |\n|---|---:|")
+    print(f"| venv installed (venv, pip upgraded, the lock, -e .) | {marks['installed']:.1f} |")
+    print(f"| GET /ready 200 | {marks.get('ready 200', float('nan')):.1f} |")
+    print(f"| first POST /v1/plan 200 (Table I, on the {'compiled kernels' if marks['backend'] else 'reference'}) "
+          f"| {marks['plan 200']:.1f} |")
+    print("\n" + "\n".join(ln for ln in text.splitlines() if "kernels" in ln)[-1500:])
 
 
 def profile_compile() -> None:
@@ -295,7 +397,14 @@ def main() -> None:
     ap.add_argument("--breakdown", action="store_true", help="where a warm plan's time goes, then exit")
     ap.add_argument("--refresh", action="store_true", help="with --breakdown: numba's own order of loading")
     ap.add_argument("--load-order", action="store_true", help="first plan's CPU, numba's order against ours")
+    ap.add_argument("--make-run", action="store_true", help="make run on a fresh clone to the first answer, then exit")
     args = ap.parse_args()
+    if args.make_run:
+        print(f"# {os.cpu_count()} CPUs; load average before: {load()}")
+        with tempfile.TemporaryDirectory() as tmpdir:
+            make_run(Path(tmpdir))
+        print(f"# load average after: {load()}")
+        return
     if args.profile_compile:
         profile_compile()
         return
@@ -328,7 +437,11 @@ def main() -> None:
                 for name, tree in trees:
                     for label, cmd in cases(tree, tmp, args.cold).items():
                         env = cold_env(tmp, r, tree) if label == "plan cold" else None
-                        results.setdefault((label, name), []).append(timed(cmd, tree, env))
+                        try:
+                            results.setdefault((label, name), []).append(timed(cmd, tree, env))
+                        finally:
+                            if env is not None:  # the CLI's background compile (issue 24): ended
+                                stop_background_compile(Path(env["RANGEPLAN_KERNEL_CACHE"]))
                 print(f"# round {r + 1}: load {load()}", flush=True)
             if args.install:
                 for label, v in install_rounds(args.rounds, tmp, args.cold).items():

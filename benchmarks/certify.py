@@ -165,7 +165,8 @@ def main() -> None:
         print(f"  {mode} {code}: {what[:300]}")
     print("\nmeasured CPU time / work estimate of the plans, on the reference machine (the CPU time over the "
           "machine's speed now: Table I's time now over its quiet time, REFERENCE_S)")
-    print("(a case over 1.5x is timed twice more right after a new calibration and keeps its least time; 'first over 1.5': at its first timing)")
+    print("(a case over 1.5x is timed twice more right after a new calibration and keeps its least time; "
+          "'first over 1.5': at its first timing)")
     print("| mode | plans | median | 99th percentile | largest | over 1.5 | first over 1.5 |\n"
           "|---|---|---|---|---|---|---|")
     for mode, r in ratios.items():

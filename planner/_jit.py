@@ -22,6 +22,9 @@ from __future__ import annotations
 
 import hashlib
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -29,7 +32,7 @@ from typing import Any
 import numba
 from numba.core import caching
 
-__all__ = ["njit", "KERNEL_SOURCES", "kernel_cache_dir", "kernel_key", "STRICT_REFRESH"]
+__all__ = ["njit", "KERNEL_SOURCES", "kernel_cache_dir", "kernel_key", "STRICT_REFRESH", "numpy_only", "kernels_off"]
 
 #: numba's own order: refresh the whole target context before loading a cached kernel
 #: (``RANGEPLAN_KERNEL_REFRESH=1``; measured by ``benchmarks/bench_start.py``)
@@ -139,3 +142,24 @@ def njit(*args: Any, **options: Any) -> Any:
     if args:
         raise TypeError("planner._jit.njit takes no positional signature; declare none (one dispatch per call)")
     return wrap
+
+
+_NUMPY_ONLY: ContextVar[bool] = ContextVar("rangeplan_numpy_only", default=False)
+
+
+def kernels_off() -> bool:
+    """Whether the current plan runs on the numpy reference only (``settings.backend =
+    "reference"``): the few helpers that call a compiled kernel whatever the backend (the
+    singularity measure, the corridor distances, the paper mode's Riccati solve) use their
+    numpy twins instead, so that a reference plan compiles nothing (issue 24)."""
+    return _NUMPY_ONLY.get()
+
+
+@contextmanager
+def numpy_only(on: bool = True) -> Iterator[None]:
+    """Within the block (this thread / task), :func:`kernels_off` is ``on``."""
+    token = _NUMPY_ONLY.set(on)
+    try:
+        yield
+    finally:
+        _NUMPY_ONLY.reset(token)

@@ -40,7 +40,8 @@ def test_ready_only_once_the_workers_can_plan(tmp_path):
             assert time.monotonic() < deadline, "workers never became ready"
             time.sleep(0.05)
         body = c.get("/ready").json()
-        assert body == {"status": "ready", "workers_ready": body["workers_ready"], "workers": 2, "failures": []}
+        assert body == {"status": "ready", "workers_ready": body["workers_ready"], "workers": 2, "failures": [],
+                        "kernels": "compiled"}
         assert body["workers_ready"] >= 1
         assert c.post("/v1/plan", json=TABLE1).status_code == 200
 

@@ -30,6 +30,9 @@ class ReadyModel(BaseModel):
     workers_ready: int = Field(description="Planning workers that have loaded the kernels (count)")
     workers: int = Field(description="Planning workers (count)")
     failures: list[str] = Field(description="Why workers cannot plan, if any")
+    kernels: str = Field("compiled", description="'compiled', or 'compiling in the background, about N s left "
+                         "...' after an install: plans then run on the numpy reference (same trajectories, ~100x "
+                         "slower; their work estimate and limit at its costs)")
 
 
 @router.get("/health", response_model=HealthModel)
@@ -48,5 +51,6 @@ async def ready(request: Request):
     has failed to; 503 before (or when they cannot plan). The container's health check."""
     state = service(request).readiness()
     body = {"status": "ready" if state["ready"] else "failed" if state["failures"] else "starting",
-            "workers_ready": state["workers_ready"], "workers": state["workers"], "failures": state["failures"]}
+            "workers_ready": state["workers_ready"], "workers": state["workers"], "failures": state["failures"],
+            "kernels": state.get("kernels", "compiled")}
     return JSONResponse(body, status_code=200 if state["ready"] else 503)

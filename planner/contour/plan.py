@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from .._jit import numpy_only
 from ..errors import PlannerError
 from ..exchange import read_gcode
 from ..model import RobotModel, load_robot
@@ -112,6 +113,11 @@ def plan_contour(request: Any, *, program: Program | None = None) -> PlanResult:
     t0 = time.perf_counter()
     req = parse_contour_request(request)
     st = req.plan_settings()
+    with numpy_only(st.backend == "reference"):  # the numpy reference compiles nothing (issue 24)
+        return _plan_contour(req, st, program, t0)
+
+
+def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0: float) -> PlanResult:
     if program is None:
         program = read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
     tol = req.tolerance_m if req.tolerance_m is not None else (program.tolerance_m or DEFAULT_CONTOUR_TOLERANCE_M)

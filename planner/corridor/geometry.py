@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._jit import kernels_off
 from . import kernels as gk
 
 __all__ = ["APPROACH_MIN_M", "CorridorDistances", "Gap", "approach_direction", "box_distance", "corridor_distances",
@@ -178,7 +179,14 @@ class CorridorDistances:
 def corridor_distances(poses: np.ndarray, segment_of: np.ndarray, segments: Sequence) -> CorridorDistances:
     """The corridor distances of the poses (K, 3), each sample's segment ``segment_of`` (K,)
     known: linear in the samples (:mod:`planner.corridor.kernels`; the same numbers as
-    :func:`corridor_violation`, :func:`psi_violation` and :func:`polygon_violation`)."""
+    :func:`corridor_violation`, :func:`psi_violation` and :func:`polygon_violation`, which
+    it uses on the numpy reference backend: :func:`planner._jit.kernels_off`)."""
+    if kernels_off():
+        poses = np.asarray(poses, dtype=float)
+        has_poly = any(getattr(s, "polygon", None) is not None for s in segments)
+        return CorridorDistances(corridor_violation(poses, segments), psi_violation(poses, segments),
+                                 polygon_violation(poses[:, :2], segments) if has_poly else None,
+                                 len(poses) * len(segments) * (2 if has_poly else 1))
     lo = np.ascontiguousarray([s.lower for s in segments], dtype=float)
     hi = np.ascontiguousarray([s.upper for s in segments], dtype=float)
     polys = [getattr(s, "polygon", None) for s in segments]

@@ -28,6 +28,7 @@ from typing import Any, cast
 
 import numpy as np
 
+from .._jit import kernels_off
 from .kernels import riccati
 from .prediction import prediction_matrices
 
@@ -166,6 +167,8 @@ def solve_riccati(Ad, Bd, C, x0, qa, qb, qu, ra, rb) -> np.ndarray:
         raise ValueError("solve_riccati needs the 6-state model of eq. (9) and C = [I 0] (the pose)")
     if np.any(Ad[:, :3] != np.eye(6, 3)):
         raise ValueError("solve_riccati needs Ad = [[I, *], [0, *]] (the hold of eq. 9)")
+    if kernels_off():  # the numpy reference backend: the same minimiser by the banded KKT solve
+        return solve_structured(Ad, Bd, C, x0, qa, qb, qu, ra, rb)
     U = np.empty((N, m))
     c = np.ascontiguousarray
     if not riccati(c(Ad), c(Bd), c(x0, dtype=float), c(qa), c(qb), c(qu[0], dtype=float), c(ra), c(rb), U):

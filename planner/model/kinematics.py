@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+from .._jit import kernels_off
 from .kernels import smallest_singular_values
 from .robot import RobotModel
 
@@ -88,6 +89,10 @@ def singularity_measure(model: RobotModel, poses: np.ndarray) -> np.ndarray:
     with np.errstate(invalid="ignore", divide="ignore"):  # a zero-length leg has no direction
         J = leg_jacobians(model, np.atleast_2d(np.asarray(poses, float)))
         Jn = J * np.array([1.0, 1.0, 1.0 / model.char_length])
+    if kernels_off():  # the numpy reference (LAPACK's gesvd); 0 for a matrix with a non-finite entry
+        bad = ~np.isfinite(Jn).all(axis=(1, 2))
+        Jn[bad] = 0.0
+        return np.linalg.svd(Jn, compute_uv=False)[:, -1]
     return smallest_singular_values(np.ascontiguousarray(Jn))
 
 

@@ -75,9 +75,15 @@ def _cached(dispatcher: Any) -> bool | None:
         return None
 
 
+def _inlined(dispatcher: Any) -> bool:
+    """A kernel inlined into its callers (``inline="always"``): compiled within them, never cached itself."""
+    return getattr(dispatcher, "targetoptions", {}).get("inline") == "always"
+
+
 def pending_kernels() -> list[str]:
-    """The kernels (``module.name``) that would compile, not load, on first use."""
-    return [name for name, d in kernel_dispatchers().items() if _cached(d) is False]
+    """The kernels (``module.name``) that would compile, not load, on first use (the inlined
+    ones, compiled within their callers, are not counted)."""
+    return [name for name, d in kernel_dispatchers().items() if not _inlined(d) and _cached(d) is False]
 
 
 def _cost(qualname: str) -> float:

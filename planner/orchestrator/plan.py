@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from .._jit import numpy_only
 from ..constraints import MARGIN_M, MARGIN_RAD, ConstrainedController
 from ..corridor import RangeSequence, Segmentation, range_sequence, reference_sequence
 from ..corridor import segment as segment_layout
@@ -58,7 +59,8 @@ def segment(request: Any, *, robot: RobotModel | None = None) -> Segmentation:
     req = parse_request(request)
     if req.layout is None:
         raise invalid("layout", "the request has no layout to segment")
-    return segment_layout(req.layout, _robot(req, robot), req.settings)
+    with numpy_only(req.settings.backend == "reference"):
+        return segment_layout(req.layout, _robot(req, robot), req.settings)
 
 
 def plan(request: Any, *, robot: RobotModel | None = None, segments: Sequence[Segment] | None = None,
@@ -68,9 +70,16 @@ def plan(request: Any, *, robot: RobotModel | None = None, segments: Sequence[Se
     ``segments`` its corridor. ``work_limit_s``: a layout's corridor, once segmented, is
     estimated again (:func:`~planner.orchestrator.work.check_work`) and refused with
     ``too_much_work`` over this many seconds. Raises :class:`~planner.errors.PlannerError`
-    naming the cause."""
+    naming the cause. ``settings.backend = "reference"`` runs numpy only (no kernel is
+    compiled or loaded: :func:`planner._jit.numpy_only`)."""
     t0 = time.perf_counter()
     req = parse_request(request)
+    with numpy_only(req.settings.backend == "reference"):
+        return _plan(req, t0, robot, segments, work_limit_s)
+
+
+def _plan(req: PlanRequest, t0: float, robot: RobotModel | None, segments: Sequence[Segment] | None,
+          work_limit_s: float | None) -> PlanResult:
     model = _robot(req, robot)
     st = req.settings
     if segments is None:
@@ -218,8 +227,9 @@ def plan_timed(name: str | None, model: RobotModel, st: Settings, segments: Sequ
     t0 = time.perf_counter()
     sub = st.model_copy(update={"fastest": False, "segment_samples": [int(c) for c in counts],
                                 "samples_per_segment": int(max(counts)), "require_settled": True})
-    result = _run(name, model, sub, segments, None, abandon=abandon,
-                  timing={"method": "segment_samples"})[0]
+    with numpy_only(st.backend == "reference"):
+        result = _run(name, model, sub, segments, None, abandon=abandon,
+                      timing={"method": "segment_samples"})[0]
     result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3
     return result
 
@@ -249,14 +259,18 @@ def _fastest(name: str | None, model: RobotModel, st: Settings, segments: Sequen
     return res
 
 
-def warm_up() -> float:
+def warm_up(backend: str = "compiled") -> float:
     """Compile (first run after installing) or load (afterwards, from numba's on-disk cache)
     the compiled kernels of every path by planning tiny corridors: the paper mode; the
     constrained mode with equalities eliminated (psi fixed), with the QP in the inputs (a
     psi range) and the slack problem (too little time); and segments a small layout in both
-    cell shapes. Returns the seconds taken. Servers
+    cell shapes. Returns the seconds taken, and marks the cache compiled (:func:`.background.mark_compiled`). Servers
     call it before taking jobs, ``make`` after installing (``python -m planner``). Compiling is
-    reported on stderr with an estimate of the time left (:mod:`.compiling`)."""
+    reported on stderr with an estimate of the time left (:mod:`.compiling`).
+    ``backend="reference"``: the same on the numpy reference (imports and first calls; nothing
+    compiles, no marker): a service's workers while the kernels compile in the background
+    (:mod:`.background`)."""
+    from .background import mark_compiled
     from .compiling import compile_progress
 
     t0 = time.perf_counter()
@@ -266,7 +280,7 @@ def warm_up() -> float:
     turning = [{"lower": [0.0, 0.0, 0.0], "upper": [0.0, 0.0, 0.0]},
                {"lower": [0.0, 0.0, 0.0], "upper": [0.04, 0.01, 0.02]},
                {"lower": [0.04, 0.01, 0.02], "upper": [0.04, 0.01, 0.02]}]
-    base = {"N": 5, "require_settled": False, "tail_max_s": 0.05}
+    base = {"N": 5, "require_settled": False, "tail_max_s": 0.05, "backend": backend}
     runs: list[tuple[list, dict]] = [
         (fixed, {"mode": "paper"}), (fixed, {"mode": "constrained"}),
         (turning, {"mode": "constrained", "samples_per_segment": 30}),
@@ -281,5 +295,8 @@ def warm_up() -> float:
                 "bounds": {"lower": [-0.02, -0.02], "upper": [0.02, 0.02]},
                 "obstacles": [{"type": "rectangle", "lower": [-0.005, -0.005], "upper": [0.005, 0.005]},
                               {"type": "circle", "center": [0.01, -0.01], "radius": 0.003}],
-                "cell": {"shape": shape, "size": 0.005}, "start": [-0.015, -0.015, 0.0], "end": [0.015, 0.015, 0.0]}})
+                "cell": {"shape": shape, "size": 0.005}, "start": [-0.015, -0.015, 0.0], "end": [0.015, 0.015, 0.0]},
+                "settings": {"backend": backend}})
+    if backend == "compiled":
+        mark_compiled()  # every kernel is in the cache now: the done-marker (.background.kernels_ready)
     return time.perf_counter() - t0
