@@ -6,6 +6,7 @@ the programmed feed never exceeded, the drive limits, rest at plunges, the bad p
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -81,9 +82,40 @@ def chord_deviation(result, path: shapely.MultiLineString, step: float) -> float
     start = np.repeat(np.cumsum(m) - m, m)
     frac = (np.arange(owner.size) - start) / np.repeat(m - 1, m)
     pts = a[owner] + frac[:, None] * (b - a)[owner]
-    d = shapely.distance(shapely.points(pts), path)
+    # the path's pieces in a tree: the nearest piece of each point (exact, and much faster
+    # than the distance to the whole multi-line of densified arcs)
+    coords = [np.asarray(g.coords) for g in path.geoms]
+    pieces = shapely.linestrings(np.concatenate([np.stack((c[:-1], c[1:]), axis=1) for c in coords]))
+    _, d = shapely.STRtree(pieces).query_nearest(shapely.points(pts), return_distance=True, all_matches=False)
     worst = float(d.max()) + step / 2
     return worst
+
+
+def feed_excess(result, program: str) -> float:
+    """The largest excess over the programmed F of the line being cut [m/s], of the cut samples'
+    speed and of each chord between two cut samples over Ts (the larger F of its two ends):
+    F in effect at each source line read from the text here (modal F, G20/G21), not from the
+    planner's parser."""
+    unit, f, feed = 1e-3, 0.0, {}
+    for n, text in enumerate(program.splitlines(), start=1):
+        code = text.split("(")[0].split(";")[0].upper()
+        if "G20" in code:
+            unit = 0.0254
+        if "G21" in code:
+            unit = 1e-3
+        m = re.search(r"F\s*([-+0-9.]+)", code)
+        if m:
+            f = float(m.group(1)) * unit / 60
+        feed[n] = f
+    c = result.contour
+    cut = np.asarray(c.cutting)
+    F = np.array([feed.get(x, np.inf) if x is not None else np.inf for x in c.program_line])
+    speed = np.hypot(*result.velocity[:, :2].T)
+    excess = float(np.max(np.where(cut, speed - F, -np.inf), initial=0.0))
+    both = cut[:-1] & cut[1:]
+    chord = np.hypot(*np.diff(result.pose[:, :2], axis=0).T) / result.settings.Ts
+    f2 = np.maximum(F[:-1], F[1:])
+    return max(excess, float(np.max(np.where(both, chord - f2, -np.inf), initial=0.0)))
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,9 @@ forwards and backwards), turned into sample counts per cell; ``program`` feed ca
 each move's F and lowers the profile until the plan is feasible and no sample is faster than
 F; ``fastest`` scales the profile (``v = lambda v0``, ``a = lambda^2 a0``) to the largest feasible
 ``lambda`` (:func:`largest_feasible`, from the scale of the cut before; each candidate
-abandoned at its first step that needs slack).
+abandoned at its first step that needs slack). Where a feed's own search finds no timing the
+other's is tried (:func:`_search`), so a pass one feed plans is planned by both; an
+``infeasible`` verdict's advice is checked before it is given (:func:`_confirmed`).
 Rapids and feed moves above the cutting height are free moves inside a box about the
 straight move (the ``fastest`` timing of :func:`planner.plan`); plunges, retracts, G4 and
 M0 are the robot at rest. The parts are joined sample to sample: each part starts at the pose
@@ -36,6 +38,7 @@ from ..schema import (
     DEFAULT_CONTOUR_TOLERANCE_M,
     MAX_SEGMENTS,
     MAX_TOTAL_STEPS,
+    MIN_TS,
     ContourRequest,
     ContourSection,
     CorridorSamples,
@@ -72,6 +75,21 @@ SCALE_MIN, SCALE_MAX = 1 / 64, 64.0
 #: the longest cell along the path, in samples at the cell speed (short cells keep the
 #: criterion's pull on the cell centre near the path's progress)
 CELL_SAMPLES = 4
+#: program feed: the profile's scales tried (from PROGRAM_MARGIN down by 0.7 each)
+PROGRAM_TRIES = 8
+#: an infeasible piece's advice, checked: the tolerance times this, then the sample time times this
+ADVICE_TOLERANCE = 2.0
+ADVICE_TS = 0.5
+#: the checks of the advice take at most this many times the piece's estimate (estimate_contour
+#: adds it for the largest pass), and at least ADVICE_MIN_S [s]
+ADVICE_WORK = 3.0
+ADVICE_MIN_S = 4.0
+#: the largest tolerance a request may give [m] (ContourRequest.tolerance_m)
+MAX_CONTOUR_TOLERANCE_M = 0.01
+#: the deviation's candidate elements: those within this many tolerances along the pass of the
+#: sample's own (and its neighbours), at most NEAR_MAX of them
+NEAR_TOLERANCES = 2.0
+NEAR_MAX = 32
 #: room for the box about a rapid [m]
 RAPID_MARGIN_M = 0.002
 
@@ -144,7 +162,8 @@ def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0
         first = len(parts)
         geo = PathGeometry(b.elements, origin)
         for chunk in _chunks(b.elements):
-            part = _cut(req, model, st, chunk, origin, tol, psi, pos, geo, b.elements, hint)
+            part = _cut(req, model, st, chunk, origin, tol, psi, pos, geo, b.elements, hint,
+                        len(program.passes))
             hint = part.scale if part.scale is not None else hint
             parts.append(part)
             pos = part.result.pose[-1, :2].copy()
@@ -229,19 +248,55 @@ def _profile(t: Tube, v_cap: np.ndarray, a: float, Ts: float, a_turn: float | No
     mean = np.maximum(0.5 * (node[:-1] + node[1:]), 1e-9)
     speed = np.minimum(v, np.maximum(mean, 0.25 * v))[cells]
     counts[cells] = np.maximum(1, np.ceil(t.length[cells] / np.maximum(speed, 1e-12) / Ts - 1e-9)).astype(np.int64)
+    counts[t.lead] = 1  # the lead cells at the pass's ends (planner.contour.tube)
     return counts
 
 
 def _cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int], origin: np.ndarray, tol: float,
          psi: float, pos: np.ndarray, geo: PathGeometry, elements: list[PathElement],
-         hint: tuple[float, float] | None = None) -> _Part:
+         hint: tuple[float, float] | None = None, passes: int = 1) -> _Part:
     """One piece of a pass planned rest to rest. ``hint``: the ``fastest`` scale found for the
     piece before (where its search starts; the search's result is bracketed the same way from
-    any start)."""
+    any start). No timing found: the ``infeasible`` error with its advice checked
+    (:func:`_confirmed`)."""
     els = [elements[k] for k in chunk]
-    feed = np.array([e.feed_m_s for e in els])
-    v_ref = float(feed.max()) if req.feed == "program" else V0_M_S
-    piece_max = max(v_ref * st.Ts * CELL_SAMPLES, 4 * tol)
+    st = st.model_copy(update={"settle_speed_m_s": min(st.settle_speed_m_s, 1e-4)})
+    found = _search(req.feed, model, st, _tubes(model, st, chunk, els, origin, tol, psi, pos, elements), chunk,
+                    els, hint)
+    if found.result is None:
+        raise _confirmed(req, model, st, chunk, els, origin, tol, psi, pos, elements, found, hint, passes)
+    result, t = found.result, found.tube
+    assert t is not None
+    K = len(result.time)
+    seg = _segment_of(counts_of(result, len(t.segments)), K)
+    elem = t.element[seg]
+    cutting = np.ones(K, bool)
+    line = geo.line[elem].astype(np.int64)
+    dev = _deviation(result.pose[:, :2], elem, geo, tol)
+    part = _Part(result, cutting, line, dev, cells=len(t.segments) - 2, segments=t.segments)
+    part.scale = found.scale
+    return part
+
+
+def _tubes(model: RobotModel, st: Settings, chunk: list[int], els: list[PathElement], origin: np.ndarray,
+           tol: float, psi: float, pos: np.ndarray, elements: list[PathElement]) -> Callable[[float], Tube]:
+    """The tube of a piece with cells sized for a speed [m/s] (:data:`CELL_SAMPLES` samples at
+    it, at least 4 tolerances long), each size built once."""
+    made: dict[float, Tube] = {}
+
+    def at(v: float) -> Tube:
+        piece_max = max(v * st.Ts * CELL_SAMPLES, 4 * tol)
+        key = round(math.log(piece_max) * 8)  # sizes within 13 % share a tube
+        if key not in made:
+            made[key] = _tube(model, chunk, els, origin, tol, psi, pos, elements, piece_max)
+        return made[key]
+
+    return at
+
+
+def _tube(model: RobotModel, chunk: list[int], els: list[PathElement], origin: np.ndarray, tol: float, psi: float,
+          pos: np.ndarray, elements: list[PathElement], piece_max: float) -> Tube:
+    """The tube of a piece, starting where the robot is, its reach checked."""
     t = tube(els, origin, tol, psi, piece_max)
     t.element = np.asarray(chunk)[t.element]
     # the first point: where the robot is (within the tube)
@@ -258,32 +313,86 @@ def _cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int],
         line = elements[int(t.element[min(k, len(t.element) - 1)])].line
         raise PlannerError(err.code, f"line {line}: the path leaves the robot's reach at origin "
                            f"[{origin[0]:g}, {origin[1]:g}] m: {err.message}", "program") from None
-    st = st.model_copy(update={"settle_speed_m_s": min(st.settle_speed_m_s, 1e-4)})
+    return t
+
+
+class _Found:
+    """A timing search's outcome: the plan (None: none found), the ``fastest`` scales, and
+    where the candidates stopped (the source line of the first step that needed slack, the
+    latest of them)."""
+
+    def __init__(self, Ts: float) -> None:
+        self.Ts = Ts
+        self.result: PlanResult | None = None
+        self.tube: Tube | None = None  #: the tube of the result
+        self.scale: tuple[float, float] | None = None
+        self.stop_line: int | None = None
+        self.plans = 0
+
+    def failed(self, err: PlannerError, t: Tube, counts: np.ndarray, els_line: Callable[[int], int]) -> None:
+        """Note where a candidate stopped (``at t = ... s`` in the controller's message)."""
+        self.plans += 1
+        try:
+            ts = float(err.message.split("at t = ")[1].split(" s")[0])
+        except (IndexError, ValueError):
+            return
+        k = int(round(ts / self.Ts))
+        seg = _segment_of(counts, k + 1)[-1] if k > 0 else 0
+        self.stop_line = els_line(int(t.element[min(int(seg), len(t.element) - 1)]))
+
+
+def _search(feed_mode: str, model: RobotModel, st: Settings, tube_at: Callable[[float], Tube], chunk: list[int],
+            els: list[PathElement], hint: tuple[float, float] | None, deadline: float | None = None) -> _Found:
+    """A timing of the piece for the feed mode, in the tube ``tube_at(v)`` with cells sized for
+    the profile's speed ``v`` (``program``: the programmed F times the profile's scale, so that
+    a slower profile has shorter cells: the criterion pulls the robot toward each cell's
+    centre, and a cell of many samples let it run ahead of the profile, faster than F, at
+    every scale; ``fastest``: :data:`V0_M_S`). If the mode's own search finds none, the
+    other mode's (a timing under the programmed F is one ``fastest`` may use; ``program``
+    retries the ``fastest`` profile capped by F, kept where no sample exceeds F).
+    ``deadline`` (``time.process_time``: compute time, as :func:`estimate_contour` counts it):
+    candidates after it are not planned."""
+    feed = np.array([e.feed_m_s for e in els])
     name = f"line {els[0].line}"
-    feed_of = feed[np.searchsorted(chunk, t.element)]
-    if req.feed == "program":
-        result = None
-        scale_found = None
+    found = _Found(st.Ts)
+    lines = dict(zip(chunk, (e.line for e in els)))
+
+    def feed_on(t: Tube) -> np.ndarray:
+        return feed[np.searchsorted(chunk, t.element)]
+
+    def attempt(t: Tube, counts: np.ndarray) -> PlanResult | None:
+        if deadline is not None and time.process_time() > deadline:
+            return None
+        _check_counts(counts, els[0].line)
+        try:
+            res = plan_timed(name, model, st, t.segments, counts.tolist())
+        except PlannerError as err:
+            if err.code not in ("infeasible", "not_settled"):
+                raise
+            found.failed(err, t, counts, lines.__getitem__)
+            return None
+        found.plans += 1
+        return res if feasible(res) else None
+
+    def program_loop() -> tuple[PlanResult, Tube] | None:
         scale = PROGRAM_MARGIN
-        for _ in range(8):
+        for _ in range(PROGRAM_TRIES):
+            t = tube_at(float(feed.max()) * scale)
+            feed_of = feed_on(t)
             counts = _profile(t, feed_of * scale, A_PROGRAM_M_S2 * scale * scale, st.Ts)
-            _check_counts(counts, els[0].line)
-            try:
-                res = plan_timed(name, model, st, t.segments, counts.tolist())
-            except PlannerError as err:
-                if err.code not in ("infeasible", "not_settled"):
-                    raise
+            res = attempt(t, counts)
+            if res is None:
                 scale *= 0.7
                 continue
             over = _overspeed(res, t, counts, feed_of)
-            if feasible(res) and over <= 1.0:
-                result = res
-                break
-            scale *= min(0.95 / max(over, 1e-9), 0.9) if over > 1.0 else 0.7
-        if result is None:
-            raise _infeasible(els[0].line, tol, st)
-    else:
-        v_cap = np.full(len(t.segments), V0_M_S)
+            if over <= 1.0:
+                return res, t
+            scale *= min(0.95 / max(over, 1e-9), 0.9)
+        return None
+
+    def scaled(t: Tube, v_cap: np.ndarray, capped: bool, lam0: float, mu0: float, high: float
+               ) -> tuple[PlanResult, tuple[float, float]] | None:
+        feed_of = feed_on(t)
         tried: dict[bytes, PlanResult | None] = {}  # by the sample counts (scales often give the same)
 
         def run(lam: float, mu: float = 1.0) -> PlanResult | None:
@@ -291,38 +400,92 @@ def _cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int],
                               J0_M_S3 * lam ** 3)
             key = counts.tobytes()
             if key not in tried:
-                _check_counts(counts, els[0].line)
-                try:
-                    res = plan_timed(name, model, st, t.segments, counts.tolist())
-                    tried[key] = res if feasible(res) else None
-                except PlannerError as err:
-                    if err.code not in ("infeasible", "not_settled"):
-                        raise
-                    tried[key] = None
+                res = attempt(t, counts)
+                if res is not None and capped and _overspeed(res, t, counts, feed_of) > 1.0:
+                    res = None
+                tried[key] = res
             return tried[key]
 
         # 1. the whole profile (speeds, accelerations); 2. the speeds alone (cell speed and the
         # curvature and corner limits), the accelerations between them as found: where the
         # start and the stop bound the first scale, the path between them can go faster
-        lam0, mu0 = hint if hint is not None else (1.0, 1.0)
-        lam = largest_feasible(lambda x: run(x) is not None, lam0)
+        lam = largest_feasible(lambda x: run(x) is not None, lam0, high=high)
         if lam is None:
-            raise _infeasible(els[0].line, tol, st)
-        mu = largest_feasible(lambda x: run(lam, x) is not None, max(mu0, 1.0), low=1.0)
+            return None
+        mu = largest_feasible(lambda x: run(lam, x) is not None, max(mu0, 1.0), low=1.0, high=max(high / lam, 1.0))
         assert mu is not None  # mu = 1 is lam's plan
-        scale_found = (lam, mu)
         best = run(lam, mu)
         assert best is not None
-        result = best
-    K = len(result.time)
-    seg = _segment_of(counts_of(result, len(t.segments)), K)
-    elem = t.element[seg]
-    cutting = np.ones(K, bool)
-    line = geo.line[elem].astype(np.int64)
-    dev = _deviation(result.pose[:, :2], elem, geo, tol)
-    part = _Part(result, cutting, line, dev, cells=len(t.segments) - 2, segments=t.segments)
-    part.scale = scale_found
-    return part
+        return best, (lam, mu)
+
+    if feed_mode == "program":
+        got_p = program_loop()
+        if got_p is None:  # the fastest profile under F
+            t = tube_at(float(feed.max()) * 0.5)
+            got = scaled(t, feed_on(t) * PROGRAM_MARGIN, True, 0.5, 1.0, 1.0)
+            got_p = (got[0], t) if got is not None else None
+        if got_p is not None:
+            found.result, found.tube = got_p
+    else:
+        lam0, mu0 = hint if hint is not None else (1.0, 1.0)
+        t = tube_at(V0_M_S)
+        got = scaled(t, np.full(len(t.segments), V0_M_S), False, lam0, mu0, SCALE_MAX)
+        if got is not None:
+            (found.result, found.scale), found.tube = got, t
+        else:  # a timing under the programmed F
+            got_p = program_loop()
+            if got_p is not None:
+                found.result, found.tube = got_p
+    return found
+
+
+def _confirmed(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int], els: list[PathElement],
+               origin: np.ndarray, tol: float, psi: float, pos: np.ndarray, elements: list[PathElement],
+               found: _Found, hint: tuple[float, float] | None, passes: int) -> PlannerError:
+    """The ``infeasible`` error of a piece no timing plans, its advice checked (issue 22, as
+    :func:`planner.orchestrator.plan._more_time_advice` does for plans): the piece planned
+    again, by the same search, at :data:`ADVICE_TOLERANCE` times the tolerance, then at
+    :data:`ADVICE_TS` times the sample time; the first that plans is named ("tolerance_m
+    0.02 plans, checked"), else the error says neither helps and where the plans stop.
+    Bounded: the checks together take at most :data:`ADVICE_WORK` times the piece's own
+    estimate (:func:`estimate_contour` counts it), at least :data:`ADVICE_MIN_S`; a candidate
+    not planned within that is said so."""
+    line = els[0].line
+    where = f"line {found.stop_line}" if found.stop_line is not None else f"line {line}"
+    head = (f"line {line}: no timing keeps the tool within {tol * 1e3:g} mm of the path within the drive limits "
+            f"at a sample time of {st.Ts:g} s (the plans stop at {where})")
+    budget = max(ADVICE_WORK * _piece_estimate(req.feed, els, st.Ts, passes), ADVICE_MIN_S)
+    deadline = time.process_time() + budget
+    candidates: list[tuple[str, float, float]] = []
+    if tol * ADVICE_TOLERANCE <= MAX_CONTOUR_TOLERANCE_M:
+        candidates.append((f"tolerance_m {tol * ADVICE_TOLERANCE:g} ({tol * ADVICE_TOLERANCE * 1e3:g} mm)",
+                           tol * ADVICE_TOLERANCE, st.Ts))
+    if st.Ts * ADVICE_TS >= MIN_TS:
+        candidates.append((f"settings.Ts {st.Ts * ADVICE_TS:g} s", tol, st.Ts * ADVICE_TS))
+    tried: list[str] = []
+    for what, tol2, Ts2 in candidates:
+        if time.process_time() > deadline:
+            break
+        st2 = st.model_copy(update={"Ts": Ts2})
+        try:
+            got = _search(req.feed, model, st2, _tubes(model, st2, chunk, els, origin, tol2, psi, pos, elements),
+                          chunk, els, hint, deadline)
+        except PlannerError:
+            got = None
+        if got is not None and got.result is not None:
+            before = "".join(f"{w} does not plan; " for w in tried)
+            return PlannerError("infeasible", f"{head}; {before}{what} plans, checked",
+                                "tolerance_m" if tol2 != tol else "settings.Ts")
+        if time.process_time() <= deadline:
+            tried.append(what)
+    not_tried = [w for w, _, _ in candidates if w not in tried]
+    if tried and not not_tried:
+        return PlannerError("infeasible", f"{head}; neither {' nor '.join(tried)} plans either (checked): the "
+                            f"path at {where} asks more of the drives than a tube of that width allows",
+                            "tolerance_m")
+    msg = f"{head}; {' and '.join(tried)} do not plan either (checked); " if tried else f"{head}; "
+    return PlannerError("infeasible", msg + f"{' and '.join(not_tried)} not checked within the work bound "
+                        f"({budget:.2g} s); give a larger tolerance_m or a smaller settings.Ts", "tolerance_m")
 
 
 def largest_feasible(ok: Callable[[float], bool], start: float, resolution: float = SCALE_RESOLUTION,
@@ -379,12 +542,6 @@ def _check_counts(counts: np.ndarray, line: int) -> None:
                            "program")
 
 
-def _infeasible(line: int, tol: float, st: Settings) -> PlannerError:
-    return PlannerError("infeasible", f"line {line}: no timing keeps the tool within {tol * 1e3:g} mm of the path "
-                        f"within the drive limits at a sample time of {st.Ts:g} s; give a larger tolerance_m or a "
-                        "smaller settings.Ts", "tolerance_m")
-
-
 def _segment_of(counts: np.ndarray, K: int) -> np.ndarray:
     """Segment index of every sample 0..K-1 (sample 0: the start point; past the sequence: the end point)."""
     seg = np.repeat(np.arange(len(counts)), counts)
@@ -409,25 +566,47 @@ def _deviation(pose: np.ndarray, elem: np.ndarray, geo: PathGeometry, tol: float
     """Per sample: the largest distance from the programmed path of the sample and of the
     straight move to the next, measured on points ``h = tol / 10`` apart along the move plus
     ``h / 2`` (the distance is 1-Lipschitz, so this bounds the maximum from above; the cells
-    keep 0.95 tol, so the bound stays within the tolerance) [m]. Candidates: the elements of
-    both ends and their neighbours along the pass (samples move forwards through the cells)."""
+    keep 0.95 tol, so the bound stays within the tolerance) [m]; the moves whose bound exceeds
+    the largest distance measured are measured again on points ``h / 8`` apart (so the pass's
+    largest figure is within ``h / 16`` of the true maximum). Candidates: the elements of
+    both ends and those within :data:`NEAR_TOLERANCES` tolerances of them along the pass (a
+    move shorter than the tolerance may be nearer than its neighbour; at most
+    :data:`NEAR_MAX` candidates, beyond which the figure can only be too large)."""
     K = len(pose)
     h = tol / 10
+    lo, hi = geo.near(NEAR_TOLERANCES * tol)
+    first = np.minimum(lo[elem[:-1]], lo[elem[1:]])
+    last = np.maximum(hi[elem[:-1]], hi[elem[1:]])
+    width = int(min(int((last - first).max(initial=0)) + 1, NEAR_MAX))
+    cand = np.minimum(first[:, None] + np.arange(width), last[:, None])
     a, b = pose[:-1], pose[1:]
+    dev = np.zeros(K)
+    seen, bound = _chords(a, b, cand, geo, h)
+    dev[:-1] = bound
+    again = np.nonzero(bound > seen.max(initial=0.0))[0]
+    if again.size:
+        dev[again] = _chords(a[again], b[again], cand[again], geo, h / 8)[1]
+    e = int(elem[-1])
+    end = geo.distance(pose[-1:], np.minimum(lo[e] + np.arange(min(hi[e] - lo[e] + 1, NEAR_MAX)), hi[e])[None, :])
+    dev[-1] = max(dev[-1], float(end[0]))
+    return dev
+
+
+def _chords(a: np.ndarray, b: np.ndarray, cand: np.ndarray, geo: PathGeometry, h: float
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """Per straight move ``a -> b``: the largest distance to the candidate elements ``cand``
+    on points at most ``h`` apart, and that plus ``h / 2`` where the move has more than one
+    point (a bound from above) [m]."""
     L = np.hypot(*(b - a).T)
     m = np.maximum(np.ceil(L / h).astype(np.int64), 1) + 1
-    owner = np.repeat(np.arange(K - 1), m)
+    owner = np.repeat(np.arange(len(a)), m)
     start = np.repeat(np.cumsum(m) - m, m)
     frac = (np.arange(owner.size) - start) / np.repeat(m - 1, m)
     pts = a[owner] + frac[:, None] * (b - a)[owner]
-    e0, e1 = elem[:-1][owner], elem[1:][owner]
-    cand = np.stack((e0 - 1, e0, e1, e1 + 1), axis=1)
-    d = geo.distance(pts, cand)
-    dev = np.zeros(K)
-    np.maximum.at(dev, owner, d + np.where(m[owner] > 1, 0.5 * h, 0.0))
-    last = geo.distance(pose[-1:], np.array([[elem[-1] - 1, elem[-1], elem[-1] + 1]]))
-    dev[-1] = max(dev[-1], float(last[0]))
-    return dev
+    d = geo.distance(pts, cand[owner])
+    seen = np.zeros(len(a))
+    np.maximum.at(seen, owner, d)
+    return seen, seen + np.where(m > 1, 0.5 * h, 0.0)
 
 
 def _travel(req: ContourRequest, model: RobotModel, st: Settings, a: np.ndarray, b: np.ndarray, psi: float,
@@ -556,19 +735,35 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
     """A lower estimate of the compute time of :func:`plan_contour` [s] and the arithmetic in
     words: the cut samples at the programmed feed (``program``; ~1.5 plans) or at the
     reference speed (``fastest``: ~10 candidate plans for the first pass, ~2.5 for the next)
-    times the step cost."""
+    times the step cost; plus the bound on the check of an infeasible verdict's advice
+    (:func:`_confirmed`: :data:`ADVICE_WORK` times the largest pass, at least
+    :data:`ADVICE_MIN_S`)."""
     req = parse_contour_request(request)
     st = req.plan_settings()
     if program is None:
         program = read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
-    samples = 0.0
-    for b in program.passes:
-        for e in b.elements:
-            v = e.feed_m_s if req.feed == "program" else V0_M_S * 2
-            samples += e.length_m / max(v, 1e-9) / st.Ts
-    # fastest: ~10 candidate plans for the first cut, ~2.5 for each next (its search starts at the
-    # scale found before: two plans when the passes are alike)
-    plans = 1.5 if req.feed == "program" else 2.5 + 7.5 / max(len(program.passes), 1)
-    seconds = samples * plans * CONTOUR_STEP_S
-    return seconds, (f"{len(program.passes)} passes, ~{samples:.0f} cut samples at Ts = {st.Ts:g} s x {plans:g} "
-                     f"plans x ~{CONTOUR_STEP_S * 1e6:.0f} us per step")
+    n = len(program.passes)
+    per_pass = [_piece_estimate(req.feed, b.elements, st.Ts, n) for b in program.passes]
+    samples = sum(_samples(req.feed, b.elements, st.Ts) for b in program.passes)
+    plans = _plans(req.feed, n)
+    check = max(ADVICE_WORK * max(per_pass, default=0.0), ADVICE_MIN_S)
+    seconds = samples * plans * CONTOUR_STEP_S + check
+    return seconds, (f"{n} passes, ~{samples:.0f} cut samples at Ts = {st.Ts:g} s x {plans:g} "
+                     f"plans x ~{CONTOUR_STEP_S * 1e6:.0f} us per step, + {check:.2g} s to check the advice of an "
+                     "infeasible pass")
+
+
+def _samples(feed: str, elements: list[PathElement], Ts: float) -> float:
+    """The cut samples of ``elements`` at the programmed feed or the reference speed."""
+    return sum(e.length_m / max(e.feed_m_s if feed == "program" else V0_M_S * 2, 1e-9) for e in elements) / Ts
+
+
+def _plans(feed: str, passes: int) -> float:
+    """Candidate plans per pass: ~1.5 (``program``); ``fastest``: ~10 for the first pass, ~2.5 for
+    each next (its search starts at the scale found before: two plans when the passes are alike)."""
+    return 1.5 if feed == "program" else 2.5 + 7.5 / max(passes, 1)
+
+
+def _piece_estimate(feed: str, elements: list[PathElement], Ts: float, passes: int = 1) -> float:
+    """:func:`estimate_contour`'s share of one pass (or piece) [s]."""
+    return _samples(feed, elements, Ts) * _plans(feed, passes) * CONTOUR_STEP_S

@@ -20,6 +20,18 @@ either side of it lie in one convex cell. A pass with arcs has ``rho = 0.95 tol 
 between every two chords, so a sample time can pass twice as much of an arc; a line-only pass
 ``rho = 0.95 tol``). Every chord is then within ``0.95 tol`` of the programmed path, which
 is what the exported G93 program runs.
+
+**Lead cells.** The constrained mode's range sequence spreads the first cell linearly out of
+the start point over its samples and narrows the last one onto the end point (the taper,
+:mod:`planner.corridor.ranges`): at the first sample of a cell held ``S`` samples the range is
+the cell shrunk by ``1 / S`` about the start point, and a tube cell is only ``2 rho`` wide
+(4.6 um at 0.01 mm), so beyond a few samples the shrunk cell is narrower than the corridor
+margin and the first step's QP has no solution: a slower timing failed where a faster one
+planned. So the first and the last piece of a pass are split at :data:`LEAD_FRACTION` ``rho``
+from the pass's ends: the short lead cells (``Tube.lead``) are held one sample each, so the
+taper is the whole lead-in cell at the first sample and the end point at the last; the
+robot at rest at either end lies in the lead cell's neighbour too (within ``0.87 rho`` of
+its end), so it may wait there as long as the timing asks.
 """
 
 from __future__ import annotations
@@ -31,7 +43,7 @@ import numpy as np
 
 from ..schema import PathElement, Segment
 
-__all__ = ["BEND_SAGITTAS", "SAGITTA_FRACTION", "TUBE_FRACTION", "PathGeometry", "Tube", "tube"]
+__all__ = ["BEND_SAGITTAS", "LEAD_FRACTION", "SAGITTA_FRACTION", "TUBE_FRACTION", "PathGeometry", "Tube", "tube"]
 
 #: chord sagitta of the arcs' polylines, as a fraction of the tolerance
 SAGITTA_FRACTION = 0.18
@@ -41,6 +53,8 @@ SAGITTA_FRACTION = 0.18
 BEND_SAGITTAS = 4.0
 #: the cells' radius about the (chord) path, as a fraction of the tolerance, before the sagitta
 TUBE_FRACTION = 0.95
+#: the lead cells' length at either end of a pass, as a fraction of the cells' radius
+LEAD_FRACTION = 0.5
 _CAP = np.radians([-90.0, -30.0, 30.0, 90.0])
 _BACK = np.radians([90.0, 150.0, 210.0, 270.0])
 
@@ -53,6 +67,7 @@ class Tube:
     turn: np.ndarray  #: (n,) turn angle at a junction (0 elsewhere) [rad]
     radius: np.ndarray  #: (n,) curvature radius of the piece (inf for lines) [m]
     rho: float  #: the cells' radius about the chord path [m]
+    lead: np.ndarray  #: (n,) the lead cells at the pass's ends (held one sample each)
 
 
 def _bend(a: np.ndarray, v: np.ndarray, b: np.ndarray) -> float:
@@ -134,6 +149,10 @@ def tube(elements: list[PathElement], origin: np.ndarray, tol: float, psi: float
     pieces = _pieces(elements, origin, s_a, piece_max)
     rho_arc = TUBE_FRACTION * tol - BEND_SAGITTAS * s_a * (1 + 1e-9)
     rho_line = TUBE_FRACTION * tol
+    # all cells of one pass share one radius: the junction of a line and a chord then still
+    # contains a disk of 0.87 rho about the vertex
+    rho = rho_arc if any(p[3] < math.inf for p in pieces) else rho_line
+    pieces, lead_at = _leads(pieces, LEAD_FRACTION * rho)
     segs: list[Segment] = []
     elem, length, turn, radius = [], [], [], []
 
@@ -156,10 +175,8 @@ def tube(elements: list[PathElement], origin: np.ndarray, tol: float, psi: float
     prev_dir: np.ndarray | None = None
     prev_p0: np.ndarray | None = None
     prev_e = -1
-    # all cells of one pass share one radius: the junction of a line and a chord then still
-    # contains a disk of 0.87 rho about the vertex
-    rho = rho_arc if any(p[3] < math.inf for p in pieces) else rho_line
-    for p0, p1, e, r in pieces:
+    lead: list[bool] = []
+    for q, (p0, p1, e, r) in enumerate(pieces):
         cell = _cell(p0, p1, rho)
         d = (p1 - p0) / np.hypot(*(p1 - p0))
         if prev is not None and prev_dir is not None and prev_p0 is not None:
@@ -175,9 +192,31 @@ def tube(elements: list[PathElement], origin: np.ndarray, tol: float, psi: float
                     raise AssertionError("empty junction")
                 add(junction, None, e, 0.0, abs(ang), math.inf)
         add(cell, None, e, float(np.hypot(*(p1 - p0))), 0.0, r)
+        lead += [False] * (len(segs) - len(lead) - 1) + [q in lead_at]
         prev, prev_dir, prev_p0, prev_e = cell, d, p0, e
     add(None, pieces[-1][1], pieces[-1][2], 0.0, 0.0, math.inf)
-    return Tube(segs, np.array(elem), np.array(length), np.array(turn), np.array(radius), rho)
+    lead += [False] * (len(segs) - len(lead))
+    return Tube(segs, np.array(elem), np.array(length), np.array(turn), np.array(radius), rho, np.array(lead))
+
+
+def _leads(pieces: list, ell: float) -> tuple[list, set[int]]:
+    """The pieces with the first and the last split ``ell`` from the pass's ends (where they
+    are longer than ``3 ell``), and the indices of those short lead pieces (module docstring)."""
+    out = list(pieces)
+    lead: set[int] = set()
+    p0, p1, e, r = out[0]
+    L = float(np.hypot(*(p1 - p0)))
+    if L > 3 * ell:
+        m = p0 + (p1 - p0) * (ell / L)
+        out[0:1] = [(p0, m, e, r), (m, p1, e, r)]
+        lead.add(0)
+    p0, p1, e, r = out[-1]
+    L = float(np.hypot(*(p1 - p0)))
+    if L > 3 * ell:
+        m = p1 - (p1 - p0) * (ell / L)
+        out[-1:] = [(p0, m, e, r), (m, p1, e, r)]
+        lead.add(len(out) - 1)
+    return out, lead
 
 
 def _norm(v: np.ndarray) -> np.ndarray:
@@ -200,6 +239,16 @@ class PathGeometry:
         self.a0 = np.array([e.start_angle_rad or 0.0 for e in elements])
         self.sweep = np.array([e.sweep_rad or 0.0 for e in elements])
         self.line = np.array([e.line for e in elements])
+        self.length = np.array([e.length_m for e in elements])
+
+    def near(self, reach: float) -> tuple[np.ndarray, np.ndarray]:
+        """Per element ``k``: the first and the last element index within ``reach`` of it
+        along the pass (its neighbours always included) (n,), (n,)."""
+        cum = np.concatenate(([0.0], np.cumsum(self.length)))
+        k = np.arange(self.n)
+        lo = np.searchsorted(cum, cum[:-1] - reach, side="left") - 1
+        hi = np.searchsorted(cum, cum[1:] + reach, side="right") - 1
+        return np.clip(np.minimum(lo, k - 1), 0, self.n - 1), np.clip(np.maximum(hi, k + 1), 0, self.n - 1)
 
     def distance(self, pts: np.ndarray, cand: np.ndarray) -> np.ndarray:
         """Distance of ``pts`` (M, 2) to the union of the candidate elements ``cand`` (M, C)
