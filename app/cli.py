@@ -16,6 +16,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import json  # noqa: E402
 import sys  # noqa: E402
+from collections.abc import Callable  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 
@@ -53,14 +54,15 @@ def output_format(args) -> str:
 
 
 def cmd_plan(args) -> int:
-    from planner import PlannerError, plan
+    from planner import PlannerError, estimate_work, plan
     from planner.orchestrator.compiling import compile_progress
 
     request = load_request(args.input)
     fmt = output_format(args)
     st = request.settings
-    if not args.compile and on_reference_while_compiling(st.backend, st.mode):
-        request = request.model_copy(update={"settings": st.model_copy(update={"backend": "reference"})})
+    on_ref = request.model_copy(update={"settings": st.model_copy(update={"backend": "reference"})})
+    if not args.compile and on_reference_while_compiling(st.backend, st.mode, lambda: estimate_work(on_ref).seconds):
+        request = on_ref
     try:
         with compile_progress():  # the first plan after installing compiles the kernels: progress on stderr
             result = plan(request)
@@ -73,16 +75,22 @@ def cmd_plan(args) -> int:
     return 0
 
 
-def on_reference_while_compiling(backend: str, mode: str) -> bool:
+def on_reference_while_compiling(backend: str, mode: str, estimate: Callable[[], float] | None = None) -> bool:
     """The CLI's fallback after installing (:func:`planner.orchestrator.background.while_compiling`):
     True when the plan should run on the numpy reference because its kernels are not compiled
-    yet (they compile in a background process meanwhile; one line on stderr says so)."""
+    yet (they compile in a background process meanwhile; one line on stderr says so, with the
+    plan's work estimate on the reference where ``estimate`` gives it [s])."""
+    from planner import PlannerError
     from planner.orchestrator.background import while_compiling
 
     running = while_compiling(backend, mode)
     if running is None:
         return False
-    print(running.note(), file=sys.stderr, flush=True)
+    try:
+        plan_s = estimate() if estimate is not None else None
+    except PlannerError:
+        plan_s = None  # the plan names the fault
+    print(running.note(plan_s), file=sys.stderr, flush=True)
     return True
 
 

@@ -137,7 +137,7 @@ def test_cli_and_service_plan_on_the_reference_while_the_kernels_compile(partial
     outs = [p.communicate(timeout=120) for p in (a, b)]
     assert a.returncode == 0 and b.returncode == 0, outs
     notes = [next((ln for ln in err.splitlines() if ln.startswith("kernels not compiled yet")), "") for _, err in outs]
-    assert all("numpy reference" in n for n in notes), outs
+    assert all("numpy reference" in n and " s for this plan" in n for n in notes), outs  # with its estimate
     assert sum("compiling them in the background" in n for n in notes) == 1, notes  # one started it
     pid = {n.split("(pid ")[1].split(",")[0] for n in notes}
     assert len(pid) == 1 and _pids(cache) <= {int(pid.pop())}

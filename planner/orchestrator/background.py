@@ -90,9 +90,12 @@ class BackgroundCompile:
     eta_s: float
     started: bool
 
-    def note(self) -> str:
-        """The one line the CLI prints on stderr for a plan that ran on the reference."""
-        return (f"kernels not compiled yet: this plan runs on the numpy reference (same trajectory, ~100x slower); "
+    def note(self, plan_s: float | None = None) -> str:
+        """The one line the CLI prints on stderr for a plan that runs on the reference
+        (``plan_s``: its work estimate at the reference's costs [s], said where given)."""
+        took = f", about {plan_s:.2g} s for this plan" if plan_s is not None else ""
+        return (f"kernels not compiled yet: this plan runs on the numpy reference (same trajectory, ~100x slower"
+                f"{took}); "
                 f"{'compiling them in the background' if self.started else 'they are compiling in the background'}"
                 f", about {self.eta_s:.0f} s left (pid {self.pid}, log {self.log})")
 
