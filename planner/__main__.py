@@ -6,9 +6,10 @@ holds the lock ``FD`` (:mod:`planner.orchestrator.background`)."""
 import sys
 
 if len(sys.argv) == 3 and sys.argv[1] == "--background":
+    from .orchestrator import warm_up
     from .orchestrator.background import _background_main
 
-    _background_main(int(sys.argv[2]))
+    _background_main(int(sys.argv[2]), warm_up)
 else:
     from .orchestrator import warm_up
 

@@ -29,6 +29,7 @@ import os
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -195,10 +196,10 @@ def while_compiling(backend: str, mode: str | None) -> BackgroundCompile | None:
     return compile_in_background()
 
 
-def _background_main(fd: int) -> None:
-    """``python -m planner --background FD``: compile every kernel holding the lock ``FD``."""
+def _background_main(fd: int, warm_up: Callable[[], float]) -> None:
+    """``python -m planner --background FD``: compile every kernel (``warm_up``, given by the
+    caller: :mod:`.plan` imports this module) holding the lock ``FD``."""
     from .compiling import compile_progress
-    from .plan import warm_up
 
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # inherited from the caller: held already
