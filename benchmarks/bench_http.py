@@ -208,9 +208,15 @@ def main() -> int:
     ap.add_argument("--runs", type=int, default=3, help="runs per row (median reported)")
     ap.add_argument("--client", choices=["raw", "httpx"], default="raw",
                     help="load generator: minimal asyncio HTTP/1.1 client (default) or httpx.AsyncClient")
+    ap.add_argument("--mode", choices=["constrained", "paper"], default=None,
+                    help="plan Table I in this mode (default: the request's own, i.e. the default mode; the "
+                         "figures of issue 4 were taken when that was the paper mode)")
     args = ap.parse_args()
+    if args.mode is not None:
+        TABLE1["settings"] = {**TABLE1.get("settings", {}), "mode": args.mode}
 
-    print(f"Table I plans over HTTP on loopback; {os.cpu_count()} cores, server workers = {args.workers}, "
+    print(f"Table I plans ({args.mode or 'default'} mode) over HTTP on loopback; {os.cpu_count()} cores, "
+          f"server workers = {args.workers}, "
           f"{args.requests} requests per run, median of {args.runs} runs, client {args.client}")
     print(f"{'executor':<9} {'clients':>7} {'plans/s':>8} {'p50 ms':>8} {'p90 ms':>8} {'p99 ms':>8} "
           f"{'planner ms':>10} {'errors':>6}")
