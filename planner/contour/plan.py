@@ -36,6 +36,7 @@ from ..model.reach import check_segments
 from ..orchestrator import feasible, plan, plan_timed
 from ..schema import (
     DEFAULT_CONTOUR_TOLERANCE_M,
+    MAX_CONTOUR_TOLERANCE_M,
     MAX_SEGMENTS,
     MAX_TOTAL_STEPS,
     MIN_TS,
@@ -84,8 +85,6 @@ ADVICE_TS = 0.5
 #: adds it for the largest pass), and at least ADVICE_MIN_S [s]
 ADVICE_WORK = 3.0
 ADVICE_MIN_S = 4.0
-#: the largest tolerance a request may give [m] (ContourRequest.tolerance_m)
-MAX_CONTOUR_TOLERANCE_M = 0.01
 #: the deviation's candidate elements: those within this many tolerances along the pass of the
 #: sample's own (and its neighbours), at most NEAR_MAX of them
 NEAR_TOLERANCES = 2.0

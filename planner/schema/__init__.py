@@ -13,6 +13,7 @@
 from .contour import (
                      CONTOUR_FEEDS,
                      DEFAULT_CONTOUR_TOLERANCE_M,
+                     MAX_CONTOUR_TOLERANCE_M,
                      MAX_PROGRAM_BYTES,
                      MIN_CONTOUR_TOLERANCE_M,
                      ContourRequest,
@@ -93,7 +94,8 @@ __all__ = [
     "SegmentationResult", "SegmentationCell", "HalfPlanes", "RobotSummary",
     "CorridorRecord", "ImportOptions", "ImportReport", "ImportResult", "DrawingShape", "OpenChain", "DRAWING_UNITS",
     "PARTIAL_LAYOUT",
-    "CONTOUR_FEEDS", "DEFAULT_CONTOUR_TOLERANCE_M", "MAX_PROGRAM_BYTES", "MIN_CONTOUR_TOLERANCE_M", "ContourRequest",
+    "CONTOUR_FEEDS", "DEFAULT_CONTOUR_TOLERANCE_M", "MAX_CONTOUR_TOLERANCE_M",
+    "MAX_PROGRAM_BYTES", "MIN_CONTOUR_TOLERANCE_M", "ContourRequest",
     "ContourSection", "PassSummary", "PathElement", "Program", "ProgramBlock", "ProgramComment", "ProgramWord",
     "error_details", "field_path", "format_validation_error", "planner_error",
     "DEFAULT_FORCE_RISE_S", "DEFAULT_LAYOUT_SPEED_M_S", "DEFAULT_MODE",

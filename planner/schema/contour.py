@@ -19,7 +19,8 @@ from .limits import MAX_COORDINATE
 from .request import TIMING_FIELDS, Settings
 from .robot import RobotDescription
 
-__all__ = ["CONTOUR_FEEDS", "DEFAULT_CONTOUR_TOLERANCE_M", "MAX_PROGRAM_BYTES", "MIN_CONTOUR_TOLERANCE_M",
+__all__ = ["CONTOUR_FEEDS", "DEFAULT_CONTOUR_TOLERANCE_M", "MAX_CONTOUR_TOLERANCE_M", "MAX_PROGRAM_BYTES",
+           "MIN_CONTOUR_TOLERANCE_M",
            "ContourRequest", "ContourSection", "PassSummary", "PathElement", "Program", "ProgramBlock",
            "ProgramComment", "ProgramWord"]
 
@@ -29,6 +30,8 @@ MAX_PROGRAM_BYTES = 2_000_000
 DEFAULT_CONTOUR_TOLERANCE_M = 5e-5
 #: smallest tolerance accepted [m]: ten times the constrained mode's corridor margin
 MIN_CONTOUR_TOLERANCE_M = 1e-5
+#: the largest tolerance a request may give [m]
+MAX_CONTOUR_TOLERANCE_M = 0.01
 #: the feeds of a contour plan
 CONTOUR_FEEDS = ("program", "fastest")
 
@@ -160,8 +163,8 @@ class ContourRequest(Strict):
             raise fail(f"{v:g} m is below what the planner can hold: the tube's cells keep a 1e-06 m margin for the "
                        "model's one-step error, and a cell narrower than ten margins leaves a sample no room; give "
                        f"at least {MIN_CONTOUR_TOLERANCE_M:g} m")
-        if v is not None and v > 0.01:
-            raise fail(f"must be at most 0.01 m, got {v:g}")
+        if v is not None and v > MAX_CONTOUR_TOLERANCE_M:
+            raise fail(f"must be at most {MAX_CONTOUR_TOLERANCE_M:g} m, got {v:g}")
         return v
 
     @model_validator(mode="after")
