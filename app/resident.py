@@ -25,8 +25,9 @@ stdout and stderr, the same exit status (2 for bad input) as the in-process CLI.
   directory just plans in-process). The socket is 0600, and the resident answers only a peer
   of its own uid (``SO_PEERCRED``); the client checks the resident's uid the same way.
 * **One per key**: the resident holds an ``flock`` on ``<key>.lock`` for its whole life (its
-  pid in the file); a second one exits at once; a socket left by a killed resident is removed
-  by the next one (which holds the lock) before it binds.
+  pid in the file; removed when it ends, while still locked); a second one exits at once; a
+  socket left by a killed resident is removed by the next one (which holds the lock) before
+  it binds.
 * **Lifetime**: it binds only after loading everything (a client never waits for its warm-up:
   it plans in-process meanwhile) and exits after ``RANGEPLAN_RESIDENT_S`` seconds (default
   600) without a request; 0 disables it (``--no-resident`` for one command). It is not
@@ -257,7 +258,7 @@ def hand_off(argv: Sequence[str], env: Mapping[str, str], cwd: str, stdin: str |
         if _peer_uid(sock) != os.getuid():
             return None
         _send(sock, {"protocol": _PROTOCOL, "argv": list(argv), "cwd": cwd, "env": _keyed_env(env),
-                     "umask": _umask(), "stdin": stdin})
+                     "umask": _umask(), "stdin": stdin, "columns": _columns(env)})
         r = _recv(sock)
         if not isinstance(r, dict) or r.get("fallback") or not isinstance(r.get("code"), int):
             return None
@@ -266,6 +267,19 @@ def hand_off(argv: Sequence[str], env: Mapping[str, str], cwd: str, stdin: str |
         return None
     finally:
         sock.close()
+
+
+def _columns(env: Mapping[str, str]) -> int:
+    """The width argparse wraps its usage and help to here (as :func:`shutil.get_terminal_size`
+    finds it: ``COLUMNS``, else the terminal of standard output, else 80)."""
+    try:
+        return int(env["COLUMNS"])
+    except (KeyError, ValueError):
+        pass
+    try:
+        return os.get_terminal_size(sys.__stdout__.fileno()).columns if sys.__stdout__ else 80
+    except (OSError, ValueError, AttributeError):
+        return 80
 
 
 def _umask() -> int:
@@ -345,24 +359,36 @@ def start_resident(env: Mapping[str, str] | None = None) -> int | None:
     return proc.pid
 
 
+class _Stop(BaseException):
+    """SIGTERM: the resident ends (a request it was running is answered by the client itself)."""
+
+
 def serve(key: str, run: Callable[[list[str]], int], warm_up: Callable[[], object]) -> int:
     """The resident (``key``: the one its starter computed; it exits when its own differs):
     take the lock, ``warm_up`` (load the planner and its kernels), bind the socket and run
     each request with ``run`` (:func:`app.cli.run`: the CLI without hand-off) until
     ``RANGEPLAN_RESIDENT_S`` seconds pass without one. Returns the exit status."""
     import fcntl
+    import signal
 
     from app.settings import settings
 
+    def stop(signum: int, frame: object) -> None:
+        raise _Stop
+
+    signal.signal(signal.SIGTERM, stop)  # ends like the idle timeout: the socket removed
     env = snapshot_environment()
     idle = settings({"RANGEPLAN_RESIDENT_S": env.get("RANGEPLAN_RESIDENT_S", "")}).resident_s
     d = resident_dir(env)
     if idle <= 0 or d is None or resident_key(env) != key:
         return 1
-    lock = os.open(d / f"{key}.lock", os.O_RDWR | os.O_CREAT, 0o600)
+    lock_path = d / f"{key}.lock"
+    lock = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o600)
     try:
         fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
+        if os.fstat(lock).st_ino != os.stat(lock_path).st_ino:
+            raise BlockingIOError  # an ending resident removed this lock file: the next start takes a new one
+    except (BlockingIOError, FileNotFoundError):
         return 0  # another resident of this key runs
     os.ftruncate(lock, 0)
     os.write(lock, f"{os.getpid()}\n".encode())
@@ -391,6 +417,8 @@ def serve(key: str, run: Callable[[list[str]], int], warm_up: Callable[[], objec
                 return 0
             with conn:
                 _serve_one(conn, env, run)
+    except _Stop:
+        return 0
     finally:
         listener.close()
         try:
@@ -398,6 +426,7 @@ def serve(key: str, run: Callable[[list[str]], int], warm_up: Callable[[], objec
                 path.unlink()
         except OSError:
             pass
+        lock_path.unlink(missing_ok=True)  # before the lock is released (when this process ends)
 
 
 def _serve_one(conn: socket.socket, env: Mapping[str, str], run: Callable[[list[str]], int]) -> None:
@@ -420,6 +449,7 @@ def _serve_one(conn: socket.socket, env: Mapping[str, str], run: Callable[[list[
     old_stdin, old_mask = sys.stdin, os.umask(int(req.get("umask", 0o022)))
     try:
         os.chdir(req["cwd"])
+        os.environ["COLUMNS"] = str(int(req.get("columns", 80)))  # argparse's width of the client's terminal
         sys.stdin = io.StringIO(req.get("stdin") or "")
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
             try:
@@ -429,10 +459,13 @@ def _serve_one(conn: socket.socket, env: Mapping[str, str], run: Callable[[list[
                 if isinstance(exc.code, str):
                     print(exc.code, file=sys.stderr)
         answer: dict = {"code": int(code), "stdout": out.getvalue(), "stderr": err.getvalue()}
+    except _Stop:
+        raise
     except BaseException:  # any other failure: the client runs the command itself (its own traceback)
         answer = {"fallback": "error"}
     finally:
         sys.stdin = old_stdin
+        os.environ.pop("COLUMNS", None)
         os.umask(old_mask)
         os.chdir("/")
     _reply(conn, answer)

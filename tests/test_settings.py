@@ -65,6 +65,8 @@ _NOT_CONFIGURATION = {
     # before pydantic loads (the start-up must stay light); RANGEPLAN_RESIDENT_S is a field of
     # the settings, checked by them when a resident starts
     ("app/resident.py", "other"),
+    # ... and gives argparse the client's terminal width while the resident runs its command
+    ("app/resident.py", "COLUMNS"),
 }
 
 
