@@ -114,8 +114,9 @@ def test_the_resident_answers_as_the_cli_in_process(running, tmp_path):
     a = cli(["plan", str(TABLE1), "-o", "a.json", "--no-resident"], env, tmp_path / "here")
     b = cli(["plan", str(TABLE1), "-o", "a.json"], env, tmp_path / "there", importtime=True)
     assert a.returncode == b.returncode == 0, (a.stderr, b.stderr[-2000:])
-    imported = {ln.split("|")[-1].strip().split(".")[0] for ln in b.stderr.splitlines() if ln.startswith("import time:")}
-    assert imported and not imported & set(HEAVY), "the client planned itself: it imported " + str(imported & set(HEAVY))
+    imported = {ln.split("|")[-1].strip().split(".")[0] for ln in b.stderr.splitlines()
+                if ln.startswith("import time:")}
+    assert imported and not imported & set(HEAVY), f"the client planned itself: it imported {imported & set(HEAVY)}"
     said = [ln for ln in b.stderr.splitlines() if not ln.startswith("import time:")]
     assert without_times("\n".join(said) + "\n") == without_times(a.stderr) != ""
     assert a.stderr.startswith("wrote a.json: 240 steps")
@@ -145,7 +146,8 @@ def test_contour_through_the_resident(running, tmp_path):
     a = cli(["contour", str(PROGRAM), "--origin=-0.04,-0.015", "-o", "a.csv", "--no-resident"], env, tmp_path)
     reply = resident.hand_off(["contour", str(PROGRAM), "--origin=-0.04,-0.015", "-o", "b.csv"], env, str(tmp_path))
     assert reply is not None
-    assert (a.returncode, without_times(a.stderr.replace("a.csv", "b.csv"))) == (reply.code, without_times(reply.stderr))
+    assert a.returncode == reply.code == 0
+    assert without_times(a.stderr.replace("a.csv", "b.csv")) == without_times(reply.stderr)
     assert (tmp_path / "a.csv").read_bytes() == (tmp_path / "b.csv").read_bytes()
 
 
