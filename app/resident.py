@@ -62,6 +62,8 @@ _HEADER = struct.Struct("!Q")
 #: the environment that keys a resident (a prefix ends with ``_``; else the exact name)
 _KEYED = ("RANGEPLAN_", "NUMBA_", "OPENBLAS_", "OMP_", "MKL_", "PYTHON", "LANG", "LC_", "XDG_CACHE_HOME", "HOME")
 _NOT_KEYED = ("RANGEPLAN_RESIDENT_S",)
+#: the BLAS thread counts :mod:`app.cli` sets to 1 where they are unset
+_BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 #: the installed packages whose file stamps key a resident (an upgrade changes them)
 _DEPENDENCIES = ("numpy", "numba", "llvmlite", "scipy", "pydantic", "pydantic_core", "shapely", "daqp", "ezdxf",
                  "orjson")
@@ -323,7 +325,8 @@ def start_resident(env: Mapping[str, str] | None = None) -> int | None:
 
     from app.settings import SettingsError, settings
 
-    env = snapshot_environment() if env is None else env
+    # the resident runs app.cli, which sets the BLAS thread counts where they are unset (keyed)
+    env = {**dict.fromkeys(_BLAS_THREADS, "1"), **(snapshot_environment() if env is None else env)}
     try:
         idle = settings({"RANGEPLAN_RESIDENT_S": env.get("RANGEPLAN_RESIDENT_S", "")}).resident_s
     except SettingsError as exc:
@@ -340,14 +343,17 @@ def start_resident(env: Mapping[str, str] | None = None) -> int | None:
     if d is None or socket_path(d, key) is None:
         return None
     try:
-        fd = os.open(d / f"{key}.lock", os.O_RDWR | os.O_CREAT, 0o600)
+        fd = os.open(d / f"{key}.lock", os.O_RDWR)
+    except FileNotFoundError:
+        fd = None  # no resident of this key runs (the lock file is the resident's)
     except OSError:
         return None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # free: no resident of this key runs
-    except BlockingIOError:
-        os.close(fd)
-        return None
+    if fd is not None:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # free: no resident of this key runs
+        except BlockingIOError:
+            os.close(fd)
+            return None
     try:
         proc = subprocess.Popen([sys.executable, "-c", "from app.cli import resident_main; resident_main()", key],
                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
@@ -355,7 +361,8 @@ def start_resident(env: Mapping[str, str] | None = None) -> int | None:
     except OSError:
         return None
     finally:
-        os.close(fd)  # the resident takes the lock itself
+        if fd is not None:
+            os.close(fd)  # the resident takes the lock itself
     return proc.pid
 
 
