@@ -91,7 +91,8 @@ def start_resident(tree: Path) -> int:
     import socket
 
     code = ("import os, app.cli; from app import resident; env = dict(os.environ); "
-            "d = resident.resident_dir(env, True); print(resident.start_resident(env), resident.socket_path(d, resident.resident_key(env)))")
+            "d = resident.resident_dir(env, True); "
+            "print(resident.start_resident(env), resident.socket_path(d, resident.resident_key(env)))")
     e = {**os.environ, "OPENBLAS_NUM_THREADS": "1", **RESIDENT_ENV}
     e.pop("PYTHONPATH", None)
     out = subprocess.run([PY, "-c", code], cwd=tree, env=e, capture_output=True, text=True, check=True)
