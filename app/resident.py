@@ -304,7 +304,11 @@ def client_main(argv: Sequence[str], command: str) -> tuple[int | None, bool]:
 
         stdin = sys.stdin.read()
         sys.stdin = io.StringIO(stdin)
-    reply = hand_off(argv, env, os.getcwd(), stdin)
+    try:
+        cwd = os.getcwd()
+    except OSError:  # removed: the in-process command says what it cannot read
+        return None, False
+    reply = hand_off(argv, env, cwd, stdin)
     if reply is None:
         return None, True
     sys.stderr.write(reply.stderr)
@@ -355,7 +359,8 @@ def start_resident(env: Mapping[str, str] | None = None) -> int | None:
             os.close(fd)
             return None
     try:
-        proc = subprocess.Popen([sys.executable, "-c", "from app.cli import resident_main; resident_main()", key],
+        # -P: no working directory on sys.path (a command's directory never shadows a module)
+        proc = subprocess.Popen([sys.executable, "-P", "-c", "from app.cli import resident_main; resident_main()", key],
                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                                 start_new_session=True, close_fds=True, env=dict(env))
     except OSError:

@@ -301,3 +301,21 @@ def test_a_crashed_resident_makes_the_client_plan_itself(tmp_path):
     assert calls and b'"argv"' in calls[0]  # it asked the "resident" first
     assert out.returncode == 0 and out.stderr.startswith("wrote x.csv: 240 steps")
     assert (tmp_path / "x.csv").read_text().count("\n") > 200
+
+
+@pytest.mark.slow
+def test_concurrent_commands_are_served_one_after_another(running, tmp_path):
+    env, _ = running
+    replies: dict[int, resident.Reply | None] = {}
+
+    def one(i: int) -> None:
+        replies[i] = resident.hand_off(["plan", str(TABLE1), "-o", f"{i}.csv"], env, str(tmp_path))
+
+    threads = [threading.Thread(target=one, args=(i,)) for i in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(120)
+    assert all(r is not None and r.code == 0 and r.stderr.startswith(f"wrote {i}.csv") for i, r in replies.items())
+    assert len(replies) == 3
+    assert len({(tmp_path / f"{i}.csv").read_bytes() for i in range(3)}) == 1
