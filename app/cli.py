@@ -360,7 +360,10 @@ def main(argv: list[str] | None = None) -> int:
     if command in ("plan", "contour"):
         from app import resident
 
-        code, start = resident.client_main(argv, command)
+        try:
+            code, start = resident.client_main(argv, command)
+        except KeyboardInterrupt:  # waiting for the resident's answer (its plan goes on)
+            return 130
         if code is not None:
             return code
         code = run(argv)
