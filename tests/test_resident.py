@@ -192,6 +192,8 @@ def test_another_key_never_connects(running, tmp_path):
         assert resident.hand_off(["plan", "--help"], other, str(tmp_path)) is None
     # the idle time is no part of the key (a client with another one uses the same resident)
     assert resident.resident_key({**env, "RANGEPLAN_RESIDENT_S": "5"}) == resident.resident_key(env)
+    # one resident per key: while this one runs (its lock held) no second one starts
+    assert resident.start_resident(env) is None
 
 
 def test_the_key_follows_every_source_file(tmp_path):
