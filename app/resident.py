@@ -296,8 +296,14 @@ def client_main(argv: Sequence[str], command: str) -> tuple[int | None, bool]:
     running in-process. Reads the standard input first when the input is ``-`` (then puts
     the text back as ``sys.stdin`` for the in-process run)."""
     env = snapshot_environment()
-    if command not in COMMANDS or idle_seconds(env) is None or "--no-resident" in argv:
+    if command not in COMMANDS or "--no-resident" in argv:
         return None, False
+    if idle_seconds(env) is None:  # off (0), or a value that does not parse: start_resident names it
+        try:
+            float(env.get("RANGEPLAN_RESIDENT_S", ""))
+            return None, False
+        except ValueError:
+            return None, True
     stdin = None
     if _input_argument(argv) == "-":
         import io

@@ -267,9 +267,14 @@ def test_no_resident_when_disabled_or_compiling(monkeypatch, tmp_path):
     assert resident.start_resident(env_with("0")) is None
 
 
-def test_a_bad_idle_time_is_named(capsys):
-    assert resident.start_resident(env_with("soon")) is None
-    assert "RANGEPLAN_RESIDENT_S" in capsys.readouterr().err
+def test_a_bad_idle_time_is_named(tmp_path):
+    """A value of RANGEPLAN_RESIDENT_S that does not parse: the command plans in-process as
+    usual and says, in one line, that no resident starts and why."""
+    out = cli(["plan", "missing.json"], env_with("soon"), tmp_path)
+    assert out.returncode == 2
+    assert out.stderr.splitlines() == ["rangeplan: error: missing.json: cannot read: No such file or directory",
+                                       "rangeplan: warning: RANGEPLAN_RESIDENT_S: Input should be a valid number, "
+                                       "unable to parse string as a number (got 'soon') (no resident planner started)"]
 
 
 @pytest.mark.slow
