@@ -21,8 +21,12 @@ $(RUNTIME): pyproject.toml container/requirements.lock
 	$(PY) -m pip install --quiet --no-compile --no-deps -e .
 	touch $(RUNTIME)
 
+# byte-compiled once here: with PYTHONDONTWRITEBYTECODE set (as on CI) and the runtime installed
+# with --no-compile (the quick `make run`), every process the tests start would compile numpy,
+# scipy, numba, pydantic and fastapi from source again (~3x their import time)
 $(STAMP): $(RUNTIME)
 	$(PY) -m pip install --quiet -e '.[test]'
+	-$(PY) -m compileall -q -j 0 $(VENV)/lib planner app >/dev/null
 	touch $(STAMP)
 
 # compile the planner's kernels in the foreground (minutes once after installing, with progress;

@@ -705,6 +705,9 @@ def confirm_error(request: dict, code: str, message: str, field_name: str | None
                     fixed["settings"].pop(k, None)
                 val = float(how.group(2))
                 fixed["settings"][how.group(1)] = int(val) if how.group(1) == "samples_per_segment" else val
+                size = re.search(r"layout\.cell\.size = ([0-9.e+-]+) m", message)
+                if size:  # advice in samples keeps the cell size the check planned
+                    fixed["layout"].setdefault("cell", {})["size"] = float(size.group(1))
             else:
                 fixed["settings"]["segment_samples"] = [c * factor for c in fixed["settings"]["segment_samples"]]
             try:

@@ -140,6 +140,38 @@ def test_infeasible_names_real_figures_and_more_time_helps():
     assert res.metrics.contained
 
 
+#: case 4 of seed 22 (benchmarks/certify_seed22_problems.jsonl): a layout at 2 samples a
+#: segment with the default cell size; 4 samples a segment alone would change that size (the
+#: default follows the samples) and the request, segmented again, would have no path
+DEFAULT_CELLS_AT_2_SAMPLES = {
+    "robot": "moving-slide",
+    "layout": {"bounds": {"lower": [-0.0595943913441878, -0.047655234028266255],
+                          "upper": [0.0904056086558122, 0.07234476597173374]},
+               "obstacles": [{"type": "polygon", "points": [[-0.04438352070960586, 0.002745721698923802],
+                                                            [-0.06727436512429127, 0.015874449483240197],
+                                                            [-0.06562322431778199, -0.011220324767388042]]}],
+               "clearance": 0.001, "cell": {"shape": "square", "size": None},
+               "start": [0.0902556086558122, 0.0712886472200782, 0.0],
+               "end": [-0.05959439134418779, 0.07034526275421982, -0.1]},
+    "settings": {"samples_per_segment": 2}}
+
+
+def test_more_samples_advice_keeps_the_default_cell_size_it_was_checked_with():
+    """Advice in samples a segment for a layout with the default cell size names that size
+    too, and the request with both changes plans (the corridor the planner checked)."""
+    err = _error(DEFAULT_CELLS_AT_2_SAMPLES)
+    assert err.code == "infeasible", err.message
+    m = re.search(r"settings\.samples_per_segment = (\d+) with layout\.cell\.size = ([0-9.e+-]+) m", err.message)
+    assert m, err.message
+    fixed = copy.deepcopy(DEFAULT_CELLS_AT_2_SAMPLES)
+    fixed["settings"]["samples_per_segment"] = int(m.group(1))
+    fixed["layout"]["cell"]["size"] = float(m.group(2))
+    original = segment_layout(DEFAULT_CELLS_AT_2_SAMPLES)
+    assert original.size == float(m.group(2))  # the corridor the planner checked the advice on
+    res = plan(fixed)
+    assert res.metrics.contained and res.metrics.settled
+
+
 def test_estimate_counts_the_whole_settling_tail():
     """The issue's request: paper mode, Ts 1e-4, a 20 s settling tail, 50 plant substeps; it was
     estimated at 0.55 s and ran into the 30 s limit. Its estimate now counts every tail sample."""

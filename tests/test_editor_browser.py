@@ -36,7 +36,10 @@ pytestmark = pytest.mark.browser
 CHROMIUM = "/usr/bin/chromium"
 FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync"]
-W, H = 1400, 900
+#: the window: the README's screenshots at 1400 x 900; the tests at 880 x 860 (60 % of the
+#: pixels, which the page's software WebGL draws in about that share of the time). Not lower: the
+#: panel's controls above the tabs need ~620 px and the tabs' own box at least 220 px.
+W, H = (1400, 900) if os.environ.get("RANGEPLAN_DOCS_SCREENSHOT") else (880, 860)
 
 
 def free_port() -> int:
@@ -392,7 +395,8 @@ def test_table1_segment_corridor_is_edited_and_replanned(tab):
 def test_the_panel_answers_while_a_plan_runs(tab, monkeypatch):
     """Plans run on the session's worker thread, so the panel answers meanwhile: each plan
     here is held on the worker until the value typed during it has reached the session (or
-    10 s pass), then computed for real (constrained mode, 5 mm cells). Were the
+    30 s pass: a loaded machine types slowly into the software-rendered page), then computed
+    for real (constrained mode, 5 mm cells). Were the
     plan run on the thread that handles the panel, the typed value could not arrive while the
     plan is held. The latency is measured by benchmarks/bench_editor.py, not asserted here."""
     s, page = tab.session, tab.page
@@ -402,7 +406,7 @@ def test_the_panel_answers_while_a_plan_runs(tab, monkeypatch):
     real_compute = session_module.compute_plan
 
     def held_compute(request, robots):
-        arrived.wait(10.0)
+        arrived.wait(30.0)
         return real_compute(request, robots)
     monkeypatch.setattr(session_module, "compute_plan", held_compute)
     received, expected = [], [None]

@@ -17,9 +17,10 @@ import numpy as np
 
 from .._jit import numpy_only
 from ..constraints import MARGIN_M, MARGIN_RAD, ConstrainedController
-from ..corridor import RangeSequence, Segmentation, range_sequence, reference_sequence
+from ..corridor import RangeSequence, Segmentation, cell_size_rule, range_sequence, reference_sequence
 from ..corridor import segment as segment_layout
 from ..corridor.geometry import corridor_gaps
+from ..corridor.workspace import parse_layout
 from ..errors import PlannerError, invalid
 from ..model import RobotModel, load_robot
 from ..model.reach import check_pose, check_segments
@@ -104,7 +105,7 @@ def _plan(req: PlanRequest, t0: float, robot: RobotModel | None, segments: Seque
             if work_limit_s is not None and work_limit_s > 0:  # what the limit leaves for the checks
                 budget = work_limit_s - (time.perf_counter() - t0)
             raise _more_time_advice(exc, req.name, model, given, st, segments, budget,
-                                    estimate_work(req, segments).seconds) from None
+                                    estimate_work(req, segments).seconds, _default_cell_size(req)) from None
         raise
     result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3  # everything, result arrays included
     mt = result.metrics
@@ -116,15 +117,27 @@ def _plan(req: PlanRequest, t0: float, robot: RobotModel | None, segments: Seque
     return result
 
 
+def _default_cell_size(req: PlanRequest) -> float | None:
+    """The cell size [m] the request's layout is segmented with when it leaves
+    ``layout.cell.size`` out (:func:`~planner.corridor.cell_size_rule`); None otherwise."""
+    if req.layout is None or req.layout.cell.size is not None:
+        return None
+    ws = parse_layout(req.layout)
+    return cell_size_rule(ws.lower, ws.upper, ws.start, ws.end, ws.shape, req.settings)
+
+
 def _more_time_advice(exc: PlannerError, name: str | None, model: RobotModel, given: Settings, st: Settings,
                       segments: Sequence[Segment], budget_s: float | None = None,
-                      estimate_s: float = 0.0) -> PlannerError:
+                      estimate_s: float = 0.0, cell_size: float | None = None) -> PlannerError:
     """``exc`` (an infeasible constrained plan) with advice that was checked: the corridor
     planned again with :data:`MORE_TIME` times the samples of every segment (each candidate
     abandoned at its first infeasible step); the first that plans is named in the timing field
     the request used. If none plans, the error says that more time does not help.
     ``budget_s``: the compute time the checks may take (None: no bound); a candidate whose
-    estimate (``estimate_s`` of the request times the factor) does not fit is not planned."""
+    estimate (``estimate_s`` of the request times the factor) does not fit is not planned.
+    ``cell_size``: the default cell size of the request's layout [m]; more samples a segment
+    give another default (:func:`~planner.corridor.cell_size_rule`), so advice in samples names
+    this size too, which keeps the corridor the check planned."""
     counts = np.asarray(st.segment_samples if st.segment_samples is not None
                         else [st.samples_per_segment] * len(segments), dtype=np.int64)
     tried: list[int] = []
@@ -148,6 +161,8 @@ def _more_time_advice(exc: PlannerError, name: str | None, model: RobotModel, gi
         else:
             advised = st.model_copy(update={"samples_per_segment": int(st.samples_per_segment * factor)})
             how = f"settings.samples_per_segment = {st.samples_per_segment * factor}"
+            if cell_size is not None:
+                how += f" with layout.cell.size = {float(cell_size)!r} m, the cell size it has now"
         try:
             sub = resolve_timing(advised, segments).model_copy(update={"require_settled": True})
         except PlannerError:
