@@ -277,3 +277,45 @@ def test_clip_halfplanes_is_the_intersection_shapely_computes():
         want = shapely.Polygon(tri).intersection(shapely.box(lo[0], lo[1], hi[0], hi[1])).area
         got = shapely.Polygon(cut).area if len(cut) >= 3 else 0.0
         assert abs(got - want) <= 1e-12
+
+
+#: seed 22's problem 2 (benchmarks/certify_seed22_problems.jsonl): a layout at 0.1 m/s whose psi
+#: range is zero-width; the compiled stage-wise solve accepted an ill-conditioned working set
+#: whose states were 2.8e-5 off the dynamics: "ok" but psi left by 1.9e-7 rad (not contained)
+ZERO_WIDTH_PSI_FAST = {
+    "robot": "moving-slide",
+    "layout": {"bounds": {"lower": [-0.045000450000000004, -0.036], "upper": [0.045000450000000004, 0.036]},
+               "obstacles": [{"type": "rectangle", "lower": [0.023105976022962077, -0.040067556908755825],
+                              "upper": [0.024905994022962077, -0.007026057081837709]},
+                             {"type": "polygon", "points": [[-0.0070801204376967075, -0.02268170204044822],
+                                                            [-0.004797388684100924, -0.016010430139852816],
+                                                            [-0.010130208649817282, -0.01994395355718831]]},
+                             {"type": "polygon", "points": [[-0.0169228729750982, -0.01122117826324612],
+                                                            [-0.009817491809792498, 0.012877352542322343],
+                                                            [-0.031225975410230034, -0.004779442898816454]]}],
+               "clearance": 0.0, "cell": {"shape": "triangle", "size": None},
+               "start": [0.009900099000000002, 0.027760664589351947, 0.0],
+               "end": [-0.04419956763337378, 0.03436546709080095, 0.0]},
+    "settings": {"speed_m_s": 0.1}}
+
+
+@pytest.mark.parametrize("backend", ["compiled", "reference"])
+def test_a_zero_width_psi_range_is_kept_when_the_step_qp_is_ill_conditioned(backend):
+    """Every constrained plan that answers ``ok`` with ``require_settled`` is contained: the
+    compiled step does not accept a stage-wise solution whose own prediction of its moves
+    breaks the rows (it is relaxed like an infeasible step, as DAQP's reference does)."""
+    from planner.constraints.controller import CONTAIN_TOL_RAD
+    from planner.constraints.rows import ROW_UNIT_M
+    from planner.constraints.step_kernels import ACCEPT_TOL
+
+    req = copy.deepcopy(ZERO_WIDTH_PSI_FAST)
+    req["settings"]["backend"] = backend
+    res = plan(req)
+    m = res.metrics
+    assert m.contained and m.settled
+    assert m.max_corridor_violation_rad <= CONTAIN_TOL_RAD
+    assert m.predicted_violation_max_m <= ACCEPT_TOL * ROW_UNIT_M
+    segs = [{"lower": s.lower.tolist(), "upper": s.upper.tolist(),
+             "polygon": None if s.polygon is None else np.asarray(s.polygon).tolist()} for s in res.corridor.segments]
+    v = check_plan(req, res, segs)
+    assert v.ok, v.problems
