@@ -319,3 +319,39 @@ def test_a_zero_width_psi_range_is_kept_when_the_step_qp_is_ill_conditioned(back
              "polygon": None if s.polygon is None else np.asarray(s.polygon).tolist()} for s in res.corridor.segments]
     v = check_plan(req, res, segs)
     assert v.ok, v.problems
+
+
+#: seed 22's case 268: the end point is the corner of the last box that the box before reaches
+#: from beyond it; the approach direction from that box's centre left the last box only the
+#: corner, and all 69 steps of its samples were infeasible (solved relaxed, 2.4x the estimate)
+END_AT_A_CORNER_REACHED_FROM_BEYOND = [
+    {"lower": [7.692676536679701e-05, 0.040196467785411485, 0.0052387491317081765],
+     "upper": [7.692676536679701e-05, 0.040196467785411485, 0.0052387491317081765]},
+    {"lower": [-0.003064129180900893, 0.03686360951143958, -0.0099999],
+     "upper": [0.003064129180900893, 0.04286544056612708, 0.0100001]},
+    {"lower": [-0.014730753354508056, 0.025466820173584148, -0.003422576539831396],
+     "upper": [0.016070546313925946, 0.05626811984201814, 0.016577423460168605]},
+    {"lower": [-0.015521845176733334, 0.018211321037716312, -0.0020774666544367756],
+     "upper": [0.010719944850370375, 0.04445311106482002, 0.017922533345563225]},
+    {"lower": [0.004094118565496924, 0.019386547195375192, 0.00586650728301589],
+     "upper": [0.013879889761019615, 0.026149870808423216, 0.025866507283015892]},
+    {"lower": [0.004094118565496924, 0.026149870808423216, 0.023866507283015898],
+     "upper": [0.004094118565496924, 0.026149870808423216, 0.023866507283015898]}]
+
+
+@pytest.mark.parametrize("backend", ["compiled", "reference"])
+def test_an_end_at_a_corner_reached_from_beyond_it_plans_without_relaxed_steps(backend):
+    from planner.corridor.geometry import APPROACH_ROOM_M, approach_direction
+    from planner.schema import Segment
+
+    segs = [Segment.model_validate(s) for s in END_AT_A_CORNER_REACHED_FROM_BEYOND]
+    d = approach_direction(segs)
+    assert d is not None
+    lo, hi, end = segs[-2].lower[:2], segs[-2].upper[:2], segs[-1].centre[:2]
+    corners = np.array([lo, [hi[0], lo[1]], hi, [lo[0], hi[1]]])
+    assert float(np.min((corners - end) @ d)) <= -APPROACH_ROOM_M  # the last box keeps room behind the end
+    req = {"robot": "moving-slide", "segments": END_AT_A_CORNER_REACHED_FROM_BEYOND, "settings": {"backend": backend}}
+    res = plan(req)
+    assert res.metrics.qp_relaxed_steps == 0 and res.metrics.contained and res.metrics.settled
+    v = check_plan(req, res, req["segments"])
+    assert v.ok, v.problems
