@@ -291,6 +291,10 @@ def _format_name(text: str) -> str:
     return text
 
 
+NO_RESIDENT = ("plan in this process: neither use the resident planner nor start one (README \"The resident "
+               "planner\"; RANGEPLAN_RESIDENT_S=0 for every command)")
+
+
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The whole parser; given the ``command`` about to run, the other commands' options that
     need heavy imports are left out (``rangeplan --help`` in well under a second)."""
@@ -308,6 +312,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     pp.add_argument("--compile", action="store_true", help="compile the kernels first if they are not compiled yet "
                     "(minutes, once after installing) instead of planning on the numpy reference while they compile "
                     "in the background")
+    pp.add_argument("--no-resident", action="store_true", help=NO_RESIDENT)
     pp.set_defaults(func=cmd_plan)
     add_import_parser(sub, full=command in (None, "import"))
     pc = sub.add_parser("contour", help="plan a G-code program (CAM tool path) within its tolerance",
@@ -331,6 +336,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     pc.add_argument("--compile", action="store_true", help="compile the kernels first if they are not compiled yet "
                     "(minutes, once after installing) instead of planning on the numpy reference while they compile "
                     "in the background")
+    pc.add_argument("--no-resident", action="store_true", help=NO_RESIDENT)
     pc.set_defaults(func=cmd_contour)
     ps = sub.add_parser("serve", help="serve the HTTP API and the browser editor")
     ps.add_argument("--host", help="API host (env RANGEPLAN_HOST, default 127.0.0.1)")
@@ -346,9 +352,52 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``rangeplan``: ``plan`` and ``contour`` are handed to the resident planner when one runs
+    (:mod:`app.resident`: the same output, messages and exit status in ~0.1 s), else run here
+    and then start one (after the output is written)."""
     argv = sys.argv[1:] if argv is None else argv
-    # the first word that is no option names the command ("" for `rangeplan --help`)
-    command = next((a for a in argv if not a.startswith("-")), "")
+    command = _command(argv)
+    if command in ("plan", "contour"):
+        from app import resident
+
+        try:
+            code, start = resident.client_main(argv, command)
+        except KeyboardInterrupt:  # waiting for the resident's answer (its plan goes on)
+            return 130
+        if code is not None:
+            return code
+        code = run(argv)
+        if start:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            resident.start_resident()
+        return code
+    return run(argv)
+
+
+def _command(argv: list[str]) -> str:
+    """The first word that is no option names the command ("" for ``rangeplan --help``)."""
+    return next((a for a in argv if not a.startswith("-")), "")
+
+
+def resident_main() -> None:
+    """The resident planner's process (started by :func:`app.resident.start_resident`, its key
+    as the argument): loads the planner and every kernel, then serves ``plan`` and ``contour``."""
+    from app import resident
+
+    def warm() -> None:
+        from planner import warm_up
+
+        warm_up()  # every kernel loaded from the cache
+        import app.formats  # noqa: F401  what the commands import when they run
+        import planner.contour  # noqa: F401
+
+    sys.exit(resident.serve(sys.argv[1], run, warm))
+
+
+def run(argv: list[str]) -> int:
+    """The CLI in this process."""
+    command = _command(argv)
     parser = build_parser(command)
     args = parser.parse_args(argv)
     try:

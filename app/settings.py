@@ -101,6 +101,10 @@ class Settings(BaseSettings):
     dask_scheduler: str | None = _f(None, "Dask scheduler address (tcp://host:8786): batches run on that cluster",
                                     cli="batch --scheduler")
     dask_malloc: str = _f("relax", "glibc malloc tuning of Dask workers (relax | keep)")
+    # -- the command line
+    resident_s: float = _f(600.0, "Seconds the CLI's resident planner stays without a request before it exits "
+                           "(0: no resident; README \"The resident planner\")", cli="plan/contour --no-resident",
+                           ge=0)
     # -- kernels
     kernel_seed: Path | None = _f(None, "Compiled-kernel cache copied into NUMBA_CACHE_DIR before the planner loads")
     # -- other programs' variables the service follows (named as they are, no prefix)

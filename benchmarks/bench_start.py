@@ -13,7 +13,11 @@ CPU time is the steadier figure); the table gives the median over ``--rounds``.
 
 - ``--help``: ``python -m app.cli --help``
 - ``import planner``: ``python -c "import planner"``
-- ``plan warm``: ``python -m app.cli plan static/examples/table1.json -o OUT.json``, kernels cached
+- ``plan warm``: ``python -m app.cli plan static/examples/table1.json -o OUT.json``, kernels cached,
+  in-process (``RANGEPLAN_RESIDENT_S=0``, as every row but the next)
+- ``plan warm, resident``: the same command handed to the CLI's resident planner
+  (``app/resident.py``; started once before the rounds, ended after them; a key of this run's
+  own): the client's wall and CPU, the resident's CPU not counted (it is no child)
 - ``worker ready``: ``import planner; planner.warm_up()`` (what a service or batch worker does)
 - ``--cold``: ``plan cold``, the first plan with an empty kernel cache (before issue 24's
   fallback: compiles; since: plans on the numpy reference while a background compile starts,
@@ -50,7 +54,8 @@ PY = sys.executable
 
 def timed(cmd: list[str], cwd: Path, env: dict | None = None) -> tuple[float, float]:
     """Run ``cmd``; (wall s, CPU s of the child). Raises on failure, with its stderr."""
-    e = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", **(env or {})}
+    e = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+         "RANGEPLAN_RESIDENT_S": "0", **(env or {})}
     e.pop("PYTHONPATH", None)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
@@ -69,9 +74,39 @@ def cases(tree: Path, tmp: Path, cold: bool) -> dict[str, list[str]]:
          "import planner": [PY, "-c", "import planner"],
          "plan warm": [PY, "-m", "app.cli", "plan", str(TABLE1), "-o", out],
          "worker ready": [PY, "-c", "import planner; planner.warm_up()"]}
+    if (tree / "app" / "resident.py").exists():
+        c["plan warm, resident"] = c["plan warm"]
     if cold:
         c["plan cold"] = c["plan warm"]
     return c
+
+
+#: the environment of the resident's row: a key of this run's own (any RANGEPLAN_* variable keys it)
+RESIDENT_ENV = {"RANGEPLAN_RESIDENT_S": "600", "RANGEPLAN_RESIDENT_TAG": f"bench-{os.getpid()}"}
+
+
+def start_resident(tree: Path) -> int:
+    """Start the resident planner of ``tree`` (as the CLI does after an in-process plan) and
+    wait until it listens; its pid."""
+    import socket
+
+    code = ("import os, app.cli; from app import resident; env = dict(os.environ); "
+            "d = resident.resident_dir(env, True); "
+            "print(resident.start_resident(env), resident.socket_path(d, resident.resident_key(env)))")
+    e = {**os.environ, "OPENBLAS_NUM_THREADS": "1", **RESIDENT_ENV}
+    e.pop("PYTHONPATH", None)
+    out = subprocess.run([PY, "-c", code], cwd=tree, env=e, capture_output=True, text=True, check=True)
+    pid, path = out.stdout.split()
+    deadline = time.monotonic() + 300
+    while True:
+        with socket.socket(socket.AF_UNIX) as s:
+            try:
+                s.connect(path)
+                return int(pid)
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise RuntimeError(f"no resident at {path}") from None
+        time.sleep(0.2)
 
 
 def cold_env(tmp: Path, round_: int, tree: Path) -> dict[str, str]:
@@ -422,6 +457,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmpdir:
         tmp = Path(tmpdir)
         trees = [("head", ROOT)]
+        residents: list[int] = []  # the resident planners started for the row "plan warm, resident"
         if args.base_tree:
             trees.insert(0, ("base", args.base_tree.resolve()))
         elif args.base:
@@ -432,21 +468,30 @@ def main() -> None:
         try:
             for _, tree in trees:  # the kernels of each tree compiled (or loaded) once before timing
                 timed([PY, "-c", "import planner; planner.warm_up()"], tree)
+            residents += [start_resident(tree) for _, tree in trees if (tree / "app" / "resident.py").exists()]
             results: dict[tuple[str, str], list[tuple[float, float]]] = {}
             for r in range(args.rounds):
                 for name, tree in trees:
                     for label, cmd in cases(tree, tmp, args.cold).items():
-                        env = cold_env(tmp, r, tree) if label == "plan cold" else None
+                        env = (cold_env(tmp, r, tree) if label == "plan cold" else
+                               RESIDENT_ENV if label == "plan warm, resident" else None)
                         try:
                             results.setdefault((label, name), []).append(timed(cmd, tree, env))
                         finally:
-                            if env is not None:  # the CLI's background compile (issue 24): ended
+                            if label == "plan cold":  # the CLI's background compile (issue 24): ended
                                 stop_background_compile(Path(env["RANGEPLAN_KERNEL_CACHE"]))
                 print(f"# round {r + 1}: load {load()}", flush=True)
             if args.install:
                 for label, v in install_rounds(args.rounds, tmp, args.cold).items():
                     results[(label, "head")] = v
         finally:
+            import signal
+
+            for pid in residents:
+                try:
+                    os.kill(pid, signal.SIGTERM)
+                except OSError:
+                    pass
             if args.base:
                 subprocess.run(["git", "worktree", "remove", "--force", str(tmp / "base")], cwd=ROOT,
                                capture_output=True)
