@@ -12,8 +12,8 @@ import numpy as np
 from .._jit import kernels_off
 from . import kernels as gk
 
-__all__ = ["APPROACH_MIN_M", "APPROACH_ROOM_M", "CorridorDistances", "Gap", "approach_direction", "box_distance", "corridor_distances",
-           "corridor_gaps",
+__all__ = ["APPROACH_MIN_M", "APPROACH_ROOM_M", "CorridorDistances", "Gap", "approach_direction", "box_distance",
+           "corridor_distances", "corridor_gaps",
            "corridor_violation", "halfplanes", "polygon_distance", "polygon_violation", "psi_violation"]
 
 #: a segment centre closer than this to the end point gives no approach direction [m]
