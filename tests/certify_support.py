@@ -280,20 +280,32 @@ def approach(segs: list[dict], lo: np.ndarray, hi: np.ndarray, end: np.ndarray) 
     """The approach direction (README "The result", overshoot_m): from the centre of the last
     segment before the end point whose centre is not the end point; but where the middle of
     the segment before the last cell lies past the end point along it, from the next centres
-    back (the first behind which that middle lies, else the one it lies least beyond)."""
+    back (the first behind which that middle lies, else the one it lies least beyond); of the
+    directions that leave the last cell's corners (its polygon's vertices) 10 um behind the end
+    point, where any does."""
     entry = None
     if len(segs) >= 3:
         poly = segs[-3].get("polygon")
         entry = (np.mean(np.asarray(poly, float), axis=0) if poly is not None
                  else 0.5 * (lo[-3, :2] + hi[-3, :2])) - end[:2]
-    best, best_excess = None, np.inf
+    poly = segs[-2].get("polygon") if len(segs) >= 2 else None
+    corners = (np.asarray(poly, float) if poly is not None else
+               np.array([[lo[-2, 0], lo[-2, 1]], [hi[-2, 0], lo[-2, 1]], [hi[-2, 0], hi[-2, 1]],
+                         [lo[-2, 0], hi[-2, 1]]])) if len(segs) >= 2 else None
+    dirs = []
     for j in range(len(segs) - 2, -1, -1):
         d = end[:2] - 0.5 * (lo[j, :2] + hi[j, :2])
         n = math.hypot(*d)
         if n <= 1e-9:
             continue
         d = d / n
-        if entry is None or entry @ d <= 0.0:
+        if entry is None:
+            return d
+        dirs.append(d)
+    roomy = [d for d in dirs if corners is None or min(float((c - end[:2]) @ d) for c in corners) <= -1e-5]
+    best, best_excess = None, np.inf
+    for d in roomy or dirs:
+        if entry @ d <= 0.0:
             return d
         if entry @ d < best_excess:
             best, best_excess = d, float(entry @ d)

@@ -309,3 +309,81 @@ def test_clip_halfplanes_is_the_intersection_shapely_computes():
         want = shapely.Polygon(tri).intersection(shapely.box(lo[0], lo[1], hi[0], hi[1])).area
         got = shapely.Polygon(cut).area if len(cut) >= 3 else 0.0
         assert abs(got - want) <= 1e-12
+
+
+#: seed 22's problem 2 (benchmarks/certify_seed22_problems.jsonl): a layout at 0.1 m/s whose psi
+#: range is zero-width; the compiled stage-wise solve accepted an ill-conditioned working set
+#: whose states were 2.8e-5 off the dynamics: "ok" but psi left by 1.9e-7 rad (not contained)
+ZERO_WIDTH_PSI_FAST = {
+    "robot": "moving-slide",
+    "layout": {"bounds": {"lower": [-0.045000450000000004, -0.036], "upper": [0.045000450000000004, 0.036]},
+               "obstacles": [{"type": "rectangle", "lower": [0.023105976022962077, -0.040067556908755825],
+                              "upper": [0.024905994022962077, -0.007026057081837709]},
+                             {"type": "polygon", "points": [[-0.0070801204376967075, -0.02268170204044822],
+                                                            [-0.004797388684100924, -0.016010430139852816],
+                                                            [-0.010130208649817282, -0.01994395355718831]]},
+                             {"type": "polygon", "points": [[-0.0169228729750982, -0.01122117826324612],
+                                                            [-0.009817491809792498, 0.012877352542322343],
+                                                            [-0.031225975410230034, -0.004779442898816454]]}],
+               "clearance": 0.0, "cell": {"shape": "triangle", "size": None},
+               "start": [0.009900099000000002, 0.027760664589351947, 0.0],
+               "end": [-0.04419956763337378, 0.03436546709080095, 0.0]},
+    "settings": {"speed_m_s": 0.1}}
+
+
+@pytest.mark.parametrize("backend", ["compiled", "reference"])
+def test_a_zero_width_psi_range_is_kept_when_the_step_qp_is_ill_conditioned(backend):
+    """Every constrained plan that answers ``ok`` with ``require_settled`` is contained: the
+    compiled step does not accept a stage-wise solution whose own prediction of its moves
+    breaks the rows (it is relaxed like an infeasible step, as DAQP's reference does)."""
+    from planner.constraints.controller import CONTAIN_TOL_RAD
+    from planner.constraints.rows import ROW_UNIT_M
+    from planner.constraints.step_kernels import ACCEPT_TOL
+
+    req = copy.deepcopy(ZERO_WIDTH_PSI_FAST)
+    req["settings"]["backend"] = backend
+    res = plan(req)
+    m = res.metrics
+    assert m.contained and m.settled
+    assert m.max_corridor_violation_rad <= CONTAIN_TOL_RAD
+    assert m.predicted_violation_max_m <= ACCEPT_TOL * ROW_UNIT_M
+    segs = [{"lower": s.lower.tolist(), "upper": s.upper.tolist(),
+             "polygon": None if s.polygon is None else np.asarray(s.polygon).tolist()} for s in res.corridor.segments]
+    v = check_plan(req, res, segs)
+    assert v.ok, v.problems
+
+
+#: seed 22's case 268: the end point is the corner of the last box that the box before reaches
+#: from beyond it; the approach direction from that box's centre left the last box only the
+#: corner, and all 69 steps of its samples were infeasible (solved relaxed, 2.4x the estimate)
+END_AT_A_CORNER_REACHED_FROM_BEYOND = [
+    {"lower": [7.692676536679701e-05, 0.040196467785411485, 0.0052387491317081765],
+     "upper": [7.692676536679701e-05, 0.040196467785411485, 0.0052387491317081765]},
+    {"lower": [-0.003064129180900893, 0.03686360951143958, -0.0099999],
+     "upper": [0.003064129180900893, 0.04286544056612708, 0.0100001]},
+    {"lower": [-0.014730753354508056, 0.025466820173584148, -0.003422576539831396],
+     "upper": [0.016070546313925946, 0.05626811984201814, 0.016577423460168605]},
+    {"lower": [-0.015521845176733334, 0.018211321037716312, -0.0020774666544367756],
+     "upper": [0.010719944850370375, 0.04445311106482002, 0.017922533345563225]},
+    {"lower": [0.004094118565496924, 0.019386547195375192, 0.00586650728301589],
+     "upper": [0.013879889761019615, 0.026149870808423216, 0.025866507283015892]},
+    {"lower": [0.004094118565496924, 0.026149870808423216, 0.023866507283015898],
+     "upper": [0.004094118565496924, 0.026149870808423216, 0.023866507283015898]}]
+
+
+@pytest.mark.parametrize("backend", ["compiled", "reference"])
+def test_an_end_at_a_corner_reached_from_beyond_it_plans_without_relaxed_steps(backend):
+    from planner.corridor.geometry import APPROACH_ROOM_M, approach_direction
+    from planner.schema import Segment
+
+    segs = [Segment.model_validate(s) for s in END_AT_A_CORNER_REACHED_FROM_BEYOND]
+    d = approach_direction(segs)
+    assert d is not None
+    lo, hi, end = segs[-2].lower[:2], segs[-2].upper[:2], segs[-1].centre[:2]
+    corners = np.array([lo, [hi[0], lo[1]], hi, [lo[0], hi[1]]])
+    assert float(np.min((corners - end) @ d)) <= -APPROACH_ROOM_M  # the last box keeps room behind the end
+    req = {"robot": "moving-slide", "segments": END_AT_A_CORNER_REACHED_FROM_BEYOND, "settings": {"backend": backend}}
+    res = plan(req)
+    assert res.metrics.qp_relaxed_steps == 0 and res.metrics.contained and res.metrics.settled
+    v = check_plan(req, res, req["segments"])
+    assert v.ok, v.problems

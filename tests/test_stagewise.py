@@ -14,6 +14,7 @@ from planner.constraints.compiled import RELAX_M
 from planner.constraints.dual_kernels import dual_solve
 from planner.constraints.rows import ROW_UNIT_M
 from planner.constraints.stagewise_kernels import stage_setup, substitute
+from planner.constraints.step_kernels import prediction_violation
 from tests.support import TABLE1, with_settings
 from tests.test_constraints_kernels import CASES, record_steps
 
@@ -189,3 +190,23 @@ def test_eliminated_equalities_give_the_same_minimiser(q_u):
         assert np.abs(Y[2:6 * N:6] - 0.0).max() < 1e-12  # psi = 0 at every predicted sample
     assert len(diffs) >= 20
     assert max(diffs) < 1e-8  # scaled moves (force / force_max)
+
+
+@pytest.mark.parametrize("case", ["table1", "psi", "triangle"])
+def test_prediction_violation_is_the_dense_qps(case, recorded):
+    """``step_kernels.prediction_violation`` (the acceptance test of a stage-wise solution)
+    equals the dense QP's largest violation of its hard rows (``X = free + Gx z``, every row,
+    equalities included) and of the force bounds, at moves that are not a solution."""
+    rng = np.random.default_rng(3)
+    for step in recorded(case)[:4]:
+        asm, qp = _qp(step)
+        dense = asm.dense(qp)
+        N, m = len(qp.W) // 3, len(asm.umax)
+        for scale in (1e-6, 1e-2, 1.2):
+            z = rng.uniform(-scale, scale, N * m)
+            Y = np.concatenate((rng.normal(size=6 * N), z))  # its own states are not read
+            want = max(dense.violation(z), float(np.max(np.abs(z) - asm.zmax)), 0.0)
+            R = qp.rows
+            got = prediction_violation(qp.Ad, qp.Bd * asm.umax, qp.x, qp.d, R.col, R.val, R.lower, R.upper, asm.zmax,
+                                       R.n_hard, Y)
+            assert got == pytest.approx(want, rel=1e-9, abs=1e-12)

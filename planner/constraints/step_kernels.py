@@ -21,10 +21,21 @@ from .dual_kernels import SOLVED, dual_solve
 from .kernels import KIND_RATE, assemble, finish, first_legs, offset, plant_step
 from .stagewise_kernels import stage_setup
 
-__all__ = ["NOT_ELIMINATED", "constrained_step"]
+__all__ = ["ACCEPT_TOL", "INACCURATE", "NOT_ELIMINATED", "constrained_step", "prediction_violation"]
 
 #: status of a step whose equalities could not be eliminated (else ``stagewise_kernels``' codes)
 NOT_ELIMINATED = -3
+#: status of a solve the stage-wise method called solved whose moves, predicted by the model
+#: itself, violate a row by more than :data:`ACCEPT_TOL` (an ill-conditioned working set)
+INACCURATE = -4
+#: a stage-wise solution is accepted only if the states the model predicts from its moves
+#: (``x_{s+1} = Ad x_s + Bu z_s``, the offset at the first) keep every hard row, the eliminated
+#: equalities included, within this (row units: 1e-9 m or rad, 1e-9 m/s, 1e-6 of force_max for
+#: the force rates). The dual method's own states ``X`` are ``Y0 + V lam``: with nearly dependent
+#: active rows the multipliers ``lam`` reach 1e6-1e7 and the cancellation leaves ``X`` off the
+#: dynamics by 1e-5 (issue 20: a zero-width psi range left by 1.9e-7 rad, on a QP DAQP finds
+#: infeasible). 1e3 times the solve's tolerance, 1e-3 of the widening of a relaxed step.
+ACCEPT_TOL = 1e-6
 
 
 @njit(cache=True)
@@ -45,11 +56,15 @@ def constrained_step(k, x, Ad, Bd, y_prev, u_prev, u0, warm, packed, Ts, substep
     can leave the next step's QP infeasible by the prediction error of a re-linearised model,
     a fraction of a nanometre; within ``relax`` that is accepted (``relaxed`` in the return).
 
+    A solve is accepted only if the states the model predicts from its moves keep the rows
+    within :data:`ACCEPT_TOL` (:func:`prediction_violation`); otherwise it counts as failed
+    (:data:`INACCURATE`: relaxed as an infeasible one, then left to the Python path).
+
     Returns ``(status, Y, z, X, y_nom, iterations, refinements, worst, relaxed)``: 1 solved (else the
-    solver's code or :data:`NOT_ELIMINATED`), the solution ``(X, z)`` as solved (6N + N m,),
-    the moves clipped to the force bounds (N m,),
+    solver's code, :data:`NOT_ELIMINATED` or :data:`INACCURATE`), the solution ``(X, z)`` as solved
+    (6N + N m,), the moves clipped to the force bounds (N m,),
     the predicted states (N, 6), the next step's nominal poses (N, 3), the active-set changes,
-    the re-solves and the largest row violation at the solution (row units)."""
+    the re-solves and the largest row violation of the predicted states (row units)."""
     m = Bd.shape[1]
     W, tgt, col, val, lower, upper, kinds, n_hard, speed0, stroke0 = assemble(k, N, x, y_prev, u_prev, unit, *inputs)
     r0, base, lmin, lmax = inputs[5], inputs[6], inputs[-2], inputs[-1]
@@ -72,6 +87,10 @@ def constrained_step(k, x, Ad, Bd, y_prev, u_prev, u0, warm, packed, Ts, substep
                                               val, lower, upper, zmax, n_hard, tol, dep_tol, warm_tol, max_iter,
                                               start, V, Lm, Y)
         iterations += it
+        if status == SOLVED:
+            worst = prediction_violation(Ad, Bu, x, d, col, val, lower, upper, zmax, n_hard, Y)
+            if not worst <= ACCEPT_TOL:
+                status = INACCURATE
         if status != SOLVED and not relaxed:
             relaxed = True
             for i in range(n_hard):
@@ -94,3 +113,37 @@ def constrained_step(k, x, Ad, Bd, y_prev, u_prev, u0, warm, packed, Ts, substep
         start = Y.copy()  # the re-solve starts from this solution: the offset moved a little
     zc, Xr, y_nom = finish(Y[6 * N:], Y[:6 * N])
     return status, Y, zc, Xr, y_nom, iterations, refinements, worst, relaxed
+
+
+@njit(cache=True)
+def prediction_violation(Ad, Bu, x, d, col, val, lower, upper, zmax, n_hard, Y):
+    """The largest violation (row units, 0 if none) of the hard rows (equalities included) and
+    of the force bounds ``|z| <= zmax`` by the moves ``z = Y[6N:]`` and the states the model
+    predicts from them, ``x_{s+1} = Ad x_s + Bu z_s`` (+ ``d`` at ``s = 0``, from ``x_0 = x``):
+    eq. (11) in the scaled moves, as the dense QP's ``X = free + Gx z``; ``Y``'s own states are
+    not read."""
+    m = Bu.shape[1]
+    N = (Y.shape[0]) // (6 + m)
+    nx = 6 * N
+    Yc = np.empty(Y.shape[0])
+    for q in range(nx, Y.shape[0]):
+        Yc[q] = Y[q]
+    for s in range(N):
+        for a in range(6):
+            acc = d[a] if s == 0 else 0.0
+            for b in range(6):
+                acc += Ad[a, b] * (x[b] if s == 0 else Yc[6 * (s - 1) + b])
+            for lg in range(m):
+                acc += Bu[a, lg] * Y[nx + m * s + lg]
+            Yc[6 * s + a] = acc
+    worst = 0.0
+    for i in range(n_hard):
+        v = 0.0
+        for t in range(col.shape[1]):
+            cc = col[i, t]
+            if cc >= 0:
+                v += val[i, t] * Yc[cc]
+        worst = max(worst, lower[i] - v, v - upper[i])
+    for q in range(nx, Y.shape[0]):
+        worst = max(worst, abs(Y[q]) - zmax[q - nx])
+    return worst

@@ -12,12 +12,15 @@ import numpy as np
 from .._jit import kernels_off
 from . import kernels as gk
 
-__all__ = ["APPROACH_MIN_M", "CorridorDistances", "Gap", "approach_direction", "box_distance", "corridor_distances",
-           "corridor_gaps",
+__all__ = ["APPROACH_MIN_M", "APPROACH_ROOM_M", "CorridorDistances", "Gap", "approach_direction", "box_distance",
+           "corridor_distances", "corridor_gaps",
            "corridor_violation", "halfplanes", "polygon_distance", "polygon_violation", "psi_violation"]
 
 #: a segment centre closer than this to the end point gives no approach direction [m]
 APPROACH_MIN_M = 1e-9
+#: the room [m] a direction of approach must leave the last cell behind the end point (10 times
+#: the constrained mode's corridor margin, whose rows keep the samples that far inside it)
+APPROACH_ROOM_M = 1e-5
 
 
 def halfplanes(polygon: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -129,6 +132,13 @@ def approach_direction(segments: Sequence) -> np.ndarray | None:
     direction from that centre against the way the robot comes, and the rows would cut the
     segment before away (issue 20: ``infeasible``); then the direction is taken from the next
     centres back, the first behind which that middle lies (else the one it lies least beyond).
+    A direction is taken only if the last cell keeps room behind the end point (a vertex
+    :data:`APPROACH_ROOM_M` behind it), where any does: an end point at the corner of its cell
+    that the segment before reaches from beyond that corner made the direction from that
+    segment's centre leave the cell nothing but the corner, which with the margins no sample of
+    the cell can keep: every step of the cell's samples was infeasible, solved only with its rows
+    widened, each after the stage-wise solver's iteration limit (issue 20: 69 of 120 steps, 2.4x
+    the work estimate).
     """
     end = np.asarray(segments[-1].centre[:2], float)
     entry = None
@@ -137,7 +147,14 @@ def approach_direction(segments: Sequence) -> np.ndarray | None:
         # the middle of the segment before the last cell (of its exact cell if it has one)
         entry = (np.asarray(poly, float).mean(axis=0) if poly is not None
                  else np.asarray(segments[-3].centre[:2], float)) - end
-    best, best_excess = None, np.inf
+    verts = None  # the last cell's vertices, relative to the end point
+    if len(segments) >= 2:
+        last = segments[-2]
+        poly = getattr(last, "polygon", None)
+        lo, hi = np.asarray(last.lower[:2], float), np.asarray(last.upper[:2], float)
+        verts = (np.asarray(poly, float) if poly is not None
+                 else np.array([lo, [hi[0], lo[1]], hi, [lo[0], hi[1]]])) - end
+    candidates = []  # (direction, how far the middle of the segment before lies past the end point, room)
     for seg in reversed(segments[:-1]):
         d = end - np.asarray(seg.centre[:2], float)
         n = float(np.hypot(d[0], d[1]))
@@ -146,12 +163,13 @@ def approach_direction(segments: Sequence) -> np.ndarray | None:
         d = d / n
         if entry is None:
             return d
-        excess = float(entry @ d)  # how far the middle of the segment before lies past the end point
+        room = verts is None or float(np.min(verts @ d)) <= -APPROACH_ROOM_M
+        candidates.append((d, float(entry @ d), room))
+    pool = [c for c in candidates if c[2]] or candidates
+    for d, excess, _ in pool:
         if excess <= 0.0:
             return d
-        if excess < best_excess:
-            best, best_excess = d, excess
-    return best
+    return min(pool, key=lambda c: c[1])[0] if pool else None
 
 
 def psi_violation(poses: np.ndarray, segments: Sequence) -> np.ndarray:
