@@ -424,9 +424,12 @@ TABLE1_FILE = Path(__file__).resolve().parents[1] / "static" / "examples" / "tab
 def test_cli_batch_ctrl_c_keeps_finished_results_and_resumes(tmp_path):
     study = write_jsonl(tmp_path / "s.jsonl", [variant(i % 5, "constrained") for i in range(40)])
     out = tmp_path / "out"
+    # SIGINT at its default in the batch, as in a terminal: a test run started in the background
+    # of a non-interactive shell (`make test &`) ignores SIGINT, and so would the batch
     proc = subprocess.Popen([*CLI, "batch", str(study), "-o", str(out), "--workers", "2", "--progress", "lines"],
                             stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=env(),
-                            start_new_session=True)
+                            start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     seen = 0
     assert proc.stderr is not None
     for line in proc.stderr:
