@@ -90,6 +90,14 @@ def server(tmp_path_factory):
         editor.stop()
 
 
+def close_notifications(page) -> None:
+    """Click every notification's close button that is there now, in one step in the page: a
+    notification that closes itself meanwhile (or the first click closing more than one) leaves a
+    locator taken before it with nothing to wait for. No wait for a still frame either: a loaded
+    machine renders the software-WebGL page slowly."""
+    page.evaluate("document.querySelectorAll('.mantine-Notification-closeButton').forEach(b => b.click())")
+
+
 class Tab:
     """One browser tab of the editor and its session on the server."""
 
@@ -112,8 +120,7 @@ class Tab:
         self.session = next(s for s in editor.sessions if id(s) not in known)
         assert self.session.wait_idle(60) and self.session.last_result is not None
         time.sleep(1.5)  # first frames, camera placed by the server
-        for close in self.page.locator(".mantine-Notification-closeButton").all():  # "software WebGL" notice
-            close.dispatch_event("click")  # no wait for a still frame: a loaded machine renders slowly
+        close_notifications(self.page)  # the "software WebGL" notice
 
     def lines(self, name: str):
         """The line-segment node ``name`` as this page received it (None: hidden). Playwright's
@@ -598,8 +605,7 @@ def test_readme_screenshot_of_an_imported_drawing_with_holes(tab):
     s.gui.robot_style.value = "outline"
     s.gui.time.value = round(0.5 * float(s.last_result.time[-1]), 2)
     tab.tab("Result")
-    for close in page.locator(".mantine-Notification-closeButton").all():
-        close.dispatch_event("click")
+    close_notifications(page)
     time.sleep(1.5)
     path = tab.shot("10-drawing")
     target = os.environ.get("RANGEPLAN_DOCS_DRAWING_SCREENSHOT")
