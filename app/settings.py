@@ -76,6 +76,9 @@ class Settings(BaseSettings):
                                                      "that loaded the planner once (ready in ~0.1 s), or a fresh "
                                                      "interpreter loading it (1-6 s each)")
     max_queue: int = _f(64, "Jobs waiting for a worker beyond which the API answers 503 busy", ge=0)
+    admission_queue: int = _f(1024, "Requests waiting for the event loop (it starts one new request a turn, so that "
+                              "/health and /ready answer at once under any burst) beyond which the API answers "
+                              "503 busy", ge=1)
     max_body_bytes: int = _f(2 * MiB, "Largest request body [bytes] (413 above)", default_text="2 MiB", gt=0)
     # -- storage
     data_dir: Path | None = _f(None, "Directory of the SQLite store",

@@ -1,10 +1,13 @@
 """Under 200 concurrent clients mixing plans, saves and list pages on loopback, /ready
 answers within 1 s throughout (issue 15). The load runs in a process of its own
 (:mod:`tests.loadgen`, 200 clients x 3 requests) at nice 10, as clients on other machines of
-the network would be: at the server's own priority the load generator takes as much of the 2
-cores as the server (benchmarks/bench_load.py --load-nice 0 measures that case: /ready max
-0.59-0.73 s on a quiet machine, 1.08 s once in a test run; at nice 10 this test saw 0.60-0.90 s).
-This process probes /ready every 50 ms at the server's priority."""
+the network would be. This process probes /ready every 50 ms at the server's priority.
+
+The 200 first requests arrive in the same instant. Before the admission gate
+(app/admission.py) the event loop started all of them in one turn and read the probe after
+it, and each of the 67 plans started a waiting thread on the loop: /ready max 0.5-1.1 s
+(1.06 and 1.08 s in two CI runs). Now one request starts a turn and the threads exist
+before the first request: max 0.11-0.18 s (benchmarks/README.md)."""
 
 from __future__ import annotations
 
