@@ -615,6 +615,46 @@ def tiny_corridor(rng: np.random.Generator) -> dict:
     return {"robot": robot, "segments": segs, "settings": {"samples_per_segment": int(rng.integers(1, 11))}}
 
 
+def slow_corridor(rng: np.random.Generator) -> dict:
+    """A slow corridor of millimetre boxes (issue 20, seed 22 case 4731: the horizon spans the
+    whole corridor, and an end point with a psi range is settled at its angle's middle at the
+    arrival rate): 3-8 boxes of 0.6-3 mm, each starting inside the one before, psi ranges of 0
+    to 0.1 rad, a start point in the first box, the end point at a corner, on an edge or inside
+    the last box, as a point or (one in two) a point in x/y with the box's psi range; timed at
+    0.02-0.1 m/s or at 1-5 samples per segment; both robots. ``rng``: a numpy generator."""
+    robot = ["moving-slide", "tri-slide"][int(rng.integers(2))]
+    n = int(rng.integers(3, 9))
+    psi_w = [0.0, 0.02, 0.1][int(rng.integers(3))]
+    p = rng.uniform(-0.03, 0.03, 2)
+    pc = float(rng.uniform(-0.03, 0.03))
+    boxes = []
+    for _ in range(n):
+        half = rng.uniform(0.0006, 0.003, 2) / 2
+        lo, hi = p - half, p + half
+        boxes.append((np.array([*lo, pc - psi_w / 2]), np.array([*hi, pc + psi_w / 2])))
+        p = lo + (hi - lo) * rng.random(2)
+        pc = float(pc + psi_w * rng.uniform(-0.45, 0.45))
+    lo, hi = boxes[-1]
+    f = [rng.choice([0.0, 1.0], 2), np.array([float(rng.choice([0.0, 1.0])), float(rng.random())]),
+         rng.random(2)][int(rng.integers(3))]
+    exy = lo[:2] + (hi[:2] - lo[:2]) * rng.permutation(f)
+    if rng.random() < 0.5:
+        end = ([*exy, lo[2]], [*exy, hi[2]])
+    else:
+        q = float(lo[2] + (hi[2] - lo[2]) * rng.random())
+        end = ([*exy, q], [*exy, q])
+    s = [*(boxes[0][0][:2] + (boxes[0][1][:2] - boxes[0][0][:2]) * rng.random(2)),
+         float(boxes[0][0][2] + psi_w * rng.random())]
+    segs = [{"lower": [float(v) for v in s], "upper": [float(v) for v in s]}]
+    segs += [{"lower": [float(v) for v in a], "upper": [float(v) for v in b]} for a, b in boxes]
+    segs.append({"lower": [float(v) for v in end[0]], "upper": [float(v) for v in end[1]]})
+    if rng.random() < 0.7:
+        settings: dict[str, Any] = {"speed_m_s": [0.02, 0.05, 0.1][int(rng.integers(3))]}
+    else:
+        settings = {"samples_per_segment": int(rng.integers(1, 6))}
+    return {"robot": robot, "segments": segs, "settings": settings}
+
+
 # ---------------------------------------------------------------- certifying one case
 
 import copy  # noqa: E402
