@@ -52,7 +52,7 @@ def one_run(clients: int, per_client: int, nice: int) -> tuple[list[tuple[float,
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("--runs", type=int, default=6)
     ap.add_argument("--clients", type=int, default=200)
     ap.add_argument("--per-client", type=int, default=3)
