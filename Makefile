@@ -61,7 +61,7 @@ lint: $(STAMP)
 	$(VENV)/bin/lint-imports
 
 test: $(STAMP) kernels browser linuxcnc lint
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q --durations=40
 
 bench: $(STAMP) kernels
 	$(PY) benchmarks/bench_planner.py

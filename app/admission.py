@@ -27,7 +27,7 @@ import asyncio
 import json
 from collections import deque
 
-__all__ = ["EXEMPT_PATHS", "AdmissionGate"]
+__all__ = ["EXEMPT_PATHS", "Admission", "AdmissionGate"]
 
 #: answered without waiting: the probes and the metrics a monitor scrapes under load
 EXEMPT_PATHS = frozenset({"/health", "/ready", "/metrics"})
@@ -81,27 +81,40 @@ async def _busy(send, message: str) -> None:
     await send({"type": "http.response.body", "body": body})
 
 
-class AdmissionGate:
-    """ASGI middleware: one request (other than :data:`EXEMPT_PATHS`) on a turn of the event
-    loop; at most ``queue`` waiting, beyond that 503 ``busy``."""
+class Admission:
+    """The gate's state, one per app (``app.state.admission``: the metrics read :attr:`waiting`)."""
 
-    def __init__(self, app, queue: int = 1024):
-        self.app, self.queue = app, queue
+    def __init__(self, queue: int = 1024):
+        self.queue = queue
         self._turns: _Turns | None = None  # made on the server's loop, at first use
 
     @property
     def waiting(self) -> int:
         """Requests waiting now."""
-        return len(self._turns.waiters) if self._turns is not None else 0
+        turns = self._turns
+        return len(turns.waiters) if turns is not None else 0
 
-    async def __call__(self, scope, receive, send):
-        if scope["type"] != "http" or scope.get("path") in EXEMPT_PATHS:
-            return await self.app(scope, receive, send)
+    def turns(self) -> _Turns:
         loop = asyncio.get_running_loop()
         turns = self._turns
         if turns is None or turns.loop is not loop:  # a new loop (a test client's): new turns
             turns = self._turns = _Turns(loop)
-        if len(turns.waiters) >= self.queue:
+        return turns
+
+
+class AdmissionGate:
+    """ASGI middleware: one request (other than :data:`EXEMPT_PATHS`) on a turn of the event
+    loop; at most ``admission.queue`` waiting, beyond that 503 ``busy``."""
+
+    def __init__(self, app, admission: Admission | None = None):
+        self.app = app
+        self.admission = admission if admission is not None else Admission()
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http" or scope.get("path") in EXEMPT_PATHS:
+            return await self.app(scope, receive, send)
+        turns = self.admission.turns()
+        if len(turns.waiters) >= self.admission.queue:
             return await _busy(send, f"{len(turns.waiters)} requests are waiting for the server already; "
                                "retry in a second")
         await turns.admit()

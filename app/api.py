@@ -36,7 +36,7 @@ from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 
-from app.admission import AdmissionGate
+from app.admission import Admission, AdmissionGate
 from app.batch.api import batch_router
 from app.docs import install_docs
 from app.handlers import install_error_handlers
@@ -138,7 +138,8 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
     access = access if access is not None else AccessPolicy.from_env()
     install_access_control(app, access)  # outside the body limit: refused before the body is read
     # outside the access rules: a burst waits here unread (app/admission.py), the probes pass
-    app.add_middleware(AdmissionGate, queue=cfg.admission_queue)
+    app.state.admission = Admission(cfg.admission_queue)
+    app.add_middleware(AdmissionGate, admission=app.state.admission)
     install_observability(app, access_log=cfg.access_log)  # request ids, JSON access lines, GET /metrics
     app.state.access = access
     install_error_handlers(app)

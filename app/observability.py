@@ -142,6 +142,10 @@ class _StateCollector(Collector):
             workers.add_metric(["configured"], ready["workers"])
             workers.add_metric(["ready"], ready["workers_ready"])
             restarts.add_metric(["plan"], int(stats.get("replaced_workers", 0)))
+        waiting = GaugeMetricFamily("rangeplan_http_requests_waiting", "Requests waiting for their turn of the event "
+                                    "loop (app/admission.py; RANGEPLAN_ADMISSION_QUEUE bounds them) (count)")
+        admission = getattr(self.app.state, "admission", None)
+        waiting.add_metric([], admission.waiting if admission is not None else 0)
         batches = getattr(self.app.state, "batches", None)
         items = GaugeMetricFamily("rangeplan_batch_items", "Items of the stored batches, by status: pending, "
                                   "running, ok, error, failed, cancelled (count)", labels=["status"])
@@ -153,7 +157,7 @@ class _StateCollector(Collector):
                 items.add_metric([status], counts["items"].get(status, 0))
             for state in ("queued", "running", "done", "cancelled"):
                 states.add_metric([state], counts["batches"].get(state, 0))
-        yield from (in_flight, queue, workers, restarts, items, states)
+        yield from (in_flight, queue, workers, restarts, waiting, items, states)
 
 
 class Metrics:

@@ -14,7 +14,7 @@ import time
 import httpx
 import pytest
 
-from app.admission import EXEMPT_PATHS, AdmissionGate
+from app.admission import EXEMPT_PATHS, Admission, AdmissionGate
 
 #: CPU time of one request's work between two waits [s] (a plan's validation is ~2-3 ms)
 WORK_S = 0.01
@@ -39,7 +39,7 @@ def _app(order: list[str]):
     return app
 
 
-async def _burst(app, n: int) -> list[str]:
+async def _burst(app, n: int) -> None:
     """``n`` requests and one /ready started in the same turn (the probe last)."""
     transport = httpx.ASGITransport(app=app)
     async with httpx.AsyncClient(transport=transport, base_url="http://t") as c:
@@ -70,7 +70,7 @@ def test_waiting_is_bounded_with_busy_and_retry_after():
     order: list[str] = []
 
     async def run():
-        transport = httpx.ASGITransport(app=AdmissionGate(_app(order), queue=3))
+        transport = httpx.ASGITransport(app=AdmissionGate(_app(order), Admission(queue=3)))
         async with httpx.AsyncClient(transport=transport, base_url="http://t") as c:
             return await asyncio.gather(*(c.get(f"/v1/work/{i}") for i in range(10)), c.get("/health"))
 
@@ -105,7 +105,7 @@ def test_a_client_that_leaves_while_waiting_does_not_stall_the_others():
     async def run():
         tasks = [asyncio.ensure_future(call(f"/v1/work/{i}")) for i in range(6)]
         await asyncio.sleep(0)  # all started: the first went on, five wait
-        assert gate.waiting == 5
+        assert gate.admission.waiting == 5
         tasks[1].cancel()
         tasks[2].cancel()
         done = await asyncio.wait_for(asyncio.gather(*tasks, return_exceptions=True), 5)
@@ -114,7 +114,7 @@ def test_a_client_that_leaves_while_waiting_does_not_stall_the_others():
     done = asyncio.run(run())
     assert isinstance(done[1], asyncio.CancelledError) and isinstance(done[2], asyncio.CancelledError)
     assert order == ["/v1/work/0", "/v1/work/3", "/v1/work/4", "/v1/work/5"]
-    assert gate.waiting == 0
+    assert gate.admission.waiting == 0
 
 
 def test_the_service_starts_the_threads_plans_wait_on_before_the_first_request(tmp_path):
@@ -149,3 +149,19 @@ def test_the_api_answers_busy_in_its_error_shape_when_too_many_wait(tmp_path, mo
     codes = sorted(r.status_code for r in answers)
     assert codes == [200, 200, 503, 503], codes
     assert json.loads(answers[-1].content)["error"]["code"] == "busy"
+
+
+def test_the_metrics_count_the_requests_waiting(tmp_path):
+    from fastapi.testclient import TestClient
+
+    from app.api import create_app
+    from app.storage import Store
+
+    class Five:
+        waiting = 5
+
+    app = create_app(Store(tmp_path), workers=1, executor="thread")
+    with TestClient(app, base_url="http://127.0.0.1") as c:
+        assert "rangeplan_http_requests_waiting 0.0" in c.get("/metrics").text
+        app.state.admission = Five()
+        assert "rangeplan_http_requests_waiting 5.0" in c.get("/metrics").text
