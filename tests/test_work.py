@@ -156,62 +156,6 @@ def test_layout_estimate_is_a_lower_bound_on_the_corridor(shape, size, start, en
     assert est.steps - tail <= len(seg.segments) * S
 
 
-def _settling_case(psi_range: bool, N: int = 30) -> dict:
-    """Seed 22 case 4731 of the certification (issue 20): 5 boxes of 0.6-3 mm at 0.05 m/s
-    (2 samples per segment), the end point in x/y with the last box's psi range (or, with
-    ``psi_range`` False, at the middle of that range)."""
-    from tests.certify_support import _with, draw_case
-
-    case = copy.deepcopy(draw_case(22, 4731))
-    end = case["segments"][-1]
-    assert end["lower"][:2] == end["upper"][:2] and end["upper"][2] > end["lower"][2]
-    if not psi_range:
-        mid = 0.5 * (end["lower"][2] + end["upper"][2])
-        end["lower"][2] = end["upper"][2] = mid
-    case["settings"]["N"] = N
-    return _with(case, mode="constrained")
-
-
-@pytest.mark.parametrize("N", [20, 30])
-def test_estimate_counts_the_rows_a_psi_range_end_holds_through_the_settling(N):
-    """An end point in x/y with a psi range settles at its angle's middle at the arrival
-    rate, each settling step with the no-overshoot half-plane (N - 1 samples) and the psi rate
-    (N samples) at their bounds, which the stage-wise solver's warm start takes one iteration
-    each: case 4731 ran 193 such steps at 59 iterations (N = 30) against ~1 for Table I, 2.8x
-    its estimate. The estimate counts at least the iterations the plan took in its settling
-    (the median step's, over every settling step the request allows) at the term's cost per
-    row, and nothing of it for an end pose with a fixed angle or in paper mode."""
-    req = _settling_case(True, N)
-    res = plan(req)
-    st = PlanRequest.model_validate(req).settings
-    settling = res.metrics.steps - round(res.timing.sequence_time_s / st.Ts)
-    assert settling > 50  # the angle creeps: the plan is mostly settling
-    with_rows = estimate_work(req)
-    point = estimate_work(_settling_case(False, N))
-    assert with_rows.steps == point.steps  # the same corridor and tail: only the rows differ
-    assert with_rows.seconds > point.seconds
-
-    from planner.orchestrator.work import tail_row_cost, tail_rows
-
-    rows = tail_rows(st, PlanRequest.model_validate(req).segments)
-    assert rows == 2 * N - 1 and res.metrics.qp_iterations_median <= rows
-    assert with_rows.seconds - point.seconds >= st.tail_steps * res.metrics.qp_iterations_median * tail_row_cost(N)
-    assert "rows held active" in with_rows.detail and "rows held active" not in point.detail
-    paper = estimate_work({**req, "settings": {**req["settings"], "mode": "paper"}})
-    assert "rows held active" not in paper.detail
-
-
-def test_settling_rows_leave_other_estimates_as_they_were(table1):
-    """Table I (an end pose), a layout and the paper mode have no settling-row term: their
-    estimates are the steps at the step cost alone."""
-    from planner.orchestrator.work import tail_rows
-
-    for req in (table1, with_settings(table1, mode="paper"), {"layout": LAYOUT}):
-        st = PlanRequest.model_validate(req).settings
-        assert tail_rows(st, PlanRequest.model_validate(req).segments) == 0
-        assert "rows held active" not in estimate_work(req).detail
-
-
 def test_estimate_is_fast_for_the_largest_requests():
     """Microseconds, not a plan: 2 000 segments with a speed target (one pass over the
     segments), and a layout at the cell limit."""

@@ -12,9 +12,6 @@ the validated request alone (no robot model, no segmentation, no simulation):
 * the cost of one receding-horizon step for the mode, backend, solver and horizon ``N``
   (``a + b N + c N^2 + d N^3``; the compiled constrained step about linearly in N, its numpy
   reference with DAQP about ``N^2.2``) and the RK4 substeps;
-* a constrained plan whose corridor ends in an x/y point with a psi range: the ``2N - 1`` rows
-  its settling holds active each step (:func:`tail_rows`; the compiled stage-wise solver's
-  warm start takes each again, :func:`tail_row_cost`), over the whole tail;
 * the range sequence, the corridor metrics and the result, per sample (linear in the
   samples; more with exact cell polygons);
 * a layout's segmentation (per cell, per obstacle and a fixed part);
@@ -64,8 +61,7 @@ from ..schema import (
 )
 from .timing import centre_path_length, method_of, moving_segments
 
-__all__ = ["MORE_TIME", "WorkEstimate", "check_work", "estimate_work", "slack_allowance", "slack_costs",
-           "tail_row_cost", "tail_rows"]
+__all__ = ["MORE_TIME", "WorkEstimate", "check_work", "estimate_work", "slack_allowance", "slack_costs"]
 
 #: the time factors the advice of an infeasible constrained plan tries, in this order (each
 #: planned until its first infeasible step; the first that plans is advised)
@@ -101,31 +97,6 @@ def _step_cost(mode: str, backend: str, solver: str, N: int, substeps: int) -> f
     c = WORK_COSTS
     step = c[f"{key}_a"] + c[f"{key}_b"] * N + c[f"{key}_c"] * N ** 2 + c[f"{key}_d"] * N ** 3
     return step + (substeps - 1) * c[f"substep_{backend}"]
-
-
-def tail_rows(st: Settings, corridor: Sequence[Any] | None) -> int:
-    """Rows the compiled constrained step holds active at each settling step (0 where the model
-    counts none): ``2N - 1`` for a corridor ending in an x/y point with a psi range, whose
-    settling keeps the no-overshoot half-plane (``EndApproachConstraint``, samples 1..N-1) and
-    the arrival's psi rate (``ArrivalConstraint``, all N samples) at their bounds while the
-    angle creeps to the end pose's at the arrival rate, each step up to the whole tail
-    (``tail_max_s``); its warm start substitutes and factors every one of them again each step
-    (issue 20: seed 22 case 4731, 59 rows a step over 193 settling steps, 2.8x its estimate
-    without this). The compiled backend only (the reference backend's DAQP step is costed at
-    its own, dearer rate)."""
-    if st.mode != "constrained" or st.backend != "compiled" or not corridor or len(corridor) < 2:
-        return 0
-    end = corridor[-1]
-    if not end.is_xy_point or float(end.upper[2] - end.lower[2]) <= 0.0:
-        return 0
-    return 2 * st.N - 1
-
-
-def tail_row_cost(N: int) -> float:
-    """Seconds one row active through a settling step costs the compiled stage-wise solver
-    (``tail_row_b N + tail_row_c N^2`` of :data:`~planner.schema.WORK_COSTS`: a Riccati
-    substitution and a row of the working set's factor, both growing with the horizon)."""
-    return WORK_COSTS["tail_row_b"] * N + WORK_COSTS["tail_row_c"] * N ** 2
 
 
 def slack_costs(N: int) -> tuple[float, float]:
@@ -223,9 +194,7 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
     plans = 2 + max(1, math.ceil(math.log2(max(st.N, 2)))) if st.fastest else 1
     steps_one = n * S + st.tail_steps
     step_s = _step_cost(st.mode, st.backend, st.solver, st.N, st.plant_substeps)
-    rows = tail_rows(st, req.segments if req.segments is not None else segments)
-    tail_s = plans * st.tail_steps * rows * tail_row_cost(st.N)
-    loop_s = plans * steps_one * step_s + tail_s
+    loop_s = plans * steps_one * step_s
     metrics_s = plans * steps_one * (c["sample"] + (c["sample_polygon"] if polygons else 0.0))
     segment_s = (c["segmentation"] if req.layout is not None else 0.0) + cells * c["cell"] + obstacles * c["obstacle"]
     seconds = c["fixed"] + loop_s + metrics_s + segment_s
@@ -250,9 +219,6 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
               f"~{step_s * 1e6:.0f} us per step in {st.mode} mode at N = {st.N}"
               f"{'' if st.backend == 'compiled' else f' ({st.backend} backend, {st.solver} solver)'}, "
               f"{metrics_s:.2g} s of corridor metrics")
-    if rows:
-        detail += (f", {tail_s:.2g} s for {rows} rows held active through each settling step (an end point "
-                   "with a psi range)")
     if segment_s > 0.01:
         detail += f", {segment_s:.2g} s of segmentation"
     if slack_n:

@@ -89,12 +89,7 @@ DEFAULT_LAYOUT_SPEED_M_S = 0.05
 #: since issue 17; more with cell polygons), per cell and per obstacle of a segmentation and
 #: a fixed part per segmentation (the workspace, the reach region: ~2.5-4 ms for 24-900 cells,
 #: found by the certification run, issue 20), and a fixed part per request (parsing, reach
-#: checks, the result). ``tail_row_b N + tail_row_c N^2``: what one row active through a
-#: settling step costs the compiled stage-wise solver (its warm start substitutes and factors
-#: every active row again each step), for a corridor ending in an x/y point with a psi range,
-#: whose settling holds ~2N rows active per step (the no-overshoot half-plane at N - 1 samples
-#: and the arrival's psi rate at N) while the angle creeps to the end pose at the arrival rate:
-#: ``benchmarks/bench_tail.py`` (issue 20, seed 22 case 4731: 59 rows a step, 4x a Table I step).
+#: checks, the result).
 WORK_COSTS: dict[str, float] = {
     "paper_compiled_a": 6e-6, "paper_compiled_b": 0.25e-6, "paper_compiled_c": 0.0, "paper_compiled_d": 0.0,
     "paper_reference_a": 110e-6, "paper_reference_b": 1.5e-6, "paper_reference_c": 0.0, "paper_reference_d": 0.0,
@@ -108,7 +103,6 @@ WORK_COSTS: dict[str, float] = {
     "sample": 2.5e-6, "sample_polygon": 1e-6,
     "cell": 5e-6, "obstacle": 1e-4, "segmentation": 3e-3, "fixed": 1.5e-3,
     "slack_step_a": 2e-3, "slack_step_d": 0.6e-6, "slack_iteration_a": 5e-6, "slack_iteration_c": 0.04e-6,
-    "tail_row_b": 0.12e-6, "tail_row_c": 0.0005e-6,
 }
 
 #: the compute [s, on the reference machine] a constrained plan with ``require_settled: false``
