@@ -283,3 +283,52 @@ def test_layout_with_end_angle_settles_in_constrained_mode():
     assert P[:, 2].min() >= -0.05 - 1e-9 and P[:, 2].max() <= 0.15 + 1e-9
     assert mt.overshoot_m < 1e-4
     check_limits(res, load_robot("moving-slide"))
+
+
+#: an end point in x/y with a 20 mrad psi range at 0.05 m/s through millimetre boxes (case 412
+#: of the certification's seed 22 on 2026-11-26): the angle arrives ~10 mrad from the range's
+#: middle, which the criterion draws it to
+PSI_RANGE_END = {"robot": "moving-slide", "settings": {"speed_m_s": 0.05}, "segments": [
+    {"lower": [-0.027122356703530755, -0.017029623010790078, 0.001295881661928535],
+     "upper": [-0.027122356703530755, -0.017029623010790078, 0.001295881661928535]},
+    {"lower": [-0.027122356703530755, -0.017631973178344203, -0.009999999999],
+     "upper": [-0.02649483021710325, -0.017015388786853658, 0.010000000001]},
+    {"lower": [-0.026516968025682142, -0.016725478915302967, 0.012387256704267447],
+     "upper": [-0.025567517321356602, -0.01556732425402954, 0.032387256704267446]},
+    {"lower": [-0.02757174034811739, -0.018287103349354596, 0.012387764704267447],
+     "upper": [-0.024196728815516582, -0.014325834453790983, 0.03238776470426745]},
+    {"lower": [-0.027458265203569667, -0.015819199459933906, 0.01525949472640807],
+     "upper": [-0.027058245203569666, -0.015030430353155644, 0.03525949472640807]},
+    {"lower": [-0.027058245203569666, -0.015721602465672013, 0.01525949472640807],
+     "upper": [-0.027058245203569666, -0.015721602465672013, 0.03525949472640807]}]}
+
+
+@pytest.mark.parametrize("backend", ["compiled", "reference"])
+def test_an_end_with_a_psi_range_settles_without_creeping(backend):
+    """Issue 20: the arrival held the psi rate at 1e-3 rad/s also where the end allows a range
+    of angles, so the angle crept to the range's middle for the whole 3 s tail and the plan
+    was refused ``not_settled`` with the robot at the end point at rest (end error 0.004 mm).
+    Now it settles within a fraction of a second after the corridor, inside the range, on
+    both backends, contained, with the x/y arrival still at rest."""
+    req = with_settings(PSI_RANGE_END, backend=backend)
+    res = plan(req)
+    st = parse_request(req).settings
+    m = res.metrics
+    assert m.settled and m.contained
+    K = round((res.timing.sequence_time_s or 0.0) / st.Ts)
+    assert m.steps - K <= 0.5 / st.Ts  # settling after the corridor: < 0.5 s (was the 3 s tail)
+    pose = np.asarray(res.pose)
+    lo, hi = PSI_RANGE_END["segments"][-1]["lower"], PSI_RANGE_END["segments"][-1]["upper"]
+    assert lo[2] <= pose[-1, 2] <= hi[2]
+    assert np.hypot(*(pose[-1, :2] - np.array(lo[:2]))) < st.settle_position_m
+    # the angle's rate is free at this end, x and y still arrive at rest (ArrivalConstraint)
+    from planner.constraints.corridor import ARRIVAL_RATE_RAD_S, ArrivalConstraint
+    from planner.corridor import range_sequence
+
+    r = parse_request(req)
+    arrival = ArrivalConstraint(range_sequence(r.segments, st, 4), r.segments)
+    assert np.isinf(arrival.limit[2]) and np.all(np.isfinite(arrival.limit[:2]))
+    fixed = copy.deepcopy(PSI_RANGE_END)
+    fixed["segments"][-1]["upper"][2] = fixed["segments"][-1]["lower"][2]
+    rf = parse_request(fixed)
+    assert ArrivalConstraint(range_sequence(rf.segments, rf.settings, 4), rf.segments).limit[2] == ARRIVAL_RATE_RAD_S
