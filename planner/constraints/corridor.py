@@ -46,8 +46,9 @@ is (within the margins) one value: an end with a psi range has no stop box in ps
 criterion draws the angle to the range's middle (the end pose the robot settles at). Held at
 1e-3 rad/s there too, the angle crept to the middle for up to the whole tail: 2.8x the work
 estimate (certification seed 22, case 4731), and ``not_settled`` at the end point at rest
-where the tail was too short (5 of 155 such corridors of seed 22; issue 20). The criterion aims at the stop box's centre there
-(:meth:`CorridorConstraint.criterion_sequence`), not at the end point itself, which lies on
+where the tail was too short (5 of 155 such corridors of seed 22; issue 20). The criterion
+aims at the stop box's centre there (:meth:`CorridorConstraint.criterion_sequence`), not at
+the end point itself, which lies on
 the box's edge or, at a cell corner, a margin outside it.
 """
 
@@ -329,9 +330,9 @@ class EndApproachConstraint(RowConstraint):
 class ArrivalConstraint(RowConstraint):
     """Arrival at rest: ``|x_dot_j|, |y_dot_j| <= ARRIVAL_SPEED_M_S`` and ``|psi_dot_j| <=
     ARRIVAL_RATE_RAD_S`` (the psi rate only where the end's angle is one value; an infinite
-    bound, a row never active, where it is a range) for the samples from sequence index :attr:`start_index` on: the one
-    after the first whose x/y range is the end point (the end of the taper). Only for corridors that
-    end in a point. Compiled twin: ``kernels.arrival_fill``."""
+    bound, a row never active, where it is a range) for the samples from sequence index
+    :attr:`start_index` on: the one after the first whose x/y range is the end point (the end
+    of the taper). Only for corridors that end in a point. Compiled twin: ``kernels.arrival_fill``."""
 
     kind = RowKind.SPEED
 
