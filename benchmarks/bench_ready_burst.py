@@ -11,20 +11,15 @@ median and maximum and when the slow ones (> 100 ms) came, counted from the load
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
-
-import httpx
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from tests.fuzz.runner import _start_server  # noqa: E402
+from tests.loadgen import probe_under_load  # noqa: E402
 
 
 def one_run(clients: int, per_client: int, nice: int) -> tuple[list[tuple[float, float]], dict]:
@@ -32,23 +27,13 @@ def one_run(clients: int, per_client: int, nice: int) -> tuple[list[tuple[float,
     with tempfile.TemporaryDirectory(prefix="rangeplan-burst-") as tmp:
         server, log, url = _start_server(Path(tmp), timeout_s=30, workers=2, token=None)
         try:
-            t00 = time.monotonic()
-            load = subprocess.Popen([sys.executable, "-m", "tests.loadgen", url, str(clients), str(per_client)],
-                                    cwd=ROOT, stdout=subprocess.PIPE, text=True,
-                                    preexec_fn=(lambda: os.nice(nice)) if nice else None)
-            probes = []
-            with httpx.Client(base_url=url, timeout=10) as c:
-                while load.poll() is None:
-                    t0 = time.monotonic()
-                    assert c.get("/ready").status_code == 200
-                    probes.append((t0 - t00, time.monotonic() - t0))
-                    time.sleep(0.05)
-            summary = json.loads(load.communicate(timeout=300)[0])
+            timeline, summary = probe_under_load(url, clients, per_client, nice)
         finally:
             server.terminate()
             server.wait(30)
             log.close()
-    return probes, summary
+    assert all(status == 200 for _, _, status in timeline)
+    return [(at, t) for at, t, _ in timeline], summary
 
 
 def main() -> None:

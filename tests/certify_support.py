@@ -636,12 +636,13 @@ def tiny_corridor(rng: np.random.Generator) -> dict:
 
 
 def slow_corridor(rng: np.random.Generator) -> dict:
-    """A slow corridor of millimetre boxes (issue 20, seed 22 case 4731: the horizon spans the
-    whole corridor, and an end point with a psi range is settled at its angle's middle at the
-    arrival rate): 3-8 boxes of 0.6-3 mm, each starting inside the one before, psi ranges of 0
-    to 0.1 rad, a start point in the first box, the end point at a corner, on an edge or inside
-    the last box, as a point or (one in two) a point in x/y with the box's psi range; timed at
-    0.02-0.1 m/s or at 1-5 samples per segment; both robots. ``rng``: a numpy generator."""
+    """A slow corridor of millimetre boxes (issue 20, seed 22 case 4731 of the list before
+    2026-11-26: the horizon spans the whole corridor, and an end point with a psi range once
+    crept to its angle's middle at the arrival rate): 3-8 boxes of 0.6-3 mm, each starting
+    inside the one before, psi ranges of 0 to 0.1 rad, a start point in the first box, the
+    end point at a corner, on an edge or inside the last box, as a point or (one in two) a
+    point in x/y with the box's psi range; timed at 0.02-0.1 m/s or at 1-5 samples per
+    segment; both robots. ``rng``: a numpy generator."""
     robot = ["moving-slide", "tri-slide"][int(rng.integers(2))]
     n = int(rng.integers(3, 9))
     psi_w = [0.0, 0.02, 0.1][int(rng.integers(3))]

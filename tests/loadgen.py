@@ -4,12 +4,17 @@ one connection each), each sending ``per_client`` requests that mix plans (Table
 JSON summary: answers per status, errors, wall time.
 
     python -m tests.loadgen URL [CLIENTS] [PER_CLIENT]
+
+:func:`probe_under_load` runs that load in a process of its own and probes ``/ready``
+meanwhile (tests/test_load.py, benchmarks/bench_ready_burst.py).
 """
 
 from __future__ import annotations
 
 import asyncio
 import json
+import os
+import subprocess
 import sys
 import time
 from collections import Counter
@@ -45,6 +50,25 @@ async def main(url: str, clients: int, per_client: int) -> dict:
         await asyncio.gather(*(client(http, i, per_client, statuses, errors) for i in range(clients)))
     return {"statuses": dict(statuses), "errors": errors[:20], "n_errors": len(errors),
             "seconds": time.monotonic() - t0}
+
+
+def probe_under_load(url: str, clients: int = 200, per_client: int = 3,
+                     nice: int = 10) -> tuple[list[tuple[float, float, int]], dict]:
+    """The load of :func:`main` in a process of its own at CPU priority offset ``nice``, and
+    ``GET /ready`` every 50 ms from this process until it ends: ``[(seconds since the load
+    started, latency [s], status)]`` and the load's summary."""
+    root = Path(__file__).resolve().parents[1]
+    t00 = time.monotonic()
+    load = subprocess.Popen([sys.executable, "-m", "tests.loadgen", url, str(clients), str(per_client)], cwd=root,
+                            stdout=subprocess.PIPE, text=True, preexec_fn=(lambda: os.nice(nice)) if nice else None)
+    probes = []
+    with httpx.Client(base_url=url, timeout=10) as c:
+        while load.poll() is None:
+            t0 = time.monotonic()
+            status = c.get("/ready").status_code
+            probes.append((t0 - t00, time.monotonic() - t0, status))
+            time.sleep(0.05)
+    return probes, json.loads(load.communicate(timeout=300)[0])
 
 
 if __name__ == "__main__":

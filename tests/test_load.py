@@ -11,41 +11,18 @@ before the first request: max 0.11-0.18 s (benchmarks/README.md)."""
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
-import time
-from pathlib import Path
-
-import httpx
 import pytest
 
 from tests.fuzz.runner import _start_server
-
-ROOT = Path(__file__).resolve().parent.parent
-
-
-def probe_while(proc: subprocess.Popen, url: str) -> list[tuple[float, int]]:
-    """(seconds, status) of GET /ready every 50 ms until ``proc`` ends."""
-    out = []
-    with httpx.Client(base_url=url, timeout=10) as c:
-        while proc.poll() is None:
-            t0 = time.monotonic()
-            status = c.get("/ready").status_code
-            out.append((time.monotonic() - t0, status))
-            time.sleep(0.05)
-    return out
+from tests.loadgen import probe_under_load
 
 
 @pytest.mark.slow
 def test_ready_answers_within_a_second_under_200_clients(tmp_path):
     server, log, url = _start_server(tmp_path, timeout_s=30, workers=2, token=None)
     try:
-        load = subprocess.Popen([sys.executable, "-m", "tests.loadgen", url, "200", "3"], cwd=ROOT,
-                                stdout=subprocess.PIPE, text=True, preexec_fn=lambda: os.nice(10))
-        probes = probe_while(load, url)
-        summary = json.loads(load.communicate(timeout=300)[0])
+        timeline, summary = probe_under_load(url, 200, 3, nice=10)
+        probes = [(t, status) for _, t, status in timeline]
     finally:
         server.terminate()
         server.wait(30)

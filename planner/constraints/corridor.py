@@ -48,8 +48,7 @@ criterion draws the angle to the range's middle (the end pose the robot settles 
 estimate (certification seed 22, case 4731), and ``not_settled`` at the end point at rest
 where the tail was too short (5 of 155 such corridors of seed 22; issue 20). The criterion
 aims at the stop box's centre there (:meth:`CorridorConstraint.criterion_sequence`), not at
-the end point itself, which lies on
-the box's edge or, at a cell corner, a margin outside it.
+the end point itself, which lies on the box's edge or, at a cell corner, a margin outside it.
 """
 
 from __future__ import annotations
