@@ -5,12 +5,17 @@ whole program, with its ``contour`` section.
 Each cut pass becomes a tube corridor of convex cells (:mod:`.tube`) planned in the
 constrained mode from rest to rest, so every sample and every straight move between two
 samples is within the tolerance of the programmed path. Timing: a speed profile along the
-pass (the cell speed ``v``, the curvature and corner limits ``sqrt(a R)``, acceleration ``a``
-forwards and backwards), turned into sample counts per cell; ``program`` feed caps ``v`` at
-each move's F and lowers the profile until the plan is feasible and no sample is faster than
-F; ``fastest`` scales the profile (``v = lambda v0``, ``a = lambda^2 a0``) to the largest feasible
-``lambda`` (:func:`largest_feasible`, from the scale of the cut before; each candidate
-abandoned at its first step that needs slack). Where a feed's own search finds no timing the
+pass turned into sample counts per cell. ``program`` feed: a heuristic profile (the cell
+speed ``v``, the curvature and corner limits ``sqrt(a R)``, acceleration ``a`` forwards and
+backwards) with ``v`` capped at each move's F, lowered until the plan is feasible and no sample
+is faster than F. ``fastest``: two timings, the faster kept (the passes after the first use the
+first's, from its scale): the heuristic profile scaled (``v = lambda v0``, ``a = lambda^2 a0``),
+and the exact path's time-optimal profile under the drive forces and leg speeds
+(:mod:`.timing`, bounded at the corners and on the arcs by what the tube allows) slowed by a
+scale; each to the largest feasible scale (:func:`largest_feasible`; each candidate abandoned
+at its first step that needs slack). The time-optimal one wins where the drive forces bind
+(fine sample times, no force-rate limit); the heuristic one where the force-rate limit does
+(its start and stop rise at a bounded jerk). Where a feed's own search finds no timing the
 other's is tried (:func:`_search`), so a pass one feed plans is planned by both; an
 ``infeasible`` verdict's advice is checked before it is given (:func:`_confirmed`).
 Rapids and feed moves above the cutting height are free moves inside a box about the
@@ -24,7 +29,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -55,6 +60,7 @@ from ..schema import (
     Timing,
     planner_error,
 )
+from .timing import PathSamples, time_optimal
 from .tube import PathGeometry, Tube, tube
 
 __all__ = ["CONTOUR_STEP_S", "estimate_contour", "largest_feasible", "parse_contour_request", "plan_contour"]
@@ -89,6 +95,22 @@ ADVICE_MIN_S = 4.0
 #: sample's own (and its neighbours), at most NEAR_MAX of them
 NEAR_TOLERANCES = 2.0
 NEAR_MAX = 32
+#: fastest, the time-optimal timing (:func:`_optimal_search`): its cells hold this many samples at
+#: the profile's top speed (shorter cells keep the robot nearer the profile's progress, longer
+#: ones lose fewer samples to cells shorter than a sample's travel)
+OPT_CELL_SAMPLES = 1.5
+#: the time-optimal timing's scale is found to this relative resolution (its profile is near
+#: the drives' limits everywhere: the scale found is near 1, and a finer step is worth its plans)
+OPT_RESOLUTION = 1 / 256
+#: the samples a tube plan takes beyond the profile's time (the start point, the lead cells, the
+#: end point): the time-optimal timing is tried where its profile's time plus these beats the other
+OPT_END_SAMPLES = 4
+#: the time-optimal profile's grid spacing: the pass's length over this many points, within
+#: [GRID_H_MIN, GRID_H_MAX] [m], and at least GRID_POINTS_MIN points (a move from rest to rest
+#: on two points would never move)
+GRID_POINTS = 400
+GRID_H_MIN, GRID_H_MAX = 2e-5, 2e-4
+GRID_POINTS_MIN = 16
 #: room for the box about a rapid [m]
 RAPID_MARGIN_M = 0.002
 
@@ -131,7 +153,8 @@ def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0
     parts: list[_Part] = []
     pass_summaries: list[PassSummary] = []
     blocks = program.blocks
-    hint: tuple[float, float] | None = None  # fastest: the scales of the cut before
+    hint: _Scale | None = None  # fastest: the timing of the cut before
+    memo: dict = {}  # fastest: the time-optimal profiles of the passes (alike passes share one)
     i = 0
     while i < len(blocks):
         b = blocks[i]
@@ -162,7 +185,7 @@ def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0
         geo = PathGeometry(b.elements, origin)
         for chunk in _chunks(b.elements):
             part = _cut(req, model, st, chunk, origin, tol, psi, pos, geo, b.elements, hint,
-                        len(program.passes))
+                        len(program.passes), memo)
             hint = part.scale if part.scale is not None else hint
             parts.append(part)
             pos = part.result.pose[-1, :2].copy()
@@ -191,6 +214,16 @@ def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0
     return result
 
 
+class _Scale(NamedTuple):
+    """``fastest``: the timing a cut found, where the next cut's search starts: its family
+    (``optimal``: the time-optimal profile scaled in time by ``lam``; ``profile``: the
+    heuristic profile, ``lam`` the whole of it, ``mu`` its speeds) and scales."""
+
+    family: str
+    lam: float
+    mu: float = 1.0
+
+
 class _Part:
     """A planned piece of the program: a plan result (or rest) with its per-sample contour data."""
 
@@ -200,7 +233,7 @@ class _Part:
         self.cells = cells
         self.segments = segments or []
         #: fastest: the profile's scales found for a cut (the next cut's search starts there)
-        self.scale: tuple[float, float] | None = None
+        self.scale: _Scale | None = None
 
 
 def _chunks(elements: list[PathElement]) -> list[list[int]]:
@@ -253,7 +286,7 @@ def _profile(t: Tube, v_cap: np.ndarray, a: float, Ts: float, a_turn: float | No
 
 def _cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int], origin: np.ndarray, tol: float,
          psi: float, pos: np.ndarray, geo: PathGeometry, elements: list[PathElement],
-         hint: tuple[float, float] | None = None, passes: int = 1) -> _Part:
+         hint: _Scale | None = None, passes: int = 1, memo: dict | None = None) -> _Part:
     """One piece of a pass planned rest to rest. ``hint``: the ``fastest`` scale found for the
     piece before (where its search starts; the search's result is bracketed the same way from
     any start). No timing found: the ``infeasible`` error with its advice checked
@@ -261,7 +294,7 @@ def _cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int],
     els = [elements[k] for k in chunk]
     st = st.model_copy(update={"settle_speed_m_s": min(st.settle_speed_m_s, 1e-4)})
     found = _search(req.feed, model, st, _tubes(model, st, chunk, els, origin, tol, psi, pos, elements), chunk,
-                    els, hint)
+                    els, hint, optimal=_optimal_of(model, st, chunk, els, origin, psi, memo))
     if found.result is None:
         raise _confirmed(req, model, st, chunk, els, origin, tol, psi, pos, elements, found, hint, passes)
     result, t = found.result, found.tube
@@ -275,6 +308,75 @@ def _cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int],
     part = _Part(result, cutting, line, dev, cells=len(t.segments) - 2, segments=t.segments)
     part.scale = found.scale
     return part
+
+
+def _optimal_of(model: RobotModel, st: Settings, chunk: list[int], els: list[PathElement], origin: np.ndarray,
+                psi: float, memo: dict | None) -> Callable[[Tube], _Optimal]:
+    """The time-optimal profile of a piece (:func:`planner.contour.timing.time_optimal`) for a
+    tube of it (:class:`_Optimal`). Bounds on the speed beyond the drives': at a corner (a
+    tangent jump of angle ``theta``) ``sqrt(a r)``, ``a`` the acceleration the drives give in
+    every direction, ``r = rho sin(h) / (1 - sin(h))``, ``h = (pi - theta) / 2`` (the
+    largest circle that turns there within the cells' radius ``rho``); on an arc, one of its
+    chords per sample (a cell holds at least one sample). ``memo``: profiles by the piece's
+    geometry and bounds (the depth passes of a program are alike: one profile)."""
+    memo = {} if memo is None else memo
+    geo = tuple((e.kind, *e.start, *e.end, *(e.centre if e.centre is not None else (0.0, 0.0)), e.sweep_rad or 0.0)
+                for e in els)
+    lengths = np.array([e.length_m for e in els])
+    start = np.concatenate(([0.0], np.cumsum(lengths)))
+    h = min(max(float(start[-1]) / GRID_POINTS, GRID_H_MIN), GRID_H_MAX, float(start[-1]) / GRID_POINTS_MIN)
+    chunk_a = np.asarray(chunk)
+
+    def at(t: Tube) -> _Optimal:
+        loc = np.searchsorted(chunk_a, t.element)
+        arc = np.isfinite(t.radius) & (t.length > 0)
+        chord = np.zeros(len(els))
+        np.maximum.at(chord, loc[arc], t.length[arc])
+        key = (geo, float(origin[0]), float(origin[1]), psi, st.Ts, t.rho, tuple(np.round(chord, 12)))
+        if key not in memo:
+            def caps(path: PathSamples, a_all: np.ndarray) -> np.ndarray:
+                half = np.clip((math.pi - path.corner) / 2, 1e-6, math.pi / 2)
+                r_c = t.rho * np.sin(half) / np.maximum(1 - np.sin(half), 1e-12)
+                cap = np.where(path.corner > 0, a_all * r_c, np.inf)
+                c = chord[path.element]
+                return np.minimum(cap, np.where(c > 0, (c / st.Ts) ** 2, np.inf))
+
+            path, w, T = time_optimal(model, els, origin, psi, h, caps, np.asarray(model.force_max, float))
+            memo[key] = (path.s, T, float(np.sqrt(w.max())))
+        s_grid, T, v_peak = memo[key]
+        # the path length at the end of every segment: its element's start plus its share of the
+        # element's cells (points and junctions: at the boundary)
+        total = np.bincount(loc, weights=t.length, minlength=len(els))
+        before = np.concatenate(([0.0], np.cumsum(total)))[loc]
+        frac = (np.cumsum(t.length) - before) / np.maximum(total[loc], 1e-300)
+        s_end = start[loc] + np.clip(frac, 0.0, 1.0) * lengths[loc]
+        return _Optimal(np.interp(s_end, s_grid, T), v_peak)
+
+    return at
+
+
+class _Optimal:
+    """The time-optimal profile for one tube: ``times``, the profile's time at the end of each of
+    the tube's segments [s]; ``v_peak``, its top speed [m/s]."""
+
+    def __init__(self, times: np.ndarray, v_peak: float):
+        self.times, self.v_peak = times, v_peak
+
+
+def _optimal_counts(t: Tube, times: np.ndarray, step: float) -> np.ndarray:
+    """Sample counts per segment of the tube from the profile's times at the segments' ends
+    (``step``: the sample time over the scale): the samples up to each end, rounded; a junction
+    cell (inside both its neighbours) takes its sample
+    from the cell before where that has two; every segment at least one, the lead cells one."""
+    b = np.round(times / step).astype(np.int64)
+    counts = np.diff(np.concatenate(([0], b)))
+    j = np.flatnonzero((t.length == 0) & (t.turn > 0) & (counts <= 0))
+    j = j[(j > 0) & (counts[np.maximum(j - 1, 0)] >= 2)]
+    counts[j - 1] -= 1
+    counts[j] = 1
+    counts = np.maximum(counts, 1)
+    counts[t.lead] = 1
+    return counts
 
 
 def _tubes(model: RobotModel, st: Settings, chunk: list[int], els: list[PathElement], origin: np.ndarray,
@@ -324,7 +426,7 @@ class _Found:
         self.Ts = Ts
         self.result: PlanResult | None = None
         self.tube: Tube | None = None  #: the tube of the result
-        self.scale: tuple[float, float] | None = None
+        self.scale: _Scale | None = None
         self.stop_line: int | None = None
         self.plans = 0
 
@@ -341,14 +443,17 @@ class _Found:
 
 
 def _search(feed_mode: str, model: RobotModel, st: Settings, tube_at: Callable[[float], Tube], chunk: list[int],
-            els: list[PathElement], hint: tuple[float, float] | None, deadline: float | None = None) -> _Found:
+            els: list[PathElement], hint: _Scale | None, deadline: float | None = None,
+            optimal: Callable[[Tube], _Optimal] | None = None) -> _Found:
     """A timing of the piece for the feed mode, in the tube ``tube_at(v)`` with cells sized for
     the profile's speed ``v`` (``program``: the programmed F times the profile's scale, so that
     a slower profile has shorter cells: the criterion pulls the robot toward each cell's
     centre, and a cell of many samples let it run ahead of the profile, faster than F, at
-    every scale; ``fastest``: :data:`V0_M_S`). If the mode's own search finds none, the
-    other mode's (a timing under the programmed F is one ``fastest`` may use; ``program``
-    retries the ``fastest`` profile capped by F, kept where no sample exceeds F).
+    every scale; ``fastest``: :data:`V0_M_S` for the heuristic profile, the time-optimal
+    profile's top speed for its timing ``optimal``, :func:`_optimal_of`; without a ``hint`` the
+    heuristic one, then the time-optimal one where it can be faster, else the hint's first). If
+    the mode's own search finds none, the other mode's (a timing under the programmed F is one
+    ``fastest`` may use; ``program`` retries the ``fastest`` profile capped by F, kept where no sample exceeds F).
     ``deadline`` (``time.process_time``: compute time, as :func:`estimate_contour` counts it):
     candidates after it are not planned."""
     feed = np.array([e.feed_m_s for e in els])
@@ -417,6 +522,51 @@ def _search(feed_mode: str, model: RobotModel, st: Settings, tube_at: Callable[[
         assert best is not None
         return best, (lam, mu)
 
+    def heuristic(h: _Scale | None) -> tuple[PlanResult, Tube, _Scale] | None:
+        t = tube_at(V0_M_S)
+        got = scaled(t, np.full(len(t.segments), V0_M_S), False, h.lam if h else 1.0, h.mu if h else 1.0,
+                     SCALE_MAX)
+        return (got[0], t, _Scale("profile", *got[1])) if got is not None else None
+
+    def optimal_search(h: _Scale | None, beat: float | None = None) -> tuple[PlanResult, Tube, _Scale] | None:
+        """The time-optimal profile's timing (:func:`_optimal_of`) scaled in time by ``1 / lam``
+        (speeds ``lam``, accelerations ``lam^2``), the largest feasible ``lam``. ``beat``: the time
+        of a timing found already [s]: first the one scale at which this one would be as fast
+        (the profile's time over it, a few samples for the ends); not feasible there, none
+        slower can win (one plan to know it); else the search starts at the profile itself."""
+        assert optimal is not None
+        ref = optimal(tube_at(V0_M_S))
+        t = tube_at(OPT_CELL_SAMPLES * ref.v_peak / CELL_SAMPLES)
+        times = optimal(t).times
+        if not (np.all(np.isfinite(times)) and times[-1] > 0):  # pragma: no cover - a profile that never moves
+            return None
+        tried: dict[bytes, PlanResult | None] = {}
+
+        def run(lam: float) -> PlanResult | None:
+            counts = _optimal_counts(t, times, lam * st.Ts)
+            key = counts.tobytes()
+            if key not in tried:
+                tried[key] = attempt(t, counts)
+            return tried[key]
+
+        lam0, low = (h.lam if h else 1.0), SCALE_MIN
+        if beat is not None:
+            room = beat - OPT_END_SAMPLES * st.Ts
+            if room <= 0:
+                return None
+            low = min(max(float(times[-1]) / room, SCALE_MIN), SCALE_MAX)
+            if run(low) is None:
+                return None
+            lam0 = max(low, 1.0)
+        lam = largest_feasible(lambda x: run(x) is not None, lam0, OPT_RESOLUTION, low=low, high=SCALE_MAX)
+        if lam is None:
+            return None
+        best = run(lam)
+        assert best is not None
+        if beat is not None and best.time[-1] >= beat:
+            return None
+        return best, t, _Scale("optimal", lam)
+
     if feed_mode == "program":
         got_p = program_loop()
         if got_p is None:  # the fastest profile under F
@@ -426,11 +576,17 @@ def _search(feed_mode: str, model: RobotModel, st: Settings, tube_at: Callable[[
         if got_p is not None:
             found.result, found.tube = got_p
     else:
-        lam0, mu0 = hint if hint is not None else (1.0, 1.0)
-        t = tube_at(V0_M_S)
-        got = scaled(t, np.full(len(t.segments), V0_M_S), False, lam0, mu0, SCALE_MAX)
-        if got is not None:
-            (found.result, found.scale), found.tube = got, t
+        best: tuple[PlanResult, Tube, _Scale] | None = None
+        if hint is None or optimal is None:  # the heuristic first, then the time-optimal one if it can beat it
+            best = heuristic(hint)
+            if optimal is not None:
+                best = optimal_search(None, best[0].time[-1] if best is not None else None) or best
+        elif hint.family == "optimal":  # the first pass's timing; the other where it finds none
+            best = optimal_search(hint) or heuristic(None)
+        else:
+            best = heuristic(hint) or optimal_search(None)
+        if best is not None:
+            found.result, found.tube, found.scale = best
         else:  # a timing under the programmed F
             got_p = program_loop()
             if got_p is not None:
@@ -440,7 +596,7 @@ def _search(feed_mode: str, model: RobotModel, st: Settings, tube_at: Callable[[
 
 def _confirmed(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int], els: list[PathElement],
                origin: np.ndarray, tol: float, psi: float, pos: np.ndarray, elements: list[PathElement],
-               found: _Found, hint: tuple[float, float] | None, passes: int) -> PlannerError:
+               found: _Found, hint: _Scale | None, passes: int) -> PlannerError:
     """The ``infeasible`` error of a piece no timing plans, its advice checked (issue 22, as
     :func:`planner.orchestrator.plan._more_time_advice` does for plans): the piece planned
     again, by the same search, at :data:`ADVICE_TOLERANCE` times the tolerance, then at
@@ -733,7 +889,7 @@ CONTOUR_STEP_S = 3e-4
 def estimate_contour(request: Any, program: Program | None = None) -> tuple[float, str]:
     """A lower estimate of the compute time of :func:`plan_contour` [s] and the arithmetic in
     words: the cut samples at the programmed feed (``program``; ~1.5 plans) or at the
-    reference speed (``fastest``: ~10 candidate plans for the first pass, ~2.5 for the next)
+    reference speed (``fastest``: ~17 candidate plans for the first pass, ~2.5 for the next)
     times the step cost; plus the bound on the check of an infeasible verdict's advice
     (:func:`_confirmed`: :data:`ADVICE_WORK` times the largest pass, at least
     :data:`ADVICE_MIN_S`)."""
@@ -758,9 +914,10 @@ def _samples(feed: str, elements: list[PathElement], Ts: float) -> float:
 
 
 def _plans(feed: str, passes: int) -> float:
-    """Candidate plans per pass: ~1.5 (``program``); ``fastest``: ~10 for the first pass, ~2.5 for
-    each next (its search starts at the scale found before: two plans when the passes are alike)."""
-    return 1.5 if feed == "program" else 2.5 + 7.5 / max(passes, 1)
+    """Candidate plans per pass: ~1.5 (``program``); ``fastest``: ~17 for the first pass (both
+    timings, ~8 candidates each), ~2.5 for each next (the first pass's faster timing, its search
+    started at the scale found before: two plans when the passes are alike)."""
+    return 1.5 if feed == "program" else 2.5 + 15.0 / max(passes, 1)
 
 
 def _piece_estimate(feed: str, elements: list[PathElement], Ts: float, passes: int = 1) -> float:
