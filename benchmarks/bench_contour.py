@@ -1,22 +1,26 @@
 """Contouring (issue 22): deviation, cycle time against the exact-path time optimum (TOPP-RA),
 planning cost of a 15-pass program and cost against program length.
 
-    .venv/bin/python benchmarks/bench_contour.py [--quick] [--fine-ts 0.002]
+    .venv/bin/python benchmarks/bench_contour.py [--quick] [--fine-ts 0.002] [--finest-ts 0.001]
 
 Program: a notched rounded rectangle (26 x 15 mm, 3 mm corner arcs, a 10 mm semicircular notch),
 cut in 15 depth passes of 0.5 mm at F1200, G64 P0.02 (0.02 mm): 180 lines and arcs, 1358 mm of
 cut. Tables:
 
-1. per feed (``program`` at Ts = 0.01 s, ``fastest`` at 0.01 s and at the finer ``--fine-ts``):
+1. per feed (``program`` at Ts = 0.01 s, ``fastest`` at 0.01 s and at the finer ``--fine-ts``,
+   and at ``--finest-ts`` with TOPP-RA's limits: no force-rate limit):
    planning CPU time and wall time, peak memory (RSS of this process), the largest deviation
    of a sample or a chord from the programmed path (the planner's figure, checked against
    shapely on the same path in tests/test_contour.py), the cut time and the whole cycle time;
+   then each ``fastest`` cycle against the exact path's (every pass at TOPP-RA's time, the
+   plunges, retracts and rapids as planned);
 2. one pass's time from rest to rest: the exact path's time optimum under the same drive-force
    limits (TOPP-RA 0.6: the redundant drives' force box mapped through the leg Jacobian is a
    zonotope of generalised forces, whose 12 facet inequalities are the second-order
    constraint; the exact path stops at its two 90-degree corners; viscous friction enters
    TOPP-RA's b(s) term; no force-rate limit: TOPP-RA's constraints are of second order), the
-   same with the legs' speed limit, and with the chord bound of an output sampled every Ts
+   same with the legs' speed limit, the planner's own exact-path optimum
+   (:mod:`planner.contour.timing`, the same limits), and with the chord bound of an output sampled every Ts
    (a controller interpolating linearly between samples runs chords of ``v Ts``, whose
    sagitta on an arc of radius R must stay within the tolerance: ``v <= sqrt(8 R tol) / Ts``);
    ``fastest`` at each Ts, with the default force-rate limit and without it (TOPP-RA's
@@ -40,6 +44,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import numpy as np
 
 from planner.contour import plan_contour
+from planner.contour.timing import time_optimal
 from planner.exchange import read_gcode
 from planner.model import load_robot
 from planner.model.dynamics import generalised_forces
@@ -214,6 +219,8 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="1x and 2x only in the length table")
     ap.add_argument("--fine-ts", type=float, default=0.002,
                     help="the finer output sample time the tables compare with the default 0.01 s")
+    ap.add_argument("--finest-ts", type=float, default=0.001,
+                    help="the sample time of the run with TOPP-RA's limits (no force-rate limit)")
     args = ap.parse_args()
     print(f"load: {os.getloadavg()[0]:.1f} (1-min average) on {os.cpu_count()} cores")
     text = program()
@@ -226,16 +233,30 @@ def main() -> None:
     results = {}
     print("| feed | Ts s | CPU s | wall s | peak RSS MB | max deviation mm | within tolerance | cut time s | cycle s |")
     print("|---|---|---|---|---|---|---|---|---|")
-    for feed, Ts in (("program", 0.01), ("fastest", 0.01), ("fastest", args.fine_ts)):
-        res, cpu, wall = run(text, feed, {"Ts": Ts})
-        c = res.contour  # type: ignore[attr-defined]
-        results[feed, Ts] = res
-        rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-        print(f"| {feed} | {Ts:g} | {cpu:.1f} | {wall:.1f} | {rss:.0f} | {c.max_deviation_m * 1e3:.4f} | "
-              f"{c.max_deviation_m <= c.tolerance_m} | {c.cut_time_s:.2f} | {c.cycle_time_s:.2f} |")
     p0 = prog.passes[0].elements
     origin = np.array(ORIGIN)
     topp = topp_time(p0, origin)
+    runs = [("program", 0.01, None), ("fastest", 0.01, None), ("fastest", args.fine_ts, None),
+            ("fastest", args.finest_ts, "off")]
+    for feed, Ts, rate in runs:
+        res, cpu, wall = run(text, feed, {"Ts": Ts} | ({} if rate is None else {"force_rate_n_s": rate}))
+        c = res.contour  # type: ignore[attr-defined]
+        results[feed, Ts] = res
+        rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        label = feed if rate is None else f"{feed}, force rates {rate}"
+        print(f"| {label} | {Ts:g} | {cpu:.1f} | {wall:.1f} | {rss:.0f} | {c.max_deviation_m * 1e3:.4f} | "
+              f"{c.max_deviation_m <= c.tolerance_m} | {c.cut_time_s:.2f} | {c.cycle_time_s:.2f} |")
+    # the whole cycle against the exact path's: every cut pass at TOPP-RA's time (the passes are
+    # alike), the rest of the cycle (plunges, retracts, rapids) as planned
+    print("\nthe cycle against the exact path's (every pass at TOPP-RA's time, the plunges, retracts and "
+          "rapids as planned):\n")
+    print("| feed | Ts s | force rates | cycle s | exact-path cycle s | ratio |")
+    print("|---|---|---|---|---|---|")
+    for feed, Ts, rate in runs[1:]:
+        c = results[feed, Ts].contour  # type: ignore[attr-defined]
+        exact = c.cycle_time_s - sum(p.time_s for p in c.passes) + topp * len(c.passes)
+        print(f"| {feed} | {Ts:g} | {rate or 'default'} | {c.cycle_time_s:.2f} | {exact:.2f} | "
+              f"{c.cycle_time_s / exact:.3f}x |")
     one = program(1)
     nominal = sum(e.length_m / e.feed_m_s for e in p0)
     print(f"\none pass ({sum(e.length_m for e in p0) * 1e3:.1f} mm), from rest to rest; 'vs same Ts': against "
@@ -245,7 +266,10 @@ def main() -> None:
     print(f"| TOPP-RA 0.6, exact path, drive-force zonotope | - | {topp:.3f} | 1.00x | |")
     t_leg = topp_time(p0, origin, leg_speed=True)
     print(f"| TOPP-RA + leg speeds | - | {t_leg:.3f} | {t_leg / topp:.2f}x | |")
-    for Ts in (0.01, 0.005, args.fine_ts):
+    model = load_robot("moving-slide")
+    _, _, T_own = time_optimal(model, p0, origin, 0.0, 1e-4, lambda p, a: np.where(p.corner > 0, 0.0, np.inf))
+    print(f"| planner.contour.timing, the same limits, 0.1 mm grid | - | {T_own[-1]:.3f} | {T_own[-1] / topp:.3f}x | |")
+    for Ts in (0.01, 0.005, args.fine_ts, args.finest_ts):
         bound = topp_time(p0, origin, leg_speed=True, Ts=Ts)
         print(f"| TOPP-RA + leg speeds + chord bound (sagitta <= tolerance) | {Ts:g} | {bound:.3f} | "
               f"{bound / topp:.2f}x | 1.00x |")
@@ -254,7 +278,7 @@ def main() -> None:
             st: dict = {"Ts": Ts} if rate is None else {"Ts": Ts, "force_rate_n_s": rate}
             res, cpu, _ = run(one, "fastest", st)
             t = res.contour.passes[0].time_s  # type: ignore[attr-defined]
-            print(f"| {label} | {Ts:g} | {t:.3f} | {t / topp:.2f}x | {t / bound:.2f}x |")
+            print(f"| {label} | {Ts:g} | {t:.3f} | {t / topp:.3f}x | {t / bound:.2f}x |")
     progp = results["program", 0.01].contour.passes[0].time_s  # type: ignore[attr-defined]
     print(f"| programmed feed L / F | - | {nominal:.3f} | {nominal / topp:.2f}x | |")
     print(f"| program feed plan | 0.01 | {progp:.3f} | {progp / topp:.2f}x | |")

@@ -365,12 +365,17 @@ class _Optimal:
 
 def _optimal_counts(t: Tube, times: np.ndarray, step: float) -> np.ndarray:
     """Sample counts per segment of the tube from the profile's times at the segments' ends
-    (``step``: the sample time over the scale): the samples up to each end, rounded; a junction
-    cell (inside both its neighbours) takes its sample
-    from the cell before where that has two; every segment at least one, the lead cells one."""
+    (``step``: the sample time over the scale): the samples up to each end, rounded. A sample
+    of a segment the profile crosses in no time is taken from the cell before where that has
+    two: a junction cell's (it lies inside both its neighbours) and the end's lead cell's (the
+    range sequence narrows it onto the end point: its sample is the one that arrives there).
+    Every segment at least one sample, the lead cells one."""
     b = np.round(times / step).astype(np.int64)
     counts = np.diff(np.concatenate(([0], b)))
-    j = np.flatnonzero((t.length == 0) & (t.turn > 0) & (counts <= 0))
+    take = (t.length == 0) & (t.turn > 0)
+    if len(take) > 2 and t.lead[-2]:
+        take[-2] = True
+    j = np.flatnonzero(take & (counts <= 0))
     j = j[(j > 0) & (counts[np.maximum(j - 1, 0)] >= 2)]
     counts[j - 1] -= 1
     counts[j] = 1
