@@ -164,3 +164,23 @@ def test_fastest_pass_is_near_the_exact_path_optimum():
     assert t <= 1.02 * T[-1], (t, T[-1])
     assert res.metrics.max_force_ratio <= 1 + 1e-6
     assert res.contour.max_deviation_m <= 2e-5
+
+
+@pytest.mark.slow
+def test_a_program_at_a_fine_sample_time_with_the_force_rate_limit():
+    """At Ts = 1 ms with the default force-rate limit a program with a rapid before its cut
+    plans (the rapid found no timing: its range pulled off the start from the first sample; the
+    cut then failed at its first step: the rapid ends a few um behind the path's start, which the
+    robot, its forces rising at 3 N per sample, cannot leave in the two samples the lead cell
+    gave it), within the tolerance and the drive limits."""
+    prog = PATH.replace("G0 X0 Y0 Z1", "G0 X-3 Y-1 Z1\nG0 X0 Y0")
+    res = plan_contour({"program": prog, "origin": ORIGIN.tolist(), "tolerance_m": 2e-5, "feed": "fastest",
+                        "settings": {"Ts": 0.001}})
+    assert res.contour is not None
+    assert res.contour.max_deviation_m <= 2e-5
+    assert res.metrics.max_force_ratio <= 1 + 1e-6 and res.metrics.contained
+    # the force-rate limit, to the widening of a relaxed step (the cut's first step from rest,
+    # 3.004 N where 3 N are allowed; as on main before this change at Ts = 2 ms: 3002 N/s)
+    rate = float(np.max(load_robot("moving-slide").force_max)) / 0.05
+    assert res.metrics.max_force_rate_n_s <= rate * (1 + 2e-3)
+    assert res.metrics.qp_relaxed_steps is not None and res.metrics.qp_relaxed_steps <= 1

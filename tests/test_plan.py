@@ -144,6 +144,47 @@ def test_range_sequence_holds_each_segment_and_tapers():
     assert np.allclose(lo, [0.06, 0.04, 0]) and np.allclose(hi, [0.06, 0.04, 0])
 
 
+A, B = [-0.013, -0.0075, 0.0], [-0.010, -0.0075, 0.0]
+MOVE = [{"lower": A, "upper": A}, {"lower": [-0.015, -0.0095, 0.0], "upper": [-0.008, -0.0055, 0.0]},
+        {"lower": B, "upper": B}]
+
+
+@pytest.mark.parametrize("S", [1, 2, 5, 8])
+def test_a_single_segment_between_two_points_spreads_then_narrows(S):
+    """Between two points the range spreads out of the start over the first half of its samples
+    (always containing the start: a robot at rest there may stay) and narrows onto the end over
+    the second half (always containing the end): spreading and narrowing at once pulled it off
+    the start from the first sample, which a robot whose forces rise at a bounded rate cannot
+    follow at a fine sample time."""
+    req = parse_request({"segments": MOVE, "settings": {"segment_samples": [1, S, 1]}})
+    seq = range_sequence(req.segments, req.settings, 4)
+    lo, hi = seq.lower[1:1 + S], seq.upper[1:1 + S]
+    spread, before = (S + 1) // 2, S // 2  # samples of the spreading; samples before the narrowing
+
+    def inside(p, k):
+        return np.all(lo[k] <= np.add(p, 1e-15)) and np.all(np.subtract(p, 1e-15) <= hi[k])
+
+    assert all(inside(A, k) for k in range(before))
+    assert all(inside(B, k) for k in range(spread - 1, S))
+    assert np.allclose(lo[-1], B) and np.allclose(hi[-1], B)  # the last sample is at the end
+    if S % 2 == 0:  # the full box between the halves
+        assert np.allclose(lo[before - 1], MOVE[1]["lower"]) and np.allclose(hi[before - 1], MOVE[1]["upper"])
+    if S > 2:  # the first sample: a range about the start, a fraction of the box
+        assert inside(A, 0) and np.all((hi[0] - lo[0])[:2] < np.subtract(MOVE[1]["upper"], MOVE[1]["lower"])[:2])
+
+
+def test_a_short_move_at_a_fine_sample_time_with_the_force_rate_limit():
+    """A 3 mm move from rest to rest at Ts = 1 ms with the default force-rate limit plans (it
+    found no timing at all, and took 1.7 s at 2 ms) and, with a horizon of 0.1 s, in about the
+    time it takes at 10 ms."""
+    coarse = plan({"segments": MOVE, "settings": {"Ts": 0.01, "fastest": True}})
+    fine = plan({"segments": MOVE, "settings": {"Ts": 0.001, "N": 100, "fastest": True}})
+    assert fine["metrics"]["contained"] and fine["metrics"]["within_limits"]
+    assert fine["time"][-1] <= 1.2 * coarse["time"][-1]
+    plain = plan({"segments": MOVE, "settings": {"Ts": 0.001, "fastest": True}})
+    assert plain["metrics"]["contained"] and plain["metrics"]["within_limits"]
+
+
 @pytest.mark.parametrize("mutate, code, field", [
     (lambda r: r["segments"][3].update(lower=[0.1, 0, 0]), "invalid_input", "segments[3].lower"),
     (lambda r: r.update(segments=r["segments"][:1]), "invalid_input", "segments"),

@@ -21,7 +21,7 @@ Modules, by concept:
 ==============  ==========================================================================
 """
 
-from .composed import Constraints
+from .composed import Constraints, force_rate
 from .controller import CONTAIN_TOL_M, CONTAIN_TOL_RAD, ConstrainedController, ControllerStats, Memory
 from .corridor import (
     END_TOL_M,
@@ -45,4 +45,5 @@ from .rows import ROW_UNIT_M, RowKind, Rows
 __all__ = ["CONTAIN_TOL_M", "CONTAIN_TOL_RAD", "END_TOL_M", "END_TOL_RAD", "MARGIN_M", "MARGIN_RAD", "ROW_UNIT_M",
            "SPEED_MARGIN", "ArrivalConstraint", "ConstrainedController", "Constraints", "ControllerStats", "Memory",
            "CorridorConstraint", "DenseQP", "DriveForceConstraint", "DriveForceRateConstraint",
-           "EndApproachConstraint", "LegSpeedConstraint", "LegStrokeConstraint", "QPSolution", "RowKind", "Rows"]
+           "EndApproachConstraint", "LegSpeedConstraint", "LegStrokeConstraint", "QPSolution", "RowKind", "Rows",
+           "force_rate"]

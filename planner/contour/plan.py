@@ -34,6 +34,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from .._jit import numpy_only
+from ..constraints import force_rate
 from ..errors import PlannerError
 from ..exchange import read_gcode
 from ..model import RobotModel, load_robot
@@ -42,6 +43,7 @@ from ..orchestrator import feasible, plan, plan_timed
 from ..schema import (
     DEFAULT_CONTOUR_TOLERANCE_M,
     MAX_CONTOUR_TOLERANCE_M,
+    MAX_HORIZON,
     MAX_SEGMENTS,
     MAX_TOTAL_STEPS,
     MIN_TS,
@@ -61,7 +63,7 @@ from ..schema import (
     planner_error,
 )
 from .timing import PathSamples, time_optimal
-from .tube import PathGeometry, Tube, tube
+from .tube import PathGeometry, Tube, hull, tube
 
 __all__ = ["CONTOUR_STEP_S", "estimate_contour", "largest_feasible", "parse_contour_request", "plan_contour"]
 
@@ -95,7 +97,7 @@ ADVICE_MIN_S = 4.0
 #: sample's own (and its neighbours), at most NEAR_MAX of them
 NEAR_TOLERANCES = 2.0
 NEAR_MAX = 32
-#: fastest, the time-optimal timing (:func:`_optimal_search`): its cells hold this many samples at
+#: fastest, the time-optimal timing (:func:`_search`): its cells hold this many samples at
 #: the profile's top speed (shorter cells keep the robot nearer the profile's progress, longer
 #: ones lose fewer samples to cells shorter than a sample's travel)
 OPT_CELL_SAMPLES = 1.5
@@ -111,6 +113,16 @@ OPT_END_SAMPLES = 4
 GRID_POINTS = 400
 GRID_H_MIN, GRID_H_MAX = 2e-5, 2e-4
 GRID_POINTS_MIN = 16
+#: with the force-rate limit a free move's horizon spans at least this many of the drives' force
+#: ramps (force_max over the rate: 0.05 s by default) unless settings.N is given: a shorter one
+#: (30 samples at a fine sample time) sees the stop too late to brake within the rate, and the
+#: move crawls (a 3 mm rapid at Ts = 2 ms: 0.29 s with 30 samples, 0.10 s with 50; the cut
+#: passes, whose timing brakes ahead, gain nothing from it)
+HORIZON_RAMPS = 2.0
+#: the first cells of a pass contain a disk of this radius about where the robot starts [m]
+#: (twice the corridor margin: the robot is inside with room to spare)
+START_ROOM_M = 2e-6
+_RING = np.linspace(0.0, 2 * np.pi, 8, endpoint=False)
 #: room for the box about a rapid [m]
 RAPID_MARGIN_M = 0.002
 
@@ -212,6 +224,17 @@ def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0
         origin=[float(x) for x in origin], words=program.words, comments=program.comments, warnings=warnings)
     result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3
     return result
+
+
+def _horizon(req: ContourRequest, st: Settings, model: RobotModel) -> Settings:
+    """The settings with the horizon of :data:`HORIZON_RAMPS` force ramps where the force-rate
+    limit holds and ``settings.N`` is not given."""
+    rate = force_rate(model, st)
+    if req.settings.get("N") is not None or rate is None:
+        return st
+    ramp = float(np.max(np.asarray(model.force_max, float) / rate))
+    n = min(math.ceil(HORIZON_RAMPS * ramp / st.Ts - 1e-9), MAX_HORIZON)
+    return st if n <= st.N else st.model_copy(update={"N": n})
 
 
 class _Scale(NamedTuple):
@@ -405,9 +428,20 @@ def _tube(model: RobotModel, chunk: list[int], els: list[PathElement], origin: n
     """The tube of a piece, starting where the robot is, its reach checked."""
     t = tube(els, origin, tol, psi, piece_max)
     t.element = np.asarray(chunk)[t.element]
-    # the first point: where the robot is (within the tube)
+    # the first point: where the robot is (within half the tolerance of the path's start, a few
+    # um after a move there); the first two cells (the lead cell, held one sample, and the next)
+    # are widened to the hull of themselves and a disk of START_ROOM_M about it: the robot at rest
+    # there, its forces rising at a bounded rate, moves a few um only in the first samples of a
+    # fine sample time (the hull stays within the tolerance: the point is within half of it)
     here = [float(pos[0]), float(pos[1]), psi]
     t.segments[0] = Segment.model_validate({"lower": here, "upper": here})
+    ring = pos + START_ROOM_M * np.column_stack((np.cos(_RING), np.sin(_RING)))
+    for k in (1, 2):
+        if k < len(t.segments) - 1 and t.segments[k].polygon is not None:
+            poly = hull(np.vstack((np.asarray(t.segments[k].polygon, float), ring)))
+            lo, hi = poly.min(axis=0), poly.max(axis=0)
+            t.segments[k] = Segment.model_validate({"lower": [lo[0], lo[1], psi], "upper": [hi[0], hi[1], psi],
+                                                    "polygon": poly.tolist()})
     if len(t.segments) > MAX_SEGMENTS:
         raise PlannerError("too_large", f"line {els[0].line}: the pass needs {len(t.segments)} tube cells at a "
                            f"tolerance of {tol * 1e3:g} mm, more than the limit of {MAX_SEGMENTS}; split the pass "
@@ -777,8 +811,8 @@ def _travel(req: ContourRequest, model: RobotModel, st: Settings, a: np.ndarray,
     segs = [{"lower": [a[0], a[1], psi], "upper": [a[0], a[1], psi]},
             {"lower": [lo[0], lo[1], psi], "upper": [hi[0], hi[1], psi]},
             {"lower": [b[0], b[1], psi], "upper": [b[0], b[1], psi]}]
-    settings = st.model_dump(exclude_none=True, exclude={"samples_per_segment", "segment_samples", "speed_m_s",
-                                                         "total_time_s"})
+    settings = _horizon(req, st, model).model_dump(exclude_none=True, exclude={
+        "samples_per_segment", "segment_samples", "speed_m_s", "total_time_s"})
     settings["fastest"] = True
     settings["settle_speed_m_s"] = min(st.settle_speed_m_s, 1e-4)
     try:

@@ -82,24 +82,31 @@ def range_sequence(segments: list[Segment], settings: Settings, n_drives: int) -
     qb = np.repeat(np.array([s.q_rb if s.q_rb is not None else qb0 for s in segments]), counts, axis=0)
     seg = np.repeat(np.arange(n), counts)
     if settings.taper:
+        def between(i: int) -> bool:  # a single segment between two points
+            return 0 < i < n - 1 and segments[i - 1].is_point and segments[i + 1].is_point
+
         for i in range(1, n):
             if segments[i - 1].is_point and not segments[i].is_point:  # spread out of a point
                 p = segments[i - 1].centre
                 sl = slice(starts[i], starts[i + 1])
-                alpha = (np.arange(1, counts[i] + 1) / counts[i])[:, None]
+                c = int(counts[i])
+                # between two points: spread over the first half, narrow over the second (both at
+                # once would pull the range off the start point from its first sample: a robot
+                # at rest there, its force rising at a bounded rate, could not follow at a fine
+                # sample time)
+                span = (c + 1) // 2 if between(i) else c
+                alpha = np.minimum(np.arange(1, c + 1) / span, 1.0)[:, None]
                 lo[sl] = p + (segments[i].lower - p) * alpha
                 hi[sl] = p + (segments[i].upper - p) * alpha
         for i in range(n - 1):
             if segments[i + 1].is_point and not segments[i].is_point:  # narrow onto a point
                 p = segments[i + 1].centre
                 sl = slice(starts[i], starts[i + 1])
-                alpha = (np.arange(1, counts[i] + 1) / counts[i])[:, None]
-                if i > 0 and segments[i - 1].is_point:  # a single segment between two points
-                    lo[sl] = lo[sl] + (p - lo[sl]) * alpha
-                    hi[sl] = hi[sl] + (p - hi[sl]) * alpha
-                else:
-                    lo[sl] = segments[i].lower + (p - segments[i].lower) * alpha
-                    hi[sl] = segments[i].upper + (p - segments[i].upper) * alpha
+                c = int(counts[i])
+                skip = c // 2 if between(i) else 0
+                alpha = (np.maximum(np.arange(1, c + 1) - skip, 0) / (c - skip))[:, None]
+                lo[sl] = lo[sl] + (p - lo[sl]) * alpha
+                hi[sl] = hi[sl] + (p - hi[sl]) * alpha
     return RangeSequence(lo, hi, qa, qb, qu, seg, segments[0].centre.copy(), segments[-1].centre.copy())
 
 
