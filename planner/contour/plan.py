@@ -63,7 +63,7 @@ from ..schema import (
     planner_error,
 )
 from .timing import PathSamples, time_optimal
-from .tube import PathGeometry, Tube, hull, tube
+from .tube import PathGeometry, Tube, tube
 
 __all__ = ["CONTOUR_STEP_S", "estimate_contour", "largest_feasible", "parse_contour_request", "plan_contour"]
 
@@ -270,6 +270,13 @@ def _chunks(elements: list[PathElement]) -> list[list[int]]:
     return out
 
 
+def _corner_radius(turn: np.ndarray, rho: float) -> np.ndarray:
+    """The largest circle that turns a corner of angle ``turn`` [rad] within ``rho`` of its
+    vertex: ``rho sin(h) / (1 - sin(h))``, ``h = (pi - turn) / 2`` [m]."""
+    half = np.clip((math.pi - turn) / 2, 1e-6, math.pi / 2)
+    return rho * np.sin(half) / np.maximum(1 - np.sin(half), 1e-12)
+
+
 def _profile(t: Tube, v_cap: np.ndarray, a: float, Ts: float, a_turn: float | None = None,
              jerk: float | None = None) -> np.ndarray:
     """Sample counts per segment of the tube from a speed profile: cell speed at most
@@ -283,9 +290,7 @@ def _profile(t: Tube, v_cap: np.ndarray, a: float, Ts: float, a_turn: float | No
     finite = np.isfinite(t.radius)
     v[finite] = np.minimum(v[finite], np.sqrt(a_turn * t.radius[finite]))
     j = t.turn > 0
-    half = np.clip((math.pi - t.turn[j]) / 2, 1e-6, math.pi / 2)
-    r_corner = t.rho * np.sin(half) / np.maximum(1 - np.sin(half), 1e-12)
-    v[j] = np.minimum(v[j], np.sqrt(a_turn * r_corner))
+    v[j] = np.minimum(v[j], np.sqrt(a_turn * _corner_radius(t.turn[j], t.rho)))
     if jerk is not None:
         d = np.concatenate(([0.0], np.cumsum(t.length)))
         d = np.minimum(d[:-1] + t.length, d[-1] - d[:-1])  # the cell's far end from the nearer rest
@@ -358,13 +363,11 @@ def _optimal_of(model: RobotModel, st: Settings, chunk: list[int], els: list[Pat
         key = (geo, float(origin[0]), float(origin[1]), psi, st.Ts, t.rho, tuple(np.round(chord, 12)))
         if key not in memo:
             def caps(path: PathSamples, a_all: np.ndarray) -> np.ndarray:
-                half = np.clip((math.pi - path.corner) / 2, 1e-6, math.pi / 2)
-                r_c = t.rho * np.sin(half) / np.maximum(1 - np.sin(half), 1e-12)
-                cap = np.where(path.corner > 0, a_all * r_c, np.inf)
+                cap = np.where(path.corner > 0, a_all * _corner_radius(path.corner, t.rho), np.inf)
                 c = chord[path.element]
                 return np.minimum(cap, np.where(c > 0, (c / st.Ts) ** 2, np.inf))
 
-            path, w, T = time_optimal(model, els, origin, psi, h, caps, np.asarray(model.force_max, float))
+            path, w, T = time_optimal(model, els, origin, psi, h, caps)
             memo[key] = (path.s, T, float(np.sqrt(w.max())))
         s_grid, T, v_peak = memo[key]
         # the path length at the end of every segment: its element's start plus its share of the
@@ -378,12 +381,11 @@ def _optimal_of(model: RobotModel, st: Settings, chunk: list[int], els: list[Pat
     return at
 
 
-class _Optimal:
-    """The time-optimal profile for one tube: ``times``, the profile's time at the end of each of
-    the tube's segments [s]; ``v_peak``, its top speed [m/s]."""
+class _Optimal(NamedTuple):
+    """The time-optimal profile for one tube."""
 
-    def __init__(self, times: np.ndarray, v_peak: float):
-        self.times, self.v_peak = times, v_peak
+    times: np.ndarray  #: the profile's time at the end of each of the tube's segments [s]
+    v_peak: float  #: its top speed [m/s]
 
 
 def _optimal_counts(t: Tube, times: np.ndarray, step: float) -> np.ndarray:
@@ -435,10 +437,13 @@ def _tube(model: RobotModel, chunk: list[int], els: list[PathElement], origin: n
     # fine sample time (the hull stays within the tolerance: the point is within half of it)
     here = [float(pos[0]), float(pos[1]), psi]
     t.segments[0] = Segment.model_validate({"lower": here, "upper": here})
+    import shapely  # loaded on first use (planner._lazy)
+
     ring = pos + START_ROOM_M * np.column_stack((np.cos(_RING), np.sin(_RING)))
     for k in (1, 2):
         if k < len(t.segments) - 1 and t.segments[k].polygon is not None:
-            poly = hull(np.vstack((np.asarray(t.segments[k].polygon, float), ring)))
+            pts = shapely.multipoints(np.vstack((np.asarray(t.segments[k].polygon, float), ring)))
+            poly = shapely.get_coordinates(shapely.get_exterior_ring(shapely.convex_hull(pts)))[:-1]
             lo, hi = poly.min(axis=0), poly.max(axis=0)
             t.segments[k] = Segment.model_validate({"lower": [lo[0], lo[1], psi], "upper": [hi[0], hi[1], psi],
                                                     "polygon": poly.tolist()})
@@ -562,6 +567,7 @@ def _search(feed_mode: str, model: RobotModel, st: Settings, tube_at: Callable[[
         return best, (lam, mu)
 
     def heuristic(h: _Scale | None) -> tuple[PlanResult, Tube, _Scale] | None:
+        h = h if h is not None and h.family == "profile" else None  # the other family's scale means nothing here
         t = tube_at(V0_M_S)
         got = scaled(t, np.full(len(t.segments), V0_M_S), False, h.lam if h else 1.0, h.mu if h else 1.0,
                      SCALE_MAX)

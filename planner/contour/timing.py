@@ -36,8 +36,7 @@ from ..model import RobotModel
 from ..model.dynamics import generalised_forces
 from ..schema import PathElement
 
-__all__ = ["PathSamples", "constraint_rows", "max_velocity_curve", "path_samples", "profile_time",
-           "speed_profile", "time_optimal"]
+__all__ = ["PathSamples", "constraint_rows", "path_samples", "profile_time", "speed_profile", "time_optimal"]
 
 
 class PathSamples:
@@ -119,14 +118,13 @@ def _facets(J: np.ndarray, f_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate((Nv, -Nv), axis=1), np.concatenate((r, r), axis=1)
 
 
-def constraint_rows(model: RobotModel, path: PathSamples, force_max: np.ndarray | None = None
+def constraint_rows(model: RobotModel, path: PathSamples
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``A, B, R`` (N, m) of ``A u + B w <= R`` at every grid point, the legs' speed bound on
     ``w`` (N,) (module docstring) and the acceleration the drives give the tool in every
     direction of the plane from rest (N,) [m/s^2] (the radius of the largest disk about 0 of
-    accelerations ``a`` with ``M_r (a, 0)`` in the zonotope: ``min R / |(M_r^T n)_xy|``).
-    ``force_max``: the drive limits (default the model's)."""
-    f_max = np.asarray(model.force_max if force_max is None else force_max, float) * np.ones(model.n_legs)
+    accelerations ``a`` with ``M_r (a, 0)`` in the zonotope: ``min R / |(M_r^T n)_xy|``)."""
+    f_max = np.asarray(model.force_max, float) * np.ones(model.n_legs)
     N = len(path.s)
     M = np.empty((N, 3, 3))
     H = np.empty((N, 3))
@@ -141,26 +139,6 @@ def constraint_rows(model: RobotModel, path: PathSamples, force_max: np.ndarray 
     reach = np.linalg.norm(np.einsum("nmk,nkl->nml", F, M)[:, :, :2], axis=2)
     a_all = np.min(R / np.maximum(reach, 1e-300), axis=1)
     return A, B, R, w_leg, a_all
-
-
-def max_velocity_curve(A: np.ndarray, B: np.ndarray, R: np.ndarray, cap: np.ndarray) -> np.ndarray:
-    """The largest ``w`` (N,) at each grid point for which some ``u`` satisfies ``A u + B w <= R``,
-    at most ``cap`` (a 2-variable LP, solved by the pairs of an upper and a lower row of ``u``:
-    ``(R_j - B_j w) / A_j >= (R_k - B_k w) / A_k``; rows without ``u`` bound ``w`` directly)."""
-    eps = 1e-12
-    up, lo = A > eps, A < -eps
-    with np.errstate(divide="ignore", invalid="ignore"):
-        a_r = np.where(up | lo, R / A, 0.0)
-        a_b = np.where(up | lo, -B / A, 0.0)  # the row's u bound: a_r + a_b w
-    # pair (j upper, k lower): c + d w >= 0 with c = a_r_j - a_r_k, d = a_b_j - a_b_k
-    c = a_r[:, :, None] - a_r[:, None, :]
-    d = a_b[:, :, None] - a_b[:, None, :]
-    pair = up[:, :, None] & lo[:, None, :] & (d < -eps)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        w_pair = np.where(pair, c / np.where(pair, -d, 1.0), np.inf).min(axis=(1, 2))
-        flat = ~(up | lo) & (B > eps)
-        w_flat = np.where(flat, R / np.where(flat, B, 1.0), np.inf).min(axis=1)
-    return np.maximum(np.minimum(np.minimum(w_pair, w_flat), cap), 0.0)
 
 
 def _largest_w(C: np.ndarray, d: np.ndarray) -> float:
@@ -186,13 +164,10 @@ def speed_profile(s: np.ndarray, A: np.ndarray, B: np.ndarray, R: np.ndarray, ca
     eps = 1e-12
     N = len(s)
     ds = np.diff(s)
-    cap = np.minimum(cap, max_velocity_curve(A, B, R, cap))
     K = np.empty(N)
     K[-1] = 0.0
     for i in range(N - 2, -1, -1):
-        if ds[i] <= 0.0:  # a boundary: the same speed on both sides
-            K[i] = min(K[i + 1], cap[i])
-            continue
+        # w_{i+1} = w_i + 2 ds u_i in [0, K_{i+1}] (at a boundary, ds = 0: the same speed on both sides)
         C = np.vstack((np.column_stack((A[i], B[i])), [[2 * ds[i], 1.0], [-2 * ds[i], -1.0], [0.0, 1.0], [0.0, -1.0]]))
         d = np.concatenate((R[i], [K[i + 1], 0.0, cap[i], 0.0]))
         K[i] = max(_largest_w(C, d), 0.0)
@@ -222,13 +197,13 @@ def profile_time(s: np.ndarray, w: np.ndarray) -> np.ndarray:
 
 
 def time_optimal(model: RobotModel, elements: list[PathElement], origin: np.ndarray, psi: float, h: float,
-                 cap_of: Callable[[PathSamples, np.ndarray], np.ndarray] | None = None,
-                 force_max: np.ndarray | None = None) -> tuple[PathSamples, np.ndarray, np.ndarray]:
+                 cap_of: Callable[[PathSamples, np.ndarray], np.ndarray] | None = None
+                 ) -> tuple[PathSamples, np.ndarray, np.ndarray]:
     """The time-optimal profile of a pass: its grid (:func:`path_samples`), ``w`` and the time at
     every grid point. ``cap_of(path, a_all) -> (N,)``: further bounds on ``w`` (the tube's, the
     corners'), given the acceleration the drives allow in every direction (:func:`constraint_rows`)."""
     path = path_samples(elements, origin, psi, h)
-    A, B, R, w_leg, a_all = constraint_rows(model, path, force_max)
+    A, B, R, w_leg, a_all = constraint_rows(model, path)
     cap = w_leg if cap_of is None else np.minimum(w_leg, cap_of(path, a_all))
     w = speed_profile(path.s, A, B, R, cap)
     return path, w, profile_time(path.s, w)

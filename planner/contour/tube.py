@@ -43,8 +43,7 @@ import numpy as np
 
 from ..schema import PathElement, Segment
 
-__all__ = ["BEND_SAGITTAS", "LEAD_FRACTION", "SAGITTA_FRACTION", "TUBE_FRACTION", "PathGeometry", "Tube", "hull",
-           "tube"]
+__all__ = ["BEND_SAGITTAS", "LEAD_FRACTION", "SAGITTA_FRACTION", "TUBE_FRACTION", "PathGeometry", "Tube", "tube"]
 
 #: chord sagitta of the arcs' polylines, as a fraction of the tolerance
 SAGITTA_FRACTION = 0.18
@@ -218,25 +217,6 @@ def _leads(pieces: list, ell: float) -> tuple[list, set[int]]:
         out[-1:] = [(p0, m, e, r), (m, p1, e, r)]
         lead.add(len(out) - 1)
     return out, lead
-
-
-def hull(points: np.ndarray) -> np.ndarray:
-    """The convex hull of 2-D points (k, 2), counter-clockwise (Andrew's monotone chain)."""
-    pts = np.unique(np.asarray(points, float), axis=0)
-    if len(pts) < 3:
-        return pts
-
-    def half(seq: np.ndarray) -> list[np.ndarray]:
-        out: list[np.ndarray] = []
-        for p in seq:
-            while len(out) >= 2 and (out[-1][0] - out[-2][0]) * (p[1] - out[-2][1]) - \
-                    (out[-1][1] - out[-2][1]) * (p[0] - out[-2][0]) <= 0:
-                out.pop()
-            out.append(p)
-        return out
-
-    lower, upper = half(pts), half(pts[::-1])
-    return np.array(lower[:-1] + upper[:-1])
 
 
 def _norm(v: np.ndarray) -> np.ndarray:
