@@ -186,6 +186,17 @@ def test_every_word_matches_rs274():
     assert np.allclose(last.end, [0.8 * 0.0254, 0.8 * 0.0254])
 
 
+def test_tabs_and_spaces_inside_words_read_as_rs274_reads_them():
+    """Spaces and tabs mean nothing outside comments (LinuxCNC's 3dtest.ngc separates its words
+    with tabs): the program with tabs between and inside words reads as rs274 reads it, and as
+    the same program written plainly ('X- \t5' was a crash, a tab between words a refusal)."""
+    tabbed = EVERY_WORD.replace(" ", "\t").replace("X", "X \t").replace("Y-", "Y- \t")
+    p = compare_with_rs274(tabbed)
+    plain = read_gcode(EVERY_WORD)
+    assert [e.model_dump() for b in p.passes for e in b.elements] == \
+        [e.model_dump() for b in plain.passes for e in b.elements]
+
+
 @pytest.mark.parametrize("name", sorted(SAMPLES))
 def test_linuxcnc_samples_match_rs274(name):
     path = SAMPLES[name]

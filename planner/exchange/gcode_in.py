@@ -188,10 +188,10 @@ def read_gcode(text: str, *, cut_below: float = 0.0, z_rapid_m_s: float = 0.05, 
                 what = {"#": "parameters ('#')", "[": "expressions ('[')",
                         "O": "O-word subroutines and control flow"}[bad]
                 raise _fail(ln, f"{what} are not supported: '{body[:40]}'")
-        rest = _WORD.sub("", body).replace(" ", "")
+        rest = "".join(_WORD.sub("", body).split())  # spaces and tabs mean nothing outside comments
         if rest:
             raise _fail(ln, f"cannot read '{rest[:20]}' (not a word of a letter and a number)")
-        found = [(m.group(1), float(m.group(2).replace(" ", ""))) for m in _WORD.finditer(body)]
+        found = [(m.group(1), float("".join(m.group(2).split()))) for m in _WORD.finditer(body)]
         gs = [v for k, v in found if k == "G"]
         ms = [int(v) if v == int(v) else v for k, v in found if k == "M"]
         for k, v in found:
