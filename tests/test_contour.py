@@ -169,6 +169,24 @@ def test_fastest_is_faster_and_within_tolerance(small):
     assert fast.metrics.within_limits and fast.metrics.contained
 
 
+def test_drive_forces_across_the_joins_of_the_parts(small):
+    """The program is planned in parts (rapid, plunge, cut, retract) joined sample to sample; the
+    drive forces held from a shared sample on are the next part's first step's: the joined
+    forces' energy (sum of f^2 Ts, computed here from the rows) equals the parts' summed energy,
+    and no step of the joined forces, the joins included, exceeds the force-rate limit (the
+    first step of every part was dropped: 0 N to the part's second force at a join) beyond the
+    widening of a relaxed step (``RELAX_M`` of a row, force rows in units of force_max)."""
+    from planner.constraints.rows import RELAX_M
+
+    for res in (small, plan_contour({"program": SMALL, "origin": ORIGIN, "feed": "fastest"})):
+        f = np.asarray(res.drives.force)
+        Ts = res.settings.Ts
+        assert float(np.sum(f * f) * Ts) == pytest.approx(res.metrics.energy, rel=1e-12)
+        step = np.abs(np.diff(np.vstack((np.zeros((1, f.shape[1])), f)), axis=0)).max()
+        assert step <= 150.0 / 0.05 * Ts + RELAX_M * 150.0 + 1e-9
+        assert len(f) == len(res.time) == len(res.acceleration)
+
+
 @pytest.mark.parametrize("body, code, words", [
     ({"origin": [0.2, 0.0]}, "unreachable", ["line 7", "reach"]),
     ({"tolerance_m": 0.02}, "invalid_input", ["at most"]),

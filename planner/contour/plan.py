@@ -851,7 +851,10 @@ def _rest_result(pose: np.ndarray) -> PlanResult:
 
 def _join(parts: list[_Part], req: ContourRequest, st: Settings, model: RobotModel) -> PlanResult:
     """One result: the parts' samples in order (each part's first sample, the previous part's
-    last, dropped), the metrics combined over the parts."""
+    last, dropped), the metrics combined over the parts. The rows held from a sample to the
+    next (drive forces, and the acceleration under them) at a shared sample are the next
+    part's: its first step's force (the previous part's row after its last sample is a 0
+    placeholder)."""
     from ..model import kinematics
 
     planned = [p.result for p in parts if p.result.metrics is not None]
@@ -861,14 +864,15 @@ def _join(parts: list[_Part], req: ContourRequest, st: Settings, model: RobotMod
                                                          "force", "lower", "upper", "viol")}
     for k, p in enumerate(parts):
         r = p.result
-        sl = slice(0 if k == 0 else 1, None)
+        sl = slice(0 if k == 0 else 1, None)  # rows at a sample
+        held = slice(0, -1 if k < len(parts) - 1 else None)  # rows held from a sample to the next
         cols["pose"].append(r.pose[sl])
         cols["velocity"].append(r.velocity[sl])
-        cols["acceleration"].append(r.acceleration[sl])
+        cols["acceleration"].append(r.acceleration[held])
         if r.metrics is not None:
             cols["length"].append(r.drives.length[sl])
             cols["legv"].append(r.drives.velocity[sl])
-            cols["force"].append(r.drives.force[sl])
+            cols["force"].append(r.drives.force[held])
             cols["lower"].append(r.corridor.lower[sl])
             cols["upper"].append(r.corridor.upper[sl])
             cols["viol"].append(r.corridor.violation_m[sl])
@@ -876,7 +880,7 @@ def _join(parts: list[_Part], req: ContourRequest, st: Settings, model: RobotMod
             poses = r.pose[sl]
             cols["length"].append(kinematics.leg_lengths(model, poses))
             cols["legv"].append(np.zeros((len(poses), model.n_legs)))
-            cols["force"].append(np.zeros((len(poses), model.n_legs)))
+            cols["force"].append(np.zeros((len(r.pose[held]), model.n_legs)))
             cols["lower"].append(poses.copy())
             cols["upper"].append(poses.copy())
             cols["viol"].append(np.zeros(len(poses)))
