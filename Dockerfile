@@ -7,10 +7,13 @@
 # (`make container-test` builds a stand-in from Debian packages when no registry is reachable).
 #
 # Stages: deps (the locked runtime dependencies, rebuilt only when container/requirements.lock
-# changes), app (the rangeplan wheel), runtime (deps + wheel + kernels compiled for any x86-64).
+# changes), app (the rangeplan wheel: the planner, the service, the landing page and its examples),
+# runtime (deps + wheel + kernels compiled for any x86-64).
 # Tests run in CI, not here: the image holds no test tools. tests/test_dockerfile.py checks
 # this file and that the lock matches pyproject.toml (`make lock` rewrites it).
 ARG BASE_IMAGE=python:3.11-slim
+# planner/_version.py's; the build fails if the wheel says otherwise (tests/test_dockerfile.py)
+ARG RANGEPLAN_VERSION=0.2.0
 
 # ---------------------------------------------------------------------------------------
 FROM ${BASE_IMAGE} AS deps
@@ -53,6 +56,10 @@ RUN python -m pip wheel --quiet --no-deps --wheel-dir /wheels /src
 
 # ---------------------------------------------------------------------------------------
 FROM ${BASE_IMAGE} AS runtime
+ARG RANGEPLAN_VERSION
+LABEL org.opencontainers.image.title="rangeplan" \
+      org.opencontainers.image.version="${RANGEPLAN_VERSION}" \
+      org.opencontainers.image.description="Offline trajectory planner for planar parallel robots: HTTP API and editor"
 ENV OPENBLAS_NUM_THREADS=1 \
     OMP_NUM_THREADS=1 \
     MKL_NUM_THREADS=1 \
@@ -64,7 +71,6 @@ ENV OPENBLAS_NUM_THREADS=1 \
     NUMBA_CPU_NAME=generic \
     NUMBA_CACHE_DIR=/tmp/rangeplan-numba \
     RANGEPLAN_KERNEL_SEED=/opt/rangeplan/kernels \
-    RANGEPLAN_STATIC_DIR=/opt/rangeplan/static \
     RANGEPLAN_DATA_DIR=/data \
     RANGEPLAN_PORT=8000 \
     RANGEPLAN_EDITOR_PORT=8080 \
@@ -79,14 +85,20 @@ RUN useradd --uid 10001 --gid 0 --no-create-home --home-dir /tmp --shell /usr/sb
 COPY --from=deps /opt/venv /opt/venv
 COPY --from=app /wheels /tmp/wheels
 RUN python -m pip --python /opt/venv/bin/python install --quiet --no-deps --no-index /tmp/wheels/*.whl \
-    && rm -rf /tmp/wheels
-COPY static /opt/rangeplan/static
+    && rm -rf /tmp/wheels \
+    && test "$(/opt/venv/bin/python -c 'import planner; print(planner.__version__)')" = "${RANGEPLAN_VERSION}"
 
 # compile the planner's kernels for a generic x86-64 CPU (NUMBA_CPU_NAME=generic: the cache
 # is not tied to the build machine's CPU) into a read-only seed; `rangeplan serve` copies it
-# to NUMBA_CACHE_DIR on the tmpfs at start (app/kernel_cache.py)
-RUN NUMBA_CACHE_DIR=/opt/rangeplan/kernels /opt/venv/bin/python -m planner \
-    && chmod -R a+rX,go-w /opt/rangeplan
+# to NUMBA_CACHE_DIR on the tmpfs at start (app/kernel_cache.py). The build's cache mount keeps
+# the kernels between builds (keyed by the kernel sources' content, planner/_jit.py): a rebuild
+# whose kernels did not change loads them in seconds instead of compiling them for minutes.
+RUN --mount=type=cache,target=/var/cache/rangeplan-kernels,sharing=locked \
+    NUMBA_CACHE_DIR=/var/cache/rangeplan-kernels /opt/venv/bin/python -m planner \
+    && mkdir -p /opt/rangeplan/kernels \
+    && cp -a "$(NUMBA_CACHE_DIR=/var/cache/rangeplan-kernels /opt/venv/bin/python -c \
+       'from planner._jit import kernel_cache_dir; print(kernel_cache_dir())')" /opt/rangeplan/kernels/ \
+    && chown -R 0:0 /opt/rangeplan && chmod -R a+rX,go-w /opt/rangeplan
 ENV PATH=/opt/venv/bin:$PATH
 
 USER 10001:0

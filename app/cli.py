@@ -300,6 +300,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     need heavy imports are left out (``rangeplan --help`` in well under a second)."""
     p = argparse.ArgumentParser(prog="rangeplan", description="Range-space predictive control trajectory planner "
                                 "for planar parallel robots (SI units throughout).")
+    from planner import __version__
+
+    p.add_argument("--version", action="version", version=f"rangeplan {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     pp = sub.add_parser("plan", help="plan a trajectory for a request file")
     pp.add_argument("input", help="plan request JSON file ('-' for standard input)")

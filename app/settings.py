@@ -62,7 +62,7 @@ class Settings(BaseSettings):
                              "closing", gt=0)
     access_log: bool = _f(True, "One JSON log line per request, with its request id (0: off)")
     static_dir: Path | None = _f(None, "Landing page directory (index.html, examples/)",
-                                 default_text="the repository's static/")
+                                 default_text="the package's app/static/")
     # -- planning
     workers: int = _f(None, "Planning worker processes", factory=_cpus, default_text="CPU count", ge=1)
     executor: Literal["process", "thread"] = _f("process", "Where plans run: worker processes, or threads of the "

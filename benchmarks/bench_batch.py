@@ -50,7 +50,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-TABLE1 = json.loads((ROOT / "static" / "examples" / "table1.json").read_text())
+TABLE1 = json.loads((ROOT / "app" / "static" / "examples" / "table1.json").read_text())
 #: the engines of the goal table, and the same with every result sent back to the main process
 #: (``--no-worker-writes``: what every run did before workers wrote their own result files)
 ENGINES = ("1 process", "local pool", "dask")

@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from planner import PlannerError, plan, warm_up
 from planner.schema import MODE_DEFAULTS, builtin_description
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "static" / "examples"
+EXAMPLES = Path(__file__).resolve().parents[1] / "app" / "static" / "examples"
 TABLE1 = json.loads((EXAMPLES / "table1.json").read_text())
 PSI_TURN = json.loads((EXAMPLES / "psi-turn.json").read_text())
 BOUNDS = {"lower": [-0.1, -0.05], "upper": [0.1, 0.08]}

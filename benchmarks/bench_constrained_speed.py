@@ -52,7 +52,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from planner import plan  # noqa: E402
 from planner.model import load_robot  # noqa: E402
 
-TABLE1 = json.loads((ROOT / "static" / "examples" / "table1.json").read_text())
+TABLE1 = json.loads((ROOT / "app" / "static" / "examples" / "table1.json").read_text())
 #: the samples per segment f0e9b8a's fastest (one count for all segments, no rate limit) found
 OLD_S = 6
 

@@ -49,7 +49,7 @@ def main() -> None:
             row += [str(sum(s.vertices for s in res.report.shapes)),
                     f"{median_ms(lambda d=data, o=opts: import_drawing(d, o), args.repeat):.1f}"]
         print("| " + " | ".join(row) + " |")
-    result = plan(json.loads((ROOT / "static/examples/table1.json").read_text()))
+    result = plan(json.loads((ROOT / "app/static/examples/table1.json").read_text()))
     print(f"\n### Table I ({len(result.pose)} samples) to machine formats (median of {args.repeat} runs)\n")
     print("| format | bytes | write [ms] |")
     print("|---|---:|---:|")

@@ -33,7 +33,7 @@ from pathlib import Path
 import httpx
 
 ROOT = Path(__file__).resolve().parents[1]
-TABLE1 = json.loads((ROOT / "static" / "examples" / "table1.json").read_text())
+TABLE1 = json.loads((ROOT / "app" / "static" / "examples" / "table1.json").read_text())
 #: processes the clients are spread over
 LOAD_PROCESSES = 4
 

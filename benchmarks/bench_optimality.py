@@ -62,7 +62,7 @@ from planner.model.plant import rk4_sample
 from planner.orchestrator.result import overshoot
 from planner.schema import MODE_DEFAULTS, parse_request
 
-TABLE1 = Path(__file__).resolve().parents[1] / "static" / "examples" / "table1.json"
+TABLE1 = Path(__file__).resolve().parents[1] / "app" / "static" / "examples" / "table1.json"
 #: the paper mode's penalties and horizon, run in constrained mode for comparison with the
 #: constrained mode's own defaults (planner.schema.MODE_DEFAULTS)
 PAPER_PENALTIES = MODE_DEFAULTS["paper"]

@@ -40,7 +40,7 @@ from planner.model.discretisation import zoh_factorised  # noqa: E402
 from planner.model.plant import rk4_sample  # noqa: E402
 from planner.orchestrator.simulate import C_POSE, simulate  # noqa: E402
 
-TABLE1 = Path(__file__).resolve().parents[1] / "static" / "examples" / "table1.json"
+TABLE1 = Path(__file__).resolve().parents[1] / "app" / "static" / "examples" / "table1.json"
 
 
 def median_time(fn, repeat: int, inner: int = 1) -> float:

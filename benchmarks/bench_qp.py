@@ -57,7 +57,7 @@ from planner.constraints.dual_kernels import dual_solve
 from planner.constraints.stagewise_kernels import stage_setup
 
 ROOT = Path(__file__).resolve().parents[1]
-TABLE1 = ROOT / "static" / "examples" / "table1.json"
+TABLE1 = ROOT / "app" / "static" / "examples" / "table1.json"
 
 
 def record_problems(req: dict) -> tuple[list[dict], object]:

@@ -34,7 +34,7 @@ import httpx
 import psutil
 
 HERE = Path(__file__).resolve().parent.parent
-TABLE1 = json.loads((HERE / "static" / "examples" / "table1.json").read_text())
+TABLE1 = json.loads((HERE / "app" / "static" / "examples" / "table1.json").read_text())
 
 
 def free_port() -> int:

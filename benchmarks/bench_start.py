@@ -13,7 +13,7 @@ CPU time is the steadier figure); the table gives the median over ``--rounds``.
 
 - ``--help``: ``python -m app.cli --help``
 - ``import planner``: ``python -c "import planner"``
-- ``plan warm``: ``python -m app.cli plan static/examples/table1.json -o OUT.json``, kernels cached,
+- ``plan warm``: ``python -m app.cli plan app/static/examples/table1.json -o OUT.json``, kernels cached,
   in-process (``RANGEPLAN_RESIDENT_S=0``, as every row but the next)
 - ``plan warm, resident``: the same command handed to the CLI's resident planner
   (``app/resident.py``; started once before the rounds, ended after them; a key of this run's
@@ -48,7 +48,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-TABLE1 = ROOT / "static" / "examples" / "table1.json"
+TABLE1 = ROOT / "app" / "static" / "examples" / "table1.json"
 PY = sys.executable
 
 

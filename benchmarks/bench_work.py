@@ -38,7 +38,7 @@ from bench_segmentation import layout as obstacle_layout  # noqa: E402
 
 from planner import PlannerError, estimate_work, plan  # noqa: E402
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "static" / "examples"
+EXAMPLES = Path(__file__).resolve().parents[1] / "app" / "static" / "examples"
 TABLE1 = json.loads((EXAMPLES / "table1.json").read_text())
 PSI = json.loads((EXAMPLES / "psi-turn.json").read_text())
 

@@ -22,7 +22,7 @@ import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-TABLE1 = ROOT / "static" / "examples" / "table1.json"
+TABLE1 = ROOT / "app" / "static" / "examples" / "table1.json"
 
 CHILD = r"""
 import json, statistics, sys, time

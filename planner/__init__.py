@@ -38,6 +38,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ._lazy import lazy_getattr
+from ._version import __version__
 
 if TYPE_CHECKING:  # the names below, for type checkers; at run time they load on first use
     from .errors import PlannerError
@@ -45,7 +46,7 @@ if TYPE_CHECKING:  # the names below, for type checkers; at run time they load o
     from .orchestrator import WorkEstimate, estimate_work, plan, segment, to_csv, warm_up
     from .schema import PlanRequest, PlanResult, SegmentationResult, Settings, parse_request
 
-__all__ = ["plan", "segment", "warm_up", "to_csv", "estimate_work", "WorkEstimate",
+__all__ = ["__version__", "plan", "segment", "warm_up", "to_csv", "estimate_work", "WorkEstimate",
            "PlanRequest", "PlanResult", "SegmentationResult", "Settings",
            "parse_request", "RobotModel", "load_robot", "PlannerError"]
 

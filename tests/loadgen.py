@@ -22,7 +22,7 @@ from pathlib import Path
 
 import httpx
 
-TABLE1 = json.loads((Path(__file__).resolve().parents[1] / "static" / "examples" / "table1.json").read_text())
+TABLE1 = json.loads((Path(__file__).resolve().parents[1] / "app" / "static" / "examples" / "table1.json").read_text())
 
 
 async def client(http: httpx.AsyncClient, i: int, n: int, statuses: Counter, errors: list) -> None:

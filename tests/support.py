@@ -8,13 +8,13 @@ from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
-EXAMPLES = ROOT / "static" / "examples"
+EXAMPLES = ROOT / "app" / "static" / "examples"
 #: the paper's Table I corridor: the one copy the tests read
 TABLE1_PATH = EXAMPLES / "table1.json"
 
 
 def load_example(name: str) -> dict[str, Any]:
-    """A request from ``static/examples/<name>.json`` (a fresh copy)."""
+    """A request from ``app/static/examples/<name>.json`` (a fresh copy)."""
     return json.loads((EXAMPLES / f"{name}.json").read_text())
 
 

@@ -25,7 +25,7 @@ from planner.schema import field_path
 from tests.support import api_client, miscalibrate_slack, robot_description
 
 ROOT = Path(__file__).resolve().parent.parent
-TABLE1_PATH = ROOT / "static" / "examples" / "table1.json"
+TABLE1_PATH = ROOT / "app" / "static" / "examples" / "table1.json"
 TABLE1 = json.loads(TABLE1_PATH.read_text())
 P0 = {"lower": [0.0, 0.0, 0.0], "upper": [0.0, 0.0, 0.0]}
 

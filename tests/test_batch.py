@@ -417,7 +417,7 @@ def test_cli_batch_usage_errors_exit_2(tmp_path):
         assert needle in r.stderr and "Traceback" not in r.stderr, r.stderr
 
 
-TABLE1_FILE = Path(__file__).resolve().parents[1] / "static" / "examples" / "table1.json"
+TABLE1_FILE = Path(__file__).resolve().parents[1] / "app" / "static" / "examples" / "table1.json"
 
 
 @pytest.mark.slow

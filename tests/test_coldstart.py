@@ -28,7 +28,7 @@ from planner._jit import kernel_cache_dir
 from planner.orchestrator.background import LOCK, MARKER, kernels_ready
 
 ROOT = Path(__file__).resolve().parent.parent
-TABLE1_PATH = ROOT / "static" / "examples" / "table1.json"
+TABLE1_PATH = ROOT / "app" / "static" / "examples" / "table1.json"
 TABLE1 = json.loads(TABLE1_PATH.read_text())
 LEFT_OUT = "orchestrator/kernels.simulate_constrained-"  # the kernel the background compile compiles
 

@@ -29,7 +29,7 @@ pytestmark = [pytest.mark.container,
               pytest.mark.skipif(not IMAGE, reason="opt-in: make container-test (needs root and podman or docker)")]
 
 ROOT = Path(__file__).resolve().parent.parent
-TABLE1 = json.loads((ROOT / "static" / "examples" / "table1.json").read_text())
+TABLE1 = json.loads((ROOT / "app" / "static" / "examples" / "table1.json").read_text())
 TOKEN = "container-test-token-0123456789"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
 #: python:3.11-slim unpacked (the target is the whole image on it) [bytes]

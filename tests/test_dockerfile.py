@@ -134,7 +134,24 @@ def test_kernels_compiled_for_a_generic_cpu_into_a_read_only_seed():
     assert "NUMBA_CPU_NAME=generic" in env
     assert "NUMBA_CACHE_DIR=/tmp/" in env and "RANGEPLAN_KERNEL_SEED=/opt/rangeplan/kernels" in env
     runs = [rest for op, rest in runtime if op == "RUN"]
-    assert any("NUMBA_CACHE_DIR=/opt/rangeplan/kernels /opt/venv/bin/python -m planner" in r for r in runs)
+    compile_run = next(r for r in runs if "-m planner" in r)
+    # compiled in the build's cache mount (kept between builds), copied into the seed
+    assert compile_run.startswith("--mount=type=cache,target=/var/cache/rangeplan-kernels")
+    assert "NUMBA_CACHE_DIR=/var/cache/rangeplan-kernels /opt/venv/bin/python -m planner" in compile_run
+    assert "/opt/rangeplan/kernels/" in compile_run and "go-w /opt/rangeplan" in compile_run
+
+
+def test_the_image_is_labelled_with_the_version_the_wheel_has():
+    """The label's version is planner/_version.py's, and the build checks the installed wheel's."""
+    import planner
+
+    ins = instructions()
+    assert ("ARG", f"RANGEPLAN_VERSION={planner.__version__}") in ins
+    runtime = stages()["runtime"]
+    labels = " ".join(rest for op, rest in runtime if op == "LABEL")
+    assert 'org.opencontainers.image.version="${RANGEPLAN_VERSION}"' in labels
+    runs = " ".join(rest for op, rest in runtime if op == "RUN")
+    assert "print(planner.__version__)')\" = \"${RANGEPLAN_VERSION}\"" in runs
 
 
 def test_health_check_start_command_and_ports():

@@ -21,7 +21,7 @@ from app.lifeline import watch_parent
 from tests.test_server_process import free_port
 
 ROOT = Path(__file__).resolve().parent.parent
-TABLE1 = json.loads((ROOT / "static" / "examples" / "table1.json").read_text())
+TABLE1 = json.loads((ROOT / "app" / "static" / "examples" / "table1.json").read_text())
 
 
 def alive(pids: list[int]) -> list[int]:

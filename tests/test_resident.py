@@ -27,8 +27,8 @@ import pytest
 from app import resident
 
 ROOT = Path(__file__).resolve().parent.parent
-TABLE1 = ROOT / "static" / "examples" / "table1.json"
-PROGRAM = ROOT / "static" / "examples" / "contour-part.ngc"
+TABLE1 = ROOT / "app" / "static" / "examples" / "table1.json"
+PROGRAM = ROOT / "app" / "static" / "examples" / "contour-part.ngc"
 HEAVY = ("numpy", "numba", "pydantic", "planner", "scipy")
 
 

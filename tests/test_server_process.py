@@ -21,7 +21,7 @@ import pytest
 from tests.support import miscalibrate_slack
 
 ROOT = Path(__file__).resolve().parent.parent
-TABLE1 = json.loads((ROOT / "static" / "examples" / "table1.json").read_text())
+TABLE1 = json.loads((ROOT / "app" / "static" / "examples" / "table1.json").read_text())
 
 
 def free_port() -> int:

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+import planner
 from app.api import create_app
 from app.security import AccessPolicy
 from app.storage import Store
@@ -19,7 +20,7 @@ from app.workers import PlanPool
 from tests.support import api_client
 
 ROOT = Path(__file__).resolve().parent.parent
-TABLE1 = json.loads((ROOT / "static" / "examples" / "table1.json").read_text())
+TABLE1 = json.loads((ROOT / "app" / "static" / "examples" / "table1.json").read_text())
 
 
 def client_for(app) -> TestClient:
@@ -40,8 +41,8 @@ def test_ready_only_once_the_workers_can_plan(tmp_path):
             assert time.monotonic() < deadline, "workers never became ready"
             time.sleep(0.05)
         body = c.get("/ready").json()
-        assert body == {"status": "ready", "workers_ready": body["workers_ready"], "workers": 2, "failures": [],
-                        "kernels": "compiled"}
+        assert body == {"status": "ready", "version": planner.__version__, "workers_ready": body["workers_ready"],
+                        "workers": 2, "failures": [], "kernels": "compiled"}
         assert body["workers_ready"] >= 1
         assert c.post("/v1/plan", json=TABLE1).status_code == 200
 

@@ -176,7 +176,7 @@ def test_cached_kernels_load_without_numbas_full_refresh_and_plan_alike():
     context (planner._jit: ~0.4 CPU s less per process; numba's polynomial registry, one it
     installs there, stays unloaded) and plans both modes exactly as with numba's own order."""
     code = ("import json, sys, planner\nplanner.warm_up()\n"
-            "req = json.load(open('static/examples/table1.json'))\nout = []\n"
+            "req = json.load(open('app/static/examples/table1.json'))\nout = []\n"
             "for mode in ('paper', 'constrained'):\n"
             "    r = planner.plan({**req, 'settings': {**req.get('settings', {}), 'mode': mode}})\n"
             "    d = json.loads(r.to_json())\n"

@@ -13,7 +13,7 @@ import pytest
 
 from app.storage import Store, default_data_dir
 
-TABLE1 = json.loads((Path(__file__).resolve().parent.parent / "static" / "examples" / "table1.json").read_text())
+TABLE1 = json.loads((Path(__file__).resolve().parents[1] / "app/static/examples/table1.json").read_text())
 
 
 def test_default_data_dir_env(monkeypatch, tmp_path):

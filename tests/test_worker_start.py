@@ -18,7 +18,7 @@ from app.workers import PlanPool
 from planner import PlanRequest
 
 ROOT = Path(__file__).resolve().parent.parent
-TABLE1 = PlanRequest.model_validate(json.loads((ROOT / "static" / "examples" / "table1.json").read_text()))
+TABLE1 = PlanRequest.model_validate(json.loads((ROOT / "app" / "static" / "examples" / "table1.json").read_text()))
 
 
 def _ready(pool: PlanPool, timeout: float = 300.0) -> None:

@@ -1,4 +1,4 @@
-"""The landing page (``static/``: its files as routes of their own, the examples under
+"""The landing page (``app/static/``, shipped in the wheel: its files as routes of their own, the examples under
 ``/examples``), or a redirect to ``/docs`` when there is none."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from fastapi.staticfiles import StaticFiles
 
 __all__ = ["STATIC_DIR", "install_pages"]
 
-#: the landing page (``RANGEPLAN_STATIC_DIR`` overrides: an installed package has no ``static/``)
-STATIC_DIR = Path(__file__).resolve().parent.parent.parent / "static"
+#: the landing page and its examples, package data of ``app`` (``RANGEPLAN_STATIC_DIR`` overrides)
+STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
 
 
 def _serve_file(path: Path):

@@ -9,10 +9,9 @@ from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field
 
 from app.routers.deps import service
+from planner import __version__ as VERSION
 
 __all__ = ["VERSION", "router"]
-
-VERSION = "0.1.0"
 
 router = APIRouter(tags=["service"])
 
@@ -27,6 +26,7 @@ class HealthModel(BaseModel):
 
 class ReadyModel(BaseModel):
     status: str = Field(description="'ready', 'starting' (workers still loading the planner) or 'failed'")
+    version: str = Field(description="rangeplan version (``rangeplan --version``, the image's label)")
     workers_ready: int = Field(description="Planning workers that have loaded the kernels (count)")
     workers: int = Field(description="Planning workers (count)")
     failures: list[str] = Field(description="Why workers cannot plan, if any")
@@ -50,7 +50,7 @@ async def ready(request: Request):
     """Readiness: 200 once at least one worker has loaded the planner's kernels and none
     has failed to; 503 before (or when they cannot plan). The container's health check."""
     state = service(request).readiness()
-    body = {"status": "ready" if state["ready"] else "failed" if state["failures"] else "starting",
+    body = {"status": "ready" if state["ready"] else "failed" if state["failures"] else "starting", "version": VERSION,
             "workers_ready": state["workers_ready"], "workers": state["workers"], "failures": state["failures"],
             "kernels": state.get("kernels", "compiled")}
     return JSONResponse(body, status_code=200 if state["ready"] else 503)
