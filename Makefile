@@ -10,7 +10,7 @@ export OPENBLAS_NUM_THREADS := 1
 export OMP_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 
-.PHONY: run test lint install kernels browser linuxcnc bench clean lock container-test
+.PHONY: run test lint install kernels browser linuxcnc bench clean lock container-test smoke dist
 
 # the runtime dependencies from the lock first (the versions the container image runs), then
 # rangeplan (all `make run` needs), then its test tools around them
@@ -62,6 +62,21 @@ lint: $(STAMP)
 
 test: $(STAMP) kernels browser linuxcnc lint
 	$(PY) -m pytest -q --durations=40
+
+# what users install: `python -m build` makes the sdist and, from it, the wheel (dist/)
+dist: $(STAMP)
+	rm -rf dist
+	$(PY) -m build --no-isolation --outdir dist . >/dev/null
+
+# the built wheel installed non-editable into a fresh venv (the locked dependencies, as the image
+# has them), and the smoke suite run against that install, not the tree (tests/test_smoke.py)
+WHEEL_VENV := .venv-wheel
+smoke: dist kernels
+	rm -rf $(WHEEL_VENV)
+	$(PYTHON) -m venv $(WHEEL_VENV)
+	$(WHEEL_VENV)/bin/python -m pip install --quiet --require-hashes -r container/requirements.lock
+	$(WHEEL_VENV)/bin/python -m pip install --quiet --no-deps dist/rangeplan-*.whl
+	RANGEPLAN_SMOKE_VENV=$(WHEEL_VENV) $(PY) -m pytest -q -p no:cacheprovider -m smoke tests/test_smoke.py
 
 bench: $(STAMP) kernels
 	$(PY) benchmarks/bench_planner.py
