@@ -403,6 +403,12 @@ def run(argv: list[str]) -> int:
     command = _command(argv)
     parser = build_parser(command)
     args = parser.parse_args(argv)
+    if command in ("plan", "contour", "batch"):
+        from app.kernel_cache import seed_kernel_cache
+
+        # the image's compiled kernels (its read-only seed) before the planner is imported: a
+        # `docker run IMAGE rangeplan plan ...` loads them instead of compiling in the background
+        seed_kernel_cache()
     try:
         return args.func(args)
     except InputError as exc:
