@@ -33,7 +33,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from .._jit import kernel_cache_dir
+from .._jit import kernel_cache, kernel_cache_dir, save_error
 
 __all__ = ["BackgroundCompile", "LOCK", "LOG", "MARKER", "compile_in_background", "kernels_ready", "mark_compiled",
            "running_compile", "while_compiling"]
@@ -51,12 +51,21 @@ COMPILE_NICE = 5
 _children: list[subprocess.Popen] = []  # background compiles this process started (reaped when seen done)
 
 
+#: flags of every file this module opens in the cache directory: never through a symlink
+_NOFOLLOW = os.O_NOFOLLOW | os.O_CLOEXEC
+
+
 def mark_compiled() -> None:
-    """Write the done-marker (after a full warm-up; nothing when the cache is not writable)."""
+    """Write the done-marker (after a full warm-up whose kernels were all saved; nothing when
+    the cache is not writable)."""
+    if not kernel_cache().lasting or save_error() is not None:
+        return
     try:
-        d = kernel_cache_dir()
-        if d.is_dir():
-            (d / MARKER).write_text(f"{time.time():.0f}\n")
+        fd = os.open(kernel_cache_dir() / MARKER, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | _NOFOLLOW, 0o644)
+        try:
+            os.write(fd, f"{time.time():.0f}\n".encode())
+        finally:
+            os.close(fd)
     except OSError:
         pass
 
@@ -135,7 +144,7 @@ def running_compile() -> BackgroundCompile | None:
     _reap()
     d = kernel_cache_dir()
     try:
-        fd = os.open(d / LOCK, os.O_RDONLY)
+        fd = os.open(d / LOCK, os.O_RDONLY | _NOFOLLOW)
     except OSError:
         return None
     try:
@@ -152,13 +161,14 @@ def running_compile() -> BackgroundCompile | None:
 
 def compile_in_background() -> BackgroundCompile | None:
     """Start the background compile of every kernel, or find the one running (its lock held);
-    None when the kernel cache directory cannot be written (the caller compiles in the
-    foreground) or every kernel is compiled by now."""
+    None when the kernel cache does not last beyond this process (read-only, temporary: the
+    caller compiles in the foreground) or every kernel is compiled by now."""
     _reap()
     d = kernel_cache_dir()
+    if not kernel_cache().lasting:
+        return None
     try:
-        d.mkdir(parents=True, exist_ok=True)
-        fd = os.open(d / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+        fd = os.open(d / LOCK, os.O_RDWR | os.O_CREAT | _NOFOLLOW, 0o644)
     except OSError:
         return None
     try:
@@ -172,10 +182,13 @@ def compile_in_background() -> BackgroundCompile | None:
         from .compiling import _cost, pending_kernels
 
         eta = sum(_cost(name.rsplit(".", 1)[-1]) for name in pending_kernels())
-        with open(d / LOG, "ab") as log:
+        log = os.open(d / LOG, os.O_WRONLY | os.O_APPEND | os.O_CREAT | _NOFOLLOW, 0o644)
+        try:
             proc = subprocess.Popen([sys.executable, "-m", "planner", "--background", str(fd)], pass_fds=(fd,),
                                     stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
                                     start_new_session=True, close_fds=True)
+        finally:
+            os.close(log)
         _children.append(proc)
         info = {"pid": proc.pid, "started": time.time(), "eta_s": round(eta, 1)}
         os.ftruncate(fd, 0)
