@@ -133,3 +133,77 @@ def test_a_read_only_seed_of_root_is_loaded_by_another_uid():
         assert "kernels not loaded" not in err
     finally:
         shutil.rmtree(top)
+
+
+#: makes the background compile's warm-up fail as on a full disk (sitecustomize of its interpreter)
+FAIL_WARM_UP = """import sys
+if sys.argv[1:2] == ["--background"]:
+    import errno
+    import planner.orchestrator
+
+    def warm_up(backend="compiled"):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    planner.orchestrator.warm_up = warm_up
+"""
+
+
+def test_a_failed_background_compile_is_not_started_again(tmp_path):
+    """A background compile that fails (here its warm-up raises ENOSPC) records why; the next
+    call starts none and says in one line that it failed and why, until the cause can have
+    changed (here: an hour passed)."""
+    import time
+
+    inject, cache_root, home = tmp_path / "inject", tmp_path / "kernels", tmp_path / "home"
+    inject.mkdir()
+    home.mkdir()
+    (inject / "sitecustomize.py").write_text(FAIL_WARM_UP)
+    env = {"RANGEPLAN_KERNEL_CACHE": str(cache_root), "HOME": str(home), "PYTHONPATH": f"{inject}:{ROOT}",
+           "OPENBLAS_NUM_THREADS": "1", "PATH": "/usr/bin:/bin", "PYTHONDONTWRITEBYTECODE": "1"}
+    cache = cache_root / _jit.kernel_key()[:16]
+    code = ("import json\nfrom planner.orchestrator.background import compile_in_background\n"
+            "b = compile_in_background()\n"
+            "print(json.dumps(b and {'pid': b.pid, 'started': b.started, 'failed': b.failed, 'note': b.note(1.0)}))")
+
+    def start() -> dict:
+        out = subprocess.run([sys.executable, "-c", code], env=env, cwd=ROOT, capture_output=True, text=True,
+                             timeout=300)
+        assert out.returncode == 0, out.stderr
+        return json.loads(out.stdout.strip().splitlines()[-1])
+
+    def wait_failed() -> dict:
+        deadline = time.monotonic() + 120
+        while not (cache / "compile.failed").exists() or "failed:" not in (cache / "compile.log").read_text():
+            assert time.monotonic() < deadline, (cache / "compile.log").read_text()
+            time.sleep(0.2)
+        return json.loads((cache / "compile.failed").read_text())
+
+    first = start()
+    assert first["started"] and first["pid"] and first["failed"] is None
+    record = wait_failed()
+    assert record["cause"] == "OSError: [Errno 28] No space left on device" and record["key"] == _jit.kernel_key()
+    assert record["writable"] is True and record["free_bytes"] > 0
+    second = start()
+    assert second["pid"] is None and not second["started"], second  # nothing started
+    assert second["failed"].startswith("OSError: [Errno 28] No space left on device, ")
+    assert second["note"].startswith("kernels not compiled: the background compile failed earlier (OSError: [Errno "
+                                     "28] No space left on device, ") and "numpy reference" in second["note"]
+    assert (cache / "compile.log").read_text().count("background compile (pid") == 1
+    (cache / "compile.failed").write_text(json.dumps({**record, "time": record["time"] - 3601}))
+    third = start()  # an hour later: tried again
+    assert third["started"] and third["pid"]
+    wait_failed()
+    assert (cache / "compile.log").read_text().count("background compile (pid") == 2
+
+
+def test_a_failure_holds_until_its_cause_can_have_changed():
+    from planner.orchestrator.background import FREE_MARGIN_BYTES, RETRY_S, _applies
+
+    record = {"key": "k", "writable": False, "free_bytes": 10, "time": 1000.0}
+    now = {"key": "k", "writable": False, "free_bytes": 10}
+    assert _applies(record, now, 1000.0 + RETRY_S - 1)
+    assert not _applies(record, now, 1000.0 + RETRY_S)
+    assert not _applies(record, {**now, "key": "other"}, 1001.0)
+    assert not _applies(record, {**now, "writable": True}, 1001.0)
+    assert not _applies(record, {**now, "free_bytes": 10 + FREE_MARGIN_BYTES}, 1001.0)
+    assert _applies(record, {**now, "free_bytes": 9 + FREE_MARGIN_BYTES}, 1001.0)
