@@ -170,14 +170,11 @@ def resident_dir(env: Mapping[str, str], create: bool = False) -> Path | None:
                 d.mkdir(mode=0o700)
             except FileExistsError:
                 pass
-        st = os.lstat(d)
     except OSError:
         return None
-    import stat
+    from planner._private import distrust
 
-    if not stat.S_ISDIR(st.st_mode) or st.st_uid != os.getuid() or st.st_mode & 0o077:
-        return None
-    return d
+    return None if distrust(d, owners=(os.geteuid(),), mask=0o077) else d
 
 
 def socket_path(directory: Path, key: str) -> Path | None:

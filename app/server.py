@@ -90,7 +90,8 @@ def serve(host: str = "127.0.0.1", port: int = 8000, editor_port: int = 8080, ed
                                memory_mb=cfg.worker_memory_mb, export_timeout_s=cfg.export_timeout_s,
                                start=cfg.worker_start, reference_while_compiling=True)
     if service.kernels is not None and (running := service.kernels.running()) is not None:
-        _log(f"kernels: not compiled yet: compiling them in the background, {running.ready_in()} (pid {running.pid}, "
+        _log(f"kernels: {running.note()}" if running.failed is not None else
+             f"kernels: not compiled yet: compiling them in the background, {running.ready_in()} (pid {running.pid}, "
              f"log {running.log}); plans run on the numpy reference meanwhile (same trajectories, ~100x slower)")
     handle = None
     try:

@@ -68,10 +68,11 @@ def test_public_names_resolve_and_unknown_raises():
 
 def test_kernel_cache_dir_precedence(tmp_path):
     tag = _jit.kernel_key()[:16]
-    assert _jit.kernel_cache_dir({"NUMBA_CACHE_DIR": "/seed", "RANGEPLAN_KERNEL_CACHE": "/k"}) == \
-        Path("/seed") / f"rangeplan-{tag}"
-    assert _jit.kernel_cache_dir({"RANGEPLAN_KERNEL_CACHE": "/k", "XDG_CACHE_HOME": "/x"}) == Path("/k") / tag
-    assert _jit.kernel_cache_dir({"XDG_CACHE_HOME": "/x"}) == Path("/x/rangeplan/kernels") / tag
+    assert _jit.chosen_kernel_cache({"NUMBA_CACHE_DIR": "/seed", "RANGEPLAN_KERNEL_CACHE": "/k"}) == \
+        (Path("/seed") / f"rangeplan-{tag}", Path("/seed"))
+    assert _jit.chosen_kernel_cache({"RANGEPLAN_KERNEL_CACHE": "/k", "XDG_CACHE_HOME": "/x"}) == \
+        (Path("/k") / tag, Path("/k"))
+    assert _jit.chosen_kernel_cache({"XDG_CACHE_HOME": "/x"}) == (Path("/x/rangeplan/kernels") / tag, Path("/x"))
 
 
 def test_kernel_key_covers_every_kernel_module():

@@ -27,7 +27,7 @@ from typing import Any, TextIO
 from numba.core import event
 from numba.core.registry import CPUDispatcher
 
-from .._jit import kernel_cache_dir
+from .. import _jit
 
 __all__ = ["compile_progress", "kernel_dispatchers", "pending_kernels", "COMPILE_COST", "KERNEL_MODULES"]
 
@@ -114,8 +114,8 @@ class _Progress(event.Listener):
                 self.pending = {name.rsplit(".", 1)[-1] for name in pending_kernels()}
                 self.total = sum(_cost(n) for n in self.pending)
                 n = len(self.pending) or "the"
-                self._write(f"compiling {n} kernels of the planner (numba; once for this version on this machine, "
-                            f"later runs load them from {kernel_cache_dir()}){self._eta_text()}", final=True)
+                self._write(f"compiling {n} kernels of the planner (numba; {_jit.kernel_cache().later()})"
+                            f"{self._eta_text()}", final=True)
                 self.thread = threading.Thread(target=self._tick, name="rangeplan-compile-progress", daemon=True)
                 self.thread.start()
 
@@ -171,7 +171,9 @@ class _Progress(event.Listener):
             self.thread.join()
             elapsed = time.perf_counter() - (self.t0 or time.perf_counter())
             n = len(self.done & self.pending) if self.pending else len(self.done)
-            self._write(f"compiled {n} kernels in {elapsed:.0f} s (cached for the next runs)", final=True)
+            kept = _jit.kernel_cache().lasting and _jit.save_error() is None
+            self._write(f"compiled {n} kernels in {elapsed:.0f} s "
+                        f"({'cached for the next runs' if kept else 'for this process only'})", final=True)
 
 
 @contextmanager
