@@ -14,6 +14,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
+import contextlib  # noqa: E402
 import json  # noqa: E402
 import sys  # noqa: E402
 from collections.abc import Callable  # noqa: E402
@@ -398,18 +399,25 @@ def resident_main() -> None:
     sys.exit(resident.serve(sys.argv[1], run, warm))
 
 
+def seed_kernels() -> None:
+    """The image's compiled kernels (its read-only seed) copied to the kernel cache before the
+    planner is imported (:func:`app.kernel_cache.seed_kernel_cache`): ``docker run IMAGE rangeplan
+    plan ...`` loads them instead of compiling them in the background."""
+    from app.kernel_cache import seed_kernel_cache
+    from app.settings import SettingsError
+
+    with contextlib.suppress(SettingsError):  # a variable that does not parse is named where it is used
+        seed_kernel_cache()
+
+
 def run(argv: list[str]) -> int:
     """The CLI in this process."""
     command = _command(argv)
     parser = build_parser(command)
     args = parser.parse_args(argv)
-    if command in ("plan", "contour", "batch"):
-        from app.kernel_cache import seed_kernel_cache
-
-        # the image's compiled kernels (its read-only seed) before the planner is imported: a
-        # `docker run IMAGE rangeplan plan ...` loads them instead of compiling in the background
-        seed_kernel_cache()
     try:
+        if command in ("plan", "contour", "batch"):
+            seed_kernels()
         return args.func(args)
     except InputError as exc:
         print(f"rangeplan: error: {exc}", file=sys.stderr)
