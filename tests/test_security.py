@@ -98,6 +98,9 @@ def test_health_ready_docs_and_landing_stay_open_and_show_no_data(secured):
         r = secured.get(path)
         assert r.status_code in (200, 503), (path, r.status_code)
     assert "corridor" not in secured.get("/health").text.lower()
+    # alive and nothing else (issue 33): the pool and the editor's port are /ready's
+    assert set(secured.get("/health").json()) <= {"status", "version"}
+    assert secured.get("/health").json()["status"] == "ok"
     # probes address the server by its pod IP: any Host is fine there
     assert secured.get("/health", headers={"Host": "10.1.2.3:8000"}).status_code == 200
 
