@@ -4,7 +4,8 @@ Endpoints (OpenAPI at ``/docs``, ReDoc at ``/redoc``, both served offline; SI un
 field description)::
 
     GET  /health                      liveness (answers while plans run; no data)
-    GET  /ready                       200 once the workers have loaded the kernels and can plan, else 503
+    GET  /ready                       200 once the workers have loaded the kernels and can plan, else 503;
+                                      the pool's state and the editor's port
     GET  /v1/robots, /v1/robots/{n}   built-in robot descriptions
     POST /v1/plan                     plan request -> result JSON (CSV: Accept: text/csv or ?format=csv;
                                       machine output: ?format=gcode | joints | dxf)

@@ -175,6 +175,8 @@ class Failed:
 
     error: ErrorDetail
     status: int = 422
+    #: the traceback of an unexpected exception (:func:`crashed`): logged, never sent
+    trace: str | None = dataclasses.field(default=None, compare=False, repr=False)
     ok: ClassVar[bool] = False
 
 
@@ -188,9 +190,13 @@ def failed(error: dict[str, Any], status: int = 422) -> Failed:
 
 
 def crashed(exc: BaseException) -> Failed:
-    """An unexpected exception in the planner: 500, its type and first line."""
+    """An unexpected exception in the planner: 500, its type and first line (the traceback
+    rides along for the server's error log)."""
+    import traceback
+
     first = f"{type(exc).__name__}: {exc}".splitlines()[0]
-    return failed({"code": "internal_error", "message": f"the planner failed unexpectedly: {first}"}, 500)
+    out = failed({"code": "internal_error", "message": f"the planner failed unexpectedly: {first}"}, 500)
+    return dataclasses.replace(out, trace="".join(traceback.format_exception(exc)))
 
 
 # ---------------------------------------------------------------------------------------

@@ -202,11 +202,17 @@ def job_outcome(outcome: Any) -> str:
 
 def observe_job(app: Any, job: Any, seconds: float, outcome: Any) -> None:
     """Count a job the HTTP routes ran (``job``: an :mod:`app.jobs` job; ``outcome``: its
-    outcome, or a label of :func:`job_outcome`)."""
+    outcome, or a label of :func:`job_outcome`); log a crash (a 500) at error level with
+    the request's id and the job's traceback."""
+    label = outcome if isinstance(outcome, str) else job_outcome(outcome)
+    if label == "crash":  # a 500: the server's fault, logged with the worker's traceback when it has one
+        error = getattr(outcome, "error", None)
+        error_log.error("job failed: %s", getattr(error, "message", outcome),
+                        extra={"request_id": _request_id.get(), "job": str(getattr(job, "kind", "other")),
+                               "exc": getattr(outcome, "trace", None)})
     metrics: Metrics | None = getattr(app.state, "metrics", None)
     if metrics is None:
         return
-    label = outcome if isinstance(outcome, str) else job_outcome(outcome)
     kind = str(getattr(job, "kind", "other"))
     metrics.jobs.labels(kind, label).inc()
     if kind == "plan":

@@ -13,10 +13,15 @@ checks and CORS, the same rules on the API port and the editor port.
   (``localhost``, ``127.0.0.1``, ``::1``), the address the server is bound to, or a name in
   ``RANGEPLAN_ALLOWED_HOSTS`` (comma-separated; ``.example.com`` allows its subdomains, ``*``
   any host): a page elsewhere that re-points its own name at this machine (DNS rebinding)
-  is refused with 400. ``/health`` and ``/ready`` answer any Host (container and Kubernetes
-  probes use the pod address) and show no data.
+  is refused with 400. The header must be exactly a host and an optional port
+  (:func:`parse_host`: ``[::1]evil.example``, ``localhost@evil.example`` or ``localhost:80x``
+  are refused, not read as a loopback name). ``/health`` and ``/ready`` answer any Host
+  (container and Kubernetes probes use the pod address) and show no stored data.
 * **Origins.** The editor's WebSocket is refused (403) when the browser says it was opened
-  by a page of another origin. CORS: ``RANGEPLAN_CORS_ORIGINS`` (comma-separated origins,
+  by a page of another origin: scheme, host and port are compared (:func:`same_origin`,
+  default ports filled in; ``null`` is another origin), so an ``https`` page cannot open the
+  ``http`` editor's WebSocket. A request the session cookie authenticates obeys the same
+  rule (or comes from a CORS origin). CORS: ``RANGEPLAN_CORS_ORIGINS`` (comma-separated origins,
   e.g. ``http://cad.example:3000``) may call the API from a browser, with preflight; none by
   default.
 
@@ -30,18 +35,20 @@ import hashlib
 import hmac
 import ipaddress
 import json
+import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from http.cookies import SimpleCookie
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
-from urllib.parse import parse_qsl, quote, urlencode, urlsplit
+from urllib.parse import parse_qsl, quote, urlencode
 
 if TYPE_CHECKING:
     from app.settings import Settings
 
-__all__ = ["AccessPolicy", "AccessControl", "ConfigError", "Verdict", "decide", "install_access_control",
-           "is_loopback", "protected_path", "LOOPBACK_HOSTS", "OPEN_PATHS", "TOKEN_COOKIE", "MIN_TOKEN_LENGTH"]
+__all__ = ["AccessPolicy", "AccessControl", "ConfigError", "Verdict", "decide", "host_name",
+           "install_access_control", "is_loopback", "parse_host", "parse_origin", "protected_path", "same_origin",
+           "LOOPBACK_HOSTS", "OPEN_PATHS", "TOKEN_COOKIE", "MIN_TOKEN_LENGTH"]
 
 LOOPBACK_HOSTS = frozenset({"localhost", "127.0.0.1", "::1"})
 #: answered for any Host and without a token (they show no data)
@@ -66,17 +73,79 @@ def is_loopback(host: str) -> bool:
         return False
 
 
-def host_name(header: str | None) -> str | None:
-    """The host name of a ``Host`` header (port and brackets removed, lower case)."""
-    if not header:
+#: the longest Host / Origin value looked at (a DNS name is at most 253 characters)
+_MAX_HOST_LENGTH = 300
+_PORT = re.compile(r"[0-9]{1,5}")
+_LABEL = re.compile(r"[a-z0-9_~-]{1,63}")
+_DEFAULT_PORTS = {"http": 80, "https": 443}
+
+
+def parse_host(value: str | None) -> tuple[str, int | None] | None:
+    """``(host, port)`` of a ``Host`` header (or an origin's authority), or None when it is
+    not one exactly. RFC 3986 ``host [":" port]`` without userinfo: an IPv6 literal is
+    ``[...]`` holding a valid address (no zone, no IPvFuture), written back compressed
+    (``[0::1]`` -> ``::1``); a name or IPv4 address is ASCII ``unreserved`` characters in
+    dot-separated labels of 1-63 (sub-delims and percent-encoding are reg-name syntax too,
+    but no DNS name has them: refused), lower-cased, one trailing dot dropped (``localhost.``
+    is ``localhost``, the same DNS name); the port is 1-5 ASCII digits up to 65535 (an empty
+    one, ``localhost:``, is refused). Nothing may follow."""
+    if not value or len(value) > _MAX_HOST_LENGTH or not value.isascii():
         return None
-    header = header.strip().lower()
-    if header.startswith("["):  # [v6]:port
-        end = header.find("]")
-        return header[1:end] if end > 0 else None
-    if header.count(":") == 1:
-        header = header.split(":", 1)[0]
-    return header.rstrip(".") or None
+    if value.startswith("["):
+        end = value.find("]")
+        literal, rest = value[1:end], value[end + 1:]
+        if end < 0 or "%" in literal or literal[:1] in ("v", "V"):
+            return None
+        try:
+            host = ipaddress.IPv6Address(literal).compressed
+        except ValueError:
+            return None
+    else:
+        host, colon, port_text = value.partition(":")
+        rest = colon + port_text
+        host = host.lower()
+        if host.endswith("."):
+            host = host[:-1]
+        if not all(_LABEL.fullmatch(label) for label in host.split(".")):
+            return None
+    if not rest:
+        return host, None
+    if rest[0] != ":" or not _PORT.fullmatch(rest[1:]) or int(rest[1:]) > 65535:
+        return None
+    return host, int(rest[1:])
+
+
+def host_name(header: str | None) -> str | None:
+    """The host name of a ``Host`` header (:func:`parse_host`), or None when it is not one."""
+    parsed = parse_host(header)
+    return parsed[0] if parsed else None
+
+
+def parse_origin(value: str | None) -> tuple[str, str, int] | None:
+    """``(scheme, host, port)`` of an ``Origin`` (``http`` or ``https``, the host as
+    :func:`parse_host` reads it, the port with the scheme's default filled in), or None for
+    anything else (``null``, a path, userinfo, another scheme)."""
+    if not value:
+        return None
+    scheme, sep, authority = value.partition("://")
+    scheme = scheme.lower()
+    if not sep or scheme not in _DEFAULT_PORTS:
+        return None
+    parsed = parse_host(authority)
+    if parsed is None:
+        return None
+    host, port = parsed
+    return scheme, host, _DEFAULT_PORTS[scheme] if port is None else port
+
+
+def _allowed_entry(entry: str) -> str:
+    """An allow-list entry as :func:`parse_host` writes host names (``[::1]`` -> ``::1``)."""
+    entry = entry.strip().lower()
+    bare = entry[1:-1] if entry.startswith("[") and entry.endswith("]") else entry
+    try:
+        return ipaddress.ip_address(bare).compressed
+    except ValueError:
+        return entry[:-1] if entry.endswith(".") and len(entry) > 1 else entry
 
 
 @dataclass(frozen=True)
@@ -126,15 +195,14 @@ class AccessPolicy:
             if not token:
                 raise ConfigError(f"RANGEPLAN_API_TOKEN_FILE: {path} is empty")
         hosts = set(LOOPBACK_HOSTS)
-        hosts |= {h.strip().lower() for h in cfg.allowed_hosts.split(",") if h.strip()}
+        hosts |= {_allowed_entry(h) for h in cfg.allowed_hosts.split(",") if h.strip()}
         if bind_host and bind_host not in ("0.0.0.0", "::", ""):
-            hosts.add(bind_host.strip("[]").lower())
+            hosts.add(_allowed_entry(bind_host))
         origins = []
         for o in (o.strip().rstrip("/") for o in cfg.cors_origins.split(",")):
             if not o:
                 continue
-            parts = urlsplit(o)
-            if o != "*" and (parts.scheme not in ("http", "https") or not parts.netloc or parts.path):
+            if o != "*" and parse_origin(o) is None:
                 raise ConfigError(f"RANGEPLAN_CORS_ORIGINS: {o!r} is not an origin (scheme://host[:port])")
             origins.append(o)
         return cls(token=token, allowed_hosts=frozenset(hosts), cors_origins=tuple(origins))
@@ -144,12 +212,18 @@ class AccessPolicy:
         return self.token is not None
 
     def host_allowed(self, header: str | None) -> bool:
+        """Whether a ``Host`` header is exactly one (:func:`parse_host`) naming an allowed host."""
         name = host_name(header)
         if name is None:
             return False
         if "*" in self.allowed_hosts or name in self.allowed_hosts:
             return True
         return any(p.startswith(".") and (name.endswith(p) or name == p[1:]) for p in self.allowed_hosts)
+
+    def cors_allowed(self, origin: str) -> bool:
+        """Whether ``origin`` is one of the CORS origins (scheme, host and port compared)."""
+        parsed = parse_origin(origin)
+        return parsed is not None and any(parse_origin(o) == parsed for o in self.cors_origins)
 
     def token_ok(self, presented: str | None) -> bool:
         return bool(self.token and presented and hmac.compare_digest(presented.encode(), self.token.encode()))
@@ -185,9 +259,15 @@ def _cookie(headers: Mapping[str, str]) -> str | None:
     return morsel.value if morsel else None
 
 
-def _same_origin(origin: str, host: str | None) -> bool:
-    parts = urlsplit(origin)
-    return parts.scheme in ("http", "https") and bool(host) and parts.netloc.lower() == (host or "").lower()
+def same_origin(origin: str, host: str | None, scheme: str) -> bool:
+    """Whether the ``Origin`` header ``origin`` is the origin of a request to ``host`` (its
+    ``Host`` header) over ``scheme`` (``http``, ``https``): scheme, host and port compared,
+    default ports filled in."""
+    mine = parse_host(host)
+    theirs = parse_origin(origin)
+    if mine is None or theirs is None or scheme not in _DEFAULT_PORTS:
+        return False
+    return theirs == (scheme, mine[0], _DEFAULT_PORTS[scheme] if mine[1] is None else mine[1])
 
 
 def local_location(path: str) -> str:
@@ -198,9 +278,10 @@ def local_location(path: str) -> str:
 
 
 def decide(policy: AccessPolicy, *, path: str, query: str, headers: Mapping[str, str],
-           protected: Callable[[str], bool], websocket: bool = False) -> Verdict | None:
-    """Apply the rules to one request (``headers`` with lower-case names); None lets it
-    through. ``protected(path)``: whether the path needs the token."""
+           protected: Callable[[str], bool], websocket: bool = False, scheme: str = "http") -> Verdict | None:
+    """Apply the rules to one request (``headers`` with lower-case names, ``scheme`` the
+    request's: ``http`` or ``https``); None lets it through. ``protected(path)``: whether
+    the path needs the token."""
     if path in OPEN_PATHS and not websocket:
         return None
     host = headers.get("host")
@@ -208,7 +289,7 @@ def decide(policy: AccessPolicy, *, path: str, query: str, headers: Mapping[str,
         return Verdict(400, "invalid_host", f"this server does not answer to the host {host_name(host)!r}; add it "
                        "to RANGEPLAN_ALLOWED_HOSTS if it is this machine's name")
     origin = headers.get("origin")
-    if websocket and origin and not _same_origin(origin, host):
+    if websocket and origin and not same_origin(origin, host, scheme):
         return Verdict(403, "forbidden_origin", f"a WebSocket opened by a page of {origin} is refused: only pages "
                        "of this server may connect")
     if "token=" in query:
@@ -228,11 +309,11 @@ def decide(policy: AccessPolicy, *, path: str, query: str, headers: Mapping[str,
     if not policy.auth_required or not protected(path):
         return None
     auth = headers.get("authorization", "")
-    scheme, _, presented = auth.partition(" ")
-    if scheme.lower() == "bearer" and policy.token_ok(presented.strip()):
+    kind, _, presented = auth.partition(" ")
+    if kind.lower() == "bearer" and policy.token_ok(presented.strip()):
         return None
     if policy.cookie_ok(_cookie(headers)):
-        if origin and not _same_origin(origin, host) and origin not in policy.cors_origins:
+        if origin and not same_origin(origin, host, scheme) and not policy.cors_allowed(origin):
             return Verdict(403, "forbidden_origin", f"a request from a page of {origin} cannot use this server's "
                            "session cookie; send the token as Authorization: Bearer")
         return None
@@ -259,8 +340,10 @@ class AccessControl:
             return await self.app(scope, receive, send)
         headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope.get("headers", ())}
         query = scope.get("query_string", b"").decode("latin-1")
+        scheme = str(scope.get("scheme") or "http")
+        scheme = {"ws": "http", "wss": "https"}.get(scheme, scheme)
         verdict = decide(self.policy, path=scope.get("path", ""), query=query, headers=headers,
-                         protected=self.protected, websocket=scope["type"] == "websocket")
+                         protected=self.protected, websocket=scope["type"] == "websocket", scheme=scheme)
         if verdict is None:
             return await self.app(scope, receive, send)
         if scope["type"] == "websocket":

@@ -84,8 +84,9 @@ def assert_error(r, status: int, code: str, field: str | None | type(...) = ...)
 # service
 
 def test_health_and_robots(client):
-    h = client.get("/health").json()
-    assert h["status"] == "ok" and h["pool"]["workers"] == 2 and h["pool"]["mode"] == "process"
+    assert client.get("/health").json()["status"] == "ok"
+    ready = client.get("/ready").json()
+    assert ready["pool"]["workers"] == 2 and ready["pool"]["mode"] == "process"
     robots = client.get("/v1/robots").json()
     names = [r["name"] for r in robots]
     assert "moving-slide" in names
@@ -324,7 +325,7 @@ def test_compute_limit_stops_runaway_plan(store, monkeypatch, tmp_path):
         assert not th.is_alive()
         err = assert_error(done["r"], 422, "timeout", None)
         assert "1 s" in err["message"]
-        assert c.get("/health").json()["pool"]["replaced_workers"] == 1
+        assert c.get("/ready").json()["pool"]["replaced_workers"] == 1
         assert c.post("/v1/plan", json=TABLE1).status_code == 200
 
 
@@ -345,7 +346,7 @@ def test_too_much_work_is_refused_in_well_under_a_second(store):
         assert est > 1.0
         constrained = {**TABLE1, "settings": {"mode": "constrained", "N": 150, "backend": "reference"}}
         assert_error(c.post("/v1/plan", json=constrained), 422, "too_much_work", "settings.N")
-        assert c.get("/health").json()["pool"]["in_flight"] == 0
+        assert c.get("/ready").json()["pool"]["in_flight"] == 0
         assert c.post("/v1/plan", json=TABLE1).status_code == 200
 
 

@@ -231,8 +231,8 @@ def test_api_on_dask_cli_processes(dask_cli_cluster, tmp_path, monkeypatch):
                    headers={"Content-Type": "application/x-ndjson"})
         assert r.status_code == 202
         items = [json.loads(ln) for ln in c.get(f"/v1/batches/{r.json()['id']}/results?wait=true").text.splitlines()]
-        health = c.get("/health").json()
+        ready = c.get("/ready").json()
     assert [it["item"] for it in items] == list(range(6)) and all(it["status"] == "ok" for it in items)
     assert all(it["engine"] == "dask" for it in items)
-    assert health["pool"]["in_flight"] == 0
+    assert ready["pool"]["in_flight"] == 0
     assert_same_plan(items[4]["result"], single_plan(reqs[4], tmp_path))

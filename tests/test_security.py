@@ -20,7 +20,7 @@ from websockets.sync.client import connect
 
 from app.api import create_app
 from app.editor import start_editor, start_guarded
-from app.security import TOKEN_COOKIE, AccessPolicy, ConfigError, host_name, is_loopback
+from app.security import TOKEN_COOKIE, AccessPolicy, ConfigError, host_name, is_loopback, same_origin
 from app.storage import Store
 from tests.support import api_client
 
@@ -98,6 +98,9 @@ def test_health_ready_docs_and_landing_stay_open_and_show_no_data(secured):
         r = secured.get(path)
         assert r.status_code in (200, 503), (path, r.status_code)
     assert "corridor" not in secured.get("/health").text.lower()
+    # alive and nothing else (issue 33): the pool and the editor's port are /ready's
+    assert secured.get("/health").json() == {"status": "ok"}
+    assert secured.get("/health").json()["status"] == "ok"
     # probes address the server by its pod IP: any Host is fine there
     assert secured.get("/health", headers={"Host": "10.1.2.3:8000"}).status_code == 200
 
@@ -227,6 +230,121 @@ def test_editor_refuses_foreign_origin_and_host(editor_url):
     assert exc.value.response.status_code == 400
     r = httpx.get(f"http://{editor_url}/", headers={"Host": "evil.example", **BEARER})
     assert r.status_code == 400
+
+
+# ---------------------------------------------------------------------------------------
+# the edges of the Host and Origin checks (issue 33), on both ports
+
+#: (Host header, allowed): exactly ``host [":" port]`` by RFC 3986 naming an allowed host
+HOSTS = [
+    ("[::1]evil.example", False),            # junk after the IPv6 literal
+    ("[::1]@evil.example", False),           # userinfo: the host is evil.example
+    ("localhost@evil.example", False),
+    ("evil.example#@localhost", False),
+    ("localhost:80x", False),                # a port is digits only
+    ("localhost:", False),                   # an empty port (RFC 3986 allows it; no client sends it)
+    ("localhost:65536", False),
+    ("localhost:+80", False),
+    ("localhost:" + "0" * 2000 + "80", False),
+    ("127.0.0.1.evil.example", False),
+    ("::1", False),                          # an IPv6 address in a Host is bracketed
+    ("[::1", False),
+    ("[fe80::1%25eth0]", False),             # zone ids: not this server's name
+    ("[v1.localhost]", False),               # IPvFuture
+    ("[::ffff:127.0.0.1]", False),           # a loopback address, but not one of the loopback names
+    ("", False),
+    ("lоcalhost", False),                    # a Cyrillic o
+    ("localhöst", False),
+    ("local%68ost", False),                  # percent-encoded: no DNS name needs it
+    ("localhost..", False),
+    (".localhost", False),
+    ("local host", False),
+    ("localhost\tevil", False),
+    ("a" * 64 + ".localhost", False),       # a label is at most 63 characters
+    ("x." * 200 + "localhost", False),
+    ("[::1]:8000", True),
+    ("[0:0:0:0:0:0:0:1]", True),             # ::1, written out
+    ("LOCALHOST", True),
+    ("localhost.", True),                    # the same DNS name, absolute
+    ("localhost:8000", True),
+    ("127.0.0.1:1", True),
+    ("cad.local:65535", True),
+]
+
+
+def _policy_hosts():
+    return frozenset({"localhost", "127.0.0.1", "::1", "cad.local"})
+
+
+@pytest.mark.parametrize(("host", "allowed"), HOSTS)
+def test_host_header_is_read_exactly(host, allowed):
+    assert AccessPolicy(allowed_hosts=_policy_hosts()).host_allowed(host) is allowed
+
+
+@pytest.mark.parametrize(("host", "allowed"), HOSTS)
+def test_api_answers_exact_hosts_only(secured, host, allowed):
+    r = secured.get("/v1/robots", headers={"Host": host.encode("utf-8"), **BEARER})
+    assert r.status_code == (200 if allowed else 400), r.text
+
+
+def _handshake(hostport: str, headers: dict[str, bytes | str]) -> int:
+    """The status of a raw WebSocket handshake to the editor (bytes exactly as given)."""
+    lines = [b"GET / HTTP/1.1", b"Upgrade: websocket", b"Connection: Upgrade",
+             b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==", b"Sec-WebSocket-Version: 13",
+             f"Sec-WebSocket-Protocol: viser-v{viser.__version__}".encode(), f"Authorization: Bearer {TOKEN}".encode()]
+    lines += [k.encode() + b": " + (v if isinstance(v, bytes) else v.encode()) for k, v in headers.items()]
+    host, port = hostport.rsplit(":", 1)
+    with socket.create_connection((host, int(port)), timeout=10) as sock:
+        sock.sendall(b"\r\n".join(lines) + b"\r\n\r\n")
+        status = sock.recv(64).split(b" ", 2)
+    return int(status[1])
+
+
+@pytest.mark.parametrize(("host", "allowed"), [(h, a) for h, a in HOSTS if h != "cad.local:65535"])
+def test_editor_websocket_answers_exact_hosts_only(editor_url, host, allowed):
+    assert _handshake(editor_url, {"Host": host.encode("utf-8")}) == (101 if allowed else 400)
+
+
+@pytest.mark.parametrize(("origin", "same"), [
+    ("https://localhost:{port}", False),     # the scheme is compared: the editor is http
+    ("http://localhost:{other}", False),
+    ("null", False),
+    ("http://evil.example:{port}", False),
+    ("http://user@localhost:{port}", False),
+    ("http://localhost:{port}/", False),
+    ("ws://localhost:{port}", False),
+    ("http://[::1]evil.example:{port}", False),
+    ("http://localhost:{port}", True),
+    ("HTTP://LOCALHOST:{port}", True),
+])
+def test_editor_websocket_compares_scheme_host_and_port_of_the_origin(editor_url, origin, same):
+    port = int(editor_url.rsplit(":", 1)[1])
+    origin = origin.format(port=port, other=port + 1)
+    assert _handshake(editor_url, {"Host": f"localhost:{port}", "Origin": origin}) == (101 if same else 403)
+
+
+@pytest.mark.parametrize(("origin", "host", "same"), [
+    ("https://localhost", "localhost", False),
+    ("http://localhost:8081", "localhost:8080", False),
+    ("null", "localhost", False),
+    ("http://localhost", "localhost:80", True),      # default ports filled in
+    ("https://localhost:443", "localhost", False),   # over http
+    ("http://localhost:80", "localhost", True),
+    ("http://[::1]:8080", "[0::1]:8080", True),
+])
+def test_same_origin_is_scheme_host_and_port(origin, host, same):
+    assert same_origin(origin, host, "http") is same
+
+
+def test_cookie_requests_on_the_api_compare_the_origin_exactly(secured):
+    value = AccessPolicy(token=TOKEN).cookie_value
+    jar = {"Cookie": f"{TOKEN_COOKIE}={value}"}
+    assert secured.get("/v1/robots", headers={**jar, "Origin": "http://localhost:80"}).status_code == 200
+    assert secured.get("/v1/robots", headers={**jar, "Origin": "http://cad.local:3000"}).status_code == 200
+    for origin in ("https://localhost", "http://localhost:8081", "null", "http://cad.local:3001",
+                   "https://cad.local:3000"):
+        r = secured.get("/v1/robots", headers={**jar, "Origin": origin})
+        assert r.status_code == 403, origin
 
 
 # ---------------------------------------------------------------------------------------

@@ -102,7 +102,7 @@ def test_real_server_plans_binds_loopback_and_keeps_corridors(data_dir, monkeypa
             pose = np.array(res["pose"])
             assert np.hypot(*(pose[-1, :2] - TABLE1["segments"][-1]["lower"][:2])) < 1e-3
 
-            # /health answers while two long plans occupy both workers (they then hit the
+            # /health and /ready answer while two long plans occupy both workers (they then hit the
             # server's 3 s compute limit; their work estimate is far lower, miscalibrated)
             from tests.test_api import slow_corridor
             long = slow_corridor()
@@ -113,14 +113,15 @@ def test_real_server_plans_binds_loopback_and_keeps_corridors(data_dir, monkeypa
                 th.start()
             seen = None
             while any(th.is_alive() for th in threads):
-                h = c.get("/health")
+                assert c.get("/health").status_code == 200
+                h = c.get("/ready")
                 assert h.status_code == 200
                 if h.json()["pool"]["in_flight"] == 2 and all(th.is_alive() for th in threads):
                     seen = h.json()
                     break
             for th in threads:
                 th.join(120)
-            assert seen is not None, "no /health answer while both plans ran"
+            assert seen is not None, "no /ready answer while both plans ran"
             assert [x.status_code for x in results] == [422, 422]
             assert {x.json()["error"]["code"] for x in results} == {"timeout"}
 

@@ -55,7 +55,7 @@ def process_request(policy: AccessPolicy, inner: Callable | None) -> Callable[[A
         headers = {k.lower(): v for k, v in request.headers.raw_items()}
         websocket = headers.get("upgrade", "").lower() == "websocket"
         verdict = decide(policy, path=path, query=query, headers=headers, protected=lambda p: True,
-                         websocket=websocket)
+                         websocket=websocket, scheme="http")  # viser serves plain HTTP
         if verdict is not None:
             return _response(verdict, websocket)
         return inner(connection, request) if inner is not None else None

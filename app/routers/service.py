@@ -17,11 +17,9 @@ router = APIRouter(tags=["service"])
 
 
 class HealthModel(BaseModel):
-    status: str = Field(description="'ok': the server process answers (see /ready for planning)")
-    version: str = Field(description="rangeplan version")
-    pool: dict[str, Any] = Field(description="Planning pool: mode, workers, jobs in flight, time limit (s), memory "
-                                 "limit per worker (MiB)")
-    editor_port: int | None = Field(description="TCP port of the browser editor, if it runs")
+    """Alive, and nothing else: no token is asked for, so nothing here tells anything."""
+
+    status: str = Field(description="'ok': the server process answers (see /ready for planning and the version)")
 
 
 class ReadyModel(BaseModel):
@@ -33,14 +31,15 @@ class ReadyModel(BaseModel):
     kernels: str = Field("compiled", description="'compiled', or 'compiling in the background, about N s left "
                          "...' after an install: plans then run on the numpy reference (same trajectories, ~100x "
                          "slower; their work estimate and limit at its costs)")
+    pool: dict[str, Any] = Field(description="Planning pool: mode, workers, jobs in flight, time limit (s), memory "
+                                 "limit per worker (MiB), workers replaced")
+    editor_port: int | None = Field(description="TCP port of the browser editor, if it runs")
 
 
 @router.get("/health", response_model=HealthModel)
 async def health(request: Request):
     """Liveness: answers immediately, also while plans run (no data; for planning see /ready)."""
-    svc = getattr(request.app.state, "service", None)
-    return {"status": "ok", "version": VERSION, "pool": svc.stats() if svc else {},
-            "editor_port": request.app.state.editor_port}
+    return {"status": "ok"}
 
 
 @router.get("/ready", response_model=ReadyModel,
@@ -49,8 +48,10 @@ async def health(request: Request):
 async def ready(request: Request):
     """Readiness: 200 once at least one worker has loaded the planner's kernels and none
     has failed to; 503 before (or when they cannot plan). The container's health check."""
-    state = service(request).readiness()
+    svc = service(request)
+    state = svc.readiness()
     body = {"status": "ready" if state["ready"] else "failed" if state["failures"] else "starting", "version": VERSION,
             "workers_ready": state["workers_ready"], "workers": state["workers"], "failures": state["failures"],
-            "kernels": state.get("kernels", "compiled")}
+            "kernels": state.get("kernels", "compiled"), "pool": svc.stats(),
+            "editor_port": request.app.state.editor_port}
     return JSONResponse(body, status_code=200 if state["ready"] else 503)

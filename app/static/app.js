@@ -7,8 +7,9 @@
   const button = document.getElementById("run");
   const editorLink = document.getElementById("editor-link");
 
-  // the editor runs on the same host; its port comes from /health (default 8080)
-  fetch("/health").then(r => r.json()).then(h => {
+  // the editor runs on the same host; its port comes from /ready (default 8080; a 503 while
+  // the workers start still names it)
+  fetch("/ready").then(r => r.json()).then(h => {
     const port = h.editor_port || 8080;
     editorLink.href = `${location.protocol}//${location.hostname}:${port}/`;
     editorLink.textContent = `Corridor editor (port ${port})` + (h.editor_port ? "" : " — not running");

@@ -43,6 +43,7 @@ from ..orchestrator import feasible, plan, plan_timed
 from ..schema import (
     DEFAULT_CONTOUR_TOLERANCE_M,
     MAX_CONTOUR_TOLERANCE_M,
+    MAX_COORDINATE,
     MAX_HORIZON,
     MAX_SEGMENTS,
     MAX_TOTAL_STEPS,
@@ -139,6 +140,29 @@ def parse_contour_request(request: Any) -> ContourRequest:
         raise planner_error(exc) from None
 
 
+def _check_reach(program: Program, origin: np.ndarray) -> None:
+    """Raise ``invalid_input`` naming the first line whose move reaches beyond
+    ``MAX_COORDINATE`` m of the robot frame's origin once ``origin`` is added (an arc: its
+    ends and the points of its circle it sweeps that are farthest along x or y)."""
+    for b in program.blocks:
+        for el in b.elements:
+            pts = [np.asarray(el.start, float), np.asarray(el.end, float)]
+            if el.kind == "arc" and el.centre is not None and el.radius_m and el.start_angle_rad is not None \
+                    and el.sweep_rad is not None:
+                a0, sweep = float(el.start_angle_rad), float(el.sweep_rad)
+                for k in range(4):  # the axis extremes of the circle within the sweep
+                    angle = k * math.pi / 2
+                    if ((angle - a0) * np.sign(sweep)) % (2 * math.pi) <= abs(sweep):
+                        pts.append(np.asarray(el.centre, float) + el.radius_m * np.array([math.cos(angle),
+                                                                                           math.sin(angle)]))
+            reach = max(float(np.max(np.abs(p + origin))) for p in pts)
+            if not reach <= MAX_COORDINATE:
+                raise PlannerError("invalid_input", f"line {el.line}: the move reaches {reach:.3g} m from the robot "
+                                   f"frame's origin (program zero at {origin.tolist()} m), beyond the limit of "
+                                   f"{MAX_COORDINATE:g} m; check the program's units (G20/G21) and the origin",
+                                   "program")
+
+
 def plan_contour(request: Any, *, program: Program | None = None) -> PlanResult:
     """Plan a whole G-code program (module docstring). ``program``: the parsed program, if the
     caller has read it already. Raises :class:`~planner.errors.PlannerError` naming the
@@ -159,6 +183,7 @@ def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0
                            "0.01..10 mm; give tolerance_m", "tolerance_m")
     model = load_robot(req.robot)
     origin = np.array(req.origin, float)
+    _check_reach(program, origin)
     warnings = list(program.warnings)
     psi = 0.0
     pos = program.start + origin

@@ -14,7 +14,7 @@ import numpy as np
 from ..errors import PlannerError
 from . import _flatten as fl
 from ._budget import MAX_BLOCK_DEPTH, charge, dxf_expanded_entities
-from ._pieces import Drawing, Piece
+from ._pieces import Drawing, Piece, check_finite
 
 __all__ = ["INSUNITS", "read_dxf"]
 
@@ -69,12 +69,22 @@ def read_dxf(data: bytes, units: tuple[str, float] | None,
             raise
         except (ValueError, ZeroDivisionError, ArithmeticError, AttributeError, IndexError, TypeError):
             got = []
+        ref = _ref(entity, kind)
+        for p in got:
+            p.ref = ref
+        check_finite(got, ref, layer)
         if got:
             pieces.extend(got)
         else:
             ignored[f"{kind} (degenerate)"] += 1
     layers = sorted({p.layer for p in pieces})
     return Drawing(pieces, layers, dict(ignored), name, mpu, source)
+
+
+def _ref(entity: Any, kind: str) -> str:
+    """How a message names a DXF entity: its type and handle (a block's exploded copy has none)."""
+    handle = entity.dxf.get("handle") if entity.dxf.hasattr("handle") else None
+    return f"{kind} (handle {handle})" if handle else f"{kind} (in a block reference)"
 
 
 def _entities(space: Any, insert_layer: str | None, depth: int, ignored: Counter) -> Iterator[tuple[Any, str]]:

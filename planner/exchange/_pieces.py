@@ -7,7 +7,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Piece", "Drawing"]
+from ..errors import PlannerError
+
+__all__ = ["Piece", "Drawing", "check_finite", "not_finite"]
 
 
 @dataclass
@@ -17,6 +19,21 @@ class Piece:
     layer: str
     source: str  # entity type: "LINE", "ARC", "LWPOLYLINE", "HATCH", "path", ...
     circle: tuple[float, float, float] | None = None  # (cx, cy, r) when the piece is a whole circle
+    ref: str = ""  # the element or entity it came from, for messages: '<path id="p1">', 'LINE (handle 1F)'
+
+
+def not_finite(ref: str, layer: str) -> PlannerError:
+    """The ``invalid_drawing`` error of the element ``ref`` (on ``layer``) with a coordinate
+    that is not a finite number."""
+    return PlannerError("invalid_drawing", f"{ref} on layer {layer!r} has a coordinate that is not a finite number "
+                        "(NaN, infinity, or too large once its transforms are applied)", "drawing")
+
+
+def check_finite(pieces: list[Piece], ref: str, layer: str) -> None:
+    """Raise :func:`not_finite` when a coordinate of ``pieces`` (read from ``ref``) is not finite."""
+    for p in pieces:
+        if not np.all(np.isfinite(p.points)) or (p.circle is not None and not np.all(np.isfinite(p.circle))):
+            raise not_finite(ref, layer)
 
 
 @dataclass

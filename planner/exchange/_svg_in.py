@@ -22,7 +22,7 @@ from ..errors import PlannerError
 from ..schema.drawing import DRAWING_UNITS
 from . import _flatten as fl
 from ._budget import svg_expanded_elements
-from ._pieces import Drawing, Piece
+from ._pieces import Drawing, Piece, check_finite, not_finite
 
 __all__ = ["read_svg"]
 
@@ -84,9 +84,13 @@ def read_svg(data: bytes, units: tuple[str, float] | None, tolerance: Callable[[
     else:  # CSS px, sized by the document's physical width/height when it has them
         name, mpu, source, per_px = "px", PX_M, ("drawing" if physical else "default"), 1.0
     height = float(svg.height) if getattr(svg, "height", None) else 0.0
+    if not (math.isfinite(height) and math.isfinite(px_per_user) and math.isfinite(per_px)):
+        raise PlannerError("invalid_drawing", "the <svg> element's size or viewBox is not a finite number",
+                           "drawing")
     tol = tolerance(mpu) / per_px  # in px
     pieces: list[Piece] = []
     ignored: Counter[str] = Counter()
+    seen: Counter[str] = Counter()
     for el in svg.elements():
         if not isinstance(el, Shape):
             if type(el).__name__ in ("Text", "Image", "Use"):
@@ -95,6 +99,8 @@ def read_svg(data: bytes, units: tuple[str, float] | None, tolerance: Callable[[
         values: Any = el.values or {}
         layer = str(values.get(_LAYER_ATTR, "(no layer)"))
         kind = type(el).__name__.lower()
+        seen[kind] += 1
+        ref = _ref(kind, values.get("id"), seen[kind])
         circle = _circle(el) if kind in ("circle", "ellipse") else None
         try:
             path = Path(el)
@@ -102,7 +108,19 @@ def read_svg(data: bytes, units: tuple[str, float] | None, tolerance: Callable[[
         except Exception:
             ignored[f"{kind} (unreadable)"] += 1
             continue
-        pieces.extend(_subpaths(path, layer, kind, circle, height, tol))
+        if not _finite_path(path):
+            raise not_finite(ref, layer)
+        try:
+            got = _subpaths(path, layer, kind, circle, height, tol)
+        except PlannerError:  # a bound of the import (too many vertices): the drawing's answer
+            raise
+        except (ArithmeticError, ValueError) as exc:  # a curve too large to flatten in floating point
+            raise PlannerError("invalid_drawing", f"{ref} on layer {layer!r} cannot be flattened: its coordinates "
+                               f"are too large ({type(exc).__name__})", "drawing") from None
+        for p in got:
+            p.ref = ref
+        check_finite(got, ref, layer)
+        pieces.extend(got)
     if per_px != 1.0:
         for p in pieces:
             p.points = p.points * per_px
@@ -110,6 +128,27 @@ def read_svg(data: bytes, units: tuple[str, float] | None, tolerance: Callable[[
                 p.circle = (p.circle[0] * per_px, p.circle[1] * per_px, p.circle[2] * per_px)
     layers = sorted({p.layer for p in pieces})
     return Drawing(pieces, layers, dict(ignored), name, mpu, source)
+
+
+def _ref(kind: str, element_id: Any, nth: int) -> str:
+    """How a message names an SVG element: by its id, else by its place among its kind."""
+    if element_id:
+        return f"<{kind} id={str(element_id)[:60]!r}>"
+    return f"<{kind}> number {nth}"
+
+
+def _finite_path(path) -> bool:
+    """Whether every point of an svgelements ``Path`` (ends, controls, arc radii) is finite."""
+    for seg in path:
+        for name in ("start", "end", "control", "control1", "control2", "center"):
+            pt = getattr(seg, name, None)
+            if pt is not None and not (math.isfinite(pt.x) and math.isfinite(pt.y)):
+                return False
+        for name in ("rx", "ry", "sweep"):
+            value = getattr(seg, name, None)
+            if value is not None and not math.isfinite(float(value)):
+                return False
+    return True
 
 
 def _subpaths(path, layer: str, kind: str, circle, height: float, tol: float) -> list[Piece]:

@@ -9,7 +9,8 @@ sized by the document's physical width/height) unless ``units`` says otherwise; 
 tolerance and placement option is in m in the workspace (see
 :class:`planner.schema.ImportOptions`). Errors are :class:`~planner.errors.PlannerError`
 with code ``invalid_drawing`` (not a drawing, units unknown, no closed shape, unknown
-layers), ``invalid_input`` (an option) or ``too_large``.
+layers, an element with a coordinate that is not finite or lies beyond ``MAX_COORDINATE`` m
+once placed: named), ``invalid_input`` (an option) or ``too_large``.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from pydantic import ValidationError
 from ..errors import PlannerError
 from ..schema import (
     DRAWING_UNITS,
+    MAX_COORDINATE,
     MAX_HOLES,
     MAX_OBSTACLES,
     MAX_POLYGON_POINTS,
@@ -91,8 +93,22 @@ def _place(drawing: Drawing, opt: ImportOptions) -> list[Piece]:
         if p.circle is not None:
             cx, cy = np.array(p.circle[:2]) @ R.T + off
             circle = (float(cx), float(cy), p.circle[2] * k)
-        out.append(Piece(pts, p.closed, p.layer, p.source, circle))
+        out.append(Piece(pts, p.closed, p.layer, p.source, circle, p.ref))
     return out
+
+
+def _check_placed(pieces: list[Piece]) -> None:
+    """Raise ``invalid_drawing`` naming the first piece with a coordinate beyond
+    ``MAX_COORDINATE`` m of the workspace origin once placed (a layout's limit), or not finite."""
+    for p in pieces:
+        reach = float(np.max(np.abs(p.points))) if len(p.points) else 0.0
+        if p.circle is not None:
+            reach = max(reach, abs(p.circle[0]) + p.circle[2], abs(p.circle[1]) + p.circle[2])
+        if not reach <= MAX_COORDINATE:  # NaN too
+            where = f"{reach:.3g} m" if math.isfinite(reach) else "infinitely far"
+            raise PlannerError("invalid_drawing", f"{p.ref or p.source} on layer {p.layer!r} lies {where} from the "
+                               f"workspace origin once placed, beyond the limit of {MAX_COORDINATE:g} m; check the "
+                               "drawing's units and the scale and offset options, or leave its layer out", "drawing")
 
 
 def _layers(drawing: Drawing, opt: ImportOptions) -> list[str]:
@@ -169,6 +185,7 @@ def import_drawing(data: bytes, options: ImportOptions | dict[str, Any] | None =
     layers = _layers(drawing, opt)
     placed = _place(drawing, opt)
     chosen = [p for p in placed if p.layer in layers]
+    _check_placed([p for p in placed if p.layer in layers or p.layer == opt.bounds_layer])
     found, chains = regions(chosen, opt.join_tolerance)
     if not found:
         why = f"; pieces left open: {_chain_text(chains)}" if chains else ""
