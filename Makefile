@@ -99,7 +99,7 @@ container-test: $(STAMP)
 	  podman runc buildah fuse-overlayfs uidmap debootstrap >/dev/null; }
 	CONTAINER_ENGINE=$(CONTAINER_ENGINE) BASE_IMAGE=$(BASE_IMAGE) IMAGE=$(IMAGE) container/build.sh
 	RANGEPLAN_CONTAINER_IMAGE=$(IMAGE) CONTAINER_ENGINE=$(CONTAINER_ENGINE) $(PY) -m pytest -q -p no:cacheprovider \
-	  -m container tests/test_container.py
+	  -m "container or smoke" tests/test_container.py tests/test_smoke.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info
