@@ -219,6 +219,19 @@ def test_editor_page_and_websocket_need_the_token(editor_url):
         assert ws.recv(timeout=10)
 
 
+def test_editor_login_on_one_client_connection(editor_url):
+    """A client that keeps its connection (httpx, a browser) follows the login's redirect: every
+    HTTP answer of the editor's port says ``Connection: close`` (websockets closes it after
+    one), so the next request goes on a new connection instead of failing on the closed one."""
+    for _ in range(20):  # the failure was a race with the server's close: many tries
+        with httpx.Client(follow_redirects=True, timeout=10) as c:
+            assert c.get(f"http://{editor_url}/").status_code == 401
+            page = c.get(f"http://{editor_url}/?token={TOKEN}")
+            assert page.status_code == 200 and "<html" in page.text.lower()
+            assert [r.headers["connection"] for r in page.history] == ["close"]
+            assert page.headers["connection"] == "close"
+
+
 def test_editor_refuses_foreign_origin_and_host(editor_url):
     port = editor_url.split(":")[1]
     with pytest.raises(InvalidStatus) as exc:

@@ -47,6 +47,15 @@ def _response(verdict: Verdict, websocket: bool) -> Response:
     return Response(verdict.status, http.HTTPStatus(verdict.status).phrase, headers, body)
 
 
+def _closing(response: Response | None) -> Response | None:
+    """``Connection: close`` on an HTTP response sent in place of a handshake: websockets closes
+    the connection after it, and a client that was not told so sends its next request (the
+    login's redirect, the page's assets) on the closed connection and fails."""
+    if isinstance(response, Response) and "Connection" not in response.headers:
+        response.headers["Connection"] = "close"
+    return response
+
+
 def process_request(policy: AccessPolicy, inner: Callable | None) -> Callable[[Any, Any], Any]:
     """A websockets ``process_request`` hook: the rules, then ``inner`` (viser's)."""
 
@@ -57,8 +66,8 @@ def process_request(policy: AccessPolicy, inner: Callable | None) -> Callable[[A
         verdict = decide(policy, path=path, query=query, headers=headers, protected=lambda p: True,
                          websocket=websocket, scheme="http")  # viser serves plain HTTP
         if verdict is not None:
-            return _response(verdict, websocket)
-        return inner(connection, request) if inner is not None else None
+            return _closing(_response(verdict, websocket))
+        return _closing(inner(connection, request)) if inner is not None else None
 
     return hook
 
