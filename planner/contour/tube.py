@@ -21,6 +21,16 @@ between every two chords, so a sample time can pass twice as much of an arc; a l
 ``rho = 0.95 tol``). Every chord is then within ``0.95 tol`` of the programmed path, which
 is what the exported G93 program runs.
 
+**Corners, the other way** (G64 P as LinuxCNC means it, issue 32: every point of the
+programmed path within the tolerance of the cut too). The intersection of two cells reaches
+``rho / sin(alpha / 2)`` from the vertex at an inner angle ``alpha`` (2.4 tol at 45 degrees),
+so a junction is cut further to the regular polygon inscribed in the circle of radius
+``0.95 tol`` about the vertex (:data:`CORNER_FRACTION`); a sample is held in it, so the cut
+passes within that of the corner point, and of every point of the two pieces between the
+vertex and that sample's foot on them (no farther from the sample than the vertex is);
+elsewhere the cut, crossing a piece's cell from one end to the other, passes within ``rho``
+(plus the sagitta on an arc) of each of its points.
+
 **Lead cells.** The constrained mode's range sequence spreads the first cell linearly out of
 the start point over its samples and narrows the last one onto the end point (the taper,
 :mod:`planner.corridor.ranges`): at the first sample of a cell held ``S`` samples the range is
@@ -43,7 +53,8 @@ import numpy as np
 
 from ..schema import PathElement, Segment
 
-__all__ = ["BEND_SAGITTAS", "LEAD_FRACTION", "SAGITTA_FRACTION", "TUBE_FRACTION", "PathGeometry", "Tube", "tube"]
+__all__ = ["BEND_SAGITTAS", "CORNER_FRACTION", "CORNER_VERTICES", "LEAD_FRACTION", "SAGITTA_FRACTION",
+           "TUBE_FRACTION", "PathGeometry", "Tube", "tube"]
 
 #: chord sagitta of the arcs' polylines, as a fraction of the tolerance
 SAGITTA_FRACTION = 0.18
@@ -53,10 +64,16 @@ SAGITTA_FRACTION = 0.18
 BEND_SAGITTAS = 4.0
 #: the cells' radius about the (chord) path, as a fraction of the tolerance, before the sagitta
 TUBE_FRACTION = 0.95
+#: a junction cell lies within this fraction of the tolerance of its corner's vertex (module docstring)
+CORNER_FRACTION = TUBE_FRACTION
+#: the vertices of the polygon inscribed in that circle
+CORNER_VERTICES = 16
 #: the lead cells' length at either end of a pass, as a fraction of the cells' radius
 LEAD_FRACTION = 0.5
 _CAP = np.radians([-90.0, -30.0, 30.0, 90.0])
 _BACK = np.radians([90.0, 150.0, 210.0, 270.0])
+_RING_ANGLES = np.linspace(0.0, 2 * np.pi, CORNER_VERTICES, endpoint=False)
+_RING = np.stack((np.cos(_RING_ANGLES), np.sin(_RING_ANGLES)), axis=1)  # CCW, as _clip wants
 
 
 @dataclass
@@ -187,7 +204,7 @@ def tube(elements: list[PathElement], origin: np.ndarray, tol: float, psi: float
             # chords' sagitta (elsewhere) plus rho of the path
             same_arc = e == prev_e and r < math.inf
             if abs(ang) > 1e-9 and _bend(prev_p0, p0, p1) + (0.0 if same_arc else s_a) + rho > TUBE_FRACTION * tol:
-                junction = _clip(prev, cell)
+                junction = _clip(_clip(prev, cell), p0 + CORNER_FRACTION * tol * _RING)
                 if len(junction) < 3:  # pragma: no cover - the disk about the vertex is in both
                     raise AssertionError("empty junction")
                 add(junction, None, e, 0.0, abs(ang), math.inf)
