@@ -810,9 +810,10 @@ def _deviation(pose: np.ndarray, elem: np.ndarray, geo: PathGeometry, tol: float
     above it on points ``h / 64`` apart (:data:`CHORD_ROUNDS`: the pass's largest figure is
     within ``h / 128`` of the true maximum, 4e-8 m at a tolerance of 0.05 mm; a round of more
     than :data:`CHORD_POINTS_MAX` points is not measured, the figure then within ``h / 16``).
-    Candidates: the elements of both ends and those within :data:`NEAR_TOLERANCES` tolerances of them along the pass (a
-    move shorter than the tolerance may be nearer than its neighbour; at most
-    :data:`NEAR_MAX` candidates, beyond which the figure can only be too large)."""
+    Candidates: the elements of both ends and those within :data:`NEAR_TOLERANCES` tolerances
+    of them along the pass (a move shorter than the tolerance may be nearer than its
+    neighbour; at most :data:`NEAR_MAX` candidates, beyond which the figure can only be too
+    large)."""
     K = len(pose)
     h = tol / 10
     lo, hi = geo.near(NEAR_TOLERANCES * tol)

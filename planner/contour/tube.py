@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -331,7 +332,8 @@ def path_to_cut(geo: PathGeometry, cut: np.ndarray, tol: float) -> float:
     if len(cut) == 1:
         cut = np.vstack((cut, cut))
     A, B = cut[:-1], cut[1:]
-    tree = shapely.STRtree(shapely.linestrings(np.stack((A, B), axis=1)))
+    segments: Any = shapely.linestrings(np.stack((A, B), axis=1))  # (K - 1,) geometries
+    tree = shapely.STRtree(segments)
 
     def measure(k: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         pts = geo.point_at(k, s)
