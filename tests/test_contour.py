@@ -232,6 +232,8 @@ def test_small_program_within_tolerance_of_rs274_path(small):
     # the planner's own figure agrees with the independent one
     assert c.max_deviation_m <= c.tolerance_m
     assert abs(c.max_deviation_m - measured) < c.tolerance_m / 20
+    # and the other way (issue 32): the path within the tolerance of the cut, as reported
+    assert_two_sided(small, SMALL, ORIGIN)
     # the whole programmed path is realised: the cut samples reach both ends of every move
     cut = small.pose[np.asarray(c.cutting), :2]
     assert shapely.distance(shapely.points(cut), path).max() <= c.tolerance_m
