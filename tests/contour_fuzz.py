@@ -10,7 +10,7 @@ import numpy as np
 
 from planner.contour import plan_contour
 from planner.errors import PlannerError
-from tests.test_contour import chord_deviation, feed_excess, rs274_cut_path
+from tests.test_contour import chord_deviation, feed_excess, rs274_cut_path, two_sided
 
 ORIGIN = [-0.015, -0.015]
 FEEDS = ("program", "fastest")
@@ -90,6 +90,13 @@ def check(prog: str, feed: str) -> dict:
     dev = chord_deviation(res, path, c.tolerance_m / 50)
     if dev > c.tolerance_m * (1 + 1e-7):
         probs.append(f"deviation {dev * 1e6:.2f} um > tolerance {c.tolerance_m * 1e6:.1f} um")
+    # the other direction (issue 32): every point of the programmed path within P of the cut
+    path_dev = max(s[1] for s in two_sided(res, prog, ORIGIN, c.tolerance_m / 500))
+    if path_dev > c.tolerance_m:
+        probs.append(f"path-to-cut {path_dev * 1e6:.2f} um > tolerance {c.tolerance_m * 1e6:.1f} um")
+    if abs(c.max_path_deviation_m - path_dev) > c.tolerance_m / 200:
+        probs.append(f"reported path-to-cut {c.max_path_deviation_m * 1e6:.2f} um vs measured {path_dev * 1e6:.2f} um")
+    dev = max(dev, path_dev)
     if abs(c.max_deviation_m - dev) > c.tolerance_m / 20:
         probs.append(f"reported deviation {c.max_deviation_m * 1e6:.2f} um vs measured {dev * 1e6:.2f} um")
     if not (mt.within_limits and mt.max_force_ratio <= 1 + 1e-9):

@@ -68,6 +68,106 @@ def rs274_cut_path(program: str, origin) -> shapely.MultiLineString:
     return shapely.MultiLineString([ln + np.asarray(origin) for ln in lines])
 
 
+def rs274_cut_passes(program: str, origin) -> list[np.ndarray]:
+    """rs274's cutting moves (feed, Z < 0) pass by pass (a pass ends at a move that does not
+    cut: a rapid, a feed move above Z 0), each as one polyline (K, 2), arcs densified to 1e-8 m
+    sagitta, robot frame [m]."""
+    moves, _ = canonical_moves(program)
+    prev = np.zeros(3)
+    passes: list[list[np.ndarray]] = [[]]
+    for mv in moves:
+        if mv[0] == "dwell":
+            continue
+        end = np.array(mv[1:4]) if mv[0] == "line" else np.array([mv[1], mv[2], mv[6]])
+        moved = np.hypot(*(end[:2] - prev[:2])) > 0
+        if mv[0] == "line":
+            if mv[4] or min(prev[2], end[2]) >= 0:
+                if passes[-1]:
+                    passes.append([])
+            elif moved:
+                passes[-1].append(np.array([prev[:2], end[:2]]))
+        else:
+            c = np.array(mv[3:5])
+            r = np.hypot(*(prev[:2] - c))
+            a0 = math.atan2(prev[1] - c[1], prev[0] - c[0])
+            sweep = math.atan2(end[1] - c[1], end[0] - c[0]) - a0
+            while mv[5] > 0 and sweep <= 1e-12:
+                sweep += 2 * math.pi
+            while mv[5] < 0 and sweep >= -1e-12:
+                sweep -= 2 * math.pi
+            n = max(2, math.ceil(abs(sweep) / (2 * math.acos(1 - 1e-8 / r))))
+            a = a0 + sweep * np.linspace(0, 1, n + 1)
+            passes[-1].append(c + r * np.stack((np.cos(a), np.sin(a)), axis=1))
+        prev = end
+    return [np.vstack(p) + np.asarray(origin) for p in passes if p]
+
+
+def cut_runs(result) -> list[np.ndarray]:
+    """The cut of each pass as the exported program runs it: the samples of each run of
+    cutting samples, with the sample before it (where the tool rests as the cut begins) (K, 2)."""
+    cut = np.asarray(result.contour.cutting)
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], cut.astype(int), [0]))))
+    return [result.pose[max(a - 1, 0):b, :2] for a, b in zip(edges[::2], edges[1::2])]
+
+
+def _polyline_distance(pts: np.ndarray, line: np.ndarray) -> np.ndarray:
+    """Distance of the points (M, 2) to the polyline (K, 2), by shapely (the nearest of its
+    segments in a tree: exact) [m]."""
+    segs = shapely.linestrings(np.stack((line[:-1], line[1:]), axis=1)) if len(line) > 1 else \
+        shapely.points(line)
+    idx, d = shapely.STRtree(segs).query_nearest(shapely.points(pts), return_distance=True, all_matches=False)
+    out = np.empty(len(pts))
+    out[idx[0]] = d
+    return out
+
+
+def _dense(line: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points at most ``step`` apart on each segment of the polyline (its vertices included),
+    and the index of the segment each point starts."""
+    L = np.hypot(*np.diff(line, axis=0).T)
+    m = np.maximum(np.ceil(L / step).astype(int), 1)
+    owner = np.repeat(np.arange(len(L)), m)
+    frac = (np.arange(owner.size) - np.repeat(np.cumsum(m) - m, m)) / np.repeat(m, m)
+    pts = np.vstack((line[owner] + frac[:, None] * (line[owner + 1] - line[owner]), line[-1:]))
+    return pts, owner
+
+
+def farthest(line: np.ndarray, target: np.ndarray, step: float) -> float:
+    """The largest distance of a point of the polyline ``line`` from the polyline ``target``
+    [m], measured on points at most ``step`` apart where it may be (within ``step / 2`` below
+    the true maximum: the distance is 1-Lipschitz along the line): on points ``1000 step``
+    apart, then 10 times closer on the pieces between them whose bound ``(d_a + d_b +
+    length) / 2`` reaches the largest distance measured, down to ``step``."""
+    pts, _ = _dense(line, 1000 * step)
+    d = _polyline_distance(pts, target)
+    top = float(d.max())
+    a, b, da, db = pts[:-1], pts[1:], d[:-1], d[1:]
+    for level in (100, 10, 1):
+        k = np.flatnonzero((da + db + np.hypot(*(b - a).T)) / 2 >= top - 1e-12)
+        if not k.size:
+            break
+        # each piece a -> b in n pieces: its n + 1 points, the distance of each
+        n = np.maximum(np.ceil(np.hypot(*(b[k] - a[k]).T) / (level * step)).astype(int), 1)
+        owner = np.repeat(k, n + 1)
+        t = (np.arange(owner.size) - np.repeat(np.cumsum(n + 1) - n - 1, n + 1)) / np.repeat(n, n + 1)
+        fine = a[owner] + t[:, None] * (b[owner] - a[owner])
+        d = _polyline_distance(fine, target)
+        top = max(top, float(d.max()))
+        inner = t[:-1] < 1  # consecutive points of one piece
+        a, b, da, db = fine[:-1][inner], fine[1:][inner], d[:-1][inner], d[1:][inner]
+    return top
+
+
+def two_sided(result, program: str, origin, step: float) -> list[tuple[float, float]]:
+    """Per pass, measured here independently of the planner: (the largest distance of the cut,
+    its samples and the straight moves between them, from rs274's path of the pass; the largest
+    distance of a point of that path, its corners included, from the cut) [m], each on points
+    at most ``step`` apart (:func:`farthest`)."""
+    paths, cuts = rs274_cut_passes(program, origin), cut_runs(result)
+    assert len(paths) == len(cuts) == len(result.contour.passes)
+    return [(farthest(c, p, step), farthest(p, c, step)) for p, c in zip(paths, cuts)]
+
+
 def chord_deviation(result, path: shapely.MultiLineString, step: float) -> float:
     """Largest distance from ``path`` of the cutting samples and of the straight moves from each
     cutting sample to the next, on points ``step`` apart (plus step / 2: a bound from above)."""
@@ -132,6 +232,8 @@ def test_small_program_within_tolerance_of_rs274_path(small):
     # the planner's own figure agrees with the independent one
     assert c.max_deviation_m <= c.tolerance_m
     assert abs(c.max_deviation_m - measured) < c.tolerance_m / 20
+    # and the other way (issue 32): the path within the tolerance of the cut, as reported
+    assert_two_sided(small, SMALL, ORIGIN)
     # the whole programmed path is realised: the cut samples reach both ends of every move
     cut = small.pose[np.asarray(c.cutting), :2]
     assert shapely.distance(shapely.points(cut), path).max() <= c.tolerance_m
@@ -285,3 +387,107 @@ def test_largest_feasible_at_the_limits():
 
     assert largest_feasible(lambda x: True, 1.0) == SCALE_MAX
     assert largest_feasible(lambda x: x < SCALE_MIN, 1.0) is None
+
+
+# -- G64 P both ways (issue 32): the cut within P of the path AND the path within P of the cut --
+
+#: the independent measure's step [m]: each figure within 5e-8 m below the true maximum
+STEP_M = 1e-7
+#: the planner's figures agree with the independent ones to this [m]: the measure's step plus the
+#: planner's own resolution (the cut-to-path figure within tol / 1280 above the maximum, the
+#: path-to-cut one within 1e-9 m)
+AGREE_M = 1e-7
+
+
+def assert_two_sided(res, prog: str, origin) -> list[tuple[float, float]]:
+    """Every pass of ``res`` within its tolerance both ways, measured independently (on rs274's
+    path: :func:`two_sided`, each figure plus ``STEP_M / 2`` a bound from above), and the
+    planner's reported figures equal to the independent ones within ``AGREE_M``."""
+    c = res.contour
+    tol = c.tolerance_m
+    sides = two_sided(res, prog, origin, STEP_M)
+    for (cut_d, path_d), ps in zip(sides, c.passes):
+        assert cut_d + STEP_M / 2 <= tol, (cut_d, tol)
+        assert path_d + STEP_M / 2 <= tol, (path_d, tol)
+        assert ps.max_path_deviation_m == pytest.approx(path_d, abs=AGREE_M)
+        assert ps.max_deviation_m == pytest.approx(max(cut_d, path_d), abs=AGREE_M)
+    assert c.max_path_deviation_m == max(ps.max_path_deviation_m for ps in c.passes)
+    assert c.max_deviation_m == pytest.approx(max(max(s) for s in sides), abs=AGREE_M)
+    assert c.max_path_deviation_m <= c.max_deviation_m <= tol
+    return sides
+
+
+def corner_program(angle_deg: float, p_mm: float, length_mm: float = 8.0) -> str:
+    """Two lines meeting at ``angle_deg`` (the angle between them at the corner: 5 a hairpin,
+    175 nearly straight), G64 P ``p_mm``."""
+    a = math.radians(180.0 - angle_deg)
+    x, y = 10 + length_mm * math.cos(a), length_mm * math.sin(a)
+    return (f"G21 G90 G17\nG64 P{p_mm}\nG0 X{10 - length_mm:.4f} Y0 Z2\nG1 Z-1 F300\nG1 X10 F1200\n"
+            f"G1 X{x:.4f} Y{y:.4f}\nG0 Z2\nM2\n")
+
+
+@pytest.mark.parametrize("angle, p_mm", [(45, 0.05), (90, 0.02), (5, 0.05), (20, 0.02), (135, 0.05), (175, 0.02)])
+def test_corner_point_within_tolerance_of_the_cut(angle, p_mm):
+    """The issue-32 case, checked against LinuxCNC's reading: the programmed corner point (and
+    every point of the path) within G64 P of the cut. Before, the cut turned inside the two
+    cells' intersection, up to 0.95 P / sin(angle / 2) from the corner (0.1215 mm at 45 degrees
+    with P0.05, 0.066 mm at 90 degrees with P0.02), while max_deviation_m said <= P."""
+    prog = corner_program(angle, p_mm)
+    res = plan_contour({"program": prog, "origin": ORIGIN, "feed": "program"})
+    sides = assert_two_sided(res, prog, ORIGIN)
+    corner = np.array([0.01, 0.0]) + ORIGIN
+    cut = cut_runs(res)[0]
+    assert float(_polyline_distance(corner[None, :], cut)[0]) <= p_mm * 1e-3
+    assert res.contour.max_path_deviation_m >= sides[0][1] - AGREE_M > 0
+
+
+def generated_program(rng: np.random.Generator, arcs: bool = True) -> str:
+    """One pass of 3-6 moves (mm, G64 P 0.01-0.05 mm): lines of 0.5-6 mm and tiny ones
+    (0.005-0.05 mm), arcs (radius 0.5-5 mm, 20-160 degrees, G2 or G3; not without ``arcs``:
+    a line-only pass has the widest cells) either tangent to the move before or not; at every
+    corner the two moves meet at 5-175 degrees."""
+    p_mm = float(rng.choice([0.01, 0.02, 0.05]))
+    pos = np.array([15.0, 15.0])
+    heading = rng.uniform(0, 2 * math.pi)
+    out = [f"G21 G90 G17\nG64 P{p_mm}", f"G0 X{pos[0]:.4f} Y{pos[1]:.4f} Z2", "G1 Z-1 F300", "F1000"]
+    for k in range(int(rng.integers(3, 7))):
+        kind = rng.choice(["line", "tiny", "arc", "tangent"] if arcs else ["line", "line", "tiny"])
+        if k > 0 and kind != "tangent":  # a corner of 5-175 degrees between the moves
+            heading += (math.pi - math.radians(rng.uniform(5, 175))) * rng.choice([-1, 1])
+        d = np.array([math.cos(heading), math.sin(heading)])
+        if kind in ("line", "tiny"):
+            pos = pos + d * (rng.uniform(0.005, 0.05) if kind == "tiny" else rng.uniform(0.5, 6))
+            out.append(f"G1 X{pos[0]:.4f} Y{pos[1]:.4f}")
+            continue
+        r, sweep, ccw = rng.uniform(0.5, 5), math.radians(rng.uniform(20, 160)), bool(rng.random() < 0.5)
+        n = np.array([-d[1], d[0]]) * (1 if ccw else -1)
+        c = pos + r * n
+        a0 = math.atan2(pos[1] - c[1], pos[0] - c[0])
+        a1 = a0 + (sweep if ccw else -sweep)
+        end = c + r * np.array([math.cos(a1), math.sin(a1)])
+        out.append(f"{'G3' if ccw else 'G2'} X{end[0]:.4f} Y{end[1]:.4f} I{c[0] - pos[0]:.4f} J{c[1] - pos[1]:.4f}")
+        pos, heading = end, heading + (sweep if ccw else -sweep)
+    return "\n".join(out + ["G0 Z2", "M2"]) + "\n"
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_generated_corners_arcs_and_tiny_moves_within_tolerance_both_ways(seed):
+    """Seeded programs (:func:`generated_program`, odd seeds with arcs, even ones lines only),
+    the programmed feed (and ``fastest`` for two of them): within G64 P both ways, the reported
+    figures equal to the independent ones."""
+    prog = generated_program(np.random.default_rng(3200 + seed), arcs=seed % 2 == 1)
+    origin = [-0.015, -0.015]
+    for feed in ("program", "fastest") if seed < 2 else ("program",):
+        res = plan_contour({"program": prog, "origin": origin, "feed": feed})
+        assert_two_sided(res, prog, origin)
+
+
+def test_shipped_example_within_tolerance_both_ways():
+    """app/static/examples/contour-part.ngc (two depth passes, G64 P0.02), both feeds."""
+    from pathlib import Path
+
+    prog = (Path(__file__).resolve().parent.parent / "app/static/examples/contour-part.ngc").read_text()
+    origin = [-0.013, -0.0075]
+    for feed in ("program", "fastest"):
+        res = plan_contour({"program": prog, "origin": origin, "feed": feed})
+        assert len(assert_two_sided(res, prog, origin)) == 2

@@ -4,7 +4,10 @@ whole program, with its ``contour`` section.
 
 Each cut pass becomes a tube corridor of convex cells (:mod:`.tube`) planned in the
 constrained mode from rest to rest, so every sample and every straight move between two
-samples is within the tolerance of the programmed path. Timing: a speed profile along the
+samples is within the tolerance of the programmed path, and every point of the programmed path,
+its corners included, within the tolerance of the cut (the two-sided tolerance of G64 P, issue
+32: ``max_deviation_m`` the larger of both directions, ``max_path_deviation_m`` the second,
+:func:`planner.contour.tube.path_to_cut`). Timing: a speed profile along the
 pass turned into sample counts per cell. ``program`` feed: a heuristic profile (the cell
 speed ``v``, the curvature and corner limits ``sqrt(a R)``, acceleration ``a`` forwards and
 backwards) with ``v`` capped at each move's F, lowered until the plan is feasible and no sample
@@ -64,7 +67,7 @@ from ..schema import (
     planner_error,
 )
 from .timing import PathSamples, time_optimal
-from .tube import PathGeometry, Tube, tube
+from .tube import PathGeometry, Tube, path_to_cut, tube
 
 __all__ = ["CONTOUR_STEP_S", "estimate_contour", "largest_feasible", "parse_contour_request", "plan_contour"]
 
@@ -98,6 +101,11 @@ ADVICE_MIN_S = 4.0
 #: sample's own (and its neighbours), at most NEAR_MAX of them
 NEAR_TOLERANCES = 2.0
 NEAR_MAX = 32
+#: the cut-to-path deviation's refinement (:func:`_deviation`): rounds, each on points 8 times
+#: closer along the moves whose bound exceeds the largest distance measured, while a round
+#: measures at most CHORD_POINTS_MAX points
+CHORD_ROUNDS = 2
+CHORD_POINTS_MAX = 200_000
 #: fastest, the time-optimal timing (:func:`_search`): its cells hold this many samples at
 #: the profile's top speed (shorter cells keep the robot nearer the profile's progress, longer
 #: ones lose fewer samples to cells shorter than a sample's travel)
@@ -229,11 +237,15 @@ def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0
         cut_parts = parts[first:]
         t_pass = sum(p.result.time[-1] for p in cut_parts)
         dev = max(float(p.deviation.max()) for p in cut_parts)
+        # the other direction (issue 32): the pass's programmed path from its cut, the samples
+        # of its parts in order (each part starts where the one before settled)
+        path_dev = path_to_cut(geo, np.concatenate([p.result.pose[:, :2] for p in cut_parts]), tol)
         speed = max(float(np.hypot(*p.result.velocity[:, :2].T).max()) for p in cut_parts)
         pass_summaries.append(PassSummary(
             index=len(pass_summaries), first_line=b.elements[0].line, last_line=b.elements[-1].line,
             elements=len(b.elements), cells=sum(p.cells for p in cut_parts),
-            length_m=float(sum(e.length_m for e in b.elements)), time_s=float(t_pass), max_deviation_m=dev,
+            length_m=float(sum(e.length_m for e in b.elements)), time_s=float(t_pass),
+            max_deviation_m=max(dev, path_dev), max_path_deviation_m=path_dev,
             max_speed_m_s=speed, max_programmed_feed_m_s=max(e.feed_m_s for e in b.elements)))
         del start_pose
         i += 1
@@ -242,9 +254,11 @@ def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0
     lines = np.concatenate([p.line if k == 0 else p.line[1:] for k, p in enumerate(parts)])
     deviation = np.concatenate([p.deviation if k == 0 else p.deviation[1:] for k, p in enumerate(parts)])
     Ts = st.Ts
+    path_max = max((p.max_path_deviation_m for p in pass_summaries), default=0.0)
     result.contour = ContourSection(
         cutting=[bool(c) for c in cutting], program_line=[int(x) if x > 0 else None for x in lines],
-        tolerance_m=tol, max_deviation_m=float(deviation.max()), deviation_m=deviation, feed=req.feed,
+        tolerance_m=tol, max_deviation_m=max(float(deviation.max()), path_max), max_path_deviation_m=path_max,
+        deviation_m=deviation, feed=req.feed,
         cycle_time_s=float(result.time[-1]), cut_time_s=float(cutting.sum() * Ts), passes=pass_summaries,
         origin=[float(x) for x in origin], words=program.words, comments=program.comments, warnings=warnings)
     result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3
@@ -792,11 +806,14 @@ def _deviation(pose: np.ndarray, elem: np.ndarray, geo: PathGeometry, tol: float
     straight move to the next, measured on points ``h = tol / 10`` apart along the move plus
     ``h / 2`` (the distance is 1-Lipschitz, so this bounds the maximum from above; the cells
     keep 0.95 tol, so the bound stays within the tolerance) [m]; the moves whose bound exceeds
-    the largest distance measured are measured again on points ``h / 8`` apart (so the pass's
-    largest figure is within ``h / 16`` of the true maximum). Candidates: the elements of
-    both ends and those within :data:`NEAR_TOLERANCES` tolerances of them along the pass (a
-    move shorter than the tolerance may be nearer than its neighbour; at most
-    :data:`NEAR_MAX` candidates, beyond which the figure can only be too large)."""
+    the largest distance measured are measured again on points ``h / 8`` apart, and those still
+    above it on points ``h / 64`` apart (:data:`CHORD_ROUNDS`: the pass's largest figure is
+    within ``h / 128`` of the true maximum, 4e-8 m at a tolerance of 0.05 mm; a round of more
+    than :data:`CHORD_POINTS_MAX` points is not measured, the figure then within ``h / 16``).
+    Candidates: the elements of both ends and those within :data:`NEAR_TOLERANCES` tolerances
+    of them along the pass (a move shorter than the tolerance may be nearer than its
+    neighbour; at most :data:`NEAR_MAX` candidates, beyond which the figure can only be too
+    large)."""
     K = len(pose)
     h = tol / 10
     lo, hi = geo.near(NEAR_TOLERANCES * tol)
@@ -808,9 +825,14 @@ def _deviation(pose: np.ndarray, elem: np.ndarray, geo: PathGeometry, tol: float
     dev = np.zeros(K)
     seen, bound = _chords(a, b, cand, geo, h)
     dev[:-1] = bound
-    again = np.nonzero(bound > seen.max(initial=0.0))[0]
-    if again.size:
-        dev[again] = _chords(a[again], b[again], cand[again], geo, h / 8)[1]
+    top = float(seen.max(initial=0.0))
+    for _ in range(CHORD_ROUNDS):
+        again = np.nonzero(dev[:-1] > top + 1e-12)[0]
+        if not again.size or np.sum(np.hypot(*(b[again] - a[again]).T)) * 8 / h > CHORD_POINTS_MAX:
+            break
+        h /= 8
+        seen_again, dev[again] = _chords(a[again], b[again], cand[again], geo, h)
+        top = max(top, float(seen_again.max()))
     e = int(elem[-1])
     end = geo.distance(pose[-1:], np.minimum(lo[e] + np.arange(min(hi[e] - lo[e] + 1, NEAR_MAX)), hi[e])[None, :])
     dev[-1] = max(dev[-1], float(end[0]))

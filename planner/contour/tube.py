@@ -1,5 +1,6 @@
-"""A cut pass as a tube corridor of convex cells, and the distance of points to the
-programmed path (lines and arcs), both in the robot frame [m].
+"""A cut pass as a tube corridor of convex cells, the distance of points to the programmed
+path (lines and arcs) and the distance of the programmed path from the cut (:func:`path_to_cut`),
+all in the robot frame [m].
 
 **Cells.** Each arc is replaced by chords whose sagitta is at most ``s_a = 0.18 tol`` (so the
 chord polyline is within ``s_a`` of the arc); long pieces are split to at most ``piece_max``.
@@ -21,6 +22,16 @@ between every two chords, so a sample time can pass twice as much of an arc; a l
 ``rho = 0.95 tol``). Every chord is then within ``0.95 tol`` of the programmed path, which
 is what the exported G93 program runs.
 
+**Corners, the other way** (G64 P as LinuxCNC means it, issue 32: every point of the
+programmed path within the tolerance of the cut too). The intersection of two cells reaches
+``rho / sin(alpha / 2)`` from the vertex at an inner angle ``alpha`` (2.4 tol at 45 degrees),
+so a junction is cut further to the regular polygon inscribed in the circle of radius
+``0.95 tol`` about the vertex (:data:`CORNER_FRACTION`); a sample is held in it, so the cut
+passes within that of the corner point, and of every point of the two pieces between the
+vertex and that sample's foot on them (no farther from the sample than the vertex is);
+elsewhere the cut, crossing a piece's cell from one end to the other, passes within ``rho``
+(plus the sagitta on an arc) of each of its points.
+
 **Lead cells.** The constrained mode's range sequence spreads the first cell linearly out of
 the start point over its samples and narrows the last one onto the end point (the taper,
 :mod:`planner.corridor.ranges`): at the first sample of a cell held ``S`` samples the range is
@@ -38,12 +49,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from ..schema import PathElement, Segment
 
-__all__ = ["BEND_SAGITTAS", "LEAD_FRACTION", "SAGITTA_FRACTION", "TUBE_FRACTION", "PathGeometry", "Tube", "tube"]
+__all__ = ["BEND_SAGITTAS", "CORNER_FRACTION", "CORNER_VERTICES", "LEAD_FRACTION", "SAGITTA_FRACTION",
+           "TUBE_FRACTION", "PathGeometry", "Tube", "path_to_cut", "tube"]
 
 #: chord sagitta of the arcs' polylines, as a fraction of the tolerance
 SAGITTA_FRACTION = 0.18
@@ -53,10 +66,16 @@ SAGITTA_FRACTION = 0.18
 BEND_SAGITTAS = 4.0
 #: the cells' radius about the (chord) path, as a fraction of the tolerance, before the sagitta
 TUBE_FRACTION = 0.95
+#: a junction cell lies within this fraction of the tolerance of its corner's vertex (module docstring)
+CORNER_FRACTION = TUBE_FRACTION
+#: the vertices of the polygon inscribed in that circle
+CORNER_VERTICES = 16
 #: the lead cells' length at either end of a pass, as a fraction of the cells' radius
 LEAD_FRACTION = 0.5
 _CAP = np.radians([-90.0, -30.0, 30.0, 90.0])
 _BACK = np.radians([90.0, 150.0, 210.0, 270.0])
+_RING_ANGLES = np.linspace(0.0, 2 * np.pi, CORNER_VERTICES, endpoint=False)
+_RING = np.stack((np.cos(_RING_ANGLES), np.sin(_RING_ANGLES)), axis=1)  # CCW, as _clip wants
 
 
 @dataclass
@@ -187,7 +206,7 @@ def tube(elements: list[PathElement], origin: np.ndarray, tol: float, psi: float
             # chords' sagitta (elsewhere) plus rho of the path
             same_arc = e == prev_e and r < math.inf
             if abs(ang) > 1e-9 and _bend(prev_p0, p0, p1) + (0.0 if same_arc else s_a) + rho > TUBE_FRACTION * tol:
-                junction = _clip(prev, cell)
+                junction = _clip(_clip(prev, cell), p0 + CORNER_FRACTION * tol * _RING)
                 if len(junction) < 3:  # pragma: no cover - the disk about the vertex is in both
                     raise AssertionError("empty junction")
                 add(junction, None, e, 0.0, abs(ang), math.inf)
@@ -241,6 +260,15 @@ class PathGeometry:
         self.line = np.array([e.line for e in elements])
         self.length = np.array([e.length_m for e in elements])
 
+    def point_at(self, k: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Points at path length ``s`` (M,) from the start of the elements ``k`` (M,), (M, 2) [m]."""
+        L = np.maximum(self.length[k], 1e-300)
+        on_line = self.p0[k] + (s / L)[:, None] * (self.p1[k] - self.p0[k])
+        r = np.maximum(self.r[k], 1e-300)
+        a = self.a0[k] + np.sign(self.sweep[k]) * s / r
+        on_arc = self.c[k] + self.r[k][:, None] * np.stack((np.cos(a), np.sin(a)), axis=1)
+        return np.where(self.arc[k][:, None], on_arc, on_line)
+
     def near(self, reach: float) -> tuple[np.ndarray, np.ndarray]:
         """Per element ``k``: the first and the last element index within ``reach`` of it
         along the pass (its neighbours always included) (n,), (n,)."""
@@ -270,3 +298,77 @@ class PathGeometry:
         d_ends = np.minimum(_norm(P - a), _norm(P - b))
         d_arc = np.where(inside, np.abs(rad - r), d_ends)
         return np.where(self.arc[cand], d_arc, d_line).min(axis=1)
+
+
+def _to_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance of the points ``p`` (M, 2) to the segments ``a b`` (M, 2) each [m]."""
+    ab = b - a
+    t = np.clip(np.einsum("mj,mj->m", p - a, ab) / np.maximum(np.einsum("mj,mj->m", ab, ab), 1e-300), 0.0, 1.0)
+    return _norm(p - a - t[:, None] * ab)
+
+
+#: path_to_cut: the first points along the path, this many per tolerance; the pieces between
+#: them subdivided by REFINE_SPLIT until the bound is within REFINE_GAP_M of the largest measured
+REFINE_START = 4
+REFINE_SPLIT = 8
+REFINE_GAP_M = 1e-9
+REFINE_ROUNDS = 16
+
+
+def path_to_cut(geo: PathGeometry, cut: np.ndarray, tol: float) -> float:
+    """The largest distance of a point of the programmed path ``geo`` from the cut, the polyline
+    of the samples ``cut`` (K, 2) as the exported program runs them: the path-to-cut direction
+    of the two-sided (Hausdorff) tolerance, ``max_{p in path} min_{q in cut} |p - q|`` [m]
+    (issue 32), an upper bound within :data:`REFINE_GAP_M` of it. The path is measured at
+    points ``tol / REFINE_START`` apart along each element (its ends included: the corners);
+    a piece ``[a, b]`` of length ``l`` between two points is bounded by the least of
+    ``(d(a) + d(b) + l) / 2`` (the distance is 1-Lipschitz along the path) and, for the cut's
+    segment ``S`` nearest ``a`` and the one nearest ``b``, ``max(d_S(a), d_S(b))`` plus the
+    arc's sagitta ``l^2 / (8 R)`` (the distance to one segment is convex along a line); the
+    pieces whose bound exceeds the largest distance measured are split and measured again."""
+    import shapely  # loaded on first use (planner._lazy)
+
+    cut = np.asarray(cut, float)[:, :2]
+    if len(cut) == 1:
+        cut = np.vstack((cut, cut))
+    A, B = cut[:-1], cut[1:]
+    segments: Any = shapely.linestrings(np.stack((A, B), axis=1))  # (K - 1,) geometries
+    tree = shapely.STRtree(segments)
+
+    def measure(k: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        pts = geo.point_at(k, s)
+        idx, d = tree.query_nearest(shapely.points(pts), return_distance=True, all_matches=False)
+        near = np.zeros(len(s), np.int64)
+        dist = np.zeros(len(s))
+        near[idx[0]], dist[idx[0]] = idx[1], d
+        return pts, dist, near
+
+    keep = np.flatnonzero(geo.length > 1e-12)
+    n = np.maximum(np.ceil(geo.length[keep] * REFINE_START / tol).astype(np.int64), 1)
+    k = np.repeat(keep, n)
+    j = np.arange(len(k)) - np.repeat(np.cumsum(n) - n, n)
+    s0 = j * np.repeat(geo.length[keep] / n, n)
+    s1 = (j + 1) * np.repeat(geo.length[keep] / n, n)
+    if not len(k):
+        return 0.0
+    seen = 0.0
+    bound = np.zeros(0)
+    for _ in range(REFINE_ROUNDS):
+        pa, da, na = measure(k, s0)
+        pb, db, nb = measure(k, s1)
+        seen = max(seen, float(da.max()), float(db.max()))
+        ell = s1 - s0
+        sag = np.where(geo.arc[k], ell * ell / (8 * np.maximum(geo.r[k], 1e-300)), 0.0)
+        by_a = np.maximum(da, _to_segment(pb, A[na], B[na])) + sag
+        by_b = np.maximum(db, _to_segment(pa, A[nb], B[nb])) + sag
+        bound = np.maximum(np.minimum.reduce([(da + db + ell) / 2, by_a, by_b]), np.maximum(da, db))
+        open_ = np.flatnonzero(bound > seen + REFINE_GAP_M)
+        if not open_.size:
+            return float(max(seen, bound.max()))
+        frac = np.arange(REFINE_SPLIT) / REFINE_SPLIT
+        k = np.repeat(k[open_], REFINE_SPLIT)
+        width = np.repeat(ell[open_], REFINE_SPLIT)
+        s0 = np.repeat(s0[open_], REFINE_SPLIT) + np.tile(frac, open_.size) * width
+        s1 = s0 + width / REFINE_SPLIT
+        bound = bound[open_]
+    return float(max(seen, bound.max()))

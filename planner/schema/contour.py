@@ -197,8 +197,12 @@ class PassSummary(_Out):
     cells: int = Field(description="Tube cells planned through (count)")
     length_m: float = Field(description="Programmed length, m")
     time_s: float = Field(description="Time from the start to the end of the pass, s")
-    max_deviation_m: float = Field(description="Largest distance of a sample or of the chord between two samples "
-                                   "from the programmed path, m")
+    max_deviation_m: float = Field(description="The two-sided deviation of the pass (G64 P as LinuxCNC means "
+                                   "it): the larger of the largest distance of a sample or of the chord between two "
+                                   "samples from the programmed path and max_path_deviation_m, m")
+    max_path_deviation_m: float = Field(description="Largest distance of a point of the programmed path (its "
+                                        "corners included) from the cut (the samples and the straight moves "
+                                        "between them), m")
     max_speed_m_s: float = Field(description="Largest tool speed (sample to sample), m/s")
     max_programmed_feed_m_s: float = Field(description="Largest programmed F of its moves, m/s")
 
@@ -210,8 +214,13 @@ class ContourSection(_Out):
     program_line: list[int | None] = Field(description="Per sample: the source line being cut; null for travel, "
                                            "plunge, retract and dwell")
     tolerance_m: float = Field(description="The tolerance planned to, m")
-    max_deviation_m: float = Field(description="Largest distance from the programmed path (computed from its lines "
-                                   "and arcs) of a cutting sample or of the straight move from it to the next, m")
+    max_deviation_m: float = Field(description="The two-sided deviation (G64 P as LinuxCNC means it): the larger "
+                                   "of the largest distance from the programmed path (computed from its lines and "
+                                   "arcs) of a cutting sample or of the straight move from it to the next, and "
+                                   "max_path_deviation_m; within tolerance_m, m")
+    max_path_deviation_m: float = Field(description="Largest distance of a point of the programmed path (its "
+                                        "corners included) from the cut of its pass (the samples and the straight "
+                                        "moves between them), over the passes, m")
     deviation_m: FloatArray = Field(description="Per sample: the largest distance from the programmed path of the "
                                     "sample and of the straight move to the next while cutting; 0 elsewhere, m")
     feed: Literal["program", "fastest"] = Field(description="The feed planned")
