@@ -8,7 +8,8 @@ Jobs (:data:`Job`) are frozen dataclasses, picklable to a worker process:
 * :class:`ImportJob` a DXF/SVG drawing as a layout and a report;
 * :class:`EditorJob` the editor's re-plan (segmentation kept when the plan fails);
 * :class:`ExportJob` a stored plan in an output format, written to a spool file the server
-  streams (the server process never parses the stored plan);
+  streams (the server process never parses the stored plan; JSON, the stored form, is
+  copied as it is: :func:`spool_plan_json`, which the server runs itself on its read threads);
 * :class:`SleepJob` (tests of the time limit).
 
 A new kind (e.g. a contour job around ``planner.plan_contour``) is a dataclass here, a
@@ -45,7 +46,7 @@ from planner.schema import ContourRequest, ImportOptions, PlanRequest, PlanResul
 __all__ = ["ContourJob", "ContourWork", "Done", "EditorJob", "EditorPlan", "ErrorDetail", "ExportJob", "Failed",
            "ImportJob", "ItemTimeout", "Job", "Outcome", "PlanJob", "SegmentJob", "SleepJob", "bounded",
            "check_estimate", "clean_spool", "crashed", "estimate", "failed", "run_bounded", "run_job",
-           "segmentation_module", "spool_dir"]
+           "segmentation_module", "spool_dir", "spool_plan_json"]
 
 
 class ErrorDetail(BaseModel):
@@ -344,6 +345,11 @@ def _export(job: ExportJob) -> Done:
     from planner.schema import PlanResult
 
     store = _store(job.store)
+    if job.format == "json" and store is not None:
+        out = spool_plan_json(store, job.plan_id, job.spool)
+        if isinstance(out, Failed):
+            raise _NotFound(out.error.message)
+        return out
     text = store.get_plan_json(job.plan_id) if store is not None else None
     if text is None:
         raise _NotFound(f"no plan with id {job.plan_id!r}")
@@ -367,6 +373,34 @@ def _export(job: ExportJob) -> Done:
 
 class _NotFound(LookupError):
     pass
+
+
+def spool_plan_json(store, plan_id: str, spool: str | None) -> Outcome:
+    """The stored plan ``plan_id`` of ``store`` (a :class:`app.storage.Store`) as its stored
+    JSON, copied without parsing in bounded chunks (:meth:`~app.storage.Store.copy_plan_json`)
+    to a new file in ``spool`` (None: as bytes); Failed ``not_found`` (404) when it is gone.
+    Only the copy's chunk is ever in memory: a download of any size is bounded like an export."""
+    import io
+
+    if spool is None:
+        buf = io.BytesIO()
+        found = store.copy_plan_json(plan_id, buf)
+        return Done(buf.getvalue()) if found else _gone(plan_id)
+    fd, path = _spool_file(spool)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            found = store.copy_plan_json(plan_id, f)
+    except BaseException:
+        os.unlink(path)
+        raise
+    if not found:
+        os.unlink(path)
+        return _gone(plan_id)
+    return Done(None, path=path)
+
+
+def _gone(plan_id: str) -> Failed:
+    return failed({"code": "not_found", "message": f"no plan with id {plan_id!r}"}, 404)
 
 
 def spool_dir(store_path: str | os.PathLike) -> str:
