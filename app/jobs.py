@@ -519,10 +519,16 @@ class _Deadline:
 
 
 def check_estimate(job: Job, timeout_s: float | None) -> Failed | None:
-    """A :class:`Failed` ``too_much_work`` if the job's work estimate exceeds ``timeout_s``."""
+    """A :class:`Failed` ``too_much_work`` if the job's work estimate exceeds ``timeout_s``, or
+    the input's error (422) found while estimating (a contour job reads its G-code program)."""
     if not timeout_s or timeout_s <= 0:
         return None
-    est = estimate(job)
+    from planner.errors import PlannerError
+
+    try:
+        est = estimate(job)
+    except PlannerError as exc:
+        return failed(exc.to_dict())
     if est is not None and est.seconds > timeout_s:
         return failed(too_much_work(est, timeout_s))
     return None
