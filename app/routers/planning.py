@@ -10,9 +10,9 @@ from fastapi.responses import Response
 from pydantic import ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from app import storage_io
 from app.errors import error_response, errors_doc
 from app.formats import PlanFormat
-from app import storage_io
 from app.http_exchange import import_openapi, import_options, plan_content, read_drawing
 from app.jobs import ExportJob, ImportJob, PlanJob, SegmentJob, spool_dir, spool_plan_json
 from app.routers.deps import Forces, Format, outcome_response, plan_format, store, submit
