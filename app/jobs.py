@@ -135,13 +135,18 @@ class ExportJob:
 @dataclass(frozen=True)
 class ContourJob:
     """Contour a G-code program (:func:`planner.contour.plan_contour`; ``POST /v1/contour``),
-    stored and answered like a :class:`PlanJob`."""
+    stored and answered like a :class:`PlanJob`. Estimated where it runs, not before it is
+    queued: the worker reads the program once (a program of tens of thousands of lines takes
+    seconds and ~90 MB to read), refuses it over ``work_limit_s`` (``too_much_work``) and
+    plans it."""
 
     request: ContourRequest
     format: str = "json"
     forces: bool = False
     source: str | None = None
     store: str | None = None
+    #: refused over this estimate [s] (set from the time limit by :func:`bounded`)
+    work_limit_s: float | None = None
     kind: ClassVar[str] = "contour"
 
 
@@ -205,15 +210,12 @@ def crashed(exc: BaseException) -> Failed:
 
 def estimate(job: Job):
     """The planner's work estimate (:func:`planner.estimate_work`) of a job that plans, else
-    None (microseconds; compared with the time limit before the job is queued)."""
+    None (compared with the time limit before the job is queued; a :class:`ContourJob` is
+    estimated by the worker that reads its program: :func:`_contour`)."""
     if isinstance(job, (PlanJob, EditorJob)):
         from planner import estimate_work
 
         return estimate_work(job.request)
-    if isinstance(job, ContourJob):
-        from planner.contour import estimate_contour
-
-        return ContourWork(*estimate_contour(job.request))
     return None
 
 
@@ -305,13 +307,21 @@ def _plan(job: PlanJob) -> Done:
 
 
 def _contour(job: ContourJob) -> Done:
-    """Contour a G-code program: stored and answered like a plan (the stored request is the
-    contour request)."""
+    """Read a G-code program once, refuse it over ``work_limit_s`` (``too_much_work``), contour
+    it: stored and answered like a plan (the stored request is the contour request)."""
     from app.storage import new_id
-    from planner.contour import plan_contour
+    from planner.contour import estimate_contour, plan_contour
+    from planner.errors import PlannerError
+    from planner.exchange import read_gcode
 
     req = job.request
-    result = plan_contour(req)
+    program = read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
+    if job.work_limit_s:
+        work = ContourWork(*estimate_contour(req, program))
+        if work.seconds > job.work_limit_s:
+            raise PlannerError(**too_much_work(work, job.work_limit_s))
+    result = plan_contour(req, program=program)
+    del program
     plan_id = new_id() if job.store else None
     result.plan_id = plan_id
     data = result.to_json()
@@ -519,16 +529,10 @@ class _Deadline:
 
 
 def check_estimate(job: Job, timeout_s: float | None) -> Failed | None:
-    """A :class:`Failed` ``too_much_work`` if the job's work estimate exceeds ``timeout_s``, or
-    the input's error (422) found while estimating (a contour job reads its G-code program)."""
+    """A :class:`Failed` ``too_much_work`` if the job's work estimate exceeds ``timeout_s``."""
     if not timeout_s or timeout_s <= 0:
         return None
-    from planner.errors import PlannerError
-
-    try:
-        est = estimate(job)
-    except PlannerError as exc:
-        return failed(exc.to_dict())
+    est = estimate(job)
     if est is not None and est.seconds > timeout_s:
         return failed(too_much_work(est, timeout_s))
     return None
@@ -536,8 +540,9 @@ def check_estimate(job: Job, timeout_s: float | None) -> Failed | None:
 
 def bounded(job: Job, timeout_s: float | None) -> Job:
     """``job`` with the time limit as its work limit (a plan job whose layout, once segmented,
-    is estimated again before it is simulated: issue 20)."""
-    if isinstance(job, PlanJob) and job.work_limit_s is None and timeout_s and timeout_s > 0:
+    is estimated again before it is simulated: issue 20; a contour job, estimated once its
+    program is read)."""
+    if isinstance(job, (PlanJob, ContourJob)) and job.work_limit_s is None and timeout_s and timeout_s > 0:
         return dataclasses.replace(job, work_limit_s=float(timeout_s))
     return job
 

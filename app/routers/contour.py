@@ -3,12 +3,12 @@
 An ``APIRouter`` included by :func:`app.api.create_app`. The request body is the schema's
 :class:`~planner.schema.ContourRequest`; the response the usual plan result (with its
 ``contour`` section) or ``?format=csv|gcode|joints|dxf``, stored like a plan (``GET
-/v1/plans/{id}``). The handler only validates the body: the job service reads the program
-and estimates its work on its own threads, never on the event loop (a program of tens of
-thousands of lines takes seconds to read), so a bad program is a 422 before a worker is taken,
-naming the line (field ``program``) and the cause, and one whose work estimate exceeds the
-compute limit is refused (``too_much_work``); the plan's time and memory are bounded like any
-plan's; the body size limit bounds the program's text (413).
+/v1/plans/{id}``). The handler only validates the body: the worker reads the program, never
+the server process (a program of tens of thousands of lines takes seconds and ~90 MB to
+read), once, under the job's time limit and memory cap: a bad program is a 422 naming the
+line (field ``program``) and the cause, one whose work estimate exceeds the compute limit is
+refused (``too_much_work``) before it is planned; the body size limit bounds the program's
+text (413).
 """
 
 from __future__ import annotations
