@@ -8,7 +8,8 @@ Jobs (:data:`Job`) are frozen dataclasses, picklable to a worker process:
 * :class:`ImportJob` a DXF/SVG drawing as a layout and a report;
 * :class:`EditorJob` the editor's re-plan (segmentation kept when the plan fails);
 * :class:`ExportJob` a stored plan in an output format, written to a spool file the server
-  streams (the server process never parses the stored plan);
+  streams (the server process never parses the stored plan; JSON, the stored form, is
+  copied as it is: :func:`spool_plan_json`, which the server runs itself on its read threads);
 * :class:`SleepJob` (tests of the time limit).
 
 A new kind (e.g. a contour job around ``planner.plan_contour``) is a dataclass here, a
@@ -45,7 +46,7 @@ from planner.schema import ContourRequest, ImportOptions, PlanRequest, PlanResul
 __all__ = ["ContourJob", "ContourWork", "Done", "EditorJob", "EditorPlan", "ErrorDetail", "ExportJob", "Failed",
            "ImportJob", "ItemTimeout", "Job", "Outcome", "PlanJob", "SegmentJob", "SleepJob", "bounded",
            "check_estimate", "clean_spool", "crashed", "estimate", "failed", "run_bounded", "run_job",
-           "segmentation_module", "spool_dir"]
+           "segmentation_module", "spool_dir", "spool_plan_json"]
 
 
 class ErrorDetail(BaseModel):
@@ -134,13 +135,18 @@ class ExportJob:
 @dataclass(frozen=True)
 class ContourJob:
     """Contour a G-code program (:func:`planner.contour.plan_contour`; ``POST /v1/contour``),
-    stored and answered like a :class:`PlanJob`."""
+    stored and answered like a :class:`PlanJob`. Estimated where it runs, not before it is
+    queued: the worker reads the program once (a program of tens of thousands of lines takes
+    seconds and ~90 MB to read), refuses it over ``work_limit_s`` (``too_much_work``) and
+    plans it."""
 
     request: ContourRequest
     format: str = "json"
     forces: bool = False
     source: str | None = None
     store: str | None = None
+    #: refused over this estimate [s] (set from the time limit by :func:`bounded`)
+    work_limit_s: float | None = None
     kind: ClassVar[str] = "contour"
 
 
@@ -204,15 +210,12 @@ def crashed(exc: BaseException) -> Failed:
 
 def estimate(job: Job):
     """The planner's work estimate (:func:`planner.estimate_work`) of a job that plans, else
-    None (microseconds; compared with the time limit before the job is queued)."""
+    None (compared with the time limit before the job is queued; a :class:`ContourJob` is
+    estimated by the worker that reads its program: :func:`_contour`)."""
     if isinstance(job, (PlanJob, EditorJob)):
         from planner import estimate_work
 
         return estimate_work(job.request)
-    if isinstance(job, ContourJob):
-        from planner.contour import estimate_contour
-
-        return ContourWork(*estimate_contour(job.request))
     return None
 
 
@@ -304,13 +307,21 @@ def _plan(job: PlanJob) -> Done:
 
 
 def _contour(job: ContourJob) -> Done:
-    """Contour a G-code program: stored and answered like a plan (the stored request is the
-    contour request)."""
+    """Read a G-code program once, refuse it over ``work_limit_s`` (``too_much_work``), contour
+    it: stored and answered like a plan (the stored request is the contour request)."""
     from app.storage import new_id
-    from planner.contour import plan_contour
+    from planner.contour import estimate_contour, plan_contour
+    from planner.errors import PlannerError
+    from planner.exchange import read_gcode
 
     req = job.request
-    result = plan_contour(req)
+    program = read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
+    if job.work_limit_s:
+        work = ContourWork(*estimate_contour(req, program))
+        if work.seconds > job.work_limit_s:
+            raise PlannerError(**too_much_work(work, job.work_limit_s))
+    result = plan_contour(req, program=program)
+    del program
     plan_id = new_id() if job.store else None
     result.plan_id = plan_id
     data = result.to_json()
@@ -344,6 +355,11 @@ def _export(job: ExportJob) -> Done:
     from planner.schema import PlanResult
 
     store = _store(job.store)
+    if job.format == "json" and store is not None:
+        out = spool_plan_json(store, job.plan_id, job.spool)
+        if isinstance(out, Failed):
+            raise _NotFound(out.error.message)
+        return out
     text = store.get_plan_json(job.plan_id) if store is not None else None
     if text is None:
         raise _NotFound(f"no plan with id {job.plan_id!r}")
@@ -367,6 +383,34 @@ def _export(job: ExportJob) -> Done:
 
 class _NotFound(LookupError):
     pass
+
+
+def spool_plan_json(store, plan_id: str, spool: str | None) -> Outcome:
+    """The stored plan ``plan_id`` of ``store`` (a :class:`app.storage.Store`) as its stored
+    JSON, copied without parsing in bounded chunks (:meth:`~app.storage.Store.copy_plan_json`)
+    to a new file in ``spool`` (None: as bytes); Failed ``not_found`` (404) when it is gone.
+    Only the copy's chunk is ever in memory: a download of any size is bounded like an export."""
+    import io
+
+    if spool is None:
+        buf = io.BytesIO()
+        found = store.copy_plan_json(plan_id, buf)
+        return Done(buf.getvalue()) if found else _gone(plan_id)
+    fd, path = _spool_file(spool)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            found = store.copy_plan_json(plan_id, f)
+    except BaseException:
+        os.unlink(path)
+        raise
+    if not found:
+        os.unlink(path)
+        return _gone(plan_id)
+    return Done(None, path=path)
+
+
+def _gone(plan_id: str) -> Failed:
+    return failed({"code": "not_found", "message": f"no plan with id {plan_id!r}"}, 404)
 
 
 def spool_dir(store_path: str | os.PathLike) -> str:
@@ -496,8 +540,9 @@ def check_estimate(job: Job, timeout_s: float | None) -> Failed | None:
 
 def bounded(job: Job, timeout_s: float | None) -> Job:
     """``job`` with the time limit as its work limit (a plan job whose layout, once segmented,
-    is estimated again before it is simulated: issue 20)."""
-    if isinstance(job, PlanJob) and job.work_limit_s is None and timeout_s and timeout_s > 0:
+    is estimated again before it is simulated: issue 20; a contour job, estimated once its
+    program is read)."""
+    if isinstance(job, (PlanJob, ContourJob)) and job.work_limit_s is None and timeout_s and timeout_s > 0:
         return dataclasses.replace(job, work_limit_s=float(timeout_s))
     return job
 

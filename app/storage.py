@@ -46,6 +46,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import BinaryIO
 
 DB_NAME = "rangeplan.sqlite3"
 #: (the quotas' defaults are those of :class:`app.settings.Settings`)
@@ -57,6 +58,8 @@ BUSY_TIMEOUT_S = 30.0
 #: before it is handed to the read threads instead (:meth:`Store.corridor_page`, ``quick``)
 QUICK_BUSY_TIMEOUT_S = 0.005
 PAGE_SIZE = 16384
+#: bytes of a stored plan read at a time when it is copied out as it is (:meth:`Store.copy_plan_json`)
+COPY_CHUNK = 1 << 20
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS corridors (
@@ -471,6 +474,23 @@ class Store:
         with self._connect() as con:
             row = con.execute("SELECT result FROM plans WHERE id = ?", (id,)).fetchone()
         return row[0] if row else None
+
+    def copy_plan_json(self, id: str, out: BinaryIO, chunk: int = COPY_CHUNK) -> bool:
+        """Write the stored result JSON of a plan to ``out`` as it is stored (its UTF-8 bytes,
+        never parsed), ``chunk`` bytes at a time (SQLite's incremental blob reads: the whole
+        text is never in memory); False if there is no such plan."""
+        con = self._db.get()
+        con.execute("BEGIN")  # one read snapshot: the row found is the row copied
+        try:
+            row = con.execute("SELECT seq FROM plans WHERE id = ?", (id,)).fetchone()
+            if row is None:
+                return False
+            with con.blobopen("plans", "result", row[0], readonly=True) as blob:
+                while data := blob.read(chunk):
+                    out.write(data)
+            return True
+        finally:
+            con.execute("COMMIT")
 
     def has_plan(self, id: str) -> bool:
         """Whether a plan of this id is stored (without reading it)."""

@@ -1,19 +1,22 @@
-"""Memory of the server process while it exports a large stored plan, side by side across
-checkouts (``--root``): issue 21's goal that 4 concurrent CSV exports of a stored ~60 MB plan
-grow the server process by at most 300 MB.
+"""Memory of the server process while clients download a large stored plan, side by side
+across checkouts (``--root``): issue 21's goal that 4 concurrent CSV exports of a stored ~60 MB
+plan grow the server process by at most 300 MB, and issue 33's that downloads in every
+format (``--format json csv ...``) grow it by at most its bounded buffers (4 JSON downloads:
+<= 50 MB) with ``/ready`` answering within 1 s.
 
 The plan is planned once by this checkout's planner (Table I's cells back and forth,
 ``--samples`` per segment, paper mode; cached in the temporary directory) and stored, as
-``POST /v1/plan`` stores it, in a fresh SQLite store per checkout. Each checkout's own
-``rangeplan serve --no-editor`` then runs on a free 127.0.0.1 port over its store (its
-``.venv``), and ``--exports`` clients fetch ``GET /v1/plans/{id}?format=FMT`` at once, each
-body streamed to nowhere and its length checked. A thread samples the server process's RSS
-(the server only, not its workers) every 10 ms and ``/ready`` every 100 ms. Printed per
-checkout: the stored plan's size, the exports' wall time, the server's RSS before, its peak
-and growth during the exports, and what it still holds after; ``/ready``'s slowest answer
-during the exports.
+``POST /v1/plan`` stores it, in a fresh SQLite store per checkout and format. Each checkout's
+own ``rangeplan serve --no-editor`` then runs on a free 127.0.0.1 port over its store (its
+``.venv``, else this interpreter with the checkout on ``PYTHONPATH``: e.g. an older revision
+unpacked by ``git archive``), and ``--exports`` clients fetch ``GET /v1/plans/{id}?format=FMT``
+at once, each body streamed to nowhere and its length checked. A thread samples the server
+process's RSS (the server only, not its workers) every 10 ms and ``/ready`` every 100 ms.
+Printed per checkout and format: the stored plan's size, the downloads' wall time, the
+server's RSS before, its peak and growth during the downloads, and what it still holds
+after; ``/ready``'s slowest answer during the downloads.
 
-    .venv/bin/python benchmarks/bench_service.py --root /path/to/main --root .
+    .venv/bin/python benchmarks/bench_service.py --root /path/to/main --root . --format json --format csv
 """
 
 from __future__ import annotations
@@ -70,7 +73,9 @@ def start(root: Path, data_dir: str, workers: int) -> tuple[subprocess.Popen, st
     env = {**os.environ, "RANGEPLAN_DATA_DIR": data_dir, "RANGEPLAN_WORKERS": str(workers),
            "RANGEPLAN_ACCESS_LOG": "0", "RANGEPLAN_LOG_LEVEL": "warning", "RANGEPLAN_MAX_PLAN_BYTES": str(1 << 30),
            "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-    proc = subprocess.Popen([str(root / ".venv" / "bin" / "python"), "-m", "app.cli", "serve", "--no-editor",
+    venv = root / ".venv" / "bin" / "python"
+    env["PYTHONPATH"] = str(root)
+    proc = subprocess.Popen([str(venv if venv.exists() else sys.executable), "-m", "app.cli", "serve", "--no-editor",
                              "--port", str(port)], env=env, cwd=root, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, start_new_session=True)
     url = f"http://127.0.0.1:{port}"
@@ -159,7 +164,8 @@ def measure(root: Path, text: str, request: dict, exports: int, fmt: str, worker
         finally:
             stop(proc)
     ok = all(isinstance(s, int) and s > 0 and s == sizes[0] for s in sizes)
-    return {"root": str(root), "plan_mb": len(text) / 1e6, "export_mb": sizes[0] / 1e6 if ok else float("nan"),
+    return {"root": str(root), "format": fmt, "plan_mb": len(text) / 1e6,
+            "export_mb": sizes[0] / 1e6 if ok else float("nan"),
             "wall_s": wall, "before_mb": before / 1e6, "peak_mb": peak[0] / 1e6, "growth_mb": (peak[0] - before) / 1e6,
             "after_mb": after / 1e6, "ready_max_s": ready_max[0], "ok": ok, "sizes": sizes}
 
@@ -168,20 +174,21 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--root", action="append", type=Path, help="checkout with a .venv (repeat; default: this one)")
     ap.add_argument("--exports", type=int, default=4, help="concurrent exports")
-    ap.add_argument("--format", default="csv", help="export format")
+    ap.add_argument("--format", action="append", help="download format (repeat; default: csv)")
     ap.add_argument("--samples", type=int, default=1200, help="samples per segment of the stored plan (1200: ~60 MB)")
     ap.add_argument("--workers", type=int, default=2, help="planning workers of each server")
     args = ap.parse_args()
     roots = [r.resolve() for r in (args.root or [HERE])]
     text, request = stored_plan(args.samples, Path(tempfile.gettempdir()))
     print(f"# {os.cpu_count()} CPUs; load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
-    print(f"{'checkout':40s} {'plan MB':>8s} {'export MB':>9s} {'wall s':>7s} {'RSS before':>10s} {'peak':>8s} "
-          f"{'growth':>8s} {'after':>8s} {'/ready max s':>12s} ok")
-    for root in roots:
-        r = measure(root, text, request, args.exports, args.format, args.workers)
-        print(f"{r['root'][-40:]:40s} {r['plan_mb']:8.1f} {r['export_mb']:9.1f} {r['wall_s']:7.1f} "
-              f"{r['before_mb']:10.0f} {r['peak_mb']:8.0f} {r['growth_mb']:8.0f} {r['after_mb']:8.0f} "
-              f"{r['ready_max_s']:12.2f} {'yes' if r['ok'] else r['sizes']}", flush=True)
+    print(f"{'checkout':40s} {'format':>6s} {'plan MB':>8s} {'export MB':>9s} {'wall s':>7s} {'RSS before':>10s} "
+          f"{'peak':>8s} {'growth':>8s} {'after':>8s} {'/ready max s':>12s} ok")
+    for fmt in args.format or ["csv"]:
+        for root in roots:
+            r = measure(root, text, request, args.exports, fmt, args.workers)
+            print(f"{r['root'][-40:]:40s} {r['format']:>6s} {r['plan_mb']:8.1f} {r['export_mb']:9.1f} "
+                  f"{r['wall_s']:7.1f} {r['before_mb']:10.0f} {r['peak_mb']:8.0f} {r['growth_mb']:8.0f} "
+                  f"{r['after_mb']:8.0f} {r['ready_max_s']:12.2f} {'yes' if r['ok'] else r['sizes']}", flush=True)
     print(f"# load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 

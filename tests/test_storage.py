@@ -321,3 +321,25 @@ def test_database_in_a_group_writable_directory_is_group_writable(tmp_path):
         assert stat.S_IMODE((shared / "old.sqlite3").stat().st_mode) & 0o060 == 0o060
     finally:
         os.umask(old)
+
+
+class _Chunks:
+    """A file-like sink that records the size of each write."""
+
+    def __init__(self):
+        self.parts: list[bytes] = []
+
+    def write(self, data: bytes) -> int:
+        self.parts.append(bytes(data))
+        return len(data)
+
+
+def test_plan_json_is_copied_as_stored_in_chunks(tmp_path):
+    """A stored plan's JSON is copied out byte for byte, a bounded chunk at a time (issue 33)."""
+    st = Store(tmp_path)
+    text = json.dumps({"plan_id": None, "note": "é" * 1000, "x": list(range(5000))})
+    plan_id = st.save_plan_json(text)
+    out = _Chunks()
+    assert st.copy_plan_json(plan_id, out, chunk=4096)
+    assert b"".join(out.parts) == text.encode() and max(map(len, out.parts)) <= 4096 and len(out.parts) > 5
+    assert not st.copy_plan_json("f" * 32, _Chunks())

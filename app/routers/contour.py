@@ -3,11 +3,12 @@
 An ``APIRouter`` included by :func:`app.api.create_app`. The request body is the schema's
 :class:`~planner.schema.ContourRequest`; the response the usual plan result (with its
 ``contour`` section) or ``?format=csv|gcode|joints|dxf``, stored like a plan (``GET
-/v1/plans/{id}``). The program is read in the server process first, so a bad program is a
-422 at once naming the line (field ``program``) and the cause; the job service then refuses a
-program whose work estimate exceeds the compute limit (``too_much_work``) before a worker is
-taken, and bounds the plan's time and memory like any plan; the body size limit bounds the
-program's text (413).
+/v1/plans/{id}``). The handler only validates the body: the worker reads the program, never
+the server process (a program of tens of thousands of lines takes seconds and ~90 MB to
+read), once, under the job's time limit and memory cap: a bad program is a 422 naming the
+line (field ``program``) and the cause, one whose work estimate exceeds the compute limit is
+refused (``too_much_work``) before it is planned; the body size limit bounds the program's
+text (413).
 """
 
 from __future__ import annotations
@@ -17,12 +18,11 @@ from typing import Any
 from fastapi import APIRouter, Request
 from fastapi.responses import Response
 
-from app.errors import error_response, errors_doc
+from app.errors import errors_doc
 from app.formats import PlanFormat
 from app.http_exchange import plan_content
 from app.jobs import ContourJob
 from app.routers.deps import Forces, Format, plan_format, store, submit
-from planner.errors import PlannerError
 from planner.schema import ContourRequest, PlanResult
 
 __all__ = ["router"]
@@ -42,13 +42,6 @@ async def contour(body: ContourRequest, request: Request, format: PlanFormat | N
     M3/M5/M6): every cut pass within `tolerance_m` of the programmed path (each sample and the
     straight move to the next), `feed` `program` (never faster than F) or `fastest` (as the
     drives allow); `origin` places program zero in the robot frame (m). Stored like a plan."""
-    from planner.exchange import read_gcode
-
-    try:
-        read_gcode(body.program, cut_below=body.cut_below_m, z_rapid_m_s=body.z_rapid_m_s)
-        body.plan_settings()
-    except PlannerError as exc:
-        return error_response(422, exc.code, exc.message, exc.field)
     fmt = plan_format(request, format)
     job = ContourJob(body, fmt, forces, source="POST /v1/contour", store=str(store(request).path))
     return await submit(request, job, fmt)

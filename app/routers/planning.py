@@ -1,6 +1,7 @@
 """Planning: ``POST /v1/plan``, ``POST /v1/import``, ``POST /v1/segment`` and
-``GET /v1/plans/{id}`` (a stored plan again, in any output format: an export job on a
-worker that reads the stored plan and writes a file the server streams)."""
+``GET /v1/plans/{id}`` (a stored plan again, in any output format: a spool file the server
+streams and then deletes; an export job on a worker writes it, JSON is the stored text
+copied as it is on the store's read threads)."""
 
 from __future__ import annotations
 
@@ -9,11 +10,12 @@ from fastapi.responses import Response
 from pydantic import ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from app import storage_io
 from app.errors import error_response, errors_doc
 from app.formats import PlanFormat
 from app.http_exchange import import_openapi, import_options, plan_content, read_drawing
-from app.jobs import ExportJob, ImportJob, PlanJob, SegmentJob, spool_dir
-from app.routers.deps import Forces, Format, plan_format, store, submit
+from app.jobs import ExportJob, ImportJob, PlanJob, SegmentJob, spool_dir, spool_plan_json
+from app.routers.deps import Forces, Format, outcome_response, plan_format, store, submit
 from planner.schema import ImportOptions, ImportResult, PlanRequest, PlanResult, SegmentationResult, planner_error
 
 __all__ = ["PLAN_RESPONSES", "plan_response", "router"]
@@ -79,18 +81,9 @@ async def get_plan(plan_id: str, request: Request, format: PlanFormat | None = F
     """A stored plan result (the newest plans are kept; see RANGEPLAN_MAX_PLANS)."""
     st = store(request)
     fmt = plan_format(request, format)
-    if fmt == "json":
-        text = await _in_thread(st.get_plan_json, plan_id)
-        if text is None:
-            raise StarletteHTTPException(404, f"no plan with id {plan_id!r}")
-        return Response(text, media_type="application/json")
-    if not await _in_thread(st.has_plan, plan_id):
+    if fmt == "json":  # the stored form: copied as it is, never parsed nor held whole
+        return outcome_response(await storage_io.read(spool_plan_json, st, plan_id, spool_dir(st.path)), fmt)
+    if not await storage_io.read(st.has_plan, plan_id):
         raise StarletteHTTPException(404, f"no plan with id {plan_id!r}")
     job = ExportJob(plan_id, str(st.path), fmt, forces, spool_dir(st.path))
     return await submit(request, job, fmt, name=plan_id)
-
-
-async def _in_thread(fn, *args):
-    import asyncio
-
-    return await asyncio.get_running_loop().run_in_executor(None, fn, *args)
