@@ -211,7 +211,8 @@ def test_linuxcnc_samples_match_rs274(name):
     ("G41 X1", "G41"), ("G42 D1", "G42"), ("G81 X1 Y1 Z-1 R1", "G81"),
     ("O100 sub", "O-word"), ("#1 = 2", "parameters"), ("G1 A5", "A5"), ("G90.1", "G90.1"), ("M98", "M98"),
     ("G1 X[1+2]", "expressions"), ("G2 X1 Y0", "I and J"), ("G2 X10 Y0 R2", "diameter"), ("G1 Q2", "Q2"),
-    ("G93", "G93: inverse-time feed (G93) is not supported"), ("G1 X2 C5", "C5 is another axis"),  # the read-back's words: not for contour
+    ("G93", "G93: inverse-time feed (G93) is not supported"),  # the read-back's words: not for contour
+    ("G1 X2 C5", "C5 is another axis"),
 ])
 def test_unsupported_words_name_the_line_and_word(line, word):
     text = f"G21 G90\nF100\nG0 X0 Y0\n{line}\nG1 Z-1\nG1 X5\nM2\n"

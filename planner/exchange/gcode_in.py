@@ -199,6 +199,7 @@ def read_gcode(text: str, *, cut_below: float = 0.0, z_rapid_m_s: float = 0.05, 
     warnings: list[str] = []
     blocks: list[ProgramBlock] = []
     plane = 17.0
+    tool_offset = 0.0  # the tool length offset in force [m]: G43.1's; G43 H's is unknown here, read as 0
     work_offsets: list[str] = []
     ended = False
     lines = text.splitlines()
@@ -303,6 +304,10 @@ def read_gcode(text: str, *, cut_below: float = 0.0, z_rapid_m_s: float = 0.05, 
                 word = f"G{g:g}" + (f" {extra}{vals[extra]:g}" if extra and extra in vals else "")
                 word += "".join(f" {k}{v:g}" for k, v in offset_words.items()) if g == 43.1 else ""
                 words.append(ProgramWord(line=ln, word=word))
+            if g in (43.0, 43.1, 49.0):  # as LinuxCNC: the position in program Z moves by the change of offset
+                new_offset = offset_words.get("Z", 0.0) * u if g == 43.1 else 0.0
+                pos = pos - np.array([0.0, 0.0, new_offset - tool_offset])
+                tool_offset = new_offset
             if g in _WORK_OFFSETS and f"G{g:g}" not in work_offsets:
                 work_offsets.append(f"G{g:g}")
         if 90.0 in gs:
