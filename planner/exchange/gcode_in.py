@@ -1,16 +1,25 @@
 """Reading a CAM program: RS274NGC (LinuxCNC's dialect) -> a :class:`~planner.schema.Program`
 of lines and arcs in m (the program's own frame), split into cut passes, travel and dwells.
 
-Supported (what CAM posts for a 2.5D contour emit): ``G0 G1 G2 G3`` (arcs by ``I J`` offsets,
-incremental as LinuxCNC's default ``G91.1``, or by ``R``; full circles with ``I J``), ``G4 P``
-(seconds), ``G17``, ``G20 G21``, ``G90 G91``, ``G61`` (exact stop), ``G64`` (``P``: the path
-tolerance), ``F`` (units per minute, ``G94``), ``M3 M4 M5 M6 M7 M8 M9``, ``M0 M1`` (a pause: the tool stops
-there), ``S``, ``T``, ``N`` line numbers, ``( )`` and ``;`` comments, ``%`` delimiters, ``M2``/``M30`` (what follows is
-ignored, as LinuxCNC does). The no-op cancels CAM headers carry (``G40`` cutter compensation
-off, ``G49`` tool length offset off, ``G80`` canned cycle off, ``G54`` the first work offset,
-zero here, ``G94``) are accepted and listed. Anything else (``G41``/``G42`` cutter compensation,
-canned cycles, ``O`` subroutines, parameters and expressions, ``G18``/``G19`` and other axes)
-is a :class:`~planner.errors.PlannerError` naming the line and the word.
+Supported (what CAM posts for a 2.5D contour emit: FreeCAD's ``linuxcnc_post``, Fusion 360,
+pcb-gcode, Estlcam, dxf2gcode): ``G0 G1 G2 G3`` (arcs by centre offsets, incremental as
+LinuxCNC's default ``G91.1``, or by ``R``; full circles by offsets; a Z move in ``G17`` is a
+helix, its XY path the arc), ``G17 G18 G19`` (an arc in the XZ or YZ plane, e.g. a vertical
+lead-in, runs along a straight line in XY: it is read as the lines between the quarter points
+of its circle where X, Y or Z turns, a stop where the XY direction reverses; a helix along the
+other axis is refused), ``G4 P`` (seconds), ``G20 G21`` (converted to m here), ``G90 G91``,
+``G61 G61.1`` (exact stop), ``G64`` (``P``: the path tolerance), ``F`` (units per minute,
+``G94``), ``M3 M4 M5 M6 M7 M8 M9`` with ``S`` and ``T``, ``M0 M1`` (a stop at rest, warned),
+``G43``/``G43 H`` (the tool table is unknown: the Z words after it are the program's),
+``G43.1 Z``, ``G49`` (the current Z shifts by the change of offset, as LinuxCNC's), ``G54``
+to ``G59.3`` (no offsets table: the identity, warned for any but ``G54``; ``origin`` places
+the program), ``G28`` with Z alone (``G28 G91 Z0.``: a retract above the cut, warned),
+``G40 G80`` cancels, ``O`` program numbers alone on a line, ``N``, ``( )`` and ``;``
+comments, ``%``, ``M2``/``M30`` (what follows is ignored, as LinuxCNC does). The spindle,
+tool and mode words are kept in ``Program.words``. Anything else (cutter compensation,
+canned cycles, ``G92``/``G10``/``G53``, ``G28`` in X or Y, ``O`` subroutines, parameters
+and expressions, other axes) is a :class:`~planner.errors.PlannerError` naming the line, the
+word and what to change in the CAM post.
 
 A feed move whose Z is below ``cut_below`` (somewhere along it) cuts; consecutive cutting
 moves form a pass. Rapids and feed moves above it are travel; Z-only moves are plunges and
