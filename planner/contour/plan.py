@@ -61,6 +61,7 @@ from ..schema import (
     PathElement,
     PlanResult,
     Program,
+    ProgramBlock,
     Segment,
     Settings,
     Timing,
@@ -195,6 +196,7 @@ def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0
     warnings = list(program.warnings)
     psi = 0.0
     pos = program.start + origin
+    z = 0.0  # the tool's Z [m] (program frame; the reader starts at Z 0, as LinuxCNC)
     parts: list[_Part] = []
     pass_summaries: list[PassSummary] = []
     blocks = program.blocks
@@ -210,12 +212,17 @@ def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0
             target = blocks[j].elements[-1].end + origin
             if np.hypot(*(target - pos)) > 1e-9:
                 part = _travel(req, model, st, pos, target, psi, b.line)
+                _travel_z(part, [e for bb in blocks[i:j + 1] for e in bb.elements], pos, target)
                 parts.append(part)
                 pos = part.result.pose[-1, :2].copy()
+            z = blocks[j].elements[-1].z_end_m
             i = j + 1
             continue
         if b.kind == "dwell":
-            parts.append(_dwell(pos, psi, b.duration_s, st.Ts))
+            part = _dwell(pos, psi, b.duration_s, st.Ts)
+            _dwell_z(part, b, z)
+            parts.append(part)
+            z = float(part.z[-1])
             i += 1
             continue
         start_pose = pos.copy()
@@ -223,6 +230,7 @@ def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0
         if gap > 0.5 * tol:
             # a cut that starts away from where the tool is: travel there first (at rest)
             part = _travel(req, model, st, pos, b.elements[0].start + origin, psi, b.line)
+            part.z[:], part.source[:] = z, b.line
             parts.append(part)
             pos = part.result.pose[-1, :2].copy()
             start_pose = pos.copy()
@@ -232,6 +240,7 @@ def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0
             part = _cut(req, model, st, chunk, origin, tol, psi, pos, geo, b.elements, hint,
                         len(program.passes), memo)
             hint = part.scale if part.scale is not None else hint
+            _cut_z(part, b.elements, origin)
             parts.append(part)
             pos = part.result.pose[-1, :2].copy()
         cut_parts = parts[first:]
@@ -248,11 +257,16 @@ def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0
             max_deviation_m=max(dev, path_dev), max_path_deviation_m=path_dev,
             max_speed_m_s=speed, max_programmed_feed_m_s=max(e.feed_m_s for e in b.elements)))
         del start_pose
+        z = b.elements[-1].z_end_m
         i += 1
     result = _join(parts, req, st, model)
     cutting = np.concatenate([p.cutting if k == 0 else p.cutting[1:] for k, p in enumerate(parts)])
     lines = np.concatenate([p.line if k == 0 else p.line[1:] for k, p in enumerate(parts)])
     deviation = np.concatenate([p.deviation if k == 0 else p.deviation[1:] for k, p in enumerate(parts)])
+    z_m = np.concatenate([p.z if k == 0 else p.z[1:] for k, p in enumerate(parts)])
+    source = np.maximum.accumulate(np.concatenate([p.source if k == 0 else p.source[1:]
+                                                   for k, p in enumerate(parts)]))
+    dwell = [d for k, p in enumerate(parts) for d in (p.dwell if k == 0 else p.dwell[1:])]
     Ts = st.Ts
     path_max = max((p.max_path_deviation_m for p in pass_summaries), default=0.0)
     result.contour = ContourSection(
@@ -260,7 +274,8 @@ def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0
         tolerance_m=tol, max_deviation_m=max(float(deviation.max()), path_max), max_path_deviation_m=path_max,
         deviation_m=deviation, feed=req.feed,
         cycle_time_s=float(result.time[-1]), cut_time_s=float(cutting.sum() * Ts), passes=pass_summaries,
-        origin=[float(x) for x in origin], words=program.words, comments=program.comments, warnings=warnings)
+        origin=[float(x) for x in origin], words=program.words, comments=program.comments, warnings=warnings,
+        z_m=z_m, source_line=[int(x) for x in source], dwell=dwell)
     result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3
     return result
 
@@ -294,8 +309,15 @@ class _Part:
         self.result, self.cutting, self.line, self.deviation = result, cutting, line, deviation
         self.cells = cells
         self.segments = segments or []
+        K = len(cutting)
+        #: per sample: Z [m] (program frame), the source line reached, the dwell realised (or None)
+        self.z = np.zeros(K)
+        self.source = np.zeros(K, np.int64)
+        self.dwell: list[str | None] = [None] * K
         #: fastest: the profile's scales found for a cut (the next cut's search starts there)
         self.scale: _Scale | None = None
+        #: a cut: per sample the index of its element in the pass
+        self.elem = np.zeros(len(cutting), np.int64)
 
 
 def _chunks(elements: list[PathElement]) -> list[list[int]]:
@@ -374,6 +396,7 @@ def _cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int],
     dev = _deviation(result.pose[:, :2], elem, geo, tol)
     part = _Part(result, cutting, line, dev, cells=len(t.segments) - 2, segments=t.segments)
     part.scale = found.scale
+    part.elem = elem
     return part
 
 
@@ -886,6 +909,66 @@ def _dwell(pos: np.ndarray, psi: float, duration: float, Ts: float) -> _Part:
     pose = np.tile([pos[0], pos[1], psi], (K, 1))
     res = _rest_result(pose)
     return _Part(res, np.zeros(K, bool), np.zeros(K, np.int64), np.zeros(K))
+
+
+def _travel_z(part: _Part, elements: list[PathElement], a: np.ndarray, b: np.ndarray) -> None:
+    """Fill the Z and source line of a travel ``a -> b`` (the straight move over the travel
+    ``elements``): each sample's progress along it, as a share of the elements' length."""
+    pose = part.result.pose[:, :2]
+    d = b - a
+    f = np.clip((pose - a) @ d / max(float(d @ d), 1e-24), 0.0, 1.0)
+    lengths = np.array([max(e.length_m, 0.0) for e in elements])
+    ends = np.cumsum(lengths)
+    total = float(ends[-1])
+    s = f * total if total > 0 else np.full(len(f), 0.0)
+    k = np.minimum(np.searchsorted(ends, s, side="left"), len(elements) - 1) if total > 0 \
+        else np.full(len(f), len(elements) - 1)
+    starts = ends - lengths
+    share = np.clip((s - starts[k]) / np.maximum(lengths[k], 1e-24), 0.0, 1.0)
+    z0 = np.array([e.z_start_m for e in elements])
+    z1 = np.array([e.z_end_m for e in elements])
+    part.z = z0[k] + share * (z1[k] - z0[k])
+    part.source = np.array([elements[int(i)].line for i in k], np.int64)
+
+
+def _dwell_z(part: _Part, block: ProgramBlock, z: float) -> None:
+    """Fill the Z, source line and dwell of a dwell part: its Z moves in order, their times
+    scaled to the part's samples (never faster than programmed: the part rounds up to whole
+    samples)."""
+    K = len(part.z)
+    moves = list(block.z_moves) or [(block.duration_s, z)]
+    times = np.concatenate(([0.0], np.cumsum([max(t, 0.0) for t, _ in moves])))
+    zs = np.array([block.z_start_m if block.z_start_m is not None else z] + [zz for _, zz in moves], float)
+    total = float(times[-1])
+    t = np.linspace(0.0, total, K)
+    part.z = np.interp(t, times, zs) if total > 0 else np.full(K, zs[-1])
+    part.source[:] = block.line
+    part.dwell = [None] + [block.reason] * (K - 1)
+
+
+def _cut_z(part: _Part, elements: list[PathElement], origin: np.ndarray) -> None:
+    """Fill the Z and source line of a cut part: per sample the Z of its element where the
+    sample projects onto it (program frame)."""
+    pose = part.result.pose[:, :2] - origin
+    elem = part.elem
+    z = np.zeros(len(pose))
+    for e_index in np.unique(elem):
+        e = elements[int(e_index)]
+        mask = elem == e_index
+        p = pose[mask]
+        if e.kind == "arc" and e.centre is not None and e.sweep_rad and e.start_angle_rad is not None:
+            c = np.asarray(e.centre, float)
+            ang = np.arctan2(p[:, 1] - c[1], p[:, 0] - c[0])
+            rel = ((ang - e.start_angle_rad) * np.sign(e.sweep_rad)) % (2 * math.pi)
+            sweep = abs(e.sweep_rad)
+            # beyond the arc's end: the nearer end
+            f = np.where(rel <= sweep, rel / sweep, np.where(rel - sweep < 2 * math.pi - rel, 1.0, 0.0))
+        else:
+            a, d = np.asarray(e.start, float), np.asarray(e.end, float) - np.asarray(e.start, float)
+            f = np.clip((p - a) @ d / max(float(d @ d), 1e-24), 0.0, 1.0)
+        z[mask] = e.z_start_m + f * (e.z_end_m - e.z_start_m)
+    part.z = z
+    part.source = part.line.copy()
 
 
 def _rest_result(pose: np.ndarray) -> PlanResult:

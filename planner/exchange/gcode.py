@@ -27,6 +27,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..schema import PlanResult
+from ._schedule import word_schedule
 
 __all__ = ["DECIMALS", "to_gcode"]
 
@@ -65,8 +66,59 @@ def to_gcode(result: PlanResult, source: str | None = None, header: Sequence[str
         f"G0 {rows[0]}",
         "G93",
     ]
+    if result.contour is not None and result.contour.z_m is not None and result.contour.source_line is not None:
+        return "\n".join(lines[:2] + _contour_body(result, rows, xy, c, ts, header, source)) + "\n"
     dwell = f"G4 P{ts:.6f}"
     for k in range(1, len(rows)):
         lines.append(dwell if rows[k] == rows[k - 1] else f"G1 {rows[k]} {feed}")
     lines += ["G94", "M2"]
     return "\n".join(lines) + "\n"
+
+
+def _contour_body(result: PlanResult, xyc_rows: list[str], xy: np.ndarray, c: np.ndarray, ts: float,
+                  header: Sequence[str], source: str | None) -> list[str]:
+    """A contour plan's program after its first two comment lines: the tool point with Z at
+    each sample, the source's words at the samples that reach their lines (:func:`word_schedule`),
+    each of its G4 dwells as one G4 of the samples it takes."""
+    contour = result.contour
+    assert contour is not None and contour.z_m is not None
+    z = np.round(np.asarray(contour.z_m, float) * 1e3, DECIMALS) + 0.0
+    fmt = f"{{:.{DECIMALS}f}}"
+    rows = [" ".join(f"{a}{fmt.format(v)}" for a, v in zip("XYZC", (x, y, zz, cc)))
+            for (x, y), zz, cc in zip(xy.tolist(), z.tolist(), c.tolist())]
+    feed = f"F{60.0 / ts:.6f}"
+    dwell = contour.dwell or [None] * len(rows)
+    line_of = contour.source_line or [0] * len(rows)
+    due: dict[int, list[str]] = {}
+    for k, _, words in word_schedule(result):
+        due.setdefault(k, []).append(words)
+    out = [
+        _comment("units: X Y tool point in mm (robot frame), C platform angle psi in degrees, Z in mm (the "
+                 "source program's frame: its tool length and work offsets as it sets them)"),
+        _comment(f"G93 inverse time: each G1 takes one sample time Ts = {ts:g} s (F = 60 / Ts = {60.0 / ts:g}); a "
+                 "Z move alone (plunge, retract) is at most its programmed feed or the Z rapid speed"),
+        _comment("a source G4 is one G4 of the planned samples it takes; spindle, tool, coolant, stop and offset "
+                 "words are where the source issues them"),
+        _comment(f"source: {source or 'rangeplan'}"),
+        *(_comment(h) for h in header),
+        "G21 G90 G17",
+        *due.pop(0, []),
+        f"G0 {xyc_rows[0] if z[0] == 0 else rows[0]}",  # Z 0: where LinuxCNC starts, as the source
+        "G93",
+    ]
+    k = 1
+    while k < len(rows):
+        out += due.pop(k, [])
+        if rows[k] == rows[k - 1] and dwell[k] == "G4":
+            m = k + 1  # the samples of this source G4: one dwell
+            while m < len(rows) and rows[m] == rows[k] and dwell[m] == "G4" and line_of[m] == line_of[k] \
+                    and m not in due:
+                m += 1
+            out.append(f"G4 P{(m - k) * ts:.6f}")
+            k = m
+            continue
+        out.append(f"G4 P{ts:.6f}" if rows[k] == rows[k - 1] else f"G1 {rows[k]} {feed}")
+        k += 1
+    for k in sorted(due):
+        out += due[k]
+    return out + ["G94", "M2"]

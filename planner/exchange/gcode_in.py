@@ -214,13 +214,18 @@ def read_gcode(text: str, *, cut_below: float = 0.0, z_rapid_m_s: float = 0.05, 
     lines = text.splitlines()
     n_lines = 0
 
-    def add_dwell(line: int, duration: float, reason: str) -> None:
+    def add_dwell(line: int, duration: float, reason: str, z: tuple[float, float] | None = None) -> None:
+        """A dwell of ``duration`` [s], joined to the one before of the same reason; ``z``: Z at
+        its start and end [m] (the position's Z, still, if not given)."""
         if duration <= 0 and reason != "pause":
             return
+        z0, z1 = z if z is not None else (float(pos[2]), float(pos[2]))
         if blocks and blocks[-1].kind == "dwell" and blocks[-1].reason == reason:
             blocks[-1].duration_s += duration
+            blocks[-1].z_moves.append((duration, z1))
         else:
-            blocks.append(ProgramBlock(kind="dwell", line=line, duration_s=duration, reason=reason))
+            blocks.append(ProgramBlock(kind="dwell", line=line, duration_s=duration, reason=reason, z_start_m=z0,
+                                       z_moves=[(duration, z1)]))
 
     for ln, raw in enumerate(lines, start=1):
         n_lines = ln
@@ -410,8 +415,9 @@ def _home_z(ln: int, gs: list[float], vals: dict[str, float], pos: np.ndarray, u
     target = pos.copy()
     target[2] = vals["Z"] * u if absolute else pos[2] + vals["Z"] * u
     dz = target[2] - pos[2]
-    add_dwell(ln, abs(dz) / z_rapid, "plunge" if dz < 0 else "retract")
-    target[2] = max(target[2], cut_below)
+    z_end = max(target[2], cut_below)
+    add_dwell(ln, abs(dz) / z_rapid, "plunge" if dz < 0 else "retract", (float(pos[2]), float(z_end)))
+    target[2] = z_end
     warnings.append(f"line {ln}: G28 Z (return to Z home) is read as a retract above the cut (Z home unknown: "
                     "its time is not counted)")
     return target
@@ -430,7 +436,8 @@ def _move(ln: int, motion: float, pos: np.ndarray, target: np.ndarray, arcw: dic
     if motion in (0.0, 1.0) and xy_same and not c_moves:
         if dz != 0.0:
             speed = z_rapid if motion == 0.0 else feed
-            add_dwell(ln, duration if duration is not None else abs(dz) / speed, "plunge" if dz < 0 else "retract")
+            add_dwell(ln, duration if duration is not None else abs(dz) / speed, "plunge" if dz < 0 else "retract",
+                      (float(pos[2]), float(target[2])))
         return
     if motion in (2.0, 3.0) and plane != 17.0:
         pts, stops = _vertical_arc(ln, motion, pos, target, arcw, u, plane)
@@ -438,7 +445,8 @@ def _move(ln: int, motion: float, pos: np.ndarray, target: np.ndarray, arcw: dic
             p0, p1 = pts[k], pts[k + 1]
             length = float(np.hypot(*(p1[:2] - p0[:2])))
             if length < 1e-12:  # a piece that moves Z alone (the arc is tangent to Z there)
-                add_dwell(ln, abs(p1[2] - p0[2]) / feed, "plunge" if p1[2] < p0[2] else "retract")
+                add_dwell(ln, abs(p1[2] - p0[2]) / feed, "plunge" if p1[2] < p0[2] else "retract",
+                          (float(p0[2]), float(p1[2])))
                 continue
             el = PathElement(kind="line", line=ln, start=p0[:2].copy(), end=p1[:2].copy(), length_m=length,
                              z_start_m=float(p0[2]), z_end_m=float(p1[2]), feed_m_s=feed, exact_stop=exact or stops[k])

@@ -88,6 +88,9 @@ class ProgramBlock(_Out):
     rapid: bool = Field(default=False, description="travel: a G0 rapid (else a feed move above the cutting height)")
     duration_s: float = Field(default=0.0, description="dwell: its time, s (Z at the feed or rapid speed, G4 P)")
     reason: str = Field(default="", description="dwell: 'plunge', 'retract', 'G4' or 'pause' (M0/M1)")
+    z_start_m: float | None = Field(default=None, description="dwell: Z at its start, m (program frame)")
+    z_moves: list[tuple[float, float]] = Field(default_factory=list, description="dwell: its pieces in order, "
+                                               "each [seconds, Z at its end in m]: the Z moves and waits it joins")
 
 
 class ProgramWord(_Out):
@@ -231,3 +234,11 @@ class ContourSection(_Out):
     words: list[ProgramWord] = Field(description="Spindle, tool and mode words of the program")
     comments: list[ProgramComment] = Field(description="Comments of the program")
     warnings: list[str] = Field(description="Warnings from reading and planning")
+    z_m: FloatArray | None = Field(default=None, description="Per sample: the tool's Z, m (program frame): the "
+                                   "pass's Z while cutting, the programmed Z moves while the robot rests in a "
+                                   "plunge or retract; null in a plan made before Z was kept")
+    source_line: list[int] | None = Field(default=None, description="Per sample: the last source line whose move "
+                                          "or dwell the plan has reached (non-decreasing; 0 before the first); the "
+                                          "words of a line are issued before the first sample that reaches it")
+    dwell: list[str | None] | None = Field(default=None, description="Per sample: the dwell being realised "
+                                           "('plunge', 'retract', 'G4', 'pause'), null while moving in XY")
