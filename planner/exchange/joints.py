@@ -6,7 +6,8 @@ Lines starting with ``#`` are comments (``halstreamer`` skips them); the header 
 the plan, the sample time (the streaming thread's period must equal it) and each column
 with its unit. Leg lengths are in mm (base pivot to platform pivot, as
 :func:`planner.model.kinematics.leg_lengths` computes them, the result's
-``drives.length``), forces in N.
+``drives.length``), forces in N. A contour plan's header also names the source program's
+spindle, tool, coolant, stop and offset words with the sample they are due at.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..schema import PlanResult
+from ._schedule import word_schedule
 
 __all__ = ["joint_columns", "to_joints"]
 
@@ -45,6 +47,10 @@ def to_joints(result: PlanResult, forces: bool = False, source: str | None = Non
               f"Ts = {ts:g} s (the streaming thread's period)\n")
     buf.write(f"# units: leg lengths in mm{', drive forces in N' if forces else ''}; "
               f"streamer cfg={'f' * len(cols)}\n")
+    for k, line, words in word_schedule(result):
+        buf.write(f"# at sample {k} (t = {k * ts:g} s), source line {line}: {words}\n")
+    if result.contour is not None and result.contour.z_m is not None:
+        buf.write("# Z (the tool's height) is not a leg: the part program's Z and words are in the G-code export\n")
     buf.write("# " + " ".join(cols) + "\n")
     np.savetxt(buf, table, fmt="%.6f", delimiter=" ")
     return buf.getvalue()

@@ -1,0 +1,204 @@
+"""A contour plan as the machine's part program (issue 32, goal 3): the exported G-code, read
+by LinuxCNC's own interpreter (``rs274``), issues the source program's spindle, tool, coolant,
+offset and dwell commands in the source's order, moves Z as the source does (the pass's Z while
+cutting, plunges and retracts with XY still, never a cut while XY travels) and takes the plan's
+time; a corridor plan's G-code is unchanged."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from planner import plan
+from planner.contour import plan_contour
+from planner.exchange import read_gcode, to_gcode, to_joints
+from planner.exchange.gcode import DECIMALS
+from planner.schema import PlanResult
+from tests.linuxcnc import rs274
+
+ROOT = Path(__file__).resolve().parent.parent
+CAM = ROOT / "tests" / "data" / "cam"
+PROGRAMS = {"contour-part": (ROOT / "app/static/examples/contour-part.ngc", [-0.01, -0.01]),
+            **{p.stem: (p, [-0.005, -0.004]) for p in sorted(CAM.glob("*.n*c"))}}
+PRINTED_MM = 0.5 * 10 ** -DECIMALS
+#: the canonical commands that are not motion: what the machine does besides moving
+WORDS = ("SELECT_TOOL", "START_CHANGE", "CHANGE_TOOL", "USE_TOOL_LENGTH_OFFSET", "SET_SPINDLE_SPEED",
+         "START_SPINDLE_CLOCKWISE", "START_SPINDLE_COUNTERCLOCKWISE", "STOP_SPINDLE_TURNING", "FLOOD_ON", "FLOOD_OFF",
+         "MIST_ON", "MIST_OFF", "PROGRAM_STOP", "OPTIONAL_PROGRAM_STOP", "SET_G5X_OFFSET", "DWELL")
+_CANON = re.compile(r"^\s*\d+\s+N\.+\s+([A-Z_0-9]+)\((.*)\)\s*$")
+
+
+def _canon(program: str) -> list[tuple[str, str]]:
+    return [(m.group(1), m.group(2)) for m in map(_CANON.match, rs274(program)) if m]
+
+
+@pytest.fixture(scope="module")
+def planned() -> dict[str, tuple[str, PlanResult, str]]:
+    out = {}
+    for name, (path, origin) in PROGRAMS.items():
+        text = path.read_text()
+        res = plan_contour({"program": text, "origin": origin})
+        out[name] = (text, res, to_gcode(res, source=path.name))
+    return out
+
+
+def _samples(program: str, ts: float) -> np.ndarray:
+    """The exported program as rs274 runs it, one row (x, y, z) [mm] per plan sample: the first
+    rapid is sample 0, each feed move one sample, a dwell of P its P / Ts samples."""
+    rows: list[list[float]] = []
+    for name, args in _canon(program):
+        if name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
+            rows.append([float(a) for a in args.split(",")[:3]])
+        elif name == "DWELL" and rows:
+            n = round(float(args) / ts)
+            assert abs(n * ts - float(args)) < 1e-6, f"a dwell of {args} s is not whole samples"
+            rows += [rows[-1]] * n
+    return np.array(rows)
+
+
+@pytest.mark.parametrize("name", list(PROGRAMS))
+def test_machine_program_issues_the_source_words_in_order(planned, name):
+    """The non-motion canonical commands (spindle, tool, tool length, coolant, stops, work
+    offset, dwells of the source's G4) of the export equal the source's, in order; the export's
+    dwells of one sample (the robot at rest) aside, a G4 within one sample time."""
+    text, res, program = planned[name]
+    ts = float(res.settings.Ts)
+    src = [(n, a) for n, a in _canon(text) if n in WORDS]
+    out = [(n, a) for n, a in _canon(program) if n in WORDS and not (n == "DWELL" and abs(float(a) - ts) < 1e-9)]
+    assert [n for n, _ in out] == [n for n, _ in src]
+    for (n, a), (_, b) in zip(out, src):
+        if n == "DWELL":
+            assert abs(float(a) - float(b)) < ts
+        else:
+            assert a == b
+    assert any(n.startswith("START_SPINDLE") for n, _ in out)
+
+
+@pytest.mark.parametrize("name", list(PROGRAMS))
+def test_machine_program_moves_z_as_the_source(planned, name):
+    """rs274's Z at each sample: at a cutting sample the Z of the source's move being cut at
+    that point (the read program's, whose XY is rs274's: tests/test_cam_posts.py); elsewhere,
+    wherever XY moves, at or above the cutting height (no cut during a rapid); a plunge or
+    retract moves Z alone to where the source ends it, never faster than the source's feed or
+    Z rapid."""
+    text, res, program = planned[name]
+    c = res.contour
+    assert c is not None
+    p = read_gcode(text)
+    xyz = _samples(program, float(res.settings.Ts))
+    assert len(xyz) == len(res.time)
+    origin = np.asarray(c.origin)
+    z = xyz[:, 2] * 1e-3  # m (the export is in mm), program frame (canonical Z is the program's: no work offset)
+    elements = [e for b in p.blocks for e in b.elements]
+    cutting = np.asarray(c.cutting)
+    for k in np.nonzero(cutting)[0]:
+        pt = res.pose[k, :2] - origin
+        best = min(_nearest(e, pt) for e in elements if e.line == c.program_line[k])
+        assert best[0] <= c.tolerance_m + 1e-9
+        assert abs(z[k] - best[1]) <= PRINTED_MM * 1e-3 + 1e-9, k
+    moved_xy = np.r_[False, np.any(np.abs(np.diff(xyz[:, :2], axis=0)) > 0, axis=1)]
+    travel = moved_xy & ~cutting
+    assert travel.any() and np.all(z[travel] >= -1e-9), "a cut while XY travels"
+    # plunges and retracts: XY still, Z from the block's start to its end, at most the source's speed
+    dz_steps = np.r_[False, np.abs(np.diff(xyz[:, 2])) > PRINTED_MM]
+    assert np.all(~moved_xy[dz_steps] | cutting[dz_steps]), "Z moves during an XY travel"
+    assert c.dwell is not None
+    holds = [b for b in p.blocks if b.kind == "dwell" and b.reason in ("plunge", "retract")]
+    runs = _runs([d if d in ("plunge", "retract") else None for d in c.dwell])
+    assert len(runs) == len(holds)
+    for (a, b), blk in zip(runs, holds):
+        assert abs(z[b - 1] - blk.z_moves[-1][1]) < 1e-6
+        assert (b - a) * float(res.settings.Ts) >= blk.duration_s - 1e-9
+        assert not moved_xy[a:b].any()
+
+
+def _nearest(e, pt: np.ndarray) -> tuple[float, float]:
+    """The distance of ``pt`` from the move ``e`` in XY [m] and the move's Z at the nearest point [m]."""
+    if e.kind == "arc":
+        c = np.asarray(e.centre)
+        rel = (np.arctan2(*(pt - c)[::-1]) - e.start_angle_rad) * np.sign(e.sweep_rad) % (2 * np.pi)
+        f = rel / abs(e.sweep_rad) if rel <= abs(e.sweep_rad) else float(rel - abs(e.sweep_rad) < 2 * np.pi - rel)
+    else:
+        a, d = np.asarray(e.start), np.asarray(e.end) - np.asarray(e.start)
+        f = float(np.clip((pt - a) @ d / max(float(d @ d), 1e-24), 0, 1))
+    q = e.point_at(np.array([f * e.length_m]))[0] if e.kind == "arc" else np.asarray(e.start) + f * d
+    return float(np.hypot(*(pt - q))), e.z_start_m + f * (e.z_end_m - e.z_start_m)
+
+
+def _runs(labels: list) -> list[tuple[int, int]]:
+    """The maximal runs [a, b) of equal non-null labels."""
+    out, k = [], 0
+    while k < len(labels):
+        if labels[k] is None:
+            k += 1
+            continue
+        m = k
+        while m < len(labels) and labels[m] == labels[k]:
+            m += 1
+        out.append((k, m))
+        k = m
+    return out
+
+
+@pytest.mark.parametrize("name", list(PROGRAMS))
+def test_machine_program_takes_the_plan_time(planned, name):
+    """The exported program's time (its G93 moves, 1 / F minutes each, and its dwells) equals
+    the plan's duration within one sample time, and it moves Z."""
+    _, res, program = planned[name]
+    total, inverse, zs = 0.0, False, set()
+    for line in program.splitlines():
+        if line.startswith("("):
+            continue
+        inverse = inverse or "G93" in line.split()
+        inverse = inverse and "G94" not in line.split()
+        m = re.match(r"G1 .* F([\d.]+)$", line)
+        if m and inverse:
+            total += 60.0 / float(m.group(1))
+            zs.update(re.findall(r"Z(-?[\d.]+)", line))
+        m = re.match(r"G4 P([\d.]+)$", line)
+        if m:
+            total += float(m.group(1))
+    ts = float(res.settings.Ts)
+    assert abs(total - res.metrics.duration_s) < ts
+    assert len(zs) > 2
+
+
+def test_joint_stream_states_the_words_at_their_samples(planned):
+    """The leg-space stream's header names each issued word with its sample and source line."""
+    _, res, _ = planned["fusion360"]
+    head = [ln for ln in to_joints(res).splitlines() if ln.startswith("#")]
+    assert any("M3" in ln and "line 12" in ln and "sample" in ln for ln in head)
+    assert any("M9" in ln for ln in head)
+
+
+def _old_to_gcode(result: PlanResult) -> str:
+    """The export of a plan before issue 32 goal 3 (one G1 per sample, X Y C), for the corridor plan."""
+    ts = float(result.settings.Ts)
+    pose = np.asarray(result.pose, float)
+    xy = np.round(pose[:, :2] * 1e3, DECIMALS) + 0.0
+    c = np.round(np.degrees(pose[:, 2]), DECIMALS) + 0.0
+    fmt = f"{{:.{DECIMALS}f}}"
+    rows = [" ".join(f"{a}{fmt.format(v)}" for a, v in zip("XYC", (x, y, cc)))
+            for (x, y), cc in zip(xy.tolist(), c.tolist())]
+    feed = f"F{60.0 / ts:.6f}"
+    lines = [
+        f"(rangeplan plan: {result.name or 'unnamed'})",
+        f"(robot: {result.robot}, mode {result.mode}, {len(pose)} samples, duration {(len(pose) - 1) * ts:g} s)",
+        "(units: X Y tool point in mm, C platform angle psi in degrees; G93 inverse time: each G1 takes one sample "
+        "time)",
+        f"(sample time Ts = {ts:g} s, F = 60 / Ts = {60.0 / ts:g} per minute)",
+        "(source: rangeplan)", "G21 G90 G17", f"G0 {rows[0]}", "G93"]
+    lines += [f"G4 P{ts:.6f}" if rows[k] == rows[k - 1] else f"G1 {rows[k]} {feed}" for k in range(1, len(rows))]
+    return "\n".join(lines + ["G94", "M2"]) + "\n"
+
+
+def test_corridor_plan_gcode_is_unchanged():
+    """Table I (app/static/examples/table1.json), a plan with no contour section: the same bytes
+    as before."""
+    res = plan(json.loads((ROOT / "app/static/examples/table1.json").read_text()))
+    assert res.contour is None
+    assert to_gcode(res) == _old_to_gcode(res)
