@@ -22,8 +22,36 @@ from tests.linuxcnc import rs274
 
 ROOT = Path(__file__).resolve().parent.parent
 CAM = ROOT / "tests" / "data" / "cam"
-PROGRAMS = {"contour-part": (ROOT / "app/static/examples/contour-part.ngc", [-0.01, -0.01]),
-            **{p.stem: (p, [-0.005, -0.004]) for p in sorted(CAM.glob("*.n*c"))}}
+#: words between moves, inside a joined plunge and between two joined G4s; M0, M1, M4, M7, G43.1, G49
+WORDS_PROGRAM = """(words between moves and dwells)
+G21 G90 G17
+G64 P0.02
+T2 M6
+G43.1 Z1.5
+S9000 M4
+G0 Z5
+G0 X2 Y2
+M1
+G0 Z1
+M8
+G1 Z-0.5 F200
+G1 X12 F600
+G1 Y8
+G4 P0.25
+M7
+G4 P0.3
+G1 X2
+G1 Y2
+G0 Z5
+M9
+M0
+M5
+G49
+M2
+"""
+PROGRAMS = {"contour-part": ((ROOT / "app/static/examples/contour-part.ngc").read_text(), [-0.01, -0.01]),
+            **{p.stem: (p.read_text(), [-0.005, -0.004]) for p in sorted(CAM.glob("*.n*c"))},
+            "words": (WORDS_PROGRAM, [-0.01, -0.01])}
 PRINTED_MM = 0.5 * 10 ** -DECIMALS
 #: the canonical commands that are not motion: what the machine does besides moving
 WORDS = ("SELECT_TOOL", "START_CHANGE", "CHANGE_TOOL", "USE_TOOL_LENGTH_OFFSET", "SET_SPINDLE_SPEED",
@@ -39,10 +67,9 @@ def _canon(program: str) -> list[tuple[str, str]]:
 @pytest.fixture(scope="module")
 def planned() -> dict[str, tuple[str, PlanResult, str]]:
     out = {}
-    for name, (path, origin) in PROGRAMS.items():
-        text = path.read_text()
+    for name, (text, origin) in PROGRAMS.items():
         res = plan_contour({"program": text, "origin": origin})
-        out[name] = (text, res, to_gcode(res, source=path.name))
+        out[name] = (text, res, to_gcode(res, source=name))
     return out
 
 

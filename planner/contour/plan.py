@@ -932,17 +932,20 @@ def _travel_z(part: _Part, elements: list[PathElement], a: np.ndarray, b: np.nda
 
 
 def _dwell_z(part: _Part, block: ProgramBlock, z: float) -> None:
-    """Fill the Z, source line and dwell of a dwell part: its Z moves in order, their times
-    scaled to the part's samples (never faster than programmed: the part rounds up to whole
-    samples)."""
+    """Fill the Z, source line and dwell of a dwell part: its pieces (Z moves and waits) in
+    order, their times scaled to the part's samples (never faster than programmed: the part
+    rounds up to whole samples); a sample's source line is that of the piece its step ends in."""
     K = len(part.z)
-    moves = list(block.z_moves) or [(block.duration_s, z)]
-    times = np.concatenate(([0.0], np.cumsum([max(t, 0.0) for t, _ in moves])))
-    zs = np.array([block.z_start_m if block.z_start_m is not None else z] + [zz for _, zz in moves], float)
+    moves = list(block.z_moves) or [(block.duration_s, z, block.line)]
+    times = np.concatenate(([0.0], np.cumsum([max(m[0], 0.0) for m in moves])))
+    zs = np.array([block.z_start_m if block.z_start_m is not None else z] + [m[1] for m in moves], float)
     total = float(times[-1])
     t = np.linspace(0.0, total, K)
     part.z = np.interp(t, times, zs) if total > 0 else np.full(K, zs[-1])
-    part.source[:] = block.line
+    piece = np.minimum(np.searchsorted(times[1:], t - 1e-12 * max(total, 1.0), side="left"), len(moves) - 1)
+    part.source = np.array([moves[int(i)][2] for i in piece], np.int64) if total > 0 \
+        else np.full(K, moves[-1][2], np.int64)
+    part.source[0] = moves[0][2]
     part.dwell = [None] + [block.reason] * (K - 1)
 
 

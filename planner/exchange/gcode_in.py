@@ -222,10 +222,10 @@ def read_gcode(text: str, *, cut_below: float = 0.0, z_rapid_m_s: float = 0.05, 
         z0, z1 = z if z is not None else (float(pos[2]), float(pos[2]))
         if blocks and blocks[-1].kind == "dwell" and blocks[-1].reason == reason:
             blocks[-1].duration_s += duration
-            blocks[-1].z_moves.append((duration, z1))
+            blocks[-1].z_moves.append((duration, z1, line))
         else:
             blocks.append(ProgramBlock(kind="dwell", line=line, duration_s=duration, reason=reason, z_start_m=z0,
-                                       z_moves=[(duration, z1)]))
+                                       z_moves=[(duration, z1, line)]))
 
     for ln, raw in enumerate(lines, start=1):
         n_lines = ln

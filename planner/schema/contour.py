@@ -89,8 +89,9 @@ class ProgramBlock(_Out):
     duration_s: float = Field(default=0.0, description="dwell: its time, s (Z at the feed or rapid speed, G4 P)")
     reason: str = Field(default="", description="dwell: 'plunge', 'retract', 'G4' or 'pause' (M0/M1)")
     z_start_m: float | None = Field(default=None, description="dwell: Z at its start, m (program frame)")
-    z_moves: list[tuple[float, float]] = Field(default_factory=list, description="dwell: its pieces in order, "
-                                               "each [seconds, Z at its end in m]: the Z moves and waits it joins")
+    z_moves: list[tuple[float, float, int]] = Field(default_factory=list, description="dwell: its pieces in "
+                                                    "order, each [seconds, Z at its end in m, source line]: the Z "
+                                                    "moves and waits it joins")
 
 
 class ProgramWord(_Out):
