@@ -15,7 +15,7 @@ import pytest
 
 from planner import plan
 from planner.contour import plan_contour
-from planner.exchange import read_gcode, to_gcode, to_joints
+from planner.exchange import read_gcode, to_gcode, to_joints, toolpath
 from planner.exchange.gcode import DECIMALS
 from planner.schema import PlanResult
 from tests.linuxcnc import rs274
@@ -174,7 +174,8 @@ def _runs(labels: list) -> list[tuple[int, int]]:
 @pytest.mark.parametrize("name", list(PROGRAMS))
 def test_machine_program_takes_the_plan_time(planned, name):
     """The exported program's time (its G93 moves, 1 / F minutes each, and its dwells) equals
-    the plan's duration within one sample time, and it moves Z."""
+    the plan's duration within one sample time, read back as the editor's preview reads it
+    too, and it moves Z."""
     _, res, program = planned[name]
     total, inverse, zs = 0.0, False, set()
     for line in program.splitlines():
@@ -192,6 +193,8 @@ def test_machine_program_takes_the_plan_time(planned, name):
     ts = float(res.settings.Ts)
     assert abs(total - res.metrics.duration_s) < ts
     assert len(zs) > 2
+    # the editor's preview reads it back (read_gcode readback) with the same time
+    assert abs(toolpath(read_gcode(program, readback=True)).duration_s - res.metrics.duration_s) < ts
 
 
 def test_joint_stream_states_the_words_at_their_samples(planned):

@@ -16,6 +16,12 @@ X and Y are the tool point in mm, C the platform angle psi in degrees (a rotary 
 coordinates are printed with ``DECIMALS`` decimals (0.1 um, 0.0001 degree). A move whose
 printed coordinates equal the previous ones becomes a dwell of one sample time, since
 LinuxCNC does not time zero-length moves.
+
+A contour plan (its ``contour`` section with ``z_m``, issue 32) is the part program: each
+``G1`` also carries Z in mm (the source program's frame), Z alone moving for a plunge or
+retract; the source's spindle, tool, coolant, stop, tool length and work offset words are
+issued before the first sample that reaches their source line (:func:`._schedule.word_schedule`),
+and a source ``G4`` is one ``G4`` of the samples it takes. Any other plan's program is as above.
 """
 
 from __future__ import annotations
