@@ -168,3 +168,61 @@ def test_estimate_is_fast_for_the_largest_requests():
         t = time.perf_counter()
         est = estimate_work(req)
         assert time.perf_counter() - t < 0.05 and math.isfinite(est.seconds)
+
+
+# ---------------------------------------------------------------------------------------
+# the fastest-timing search (issue 33): its candidates and the counts it ends at
+
+def _serpentine(n: int, cell: float = 0.01) -> dict:
+    """``n`` segments: a start point, square boxes of ``cell`` back and forth, an end point."""
+    boxes = []
+    for k in range(n - 2):
+        row, col = divmod(k, 14)
+        col = 13 - col if row % 2 else col
+        x0, y0 = -0.07 + col * cell, -0.04 + row * cell
+        boxes.append({"lower": [x0, y0, 0.0], "upper": [x0 + cell, y0 + cell, 0.0]})
+    a = [boxes[0]["lower"][0] + cell / 2, boxes[0]["lower"][1] + cell / 2, 0.0]
+    b = [boxes[-1]["lower"][0] + cell / 2, boxes[-1]["lower"][1] + cell / 2, 0.0]
+    return {"segments": [{"lower": a, "upper": a}, *boxes, {"lower": b, "upper": b}]}
+
+
+@pytest.mark.parametrize("name, req", [
+    ("Table I, Ts 10 ms", lambda t: with_settings(t, fastest=True)),
+    ("Table I, Ts 5 ms", lambda t: with_settings(t, fastest=True, Ts=0.005)),
+    ("20-segment serpentine", lambda t: with_settings(_serpentine(20), fastest=True)),
+])
+def test_fastest_finishes_within_its_estimate(table1, name, req):
+    """Measured CPU seconds of a fastest plan <= 1.5x its estimate (the search's candidates
+    counted: 50-70 on these, where the estimate counted 7 plans before and Table I at Ts 5 ms
+    took 2.4x it)."""
+    request = req(table1)
+    est = estimate_work(request)
+    plan(with_settings(table1, N=5, tail_max_s=0.05, require_settled=False))  # kernels loaded
+    t0 = time.process_time()
+    res = plan(request)
+    cpu = time.process_time() - t0
+    assert res.timing.evaluations is not None and res.timing.evaluations > 20
+    assert cpu <= 1.5 * est.seconds, (name, cpu, est.seconds)
+
+
+def test_fastest_over_the_limit_is_refused_up_front_with_what_to_change(table1):
+    """Table I with fastest at Ts 2 ms took 46 CPU s (estimated 1.22 s: admitted, then cut off
+    at the 30 s limit): the horizon N Ts = 60 ms covers 1.2 force ramps, the search ends at
+    ~1 200 samples a segment after 121 candidates. Now refused before it starts, naming the
+    horizon, Ts and another timing."""
+    from app.jobs import PlanJob, run_bounded
+    from planner.schema import PlanRequest
+
+    slow = with_settings(table1, fastest=True, Ts=0.002)
+    est = estimate_work(slow)
+    assert est.seconds > 30.0 and est.field == "settings.fastest"
+    t0 = time.process_time()
+    out = run_bounded(PlanJob(PlanRequest.model_validate(slow)), timeout_s=30.0)
+    assert time.process_time() - t0 < 1.0
+    assert not out.ok and out.error.code == "too_much_work", out
+    msg = out.error.message
+    assert "settings.N of at least 35" in msg and "larger settings.Ts" in msg and "settings.fastest" in msg
+    # 200 segments: the per-segment bisections grow as n^2 (20, 50, 100 segments measured
+    # 0.7, 2.9, 8.4 CPU s; estimated 1.0, 3.8, 13 s)
+    long = estimate_work(with_settings(_serpentine(200), fastest=True))
+    assert long.seconds > 30.0 and "timing other than settings.fastest" in long.message(30.0)
