@@ -56,12 +56,12 @@ import numpy as np
 from ..corridor import cell_size_rule, remedy_cells
 from ..errors import PlannerError
 from ..schema import (
+    DEFAULT_FORCE_RISE_S,
     MAX_SAMPLES_PER_SEGMENT,
     MAX_TOTAL_STEPS,
     SLACK_BUDGET_S,
     SQRT3_2,
     WORK_COSTS,
-    DEFAULT_FORCE_RISE_S,
     PlanRequest,
     Settings,
     cell_count,
@@ -69,8 +69,8 @@ from ..schema import (
 )
 from .timing import centre_path_length, method_of, moving_segments
 
-__all__ = ["FASTEST_A_M_S2", "FASTEST_BISECTION", "FASTEST_RAMPS", "FASTEST_SLOW_S", "MORE_TIME", "WorkEstimate", "check_work",
-           "estimate_work", "fastest_count", "fastest_steps", "slack_allowance", "slack_costs"]
+__all__ = ["FASTEST_A_M_S2", "FASTEST_BISECTION", "FASTEST_RAMPS", "FASTEST_SLOW_S", "MORE_TIME", "WorkEstimate",
+           "check_work", "estimate_work", "fastest_count", "fastest_steps", "slack_allowance", "slack_costs"]
 
 #: the time factors the advice of an infeasible constrained plan tries, in this order (each
 #: planned until its first infeasible step; the first that plans is advised)
@@ -317,8 +317,9 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
     what = ("reference poses" if req.reference is not None else "segments" if req.segments is not None
             else f"segments (the path through {cells} cells)" if segments is not None
             else f"segments (shortest path through {cells} cells)")
+    search = f"; the fastest-timing search at ~{S} samples a segment: {plans} candidates, {steps} steps"
     detail = (f"{n} {what} x {S} samples + settling (at most {st.tail_max_s:g} s) = {steps_one} steps"
-              f"{f'; the fastest-timing search at ~{S} samples a segment: {plans} candidates, {steps} steps' if plans > 1 else ''}, "
+              f"{search if plans > 1 else ''}, "
               f"~{step_s * 1e6:.0f} us per step in {st.mode} mode at N = {st.N}"
               f"{'' if st.backend == 'compiled' else f' ({st.backend} backend, {st.solver} solver)'}, "
               f"{metrics_s:.2g} s of corridor metrics")
