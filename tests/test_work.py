@@ -226,3 +226,85 @@ def test_fastest_over_the_limit_is_refused_up_front_with_what_to_change(table1):
     # 0.7, 2.9, 8.4 CPU s; estimated 1.0, 3.8, 13 s)
     long = estimate_work(with_settings(_serpentine(200), fastest=True))
     assert long.seconds > 30.0 and "timing other than settings.fastest" in long.message(30.0)
+
+
+# ---------------------------------------------------------------------------------------
+# G-code programs (issue 33): lines, arc chords, passes and the moves between them counted
+
+def _lines(n: int, per_pass: int = 100) -> str:
+    out, x, y = ["G21 G90"], 0.0, 0.0
+    for i in range(n):
+        p, k = divmod(i, per_pass)
+        if k == 0:
+            x, y = (p % 10) * 1.0, 0.0
+            out += ["G0 Z5", f"G0 X{x:.3f} Y{y:.3f}", "G1 Z-1 F3000"]
+        y, x = (y + 0.5, x) if k % 2 else (y, x + 0.5)
+        out.append(f"G1 X{x:.3f} Y{y:.3f}")
+    return "\n".join(out) + "\n"
+
+
+def _circles(n: int, per_pass: int = 100) -> str:
+    out = ["G21 G90"]
+    for i in range(n):
+        p, k = divmod(i, per_pass)
+        x, y = (p % 10) * 1.0 + (k % 10) * 0.5, (k // 10) * 0.5
+        out += ["G0 Z5", f"G0 X{x:.3f} Y{y:.3f}", "G1 Z-1 F3000"] if k == 0 else [f"G1 X{x:.3f} Y{y:.3f}"]
+        out.append(f"G2 X{x:.3f} Y{y:.3f} I0.1 J0")
+    return "\n".join(out) + "\n"
+
+
+def _passes(n: int) -> str:
+    out = ["G21 G90"]
+    for i in range(n):
+        x, y = (i % 20) * 1.0, (i // 20 % 20) * 1.0
+        out += [f"G0 X{x:.3f} Y{y:.3f}", "G1 Z-1 F3000", f"G1 X{x + 0.8:.3f} Y{y + 0.4:.3f}", "G0 Z5"]
+    return "\n".join(out) + "\n"
+
+
+def _contour_cpu(raw: dict) -> tuple[float, float]:
+    from planner.contour import estimate_contour, plan_contour
+    from planner.exchange import read_gcode
+    from planner.schema import ContourRequest
+
+    req = ContourRequest.model_validate(raw)
+    t0 = time.process_time()
+    program = read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
+    est = estimate_contour(req, program)[0]
+    plan_contour(req, program=program)
+    return time.process_time() - t0, est
+
+
+@pytest.mark.parametrize("raw", [{"program": _lines(150)}, {"program": _circles(40)}, {"program": _passes(12)}],
+                         ids=["lines", "circles", "passes"])
+def test_contour_finishes_within_its_estimate(raw):
+    cpu, est = _contour_cpu({**raw, "feed": "program"})
+    assert cpu <= 1.5 * est, (cpu, est)
+
+
+def test_contour_estimate_grows_with_lines_chords_and_passes():
+    """The estimate follows the counts (measured ~3.5 ms a line, ~11 ms a tiny circle, ~50 ms a
+    short pass: issue 33), not a constant: before, 1 000 circles were estimated 5.0 s and took
+    11.4 CPU s, 200 passes 4.2 s and took 9.8 s, and ten times the program was admitted."""
+    from planner.contour import estimate_contour
+
+    def est(program: str) -> float:
+        return estimate_contour({"program": program, "feed": "program"})[0]
+
+    assert est(_lines(3000)) > 10.5 / 1.5 and est(_lines(3000)) > 2.5 * est(_lines(300))
+    assert est(_circles(1000)) > 11.4 / 1.5 and est(_circles(1000)) > 2.5 * est(_circles(100))
+    assert est(_passes(200)) > 9.8 / 1.5 and est(_passes(200)) > 2.5 * est(_passes(20))
+
+
+@pytest.mark.parametrize("program, says", [(_lines(20_000), "tube cells"), (_circles(10_000), "arc chords"),
+                                           (_passes(2000), "fewer passes")])
+def test_huge_program_is_refused_with_its_estimate(program, says):
+    """A contour job over the limit is refused where its program is read, before any plan,
+    with the estimate and what to change."""
+    from app.jobs import ContourJob, run_bounded
+    from planner.schema import ContourRequest
+
+    t0 = time.process_time()
+    out = run_bounded(ContourJob(ContourRequest.model_validate({"program": program})), timeout_s=30.0)
+    assert not out.ok and out.error.code == "too_much_work", out
+    assert "estimated" in out.error.message and says in out.error.message, out.error.message
+    assert time.process_time() - t0 < 10.0
