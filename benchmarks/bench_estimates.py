@@ -8,7 +8,8 @@ G-code contours (many lines, many tiny full circles, many short passes) and draw
 Prints one row a case: the estimate [s], the measured CPU seconds of this process
 (``time.process_time``; the machine may be loaded, wall time is not the figure), their ratio
 (goal <= 1.5) and whether a 30 s limit admits the case. A case whose estimate is over
-``--skip-over`` seconds is not run (``-``). Run it with ``PYTHONPATH`` on the checkout to
+``--skip-over`` seconds is not run (``-``). Imports: the CPU seconds of reading a DXF spline
+(``too_large``: refused from its point counts). Run it with ``PYTHONPATH`` on the checkout to
 measure (e.g. a ``git archive`` of the base for the before figures).
 """
 
@@ -151,6 +152,35 @@ def run_contour(limit: float, skip: float) -> None:
         _row(name, est, go, limit, skip)
 
 
+def spline_dxf(n: int, fit: bool) -> bytes:
+    """A DXF of one closed spline through (``fit``) or on ``n`` points of a 50 mm circle."""
+    import io
+
+    import ezdxf
+    import numpy as np
+
+    doc = ezdxf.new()
+    msp = doc.modelspace()
+    a = np.linspace(0, 2 * math.pi, n, endpoint=False)
+    pts = np.c_[50 * np.cos(a), 50 * np.sin(a)].tolist()
+    sp = msp.add_spline(pts) if fit else msp.add_open_spline(pts)
+    sp.closed = True
+    buf = io.StringIO()
+    doc.write(buf)
+    return buf.getvalue().encode()
+
+
+def run_import() -> None:
+    """CPU seconds of importing a DXF spline (no estimate: counted and refused, or read)."""
+    from planner.exchange import import_drawing
+
+    for n, fit in ((1000, True), (2000, True), (4000, True), (20_000, True), (4000, False), (20_000, False)):
+        data = spline_dxf(n, fit)
+        cpu, out = _cpu(lambda data=data: import_drawing(data, {"units": "mm"}, format="dxf"))
+        name = f"DXF spline, {n} {'fit' if fit else 'control'} points"
+        print(f"{name:45s} {'':>9s} {cpu:9.3g} {'':>7s} {'':>9s} {out}", flush=True)
+
+
 def _row(name: str, est: float, fn, limit: float, skip: float) -> None:
     if est > skip:
         print(f"{name:45s} {est:9.3g} {'-':>9s} {'-':>7s} {'refused' if est > limit else 'admitted':>9s}", flush=True)
@@ -174,6 +204,8 @@ def main() -> None:
         run_fastest(args.limit, args.skip_over)
     if args.only in (None, "contour"):
         run_contour(args.limit, args.skip_over)
+    if args.only in (None, "import"):
+        run_import()
 
 
 if __name__ == "__main__":
