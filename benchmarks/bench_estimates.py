@@ -114,6 +114,13 @@ def contour_cases() -> list[tuple[str, dict]]:
     for n in (10, 50, 200):
         cases.append((f"{n} passes of 0.9 mm, program feed", {"program": gcode_passes(n), "feed": "program"}))
     cases.append(("200 lines, fastest", {"program": gcode_lines(200), "feed": "fastest"}))
+    cases += [  # other sample times, and fastest
+        ("200 lines, Ts 5 ms", {"program": gcode_lines(200), "settings": {"Ts": 0.005}}),
+        ("50 circles, Ts 2 ms", {"program": gcode_circles(50), "settings": {"Ts": 0.002}}),
+        ("20 passes, Ts 2 ms", {"program": gcode_passes(20), "settings": {"Ts": 0.002}}),
+        ("100 lines, fastest, Ts 5 ms", {"program": gcode_lines(100), "feed": "fastest", "settings": {"Ts": 0.005}}),
+        ("30 circles, fastest", {"program": gcode_circles(30), "feed": "fastest"}),
+    ]
     return cases
 
 
