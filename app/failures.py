@@ -43,13 +43,18 @@ def import_timeout(limit_s: float) -> dict[str, Any]:
                        "choose fewer layers or a larger flatten_tolerance"}
 
 
-def out_of_memory(memory_mb: int | None) -> dict[str, Any]:
-    """A plan that needed more memory than its process's limit ``memory_mb`` [MiB] (None: no
-    limit, the machine's memory ran out)."""
-    limit = f"the planning process's memory limit of {memory_mb} MiB" if memory_mb else "the memory available"
-    return {"code": "too_much_memory", "field": None,
-            "message": f"planning this request needed more than {limit} (RANGEPLAN_WORKER_MEMORY_MB) and was "
-                       "stopped; use fewer segments or samples per segment, or a larger settings.Ts"}
+def out_of_memory(memory_mb: int | None, kind: str = "plan") -> dict[str, Any]:
+    """A job that needed more memory than its process's limit ``memory_mb`` [MiB] (None: no
+    limit, the machine's memory ran out), worded for its ``kind`` (a job's ``kind``: a drawing
+    import or a G-code program is not "planning this request", issue 33)."""
+    limit = f"the worker process's memory limit of {memory_mb} MiB" if memory_mb else "the memory available"
+    what, change = {
+        "import": ("reading this drawing", "use a coarser flatten_tolerance, fewer layers, or splines given by "
+                   "control points rather than fit points"),
+        "contour": ("contouring this program", "split the program, or give a larger tolerance_m or settings.Ts"),
+    }.get(kind, ("planning this request", "use fewer segments or samples per segment, or a larger settings.Ts"))
+    return {"code": "too_much_memory", "field": "drawing" if kind == "import" else None,
+            "message": f"{what} needed more than {limit} (RANGEPLAN_WORKER_MEMORY_MB) and was stopped; {change}"}
 
 
 def degenerate(exc: BaseException, custom_robot: bool) -> dict[str, Any]:

@@ -250,7 +250,7 @@ def run_job(job: Job, memory_mb: int | None = None) -> Outcome:
         request = getattr(job, "request", None)
         return failed(degenerate(exc, custom_robot=not isinstance(getattr(request, "robot", None), str)))
     except MemoryError:
-        return failed(out_of_memory(memory_mb))
+        return failed(out_of_memory(memory_mb, job.kind))
     except _NotFound as exc:
         return failed({"code": "not_found", "message": str(exc)}, 404)
     except Exception as exc:  # a planner bug: reported, the worker keeps serving

@@ -119,7 +119,8 @@ def describe_failure(exc: Exception, job: Job, timeout_s: float, memory_mb: int 
     """The outcome of a job the pool did not run to the end (the one wording of a time
     limit, a memory limit, a full queue or a dead worker)."""
     if isinstance(exc, WorkerOutOfMemory):
-        return failed({"code": "too_much_memory", "message": str(exc) or out_of_memory(memory_mb)["message"]})
+        return failed({"code": "too_much_memory", "message": str(exc) or out_of_memory(memory_mb, job.kind)["message"],
+                       "field": "drawing" if job.kind == "import" else None})
     if isinstance(exc, JobTimeout):
         if isinstance(job, ExportJob):
             return failed({"code": "timeout", "field": "format", "message": f"writing the plan as {job.format} took "

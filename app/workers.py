@@ -448,7 +448,7 @@ class PlanPool:
                 w.kill()
                 replacement = self._replace(w)
                 if self.memory_mb and status in _ALLOCATION_FAILURE:
-                    raise WorkerOutOfMemory(out_of_memory(self.memory_mb)["message"]) from None
+                    raise WorkerOutOfMemory(out_of_memory(self.memory_mb, job.kind)["message"]) from None
                 if isinstance(exc, OSError):
                     raise WorkerCrashed(str(exc)) from None
                 raise

@@ -186,6 +186,46 @@ def test_dxf_refusal_names_the_entity_and_the_cause(client):
     assert "beyond the limit of 1000 m" in r.json()["error"]["message"]
 
 
+def test_spline_of_many_fit_points_is_refused_before_ezdxf_builds_it(client):
+    """Issue 33: a closed spline through 20 000 fit points (no control points) held a worker
+    10-22 s until the 2 GiB cap, answered as "planning this request"; ezdxf interpolates fit
+    points through a dense system (~n^2). Counted before, refused at once naming the entity."""
+    import time
+
+    import numpy as np
+
+    a = np.linspace(0, 2 * math.pi, 20_000, endpoint=False)
+
+    def build(doc, msp):
+        msp.add_lwpolyline([(0, 0), (10, 0), (10, 10)], close=True)
+        sp = msp.add_spline(np.c_[50 * np.cos(a), 50 * np.sin(a)].tolist())
+        sp.closed = True
+
+    data = _dxf(build)
+    t0 = time.process_time()
+    r = client.post("/v1/import", content=data, headers={"Content-Type": "application/dxf"})
+    assert time.process_time() - t0 < 5.0
+    assert r.status_code in (413, 422), r.text
+    err = r.json()["error"]
+    assert err["code"] == "too_large" and "SPLINE (handle " in err["message"] and "20000 fit points" in err["message"]
+    assert "control points" in err["message"] and "planning this request" not in err["message"]
+
+    def controls(doc, msp):  # the same count as control points flattens in linear time: refused over its bound
+        msp.add_open_spline(np.c_[50 * np.cos(a), 50 * np.sin(a)].tolist())
+
+    r = client.post("/v1/import", content=_dxf(controls), headers={"Content-Type": "application/dxf"})
+    assert r.status_code in (413, 422) and "20000 control points" in r.json()["error"]["message"], r.text
+
+
+def test_memory_error_of_an_import_does_not_say_planning():
+    from app.failures import out_of_memory
+
+    msg = out_of_memory(2048, "import")["message"]
+    assert "reading this drawing" in msg and "planning" not in msg and "flatten_tolerance" in msg
+    assert "contouring this program" in out_of_memory(2048, "contour")["message"]
+    assert "planning this request" in out_of_memory(2048)["message"]
+
+
 # ---------------------------------------------------------------------------------------
 # G-code programs
 

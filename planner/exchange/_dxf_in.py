@@ -13,7 +13,7 @@ import numpy as np
 
 from ..errors import PlannerError
 from . import _flatten as fl
-from ._budget import MAX_BLOCK_DEPTH, charge, dxf_expanded_entities
+from ._budget import MAX_BLOCK_DEPTH, charge, dxf_expanded_entities, spline_points
 from ._pieces import Drawing, Piece, check_finite
 
 __all__ = ["INSUNITS", "read_dxf"]
@@ -188,6 +188,7 @@ def _pieces(e, kind: str, layer: str, tol: float) -> Iterator[Piece]:
             pts = _wcs(e, pts, float(e.dxf.get("elevation", (0, 0, 0))[2]))
         yield _piece(pts, bool(e.is_closed) or _closed(pts, 0.0), layer, kind)
     elif kind == "SPLINE":
+        spline_points(e, _ref(e, kind))  # counted before ezdxf builds the curve
         pts = _flattened(e.construction_tool(), tol)
         if len(pts) >= 2:
             yield _piece(pts, bool(e.closed) or _closed(pts, 0.0), layer, kind)
@@ -218,6 +219,7 @@ def _hatch(e, kind: str, layer: str, tol: float) -> Iterator[Piece]:
                 sweep = (t1 - t0) % (2 * math.pi) or 2 * math.pi
                 pts = fl.ellipse(ct.center, ct.major_axis, ct.minor_axis, t0, sweep, tol)
             elif t == "SPLINE":
+                spline_points(edge, f"a spline edge of {_ref(e, kind)}")
                 pts = _flattened(edge.construction_tool(), tol)
             else:
                 continue

@@ -15,7 +15,14 @@ the validated request alone (no robot model, no segmentation, no simulation):
 * the range sequence, the corridor metrics and the result, per sample (linear in the
   samples; more with exact cell polygons);
 * a layout's segmentation (per cell, per obstacle and a fixed part);
-* the ``fastest`` timing search: about ``2 + log2(N)`` plans at ``S = N``;
+* the ``fastest`` timing search (:func:`fastest_steps`): the uniform count ``S`` it will find
+  estimated from the longest move between two segment centres and the robot's dynamics
+  (:func:`fastest_count`: a move from rest to rest at :data:`FASTEST_A_M_S2`, or
+  :data:`FASTEST_SLOW_S` a segment where the horizon ``N Ts`` covers fewer than
+  :data:`FASTEST_RAMPS` force ramps, where the search ends at ~10-25x the counts); the uniform
+  phase's doubling and bisection at up to ``2 S``, and the per-segment bisections, each of
+  ``log2(S) + 1`` candidates planned from the segment to the end (issue 33: Table I at Ts 2 ms
+  ran 121 candidates, ~1 200 samples a segment, 46 CPU s against 1.2 s estimated);
 * the advice an error may carry, checked before it is given (issue 20), bounded by its own
   parameters and estimated apart (``advice_seconds``): a layout without a path is segmented
   again with smaller cells, a narrower psi range and less clearance (at most
@@ -49,6 +56,7 @@ import numpy as np
 from ..corridor import cell_size_rule, remedy_cells
 from ..errors import PlannerError
 from ..schema import (
+    DEFAULT_FORCE_RISE_S,
     MAX_SAMPLES_PER_SEGMENT,
     MAX_TOTAL_STEPS,
     SLACK_BUDGET_S,
@@ -61,12 +69,28 @@ from ..schema import (
 )
 from .timing import centre_path_length, method_of, moving_segments
 
-__all__ = ["MORE_TIME", "WorkEstimate", "check_work", "estimate_work", "slack_allowance", "slack_costs"]
+__all__ = ["FASTEST_A_M_S2", "FASTEST_BISECTION", "FASTEST_RAMPS", "FASTEST_SLOW_S", "MORE_TIME", "WorkEstimate",
+           "check_work", "estimate_work", "fastest_count", "fastest_steps", "slack_allowance", "slack_costs"]
 
 #: the time factors the advice of an infeasible constrained plan tries, in this order (each
 #: planned until its first infeasible step; the first that plans is advised)
 MORE_TIME = (2, 4, 8, 16)
 
+#: ``fastest``: the acceleration [m/s^2] of the move from rest to rest over the longest step
+#: between two segment centres that sets the uniform count the search finds (Table I, 2 cm
+#: steps: ~0.1 s a segment measured, at Ts 5 and 10 ms; this takes 0.13 s)
+FASTEST_A_M_S2 = 5.0
+#: ``fastest``: horizons ``N Ts`` of fewer force ramps (``force_max / force_rate``) than this
+#: leave the robot too little preview to brake within the force-rate limit: the search ends at
+#: 10-25x the counts (Table I: 1.5 ramps as usual, 1.2 ramps ~1 200 samples a segment at Ts
+#: 2 ms, ~110 at Ts 10 ms with N = 6)
+FASTEST_RAMPS = 1.4
+#: ``fastest``: the time a segment takes [s] with such a short horizon (measured 1.2-2.5 s)
+FASTEST_SLOW_S = 3.0
+#: ``fastest``: the mean share of a per-segment bisection candidate's steps it plans (half of
+#: them feasible, to the end; half abandoned at ~a quarter: Table I at Ts 2 ms, 0.15-0.2 s
+#: against 0.8 s)
+FASTEST_BISECTION = 0.65
 
 
 @dataclass(frozen=True)
@@ -81,12 +105,15 @@ class WorkEstimate:
     #: the most that checking an error's advice adds (a layout's remedies segmented, an
     #: infeasible plan's :data:`MORE_TIME`), on the reference machine [s]; not part of ``seconds``
     advice_seconds: float = 0.0
+    #: what to change, where the request's own options decide it (None: the general advice)
+    advice: str | None = None
 
     def message(self, limit_s: float) -> str:
         """Why a server with the time limit ``limit_s`` [s] rejects this request."""
+        advice = self.advice or ("make it smaller: fewer segments or samples per segment, a larger settings.Ts, a "
+                                 "shorter horizon settings.N, or the paper mode")
         return (f"this request needs an estimated {self.seconds:.3g} s of planning ({self.detail}), more than this "
-                f"server's limit of {limit_s:g} s; make it smaller: fewer segments or samples per segment, a larger "
-                "settings.Ts, a shorter horizon settings.N, or the paper mode")
+                f"server's limit of {limit_s:g} s; {advice}")
 
 
 def _step_cost(mode: str, backend: str, solver: str, N: int, substeps: int) -> float:
@@ -155,6 +182,60 @@ def _samples_per_segment(req: PlanRequest, n: int) -> int:
     return st.samples_per_segment
 
 
+def _longest_step(centres: np.ndarray) -> float:
+    """The longest move between two consecutive centres [m] (psi at 5 cm a radian)."""
+    if len(centres) < 2:
+        return 0.0
+    d = np.diff(centres, axis=0)
+    return float(np.max(np.hypot(d[:, 0], d[:, 1]) + 0.05 * np.abs(d[:, 2])))
+
+
+def _ramp_s(req: PlanRequest) -> float | None:
+    """The time a drive force takes to rise to its limit at the force-rate limit [s] (None: off)."""
+    rate = req.settings.force_rate_n_s
+    if isinstance(rate, str):
+        return None
+    if rate is None:
+        return DEFAULT_FORCE_RISE_S
+    from ..model import load_robot  # a given rate: the drives' force limits
+
+    force = np.asarray(load_robot(req.robot).force_max, float)
+    return float(np.max(force / np.broadcast_to(np.asarray(rate, float), force.shape)))
+
+
+def fastest_count(step_m: float, Ts: float, N: int, ramp_s: float | None) -> int:
+    """The uniform samples per segment the ``fastest`` search is estimated to end at: a move
+    of ``step_m`` from rest to rest at :data:`FASTEST_A_M_S2` (``2 sqrt(d / a)``), or
+    :data:`FASTEST_SLOW_S` a segment where the horizon ``N Ts`` covers fewer than
+    :data:`FASTEST_RAMPS` force ramps of ``ramp_s`` (None: no force-rate limit)."""
+    t = 2.0 * math.sqrt(max(step_m, 0.0) / FASTEST_A_M_S2)
+    if ramp_s is not None and N * Ts < FASTEST_RAMPS * ramp_s:
+        t = max(t, FASTEST_SLOW_S)
+    return max(1, min(math.ceil(t / Ts), MAX_SAMPLES_PER_SEGMENT))
+
+
+def fastest_steps(n: int, S: int, N: int, tail_steps: int) -> tuple[int, int]:
+    """``(candidates, receding-horizon steps)`` of the ``fastest`` search
+    (:mod:`.fastest`) on ``n`` segments ending at the uniform count ``S``: the uniform phase
+    (from ``N / 2`` doubled or halved to ``S``: its candidates ``2 n S_hi`` together, ``S_hi =
+    max(N / 2, 2 S)``, then ``log2(S_hi)`` bisection candidates of ``n S_hi`` steps and the whole
+    settling tail each), the ends (one plan) and, for each of the ``n - 2`` moving segments,
+    ``log2(S)`` bisection candidates planned from the segment's start (less a horizon) to the end
+    (``(n - i) S + N`` steps: a feasible candidate arrives at rest), :data:`FASTEST_BISECTION` of
+    them on average (the infeasible half is abandoned early)."""
+    S_hi = max(N // 2, 2 * S, 1)
+    bisect = max(1, math.ceil(math.log2(max(S_hi, 2))))
+    uniform = 2 * n * S_hi + bisect * (n * S_hi + tail_steps)
+    ends = n * S + tail_steps
+    per_segment = max(1, math.ceil(math.log2(max(S, 2))))
+    moving = max(n - 2, 0)
+    # segment i (1..n-2) resumed at its start less N: (n - i) S + N steps a feasible candidate,
+    # about a quarter of it an infeasible one (abandoned): half of each
+    segment_steps = math.ceil(FASTEST_BISECTION * per_segment * (S * (moving * (moving + 3) // 2) + moving * N))
+    candidates = 2 + bisect + 1 + per_segment * moving
+    return candidates, uniform + ends + segment_steps
+
+
 def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEstimate:
     """The estimated compute time of planning ``request`` (a validated
     :class:`~planner.schema.PlanRequest` or a dict in the one JSON shape); see the module
@@ -191,15 +272,37 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
             S = max(1, math.floor(line / (st.speed_m_s * st.Ts * moving_segments(n))))
         corridor_field = "layout.cell.size"
     polygons = req.layout is not None or any(s.polygon is not None for s in (req.segments or ()))
-    plans = 2 + max(1, math.ceil(math.log2(max(st.N, 2)))) if st.fastest else 1
     steps_one = n * S + st.tail_steps
+    plans, steps = 1, steps_one
+    advice: str | None = None
+    if st.fastest:
+        seg_list = req.segments if req.segments is not None else segments
+        if seg_list is not None:
+            step_m = _longest_step(np.array([s.centre for s in seg_list], float))
+        else:  # a layout not yet segmented: a cell's diagonal
+            assert req.layout is not None
+            step_m = math.sqrt(2.0) * (req.layout.cell.size or cell_size_rule(
+                req.layout.bounds.lower, req.layout.bounds.upper, req.layout.start_pose, req.layout.end_pose,
+                req.layout.cell.shape, st))
+        S = fastest_count(step_m, st.Ts, st.N, _ramp_s(req))
+        steps_one = n * S + st.tail_steps
+        plans, steps = fastest_steps(n, S, st.N, st.tail_steps)
+        ramp = _ramp_s(req)
+        advice = ("a timing other than settings.fastest (speed_m_s, total_time_s or samples_per_segment: one plan "
+                  "instead of a search of candidates), or fewer segments")
+        if ramp is not None and st.N * st.Ts < FASTEST_RAMPS * ramp:
+            advice = (f"a horizon settings.N of at least {math.ceil(FASTEST_RAMPS * ramp / st.Ts)} samples at Ts = "
+                      f"{st.Ts:g} s (N Ts covering {FASTEST_RAMPS:g} force ramps of {ramp:g} s: with less the "
+                      "fastest timing found is ~10-25x slower and takes as many more candidates), a larger "
+                      "settings.Ts, or " + advice)
     step_s = _step_cost(st.mode, st.backend, st.solver, st.N, st.plant_substeps)
-    loop_s = plans * steps_one * step_s
-    metrics_s = plans * steps_one * (c["sample"] + (c["sample_polygon"] if polygons else 0.0))
+    loop_s = steps * step_s
+    metrics_s = steps * (c["sample"] + (c["sample_polygon"] if polygons else 0.0))
     segment_s = (c["segmentation"] if req.layout is not None else 0.0) + cells * c["cell"] + obstacles * c["obstacle"]
     seconds = c["fixed"] + loop_s + metrics_s + segment_s
     plan_s = seconds  # without the slack steps (the advice's candidates take none)
-    slack_n, slack_it = slack_allowance(st, steps_one)
+    # the fastest search's candidates plan with require_settled (abandoned at their first slack step)
+    slack_n, slack_it = slack_allowance(st, steps_one) if not st.fastest else (0, 0)
     slack_s = float(np.dot((slack_n, slack_it), slack_costs(st.N)))
     seconds += plans * slack_s
     # the field to change: the horizon if a step costs more than at the mode's default N,
@@ -214,8 +317,9 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
     what = ("reference poses" if req.reference is not None else "segments" if req.segments is not None
             else f"segments (the path through {cells} cells)" if segments is not None
             else f"segments (shortest path through {cells} cells)")
+    search = f"; the fastest-timing search at ~{S} samples a segment: {plans} candidates, {steps} steps"
     detail = (f"{n} {what} x {S} samples + settling (at most {st.tail_max_s:g} s) = {steps_one} steps"
-              f"{f' x {plans} plans of the fastest-timing search' if plans > 1 else ''}, "
+              f"{search if plans > 1 else ''}, "
               f"~{step_s * 1e6:.0f} us per step in {st.mode} mode at N = {st.N}"
               f"{'' if st.backend == 'compiled' else f' ({st.backend} backend, {st.solver} solver)'}, "
               f"{metrics_s:.2g} s of corridor metrics")
@@ -238,8 +342,8 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
         more = [f for f in MORE_TIME
                 if S * f <= MAX_SAMPLES_PER_SEGMENT and n * S * f + st.tail_steps <= MAX_TOTAL_STEPS]
         advice_s = max(advice_s, sum(more) * plan_s)
-    return WorkEstimate(seconds=seconds, steps=plans * steps_one, plans=plans, field=field, detail=detail,
-                        advice_seconds=advice_s)
+    return WorkEstimate(seconds=seconds, steps=steps, plans=plans, field=field, detail=detail,
+                        advice_seconds=advice_s, advice=advice)
 
 
 def check_work(request: Any, segments: Any, limit_s: float | None) -> None:
