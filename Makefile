@@ -60,8 +60,17 @@ lint: $(STAMP)
 	$(VENV)/bin/pyright
 	$(VENV)/bin/lint-imports
 
-test: $(STAMP) kernels browser linuxcnc lint
-	$(PY) -m pytest -q --durations=40
+# the lint (as `make lint`) beside the tests in 2 processes (pytest-xdist; tests/conftest.py orders
+# them, a group runs in one process), then alone the tests that bound a wall time or a latency
+# (marker `serial`); fails if any part fails
+test: $(STAMP) kernels browser linuxcnc
+	@log=$$(mktemp); { $(VENV)/bin/ruff check . && $(VENV)/bin/pyright && $(VENV)/bin/lint-imports; } >$$log 2>&1 & \
+	lint=$$!; \
+	$(PY) -m pytest -q -n 2 --dist loadgroup --no-loadscope-reorder -m "not serial" --durations=40; tests=$$?; \
+	wait $$lint; linted=$$?; cat $$log; rm -f $$log; \
+	$(PY) -m pytest -q -m serial --durations=10; serial=$$?; \
+	echo "lint: exit $$linted; tests in parallel: exit $$tests; serial tests: exit $$serial"; \
+	[ $$linted = 0 ] && [ $$tests = 0 ] && [ $$serial = 0 ]
 
 # what users install: `python -m build` makes the sdist and, from it, the wheel (dist/)
 dist: $(STAMP)

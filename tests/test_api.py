@@ -304,6 +304,7 @@ def slow_corridor(n: int = 40) -> dict:
             "settings": {"mode": "constrained", "require_settled": False}}
 
 
+@pytest.mark.serial  # then Table I within a 1 s compute limit
 def test_compute_limit_stops_runaway_plan(store, monkeypatch, tmp_path):
     """A plan longer than the limit (its estimate miscalibrated) answers 422 `timeout`
     promptly; the killed worker is replaced and the next plan succeeds; /health answered
@@ -329,6 +330,7 @@ def test_compute_limit_stops_runaway_plan(store, monkeypatch, tmp_path):
         assert c.post("/v1/plan", json=TABLE1).status_code == 200
 
 
+@pytest.mark.serial  # a bound of 0.5 s
 def test_too_much_work_is_refused_in_well_under_a_second(store):
     """The largest corridor the schema accepts (200 000 steps) against a 1 s limit: refused
     with too_much_work naming the estimate, the limit and the field, before any worker is

@@ -74,6 +74,7 @@ def test_plan_item_reports_the_requests_fault_with_its_code(request_, code, fiel
     assert out["error"]["message"]
 
 
+@pytest.mark.serial  # two plan times compared
 def test_plan_item_stops_at_the_compute_limit(monkeypatch):
     # a constrained plan of 12 x 1000 samples (~0.5 s or more), limited to a quarter of its
     # time: the limit lands inside the compiled loop, which hands back control every
@@ -610,6 +611,7 @@ def test_api_batch_items_have_the_bounds_of_a_single_plan(tmp_path):
     assert items[0]["error"]["field"] == "settings.N" and "limit of 5 s" in items[0]["error"]["message"]
 
 
+@pytest.mark.serial  # a bound of 1 s
 def test_plan_item_refuses_too_much_work_before_planning():
     heavy = {**TABLE1, "settings": {"mode": "constrained", "N": 150, "backend": "reference"}}
     t0 = time.perf_counter()

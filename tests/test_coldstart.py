@@ -127,6 +127,7 @@ def test_a_killed_background_compile_does_not_block_the_next(partial_cache):
 
 
 @pytest.mark.slow
+@pytest.mark.serial  # a plan within the 8 s compute limit (failed beside the browser tests)
 def test_cli_and_service_plan_on_the_reference_while_the_kernels_compile(partial_cache, tmp_path):
     """Two CLI plans at once start one background compile and plan on the reference; a server
     started meanwhile starts none, serves on the reference (a request too big for it is refused

@@ -75,6 +75,7 @@ def refused(data: bytes, options: dict | None = None) -> tuple[PlannerError, flo
     ("2000 large arcs", lambda: large_arcs(2000), "path segments", "drawing"),
     ("200 huge arcs", lambda: large_arcs(200, 4e4), "vertices in all", "flatten_tolerance"),
 ])
+@pytest.mark.serial  # a bound of 2 s
 def test_crafted_drawings_are_refused_before_they_expand(name, data, cause, field):
     err, seconds = refused(data(), {"flatten_tolerance": 1e-6})
     assert err.code == "too_large" and err.field == field, (name, err)

@@ -215,6 +215,7 @@ def test_bad_options_name_the_field():
 
 
 @pytest.mark.parametrize("kind", ENTITY_KINDS)
+@pytest.mark.serial  # a bound of 1 s
 def test_a_curve_finer_than_a_shape_may_be_is_refused_before_it_is_flattened(kind):
     """Chords within 1 nm of a curve of ~1 m radius would be ~35 000 per curve, more than a
     shape may have (MAX_POLYGON_POINTS): too_large naming flatten_tolerance, in well under a

@@ -315,6 +315,7 @@ def test_edits_are_debounced_into_one_plan(editor):
     assert list(editor.gui.end.value[:2]) == [0.06, 0.06]
 
 
+@pytest.mark.serial  # a bound of 0.2 s
 def test_stale_result_never_overwrites_a_newer_one(seg_impl, monkeypatch):
     fake = FakeSegmentation(delay=0.8)
     monkeypatch.setattr(jobs, "segmentation_module", lambda: fake)

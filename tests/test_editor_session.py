@@ -338,6 +338,7 @@ def test_plots_read_in_seconds_scaled_to_the_data_and_cleared_after_a_failure(ta
     assert "failed" in panel.header.content and "no plan" in panel.force_plot.title
 
 
+@pytest.mark.serial  # a bound of 0.5 s
 def test_the_panel_answers_while_a_plan_runs(monkeypatch):
     """A slow segmentation (1 s) on the worker: typed values, undo and the status line are
     handled at once meanwhile, and the status names the plan being computed."""

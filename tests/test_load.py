@@ -18,6 +18,7 @@ from tests.loadgen import probe_under_load
 
 
 @pytest.mark.slow
+@pytest.mark.serial  # /ready within 1 s under load: alone on the machine
 def test_ready_answers_within_a_second_under_200_clients(tmp_path):
     server, log, url = _start_server(tmp_path, timeout_s=30, workers=2, token=None)
     try:

@@ -194,6 +194,7 @@ def test_pages_visit_every_corridor_once_in_order_while_others_are_added(tmp_pat
             st.corridor_page(cursor=bad)
 
 
+@pytest.mark.serial  # a bound of 0.6 s
 def test_a_quick_page_is_the_same_page_read_only_and_never_waits_for_a_lock(tmp_path):
     """The event loop's page read (read-only connection) gives what the read threads give,
     cannot write, and raises StoreBusy at once while another connection holds the database

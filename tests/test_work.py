@@ -156,6 +156,7 @@ def test_layout_estimate_is_a_lower_bound_on_the_corridor(shape, size, start, en
     assert est.steps - tail <= len(seg.segments) * S
 
 
+@pytest.mark.serial  # a bound of 0.05 s
 def test_estimate_is_fast_for_the_largest_requests():
     """Microseconds, not a plan: 2 000 segments with a speed target (one pass over the
     segments), and a layout at the cell limit."""
