@@ -71,6 +71,9 @@ test: $(STAMP) kernels browser linuxcnc
 	$(PY) -m pytest -q -m serial --durations=10; serial=$$?; \
 	echo "lint: exit $$linted; tests in parallel: exit $$tests; serial tests: exit $$serial"; \
 	[ $$linted = 0 ] && [ $$tests = 0 ] && [ $$serial = 0 ]
+	@# what users install: the wheel in a fresh venv, then the image (tests/test_smoke.py, test_container.py)
+	$(MAKE) --no-print-directory smoke
+	$(MAKE) --no-print-directory container-test
 
 # what users install: `python -m build` makes the sdist and, from it, the wheel (dist/)
 dist: $(STAMP)
@@ -96,16 +99,19 @@ lock: $(STAMP)
 	$(VENV)/bin/pip-compile --quiet --generate-hashes --strip-extras --allow-unsafe --no-emit-index-url \
 	  --no-emit-find-links --output-file container/requirements.lock pyproject.toml
 
-# Opt-in (root, podman or docker; not part of `make test`): build the image and run it as a
-# deployment would (tests/test_container.py). Without access to a registry the base image is
-# a stand-in built from Debian packages (container/stand-in-base.sh); the output says so.
-CONTAINER_ENGINE ?= $(shell command -v podman >/dev/null 2>&1 && echo podman || echo docker)
+# Part of `make test` (root; podman, or CONTAINER_ENGINE=docker with a running engine): build
+# the image and run it as a deployment would (tests/test_container.py) and the smoke suite
+# against it (tests/test_smoke.py). Without access to a registry the base image is a stand-in
+# built from Debian packages (container/stand-in-base.sh, debootstrap); the output says so.
+# podman by default: a docker client may be installed where no engine runs.
+CONTAINER_ENGINE ?= podman
 BASE_IMAGE ?= python:3.11-slim
 IMAGE ?= localhost/rangeplan:test
 container-test: $(STAMP)
-	@command -v $(CONTAINER_ENGINE) >/dev/null 2>&1 || { echo "installing podman from Debian"; \
+	@if [ "$(CONTAINER_ENGINE)" = podman ]; then for tool in podman runc debootstrap; do \
+	  command -v $$tool >/dev/null 2>&1 || { echo "installing podman and debootstrap from Debian"; \
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
-	  podman runc buildah fuse-overlayfs uidmap debootstrap >/dev/null; }
+	  podman runc buildah fuse-overlayfs uidmap debootstrap >/dev/null; break; }; done; fi
 	CONTAINER_ENGINE=$(CONTAINER_ENGINE) BASE_IMAGE=$(BASE_IMAGE) IMAGE=$(IMAGE) container/build.sh
 	RANGEPLAN_CONTAINER_IMAGE=$(IMAGE) CONTAINER_ENGINE=$(CONTAINER_ENGINE) $(PY) -m pytest -q -p no:cacheprovider \
 	  -m "container or smoke" tests/test_container.py tests/test_smoke.py

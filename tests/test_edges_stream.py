@@ -98,6 +98,7 @@ def stored_big_plan(tmp_path):
     return tmp_path, plan_id, len(text), hashlib.sha256(text).hexdigest()
 
 
+@pytest.mark.serial  # /ready within 1 s and the server's memory growth: alone on the machine
 def test_concurrent_json_downloads_stream_from_storage(stored_big_plan):
     data_dir, plan_id, size, digest = stored_big_plan
     server = Server(data_dir, free_port(), {"RANGEPLAN_WORKERS": "1"})
@@ -173,6 +174,7 @@ def many_circles_dxf(n: int = 4000) -> bytes:
     return dxf_bytes(doc)
 
 
+@pytest.mark.serial  # /health within 1 s: alone on the machine
 def test_huge_programs_and_drawings_are_read_off_the_event_loop(tmp_path):
     server = Server(tmp_path, free_port(), {"RANGEPLAN_WORKERS": "1"})
     drawing = many_circles_dxf()
