@@ -5,7 +5,7 @@
 - ``wheel``, ``sdist``: ``python -m build --no-isolation`` of this tree [kB];
 - ``image``: the image's size, its base's (``.container-base``, as container/build.sh wrote
   it) and the difference, rangeplan's own layers [MB];
-- ``/ready``: seconds from ``podman run -d --read-only --tmpfs /tmp --user 23456:0`` (an arbitrary
+- ``/ready``: seconds from ``podman run -d --read-only --tmpfs /tmp --user UID:0`` (a random
   uid, as Kubernetes runs it) to the first 200 of ``/ready``, and to the first plan of Table I,
   over ``--rounds`` containers (median, min, max).
 
@@ -76,7 +76,8 @@ def main() -> None:
     print(f"| image | {total:.0f} MB |\n| its base ({base}) | {base_mb:.0f} MB |\n"
           f"| rangeplan's own layers | {total - base_mb:.1f} MB |")
     runs = [start_up(target) for _ in range(args.rounds)]
-    print(f"\n| {args.rounds} containers, --read-only --user 23456:0 | median | min | max |\n|---|---:|---:|---:|")
+    print(f"\n| {args.rounds} containers, --read-only --user {target.user} | median | min | max |\n"
+          "|---|---:|---:|---:|")
     for name, values in (("run -> /ready 200 [s]", [r[0] for r in runs]),
                          ("run -> first plan of Table I [s]", [r[1] for r in runs])):
         print(f"| {name} | {statistics.median(values):.2f} | {min(values):.2f} | {max(values):.2f} |")

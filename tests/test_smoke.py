@@ -5,7 +5,7 @@ Run against an *installed* rangeplan, never the tree:
 * ``RANGEPLAN_SMOKE_VENV=DIR``: a fresh virtual environment with the built wheel installed
   non-editable (``make smoke``);
 * ``RANGEPLAN_CONTAINER_IMAGE=IMAGE``: the container image built from the Dockerfile, run
-  ``--read-only --tmpfs /tmp`` under an arbitrary uid in group 0 (``make container-test``).
+  ``--read-only --tmpfs /tmp`` under a random uid in group 0 (``make container-test``).
 
 Without either, every test here is skipped (the rest of the suite tests the tree). Each check
 compares with an independent computation where there is one: the installed plan of Table I
@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import os
+import secrets
 import shutil
 import socket
 import subprocess
@@ -111,11 +112,12 @@ class VenvTarget:
 
 
 class ImageTarget:
-    """The container image, run ``--read-only --tmpfs /tmp --user 23456:0`` (an arbitrary uid in
-    group 0, as Kubernetes runAsUser and OpenShift run it)."""
+    """The container image, run ``--read-only --tmpfs /tmp --user UID:0`` with a random uid in
+    group 0 (as Kubernetes runAsUser and OpenShift run it; one per test run, in the test ids'
+    output)."""
 
     name = "image"
-    user = "23456:0"
+    user = f"{10000 + secrets.randbelow(50000)}:0"
 
     def __init__(self, image: str):
         self.image = image
@@ -195,7 +197,8 @@ def server(target, tmp_path_factory):
             assert time.monotonic() < deadline, f"{target.name}: /ready never answered 200"
             time.sleep(0.05)
         ready_s = time.monotonic() - srv.started
-        print(f"\n{target.name}: /ready 200 {ready_s:.2f} s after start", file=sys.stderr)
+        print(f"\n{target.name}: /ready 200 {ready_s:.2f} s after start"
+              f"{f' (user {target.user})' if isinstance(target, ImageTarget) else ''}", file=sys.stderr)
         yield srv, ready_s, r.json()
 
 
