@@ -1,5 +1,5 @@
 """Command line: ``rangeplan plan INPUT.json [-o OUT.json | .csv | .ngc | .txt | .dxf]``,
-``rangeplan contour PROGRAM.ngc [--origin X,Y] [--tolerance M] [--feed program|fastest] -o OUT``,
+``rangeplan contour PROGRAM.ngc [--origin X,Y|fit] [--tolerance M] [--feed program|fastest] -o OUT``,
 ``rangeplan import DRAWING.dxf|.svg [options] -o request.json`` and ``rangeplan serve``.
 
 Bad input exits with status 2 and one line naming the field and the cause.
@@ -144,7 +144,7 @@ def cmd_contour(args) -> int:
     request = {"name": Path(args.program).name, "program": text, "feed": args.feed, "cut_below_m": args.cut_below,
                "settings": settings}
     if args.origin is not None:
-        request["origin"] = parse_pair(args.origin, "--origin")
+        request["origin"] = "fit" if args.origin.strip().lower() == "fit" else parse_pair(args.origin, "--origin")
     if args.tolerance is not None:
         request["tolerance_m"] = args.tolerance
     fmt = output_format(args)
@@ -161,7 +161,8 @@ def cmd_contour(args) -> int:
     c = result.contour
     assert c is not None
     emit(result, args, fmt, warnings=tuple(c.warnings),
-         summary=f"{len(c.passes)} passes, cycle {c.cycle_time_s:.2f} s (cutting {c.cut_time_s:.2f} s), deviation "
+         summary=f"origin [{c.origin[0]:g}, {c.origin[1]:g}] m, {len(c.passes)} passes, cycle {c.cycle_time_s:.2f} s "
+         f"(cutting {c.cut_time_s:.2f} s), deviation "
          f"{c.max_deviation_m * 1e3:.4f} mm of {c.tolerance_m * 1e3:.4f} mm, max force "
          f"{result.metrics.max_drive_force_n:.1f} N, compute {result.metrics.compute_ms:.0f} ms")
     return 0
@@ -326,8 +327,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     pc.add_argument("program", help="G-code file (RS274NGC; '-' for standard input)")
     pc.add_argument("-o", "--output", help="output file: .json (default), .csv, .ngc, .txt or .dxf")
     pc.add_argument("--format", type=_format_name, metavar="FORMAT", help="output format (default: from the extension)")
-    pc.add_argument("--origin", metavar="X,Y", help="program zero in the robot frame, m (default 0,0); "
-                    "negative: --origin=-0.04,-0.015")
+    pc.add_argument("--origin", metavar="X,Y|fit", help="program zero in the robot frame, m (default 0,0); "
+                    "negative: --origin=-0.04,-0.015; 'fit': where the program lies inside the robot's reach "
+                    "(the summary says where)")
     pc.add_argument("--tolerance", type=float, metavar="M", help="largest distance from the programmed path, m "
                     "(default: the program's G64 P, else 5e-5)")
     pc.add_argument("--feed", choices=("program", "fastest"), default="program",

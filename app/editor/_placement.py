@@ -1,8 +1,9 @@
-"""Placing an imported drawing where the robot reaches (numpy and shapely; the robot's reach
-comes from :mod:`._planning`).
+"""Placing an imported drawing where the robot reaches (numpy and shapely). The region and the
+fit are the planner's (:mod:`planner.model.placement`, which the contour's ``origin: "fit"``
+uses too); this module adds the start and end.
 
 The reachable region of a robot at a platform angle psi is the set of tool points whose
-legs are all within their stroke and whose pose is regular (:func:`._planning.reachable_points`).
+legs are all within their stroke and whose pose is regular (:func:`planner.model.placement.reachable_points`).
 For the built-in robot at psi = 0 it spans x, y within about +-0.146 m (a pinwheel-shaped
 region, not a square: :func:`reachable_region` gives its extent and centre). "Place drawing"
 (:func:`fit_drawing`) centres the drawing on the region and scales it down, when it does not
@@ -18,86 +19,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 import shapely
-from shapely import affinity
 
 from . import _geometry as geo
-from ._planning import Robot, reachable_mask
+from ._planning import Placement, fit_shape, reachable_region
 
 __all__ = ["Placement", "fit_drawing", "free_point", "reachable_region"]
 
-REACH_SAMPLES = 241  #: grid samples per side when measuring the reachable region
-_cache: dict[tuple, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 Reach = Callable[[np.ndarray, np.ndarray, float], np.ndarray]
-
-
-def reachable_region(robot: Robot, psi: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Lower (2,), upper (2,) corners of the extent and the centroid (2,) [m] of the tool
-    points reachable at angle ``psi`` [rad], sampled on a :data:`REACH_SAMPLES` grid over a
-    square 1.1 times the base pivots' extent."""
-    key = (id(robot), round(float(psi), 9))
-    if key not in _cache:
-        base = np.asarray(robot.base, float)
-        c = base.mean(axis=0)
-        span = 1.1 * float(np.max(np.abs(base - c)))
-        xs, ys, mask = reachable_mask(robot, c - span, c + span, float(psi), n=REACH_SAMPLES)
-        X, Y = np.meshgrid(xs, ys)
-        if not mask.any():
-            raise ValueError(f"the robot reaches no tool point at ψ {psi:g} rad")
-        pts = np.column_stack((X[mask], Y[mask]))
-        if len(_cache) > 16:
-            _cache.clear()
-        _cache[key] = (pts.min(axis=0), pts.max(axis=0), pts.mean(axis=0))
-    return _cache[key]
-
-
-@dataclass(frozen=True)
-class Placement:
-    """Where a drawing goes: ``factor`` (<= 1) times the user's scale, then ``offset`` [m]
-    (x, y after scaling); ``shrunk`` whether the factor is below 1."""
-
-    factor: float
-    offset: tuple[float, float]
-    shrunk: bool
-
-
-def _outline_reachable(shape, reach: Reach, psi: float) -> bool:
-    pts = np.asarray(shapely.get_coordinates(shapely.segmentize(shape.boundary, 0.002)))
-    return bool(len(pts)) and bool(np.all(reach(pts[:, 0], pts[:, 1], psi)))
-
-
-def fit_drawing(shapes: list, centre, margin: float, reach: Reach, psi: float) -> Placement:
-    """Centre ``shapes`` (shapely polygons [m], the drawing at the user's scale) on ``centre``
-    (x, y) [m] and find the largest factor <= 1 such that the scaled drawing grown by
-    ``margin`` [m] lies in the reachable region (its outline sampled every 2 mm is reachable:
-    the region has no holes). Raises ValueError when even a tiny drawing does not fit."""
-    body = shapely.union_all(shapes)
-    x0, y0, x1, y1 = body.bounds
-    mid = np.array([0.5 * (x0 + x1), 0.5 * (y0 + y1)])
-    c = np.asarray(centre, float)
-
-    def fits(k: float) -> bool:
-        placed = affinity.translate(affinity.scale(body, k, k, origin=(mid[0], mid[1])), *(c - mid))
-        return _outline_reachable(placed.buffer(margin, quad_segs=4) if margin > 0 else placed, reach, psi)
-
-    if fits(1.0):
-        k = 1.0
-    else:
-        lo, hi = 0.0, 1.0
-        if not fits(1e-3):
-            raise ValueError(f"a margin of {margin:g} m around the drawing does not fit where the robot reaches")
-        lo = 1e-3
-        for _ in range(30):
-            mid_k = math.sqrt(lo * hi)
-            lo, hi = (mid_k, hi) if fits(mid_k) else (lo, mid_k)
-            if hi / lo < 1.0005:
-                break
-        k = lo
-    offset = c - k * mid
-    return Placement(k, (float(offset[0]), float(offset[1])), k < 1.0)
+#: the drawing import places with the planner's one implementation (planner.model.placement)
+fit_drawing = fit_shape
 
 
 def _cell_around(x: float, y: float, lower, cell: float, shape: str):

@@ -40,6 +40,7 @@ from app.settings import settings
 from planner import PlannerError, PlanRequest, PlanResult, RobotModel, load_robot
 from planner.exchange import Toolpath, read_gcode, toolpath
 from planner.model import SINGULAR_TOL, kinematics
+from planner.model.placement import Placement, fit_shape, reach_extent, reachable_mask, reachable_points
 from planner.schema import (
     DEFAULT_LAYOUT_SPEED_M_S,
     DEFAULT_MODE,
@@ -86,8 +87,11 @@ __all__ = [
     "validate_request",
     "editable",
     "field_bounds",
+    "Placement",
+    "fit_shape",
     "reachable_mask",
     "reachable_points",
+    "reachable_region",
     "robot_geometry",
     "drawing_request",
     "export_result",
@@ -96,6 +100,8 @@ __all__ = [
 ]
 
 log = logging.getLogger("rangeplan.editor")
+#: the editor's name: the extent and centroid of the reach at one angle
+reachable_region = reach_extent
 
 #: the job service re-plans and imports are submitted to, or None: inline (:func:`_service`)
 _shared: JobService | None = None
@@ -142,31 +148,6 @@ def field_bounds(model: str, field: str) -> dict[str, float]:
             if value is not None:
                 out[key] = value  # as declared (1.0, 200): messages print it as the planner does
     return out
-
-
-def reachable_mask(robot: RobotModel, lower, upper, psi: float, n: int = 96):
-    """Sample the rectangle [lower, upper] [m] on an ``n`` x ``n`` grid of points and mark
-    the poses (x, y, psi [rad]) the robot reaches: every leg within its stroke and the pose
-    regular (singularity measure >= the planner's ``SINGULAR_TOL``). Returns ``(xs, ys,
-    mask)``: grid coordinates [m] and a boolean (n, n) array indexed [iy, ix]."""
-    xs = np.linspace(lower[0], upper[0], n)
-    ys = np.linspace(lower[1], upper[1], n)
-    X, Y = np.meshgrid(xs, ys)
-    return xs, ys, reachable_points(robot, X.ravel(), Y.ravel(), psi).reshape(n, n)
-
-
-def reachable_points(robot: RobotModel, x, y, psi: float) -> np.ndarray:
-    """Whether the robot reaches the tool points (``x``, ``y``) [m] (1-D arrays) at angle
-    ``psi`` [rad]: every leg within its stroke and the pose regular (see :func:`reachable_mask`)."""
-    x, y = np.asarray(x, float).ravel(), np.asarray(y, float).ravel()
-    poses = np.column_stack((x, y, np.full(x.size, float(psi))))
-    L = kinematics.leg_lengths(robot, poses)
-    ok = np.all((L >= robot.length_min) & (L <= robot.length_max), axis=1)
-    if ok.any():
-        sing = np.zeros(len(poses))
-        sing[ok] = kinematics.singularity_measure(robot, poses[ok])
-        ok &= sing >= SINGULAR_TOL
-    return ok
 
 
 def robot_geometry(robot: RobotModel, pose) -> dict:

@@ -41,6 +41,7 @@ from ..constraints import force_rate
 from ..errors import PlannerError
 from ..exchange import read_gcode
 from ..model import RobotModel, load_robot
+from ..model.placement import fit_shape, reach_extent, reachable_points
 from ..model.reach import check_segments
 from ..orchestrator import feasible, plan, plan_timed
 from ..schema import (
@@ -181,7 +182,143 @@ def plan_contour(request: Any, *, program: Program | None = None) -> PlanResult:
     req = parse_contour_request(request)
     st = req.plan_settings()
     with numpy_only(st.backend == "reference"):  # the numpy reference compiles nothing (issue 24)
-        return _plan_contour(req, st, program, t0)
+        try:
+            return _plan_contour(req, st, program, t0)
+        except PlannerError as err:
+            if req.origin == "fit" or err.code not in ("unreachable", "singular") or "origin that fits" in err.message \
+                    or "no origin fits" in err.message:
+                raise
+            # a typed origin the path leaves the reach at (found while planning): propose one
+            program = program or read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
+            tol = req.tolerance_m if req.tolerance_m is not None else (program.tolerance_m
+                                                                         or DEFAULT_CONTOUR_TOLERANCE_M)
+            raise PlannerError(err.code, f"{err.message}; {_proposal(program, load_robot(req.robot), tol)}",
+                               err.field) from None
+
+
+#: the margin [m] between the program's moves and the edge of the reach that ``origin: "fit"``
+#: keeps (beyond the tolerance): the tube's cells and the travel boxes are boxes about the path
+FIT_MARGIN_M = 0.003
+#: the platform angle a contour plans at [rad]
+CONTOUR_PSI = 0.0
+
+
+def _program_shapes(program: Program, tol: float) -> list[tuple[int, Any]]:
+    """What of the program must be reachable, in the program frame, as (source line, shapely
+    geometry): each cut move's path (sampled every mm) and the box each travel plans in (the
+    straight move from where the tool is grown by ``RAPID_MARGIN_M``), as :func:`_plan_contour`
+    moves."""
+    import shapely
+
+    out: list[tuple[int, Any]] = []
+    pos = np.asarray(program.start, float)
+
+    def travel(a: np.ndarray, b: np.ndarray, line: int) -> None:
+        lo, hi = np.minimum(a, b) - RAPID_MARGIN_M, np.maximum(a, b) + RAPID_MARGIN_M
+        out.append((line, shapely.box(lo[0], lo[1], hi[0], hi[1])))
+
+    blocks = program.blocks
+    i = 0
+    while i < len(blocks):
+        b = blocks[i]
+        if b.kind == "travel":
+            j = i
+            while j + 1 < len(blocks) and blocks[j + 1].kind == "travel":
+                j += 1
+            target = np.asarray(blocks[j].elements[-1].end, float)
+            travel(pos, target, b.line)
+            pos, i = target, j + 1
+            continue
+        if b.kind == "cut":
+            if np.hypot(*(np.asarray(b.elements[0].start) - pos)) > 0.5 * tol:
+                travel(pos, np.asarray(b.elements[0].start, float), b.line)
+            for el in b.elements:
+                n = max(2, math.ceil(el.length_m / 1e-3) + 1)
+                pts = el.point_at(np.linspace(0.0, el.length_m, n))
+                out.append((el.line, shapely.LineString(pts) if el.length_m > 0 else shapely.Point(pts[0])))
+            pos = np.asarray(b.elements[-1].end, float)
+        i += 1
+    if not out:
+        out.append((1, shapely.Point(pos)))
+    return out
+
+
+def _reach(model: RobotModel) -> Callable[[np.ndarray, np.ndarray, float], np.ndarray]:
+    return lambda x, y, psi: reachable_points(model, x, y, psi)
+
+
+def _fit(program: Program, model: RobotModel, tol: float) -> tuple[np.ndarray | None, str]:
+    """The origin [m] that centres the program's moves (:func:`_program_shapes`) on the robot's
+    reachable region, grown by ``FIT_MARGIN_M`` + ``tol``, all of it reachable (the drawing
+    import's placement, :func:`planner.model.placement.fit_shape`, unscaled); or None and
+    why none does and by how much the program is too large."""
+    import shapely
+
+    shapes = [g for _, g in _program_shapes(program, tol)]
+    margin = FIT_MARGIN_M + tol
+    x0, y0, x1, y1 = shapely.union_all(shapes).bounds
+    size = f"{x1 - x0:.4g} m x {y1 - y0:.4g} m"
+    try:
+        _, _, centre = reach_extent(model, CONTOUR_PSI)
+        p = fit_shape(shapes, centre, margin, _reach(model), CONTOUR_PSI)
+    except ValueError:
+        return None, (f"no origin fits: the program's moves ({size}) grown by a margin of {margin:g} m do not fit "
+                      "where the robot reaches at any scale")
+    if p.shrunk:
+        k = p.factor
+        return None, (f"no origin fits: the program's moves span {size} (cuts, and the boxes its travel moves plan "
+                      f"in); centred on the robot's reach with a margin of {margin:g} m they fit only at {k:.1%} of "
+                      f"their size, {1 / k:.3g} times too large (about {(1 - k) * (x1 - x0):.3g} m too wide and "
+                      f"{(1 - k) * (y1 - y0):.3g} m too tall)")
+    origin = np.round(np.asarray(p.offset, float), 4) + 0.0
+    if not _reachable_at(program, model, origin, tol):  # rounded off the fit: the unrounded one
+        origin = np.asarray(p.offset, float)
+    return origin, ""
+
+
+def _reachable_at(program: Program, model: RobotModel, origin: np.ndarray, tol: float) -> bool:
+    import shapely
+
+    shapes = [g for _, g in _program_shapes(program, tol)]
+    from shapely import affinity
+
+    placed = affinity.translate(shapely.union_all(shapes), *origin).buffer(FIT_MARGIN_M + tol, quad_segs=4)
+    pts = np.asarray(shapely.get_coordinates(shapely.segmentize(placed.boundary, 0.002)))
+    return bool(np.all(reachable_points(model, pts[:, 0], pts[:, 1], CONTOUR_PSI)))
+
+
+def fit_origin(program: Program, model: RobotModel, tol: float) -> np.ndarray:
+    """The origin ``origin: "fit"`` places the program at (:func:`_fit`); raises ``unreachable``
+    saying by how much the program is too large when none fits."""
+    origin, why = _fit(program, model, tol)
+    if origin is None:
+        raise PlannerError("unreachable", why, "origin")
+    return origin
+
+
+def _proposal(program: Program, model: RobotModel, tol: float) -> str:
+    origin, why = _fit(program, model, tol)
+    if origin is None:
+        return why
+    return (f"an origin that fits: [{origin[0]:g}, {origin[1]:g}] m (--origin={origin[0]:g},{origin[1]:g}, or "
+            "'fit')")
+
+
+def _check_reachable(program: Program, model: RobotModel, origin: np.ndarray, tol: float) -> None:
+    """Raise ``unreachable`` naming the first move (source line) some point of which (a cut's
+    path sampled every mm, a travel's box) the robot does not reach at ``origin`` [m], with an
+    origin that fits (or why none does)."""
+    import shapely
+
+    for line, g in _program_shapes(program, tol):
+        pts = np.asarray(shapely.get_coordinates(shapely.segmentize(g.boundary if g.geom_type == "Polygon" else g,
+                                                                    1e-3))) + origin
+        ok = reachable_points(model, pts[:, 0], pts[:, 1], CONTOUR_PSI)
+        if not ok.all():
+            x, y = pts[int(np.argmin(ok))]
+            raise PlannerError("unreachable", f"line {line}: the move passes ({x:.4f} m, {y:.4f} m) in the robot "
+                               f"frame, out of the robot's reach with program zero at origin [{origin[0]:g}, "
+                               f"{origin[1]:g}] m; {_proposal(program, model, tol)}", "origin")
 
 
 def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0: float) -> PlanResult:
@@ -192,8 +329,12 @@ def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0
         raise PlannerError("invalid_input", f"the program's G64 P gives a tolerance of {tol * 1e3:g} mm, outside "
                            "0.01..10 mm; give tolerance_m", "tolerance_m")
     model = load_robot(req.robot)
-    origin = np.array(req.origin, float)
-    _check_reach(program, origin)
+    if req.origin == "fit":
+        origin = fit_origin(program, model, tol)
+    else:
+        origin = np.array(req.origin, float)
+        _check_reach(program, origin)
+        _check_reachable(program, model, origin, tol)
     warnings = list(program.warnings)
     psi = 0.0
     pos = program.start + origin

@@ -130,8 +130,11 @@ class ContourRequest(Strict):
 
     name: str | None = Field(default=None, max_length=200, description="A name for the plan")
     program: str = Field(description="The G-code program's text (RS274NGC, LinuxCNC dialect)")
-    origin: list[Finite] = Field(default_factory=lambda: [0.0, 0.0], min_length=2, max_length=2,
-                                 description="Where program zero (X0 Y0) sits in the robot frame [x, y], m")
+    origin: list[Finite] | Literal["fit"] = Field(
+        default_factory=lambda: [0.0, 0.0],
+        description="Where program zero (X0 Y0) sits in the robot frame [x, y], m; 'fit': where the program's "
+        "moves (its cuts, and the boxes its travel moves plan in) lie, with a margin, inside the region the robot "
+        "reaches at psi 0, centred on it when they can (the result's contour.origin says where)")
     tolerance_m: Finite | None = Field(default=None, description="Largest distance of the tool point from the "
                                        "programmed path while cutting, m; default: the program's G64 P, else "
                                        "5e-5 m (0.05 mm)")
@@ -155,7 +158,11 @@ class ContourRequest(Strict):
 
     @field_validator("origin")
     @classmethod
-    def _origin(cls, v: list[float]) -> list[float]:
+    def _origin(cls, v: list[float] | str) -> list[float] | str:
+        if isinstance(v, str):
+            return v
+        if len(v) != 2:
+            raise fail(f"must be [x, y] or 'fit', got {len(v)} numbers")
         if any(abs(x) > MAX_COORDINATE for x in v):
             raise fail(f"must be within +-{MAX_COORDINATE:g} m")
         return v
