@@ -256,3 +256,48 @@ def test_geometric_infeasibility_does_not_ask_for_more_time():
     assert exc.value.field == "settings" and "x the time plans (settings.samples_per_segment = " in exc.value.message
     n = int(exc.value.message.split("settings.samples_per_segment = ")[1].split(",")[0])
     assert n > 3 and plan(with_settings(TABLE1, mode="constrained", samples_per_segment=n)).metrics.contained
+
+
+#: constrained plans of Table I whose relaxed steps (rows widened by RELAX_M = 8e-7 of
+#: force_max) used the widening of a force-rate row: before issue 31 their largest force
+#: rate was the limit + 1.2e-4 N per sample (3000.012 N/s at Ts 0.01, 3000.024 at 0.005,
+#: 1000.012 of 1000; 3000.06 at 0.002) with within_limits true
+RATE_CASES = [{}, {"Ts": 0.005}, {"fastest": True}, {"samples_per_segment": 10}, {"force_rate_n_s": 1000.0},
+              {"force_rate_n_s": [400.0, 800.0, 600.0, 1000.0]}, {"Ts": 0.005, "backend": "reference"}]
+
+
+#: within_limits' tolerance of the force rates (Metrics.within_limits' description)
+RATE_TOL_REL = 1e-9
+
+
+def _rate_ratio(res) -> float:
+    """The largest force step over its limit x Ts, per drive (from zero before the start)."""
+    U = res.drives.force
+    steps = np.abs(np.diff(np.vstack((np.zeros((1, U.shape[1])), U[:-1])), axis=0))
+    fr = res.settings.force_rate_n_s
+    limit = 150.0 / 0.05 if fr is None else np.broadcast_to(np.asarray(fr, float), (U.shape[1],))
+    return float((steps / (limit * res.settings.Ts)).max())
+
+
+@pytest.mark.parametrize("settings", RATE_CASES)
+def test_force_rate_within_its_limit(settings):
+    """Every applied force step within force_rate_n_s x Ts to 1e-9 relative (the tolerance of
+    within_limits), the relaxed steps' included: the applied move is clipped to its rate rows
+    as given (issue 31)."""
+    res = plan(with_settings(TABLE1, mode="constrained", **settings))
+    ratio = _rate_ratio(res)
+    assert ratio <= 1.0 + RATE_TOL_REL
+    assert res.metrics.max_force_rate_n_s <= 150.0 / 0.05 * (1.0 + RATE_TOL_REL)
+    assert res.metrics.within_limits
+
+
+def test_within_limits_false_when_a_force_rate_is_exceeded(monkeypatch):
+    """within_limits judges the force rates too: Table I's plan (its forces use 0.58 of the
+    default rate limit) measured against a third of the limit is not within its limits
+    (before issue 31 the rates were not judged at all)."""
+    res = plan(with_settings(TABLE1, mode="constrained"))
+    assert res.metrics.within_limits and _rate_ratio(res) > 0.5
+    real = result_module.force_rate
+    monkeypatch.setattr(result_module, "force_rate", lambda robot, st: real(robot, st) / 3.0)
+    res = plan(with_settings(TABLE1, mode="constrained"))
+    assert not res.metrics.within_limits

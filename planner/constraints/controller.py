@@ -300,6 +300,7 @@ class ConstrainedController:
             iterations += slack_iterations
         stats.iterations.append(iterations)
         z, Xp, y_nom = asm.finish(qp, z, hard)
+        self._clip_first_rates(z)
         mem.remember(z, Xp, y_nom, self.constraints.forces.umax)
         stats.solve_s += time.perf_counter() - t0
         return mem.u_prev
@@ -354,6 +355,17 @@ class ConstrainedController:
                                 "within one sample, which no timing allows: connect or widen the segments"
                                 + (f", or {also}" if also else ""), f"segments[{g.index + 1}]")
         return PlannerError("infeasible", what + (f"; {also}" if also else ""), "settings")
+
+    def _clip_first_rates(self, z: np.ndarray) -> None:
+        """The applied (first) moves ``z[:m]`` clipped, in place, to the force-rate limit of
+        the force just applied: a relaxed solve may use its rows' widening by ``RELAX_M`` of
+        force_max (6e-4 of a 20 N/s x 0.01 s step), a solve its tolerance (issue 31). The
+        compiled twin: ``step_kernels.clip_first_rates``."""
+        rate = self.constraints.rate.step
+        if rate is not None:
+            m, umax = self.n_legs, self.constraints.forces.umax
+            z[:m] = np.minimum(np.maximum(z[:m], (self.memory.u_prev - rate) / umax),
+                               (self.memory.u_prev + rate) / umax)
 
     def _previous_plan(self, zmax: np.ndarray) -> np.ndarray:
         """The previous step's moves shifted by one sample (zero before the first), the first

@@ -40,6 +40,7 @@ ROW_UNIT_M = 1e-3
 #: for the force rates] (both backends):
 #: inside the corridor margin (MARGIN_M, MARGIN_RAD: 0.2 um is left, 200 times the one-step
 #: mismatch), so the actual corridor is still kept; the leg-speed margin is 5e-6 m/s
+#: (the applied move is clipped back to its force-rate rows as given: issue 31)
 RELAX_M = 8e-7
 
 

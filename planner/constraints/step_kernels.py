@@ -112,7 +112,23 @@ def constrained_step(k, x, Ad, Bd, y_prev, u_prev, u0, warm, packed, Ts, substep
         refinements += 1
         start = Y.copy()  # the re-solve starts from this solution: the offset moved a little
     zc, Xr, y_nom = finish(Y[6 * N:], Y[:6 * N])
+    clip_first_rates(zc, col, lower, upper, kinds, elim, n_hard, 6 * N, m, relax * unit if relaxed else 0.0)
     return status, Y, zc, Xr, y_nom, iterations, refinements, worst, relaxed
+
+
+@njit(cache=True)
+def clip_first_rates(zc, col, lower, upper, kinds, elim, n_hard, q0, m, widened):
+    """The applied (first) moves ``zc[:m]`` clipped, in place, to their force-rate rows as
+    given (before a relaxed step's widening by ``widened``, in force_max): a relaxed solve
+    may use the widening (8e-7 of force_max, 6e-4 of a 20 N/s x 0.01 s step), the solve's
+    acceptance 1e-6; the plant gets a force within its rate limit (issue 31). The plan's
+    prediction keeps the solved move: the next step starts from the actual state."""
+    for i in range(n_hard):
+        if kinds[i] != KIND_RATE or col[i, 1] >= 0 or col[i, 0] < q0 or col[i, 0] >= q0 + m:
+            continue
+        r = 0.0 if elim[i] else widened
+        q = col[i, 0] - q0
+        zc[q] = min(max(zc[q], lower[i] + r), upper[i] - r)
 
 
 @njit(cache=True)

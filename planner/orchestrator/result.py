@@ -11,7 +11,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..constraints import CONTAIN_TOL_M, CONTAIN_TOL_RAD
+from ..constraints import CONTAIN_TOL_M, CONTAIN_TOL_RAD, force_rate
 from ..corridor import RangeSequence
 from ..corridor.geometry import APPROACH_MIN_M, approach_direction, box_distance, corridor_distances
 from ..errors import PlannerError
@@ -44,6 +44,11 @@ def _check_finite(**arrays: np.ndarray) -> None:
         if not np.all(np.isfinite(a)):
             raise PlannerError("diverged", f"the planner produced a non-finite number in {name}; try a smaller "
                                "sample time or larger k_u", "settings")
+
+
+#: relative tolerance of the drive-force rates in ``within_limits`` (the rounding of the
+#: forces' differences; the applied moves are clipped to their rate rows, issue 31)
+RATE_TOL_REL = 1e-9
 
 
 def build_result(robot: RobotModel, name: str | None, st: Settings, seq: RangeSequence,
@@ -115,8 +120,10 @@ def build_result(robot: RobotModel, name: str | None, st: Settings, seq: RangeSe
             union = max(union, pv)
         metrics["contained"] = bool(metrics.get("infeasible_steps", 0) == 0 and union <= CONTAIN_TOL_M
                                     and metrics["max_corridor_violation_rad"] <= CONTAIN_TOL_RAD)
+        rate = force_rate(robot, st)  # per drive [N/s], None: no limit
+        rate_ok = rate is None or bool(np.all(np.abs(dU) <= rate * st.Ts * (1.0 + RATE_TOL_REL)))
         metrics["within_limits"] = bool(metrics["max_force_ratio"] <= 1.0 + 1e-12 and metrics["max_speed_ratio"] <= 1.0
-                                        and stroke <= CONTAIN_TOL_M)
+                                        and stroke <= CONTAIN_TOL_M and rate_ok)
     corridor = CorridorSamples.model_construct(
         lower=lower, upper=upper, violation_m=ti_violation,
         segments=None if segments is None else

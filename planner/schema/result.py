@@ -86,7 +86,9 @@ class Metrics(_Out):
                                    "trajectory lies in the corridor: (x, y) in the union of the segments (and of the "
                                    "exact cells) to 1e-9 m, psi in the psi ranges of the segments it is in to 1e-7 rad")
     within_limits: bool | None = Field(None, description="Constrained mode: drive forces, leg speeds and strokes "
-                                       "within their limits on the actual trajectory")
+                                       "within their limits on the actual trajectory, and each drive-force change "
+                                       "from one sample to the next (from zero before the start) within its "
+                                       "force_rate_n_s x Ts to 1e-9 relative")
     max_polygon_violation_m: float | None = Field(None, description="Constrained mode, corridors with exact cell "
                                                   "polygons: largest distance outside their union, m")
     infeasible_steps: int | None = Field(None, description="Constrained mode: steps whose QP needed slack (count)")
