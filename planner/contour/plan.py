@@ -311,8 +311,10 @@ def _check_reachable(program: Program, model: RobotModel, origin: np.ndarray, to
     import shapely
 
     for line, g in _program_shapes(program, tol):
-        pts = np.asarray(shapely.get_coordinates(shapely.segmentize(g.boundary if g.geom_type == "Polygon" else g,
-                                                                    1e-3))) + origin
+        edge = g.boundary if g.geom_type == "Polygon" else g
+        # a zero-length move (a full circle's chord, a repeated point) is its point: GEOS cannot segmentize it
+        dense = edge if edge.length == 0 else shapely.segmentize(edge, 1e-3)
+        pts = np.asarray(shapely.get_coordinates(dense)) + origin
         ok = reachable_points(model, pts[:, 0], pts[:, 1], CONTOUR_PSI)
         if not ok.all():
             x, y = pts[int(np.argmin(ok))]
