@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -203,6 +203,15 @@ FIT_MARGIN_M = 0.003
 CONTOUR_PSI = 0.0
 
 
+def _travel_run_end(blocks: Sequence[Any], i: int) -> int:
+    """The index of the last travel block of the run that starts at ``blocks[i]``: consecutive
+    travels are one move, from where the first starts to where the last ends."""
+    j = i
+    while j + 1 < len(blocks) and blocks[j + 1].kind == "travel":
+        j += 1
+    return j
+
+
 def _program_shapes(program: Program, tol: float) -> list[tuple[int, Any]]:
     """What of the program must be reachable, in the program frame, as (source line, shapely
     geometry): each cut move's path (sampled every mm) and the box each travel plans in (the
@@ -222,9 +231,7 @@ def _program_shapes(program: Program, tol: float) -> list[tuple[int, Any]]:
     while i < len(blocks):
         b = blocks[i]
         if b.kind == "travel":
-            j = i
-            while j + 1 < len(blocks) and blocks[j + 1].kind == "travel":
-                j += 1
+            j = _travel_run_end(blocks, i)
             target = np.asarray(blocks[j].elements[-1].end, float)
             travel(pos, target, b.line)
             pos, i = target, j + 1
@@ -350,9 +357,7 @@ def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0
     while i < len(blocks):
         b = blocks[i]
         if b.kind == "travel":
-            j = i
-            while j + 1 < len(blocks) and blocks[j + 1].kind == "travel":
-                j += 1
+            j = _travel_run_end(blocks, i)
             target = blocks[j].elements[-1].end + origin
             if np.hypot(*(target - pos)) > 1e-9:
                 part = _travel(req, model, st, pos, target, psi, b.line)
