@@ -23,7 +23,7 @@ from planner.exchange import export, import_drawing, read_gcode, to_dxf, to_gcod
 from planner.exchange.gcode import DECIMALS
 from planner.model import kinematics, load_robot
 from tests.drawings import DRAWINGS, obstacle_region
-from tests.linuxcnc import RS274, rs274
+from tests.linuxcnc import RS274, one_at_a_time, rs274
 from tests.support import PSI_TURN, TABLE1, with_settings
 from tests.test_gcode_in import compare_with_rs274
 
@@ -135,8 +135,9 @@ def test_gcode_reads_back_as_the_plan(plans, name):
 def test_gcode_bad_program_fails_in_rs274(tmp_path):
     """The check above is real: rs274 rejects a G1 without F in inverse-time mode."""
     (tmp_path / "bad.ngc").write_text("G21 G93\nG1 X1 Y1\nM2\n")
-    r = subprocess.run([RS274, "-g", "bad.ngc", "bad.canon"], cwd=tmp_path, capture_output=True, text=True,
-                       timeout=60, stdin=subprocess.DEVNULL)
+    with one_at_a_time():
+        r = subprocess.run([RS274, "-g", "bad.ngc", "bad.canon"], cwd=tmp_path, capture_output=True, text=True,
+                           timeout=60, stdin=subprocess.DEVNULL)
     assert r.returncode != 0 and "F word missing" in r.stdout + r.stderr
 
 
