@@ -39,7 +39,7 @@ kernels: $(RUNTIME)
 install: $(STAMP) kernels
 
 # the service starts at once: while the kernels are not compiled it compiles them in the
-# background and plans on the numpy reference meanwhile (README "First run")
+# background and plans on the numpy reference meanwhile (docs/install.md, "What the first run costs")
 run: $(RUNTIME)
 	$(VENV)/bin/rangeplan serve
 
