@@ -224,3 +224,14 @@ def on_page_markdown(markdown: str, page, config, files) -> str:  # mkdocs' hook
                 raise ValueError(f"{name} has no {marker} marker for its generated part")
             return markdown.replace(marker, make())
     return markdown
+
+
+#: a Sphinx cross-reference role in a docstring as mkdocstrings renders it (``:class:`~a.B```
+#: -> ``:class:<code>~a.B</code>``)
+ROLE = re.compile(r":(?:class|func|meth|attr|data|mod|exc|obj|const):<code>(~?)([^<]*)</code>")
+
+
+def on_page_content(html: str, page, config, files) -> str:  # mkdocs' hook signature
+    """The docstrings' Sphinx roles as plain code (``~`` keeps the last name, as Sphinx shows it)."""
+    return ROLE.sub(lambda m: f"<code>{m.group(2).rsplit('.', 1)[-1] if m.group(1) else m.group(2)}</code>", html)
+
