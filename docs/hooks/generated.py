@@ -197,7 +197,7 @@ def cli_help(root: Path) -> str:
     from app.cli import build_parser
 
     columns = os.environ.get("COLUMNS")
-    os.environ["COLUMNS"] = "100"  # argparse wraps to the terminal's width
+    os.environ["COLUMNS"] = "88"  # argparse wraps to the terminal's width
     try:
         parser = build_parser()
         out = ["```text", "$ rangeplan --help", parser.format_help().rstrip(), "```", ""]
