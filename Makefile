@@ -57,12 +57,13 @@ linuxcnc:
 	  linuxcnc-uspace >/dev/null; }
 
 # ruff (style and errors), pyright (types), import-linter (the layers of planner/ and app/), and
-# the manual built in strict mode (a broken link, anchor or API reference fails)
+# the manual built in strict mode (a broken link, anchor or API reference fails; never with
+# --quiet, which hides the warnings --strict counts: a broken link then passes)
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/pyright
 	$(VENV)/bin/lint-imports
-	$(VENV)/bin/mkdocs build --strict --quiet
+	$(VENV)/bin/mkdocs build --strict
 
 # the manual (docs/, mkdocs.yml) into site/: MkDocs with the Material theme, offline (no fonts or
 # scripts from the internet); the API reference from the docstrings (mkdocstrings), the HTTP API
@@ -76,7 +77,7 @@ docs: $(STAMP)
 # that bound a wall time or a latency (marker `serial`); fails if any part fails
 test: $(STAMP) kernels browser linuxcnc
 	@log=$$(mktemp); { $(VENV)/bin/ruff check . && $(VENV)/bin/pyright && $(VENV)/bin/lint-imports \
-	  && $(VENV)/bin/mkdocs build --strict --quiet; } >$$log 2>&1 & \
+	  && $(VENV)/bin/mkdocs build --strict; } >$$log 2>&1 & \
 	lint=$$!; \
 	$(PY) -m pytest -q -n 2 --dist loadgroup --no-loadscope-reorder -m "not serial" --durations=40; tests=$$?; \
 	wait $$lint; linted=$$?; cat $$log; rm -f $$log; \
