@@ -9,8 +9,10 @@ RUNTIME := $(VENV)/.runtime-stamp
 export OPENBLAS_NUM_THREADS := 1
 export OMP_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
+# mkdocs-material's banner about MkDocs 2.0 on every build
+export NO_MKDOCS_2_WARNING := 1
 
-.PHONY: run test lint install kernels browser linuxcnc bench clean lock container-test smoke dist
+.PHONY: run test lint docs install kernels browser linuxcnc bench clean lock container-test smoke dist
 
 # the runtime dependencies from the lock first (the versions the container image runs), then
 # rangeplan (all `make run` needs), then its test tools around them
@@ -37,7 +39,7 @@ kernels: $(RUNTIME)
 install: $(STAMP) kernels
 
 # the service starts at once: while the kernels are not compiled it compiles them in the
-# background and plans on the numpy reference meanwhile (README "First run")
+# background and plans on the numpy reference meanwhile (docs/install.md, "What the first run costs")
 run: $(RUNTIME)
 	$(VENV)/bin/rangeplan serve
 
@@ -54,17 +56,28 @@ linuxcnc:
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
 	  linuxcnc-uspace >/dev/null; }
 
-# ruff (style and errors), pyright (types), import-linter (the layers of planner/ and app/)
+# ruff (style and errors), pyright (types), import-linter (the layers of planner/ and app/), and
+# the manual built in strict mode (a broken link, anchor or API reference fails; never with
+# --quiet, which hides the warnings --strict counts: a broken link then passes)
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/pyright
 	$(VENV)/bin/lint-imports
+	$(VENV)/bin/mkdocs build --strict
 
-# the lint (as `make lint`) beside the tests in 2 processes (pytest-xdist; tests/conftest.py orders
-# them, a group runs in one process), then alone the tests that bound a wall time or a latency
-# (marker `serial`); fails if any part fails
+# the manual (docs/, mkdocs.yml) into site/: MkDocs with the Material theme, offline (no fonts or
+# scripts from the internet); the API reference from the docstrings (mkdocstrings), the HTTP API
+# page from the service's OpenAPI document and the command reference from the CLI's parser
+# (docs/hooks/generated.py). Open site/index.html.
+docs: $(STAMP)
+	$(VENV)/bin/mkdocs build --strict
+
+# the lint (as `make lint`, the manual's strict build included) beside the tests in 2 processes
+# (pytest-xdist; tests/conftest.py orders them, a group runs in one process), then alone the tests
+# that bound a wall time or a latency (marker `serial`); fails if any part fails
 test: $(STAMP) kernels browser linuxcnc
-	@log=$$(mktemp); { $(VENV)/bin/ruff check . && $(VENV)/bin/pyright && $(VENV)/bin/lint-imports; } >$$log 2>&1 & \
+	@log=$$(mktemp); { $(VENV)/bin/ruff check . && $(VENV)/bin/pyright && $(VENV)/bin/lint-imports \
+	  && $(VENV)/bin/mkdocs build --strict; } >$$log 2>&1 & \
 	lint=$$!; \
 	$(PY) -m pytest -q -n 2 --dist loadgroup --no-loadscope-reorder -m "not serial" --durations=40; tests=$$?; \
 	wait $$lint; linted=$$?; cat $$log; rm -f $$log; \
@@ -117,4 +130,4 @@ container-test: $(STAMP)
 	  -m "container or smoke" tests/test_container.py tests/test_smoke.py
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build *.egg-info site

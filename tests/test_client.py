@@ -1,5 +1,5 @@
 """The typed client (app.client) against a real `rangeplan serve` process with a token, as
-deployed: the README's example runs as written, every method returns the planner's own
+deployed: the manual's example (docs/client.md) runs as written, every method returns the planner's own
 models, and every error (server answer, client-side validation, transport, a missing or
 wrong token) is one exception type with code, message and field."""
 
@@ -29,14 +29,15 @@ def server(tmp_path_factory):
     srv.stop()
 
 
-def readme_example() -> str:
-    text = (ROOT / "README.md").read_text()
-    section = text[text.index("### Python client"):]
+def manual_example() -> str:
+    """The client example of the manual's Python client page."""
+    text = (ROOT / "docs" / "client.md").read_text()
+    section = text[text.index("# Python client"):]
     return re.search(r"```python\n(.*?)```", section, re.S).group(1)
 
 
-def test_readme_example_runs_against_a_real_server(server, tmp_path):
-    code = readme_example()
+def test_manual_example_runs_against_a_real_server(server, tmp_path):
+    code = manual_example()
     assert 8 <= len(code.strip().splitlines()) <= 16
     code = code.replace("http://127.0.0.1:8000", server.url)
     r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300,
