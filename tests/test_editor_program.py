@@ -119,6 +119,10 @@ def test_an_opened_program_is_placed_planned_and_drawn(tab):
     cutting = pose[np.asarray(c.cutting, bool), :2]
     assert shapely.contains_xy(tube, cutting[:, 0], cutting[:, 1]).all()
 
+    # drawn nearly in the plane (no parallax between the program, the tube and the cut), in order
+    for name in ("/contour/program_feed", "/contour/tube", "/result/trajectory", "/preview/feed"):
+        sx, sy, sz = np.broadcast_to(np.asarray(client.scene.node(name).get("scale", 1.0), float), 3)
+        assert sx == sy == 1.0 and 0 < sz * geo.Z["preview"] <= 1e-5, (name, sz)
     # the planned cut: the result's samples, in order
     traj = client.scene.lines("/result/trajectory")
     assert traj is not None and len(traj) == len(pose) - 1
@@ -156,6 +160,8 @@ def test_an_opened_program_is_placed_planned_and_drawn(tab):
     assert s.undo() and "layout" in s.request and "program" not in s.request
     assert wait_for(lambda: client.scene.lines("/contour/program_feed") is None
                     and client.scene.mesh("/contour/tube") is None, 30)
+    assert wait_for(lambda: np.all(np.asarray(client.scene.node("/result/trajectory").get("scale"), float) == 1.0),
+                    10)
 
 
 def test_a_bad_program_names_its_line_in_the_status(tab):

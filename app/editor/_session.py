@@ -293,6 +293,7 @@ class Session(SegmentEdits):
             self.program_drawn = None
             self.scene.show_program(None)
             self.scene.show_tube(None)
+            self.scene.set_flat(False)
             if robot is not None:
                 self.scene.show_layout(layout, robot)
                 if layout is not None:
@@ -321,6 +322,7 @@ class Session(SegmentEdits):
         says where: :meth:`_show_contour`)."""
         self.scene.show_segmentation(None)
         self.scene.show_segments(None)
+        self.scene.set_flat(True)
         if robot is not None:
             self.scene.show_layout(None, robot)
             self.scene.show_reach(robot, 0.0)
