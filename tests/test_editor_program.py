@@ -8,6 +8,7 @@ viser clients (tests/viser_client.py)."""
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 from types import SimpleNamespace
@@ -17,6 +18,7 @@ import pytest
 import shapely
 
 from app.editor import _geometry as geo
+from app.editor import _state
 from app.editor._planning import reachable_points
 from planner.exchange import read_gcode
 from planner.schema import PathElement
@@ -123,6 +125,10 @@ def test_an_opened_program_is_placed_planned_and_drawn(tab):
     for name in ("/contour/program_feed", "/contour/tube", "/result/trajectory", "/preview/feed"):
         sx, sy, sz = np.broadcast_to(np.asarray(client.scene.node(name).get("scale", 1.0), float), 3)
         assert sx == sy == 1.0 and 0 < sz * geo.Z["preview"] <= 1e-5, (name, sz)
+    # the Result tab states G64 P both ways as the plan measured it
+    for stated in (f"{c.max_deviation_m * 1e3:.4f} mm / {c.max_path_deviation_m * 1e3:.4f} mm",
+                   f"{c.tolerance_m * 1e3:g} mm", f"[{origin[0]:.4f}, {origin[1]:.4f}] m"):
+        assert stated in s.gui.result.metrics.content, stated
     # the planned cut: the result's samples, in order
     traj = client.scene.lines("/result/trajectory")
     assert traj is not None and len(traj) == len(pose) - 1
@@ -139,13 +145,17 @@ def test_an_opened_program_is_placed_planned_and_drawn(tab):
     words = set(re.findall(r"\b([MST]\d+)", sent[-1]))
     assert {"M3", "S10000", "T1", "M6"} <= words, words
     assert wait_for(lambda: f"{s.preview.preview.lines} lines" in s.gui.preview_note.content, 10)
+    client.type(s.gui.preview, False)
+    assert wait_for(lambda: s.preview.preview is None and client.scene.lines("/preview/feed") is None)
 
     # a typed origin (the panel's field): not planned yet, nothing of the fit plan is offered
     s.gui.auto_replan.value = False
     typed = (origin + [0.004, -0.003]).round(4)
     client.type(s.gui.program.origin.text, f"{typed[0]:g}, {typed[1]:g}")
     assert wait_for(lambda: s.request["origin"] == typed.tolist(), 10)
-    assert all(btn.disabled for btn in s.gui.download_buttons.values()) and s.gui.preview.disabled
+    assert wait_for(lambda: all(btn.disabled for btn in s.gui.download_buttons.values()) and s.gui.preview.disabled,
+                    10)
+    assert "changed since" in s.gui.downloads_note.content
     gen = s.last_plan_generation
     s.plan_now()
     assert wait_for(lambda: s.last_plan_generation > gen, 120) and s.wait_idle(120)
@@ -155,6 +165,16 @@ def test_an_opened_program_is_placed_planned_and_drawn(tab):
     assert moved.shape == feed.shape
     assert np.allclose(moved[:, :, :2] - feed[:, :, :2], typed - origin, atol=1e-6)
     s.gui.auto_replan.value = True
+    # not a corridor: not saved to the store; the request JSON keeps it and opens it again
+    s.files.save(new=True)
+    assert s.notifications[-1][0] == "Not saved" and not s.store.list_corridors()
+    exported: list[bytes] = []
+    s.client.send_file_download = lambda name, content, **kw: exported.append(content)
+    s.files.export_request(s.client)
+    assert json.loads(exported[-1])["program"] == text
+    assert s.files.load_request(json.loads(exported[-1]), None, "corridor.json")
+    assert s.request["program"] == text and s.request["origin"] == typed.tolist() and s.wait_idle(120)
+    assert s.last_error is None and s.undo()
     # undo the origin, undo the opening: the corridor is back, the program's drawing gone
     assert s.undo() and s.request["origin"] == "fit"
     assert s.undo() and "layout" in s.request and "program" not in s.request
@@ -162,6 +182,12 @@ def test_an_opened_program_is_placed_planned_and_drawn(tab):
                     and client.scene.mesh("/contour/tube") is None, 30)
     assert wait_for(lambda: np.all(np.asarray(client.scene.node("/result/trajectory").get("scale"), float) == 1.0),
                     10)
+    # "Close program" (shown only for a program) starts a new layout with the program's robot
+    assert not s.gui.program.close_button.visible
+    assert s.redo() and s.redo() and s.gui.program.close_button.visible
+    s.gui.program.close_button.visible and s.new_layout()
+    assert "program" not in s.request and s.request["layout"] == _state.DEFAULT_REQUEST["layout"]
+    assert s.wait_idle(120) and s.last_error is None and s.last_result.contour is None
 
 
 def test_a_bad_program_names_its_line_in_the_status(tab):

@@ -5,8 +5,8 @@ take) is opened with its placement: program zero at a typed origin x, y in the r
 [m], or, with the field empty, ``origin: "fit"`` (placed inside the region the robot reaches,
 with a margin; the plan says where). The tolerance (empty: the program's ``G64 P``, else
 0.05 mm) and the feed (``program``: never faster than F; ``fastest``) are the contour
-request's. Opening replaces the design by the contour request and plans it at once (undo
-brings the corridor back); changing a field of an opened program re-plans it like any edit.
+request's. Opening replaces the design by the contour request and plans it at once (undo,
+or "Close program", brings a corridor back); changing a field of an opened program re-plans it like any edit.
 """
 
 from __future__ import annotations
@@ -63,6 +63,10 @@ class ProgramPanel:
             self.upload = gui.add_upload_button("Open G-code program", mime_type=PROGRAM_MIME,
                                                 hint="Replaces the design by the program, placed and planned")
             self.upload.on_upload(lambda e: session.files.open_program(self.upload.value, client=e.client))
+            self.close_button = gui.add_button("Close program (new layout)", visible=False,
+                                               hint="Back to a corridor: the default layout (Undo reopens the "
+                                                    "program)")
+            self.close_button.on_click(lambda _: session.new_layout())
 
     def _edit(self, key: str):
         def on_value(value) -> None:
@@ -81,6 +85,7 @@ class ProgramPanel:
 
     def show(self, request: dict) -> None:
         """Show a contour request's placement fields (nothing for a plan request)."""
+        self.close_button.visible = is_contour(request)
         if not is_contour(request):
             return
         origin = request.get("origin", [0.0, 0.0])

@@ -227,7 +227,12 @@ def toggle_cell_obstacle(request: dict, cell_polygon) -> None:
 
 
 def with_new_layout(request: dict) -> dict:
-    """A copy of ``request`` with the default layout in place of its corridor."""
+    """A copy of ``request`` with the default layout in place of its corridor (of a G-code
+    program's design: the default request with its robot and name)."""
+    if "program" in request:
+        out = copy.deepcopy(DEFAULT_REQUEST)
+        out["robot"] = copy.deepcopy(request.get("robot", DEFAULT_ROBOT))
+        return out
     out = copy.deepcopy(request)
     out["layout"] = copy.deepcopy(DEFAULT_REQUEST["layout"])
     out.pop("segments", None)
