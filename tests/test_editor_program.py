@@ -212,3 +212,25 @@ def test_a_bad_program_names_its_line_in_the_status(tab):
     before = s.request
     assert not _open(s, "binary.ngc", {"origin": "fit"}, b"\xff\xfe\x00G1 X1\x9c")
     assert s.request == before and s.notifications[-1][0] == "Program not opened"
+
+
+def test_an_origin_out_of_reach_is_shown_on_its_field_with_one_that_fits(tab):
+    """Program zero typed 0.3 m out: the plan fails, the origin field says which move leaves
+    the reach and proposes an origin that fits; typed into the field, that origin plans, the
+    program lies where the robot reaches and the field's error is gone."""
+    s, client = tab.session, tab.clients[0]
+    gen = s.last_plan_generation
+    assert _open(s, "freecad_linuxcnc.ngc", {"origin": [0.3, 0.3]})
+    assert wait_for(lambda: s.worker.started > gen and s.wait_idle(60) and s.last_error is not None, 120)
+    field = s.gui.program.origin
+    assert s.last_error.field == "origin" and field.error is not None
+    found = re.search(r"an origin that fits: \[(\S+), (\S+)\] m", field.error)
+    assert found and "line " in field.error, field.error
+    proposal = [float(found[1]), float(found[2])]
+    done = s.plans_done
+    client.type(field.text, f"{proposal[0]:g}, {proposal[1]:g}")
+    assert wait_for(lambda: s.plans_done > done, 120) and s.wait_idle(120)
+    assert s.last_error is None and field.error is None
+    assert s.last_result.contour.origin == pytest.approx(proposal, abs=1e-12)
+    pose = np.asarray(s.last_result.pose, float)
+    assert reachable_points(s.robots.of_request(s.request), pose[:, 0], pose[:, 1], 0.0).all()

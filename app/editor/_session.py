@@ -20,6 +20,7 @@ Units: m, rad, s, N.
 from __future__ import annotations
 
 import logging
+import re
 import threading
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, cast
@@ -45,6 +46,9 @@ if TYPE_CHECKING:
 __all__ = ["Session"]
 
 log = logging.getLogger("rangeplan.editor")
+#: where a validation message lists the next field ("; settings.N: ..."); a "; " inside one
+#: field's message (an out-of-reach origin's "; an origin that fits: ...") is not cut there
+_OTHER_FIELD = re.compile(r"; (?=[A-Za-z_][\w.\[\]]*: )")
 
 
 class Session(SegmentEdits):
@@ -424,7 +428,7 @@ class Session(SegmentEdits):
 
     def _show_error_on_field(self, error: ErrorDetail) -> None:
         field, message = error.field or "", error.message
-        message = message.split("; ")[0]  # the field's own message (validation may list more fields)
+        message = _OTHER_FIELD.split(message)[0]  # the field's own message (validation may list more fields)
         if field.startswith("segments["):
             try:
                 i = int(field[len("segments["):field.index("]")])
