@@ -185,8 +185,9 @@ def test_an_opened_program_is_placed_planned_and_drawn(tab):
     # "Close program" (shown only for a program) starts a new layout with the program's robot
     assert not s.gui.program.close_button.visible
     assert s.redo() and s.redo() and s.gui.program.close_button.visible
-    s.gui.program.close_button.visible and s.new_layout()
-    assert "program" not in s.request and s.request["layout"] == _state.DEFAULT_REQUEST["layout"]
+    client.click(s.gui.program.close_button)
+    assert wait_for(lambda: "program" not in s.request, 10)
+    assert s.request["layout"] == _state.DEFAULT_REQUEST["layout"]
     assert s.wait_idle(120) and s.last_error is None and s.last_result.contour is None
 
 
