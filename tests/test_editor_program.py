@@ -147,6 +147,15 @@ def test_an_opened_program_is_placed_planned_and_drawn(tab):
     assert wait_for(lambda: f"{s.preview.preview.lines} lines" in s.gui.preview_note.content, 10)
     client.type(s.gui.preview, False)
     assert wait_for(lambda: s.preview.preview is None and client.scene.lines("/preview/feed") is None)
+    # every machine file of the plan, each naming the program and the plan
+    n = len(sent)
+    for fmt in ("joints", "dxf"):
+        s.files.download_export(s.client, fmt)
+    s.files.download_csv(s.client)
+    assert len(sent) == n + 3
+    for body in sent[n - 1:]:
+        assert f"editor plan #{s.last_plan_generation}" in body and "design: freecad_linuxcnc.ngc" in body
+    assert len([ln for ln in sent[-1].splitlines() if ln and not ln.startswith("#")]) == len(pose) + 1  # + header
 
     # a typed origin (the panel's field): not planned yet, nothing of the fit plan is offered
     s.gui.auto_replan.value = False
