@@ -696,3 +696,51 @@ def test_gcode_preview_draws_the_downloaded_program_over_the_plan(mirrored_tab):
     assert wait_for(lambda: (tab.lines("/preview/feed") is not None
                              and np.allclose(tab.lines("/preview/feed")[0, 0, :2], [-0.08, -0.04], atol=1e-8)), 30)
     assert toggle.is_enabled()
+
+
+def test_files_tab_opens_a_gcode_program_and_shows_its_plan(mirrored_tab):
+    """Files tab, real clicks: open FreeCAD's linuxcnc_post program through the file chooser
+    of "Open G-code program" (the origin field empty: placed in reach). The design becomes the
+    program, planned by the contour job; the page receives the programmed path at the origin
+    the plan reports (the reader's path, within float32), the tolerance tube and the planned
+    cut; the status names the passes, the deviation and the origin; the G-code download is the
+    program the preview shows, with the post's tool change and spindle words."""
+    from app.editor._planning import program_toolpath
+
+    tab = mirrored_tab
+    s, page = tab.session, tab.page
+    program = Path(__file__).parent / "data" / "cam" / "freecad_linuxcnc.ngc"
+    tab.tab("Files")
+    done = s.plans_done
+    with page.expect_file_chooser() as chooser:
+        page.get_by_role("button", name="Open G-code program").click()
+    chooser.value.set_files(str(program))
+    assert wait_for(lambda: s.request.get("program") == program.read_text(), 30), s.request.keys()
+    assert wait_for(lambda: s.plans_done > done, 120) and s.wait_idle(120)
+    assert s.last_error is None, s.last_error
+    c = s.last_result.contour
+    assert c is not None and s.request["origin"] == "fit"
+    path = program_toolpath(s.request)
+    expect = path.points + np.asarray(c.origin)
+    moves = np.any(expect[1:] != expect[:-1], axis=1) & ~path.rapid
+    assert wait_for(lambda: tab.lines("/contour/program_feed") is not None, 30)
+    got = tab.lines("/contour/program_feed")
+    assert got.shape == (int(moves.sum()), 2, 3)
+    assert np.max(np.abs(got[:, 0, :2] - expect[:-1][moves])) <= 1e-8
+    assert np.max(np.abs(got[:, 1, :2] - expect[1:][moves])) <= 1e-8
+    assert wait_for(lambda: tab.scene.mesh("/contour/tube") is not None, 10)
+    traj = tab.lines("/result/trajectory")
+    assert traj is not None and len(traj) == len(s.last_result.pose) - 1
+    body = page.locator("body")
+    assert wait_for(lambda: f"program zero at [{c.origin[0]:.4f}, {c.origin[1]:.4f}] m (fit)" in body.inner_text(), 10)
+    toggle = tab.field("G-code preview")
+    assert wait_for(toggle.is_enabled, 10)
+    toggle.click()
+    assert wait_for(lambda: s.preview.preview is not None and tab.lines("/preview/feed") is not None, 60)
+    gcode = page.get_by_role("button", name="Download G-code (LinuxCNC)")
+    with page.expect_download() as download:
+        gcode.click()
+    text = Path(download.value.path()).read_text()
+    assert text == s.preview.preview.text
+    assert "M6" in text and "S10000" in text
+    tab.shot("12-gcode-program")

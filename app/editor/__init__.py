@@ -12,9 +12,11 @@ editor's state is a plan request in the one JSON shape. The parts:
 - :mod:`._planning`: the re-plan worker; the only editor module that imports ``planner``
 - :mod:`._scene`: the 3-D scene of one tab, its nodes created once and updated in place
 - :mod:`._gui`: the control panel and the playback; :mod:`._gui_segments`: the segment
-  boxes' folder; :mod:`._fields`: number entry as text; :mod:`._result`: the Result tab's
-  plots and the leg legend; :mod:`._cursor`: the live cursor readout
-- :mod:`._files`: store, request JSON and trajectory CSV
+  boxes' folder; :mod:`._gui_program`: the Files tab's G-code program folder (a CAM program
+  opened, placed and contoured: the design is then a contour request); :mod:`._fields`:
+  number entry as text; :mod:`._result`: the Result tab's plots and the leg legend;
+  :mod:`._cursor`: the live cursor readout
+- :mod:`._files`: store, request JSON, G-code programs opened, trajectory CSV and machine files
 - :mod:`._geometry`: numpy / shapely geometry of what is drawn, snapping, clipping
 - :mod:`._gate`: the access rules (:mod:`app.security`) on the editor's port
 

@@ -1,6 +1,7 @@
 """The editor's files: corridors saved to / loaded from the store, the request JSON
-imported and exported, DXF/SVG drawings imported as the layout's obstacles, and the planned
-trajectory as a CSV, G-code, leg-length stream or DXF download.
+imported and exported, DXF/SVG drawings imported as the layout's obstacles, G-code programs
+opened to contour (the design becomes a contour request), and the planned trajectory as a
+CSV, G-code, leg-length stream or DXF download.
 
 A corridor is saved as its plan request (the one JSON shape); whatever is loaded or
 imported is validated as a plan request first and replaces the design only when valid.
@@ -21,12 +22,14 @@ from ._placement import fit_drawing, free_point, reachable_region
 from ._planning import (
     MACHINE_FORMATS,
     OUTPUT_FORMATS,
+    ContourRequest,
     PlannerError,
     PlanRequest,
     PlanResult,
     drawing_request,
     editable,
     export_result,
+    is_contour,
     reachable_points,
     to_csv,
     validate_request,
@@ -61,7 +64,7 @@ class MachineFiles:
     request: dict | None
     plan: int
     reason: str
-    model: PlanRequest | None = None
+    model: PlanRequest | ContourRequest | None = None
 
     def header(self) -> tuple[str, ...]:
         """The provenance lines every downloaded file carries: design, plan id, request hash."""
@@ -100,10 +103,16 @@ class EditorFiles:
         last saved as (a new one if there is none or it was deleted meanwhile)."""
         state = self._editor.state
         req = state.request
+        if is_contour(req):  # the store keeps corridors (plan requests)
+            self._editor.notify("Not saved", "a G-code program is not a corridor: keep its file (Export request "
+                                "JSON keeps the program with its placement, Import request JSON opens it again)",
+                                client=client)
+            return
         valid, message = validate_request(req)
         if valid is None:  # saving validates exactly as planning does
             self._editor.notify("Not saved", message or "invalid request", client=client)
             return
+        assert isinstance(valid, PlanRequest)
         req = valid.to_json_dict()
         try:
             if new or state.corridor_id is None:
@@ -155,8 +164,39 @@ class EditorFiles:
             self._editor.notify("Import failed", f"{origin}: {message}", client=client)
             return False
         req = editable(model)
+        if is_contour(req):  # a G-code program's design (exported with Export request JSON)
+            self._editor.open_design(req)
+            return True
         self._editor.set_request(req, immediate=True)
         self._editor.place_cameras()
+        return True
+
+    def open_program(self, upload, client=None, placement: dict | None = None) -> bool:
+        """Open an uploaded G-code program (``upload.name``, ``upload.content`` bytes) as the
+        design: a contour request (:class:`planner.schema.ContourRequest`) with the program,
+        the placement (``placement``, default the panel's fields: ``origin`` [x, y] m or
+        "fit", ``tolerance_m``, ``feed``) and the design's robot, planned at once. A file
+        that is not text, or a request the schema refuses (too large, a bad origin), is refused
+        with the cause and leaves the design as it is; a program the reader refuses is planned
+        and fails naming its line (the status line and the notification say it)."""
+        try:
+            text = upload.content.decode("utf-8-sig")
+        except UnicodeDecodeError as exc:
+            self._editor.notify("Program not opened", f"{upload.name}: not a text file (UTF-8): {exc}", client=client)
+            return False
+        placement = placement if placement is not None else self._editor.gui.program.placement
+        robot = self._editor.request.get("robot", "moving-slide")
+        data: dict[str, Any] = {"name": upload.name, "program": text, "robot": robot, **placement}
+        model, message = validate_request(data)
+        if model is None:
+            self._editor.notify("Program not opened", f"{upload.name}: {message}", client=client)
+            return False
+        self._editor.open_design(editable(model))
+        self._editor.state.corridor_id = None
+        origin = placement.get("origin", "fit")
+        where = "placed in reach (origin fit)" if origin == "fit" else f"program zero at {list(origin)} m"
+        self._editor.notify("Program opened", f"{upload.name}: {len(text.splitlines())} lines, {where}; planning…",
+                            color="green", client=client)
         return True
 
     def export_request(self, client) -> None:

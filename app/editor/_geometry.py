@@ -19,7 +19,8 @@ import shapely
 CELL_COLOURS = {"free": (222, 235, 247), "blocked": (90, 90, 90), "unreachable": (244, 204, 204)}
 #: z of each layer [m] above the plane so that later layers draw on top
 Z = {"cells": 0.0, "grid": 0.0005, "corridor": 0.001, "obstacles": 0.0015, "obstacle_edges": 0.0017,
-     "reach": 0.002, "trajectory": 0.003, "ticks": 0.0035, "preview": 0.0037, "robot": 0.004, "pivots": 0.0045,
+     "reach": 0.002, "tube": 0.0022, "program": 0.0026,
+     "trajectory": 0.003, "ticks": 0.0035, "preview": 0.0037, "robot": 0.004, "pivots": 0.0045,
      "handles": 0.006}
 
 

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 from . import _state
 from ._cursor import CursorReadout
 from ._fields import Bounds, NumberField, VectorField, syncing
+from ._gui_program import ProgramPanel
 from ._gui_segments import SegmentsPanel
 from ._planning import (
     DEFAULT_LAYOUT_SPEED_M_S,
@@ -165,6 +166,7 @@ class EditorGui:
         }
         if self.speed is not None:
             self.fields_by_path["settings.speed_m_s"] = self.speed
+        self.fields_by_path.update({"origin": self.program.origin, "tolerance_m": self.program.tolerance})
 
     # ------------------------------------------------------------------ building
     def _on_input(self, widget, action: Callable[[], Any]) -> None:
@@ -268,6 +270,7 @@ class EditorGui:
         upload = gui.add_upload_button("Import request JSON", mime_type="application/json")
         upload.on_upload(lambda e: editor.files.import_upload(upload.value, client=e.client))
         gui.add_button("Export request JSON").on_click(lambda e: editor.files.export_request(e.client))
+        self.program = ProgramPanel(gui, editor)
         self._build_cad_files(gui)
 
     def _build_cad_files(self, gui) -> None:
@@ -313,6 +316,7 @@ class EditorGui:
         settings = request.get("settings", {})
         layout = request.get("layout")
         segments = request.get("segments") or []
+        self.program.show(request)
         with syncing():
             self.layout_folder.visible = layout is not None
             self.segments.folder.visible = layout is None and bool(segments)

@@ -12,7 +12,8 @@ only the newest generation, and the caller drops a result whose generation is no
 current (a stale result never overwrites a newer one).
 
 Where a plan is computed: every re-plan and drawing import is a typed job
-(:class:`app.jobs.EditorJob`, :class:`app.jobs.ImportJob`) submitted to the service's one
+(:class:`app.jobs.EditorJob`, :class:`app.jobs.ImportJob`; a G-code program's design, a
+contour request, :class:`app.jobs.ContourJob` as ``POST /v1/contour`` runs it) submitted to the service's one
 executor, :class:`app.service.JobService`. Under ``rangeplan serve`` that is the API's
 service (:func:`use_service`): the same worker processes, work estimate, time limit, memory
 limit and error codes as ``POST /v1/plan``, never in the server process. Without one (an
@@ -22,6 +23,7 @@ estimate and limit (``RANGEPLAN_PLAN_TIMEOUT_S``).
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import threading
@@ -34,7 +36,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from app.formats import MACHINE_FORMATS, OUTPUT_FORMATS, write
-from app.jobs import EditorJob, EditorPlan, ErrorDetail, Failed, ImportJob
+from app.jobs import ContourJob, EditorJob, EditorPlan, ErrorDetail, Failed, ImportJob
 from app.service import JobService
 from app.settings import settings
 from planner import PlannerError, PlanRequest, PlanResult, RobotModel, load_robot
@@ -45,10 +47,13 @@ from planner.schema import (
     DEFAULT_LAYOUT_SPEED_M_S,
     DEFAULT_MODE,
     DEFAULT_ROBOT,
+    MAX_CONTOUR_TOLERANCE_M,
     MAX_LEGS,
+    MIN_CONTOUR_TOLERANCE_M,
     MODE_DEFAULTS,
     PARTIAL_LAYOUT,
     Cell,
+    ContourRequest,
     ImportOptions,
     ImportResult,
     Layout,
@@ -67,9 +72,12 @@ __all__ = [
     "HAS_SPEED_SETTING",
     "MACHINE_FORMATS",
     "OUTPUT_FORMATS",
+    "MAX_CONTOUR_TOLERANCE_M",
     "MAX_LEGS",
+    "MIN_CONTOUR_TOLERANCE_M",
     "MODE_DEFAULTS",
     "SINGULAR_TOL",
+    "ContourRequest",
     "PlanOutcome",
     "PlanRequest",
     "PlanResult",
@@ -81,6 +89,9 @@ __all__ = [
     "RobotCache",
     "builtin_robot_names",
     "compute_plan",
+    "is_contour",
+    "program_toolpath",
+    "tube_cells",
     "to_csv",
     "use_pool",
     "use_service",
@@ -127,10 +138,19 @@ Robot = RobotModel
 HAS_SPEED_SETTING = "speed_m_s" in Settings.model_fields
 
 
-def validate_request(request: dict) -> tuple[PlanRequest | None, str | None]:
-    """The request validated as planning and storage validate it: ``(request, None)`` or
-    ``(None, one line naming the field and the cause)``."""
+def is_contour(request: dict | None) -> bool:
+    """Whether the design ``request`` is a G-code program to contour (a
+    :class:`~planner.schema.ContourRequest`: it has a ``program``), not a plan request."""
+    return isinstance(request, dict) and "program" in request
+
+
+def validate_request(request: dict) -> tuple[PlanRequest | ContourRequest | None, str | None]:
+    """The request validated as planning and storage validate it (a G-code program's design
+    as ``POST /v1/contour`` validates it): ``(request, None)`` or ``(None, one line naming the
+    field and the cause)``."""
     try:
+        if is_contour(request):
+            return ContourRequest.model_validate(request), None
         return PlanRequest.model_validate(request), None
     except ValidationError as exc:
         return None, format_validation_error(exc)
@@ -159,10 +179,12 @@ def robot_geometry(robot: RobotModel, pose) -> dict:
     return {"base": robot.base.copy(), "pivots": pivots, "lengths": np.hypot(dx[0], dy[0])}
 
 
-def editable(req: PlanRequest) -> dict:
+def editable(req: PlanRequest | ContourRequest) -> dict:
     """A validated request as the editor's state: what the client gave (settings the mode
     decides stay unset), with the layout complete (every field, top-level start/end merged
-    in), in JSON types."""
+    in), in JSON types. A contour request: its fields in JSON types."""
+    if isinstance(req, ContourRequest):
+        return req.model_dump(mode="json", exclude_none=True)
     out = req.to_json_dict()
     if req.layout is not None:
         out["layout"] = req.layout.model_dump(mode="json", exclude_none=True)
@@ -207,14 +229,14 @@ def _read_drawing(data: bytes, filename: str, options: dict) -> ImportResult:
     return ImportResult.model_validate_json(out.payload or b"", context=PARTIAL_LAYOUT)
 
 
-def export_result(result: PlanResult, fmt: str, request: PlanRequest | dict,
+def export_result(result: PlanResult, fmt: str, request: PlanRequest | ContourRequest | dict,
                   header: tuple[str, ...] = ()) -> str:
     """A plan result in a machine format (:data:`MACHINE_FORMATS`: G-code, leg lengths, DXF
     with the obstacles of ``request``'s layout: the validated request the result was planned
     for, or a draft dict, validated here), ``header`` lines (design, plan id, request hash)
     in its header."""
-    model = request if isinstance(request, PlanRequest) else validate_request(request)[0]
-    layout = model.layout if model is not None else None
+    model = request if isinstance(request, (PlanRequest, ContourRequest)) else validate_request(request)[0]
+    layout = model.layout if isinstance(model, PlanRequest) else None  # a contour draws no obstacles
     return write(result, fmt, layout=layout, source="rangeplan editor", header=header).decode()
 
 
@@ -257,7 +279,7 @@ class PlanOutcome:
     result: PlanResult | None
     error: ErrorDetail | None
     seconds: float
-    request: PlanRequest | None = None
+    request: PlanRequest | ContourRequest | None = None
 
 
 def compute_plan(request: dict, robots: RobotCache) -> PlanOutcome:
@@ -267,20 +289,61 @@ def compute_plan(request: dict, robots: RobotCache) -> PlanOutcome:
     (``robots``: the editor's cache, for drawing; the job loads its own.)"""
     t0 = time.perf_counter()
 
-    def outcome(plan: EditorPlan, req: PlanRequest | None = None) -> PlanOutcome:
+    def outcome(plan: EditorPlan, req: PlanRequest | ContourRequest | None = None) -> PlanOutcome:
         return PlanOutcome(plan.segmentation, plan.result, plan.error, time.perf_counter() - t0, req)
 
+    contour = is_contour(request)
     try:
-        req = PlanRequest.model_validate(request)
+        req = ContourRequest.model_validate(request) if contour else PlanRequest.model_validate(request)
     except ValidationError as exc:  # the first failing field names the error; the message lists up to three
         first = planner_error(exc)
         message = format_validation_error(exc).removeprefix(f"{first.field}: ")
         return outcome(EditorPlan(error=ErrorDetail(code=first.code, message=message, field=first.field, details=None)))
+    if isinstance(req, ContourRequest):  # a G-code program: the contour job, as POST /v1/contour runs it
+        done = _service().run(ContourJob(req, "json", source="rangeplan editor"))
+        if isinstance(done, Failed):
+            return outcome(EditorPlan(error=done.error), req)
+        return outcome(EditorPlan(result=PlanResult.model_validate_json(done.payload or b"{}")), req)
     out = _service().run(EditorJob(req))
     if isinstance(out, Failed):
         return outcome(EditorPlan(error=out.error), req)
     # the worker's JSON parsed once into the result models (it crossed a process boundary)
     return outcome(EditorPlan.model_validate_json(out.payload or b"{}"), req)
+
+
+#: programs read for drawing, by their text and reading options (the newest few)
+_programs: dict[tuple, Toolpath] = {}
+_programs_lock = threading.Lock()
+
+
+def program_toolpath(request: dict) -> Toolpath:
+    """The programmed path of a G-code program's design (``request``: a contour request dict)
+    as :func:`planner.exchange.read_gcode` reads it (the reading the contour job plans from:
+    the same ``cut_below_m`` and ``z_rapid_m_s``), as a polyline in the program frame
+    (:func:`planner.exchange.toolpath`: arcs sampled 0.5 mm apart at most, rapids marked). The
+    last few are kept (a re-plan after an edit of the origin or the tolerance reads nothing).
+    Raises :class:`PlannerError` naming the line for a bad program."""
+    cut_below = float(request.get("cut_below_m", 0.0))
+    z_rapid = float(request.get("z_rapid_m_s", 0.05))
+    text = str(request.get("program", ""))
+    key = (hashlib.sha256(text.encode()).hexdigest(), cut_below, z_rapid)
+    with _programs_lock:
+        found = _programs.get(key)
+    if found is not None:
+        return found
+    path = toolpath(read_gcode(text, cut_below=cut_below, z_rapid_m_s=z_rapid))
+    with _programs_lock:
+        if len(_programs) >= 4:
+            _programs.pop(next(iter(_programs)))
+        _programs[key] = path
+    return path
+
+
+def tube_cells(result: PlanResult) -> list[np.ndarray]:
+    """The tolerance tube of a contour plan: the convex cells (each (m, 2) [m], robot frame) its
+    cut passes were planned through, in order (the corridor's segments with a polygon; the
+    boxes of the travel moves and the points at the passes' ends have none)."""
+    return [np.asarray(s.polygon, float) for s in result.corridor.segments or [] if s.polygon is not None]
 
 
 class PlanWorker(threading.Thread):

@@ -55,6 +55,8 @@ class GcodePreview:
     path_deviation_m: float
     time_deviation_m: float
     psi_deviation_rad: float
+    text: str = ""  #: the program as the G-code download writes it
+
 
     def segments(self, rapid: bool) -> np.ndarray:
         """The feed (``rapid`` False) or rapid pieces of the path, (M, 2, 2) [m], without
@@ -86,7 +88,7 @@ def build_preview(files: MachineFiles) -> GcodePreview:
         lines=len(text.splitlines()), duration_s=path.duration_s, plan_duration_s=float(t[-1]),
         path_deviation_m=geo.polyline_distance(path.points[fed], pose[:, :2]),
         time_deviation_m=float(np.max(np.hypot(*(at[:, :2] - pose[:, :2]).T))),
-        psi_deviation_rad=float(np.max(np.abs(at[:, 2] - pose[:, 2]))))
+        psi_deviation_rad=float(np.max(np.abs(at[:, 2] - pose[:, 2]))), text=text)
 
 
 class Previewer:

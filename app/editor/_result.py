@@ -143,7 +143,18 @@ def metrics_markdown(result: PlanResult) -> str:
         f"| path length | {m.path_length_m:.3f} m |",
         f"| mode, compute | {result.mode}, {m.compute_ms:.0f} ms |",
     ]
+    c = result.contour
+    if c is not None:  # a G-code program's plan: G64 P both ways, its time
+        lines += [
+            f"| tolerance (G64 P) | {c.tolerance_m * 1e3:g} mm |",
+            f"| deviation, cut from path / path from cut | {c.max_deviation_m * 1e3:.4f} mm / "
+            f"{c.max_path_deviation_m * 1e3:.4f} mm |",
+            f"| cycle time, cutting | {c.cycle_time_s:.3f} s, {c.cut_time_s:.3f} s ({len(c.passes)} pass(es)) |",
+            f"| program zero (robot frame) | [{c.origin[0]:.4f}, {c.origin[1]:.4f}] m |",
+        ]
     warn = []
+    if c is not None and c.max_deviation_m > c.tolerance_m:
+        warn.append("the cut leaves the tolerance")
     if m.max_force_ratio > 1:
         warn.append("drive force above the limit")
     if m.max_corridor_violation_m > 1e-3:

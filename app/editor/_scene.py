@@ -30,13 +30,13 @@ import numpy as np
 import viser
 
 from . import _geometry as geo
-from ._planning import MAX_LEGS, Robot, reachable_mask, robot_geometry
+from ._planning import MAX_LEGS, Robot, reachable_mask, reachable_region, robot_geometry
 
 if TYPE_CHECKING:
-    from ._planning import PlanResult, SegmentationResult
+    from ._planning import PlanResult, SegmentationResult, Toolpath
     from ._preview import GcodePreview
 
-__all__ = ["PREVIEW_COLOURS", "ROBOT_STYLES", "TICK_EVERY_S", "EditorScene", "axis_ticks"]
+__all__ = ["PREVIEW_COLOURS", "PROGRAM_COLOURS", "ROBOT_STYLES", "TICK_EVERY_S", "EditorScene", "axis_ticks"]
 
 TICK_EVERY_S = 0.1  #: spacing of the time ticks on the trajectory [s]
 EDGE_HANDLE = 0.014  #: width of a segment edge handle, as a fraction of the larger view side
@@ -57,6 +57,12 @@ _PIVOTS_ABOVE_PLATFORM = geo.Z["pivots"] - geo.Z["robot"]  #: z of pivots and to
 _REACH_COLOURS = {"start": (210, 20, 20), "end": (230, 110, 0)}
 #: the G-code preview: feed moves and (dashed) rapids, as AXIS draws a program (RGB 0-255)
 PREVIEW_COLOURS = {"feed": (0, 170, 170), "rapid": (220, 0, 0)}
+#: the factor on the z of the layers a G-code program is compared on (:meth:`EditorScene.set_flat`):
+#: 3.7 mm becomes 7.4 um, 0.4 um of parallax at 7 mm from the centre of a view 13 mm above
+FLAT_Z = 0.002
+#: an opened G-code program: its programmed path (feed moves, rapids) and tolerance tube (RGB 0-255)
+PROGRAM_COLOURS = {"feed": (0, 0, 0), "rapid": (150, 150, 150), "tube": (255, 190, 90),
+                   "tube_edges": (220, 120, 0)}
 
 
 def _show_lines(handle: viser.LineSegmentsHandle, segments: np.ndarray) -> None:
@@ -109,6 +115,7 @@ class EditorScene:
         self._robot_drawn: Robot | None = None  # robot whose structure the robot nodes show
         self._robot_lock = threading.Lock()  # one pose at a time: legs and platform of the same frame
         self.robot_style = "solid"
+        self._flat = False  # see set_flat
         scene = client.scene  # up direction and world axes: the server's, set by the editor
         scene.on_click()(on_click)
         scene.on_rect_select(modifier="shift")(on_rect_select)
@@ -149,6 +156,12 @@ class EditorScene:
         # result: trajectory and its time ticks
         self.trajectory = lines("/result/trajectory", (20, 60, 220), 3.0)
         self.ticks = points("/result/ticks", (255, 140, 0), 0.0035, "circle")
+        # an opened G-code program (a contour design): the tolerance tube (the cells its passes
+        # were planned through, filled and outlined) and the programmed path, feed moves and rapids
+        self.tube = mesh("/contour/tube", PROGRAM_COLOURS["tube"], 0.6, flat_shading=True)
+        self.tube_edges = lines("/contour/tube_edges", PROGRAM_COLOURS["tube_edges"], 0.8)
+        self.program_feed = lines("/contour/program_feed", PROGRAM_COLOURS["feed"], 1.5)
+        self.program_rapid = lines("/contour/program_rapid", PROGRAM_COLOURS["rapid"], 1.0)
         # the G-code preview (the exported program read back): feed moves, rapids dashed
         self.preview_feed = lines("/preview/feed", PREVIEW_COLOURS["feed"], 2.0)
         self.preview_rapid = lines("/preview/rapid", PREVIEW_COLOURS["rapid"], 2.0)
@@ -423,7 +436,60 @@ class EditorScene:
         _show_lines(self.trajectory, np.stack((pts[:-1], pts[1:]), axis=1))
         ticks = geo.time_ticks(t, pose, TICK_EVERY_S)
         self.ticks.points = np.column_stack((ticks, np.full(len(ticks), geo.Z["ticks"])))
-        self.ticks.visible = True
+        self.ticks.visible = not self._flat
+
+    def set_flat(self, flat: bool) -> None:
+        """Draw the program, the tube, the planned cut, its ticks and the G-code preview nearly
+        in the plane (their z scaled by :data:`FLAT_Z`, their order kept) or at their layers'
+        heights. The view is a perspective one: a layer drawn 3.7 mm above the plane shows
+        r dz / h too far out at r from the view's centre seen from h above, a few pixels for a
+        0.3 m layout but 0.2 mm beside a 10 mm program framed from 13 mm: the tube then seemed
+        to miss the programmed path it is built around by 4 tolerances. The time ticks are
+        hidden while flat (0.1 s apart they are a dot every 0.5 mm at a cut's feed of 300 mm/min)."""
+        if flat == self._flat:
+            return
+        self._flat = flat
+        if flat:
+            self.ticks.visible = False
+        scale = (1.0, 1.0, FLAT_Z) if flat else 1.0
+        for node in (self.trajectory, self.preview_feed, self.preview_rapid, self.tube, self.tube_edges,
+                     self.program_feed, self.program_rapid):
+            node.scale = scale
+
+    def show_program(self, path: Toolpath | None, origin=None) -> None:
+        """An opened G-code program's programmed path (:func:`planner.exchange.toolpath`, program
+        frame) with program zero at ``origin`` [x, y] (robot frame, m): its feed moves (cuts and
+        feed moves above the material) and its rapids as line segments between the path's
+        points, pieces of length 0 (dwells, plunges) left out; None hides it."""
+        if path is None or origin is None:
+            self.program_feed.visible = self.program_rapid.visible = False
+            return
+        pts = np.asarray(path.points, float) + np.asarray(origin, float)[:2]
+        a, b = pts[:-1], pts[1:]
+        moves = np.any(a != b, axis=1)
+        z = geo.Z["program"]
+        for node, rapid in ((self.program_feed, False), (self.program_rapid, True)):
+            keep = moves & (path.rapid == rapid)
+            segs = np.stack((a[keep], b[keep]), axis=1)
+            _show_lines(node, np.concatenate((segs, np.full((*segs.shape[:2], 1), z)), axis=2))
+
+    def show_tube(self, cells: list[np.ndarray] | None) -> None:
+        """The tolerance tube of a contour plan: its convex cells (each (m, 2) [m]) filled and
+        outlined; None (or none) hides it."""
+        cells = cells or []
+        _show_mesh(self.tube, *geo.polygon_mesh(cells, geo.Z["tube"]))
+        _show_lines(self.tube_edges, geo.polygon_edges(cells, geo.Z["tube"] + 1e-4))
+
+    def show_reach(self, robot: Robot | None, psi: float = 0.0) -> None:
+        """The outline of the region ``robot`` reaches at ``psi`` [rad] over its whole reach
+        (a G-code program has no layout bounds: where ``origin: "fit"`` places it); None hides it."""
+        if robot is None:
+            self.reachable["start"].visible = False
+            return
+        lo, hi, _ = reachable_region(robot, psi)
+        margin = 0.02 * (hi - lo)
+        _show_lines(self.reachable["start"], self._reach_outline(robot, lo - margin, hi + margin, psi))
+        self.reachable["end"].visible = False
 
     def show_preview(self, preview: GcodePreview | None) -> None:
         """The G-code preview over the trajectory: the read-back program's feed moves as

@@ -20,6 +20,7 @@ Units: m, rad, s, N.
 from __future__ import annotations
 
 import logging
+import re
 import threading
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, cast
@@ -32,7 +33,7 @@ from ._files import EditorFiles
 from ._gui import EditorGui, error_body, error_title
 from ._history import History
 from ._placement import reachable_region
-from ._planning import PlanWorker, compute_plan
+from ._planning import PlannerError, PlanWorker, compute_plan, is_contour, program_toolpath, tube_cells
 from ._preview import Previewer
 from ._result import leg_legend_html
 from ._scene import EditorScene
@@ -40,11 +41,14 @@ from ._session_segments import SegmentEdits
 
 if TYPE_CHECKING:
     from ._editor import Editor
-    from ._planning import ErrorDetail, PlanResult, SegmentationResult
+    from ._planning import ErrorDetail, PlanResult, SegmentationResult, Toolpath
 
 __all__ = ["Session"]
 
 log = logging.getLogger("rangeplan.editor")
+#: where a validation message lists the next field ("; settings.N: ..."); a "; " inside one
+#: field's message (an out-of-reach origin's "; an origin that fits: ...") is not cut there
+_OTHER_FIELD = re.compile(r"; (?=[A-Za-z_][\w.\[\]]*: )")
 
 
 class Session(SegmentEdits):
@@ -64,6 +68,10 @@ class Session(SegmentEdits):
         self._draw_lock = threading.Lock()
         self._drag: tuple[dict, float, float] | None = None  # segment at drag start, pointer x, y [m]
         self._closed = False
+        #: the opened G-code program's path as drawn (program frame) and program zero [x, y] (robot
+        #: frame, m) it was drawn at; None: no program drawn
+        self.program_drawn: tuple[Toolpath, list[float]] | None = None
+        self._frame_program = False  # a program was just opened: the view frames it once it is placed
         self.scene = EditorScene(client, on_click=self._on_scene_click, on_rect_select=self._on_rect_select,
                                  on_handle_moved=self.move_handle, on_segment_drag=self.drag_segment)
         self.files = EditorFiles(self, editor.store)
@@ -149,6 +157,14 @@ class Session(SegmentEdits):
                 self._schedule(immediate, always=True)
         self.scene.show_result(None)
         self._show_all()
+
+    def open_design(self, request: dict) -> None:
+        """Open a G-code program's design (a contour request dict, see
+        :meth:`app.editor._files.EditorFiles.open_program`) as one undo step, plan it at once;
+        the view frames the program when the plan has placed it."""
+        self._frame_program = True
+        self.set_request(request, immediate=True)
+        self.place_cameras()
 
     def undo(self) -> bool:
         """Undo the newest edit step; returns False when there is none."""
@@ -274,6 +290,14 @@ class Session(SegmentEdits):
             grid = self.snap_grid()
             self.gui.cursor.set_grid(grid[0] if grid else None, grid[1] if grid else (0.0, 0.0))
             robot = self.robots.of_request(r)
+            if is_contour(r):
+                self._show_program_design(r, robot)
+                self.show_downloads()
+                return
+            self.program_drawn = None
+            self.scene.show_program(None)
+            self.scene.show_tube(None)
+            self.scene.set_flat(False)
             if robot is not None:
                 self.scene.show_layout(layout, robot)
                 if layout is not None:
@@ -294,6 +318,57 @@ class Session(SegmentEdits):
                 self.scene.set_view_span(float(np.max(np.subtract(layout["bounds"]["upper"],
                                                                   layout["bounds"]["lower"]))))
         self.show_downloads()
+
+    def _show_program_design(self, request: dict, robot) -> None:
+        """A G-code program's design (called under the draw lock): no layout, no boxes; the
+        region the robot reaches (where "fit" places the program) and, when the program was
+        read and its origin is typed, its path at that origin at once (with "fit" the plan
+        says where: :meth:`_show_contour`)."""
+        self.scene.show_segmentation(None)
+        self.scene.show_segments(None)
+        self.scene.set_flat(True)
+        if robot is not None:
+            self.scene.show_layout(None, robot)
+            self.scene.show_reach(robot, 0.0)
+            lo, hi, _ = reachable_region(robot, 0.0)
+            text = (f"Reachable at ψ 0 rad (red outline), where the program is placed: x {lo[0] * 1e3:.0f}…"
+                    f"{hi[0] * 1e3:.0f} mm, y {lo[1] * 1e3:.0f}…{hi[1] * 1e3:.0f} mm")
+            if self.gui.reach_note.content != text:
+                self.gui.reach_note.content = text
+        origin = request.get("origin", [0.0, 0.0])
+        drawn = self.program_drawn
+        if drawn is not None and origin != "fit" and list(map(float, origin)) != drawn[1]:
+            self._draw_program(drawn[0], [float(v) for v in origin])
+        pts = drawn[0].points if drawn is not None else np.zeros((1, 2))
+        self.scene.set_view_span(max(float(np.max(np.ptp(pts, axis=0))), 0.005))
+
+    def _draw_program(self, path: Toolpath | None, origin: list[float] | None) -> None:
+        self.program_drawn = (path, origin) if path is not None and origin is not None else None
+        self.scene.show_program(path, origin)
+
+    def _show_contour(self, request: dict, result: PlanResult | None) -> None:
+        """After a contour plan (on the worker): the programmed path, read as the contour job
+        reads it, at the origin the plan used (a typed one when the plan failed), the tube the
+        passes were planned through, and, once after a program was opened, the view on it."""
+        try:
+            path: Toolpath | None = program_toolpath(request)
+        except PlannerError:  # the plan's error names the line
+            path = None
+        origin = request.get("origin", [0.0, 0.0])
+        if result is not None and result.contour is not None:
+            at: list[float] | None = [float(v) for v in result.contour.origin]
+        else:
+            at = None if origin == "fit" else [float(v) for v in origin]
+        with self._draw_lock:
+            self._draw_program(path, at)
+            self.scene.show_tube(tube_cells(result) if result is not None else None)
+            if path is not None and at is not None:
+                self.scene.set_view_span(max(float(np.max(np.ptp(path.points, axis=0))), 0.005))
+        if self._frame_program and path is not None and at is not None:
+            self._frame_program = False
+            pts = path.points + np.asarray(at)
+            lo, hi = pts.min(axis=0), pts.max(axis=0)
+            self.scene.place_camera(0.5 * (lo + hi), max(0.7 * float(np.max(hi - lo)), 0.005), self.client)
 
     def show_downloads(self) -> None:
         """Machine-file downloads and the G-code preview on only for the plan of the design on
@@ -353,7 +428,7 @@ class Session(SegmentEdits):
 
     def _show_error_on_field(self, error: ErrorDetail) -> None:
         field, message = error.field or "", error.message
-        message = message.split("; ")[0]  # the field's own message (validation may list more fields)
+        message = _OTHER_FIELD.split(message)[0]  # the field's own message (validation may list more fields)
         if field.startswith("segments["):
             try:
                 i = int(field[len("segments["):field.index("]")])
@@ -380,7 +455,12 @@ class Session(SegmentEdits):
         to edit; scroll out to see the whole robot)."""
         r = self.state.request
         layout = r.get("layout")
-        if layout is not None and fit_layout:
+        if is_contour(r):  # a program: its reach until the plan places it (then the program: _show_contour)
+            robot = self.robots.of_request(r, fallback=True)
+            assert robot is not None
+            lo, hi, _ = reachable_region(robot, 0.0)
+            centre, half = 0.5 * (lo + hi), 0.6 * float(np.max(hi - lo))
+        elif layout is not None and fit_layout:
             lo, hi = np.asarray(layout["bounds"]["lower"], float), np.asarray(layout["bounds"]["upper"], float)
             side = float(np.max(hi - lo))  # the bounds and, under them, the axis labels and the scale bar
             centre, half = 0.5 * (lo + hi) - np.array([0.0, 0.03 * side]), 0.6 * side
@@ -448,6 +528,9 @@ class Session(SegmentEdits):
         self.show_downloads()
         robot = self.robots.of_request(request)
         seg, result, error = outcome.segmentation, outcome.result, outcome.error
+        contour = is_contour(request)
+        if contour:
+            self._show_contour(request, result)
         self.scene.show_segmentation(seg if request.get("layout") is not None else None)
         grid = self.snap_grid()  # an automatic cell size is known now: the readout's grid follows
         self.gui.cursor.set_grid(grid[0] if grid else None, grid[1] if grid else (0.0, 0.0))
@@ -471,8 +554,15 @@ class Session(SegmentEdits):
         self.gui.result.header.content = (f"**Plan #{gen}** (the current design): planned in {outcome.seconds:.2f} s, "
                                           f"duration {result.metrics.duration_s:.2f} s")
         self.show_time(duration)
-        what = (f"{len(seg.path)} cells in the corridor" if seg else
-                f"{len(request.get('segments') or [])} boxes in the corridor")
+        c = result.contour
+        if contour and c is not None:
+            what = (f"{len(c.passes)} pass(es), deviation {c.max_deviation_m * 1e3:.4f} mm of the tolerance "
+                    f"{c.tolerance_m * 1e3:g} mm, program zero at [{c.origin[0]:.4f}, {c.origin[1]:.4f}] m"
+                    + (" (fit)" if request.get("origin") == "fit" else ""))
+        elif seg:
+            what = f"{len(seg.path)} cells in the corridor"
+        else:
+            what = f"{len(request.get('segments') or [])} boxes in the corridor"
         self.gui.show_status(f"plan #{gen} in {outcome.seconds:.2f} s — duration {result.metrics.duration_s:.2f} s, "
                              f"{what}")
 

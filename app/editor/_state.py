@@ -23,7 +23,7 @@ from . import _geometry as geo
 from ._planning import DEFAULT_MODE, DEFAULT_ROBOT, MODE_DEFAULTS
 
 if TYPE_CHECKING:
-    from ._planning import ErrorDetail, PlanRequest, PlanResult, SegmentationResult
+    from ._planning import ContourRequest, ErrorDetail, PlanRequest, PlanResult, SegmentationResult
 
 __all__ = [
     "DEFAULT_REQUEST",
@@ -84,7 +84,7 @@ class EditorState:
         self.last_result: PlanResult | None = None  #: newest published plan result
         self.last_result_robot: Any = None  #: robot spec (name or description) of last_result
         self.last_result_request: dict | None = None  #: the request draft last_result was planned for
-        self.last_result_model: PlanRequest | None = None  #: that request, validated
+        self.last_result_model: PlanRequest | ContourRequest | None = None  #: that request, validated
         self.last_segmentation: SegmentationResult | None = None  #: newest published segmentation
         self.last_error: ErrorDetail | None = None  #: newest error (code, message, field) or None
         self.last_plan_generation = 0  #: generation of the newest published result
@@ -107,7 +107,8 @@ class EditorState:
             edit(self._request)
 
     def publish(self, gen: int, request: dict, segmentation: SegmentationResult | None,
-                result: PlanResult | None, error: ErrorDetail | None, model: PlanRequest | None = None) -> None:
+                result: PlanResult | None, error: ErrorDetail | None,
+                model: PlanRequest | ContourRequest | None = None) -> None:
         """Record the outcome of the current re-plan ``gen`` of ``request`` (the draft;
         ``model``: it validated). A failed plan keeps the last good result; a failed
         segmentation of a layout keeps the last segmentation (the cells stay clickable)."""
@@ -226,7 +227,12 @@ def toggle_cell_obstacle(request: dict, cell_polygon) -> None:
 
 
 def with_new_layout(request: dict) -> dict:
-    """A copy of ``request`` with the default layout in place of its corridor."""
+    """A copy of ``request`` with the default layout in place of its corridor (of a G-code
+    program's design: the default request with its robot and name)."""
+    if "program" in request:
+        out = copy.deepcopy(DEFAULT_REQUEST)
+        out["robot"] = copy.deepcopy(request.get("robot", DEFAULT_ROBOT))
+        return out
     out = copy.deepcopy(request)
     out["layout"] = copy.deepcopy(DEFAULT_REQUEST["layout"])
     out.pop("segments", None)
