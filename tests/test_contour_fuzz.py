@@ -66,7 +66,7 @@ def test_infeasible_advice_is_checked():
 def test_estimate_counts_the_advice_check():
     """estimate_contour adds the bound on the advice check (at least ADVICE_MIN_S) to the
     planning estimate, and says so."""
-    from planner.contour.plan import ADVICE_MIN_S
+    from planner.contour.estimate import ADVICE_MIN_S
 
     seconds, detail = estimate_contour({"program": SMALL, "origin": ORIGIN})
     assert seconds >= ADVICE_MIN_S and "advice" in detail
