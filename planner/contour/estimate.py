@@ -16,27 +16,35 @@ from .tube import SAGITTA_FRACTION
 __all__ = ["ADVICE_MIN_S", "ADVICE_WORK", "CONTOUR_CELL_PLAN_S", "CONTOUR_CELL_S", "CONTOUR_PIECE_S", "CONTOUR_STEP_S",
            "CONTOUR_TRAVEL_S", "estimate_contour", "piece_estimate"]
 
-#: the checks of the advice take at most this many times the piece's estimate (estimate_contour
-#: adds it for the largest pass), and at least ADVICE_MIN_S [s]
+#: the checks of an infeasible verdict's advice take at most this many times the piece's
+#: estimate, and at least ADVICE_MIN_S [s] (and no more than what a ``work_limit_s`` leaves):
+#: not part of the estimate, which is the work of a program that plans (as
+#: :class:`planner.WorkEstimate`'s ``advice_seconds``); :func:`estimate_contour` names the bound
 ADVICE_WORK = 3.0
 ADVICE_MIN_S = 4.0
-#: seconds per receding-horizon step of a tube plan (polygon cells with eight half-planes,
-#: junctions): measured ~0.5-1.3 ms per step on the benchmark programs (benchmarks/bench_contour.py);
-#: the estimate takes the low end for the samples the feed asks for (the cells' own cost is
-#: counted apart: :data:`CONTOUR_CELL_PLAN_S`)
-CONTOUR_STEP_S = 3e-4
-#: seconds a tube cell costs each candidate plan (its ~1.5-2.5 samples at least, its range and
-#: polygon rows): 0.35-0.55 ms measured (issue 33: 1 000 lines of 0.5 mm, 1 000 circles of
-#: 0.1 mm, ``benchmarks/bench_estimates.py``)
-CONTOUR_CELL_PLAN_S = 6e-4
-#: seconds a tube cell costs once a piece: built, its deviation and join (``program`` feed,
-#: 0.36-0.49 ms measured); ``fastest`` adds the time-optimal profile (~1.9 ms measured)
-CONTOUR_CELL_S = {"program": 5e-4, "fastest": 2.2e-3}
+#: The unit costs [s] below are CPU seconds fitted (least squares on the relative error) to 23
+#: generated programs (issue 33, ``benchmarks/bench_estimates.py``: 200-6 000 lines of 0.5 mm,
+#: 50-1 000 full circles of 0.1 mm, 10-400 short passes, arcs of 1.5 mm at 0.05 and 0.01 mm,
+#: Ts 2-10 ms, both feeds), then rounded up about 10 %: the estimate is the work, not a bound
+#: far above it (before, 2-16x the work: a 4 s floor and costs taken at the high end).
+#: seconds per receding-horizon step of a candidate plan (polygon cells, junctions), by feed
+#: (``fastest``'s samples at the reference speed are fewer and each carries a cell's rows)
+CONTOUR_STEP_S = {"program": 4.5e-4, "fastest": 1.1e-3}
+#: seconds a tube cell costs each candidate plan (its rows), by feed
+CONTOUR_CELL_PLAN_S = {"program": 3e-4, "fastest": 0.0}
+#: seconds a tube cell costs once a piece (built, its deviation and join): ``fastest`` adds the
+#: time-optimal profile and the search's candidates' cell rows
+CONTOUR_CELL_S = {"program": 0.0, "fastest": 3.5e-3}
 #: seconds of a piece besides its cells and samples (the search, the plan's start and settling)
-CONTOUR_PIECE_S = 0.01
-#: seconds of a free move between passes (a ``fastest`` plan of three segments, ~5 candidates:
-#: 38-62 ms measured at Ts 10 ms), at Ts 10 ms; its samples, and so its cost, grow as 1 / Ts
-CONTOUR_TRAVEL_S = 0.065
+CONTOUR_PIECE_S = 0.017
+#: seconds of a move of the program (its path geometry, deviation candidates, Z)
+CONTOUR_ELEMENT_S = 1.1e-3
+#: seconds of a line of the program read (:func:`planner.exchange.read_gcode`: 30-70 us a line, a
+#: rapid with a comment the most)
+CONTOUR_LINE_S = 7.5e-5
+#: seconds of a free move between passes (a ``fastest`` plan of three segments: ~17 ms
+#: measured at Ts 10 ms), at Ts 10 ms; its samples, and so its cost, grow as 1 / Ts
+CONTOUR_TRAVEL_S = 0.019
 
 
 def _cells(feed: str, elements: list[PathElement], tol: float, Ts: float) -> int:
@@ -69,11 +77,13 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
     between exact stops) its tube cells (:func:`_cells`: lines, arc chords, junctions) built
     once and planned by each candidate, and its cut samples at the programmed feed
     (``program``; ~1.5 plans) or at the reference speed (``fastest``: ~17 candidate plans for
-    the first pass, ~2.5 for the next) (:func:`piece_estimate`); the free moves between passes
-    (:data:`CONTOUR_TRAVEL_S` each); plus the bound on the check of an infeasible verdict's
-    advice (:func:`confirmed_infeasible`: :data:`ADVICE_WORK` times the largest piece, at least
-    :data:`ADVICE_MIN_S`). Measured <= 1.5x it on generated programs of many lines, many tiny
-    circles and many short passes (``benchmarks/bench_estimates.py``)."""
+    the first pass, ~2.5 for the next) and its moves (:func:`piece_estimate`); the free moves
+    between passes (:data:`CONTOUR_TRAVEL_S` each); the program's lines read. Not counted: the
+    check of an infeasible verdict's advice, bounded apart
+    (:func:`~planner.contour.search.confirmed_infeasible`: :data:`ADVICE_WORK` times the largest
+    piece, at least :data:`ADVICE_MIN_S`, within what ``work_limit_s`` leaves; the detail names
+    it). Measured 0.44-1.21x it on generated programs of many lines, many tiny circles, many short
+    passes and arcs (``benchmarks/bench_estimates.py``, benchmarks/README.md)."""
     req = parse_contour_request(request)
     st = req.plan_settings()
     program = read_program(req, program)
@@ -87,22 +97,28 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
                   and (k + 1 == len(program.blocks) or program.blocks[k + 1].kind != "travel"))
     travels += 1  # a cut that starts away from the tool: one more
     travel_s = travels * CONTOUR_TRAVEL_S * max(1.0, 0.01 / st.Ts)
+    lines = req.program.count("\n") + 1
+    read_s = lines * CONTOUR_LINE_S
     plans = _plans(req.feed, n)
     check = max(ADVICE_WORK * max(per_piece, default=0.0), ADVICE_MIN_S)
     cut_s = sum(per_piece)
-    seconds = cut_s + travel_s + check
-    parts = {"travel": travel_s, "cells": cells * (CONTOUR_CELL_S[req.feed] + plans * CONTOUR_CELL_PLAN_S),
-             "samples": samples * plans * CONTOUR_STEP_S}
+    seconds = cut_s + travel_s + read_s
+    f = req.feed
+    parts = {"travel": travel_s, "cells": cells * (CONTOUR_CELL_S[f] + plans * CONTOUR_CELL_PLAN_S[f]),
+             "samples": samples * plans * CONTOUR_STEP_S[f], "lines": read_s,
+             "elements": CONTOUR_ELEMENT_S * sum(len(els) for els in pieces)}
     most = max(parts, key=parts.__getitem__)
     advice = {"travel": "fewer passes (each is a move there, planned with the fastest timing)",
               "cells": "a coarser tolerance_m (fewer arc chords) or fewer, longer moves",
+              "elements": "fewer, longer moves (join short moves in the CAM program)",
+              "lines": "a shorter program (split it)",
               "samples": "a larger settings.Ts or a higher programmed feed"}[most]
     if req.feed == "fastest":
         advice += ", or feed 'program' instead of 'fastest' (one plan a pass instead of a search)"
     return seconds, (f"{n} passes in {len(pieces)} pieces, {cells} tube cells and ~{samples:.0f} cut samples at "
                      f"Ts = {st.Ts:g} s x {plans:.3g} plans: {cut_s:.3g} s; {travels} moves between them: "
-                     f"{travel_s:.3g} s; + {check:.2g} s to check the advice of an infeasible pass; most of it "
-                     f"{most}: {advice}")
+                     f"{travel_s:.3g} s; {lines} lines read: {read_s:.2g} s; most of it {most}: {advice}; an "
+                     f"infeasible pass's advice is checked within {check:.2g} s more")
 
 
 def _samples(feed: str, elements: list[PathElement], Ts: float) -> float:
@@ -120,9 +136,11 @@ def _plans(feed: str, passes: int) -> float:
 def piece_estimate(feed: str, elements: list[PathElement], Ts: float, passes: int = 1,
                     tol: float = DEFAULT_CONTOUR_TOLERANCE_M) -> float:
     """:func:`estimate_contour`'s share of one piece (a pass, or its part between exact stops)
-    [s]: :data:`CONTOUR_PIECE_S`, its cells (:func:`_cells`) built once and planned by each
-    candidate, its cut samples planned by each candidate."""
+    [s]: :data:`CONTOUR_PIECE_S`, its moves (:data:`CONTOUR_ELEMENT_S`), its cells
+    (:func:`_cells`) built once and planned by each candidate, its cut samples planned by each
+    candidate."""
     plans = _plans(feed, passes)
     cells = _cells(feed, elements, tol, Ts)
-    return (CONTOUR_PIECE_S + cells * (CONTOUR_CELL_S[feed] + plans * CONTOUR_CELL_PLAN_S)
-            + _samples(feed, elements, Ts) * plans * CONTOUR_STEP_S)
+    return (CONTOUR_PIECE_S + CONTOUR_ELEMENT_S * len(elements)
+            + cells * (CONTOUR_CELL_S[feed] + plans * CONTOUR_CELL_PLAN_S[feed])
+            + _samples(feed, elements, Ts) * plans * CONTOUR_STEP_S[feed])

@@ -74,16 +74,20 @@ from .tube import PathGeometry, path_to_cut
 __all__ = ["CONTOUR_CELL_PLAN_S", "CONTOUR_CELL_S", "CONTOUR_PIECE_S", "CONTOUR_STEP_S", "CONTOUR_TRAVEL_S",
            "estimate_contour", "largest_feasible", "parse_contour_request", "plan_contour", "plan_cut"]
 
-def plan_contour(request: Any, *, program: Program | None = None) -> PlanResult:
+def plan_contour(request: Any, *, program: Program | None = None, work_limit_s: float | None = None) -> PlanResult:
     """Plan a whole G-code program (module docstring). ``program``: the parsed program, if the
-    caller has read it already. Raises :class:`~planner.errors.PlannerError` naming the
-    field (``program`` with the line, ``tolerance_m``, ``origin``, ``settings.*``)."""
+    caller has read it already. ``work_limit_s``: the compute time [s] the caller allows (a
+    server's limit, which admitted the program by :func:`estimate_contour`): an infeasible
+    pass's advice is checked only within what it leaves. Raises
+    :class:`~planner.errors.PlannerError` naming the field (``program`` with the line,
+    ``tolerance_m``, ``origin``, ``settings.*``)."""
     t0 = time.perf_counter()
+    limit_at = time.process_time() + work_limit_s if work_limit_s is not None and work_limit_s > 0 else None
     req = parse_contour_request(request)
     st = req.plan_settings()
     with numpy_only(st.backend == "reference"):  # the numpy reference compiles nothing (issue 24)
         try:
-            return _plan_contour(req, st, program, t0)
+            return _plan_contour(req, st, program, t0, limit_at)
         except PlannerError as err:
             if req.origin == "fit" or err.code not in ("unreachable", "singular") or "origin that fits" in err.message \
                     or "no origin fits" in err.message:
@@ -95,7 +99,8 @@ def plan_contour(request: Any, *, program: Program | None = None) -> PlanResult:
                                err.field) from None
 
 
-def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0: float) -> PlanResult:
+def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0: float,
+                  limit_at: float | None = None) -> PlanResult:
     """:func:`plan_contour` of a validated request: the program read, its tolerance checked,
     its origin placed and checked (:mod:`.placement`), its blocks planned in order
     (:class:`_Walk`), the parts joined (:func:`~planner.contour.join.join_parts`) with the
@@ -112,7 +117,7 @@ def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0
         origin = np.array(req.origin, float)
         check_reach(program, origin)
         check_reachable(program, model, origin, tol)
-    walk = _Walk(req, st, model, program, origin, tol)
+    walk = _Walk(req, st, model, program, origin, tol, limit_at)
     walk.run()
     result = join_parts(walk.parts, req, st, model)
     result.contour = contour_section(walk.parts, walk.summaries, result, req, program, origin, tol, st.Ts)
@@ -127,8 +132,9 @@ class _Walk:
     cut pass."""
 
     def __init__(self, req: ContourRequest, st: Settings, model: RobotModel, program: Program, origin: np.ndarray,
-                 tol: float) -> None:
+                 tol: float, limit_at: float | None = None) -> None:
         self.req, self.st, self.model, self.program, self.origin, self.tol = req, st, model, program, origin, tol
+        self.limit_at = limit_at  # ``time.process_time`` past which no advice is checked
         self.pos = program.start + origin
         self.z = 0.0
         self.parts: list[Part] = []
@@ -187,7 +193,7 @@ class _Walk:
         geo = PathGeometry(b.elements, origin)
         for chunk in chunks(b.elements):
             part = plan_cut(req, model, st, chunk, origin, tol, CONTOUR_PSI, self.pos, geo, b.elements, self.hint,
-                            len(self.program.passes), self.memo)
+                            len(self.program.passes), self.memo, self.limit_at)
             self.hint = part.scale if part.scale is not None else self.hint
             cut_z(part, b.elements, origin)
             self.parts.append(part)
@@ -214,17 +220,19 @@ def _pass_summary(index: int, b: ProgramBlock, cut_parts: list[Part], geo: PathG
 
 def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int], origin: np.ndarray, tol: float,
              psi: float, pos: np.ndarray, geo: PathGeometry, elements: list[PathElement],
-             hint: Scale | None = None, passes: int = 1, memo: dict | None = None) -> Part:
+             hint: Scale | None = None, passes: int = 1, memo: dict | None = None,
+             limit_at: float | None = None) -> Part:
     """One piece of a pass planned rest to rest. ``hint``: the ``fastest`` scale found for the
     piece before (where its search starts; the search's result is bracketed the same way from
     any start). No timing found: the ``infeasible`` error with its advice checked
-    (:func:`confirmed_infeasible`)."""
+    (:func:`confirmed_infeasible`, its checks stopped at the ``time.process_time`` ``limit_at``)."""
     els = [elements[k] for k in chunk]
     st = st.model_copy(update={"settle_speed_m_s": min(st.settle_speed_m_s, 1e-4)})
     found = search_timing(req.feed, model, st, TubeSizes(model, st, chunk, els, origin, tol, psi, pos, elements),
                           chunk, els, hint, optimal=OptimalProfiles(model, st, chunk, els, origin, psi, memo))
     if found.result is None:
-        raise confirmed_infeasible(req, model, st, chunk, els, origin, tol, psi, pos, elements, found, hint, passes)
+        raise confirmed_infeasible(req, model, st, chunk, els, origin, tol, psi, pos, elements, found, hint, passes,
+                                   limit_at)
     result, t = found.result, found.tube
     assert t is not None
     K = len(result.time)

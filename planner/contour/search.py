@@ -309,21 +309,26 @@ def search_timing(feed_mode: str, model: RobotModel, st: Settings, tube_at: Call
 
 def confirmed_infeasible(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int],
                          els: list[PathElement], origin: np.ndarray, tol: float, psi: float, pos: np.ndarray,
-                         elements: list[PathElement], found: Found, hint: Scale | None, passes: int) -> PlannerError:
+                         elements: list[PathElement], found: Found, hint: Scale | None, passes: int,
+                         limit_at: float | None = None) -> PlannerError:
     """The ``infeasible`` error of a piece no timing plans, its advice checked (issue 22, as
     :func:`planner.orchestrator.plan._more_time_advice` does for plans): the piece planned
     again, by the same search, at :data:`ADVICE_TOLERANCE` times the tolerance, then at
     :data:`ADVICE_TS` times the sample time; the first that plans is named ("tolerance_m
     0.02 plans, checked"), else the error says neither helps and where the plans stop.
     Bounded: the checks together take at most :data:`ADVICE_WORK` times the piece's own
-    estimate (:func:`estimate_contour` counts it), at least :data:`ADVICE_MIN_S`; a candidate
-    not planned within that is said so."""
+    estimate, at least :data:`ADVICE_MIN_S` (the bound :func:`~planner.contour.estimate.estimate_contour`
+    names), and end at ``limit_at`` (``time.process_time``: the caller's work limit); a
+    candidate not planned within that is said so."""
     line = els[0].line
     where = f"line {found.stop_line}" if found.stop_line is not None else f"line {line}"
     head = (f"line {line}: no timing keeps the tool within {tol * 1e3:g} mm of the path within the drive limits "
             f"at a sample time of {st.Ts:g} s (the plans stop at {where})")
     budget = max(ADVICE_WORK * piece_estimate(req.feed, els, st.Ts, passes, tol), ADVICE_MIN_S)
     deadline = time.process_time() + budget
+    if limit_at is not None:  # what the caller's work limit leaves
+        deadline = min(deadline, limit_at)
+        budget = max(deadline - time.process_time(), 0.0)
     candidates: list[tuple[str, float, float]] = []
     if tol * ADVICE_TOLERANCE <= MAX_CONTOUR_TOLERANCE_M:
         candidates.append((f"tolerance_m {tol * ADVICE_TOLERANCE:g} ({tol * ADVICE_TOLERANCE * 1e3:g} mm)",
