@@ -66,7 +66,7 @@ from .passes import (
 )
 from .placement import CONTOUR_PSI, check_reach, check_reachable, fit_origin, proposal
 from .profiles import OptimalProfiles
-from .search import Scale, confirmed_infeasible, largest_feasible, search_timing
+from .search import Scale, confirmed_infeasible, largest_feasible, search_timing, z_caps
 from .tube import PathGeometry, path_to_cut
 
 # the names this module had before issue 34 split it (the estimate's constants, the search's
@@ -229,7 +229,9 @@ def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[i
     els = [elements[k] for k in chunk]
     st = st.model_copy(update={"settle_speed_m_s": min(st.settle_speed_m_s, 1e-4)})
     found = search_timing(req.feed, model, st, TubeSizes(model, st, chunk, els, origin, tol, psi, pos, elements),
-                          chunk, els, hint, optimal=OptimalProfiles(model, st, chunk, els, origin, psi, memo))
+                          chunk, els, hint, z_max_m_s=req.z_rapid_m_s,
+                          optimal=OptimalProfiles(model, st, chunk, els, origin, psi, memo,
+                                                  z_caps(els, req.z_rapid_m_s)))
     if found.result is None:
         raise confirmed_infeasible(req, model, st, chunk, els, origin, tol, psi, pos, elements, found, hint, passes,
                                    limit_at)

@@ -72,14 +72,17 @@ def profile_counts(t: Tube, v_cap: np.ndarray, a: float, Ts: float, a_turn: floa
     return counts
 
 
-def optimal_caps(path: PathSamples, a_all: np.ndarray, rho: float, chord: np.ndarray, Ts: float) -> np.ndarray:
+def optimal_caps(path: PathSamples, a_all: np.ndarray, rho: float, chord: np.ndarray, Ts: float,
+                 zcap: np.ndarray | None = None) -> np.ndarray:
     """The time-optimal profile's bounds on the squared speed beyond the drives' (the ``caps``
     of :func:`planner.contour.timing.time_optimal`): at a corner ``a_all r``, ``r`` the
     :func:`corner_radius` of the turn within ``rho``; on an arc, one of its tube chords per sample
-    time ``Ts`` (``chord``: the longest chord of each element, 0 where it is no arc)."""
+    time ``Ts`` (``chord``: the longest chord of each element, 0 where it is no arc); on a move
+    whose Z changes, the XY speed that keeps Z within its axis speed (``zcap`` per element)."""
     cap = np.where(path.corner > 0, a_all * corner_radius(path.corner, rho), np.inf)
     c = chord[path.element]
-    return np.minimum(cap, np.where(c > 0, (c / Ts) ** 2, np.inf))
+    cap = np.minimum(cap, np.where(c > 0, (c / Ts) ** 2, np.inf))
+    return cap if zcap is None else np.minimum(cap, zcap[path.element] ** 2)
 
 
 class OptimalProfiles:
@@ -93,7 +96,7 @@ class OptimalProfiles:
     alike: one profile)."""
 
     def __init__(self, model: RobotModel, st: Settings, chunk: list[int], els: list[PathElement],
-                 origin: np.ndarray, psi: float, memo: dict | None) -> None:
+                 origin: np.ndarray, psi: float, memo: dict | None, zcap: np.ndarray | None = None) -> None:
         self.model, self.st, self.els, self.origin, self.psi = model, st, els, origin, psi
         self.memo = {} if memo is None else memo
         self.geo = tuple((e.kind, *e.start, *e.end, *(e.centre if e.centre is not None else (0.0, 0.0)),
@@ -103,6 +106,8 @@ class OptimalProfiles:
         total = float(self.start[-1])
         self.h = min(max(total / GRID_POINTS, GRID_H_MIN), GRID_H_MAX, total / GRID_POINTS_MIN)
         self.chunk = np.asarray(chunk)
+        #: per element the XY speed bound of its Z (:func:`planner.contour.search.z_caps`), None: none
+        self.zcap = zcap if zcap is not None and np.isfinite(zcap).any() else None
 
     def __call__(self, t: Tube) -> Optimal:
         """The profile for the tube ``t``: its time at the end of each of ``t``'s segments."""
@@ -111,9 +116,10 @@ class OptimalProfiles:
         arc = np.isfinite(t.radius) & (t.length > 0)
         chord = np.zeros(len(els))
         np.maximum.at(chord, loc[arc], t.length[arc])
-        key = (self.geo, float(origin[0]), float(origin[1]), self.psi, st.Ts, t.rho, tuple(np.round(chord, 12)))
+        key = (self.geo, float(origin[0]), float(origin[1]), self.psi, st.Ts, t.rho, tuple(np.round(chord, 12)),
+               None if self.zcap is None else tuple(self.zcap))
         if key not in memo:
-            caps = partial(optimal_caps, rho=t.rho, chord=chord, Ts=st.Ts)
+            caps = partial(optimal_caps, rho=t.rho, chord=chord, Ts=st.Ts, zcap=self.zcap)
             path, w, T = time_optimal(self.model, els, origin, self.psi, self.h, caps)
             memo[key] = (path.s, T, float(np.sqrt(w.max())))
         s_grid, T, v_peak = memo[key]

@@ -31,7 +31,7 @@ from .profiles import Optimal, optimal_counts, profile_counts
 from .tube import Tube
 
 __all__ = ["SCALE_MAX", "SCALE_MIN", "SCALE_RESOLUTION", "Found", "Scale", "TimingSearch", "confirmed_infeasible",
-           "largest_feasible", "overspeed", "search_timing"]
+           "largest_feasible", "overspeed", "search_timing", "z_caps"]
 
 #: fastest: the reference acceleration the scale's square multiplies [m/s^2] (the reference
 #: cell speed: :data:`planner.contour.passes.V0_M_S`)
@@ -105,10 +105,13 @@ class TimingSearch:
     collects where the failed candidates stopped."""
 
     def __init__(self, model: RobotModel, st: Settings, tube_at: Callable[[float], Tube], chunk: list[int],
-                 els: list[PathElement], deadline: float | None, optimal: Callable[[Tube], Optimal] | None) -> None:
+                 els: list[PathElement], deadline: float | None, optimal: Callable[[Tube], Optimal] | None,
+                 z_max_m_s: float | None = None) -> None:
         self.model, self.st, self.tube_at, self.chunk, self.els = model, st, tube_at, chunk, els
         self.deadline, self.optimal = deadline, optimal
         self.feed = np.array([e.feed_m_s for e in els])
+        self.zcap = z_caps(els, z_max_m_s)  # the XY speed that keeps each move's Z within the axis speed
+        self.z_capped = bool(np.isfinite(self.zcap).any())
         self.name = f"line {els[0].line}"
         self.found = Found(st.Ts)
         self.lines = dict(zip(chunk, (e.line for e in els)))
@@ -116,6 +119,11 @@ class TimingSearch:
     def feed_on(self, t: Tube) -> np.ndarray:
         """The programmed F [m/s] of the move each of the tube's segments belongs to."""
         return self.feed[np.searchsorted(self.chunk, t.element)]
+
+    def zcap_on(self, t: Tube) -> np.ndarray:
+        """The Z speed's bound on the XY speed [m/s] of each of the tube's segments (inf where
+        its move keeps Z)."""
+        return self.zcap[np.searchsorted(self.chunk, t.element)]
 
     def attempt(self, t: Tube, counts: np.ndarray) -> PlanResult | None:
         """One candidate: the tube planned with these sample counts per segment
@@ -160,8 +168,10 @@ class TimingSearch:
         ``lam^2 A0``, turn acceleration ``(lam mu)^2 A0``, jerk ``lam^3 J0``) planned in ``t``;
         ``capped``: None where a sample exceeds the programmed F. ``tried``: the plans by their
         sample counts (scales often give the same)."""
-        counts = profile_counts(t, v_cap * lam * mu, A0_M_S2 * lam * lam, self.st.Ts, A0_M_S2 * (lam * mu) ** 2,
-                                J0_M_S3 * lam ** 3)
+        v = v_cap * lam * mu
+        if self.z_capped:  # a ramp's or helix's Z within the axis speed, whatever the scale
+            v = np.minimum(v, self.zcap_on(t))
+        counts = profile_counts(t, v, A0_M_S2 * lam * lam, self.st.Ts, A0_M_S2 * (lam * mu) ** 2, J0_M_S3 * lam ** 3)
         key = counts.tobytes()
         if key not in tried:
             res = self.attempt(t, counts)
@@ -170,14 +180,15 @@ class TimingSearch:
             tried[key] = res
         return tried[key]
 
-    def scaled(self, t: Tube, v_cap: np.ndarray, capped: bool, lam0: float, mu0: float, high: float
-               ) -> tuple[PlanResult, tuple[float, float]] | None:
+    def scaled(self, t: Tube, v_cap: np.ndarray, capped: bool, lam0: float, mu0: float, high: float,
+               limit: np.ndarray | None = None) -> tuple[PlanResult, tuple[float, float]] | None:
         """The heuristic profile's fastest feasible scales (:meth:`scaled_run`), searched from
         ``lam0``, ``mu0`` up to ``high``: 1. the whole profile (speeds, accelerations); 2. the
         speeds alone (cell speed and the curvature and corner limits), the accelerations between
         them as found: where the start and the stop bound the first scale, the path between them
-        can go faster. The plan and ``(lam, mu)``; None: no scale is feasible."""
-        feed_of = self.feed_on(t)
+        can go faster. The plan and ``(lam, mu)``; None: no scale is feasible. ``capped``: no
+        sample faster than ``limit`` (per segment; the programmed F if not given)."""
+        feed_of = self.feed_on(t) if limit is None else limit
         tried: dict[bytes, PlanResult | None] = {}
 
         def run(lam: float, mu: float = 1.0) -> PlanResult | None:
@@ -198,8 +209,8 @@ class TimingSearch:
         this family's."""
         h = h if h is not None and h.family == "profile" else None  # the other family's scale means nothing here
         t = self.tube_at(V0_M_S)
-        got = self.scaled(t, np.full(len(t.segments), V0_M_S), False, h.lam if h else 1.0, h.mu if h else 1.0,
-                          SCALE_MAX)
+        got = self.scaled(t, np.full(len(t.segments), V0_M_S), self.z_capped, h.lam if h else 1.0,
+                          h.mu if h else 1.0, SCALE_MAX, self.zcap_on(t))
         return (got[0], t, Scale("profile", *got[1])) if got is not None else None
 
     def optimal_run(self, t: Tube, times: np.ndarray, tried: dict[bytes, PlanResult | None],
@@ -209,7 +220,10 @@ class TimingSearch:
         counts = optimal_counts(t, times, lam * self.st.Ts)
         key = counts.tobytes()
         if key not in tried:
-            tried[key] = self.attempt(t, counts)
+            res = self.attempt(t, counts)
+            if res is not None and self.z_capped and overspeed(res, t, counts, self.zcap_on(t)) > 1.0:
+                res = None  # a ramp's Z faster than the axis
+            tried[key] = res
         return tried[key]
 
     def optimal_search(self, h: Scale | None, beat: float | None = None) -> tuple[PlanResult, Tube, Scale] | None:
@@ -277,7 +291,7 @@ class TimingSearch:
 
 def search_timing(feed_mode: str, model: RobotModel, st: Settings, tube_at: Callable[[float], Tube], chunk: list[int],
                   els: list[PathElement], hint: Scale | None, deadline: float | None = None,
-                  optimal: Callable[[Tube], Optimal] | None = None) -> Found:
+                  optimal: Callable[[Tube], Optimal] | None = None, z_max_m_s: float | None = None) -> Found:
     """A timing of the piece for the feed mode, in the tube ``tube_at(v)`` with cells sized for
     the profile's speed ``v`` (``program``: the programmed F times the profile's scale, so that
     a slower profile has shorter cells: the criterion pulls the robot toward each cell's
@@ -289,8 +303,10 @@ def search_timing(feed_mode: str, model: RobotModel, st: Settings, tube_at: Call
     use; ``program`` retries the ``fastest`` profile capped by F, kept where no sample exceeds
     F). ``deadline`` (``time.process_time``: compute time, as
     :func:`~planner.contour.estimate.estimate_contour` counts it): candidates after it are not
-    planned."""
-    search = TimingSearch(model, st, tube_at, chunk, els, deadline, optimal)
+    planned. ``z_max_m_s``: the Z axis speed, which bounds the XY speed along a move whose Z
+    changes (:func:`z_caps`), in both feeds (the program feed's F is capped by it already:
+    :func:`planner.exchange._tabs.cap_z_speed`)."""
+    search = TimingSearch(model, st, tube_at, chunk, els, deadline, optimal, z_max_m_s)
     found = search.found
     if feed_mode == "program":
         got_p = search.program_feed()
@@ -342,7 +358,7 @@ def confirmed_infeasible(req: ContourRequest, model: RobotModel, st: Settings, c
         st2 = st.model_copy(update={"Ts": Ts2})
         try:
             tubes = TubeSizes(model, st2, chunk, els, origin, tol2, psi, pos, elements)
-            got = search_timing(req.feed, model, st2, tubes, chunk, els, hint, deadline)
+            got = search_timing(req.feed, model, st2, tubes, chunk, els, hint, deadline, z_max_m_s=req.z_rapid_m_s)
         except PlannerError:
             got = None
         if got is not None and got.result is not None:
@@ -359,6 +375,19 @@ def confirmed_infeasible(req: ContourRequest, model: RobotModel, st: Settings, c
     msg = f"{head}; {' and '.join(tried)} do not plan either (checked); " if tried else f"{head}; "
     return PlannerError("infeasible", msg + f"{' and '.join(not_tried)} not checked within the work bound "
                         f"({budget:.2g} s); give a larger tolerance_m or a smaller settings.Ts", "tolerance_m")
+
+
+def z_caps(els: list[PathElement], z_max_m_s: float | None) -> np.ndarray:
+    """Per move, the XY speed [m/s] at which its Z moves at ``z_max_m_s`` (``z_max L / |dZ|``,
+    ``L`` its XY length): inf where Z stays, or no limit is given."""
+    out = np.full(len(els), np.inf)
+    if z_max_m_s is None:
+        return out
+    for k, e in enumerate(els):
+        dz = abs(e.z_end_m - e.z_start_m)
+        if dz > 0 and e.length_m > 0:
+            out[k] = z_max_m_s * e.length_m / dz
+    return out
 
 
 def largest_feasible(ok: Callable[[float], bool], start: float, resolution: float = SCALE_RESOLUTION,
