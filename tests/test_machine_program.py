@@ -272,7 +272,7 @@ def test_z_in_the_material_is_one_pass_within_the_z_speed(feed):
     cutting = np.asarray(c.cutting)
     first, last = np.nonzero(cutting)[0][[0, -1]]
     assert cutting[first:last + 1].all()
-    assert all(d is None for d in c.dwell[first + 1:last + 1])
+    assert c.dwell is not None and all(d is None for d in c.dwell[first + 1:last + 1])
     ts = float(res.settings.Ts)
     xyz = _samples(to_gcode(res, source="tabs"), ts)
     z = xyz[:, 2] * 1e-3
