@@ -367,7 +367,7 @@ def test_consecutive_cells_hull_within_tolerance():
 def test_largest_feasible_brackets_the_threshold(start, threshold):
     """fastest's scale search: from any start, ok(lam) and not ok(lam (1 + 1/64)) for a
     monotone feasibility; from a start at the answer, two plans."""
-    from planner.contour.plan import SCALE_RESOLUTION, largest_feasible
+    from planner.contour.search import SCALE_RESOLUTION, largest_feasible
 
     calls = []
 
@@ -383,7 +383,7 @@ def test_largest_feasible_brackets_the_threshold(start, threshold):
 
 
 def test_largest_feasible_at_the_limits():
-    from planner.contour.plan import SCALE_MAX, SCALE_MIN, largest_feasible
+    from planner.contour.search import SCALE_MAX, SCALE_MIN, largest_feasible
 
     assert largest_feasible(lambda x: True, 1.0) == SCALE_MAX
     assert largest_feasible(lambda x: x < SCALE_MIN, 1.0) is None

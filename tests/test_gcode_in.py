@@ -289,3 +289,47 @@ def test_readback_refusals_name_the_line(text, message):
     with pytest.raises(PlannerError) as err:
         read_gcode(text, readback=True)
     assert message in err.value.message, err.value.message
+
+
+TAB = """G21 G90
+G0 Z5
+G0 X0 Y0
+G1 Z0.5 F300
+G1 X4 Z-1 F600
+G1 X8
+G1 X9 Z0.5
+G1 X11
+G1 X12 Z-1
+G1 X16
+G0 Z5
+M2
+"""
+
+
+def test_a_tab_above_the_cut_height_stays_in_its_pass():
+    """Feed moves above the cutting height between two cuts (ramp up, the tab's top, ramp down)
+    are one pass with them (issue 32, goal 3): the path of the pass is the source's moves in
+    order, Z as written; a rapid or a Z-only move between two cuts still ends the pass."""
+    p = read_gcode(TAB)
+    assert len(p.passes) == 1
+    els = p.passes[0].elements
+    assert [e.line for e in els] == [5, 6, 7, 8, 9, 10]
+    assert all(np.allclose(a.end, b.start) for a, b in zip(els, els[1:]))
+    assert max(e.z_end_m for e in els) == pytest.approx(0.5e-3) and els[3].z_start_m == pytest.approx(0.5e-3)
+    rapid = TAB.replace("G1 X11\n", "G0 X11\n")
+    assert len(read_gcode(rapid).passes) == 2
+    vertical = TAB.replace("G1 X9 Z0.5\nG1 X11\nG1 X12 Z-1\n", "G1 Z0.5\nG1 X11\nG1 Z-1\n")
+    assert len(read_gcode(vertical).passes) == 2
+
+
+def test_a_moving_z_is_cut_within_the_z_axis_speed():
+    """A move whose Z changes is cut at an XY feed at which its Z moves at most at the Z axis
+    speed (z_rapid_m_s): F_xy |dZ| / L <= z_rapid; a move that keeps Z keeps its F."""
+    steep = TAB.replace("G1 X9 Z0.5", "G1 X8.3 Z0.5")  # 0.3 mm for 1.5 mm of Z
+    els = read_gcode(steep, z_rapid_m_s=0.004).passes[0].elements
+    for e in els:
+        dz = abs(e.z_end_m - e.z_start_m)
+        assert e.feed_m_s * dz / e.length_m <= 0.004 + 1e-12
+        if dz == 0:
+            assert e.feed_m_s == pytest.approx(0.01)
+    assert els[2].feed_m_s == pytest.approx(0.004 * 0.3 / 1.5)  # the bound itself, below F

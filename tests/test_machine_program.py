@@ -49,9 +49,32 @@ M5
 G49
 M2
 """
+#: a ramp in, a tab above the cutting height and a helix in one pass (issue 32, goal 3)
+TAB_PASS = """(a pass with a ramp in, a tab above the cut height and a helix)
+G21 G90 G17
+G64 P0.02
+S9000 M3
+G0 Z5
+G0 X0 Y0
+G1 Z0.5 F300
+G1 X4 Y0 Z-1 F600
+G1 X8
+G1 X9 Z0.5
+G1 X11
+G1 X12 Z-1
+G1 X16
+G3 X16 Y6 Z-1.5 I0 J3
+G1 X0 Y6
+G1 Y0
+G0 Z5
+M5
+M2
+"""
+#: TAB_PASS and a second pass after a rapid
+TABS_PROGRAM = TAB_PASS.replace("G0 Z5\nM5", "G0 Z5\nG0 X20 Y0\nG1 Z-1 F300\nG1 X22 F600\nG0 Z5\nM5")
 PROGRAMS = {"contour-part": ((ROOT / "app/static/examples/contour-part.ngc").read_text(), [-0.01, -0.01]),
             **{p.stem: (p.read_text(), [-0.005, -0.004]) for p in sorted(CAM.glob("*.n*c"))},
-            "words": (WORDS_PROGRAM, [-0.01, -0.01])}
+            "words": (WORDS_PROGRAM, [-0.01, -0.01]), "tabs": (TABS_PROGRAM, [-0.01, -0.01])}
 PRINTED_MM = 0.5 * 10 ** -DECIMALS
 #: the canonical commands that are not motion: what the machine does besides moving
 WORDS = ("SELECT_TOOL", "START_CHANGE", "CHANGE_TOOL", "USE_TOOL_LENGTH_OFFSET", "SET_SPINDLE_SPEED",
@@ -232,3 +255,33 @@ def test_corridor_plan_gcode_is_unchanged():
     res = plan(json.loads((ROOT / "app/static/examples/table1.json").read_text()))
     assert res.contour is None
     assert to_gcode(res) == _old_to_gcode(res)
+
+
+@pytest.mark.parametrize("feed", ["program", "fastest"])
+def test_z_in_the_material_is_one_pass_within_the_z_speed(feed):
+    """The ramp, the tab and the helix of TAB_PASS are cut in one pass: its cutting samples
+    run without a stop from the ramp to the end (no rest, no dwell), rs274's Z of the exported
+    program at each of them is the source's Z where the sample is on the path (to the printed
+    0.0005 mm), and Z moves at most at the Z axis speed between samples (the tab's flanks made
+    steep, the axis slow: the bound binds)."""
+    text = TAB_PASS.replace("G1 X9 Z0.5", "G1 X8.5 Z0.5").replace("G1 X12 Z-1", "G1 X11.5 Z-1")
+    z_max = 0.01
+    res = plan_contour({"program": text, "origin": [-0.01, -0.01], "feed": feed, "z_rapid_m_s": z_max})
+    c = res.contour
+    assert c is not None and len(c.passes) == 1
+    cutting = np.asarray(c.cutting)
+    first, last = np.nonzero(cutting)[0][[0, -1]]
+    assert cutting[first:last + 1].all()
+    assert c.dwell is not None and all(d is None for d in c.dwell[first + 1:last + 1])
+    ts = float(res.settings.Ts)
+    xyz = _samples(to_gcode(res, source="tabs"), ts)
+    z = xyz[:, 2] * 1e-3
+    p = read_gcode(text)
+    origin = np.asarray(c.origin)
+    elements = [e for b in p.blocks for e in b.elements]
+    for k in range(first, last + 1):
+        best = min(_nearest(e, res.pose[k, :2] - origin) for e in elements if e.line == c.program_line[k])
+        assert abs(z[k] - best[1]) <= PRINTED_MM * 1e-3 + 1e-9, k
+    vz = np.abs(np.diff(np.asarray(c.z_m)[first:last + 1])) / ts
+    assert vz.max() <= z_max * 1.001, vz.max()
+    assert vz.max() >= 0.5 * z_max  # the flanks run near the bound, not crawling

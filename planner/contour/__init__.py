@@ -8,7 +8,9 @@
   to the programmed path.
 """
 
-from .plan import estimate_contour, parse_contour_request, plan_contour
+from .estimate import estimate_contour
+from .passes import parse_contour_request
+from .plan import plan_contour
 from .tube import PathGeometry, Tube, tube
 
 __all__ = ["PathGeometry", "Tube", "estimate_contour", "parse_contour_request", "plan_contour", "tube"]

@@ -15,8 +15,9 @@ from ..errors import PlannerError
 from . import _flatten as fl
 from ._budget import MAX_BLOCK_DEPTH, charge, dxf_expanded_entities, spline_points
 from ._pieces import Drawing, Piece, check_finite
+from ._work import ImportWork, check_import_work, dxf_work
 
-__all__ = ["INSUNITS", "read_dxf"]
+__all__ = ["INSUNITS", "estimate_dxf", "parse_dxf", "read_dxf"]
 
 #: DXF $INSUNITS code -> (name, metres per unit); 0 (unitless) is not here: the default applies
 INSUNITS: dict[int, tuple[str, float]] = {
@@ -28,10 +29,10 @@ INSUNITS: dict[int, tuple[str, float]] = {
 _OUTLINES = {"LINE", "ARC", "CIRCLE", "ELLIPSE", "LWPOLYLINE", "POLYLINE", "SPLINE", "HATCH", "MPOLYGON"}
 
 
-def read_dxf(data: bytes, units: tuple[str, float] | None,
-             tolerance: Callable[[float], float]) -> Drawing:
-    """Read a DXF file's bytes. ``units`` (name, metres per unit) overrides ``$INSUNITS``;
-    ``tolerance(metres_per_unit)`` is the flattening tolerance in drawing units."""
+def parse_dxf(data: bytes, units: tuple[str, float] | None) -> tuple[Any, str, float, str]:
+    """A DXF file's bytes parsed (ezdxf's recover mode): the document and its unit (name,
+    metres per unit, where from: ``option``, ``drawing`` or ``default``); ``units`` (name,
+    metres per unit) overrides ``$INSUNITS``."""
     from ezdxf import recover
     from ezdxf.lldxf.const import DXFError
 
@@ -54,8 +55,28 @@ def read_dxf(data: bytes, units: tuple[str, float] | None,
             raise PlannerError("invalid_drawing", f"units unknown: the drawing's $INSUNITS is {code}, which is not a "
                                "length unit rangeplan converts; give the drawing's unit with the units option "
                                "(e.g. units=mm)", "units")
+    return doc, name, mpu, source
+
+
+def estimate_dxf(data: bytes, units: tuple[str, float] | None, tolerance: Callable[[float], float]) -> ImportWork:
+    """The estimated import of a DXF file's bytes (:func:`planner.exchange._work.dxf_work`),
+    block references bounded first (:func:`~planner.exchange._budget.dxf_expanded_entities`)."""
+    doc, _name, mpu, _source = parse_dxf(data, units)
+    dxf_expanded_entities(doc)
+    return dxf_work(doc, tolerance(mpu), len(data), _OUTLINES)
+
+
+def read_dxf(data: bytes, units: tuple[str, float] | None,
+             tolerance: Callable[[float], float], work_limit_s: float | None = None) -> Drawing:
+    """Read a DXF file's bytes. ``units`` (name, metres per unit) overrides ``$INSUNITS``;
+    ``tolerance(metres_per_unit)`` is the flattening tolerance in drawing units.
+    ``work_limit_s``: refused (``too_much_work``) before any entity is read where the import's
+    estimate (:func:`~planner.exchange._work.dxf_work`) exceeds it."""
+    doc, name, mpu, source = parse_dxf(data, units)
     dxf_expanded_entities(doc)  # block references bounded before any is exploded
     tol = tolerance(mpu)
+    if work_limit_s is not None:  # the work, estimated before it is done
+        check_import_work(dxf_work(doc, tol, len(data), _OUTLINES), work_limit_s)
     pieces: list[Piece] = []
     ignored: Counter[str] = Counter()
     for entity, layer in _entities(doc.modelspace(), None, 0, ignored):

@@ -23,8 +23,9 @@ from ..schema.drawing import DRAWING_UNITS
 from . import _flatten as fl
 from ._budget import svg_expanded_elements
 from ._pieces import Drawing, Piece, check_finite, not_finite
+from ._work import ImportWork, check_import_work, svg_work
 
-__all__ = ["read_svg"]
+__all__ = ["estimate_svg", "read_svg"]
 
 PX_M = 0.0254 / 96  # metres per CSS pixel
 _LAYER_ATTR = "data-rangeplan-layer"
@@ -32,10 +33,8 @@ _INKSCAPE_LABEL = "{http://www.inkscape.org/namespaces/inkscape}label"
 _PHYSICAL = re.compile(r"^\s*[-+]?[0-9.eE+-]+\s*(mm|cm|in|pt|pc|q|m)\s*$")
 
 
-def _tag_layers(data: bytes) -> tuple[bytes, str | None]:
-    """The document with each top-level group's layer name in an attribute svgelements
-    passes down to the shapes; and the physical unit its size is given in (``width="200mm"``
-    -> ``"mm"``), or None."""
+def _root(data: bytes) -> Any:
+    """The SVG document's XML tree (its root element), or ``invalid_drawing``."""
     try:
         root = ET.fromstring(data)
     except ET.ParseError as exc:
@@ -43,7 +42,45 @@ def _tag_layers(data: bytes) -> tuple[bytes, str | None]:
     if not (root.tag == "svg" or root.tag.endswith("}svg")):
         raise PlannerError("invalid_drawing", f"not an SVG drawing: the root element is <{root.tag}>, not <svg>",
                            "drawing")
+    return root
+
+
+def _user_metres(root: Any, units: tuple[str, float] | None) -> float:
+    """Metres per user unit of the document, from its attributes alone (before svgelements
+    reads it, for the estimate: ``units``, else the physical width over the viewBox's, else CSS px)."""
+    if units is not None:
+        return units[1]
+    width = _PHYSICAL.match(root.get("width", ""))
+    per = DRAWING_UNITS[width.group(1)] if width and width.group(1) in DRAWING_UNITS else PX_M
+    try:
+        w = float(re.sub(r"[a-z%]+\s*$", "", root.get("width", "").strip())) if root.get("width") else None
+        vb = [float(v) for v in re.split(r"[\s,]+", (root.get("viewBox") or "").strip()) if v]
+    except ValueError:
+        return per
+    if w and len(vb) == 4 and vb[2] > 0 and math.isfinite(w * per / vb[2]):
+        return w * per / vb[2]
+    return per
+
+
+def estimate_svg(data: bytes, units: tuple[str, float] | None, tolerance: Callable[[float], float],
+                 root: Any = None) -> ImportWork:
+    """The estimated import of an SVG file's bytes (:func:`planner.exchange._work.svg_work`;
+    ``root``: its XML tree, if parsed already)."""
+    root = _root(data) if root is None else root
+    return svg_work(root, len(data), tolerance(_user_metres(root, units)))
+
+
+def _tag_layers(data: bytes, units: tuple[str, float] | None = None,
+                tolerance: Callable[[float], float] | None = None,
+                work_limit_s: float | None = None) -> tuple[bytes, str | None]:
+    """The document with each top-level group's layer name in an attribute svgelements
+    passes down to the shapes; and the physical unit its size is given in (``width="200mm"``
+    -> ``"mm"``), or None. ``work_limit_s``: refused (``too_much_work``) where the import's
+    estimate (:func:`estimate_svg`) exceeds it, before svgelements reads anything."""
+    root = _root(data)
     svg_expanded_elements(root)  # <use> references bounded before svgelements copies any
+    if work_limit_s is not None and tolerance is not None:
+        check_import_work(estimate_svg(data, units, tolerance, root), work_limit_s)
     size = _PHYSICAL.match(root.get("width", "")) or _PHYSICAL.match(root.get("height", ""))
     physical = size.group(1) if size else None
     for child in root:
@@ -54,7 +91,8 @@ def _tag_layers(data: bytes) -> tuple[bytes, str | None]:
     return ET.tostring(root), physical
 
 
-def read_svg(data: bytes, units: tuple[str, float] | None, tolerance: Callable[[float], float]) -> Drawing:
+def read_svg(data: bytes, units: tuple[str, float] | None, tolerance: Callable[[float], float],
+             work_limit_s: float | None = None) -> Drawing:
     """Read an SVG file's bytes. ``units`` (name, metres per unit) says what one user unit
     (a coordinate of the document, before its viewBox scaling) is; by default the document's
     physical size, or CSS px. ``tolerance(metres_per_unit)`` is the flattening tolerance in
@@ -63,7 +101,7 @@ def read_svg(data: bytes, units: tuple[str, float] | None, tolerance: Callable[[
 
     from svgelements import SVG, Path, Shape
 
-    tagged, physical = _tag_layers(data)
+    tagged, physical = _tag_layers(data, units, tolerance, work_limit_s)
     try:
         svg = SVG.parse(io.BytesIO(tagged), reify=True, ppi=96.0)
     except Exception as exc:  # svgelements raises many kinds on bad documents

@@ -37,12 +37,13 @@ from ..schema import (
     planner_error,
 )
 from ._budget import vertex_budget
-from ._dxf_in import read_dxf
+from ._dxf_in import estimate_dxf, read_dxf
 from ._pieces import Drawing, Piece
 from ._regions import Chain, Region, regions
-from ._svg_in import read_svg
+from ._svg_in import estimate_svg, read_svg
+from ._work import ImportWork
 
-__all__ = ["DRAWING_FORMATS", "drawing_format", "import_drawing"]
+__all__ = ["DRAWING_FORMATS", "ImportWork", "drawing_format", "estimate_import", "import_drawing"]
 
 #: accepted drawing formats by content type
 DRAWING_FORMATS: dict[str, Literal["dxf", "svg"]] = {
@@ -165,19 +166,44 @@ def _chain_text(chains: list[Chain], limit: int = 3) -> str:
     return "; ".join(parts) + more
 
 
-def import_drawing(data: bytes, options: ImportOptions | dict[str, Any] | None = None, *,
-                   format: Literal["dxf", "svg"] | None = None, filename: str | None = None,
-                   content_type: str | None = None) -> ImportResult:
-    """A drawing's bytes as a layout and a report (:class:`planner.schema.ImportResult`)."""
+class _Tolerance:
+    """The flattening tolerance in drawing units for a drawing's metres per unit."""
+
+    def __init__(self, opt: ImportOptions) -> None:
+        self.opt = opt
+
+    def __call__(self, metres_per_unit: float) -> float:
+        return self.opt.flatten_tolerance / (self.opt.scale * metres_per_unit)
+
+
+def estimate_import(data: bytes, options: ImportOptions | dict[str, Any] | None = None, *,
+                    format: Literal["dxf", "svg"] | None = None, filename: str | None = None,
+                    content_type: str | None = None) -> ImportWork:
+    """The estimated compute time of :func:`import_drawing` with these arguments
+    (:class:`~planner.exchange._work.ImportWork`: ``seconds``, ``detail``, ``field`` and
+    ``message(limit_s)``), from the parsed file's counts (:mod:`planner.exchange._work`): the
+    file parsed, no curve made. Raises what the import raises for a file it cannot read or
+    whose block references or ``<use>`` references are over their bounds."""
     opt = _options(options)
     fmt = format or drawing_format(data, filename, content_type)
     units = (opt.units, DRAWING_UNITS[opt.units]) if opt.units is not None else None
+    return estimate_dxf(data, units, _Tolerance(opt)) if fmt == "dxf" else estimate_svg(data, units, _Tolerance(opt))
 
-    def tolerance(metres_per_unit: float) -> float:  # flattening tolerance in drawing units
-        return opt.flatten_tolerance / (opt.scale * metres_per_unit)
 
+def import_drawing(data: bytes, options: ImportOptions | dict[str, Any] | None = None, *,
+                   format: Literal["dxf", "svg"] | None = None, filename: str | None = None,
+                   content_type: str | None = None, work_limit_s: float | None = None) -> ImportResult:
+    """A drawing's bytes as a layout and a report (:class:`planner.schema.ImportResult`).
+    ``work_limit_s``: a drawing whose estimated import (:func:`estimate_import`) exceeds it
+    is refused (``too_much_work``, naming what to change) once parsed, before its entities
+    are exploded and its curves flattened."""
+    opt = _options(options)
+    fmt = format or drawing_format(data, filename, content_type)
+    units = (opt.units, DRAWING_UNITS[opt.units]) if opt.units is not None else None
+    tolerance = _Tolerance(opt)
     with vertex_budget():  # every curve of the drawing together (planner.exchange._budget)
-        drawing = read_dxf(data, units, tolerance) if fmt == "dxf" else read_svg(data, units, tolerance)
+        drawing = read_dxf(data, units, tolerance, work_limit_s) if fmt == "dxf" \
+            else read_svg(data, units, tolerance, work_limit_s)
     if not drawing.pieces:
         found = ", ".join(f"{n} {k}" for k, n in sorted(drawing.ignored.items())) or "nothing"
         raise PlannerError("invalid_drawing", f"no closed shape: the drawing has no outlines (lines, arcs, circles, "

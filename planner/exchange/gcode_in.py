@@ -22,7 +22,9 @@ and expressions, other axes) is a :class:`~planner.errors.PlannerError` naming t
 word and what to change in the CAM post.
 
 A feed move whose Z is below ``cut_below`` (somewhere along it) cuts; consecutive cutting
-moves form a pass. Rapids and feed moves above it are travel; Z-only moves are plunges and
+moves form a pass, and feed moves above it between two cutting moves (a tab) join it
+(:mod:`planner.exchange._tabs`: a move whose Z changes is cut at most at the Z speed
+``z_rapid``). Rapids and other feed moves above it are travel; Z-only moves are plunges and
 retracts (dwells of ``|dZ| / F``, or ``/ z_rapid`` for G0).
 
 Read back (``readback=True``): the planner's own export (:func:`planner.exchange.to_gcode`)
@@ -51,6 +53,7 @@ from ..schema.contour import (
     ProgramComment,
     ProgramWord,
 )
+from ._tabs import cap_z_speed, join_tabs
 
 __all__ = ["Toolpath", "read_gcode", "toolpath"]
 
@@ -397,6 +400,9 @@ def read_gcode(text: str, *, cut_below: float = 0.0, z_rapid_m_s: float = 0.05, 
     if not readback and not any(b.kind == "cut" for b in blocks):
         raise PlannerError("invalid_input", f"the program has no cutting move (no feed move with Z below "
                            f"{cut_below * 1e3:g} mm): nothing to contour", "program")
+    if not readback:  # tabs inside a pass, Z within its axis speed (planner.exchange._tabs)
+        blocks = join_tabs(blocks)
+        cap_z_speed(blocks, z_rapid_m_s)
     return Program(blocks=blocks, tolerance_m=tolerance, units=units, lines=n_lines, words=words, comments=comments,
                    warnings=warnings, start=first_xy if first_xy is not None else np.zeros(2))
 

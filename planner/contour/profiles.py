@@ -1,0 +1,160 @@
+"""Speed profiles along a piece's tube turned into sample counts per cell (issue 22): the
+timings :mod:`planner.contour.search` scales.
+
+- :func:`profile_counts`: the heuristic profile (a cell speed, the curvature and corner limits
+  ``sqrt(a R)``, an acceleration forwards and backwards, a bounded jerk at the ends);
+- :class:`OptimalProfiles`, :func:`optimal_counts`: the exact path's time-optimal profile under
+  the drive forces and leg speeds (:func:`planner.contour.timing.time_optimal`), bounded at the
+  corners and on the arcs by what the tube allows, as times at the cells' ends, and the counts
+  of a time scale of it.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import partial
+from typing import NamedTuple
+
+import numpy as np
+
+from ..model import RobotModel
+from ..schema import PathElement, Settings
+from .timing import PathSamples, time_optimal
+from .tube import Tube
+
+#: the time-optimal profile's grid spacing: the pass's length over this many points, within
+#: [GRID_H_MIN, GRID_H_MAX] [m], and at least GRID_POINTS_MIN points (a move from rest to rest
+#: on two points would never move)
+GRID_POINTS = 400
+GRID_H_MIN, GRID_H_MAX = 2e-5, 2e-4
+GRID_POINTS_MIN = 16
+
+
+def corner_radius(turn: np.ndarray, rho: float) -> np.ndarray:
+    """The largest circle that turns a corner of angle ``turn`` [rad] within ``rho`` of its
+    vertex: ``rho sin(h) / (1 - sin(h))``, ``h = (pi - turn) / 2`` [m]."""
+    half = np.clip((math.pi - turn) / 2, 1e-6, math.pi / 2)
+    return rho * np.sin(half) / np.maximum(1 - np.sin(half), 1e-12)
+
+
+def profile_counts(t: Tube, v_cap: np.ndarray, a: float, Ts: float, a_turn: float | None = None,
+                   jerk: float | None = None) -> np.ndarray:
+    """Sample counts per segment of the tube from a speed profile: cell speed at most
+    ``v_cap`` (per segment), ``sqrt(a_turn R)`` on arcs, ``sqrt(a_turn R_corner)`` at junctions
+    (``a_turn``: ``a`` if not given), reached with acceleration ``a`` from rest and back to rest;
+    ``jerk``: within ``(jerk / 2)^(1/3) (3 d)^(2/3)`` at a distance ``d`` from the rest at either
+    end (the speed of a start from rest at that jerk: the drive forces rise at a bounded rate)."""
+    n = len(t.segments)
+    a_turn = a if a_turn is None else a_turn
+    v = v_cap.astype(float).copy()
+    finite = np.isfinite(t.radius)
+    v[finite] = np.minimum(v[finite], np.sqrt(a_turn * t.radius[finite]))
+    j = t.turn > 0
+    v[j] = np.minimum(v[j], np.sqrt(a_turn * corner_radius(t.turn[j], t.rho)))
+    if jerk is not None:
+        d = np.concatenate(([0.0], np.cumsum(t.length)))
+        d = np.minimum(d[:-1] + t.length, d[-1] - d[:-1])  # the cell's far end from the nearer rest
+        v = np.minimum(v, np.cbrt(jerk / 2) * np.cbrt(3 * d) ** 2)
+    # speeds at the nodes between segments, from rest to rest
+    node = np.empty(n + 1)
+    node[0] = 0.0
+    for k in range(n):
+        node[k + 1] = min(v[k], math.sqrt(node[k] ** 2 + 2 * a * t.length[k]))
+    node[n] = 0.0
+    for k in range(n - 1, -1, -1):
+        node[k] = min(node[k], math.sqrt(node[k + 1] ** 2 + 2 * a * t.length[k]))
+    counts = np.ones(n, np.int64)
+    cells = t.length > 0
+    mean = np.maximum(0.5 * (node[:-1] + node[1:]), 1e-9)
+    speed = np.minimum(v, np.maximum(mean, 0.25 * v))[cells]
+    counts[cells] = np.maximum(1, np.ceil(t.length[cells] / np.maximum(speed, 1e-12) / Ts - 1e-9)).astype(np.int64)
+    counts[t.lead] = 1  # the lead cells at the pass's ends (planner.contour.tube)
+    return counts
+
+
+def optimal_caps(path: PathSamples, a_all: np.ndarray, rho: float, chord: np.ndarray, Ts: float,
+                 zcap: np.ndarray | None = None) -> np.ndarray:
+    """The time-optimal profile's bounds on the squared speed beyond the drives' (the ``caps``
+    of :func:`planner.contour.timing.time_optimal`): at a corner ``a_all r``, ``r`` the
+    :func:`corner_radius` of the turn within ``rho``; on an arc, one of its tube chords per sample
+    time ``Ts`` (``chord``: the longest chord of each element, 0 where it is no arc); on a move
+    whose Z changes, the XY speed that keeps Z within its axis speed (``zcap`` per element)."""
+    cap = np.where(path.corner > 0, a_all * corner_radius(path.corner, rho), np.inf)
+    c = chord[path.element]
+    cap = np.minimum(cap, np.where(c > 0, (c / Ts) ** 2, np.inf))
+    return cap if zcap is None else np.minimum(cap, zcap[path.element] ** 2)
+
+
+class OptimalProfiles:
+    """The time-optimal profile of a piece (:func:`planner.contour.timing.time_optimal`) for a
+    tube of it (:class:`Optimal`): ``OptimalProfiles(...)(t)``. Bounds on the speed beyond the
+    drives' (:func:`optimal_caps`): at a corner (a tangent jump of angle ``theta``) ``sqrt(a r)``,
+    ``a`` the acceleration the drives give in every direction, ``r = rho sin(h) / (1 - sin(h))``,
+    ``h = (pi - theta) / 2`` (the largest circle that turns there within the cells' radius
+    ``rho``); on an arc, one of its chords per sample (a cell holds at least one sample).
+    ``memo``: profiles by the piece's geometry and bounds (the depth passes of a program are
+    alike: one profile)."""
+
+    def __init__(self, model: RobotModel, st: Settings, chunk: list[int], els: list[PathElement],
+                 origin: np.ndarray, psi: float, memo: dict | None, zcap: np.ndarray | None = None) -> None:
+        self.model, self.st, self.els, self.origin, self.psi = model, st, els, origin, psi
+        self.memo = {} if memo is None else memo
+        self.geo = tuple((e.kind, *e.start, *e.end, *(e.centre if e.centre is not None else (0.0, 0.0)),
+                          e.sweep_rad or 0.0) for e in els)
+        self.lengths = np.array([e.length_m for e in els])
+        self.start = np.concatenate(([0.0], np.cumsum(self.lengths)))
+        total = float(self.start[-1])
+        self.h = min(max(total / GRID_POINTS, GRID_H_MIN), GRID_H_MAX, total / GRID_POINTS_MIN)
+        self.chunk = np.asarray(chunk)
+        #: per element the XY speed bound of its Z (:func:`planner.contour.search.z_caps`), None: none
+        self.zcap = zcap if zcap is not None and np.isfinite(zcap).any() else None
+
+    def __call__(self, t: Tube) -> Optimal:
+        """The profile for the tube ``t``: its time at the end of each of ``t``'s segments."""
+        els, origin, st, memo = self.els, self.origin, self.st, self.memo
+        loc = np.searchsorted(self.chunk, t.element)
+        arc = np.isfinite(t.radius) & (t.length > 0)
+        chord = np.zeros(len(els))
+        np.maximum.at(chord, loc[arc], t.length[arc])
+        key = (self.geo, float(origin[0]), float(origin[1]), self.psi, st.Ts, t.rho, tuple(np.round(chord, 12)),
+               None if self.zcap is None else tuple(self.zcap))
+        if key not in memo:
+            caps = partial(optimal_caps, rho=t.rho, chord=chord, Ts=st.Ts, zcap=self.zcap)
+            path, w, T = time_optimal(self.model, els, origin, self.psi, self.h, caps)
+            memo[key] = (path.s, T, float(np.sqrt(w.max())))
+        s_grid, T, v_peak = memo[key]
+        # the path length at the end of every segment: its element's start plus its share of the
+        # element's cells (points and junctions: at the boundary)
+        total = np.bincount(loc, weights=t.length, minlength=len(els))
+        before = np.concatenate(([0.0], np.cumsum(total)))[loc]
+        frac = (np.cumsum(t.length) - before) / np.maximum(total[loc], 1e-300)
+        s_end = self.start[loc] + np.clip(frac, 0.0, 1.0) * self.lengths[loc]
+        return Optimal(np.interp(s_end, s_grid, T), v_peak)
+
+
+class Optimal(NamedTuple):
+    """The time-optimal profile for one tube."""
+
+    times: np.ndarray  #: the profile's time at the end of each of the tube's segments [s]
+    v_peak: float  #: its top speed [m/s]
+
+
+def optimal_counts(t: Tube, times: np.ndarray, step: float) -> np.ndarray:
+    """Sample counts per segment of the tube from the profile's times at the segments' ends
+    (``step``: the sample time over the scale): the samples up to each end, rounded. A sample
+    of a segment the profile crosses in no time is taken from the cell before where that has
+    two: a junction cell's (it lies inside both its neighbours) and the end's lead cell's (the
+    range sequence narrows it onto the end point: its sample is the one that arrives there).
+    Every segment at least one sample, the lead cells one."""
+    b = np.round(times / step).astype(np.int64)
+    counts = np.diff(np.concatenate(([0], b)))
+    take = (t.length == 0) & (t.turn > 0)
+    if len(take) > 2 and t.lead[-2]:
+        take[-2] = True
+    j = np.flatnonzero(take & (counts <= 0))
+    j = j[(j > 0) & (counts[np.maximum(j - 1, 0)] >= 2)]
+    counts[j - 1] -= 1
+    counts[j] = 1
+    counts = np.maximum(counts, 1)
+    counts[t.lead] = 1
+    return counts

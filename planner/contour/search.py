@@ -1,0 +1,450 @@
+"""The timing search of a contour piece (issue 22): sample counts per tube cell planned in the
+constrained mode from rest to rest, the fastest feasible kept.
+
+``program`` feed: the heuristic profile with its cell speed capped at each move's F, lowered
+until the plan is feasible and no sample is faster than F (:meth:`TimingSearch.program_loop`).
+``fastest``: two timings, the faster kept (the passes after the first use the first's, from
+its scale, :class:`Scale`): the heuristic profile scaled (``v = lambda v0``, ``a = lambda^2 a0``,
+:meth:`TimingSearch.heuristic`), and the exact path's time-optimal profile slowed by a scale
+(:meth:`TimingSearch.optimal_search`); each to the largest feasible scale
+(:func:`largest_feasible`; each candidate abandoned at its first step that needs slack). Where
+a feed's own search finds no timing the other's is tried (:func:`search_timing`); an
+``infeasible`` verdict's advice is checked before it is given (:func:`confirmed_infeasible`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from typing import NamedTuple
+
+import numpy as np
+
+from ..errors import PlannerError
+from ..model import RobotModel
+from ..orchestrator import feasible, plan_timed
+from ..schema import MAX_CONTOUR_TOLERANCE_M, MAX_TOTAL_STEPS, MIN_TS, ContourRequest, PathElement, PlanResult, Settings
+from .estimate import ADVICE_MIN_S, ADVICE_WORK, piece_estimate
+from .passes import CELL_SAMPLES, PROGRAM_MARGIN, V0_M_S, TubeSizes, segment_of
+from .profiles import Optimal, optimal_counts, profile_counts
+from .tube import Tube
+
+__all__ = ["SCALE_MAX", "SCALE_MIN", "SCALE_RESOLUTION", "Found", "Scale", "TimingSearch", "confirmed_infeasible",
+           "largest_feasible", "overspeed", "search_timing", "z_caps"]
+
+#: fastest: the reference acceleration the scale's square multiplies [m/s^2] (the reference
+#: cell speed: :data:`planner.contour.passes.V0_M_S`)
+A0_M_S2 = 1.0
+#: fastest: the reference jerk of the start and stop [m/s^3] (the scale's cube multiplies it)
+J0_M_S3 = 50.0
+#: program feed: the acceleration of the profile [m/s^2]
+A_PROGRAM_M_S2 = 2.0
+#: fastest: the scale is found to this relative resolution: ``lam`` feasible, ``lam (1 + r)`` not
+SCALE_RESOLUTION = 1 / 64
+#: fastest: the range of scales searched
+SCALE_MIN, SCALE_MAX = 1 / 64, 64.0
+#: program feed: the profile's scales tried (from PROGRAM_MARGIN down by 0.7 each)
+PROGRAM_TRIES = 8
+#: an infeasible piece's advice, checked: the tolerance times this, then the sample time times this
+ADVICE_TOLERANCE = 2.0
+ADVICE_TS = 0.5
+#: fastest, the time-optimal timing (:func:`search_timing`): its cells hold this many samples at
+#: the profile's top speed (shorter cells keep the robot nearer the profile's progress, longer
+#: ones lose fewer samples to cells shorter than a sample's travel)
+OPT_CELL_SAMPLES = 1.5
+#: the time-optimal timing's scale is found to this relative resolution (its profile is near
+#: the drives' limits everywhere: the scale found is near 1, and a finer step is worth its plans)
+OPT_RESOLUTION = 1 / 256
+#: the samples a tube plan takes beyond the profile's time (the start point, the lead cells, the
+#: end point): the time-optimal timing is tried where its profile's time plus these beats the other
+OPT_END_SAMPLES = 4
+
+
+class Scale(NamedTuple):
+    """``fastest``: the timing a cut found, where the next cut's search starts: its family
+    (``optimal``: the time-optimal profile scaled in time by ``lam``; ``profile``: the
+    heuristic profile, ``lam`` the whole of it, ``mu`` its speeds) and scales."""
+
+    family: str
+    lam: float
+    mu: float = 1.0
+
+
+class Found:
+    """A timing search's outcome: the plan (None: none found), the ``fastest`` scales, and
+    where the candidates stopped (the source line of the first step that needed slack, the
+    latest of them)."""
+
+    def __init__(self, Ts: float) -> None:
+        self.Ts = Ts
+        self.result: PlanResult | None = None
+        self.tube: Tube | None = None  #: the tube of the result
+        self.scale: Scale | None = None
+        self.stop_line: int | None = None
+        self.plans = 0
+
+    def failed(self, err: PlannerError, t: Tube, counts: np.ndarray, els_line: Callable[[int], int]) -> None:
+        """Note where a candidate stopped (``at t = ... s`` in the controller's message)."""
+        self.plans += 1
+        try:
+            ts = float(err.message.split("at t = ")[1].split(" s")[0])
+        except (IndexError, ValueError):
+            return
+        k = int(round(ts / self.Ts))
+        seg = segment_of(counts, k + 1)[-1] if k > 0 else 0
+        self.stop_line = els_line(int(t.element[min(int(seg), len(t.element) - 1)]))
+
+
+class TimingSearch:
+    """The candidate timings of one piece, each planned in its tube (the closures of the search
+    before issue 34, as methods): ``tube_at(v)``, the piece's tube with cells sized for the
+    profile speed ``v`` (:class:`~planner.contour.passes.TubeSizes`); ``optimal``, its
+    time-optimal profile for a tube (:class:`~planner.contour.profiles.OptimalProfiles`);
+    ``deadline`` (``time.process_time``): candidates after it are not planned. ``found``
+    collects where the failed candidates stopped."""
+
+    def __init__(self, model: RobotModel, st: Settings, tube_at: Callable[[float], Tube], chunk: list[int],
+                 els: list[PathElement], deadline: float | None, optimal: Callable[[Tube], Optimal] | None,
+                 z_max_m_s: float | None = None) -> None:
+        self.model, self.st, self.tube_at, self.chunk, self.els = model, st, tube_at, chunk, els
+        self.deadline, self.optimal = deadline, optimal
+        self.feed = np.array([e.feed_m_s for e in els])
+        self.zcap = z_caps(els, z_max_m_s)  # the XY speed that keeps each move's Z within the axis speed
+        self.z_capped = bool(np.isfinite(self.zcap).any())
+        self.name = f"line {els[0].line}"
+        self.found = Found(st.Ts)
+        self.lines = dict(zip(chunk, (e.line for e in els)))
+
+    def feed_on(self, t: Tube) -> np.ndarray:
+        """The programmed F [m/s] of the move each of the tube's segments belongs to."""
+        return self.feed[np.searchsorted(self.chunk, t.element)]
+
+    def zcap_on(self, t: Tube) -> np.ndarray:
+        """The Z speed's bound on the XY speed [m/s] of each of the tube's segments (inf where
+        its move keeps Z)."""
+        return self.zcap[np.searchsorted(self.chunk, t.element)]
+
+    def attempt(self, t: Tube, counts: np.ndarray) -> PlanResult | None:
+        """One candidate: the tube planned with these sample counts per segment
+        (:func:`planner.orchestrator.plan_timed`); None where it is infeasible, does not settle
+        or comes after the deadline (noted in :attr:`found`)."""
+        if self.deadline is not None and time.process_time() > self.deadline:
+            return None
+        check_counts(counts, self.els[0].line)
+        try:
+            res = plan_timed(self.name, self.model, self.st, t.segments, counts.tolist())
+        except PlannerError as err:
+            if err.code not in ("infeasible", "not_settled"):
+                raise
+            self.found.failed(err, t, counts, self.lines.__getitem__)
+            return None
+        self.found.plans += 1
+        return res if feasible(res) else None
+
+    def program_loop(self) -> tuple[PlanResult, Tube] | None:
+        """The ``program`` feed's timing: the heuristic profile with the cell speed at the
+        programmed F times a scale (from :data:`PROGRAM_MARGIN`, the cells sized for it),
+        the scale lowered by 0.7 after an infeasible plan and to 0.95 F over the fastest sample
+        after one that exceeds F, at most :data:`PROGRAM_TRIES` times."""
+        scale = PROGRAM_MARGIN
+        for _ in range(PROGRAM_TRIES):
+            t = self.tube_at(float(self.feed.max()) * scale)
+            feed_of = self.feed_on(t)
+            counts = profile_counts(t, feed_of * scale, A_PROGRAM_M_S2 * scale * scale, self.st.Ts)
+            res = self.attempt(t, counts)
+            if res is None:
+                scale *= 0.7
+                continue
+            over = overspeed(res, t, counts, feed_of)
+            if over <= 1.0:
+                return res, t
+            scale *= min(0.95 / max(over, 1e-9), 0.9)
+        return None
+
+    def scaled_run(self, t: Tube, v_cap: np.ndarray, capped: bool, feed_of: np.ndarray,
+                   tried: dict[bytes, PlanResult | None], lam: float, mu: float = 1.0) -> PlanResult | None:
+        """The heuristic profile at the scale ``lam`` (speeds ``lam mu v_cap``, acceleration
+        ``lam^2 A0``, turn acceleration ``(lam mu)^2 A0``, jerk ``lam^3 J0``) planned in ``t``;
+        ``capped``: None where a sample exceeds the programmed F. ``tried``: the plans by their
+        sample counts (scales often give the same)."""
+        v = v_cap * lam * mu
+        if self.z_capped:  # a ramp's or helix's Z within the axis speed, whatever the scale
+            v = np.minimum(v, self.zcap_on(t))
+        counts = profile_counts(t, v, A0_M_S2 * lam * lam, self.st.Ts, A0_M_S2 * (lam * mu) ** 2, J0_M_S3 * lam ** 3)
+        key = counts.tobytes()
+        if key not in tried:
+            res = self.attempt(t, counts)
+            if res is not None and capped and overspeed(res, t, counts, feed_of) > 1.0:
+                res = None
+            tried[key] = res
+        return tried[key]
+
+    def scaled(self, t: Tube, v_cap: np.ndarray, capped: bool, lam0: float, mu0: float, high: float,
+               limit: np.ndarray | None = None) -> tuple[PlanResult, tuple[float, float]] | None:
+        """The heuristic profile's fastest feasible scales (:meth:`scaled_run`), searched from
+        ``lam0``, ``mu0`` up to ``high``: 1. the whole profile (speeds, accelerations); 2. the
+        speeds alone (cell speed and the curvature and corner limits), the accelerations between
+        them as found: where the start and the stop bound the first scale, the path between them
+        can go faster. The plan and ``(lam, mu)``; None: no scale is feasible. ``capped``: no
+        sample faster than ``limit`` (per segment; the programmed F if not given)."""
+        feed_of = self.feed_on(t) if limit is None else limit
+        tried: dict[bytes, PlanResult | None] = {}
+
+        def run(lam: float, mu: float = 1.0) -> PlanResult | None:
+            return self.scaled_run(t, v_cap, capped, feed_of, tried, lam, mu)
+
+        lam = largest_feasible(lambda x: run(x) is not None, lam0, high=high)
+        if lam is None:
+            return None
+        mu = largest_feasible(lambda x: run(lam, x) is not None, max(mu0, 1.0), low=1.0, high=max(high / lam, 1.0))
+        assert mu is not None  # mu = 1 is lam's plan
+        best = run(lam, mu)
+        assert best is not None
+        return best, (lam, mu)
+
+    def heuristic(self, h: Scale | None) -> tuple[PlanResult, Tube, Scale] | None:
+        """``fastest``'s heuristic timing: the profile of the reference speed :data:`V0_M_S`
+        (cells sized for it) scaled (:meth:`scaled`), from the hint's scales if it is one of
+        this family's."""
+        h = h if h is not None and h.family == "profile" else None  # the other family's scale means nothing here
+        t = self.tube_at(V0_M_S)
+        got = self.scaled(t, np.full(len(t.segments), V0_M_S), self.z_capped, h.lam if h else 1.0,
+                          h.mu if h else 1.0, SCALE_MAX, self.zcap_on(t))
+        return (got[0], t, Scale("profile", *got[1])) if got is not None else None
+
+    def optimal_run(self, t: Tube, times: np.ndarray, tried: dict[bytes, PlanResult | None],
+                    lam: float) -> PlanResult | None:
+        """The time-optimal profile's ``times`` scaled in time by ``1 / lam`` planned in ``t``
+        (``tried``: the plans by their sample counts)."""
+        counts = optimal_counts(t, times, lam * self.st.Ts)
+        key = counts.tobytes()
+        if key not in tried:
+            res = self.attempt(t, counts)
+            if res is not None and self.z_capped and overspeed(res, t, counts, self.zcap_on(t)) > 1.0:
+                res = None  # a ramp's Z faster than the axis
+            tried[key] = res
+        return tried[key]
+
+    def optimal_search(self, h: Scale | None, beat: float | None = None) -> tuple[PlanResult, Tube, Scale] | None:
+        """The time-optimal profile's timing (:class:`~planner.contour.profiles.OptimalProfiles`)
+        scaled in time by ``1 / lam`` (speeds ``lam``, accelerations ``lam^2``), the largest
+        feasible ``lam``. ``beat``: the time of a timing found already [s]: first the one scale
+        at which this one would be as fast (the profile's time over it, a few samples for the
+        ends); not feasible there, none slower can win (one plan to know it); else the search
+        starts at the profile itself."""
+        optimal = self.optimal
+        assert optimal is not None
+        ref = optimal(self.tube_at(V0_M_S))
+        t = self.tube_at(OPT_CELL_SAMPLES * ref.v_peak / CELL_SAMPLES)
+        times = optimal(t).times
+        if not (np.all(np.isfinite(times)) and times[-1] > 0):  # pragma: no cover - a profile that never moves
+            return None
+        tried: dict[bytes, PlanResult | None] = {}
+
+        def run(lam: float) -> PlanResult | None:
+            return self.optimal_run(t, times, tried, lam)
+
+        lam0, low = (h.lam if h else 1.0), SCALE_MIN
+        if beat is not None:
+            room = beat - OPT_END_SAMPLES * self.st.Ts
+            if room <= 0:
+                return None
+            low = min(max(float(times[-1]) / room, SCALE_MIN), SCALE_MAX)
+            if run(low) is None:
+                return None
+            lam0 = max(low, 1.0)
+        lam = largest_feasible(lambda x: run(x) is not None, lam0, OPT_RESOLUTION, low=low, high=SCALE_MAX)
+        if lam is None:
+            return None
+        best = run(lam)
+        assert best is not None
+        if beat is not None and best.time[-1] >= beat:
+            return None
+        return best, t, Scale("optimal", lam)
+
+    def program_feed(self) -> tuple[PlanResult, Tube] | None:
+        """The ``program`` feed's search: :meth:`program_loop`, else the ``fastest`` heuristic
+        profile capped by F (cells sized for half of it), kept where no sample exceeds F."""
+        got_p = self.program_loop()
+        if got_p is None:  # the fastest profile under F
+            t = self.tube_at(float(self.feed.max()) * 0.5)
+            got = self.scaled(t, self.feed_on(t) * PROGRAM_MARGIN, True, 0.5, 1.0, 1.0)
+            got_p = (got[0], t) if got is not None else None
+        return got_p
+
+    def fastest(self, hint: Scale | None) -> tuple[PlanResult, Tube, Scale] | None:
+        """The ``fastest`` feed's search: without a ``hint`` (or without the time-optimal
+        profile) the heuristic timing, then the time-optimal one where it can beat it; with the
+        first pass's ``hint``, its family first and the other where that finds none."""
+        best: tuple[PlanResult, Tube, Scale] | None = None
+        if hint is None or self.optimal is None:  # the heuristic first, then the time-optimal one if it can beat it
+            best = self.heuristic(hint)
+            if self.optimal is not None:
+                best = self.optimal_search(None, best[0].time[-1] if best is not None else None) or best
+        elif hint.family == "optimal":  # the first pass's timing; the other where it finds none
+            best = self.optimal_search(hint) or self.heuristic(None)
+        else:
+            best = self.heuristic(hint) or self.optimal_search(None)
+        return best
+
+
+def search_timing(feed_mode: str, model: RobotModel, st: Settings, tube_at: Callable[[float], Tube], chunk: list[int],
+                  els: list[PathElement], hint: Scale | None, deadline: float | None = None,
+                  optimal: Callable[[Tube], Optimal] | None = None, z_max_m_s: float | None = None) -> Found:
+    """A timing of the piece for the feed mode, in the tube ``tube_at(v)`` with cells sized for
+    the profile's speed ``v`` (``program``: the programmed F times the profile's scale, so that
+    a slower profile has shorter cells: the criterion pulls the robot toward each cell's
+    centre, and a cell of many samples let it run ahead of the profile, faster than F, at
+    every scale; ``fastest``: :data:`V0_M_S` for the heuristic profile, the time-optimal
+    profile's top speed for its timing ``optimal``; without a ``hint`` the heuristic one, then
+    the time-optimal one where it can be faster, else the hint's first). If the mode's own
+    search finds none, the other mode's (a timing under the programmed F is one ``fastest`` may
+    use; ``program`` retries the ``fastest`` profile capped by F, kept where no sample exceeds
+    F). ``deadline`` (``time.process_time``: compute time, as
+    :func:`~planner.contour.estimate.estimate_contour` counts it): candidates after it are not
+    planned. ``z_max_m_s``: the Z axis speed, which bounds the XY speed along a move whose Z
+    changes (:func:`z_caps`), in both feeds (the program feed's F is capped by it already:
+    :func:`planner.exchange._tabs.cap_z_speed`)."""
+    search = TimingSearch(model, st, tube_at, chunk, els, deadline, optimal, z_max_m_s)
+    found = search.found
+    if feed_mode == "program":
+        got_p = search.program_feed()
+        if got_p is not None:
+            found.result, found.tube = got_p
+    else:
+        best = search.fastest(hint)
+        if best is not None:
+            found.result, found.tube, found.scale = best
+        else:  # a timing under the programmed F
+            got_p = search.program_loop()
+            if got_p is not None:
+                found.result, found.tube = got_p
+    return found
+
+
+def confirmed_infeasible(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int],
+                         els: list[PathElement], origin: np.ndarray, tol: float, psi: float, pos: np.ndarray,
+                         elements: list[PathElement], found: Found, hint: Scale | None, passes: int,
+                         limit_at: float | None = None) -> PlannerError:
+    """The ``infeasible`` error of a piece no timing plans, its advice checked (issue 22, as
+    :func:`planner.orchestrator.plan._more_time_advice` does for plans): the piece planned
+    again, by the same search, at :data:`ADVICE_TOLERANCE` times the tolerance, then at
+    :data:`ADVICE_TS` times the sample time; the first that plans is named ("tolerance_m
+    0.02 plans, checked"), else the error says neither helps and where the plans stop.
+    Bounded: the checks together take at most :data:`ADVICE_WORK` times the piece's own
+    estimate, at least :data:`ADVICE_MIN_S` (the bound :func:`~planner.contour.estimate.estimate_contour`
+    names), and end at ``limit_at`` (``time.process_time``: the caller's work limit); a
+    candidate not planned within that is said so."""
+    line = els[0].line
+    where = f"line {found.stop_line}" if found.stop_line is not None else f"line {line}"
+    head = (f"line {line}: no timing keeps the tool within {tol * 1e3:g} mm of the path within the drive limits "
+            f"at a sample time of {st.Ts:g} s (the plans stop at {where})")
+    budget = max(ADVICE_WORK * piece_estimate(req.feed, els, st.Ts, passes, tol), ADVICE_MIN_S)
+    deadline = time.process_time() + budget
+    if limit_at is not None:  # what the caller's work limit leaves
+        deadline = min(deadline, limit_at)
+        budget = max(deadline - time.process_time(), 0.0)
+    candidates: list[tuple[str, float, float]] = []
+    if tol * ADVICE_TOLERANCE <= MAX_CONTOUR_TOLERANCE_M:
+        candidates.append((f"tolerance_m {tol * ADVICE_TOLERANCE:g} ({tol * ADVICE_TOLERANCE * 1e3:g} mm)",
+                           tol * ADVICE_TOLERANCE, st.Ts))
+    if st.Ts * ADVICE_TS >= MIN_TS:
+        candidates.append((f"settings.Ts {st.Ts * ADVICE_TS:g} s", tol, st.Ts * ADVICE_TS))
+    tried: list[str] = []
+    for what, tol2, Ts2 in candidates:
+        if time.process_time() > deadline:
+            break
+        st2 = st.model_copy(update={"Ts": Ts2})
+        try:
+            tubes = TubeSizes(model, st2, chunk, els, origin, tol2, psi, pos, elements)
+            got = search_timing(req.feed, model, st2, tubes, chunk, els, hint, deadline, z_max_m_s=req.z_rapid_m_s)
+        except PlannerError:
+            got = None
+        if got is not None and got.result is not None:
+            before = "".join(f"{w} does not plan; " for w in tried)
+            return PlannerError("infeasible", f"{head}; {before}{what} plans, checked",
+                                "tolerance_m" if tol2 != tol else "settings.Ts")
+        if time.process_time() <= deadline:
+            tried.append(what)
+    not_tried = [w for w, _, _ in candidates if w not in tried]
+    if tried and not not_tried:
+        return PlannerError("infeasible", f"{head}; neither {' nor '.join(tried)} plans either (checked): the "
+                            f"path at {where} asks more of the drives than a tube of that width allows",
+                            "tolerance_m")
+    msg = f"{head}; {' and '.join(tried)} do not plan either (checked); " if tried else f"{head}; "
+    return PlannerError("infeasible", msg + f"{' and '.join(not_tried)} not checked within the work bound "
+                        f"({budget:.2g} s); give a larger tolerance_m or a smaller settings.Ts", "tolerance_m")
+
+
+def z_caps(els: list[PathElement], z_max_m_s: float | None) -> np.ndarray:
+    """Per move, the XY speed [m/s] at which its Z moves at ``z_max_m_s`` (``z_max L / |dZ|``,
+    ``L`` its XY length): inf where Z stays, or no limit is given."""
+    out = np.full(len(els), np.inf)
+    if z_max_m_s is None:
+        return out
+    for k, e in enumerate(els):
+        dz = abs(e.z_end_m - e.z_start_m)
+        if dz > 0 and e.length_m > 0:
+            out[k] = z_max_m_s * e.length_m / dz
+    return out
+
+
+def largest_feasible(ok: Callable[[float], bool], start: float, resolution: float = SCALE_RESOLUTION,
+                     low: float = SCALE_MIN, high: float = SCALE_MAX) -> float | None:
+    """The largest scale ``lam`` in ``[low, high]`` with ``ok(lam)`` and not ``ok(lam (1 + resolution))``
+    (or ``lam`` at ``high``), found from ``start``: steps growing geometrically (``resolution``,
+    twice that, ...) up from a feasible start or down from an infeasible one bracket it, then
+    bisection (in the logarithm) narrows the bracket to ``1 + resolution``. From the scale of
+    the piece before (identical depth passes), that is two plans: ``start`` and the step above.
+    ``None``: nothing from ``low`` up is feasible (assumes slower is never worse, as the
+    bisection it replaces did)."""
+    start = min(max(start, low), high)
+    step = resolution
+    if ok(start):
+        lo = start
+        while True:
+            if lo >= high:
+                return lo
+            cand = min(lo * (1 + step), high)
+            if not ok(cand):
+                hi = cand
+                break
+            lo = cand
+            step *= 2
+    else:
+        hi = start
+        while True:
+            if hi <= low:
+                return None
+            cand = max(hi / (1 + step), low)
+            if ok(cand):
+                lo = cand
+                break
+            hi = cand
+            step *= 2
+    while hi > lo * (1 + resolution) * (1 + 1e-12):
+        mid = math.sqrt(lo * hi)
+        if ok(mid):
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+def check_counts(counts: np.ndarray, line: int) -> None:
+    if counts.sum() > MAX_TOTAL_STEPS // 2:
+        raise PlannerError("too_large", f"line {line}: the pass needs {int(counts.sum())} samples, more than the "
+                           f"limit of {MAX_TOTAL_STEPS // 2}; give a larger settings.Ts or split the program",
+                           "program")
+
+
+def overspeed(res: PlanResult, t: Tube, counts: np.ndarray, feed: np.ndarray) -> float:
+    """Largest tool speed / the programmed F of the move being cut (samples and chords)."""
+    K = len(res.time)
+    seg = segment_of(counts, K)
+    speed = np.hypot(*res.velocity[:, :2].T)
+    chord = np.zeros(K)
+    chord[:-1] = np.hypot(*np.diff(res.pose[:, :2], axis=0).T) / res.settings.Ts
+    f = feed[seg]
+    return float(np.max(np.maximum(speed, chord) / np.maximum(f, 1e-12)))

@@ -1,0 +1,57 @@
+"""The contour estimate is the work (issue 33, goal 2): on generated edge programs (many short
+lines, tiny full circles, short passes, arcs, a long program of rapids; both feeds) the
+measured CPU seconds of reading and planning are within [1/3, 1.5] x
+:func:`planner.contour.estimate_contour` (before: 0.05-0.47, the estimate 2-16x the work and
+programs refused needlessly). ``benchmarks/bench_estimates.py --only contour`` prints the
+larger table (benchmarks/README.md)."""
+
+from __future__ import annotations
+
+import importlib.util
+import time
+from pathlib import Path
+
+import pytest
+
+from planner.contour import estimate_contour, plan_contour
+from planner.exchange import read_gcode
+from planner.schema import ContourRequest
+
+# the benchmark's program generators (benchmarks/ is no package: loaded by path)
+_spec = importlib.util.spec_from_file_location(
+    "bench_estimates", Path(__file__).resolve().parent.parent / "benchmarks" / "bench_estimates.py")
+assert _spec is not None and _spec.loader is not None
+_bench = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_bench)
+gcode_arcs, gcode_circles, gcode_lines = _bench.gcode_arcs, _bench.gcode_circles, _bench.gcode_lines
+gcode_long, gcode_passes = _bench.gcode_long, _bench.gcode_passes
+
+CASES = {
+    "lines": {"program": gcode_lines(300), "feed": "program"},
+    "circles": {"program": gcode_circles(60), "feed": "program"},
+    "passes": {"program": gcode_passes(25), "feed": "program"},
+    "arcs": {"program": gcode_arcs(20), "feed": "program"},
+    "long program": {"program": gcode_long(8000), "feed": "program"},
+    "lines fastest": {"program": gcode_lines(60), "feed": "fastest"},
+    "arcs Ts 5 ms": {"program": gcode_arcs(10), "settings": {"Ts": 0.005}},
+}
+
+
+@pytest.mark.serial  # compares CPU seconds with the estimate
+@pytest.mark.parametrize("name", list(CASES))
+def test_estimate_holds_both_ways(name):
+    req = ContourRequest.model_validate(CASES[name])
+    t0 = time.process_time()
+    program = read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
+    est = estimate_contour(req, program)[0]
+    plan_contour(req, program=program)
+    cpu = time.process_time() - t0
+    assert est / 3 <= cpu <= 1.5 * est, (name, cpu, est)
+
+
+def test_estimate_counts_the_program_lines():
+    """A program of rapids alone is read and walked: its lines are counted (a long program
+    of rapids around a few cuts is not estimated as the cuts alone)."""
+    short = estimate_contour({"program": gcode_long(100)})[0]
+    long = estimate_contour({"program": gcode_long(20_100)})[0]
+    assert long - short == pytest.approx(20_000 * 7.5e-5, rel=0.05)
