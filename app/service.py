@@ -12,8 +12,9 @@ batches submit typed jobs (:data:`app.jobs.Job`) and get a typed outcome
    status they answer (``timeout`` and ``too_much_memory`` 422, ``busy`` 503, a dead worker
    500), as the worker maps the planner's.
 
-Batch items on a local process pool or a Dask cluster run :func:`app.jobs.run_bounded`, the
-same estimate, limit and mapping in the process that runs them.
+Batch items on a local process pool or a Dask cluster run :func:`app.executors.run_bounded`,
+the same estimate, limit and mapping, in a planning process of the process that runs them
+(a time limit is always enforced by killing a process: :mod:`app.executors`).
 """
 
 from __future__ import annotations
@@ -26,23 +27,20 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
-from app.failures import import_timeout, out_of_memory, timeout
+from app.executors import describe_failure
 from app.jobs import (
     ContourJob,
     EditorJob,
     ExportJob,
-    Failed,
-    ImportJob,
     Job,
     Outcome,
     PlanJob,
     SegmentJob,
     bounded,
     check_estimate,
-    failed,
-    run_bounded,
+    run_job,
 )
-from app.workers import JobTimeout, PlanPool, PoolBusy, WorkerCrashed, WorkerOutOfMemory
+from app.workers import JobTimeout, PlanPool, PoolBusy, WorkerCrashed
 
 __all__ = ["JobService", "KernelCompile", "describe_failure", "on_reference"]
 
@@ -115,31 +113,14 @@ class KernelCompile:
         self._stop.set()
 
 
-def describe_failure(exc: Exception, job: Job, timeout_s: float, memory_mb: int | None = None) -> Failed:
-    """The outcome of a job the pool did not run to the end (the one wording of a time
-    limit, a memory limit, a full queue or a dead worker)."""
-    if isinstance(exc, WorkerOutOfMemory):
-        return failed({"code": "too_much_memory", "message": str(exc) or out_of_memory(memory_mb, job.kind)["message"],
-                       "field": "drawing" if job.kind == "import" else None})
-    if isinstance(exc, JobTimeout):
-        if isinstance(job, ExportJob):
-            return failed({"code": "timeout", "field": "format", "message": f"writing the plan as {job.format} took "
-                           f"longer than the export limit of {timeout_s:g} s (RANGEPLAN_EXPORT_TIMEOUT_S)"})
-        return failed(import_timeout(timeout_s) if isinstance(job, ImportJob) else timeout(timeout_s))
-    if isinstance(exc, PoolBusy):
-        return failed({"code": "busy", "message": f"too many plans in progress ({exc}); retry shortly"}, 503)
-    if isinstance(exc, WorkerCrashed):
-        return failed({"code": "internal_error", "message": f"the planning process died: {exc}"}, 500)
-    raise exc
-
-
 #: threads of :meth:`JobService.arun` started with the service (at most)
 PRESTARTED_THREADS = 256
 
 
 class JobService:
-    """Runs jobs on ``pool`` (a :class:`PlanPool`; None: inline in the calling thread under
-    ``timeout_s``, the editor started on its own). :meth:`run` blocks; :meth:`arun` awaits
+    """Runs jobs on ``pool`` (a :class:`PlanPool`; None: inline in the calling thread, the
+    editor started on its own: the work estimate is checked against ``timeout_s``, but a thread
+    cannot be stopped, so no time limit is armed; a time limit needs a process). :meth:`run` blocks; :meth:`arun` awaits
     it from an event loop on a thread pool sized to the pool's capacity."""
 
     def __init__(self, pool: PlanPool | None = None, *, timeout_s: float = 30.0, memory_mb: int | None = None,
@@ -199,8 +180,8 @@ class JobService:
             return refused
         limit = self.export_timeout_s if isinstance(job, ExportJob) else self.timeout_s
         job = bounded(job, limit)
-        if self.pool is None:
-            return run_bounded(job, limit, self.memory_mb)
+        if self.pool is None:  # in this thread: estimated and work-limited, but never stopped
+            return run_job(job, self.memory_mb)
         try:
             return self.pool.run(job, limit)
         except (JobTimeout, PoolBusy, WorkerCrashed) as exc:

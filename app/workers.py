@@ -274,7 +274,7 @@ class _Worker:
         finally:
             self.started.set()
 
-    def call(self, job: Job, timeout: float) -> Outcome:
+    def call(self, job: Job, timeout: float | None) -> Outcome:
         try:
             # interpreter start and imports do not count against the job
             if not self.started.wait(STARTUP_TIMEOUT_S + 1) or not self.ready:
@@ -413,8 +413,8 @@ class PlanPool:
     def run(self, job: Job, timeout_s: float | None = None) -> Outcome:
         """Run a job (blocking); returns its outcome (:func:`app.jobs.run_job`), or raises
         :class:`JobTimeout`, :class:`PoolBusy` or :class:`WorkerCrashed` (the process died).
-        ``timeout_s`` overrides the pool's time limit for this job. The work estimate is the
-        caller's (:class:`app.service.JobService`)."""
+        ``timeout_s`` overrides the pool's time limit for this job (0: none). The work estimate
+        is the caller's (:class:`app.service.JobService`, :func:`app.executors.run_bounded`)."""
         limit = self.timeout_s if timeout_s is None else float(timeout_s)
         with self._lock:
             if self._closed:
@@ -428,7 +428,7 @@ class PlanPool:
                 with self._sem:
                     t0 = time.perf_counter()
                     out = run_job(job)
-                    if time.perf_counter() - t0 > limit:
+                    if 0 < limit < time.perf_counter() - t0:
                         raise JobTimeout  # cannot stop a thread: only report it afterwards
                     return out
             w = self._idle.get()
@@ -437,7 +437,7 @@ class PlanPool:
                 if not w.alive():
                     w.kill()
                     replacement = w = self._replace(w)
-                out = w.call(job, limit)
+                out = w.call(job, limit if limit > 0 else None)
                 if isinstance(out, Failed) and out.error.code == "too_much_memory":
                     w.exit_status()  # it exits after a memory error (or is killed): replace it now
                     w.kill()
