@@ -148,6 +148,62 @@ def test_warm_up_plugin_relaxes_the_nannys_malloc_trim(local_cluster):
     assert set(state.values()) == {True}
 
 
+def test_a_job_past_its_limit_is_cut_on_a_dask_worker_which_plans_the_next(local_cluster):
+    """On a Dask worker the job runs in a planning process of the worker (a child of it),
+    killed at the limit; the worker (same pid, same address) plans the next item."""
+    from app.batch.engine import plan_item
+    from app.executors import run_bounded
+    from app.jobs import SleepJob
+    from tests.batch_support import planning_children, worker_pid
+
+    with distributed.Client(local_cluster.scheduler_address, timeout="20s") as c:
+        addr = sorted(local_cluster.scheduler_info["workers"])[0]
+
+        def on(fn, *args):
+            return c.submit(fn, *args, workers=[addr], pure=False).result(300)
+
+        pid = on(worker_pid)
+        assert on(run_bounded, SleepJob(0.05), 30.0).ok
+        child = on(planning_children)
+        assert child and pid not in child
+        t0 = time.perf_counter()
+        out = on(run_bounded, SleepJob(120.0), 1.0)
+        assert not out.ok and out.error.code == "timeout", out
+        assert time.perf_counter() - t0 < 20.0
+        assert on(worker_pid) == pid and c.run(os.getpid)[addr] == pid
+        assert not set(on(planning_children)) & set(child)
+        res = on(plan_item, variant(3), "json", 60.0)
+    assert res["status"] == "ok" and res["worker"] == addr and res["pid"] == pid
+    assert_same_plan(json.loads(bytes(res["payload"])), json.loads(plan_item(variant(3))["payload"]))
+
+
+def test_contour_items_on_a_local_cluster_equal_direct_plans_and_resume(local_cluster, tmp_path):
+    """Contour requests (G-code programs) beside plan requests on Dask: each contour item's
+    result is the program contoured directly (same contour metrics), the refused program is
+    that item's error naming the line, and a second run skips every item done."""
+    from app.batch.cli import run_batch
+    from tests.batch_support import assert_same_contour, contour_items
+
+    contours = contour_items()
+    reqs = [contours[0], variant(4), contours[3], contours[1], contours[2]]
+    study = write_jsonl(tmp_path / "cam.jsonl", reqs)
+    out = tmp_path / "out"
+    res = run_batch([str(study)], out, scheduler=local_cluster.scheduler_address, progress="none", timeout_s=120)
+    assert (res["ok"], res["failed"], res["engine"]) == (4, 1, "dask"), res
+    rows = {r["key"]: r for r in read_summary(out)}
+    workers = set(local_cluster.scheduler_info["workers"])
+    for i in (1, 4, 5):
+        row = rows[f"cam-{i:06d}"]
+        assert row["kind"] == "contour" and row["engine"] == "dask" and row["worker"] in workers, row
+        result = json.loads((out / row["file"]).read_text())
+        assert_same_contour(result, reqs[i - 1])
+        assert float(row["max_deviation_m"]) == result["contour"]["max_deviation_m"]
+    assert rows["cam-000002"]["kind"] == "plan" and rows["cam-000002"]["status"] == "ok"
+    assert rows["cam-000003"]["error_code"] == "invalid_input" and "line 11" in rows["cam-000003"]["error_message"]
+    again = run_batch([str(study)], out, scheduler=local_cluster.scheduler_address, progress="none", timeout_s=120)
+    assert (again["skipped"], again["ok"], again["failed"]) == (5, 0, 0), again
+
+
 def test_api_on_a_local_cluster(local_cluster, tmp_path, monkeypatch):
     monkeypatch.setenv("RANGEPLAN_DASK_SCHEDULER", local_cluster.scheduler_address)
     app = create_app(Store(tmp_path), workers=1)
