@@ -1,4 +1,18 @@
-"""Where a job runs, and the one way its time limit is enforced: a process killed at the limit.
+"""Where a job runs: one executor interface, three implementations; and the one way a time
+limit is enforced: a process killed at the limit.
+
+:class:`JobExecutor` is what :class:`app.service.JobService` (the API, the editor, contour
+plans) submits typed jobs to:
+
+* :class:`InProcessExecutor`: the calling thread (a command, the editor on its own); it
+  cannot stop a job, so it arms no time limit;
+* :class:`app.workers.PlanPool`: a local pool of planning processes, each killed and replaced
+  at the time limit (the server's default; ``RANGEPLAN_EXECUTOR=process``);
+* :class:`app.cluster.DaskExecutor`: a Dask cluster (``RANGEPLAN_EXECUTOR=dask``,
+  ``RANGEPLAN_DASK_SCHEDULER``); each job runs :func:`run_bounded` on a worker.
+
+Batches run their items through the same :func:`run_bounded` on their engines (inline, a local
+process pool, the same Dask cluster: :mod:`app.batch.executors`).
 
 A job (:data:`app.jobs.Job`) never has its time limit enforced inside the thread that runs
 it (an exception injected into a running thread can land anywhere, in numba's cache loader
@@ -19,13 +33,78 @@ No web framework or editor import.
 from __future__ import annotations
 
 import atexit
+import os
+import socket
+import sys
 import threading
+from typing import Any, Protocol, runtime_checkable
 
 from app.failures import import_timeout, out_of_memory, timeout
 from app.jobs import ExportJob, Failed, ImportJob, Job, Outcome, bounded, check_estimate, failed, run_job
 from app.workers import JobTimeout, PlanPool, PoolBusy, WorkerCrashed, WorkerOutOfMemory
 
-__all__ = ["child_pool", "close_child_pool", "describe_failure", "run_bounded"]
+__all__ = ["InProcessExecutor", "JobExecutor", "WORKER", "child_pool", "close_child_pool", "describe_failure",
+           "run_bounded", "warm_worker", "where"]
+
+
+@runtime_checkable
+class JobExecutor(Protocol):
+    """Runs typed jobs (:data:`app.jobs.Job`). :meth:`run` blocks and returns the job's outcome
+    (:func:`app.jobs.run_job`), or raises :class:`~app.workers.JobTimeout` (the job passed
+    ``timeout_s``, default :attr:`timeout_s`; 0: none), :class:`~app.workers.PoolBusy` (more
+    than :attr:`capacity` jobs at once) or :class:`~app.workers.WorkerCrashed` (the process
+    running it died); :class:`app.service.JobService` maps these once (:func:`describe_failure`).
+    The work estimate is the caller's."""
+
+    mode: str
+    timeout_s: float
+    memory_mb: int
+
+    @property
+    def capacity(self) -> int: ...
+
+    def run(self, job: Job, timeout_s: float | None = None) -> Outcome: ...
+
+    def stats(self) -> dict[str, Any]: ...
+
+    def readiness(self) -> dict[str, Any]: ...
+
+    def renew(self) -> None: ...
+
+    def close(self) -> None: ...
+
+
+class InProcessExecutor:
+    """Jobs in the calling thread (:class:`JobExecutor`): no parallelism beyond the callers'
+    threads and no time limit (a thread cannot be stopped; the caller's work estimate still
+    refuses work over ``timeout_s``). ``memory_mb`` only names the cap in a memory error."""
+
+    mode = "inline"
+
+    def __init__(self, timeout_s: float = 30.0, memory_mb: int | None = None):
+        self.timeout_s = float(timeout_s)
+        self.memory_mb = int(memory_mb or 0)
+        self.jobs_run = 0
+
+    @property
+    def capacity(self) -> int:
+        return 0
+
+    def run(self, job: Job, timeout_s: float | None = None) -> Outcome:
+        self.jobs_run += 1
+        return run_job(job, self.memory_mb or None)
+
+    def stats(self) -> dict[str, Any]:
+        return {}
+
+    def readiness(self) -> dict[str, Any]:
+        return {"ready": True, "workers_ready": 1, "workers": 1, "failures": []}
+
+    def renew(self) -> None:
+        """Nothing to renew: the next job loads what this process has."""
+
+    def close(self) -> None:
+        """Nothing to stop."""
 
 
 def describe_failure(exc: Exception, job: Job, timeout_s: float, memory_mb: int | None = None) -> Failed:
@@ -47,6 +126,78 @@ def describe_failure(exc: Exception, job: Job, timeout_s: float, memory_mb: int 
 
 
 # ---------------------------------------------------------------------------------------
+# a process that runs jobs for others (a batch's local worker, a Dask worker)
+
+#: set in a worker by :func:`warm_worker` (``local``); Dask workers are recognised by
+#: ``distributed.get_worker()``; anything else is the calling process (``inline``).
+#: ``memory_mb``: this process's memory cap (:func:`warm_worker`), named by a memory error;
+#: ``jobs``: jobs run here through :func:`run_bounded` (count)
+WORKER: dict[str, Any] = {"name": "inline", "memory_mb": None}
+#: whether this process has loaded the compiled kernels (:func:`_load_kernels`)
+_KERNELS = {"loaded": False}
+_KERNELS_LOCK = threading.Lock()
+
+
+def _load_kernels() -> float:
+    """Load (or compile) the planner's kernels once per process; returns the seconds taken."""
+    with _KERNELS_LOCK:
+        if _KERNELS["loaded"]:
+            return 0.0
+        try:
+            from planner import warm_up
+
+            return warm_up()
+        except Exception:  # the first plan compiles instead
+            return 0.0
+        finally:
+            _KERNELS["loaded"] = True
+
+
+def where() -> dict[str, Any]:
+    """Where this call runs: ``{"engine", "worker", "host", "pid"}``; ``worker`` is the Dask
+    worker's address, else ``host:pid``."""
+    host, pid = socket.gethostname(), os.getpid()
+    if "distributed" in sys.modules:  # only a Dask worker (or client) has imported it
+        try:
+            from distributed import get_worker
+
+            return {"engine": "dask", "worker": get_worker().address, "host": host, "pid": pid}
+        except (ImportError, ValueError):  # ValueError: not inside a Dask task
+            pass
+    return {"engine": WORKER["name"], "worker": f"{host}:{pid}", "host": host, "pid": pid}
+
+
+def warm_worker(engine: str = "local", nice: int = 0, memory_mb: int | None = None,
+                parent: int | None = None) -> float:
+    """Load the compiled kernels (``planner.warm_up``) and mark this process as ``engine``;
+    ``nice`` > 0 lowers its CPU priority (the service's batch workers yield to interactive
+    plans); ``memory_mb`` caps the address space of the planning processes its items run in
+    (:func:`child_pool`), as the API's planning workers (an item that needs more
+    fails with ``too_much_memory`` and the worker plans the next). Runs once per worker
+    process, never per item. ``parent``: the pid of the process that started this one (a
+    local pool's worker ends when it does: :mod:`app.lifeline`). Returns the seconds taken."""
+    import signal
+
+    if parent is not None:
+        from app.lifeline import exit_with_parent
+
+        exit_with_parent(parent)
+    WORKER["name"] = engine
+    if threading.current_thread() is threading.main_thread() and engine == "local":
+        # Ctrl-C reaches the whole process group: the parent decides what stops
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if nice > 0:
+        try:
+            os.nice(nice)
+        except OSError:
+            pass
+    seconds = _load_kernels()
+    if memory_mb:
+        WORKER["memory_mb"] = int(memory_mb)
+    return seconds
+
+
+# ---------------------------------------------------------------------------------------
 # this process's own planning processes
 
 _CHILD: dict[str, PlanPool | None] = {"pool": None}
@@ -56,8 +207,6 @@ _CHILD_LOCK = threading.Lock()
 def _threads_here() -> int:
     """How many threads of this process may run jobs at once: a Dask worker's thread count
     inside a Dask worker, else 1 (a local pool's worker, a command)."""
-    import sys
-
     if "distributed" in sys.modules:
         try:
             from distributed import get_worker
@@ -103,6 +252,8 @@ def run_bounded(job: Job, timeout_s: float | None = None, memory_mb: int | None 
     :func:`child_pool` that is killed at ``timeout_s`` (``timeout``; the next job gets a new
     process) and capped at ``memory_mb`` MiB (``too_much_memory``). With neither bound the job
     runs in the calling thread. Never raises for the input's fault, a limit or a dead process."""
+    with _CHILD_LOCK:
+        WORKER["jobs"] = WORKER.get("jobs", 0) + 1
     refused = check_estimate(job, timeout_s)
     if refused is not None:
         return refused

@@ -107,3 +107,11 @@ def assert_same_contour(result: dict[str, Any], request: dict[str, Any]) -> None
                 "program_line", "cutting", "feed"):
         assert a[key] == b[key], key
     assert len(a["passes"]) == len(b["passes"]) and a["max_deviation_m"] <= a["tolerance_m"]
+
+
+def jobs_run_here() -> int:
+    """Jobs this process has run through :func:`app.executors.run_bounded` (on a Dask worker:
+    the service's jobs and batch items sent to it)."""
+    from app.executors import WORKER
+
+    return int(WORKER.get("jobs", 0))

@@ -221,6 +221,81 @@ def test_api_on_a_local_cluster(local_cluster, tmp_path, monkeypatch):
 
 
 # ---------------------------------------------------------------------------------------
+# the service's jobs on the cluster (RANGEPLAN_EXECUTOR=dask)
+
+def test_plans_over_http_run_on_dask_workers_with_the_local_result(local_cluster, tmp_path, monkeypatch):
+    """POST /v1/plan and POST /v1/contour with RANGEPLAN_EXECUTOR=dask: planned on a Dask worker
+    (in its planning process), the same result as planned here, stored as usual."""
+    from planner import plan
+    from planner.contour import plan_contour
+    from tests.batch_support import assert_same_contour, contour_items, jobs_run_here
+
+    monkeypatch.setenv("RANGEPLAN_DASK_SCHEDULER", local_cluster.scheduler_address)
+    monkeypatch.setenv("RANGEPLAN_EXECUTOR", "dask")
+    with distributed.Client(local_cluster.scheduler_address, timeout="20s") as c:
+        before = c.run(jobs_run_here)
+    app = create_app(Store(tmp_path), timeout_s=120)
+    with api_client(app) as client:
+        assert client.get("/ready").status_code == 200
+        r = client.post("/v1/plan", json=variant(5, "constrained"))
+        assert r.status_code == 200, r.text
+        assert_same_plan(r.json(), plan(variant(5, "constrained")).to_json_dict())
+        stored = client.get(f"/v1/plans/{r.headers['X-Plan-Id']}")
+        assert stored.status_code == 200 and stored.json()["metrics"] == r.json()["metrics"]
+        good = contour_items()[0]
+        rc = client.post("/v1/contour", json=good)
+        assert rc.status_code == 200, rc.text
+        assert_same_contour(rc.json(), good)
+        bad = client.post("/v1/plan", json=UNREACHABLE)  # the planner's error, from the worker
+        assert bad.status_code == 422 and bad.json()["error"]["code"] == "unreachable", bad.text
+        stats = app.state.service.stats()
+    assert stats["mode"] == "dask" and stats["scheduler"] == local_cluster.scheduler_address
+    with distributed.Client(local_cluster.scheduler_address, timeout="20s") as c:
+        after = c.run(jobs_run_here)
+    assert sum(after.values()) - sum(before.values()) == 3  # each job (plan, contour, unreachable) ran on a worker
+    assert plan_contour(good).contour.max_deviation_m == rc.json()["contour"]["max_deviation_m"]
+
+
+def test_service_on_dask_cuts_a_job_at_its_limit_and_plans_the_next(local_cluster):
+    from app.cluster import DaskExecutor
+    from app.jobs import PlanJob, SleepJob
+    from app.service import JobService
+    from planner.schema import PlanRequest
+
+    svc = JobService(DaskExecutor(local_cluster.scheduler_address, timeout_s=2.0, max_queue=2))
+    try:
+        assert svc.readiness()["ready"] and svc.readiness()["workers"] == 2
+        t0 = time.perf_counter()
+        out = svc.run(SleepJob(60.0))
+        assert not out.ok and out.error.code == "timeout" and "2 s" in out.error.message, out
+        assert time.perf_counter() - t0 < 30
+        done = svc.run(PlanJob(PlanRequest.model_validate(variant(6)), "none"))
+        assert done.ok and done.summary["duration_s"] > 0
+        # more jobs than the cluster's 2 threads + 2 waiting: the rest are busy (503), not queued forever
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(8) as ex:
+            outs = list(ex.map(lambda _: svc.run(SleepJob(1.0)), range(8)))
+        codes = sorted(o.error.code if not o.ok else "ok" for o in outs)
+        assert codes.count("busy") >= 1 and codes.count("ok") >= 4, codes
+    finally:
+        svc.close()
+
+
+def test_dask_executor_without_a_scheduler_is_a_clear_error(monkeypatch):
+    from app.service import JobService
+
+    monkeypatch.delenv("RANGEPLAN_DASK_SCHEDULER", raising=False)
+    with pytest.raises(ValueError, match="RANGEPLAN_DASK_SCHEDULER"):
+        JobService.start(1, 30.0, 4, mode="dask")
+    with pytest.raises(OSError, match=f"cannot reach the Dask scheduler at {UNREACHABLE_ADDRESS}"):
+        JobService.start(1, 30.0, 4, mode="dask", scheduler=UNREACHABLE_ADDRESS)
+
+
+UNREACHABLE_ADDRESS = "tcp://127.0.0.1:9"
+
+
+# ---------------------------------------------------------------------------------------
 # a scheduler and workers started with the dask command line
 
 @pytest.fixture(scope="module")

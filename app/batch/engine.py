@@ -23,18 +23,15 @@ Workers import this module once and load the compiled kernels once
 from __future__ import annotations
 
 import os
-import socket
-import sys
-import threading
 import time
 from typing import Any
 
 import orjson
 
-from app.executors import run_bounded
+from app.executors import WORKER, run_bounded, warm_worker, where
 from app.formats import OUTPUT_FORMATS
 from app.jobs import ContourJob, Failed, PlanJob, failed
-from planner import PlannerError, warm_up
+from planner import PlannerError
 from planner.schema import ContourRequest, PlanRequest, error_details
 
 __all__ = ["FORMATS", "STAGING_PREFIX", "plan_item", "request_kind", "plan_chunk", "unpack_chunk", "warm_worker",
@@ -46,72 +43,6 @@ FORMATS: dict[str, tuple[str | None, Any]] = {
     **{k: (OUTPUT_FORMATS[k].extension, OUTPUT_FORMATS[k].writer) for k in ("json", "csv")},
     "none": (None, None),
 }
-
-#: set in a worker by :func:`warm_worker` (``local``); Dask workers are recognised by
-#: ``distributed.get_worker()``; anything else is the calling process (``inline``).
-#: ``memory_mb``: this process's memory cap (:func:`warm_worker`), named by a memory error
-_ENGINE: dict[str, Any] = {"name": "inline", "memory_mb": None}
-#: whether this process has loaded the compiled kernels (:func:`_load_kernels`)
-_KERNELS = {"loaded": False}
-_KERNELS_LOCK = threading.Lock()
-
-
-def _load_kernels() -> float:
-    """Load (or compile) the planner's kernels once per process; returns the seconds taken."""
-    with _KERNELS_LOCK:
-        if _KERNELS["loaded"]:
-            return 0.0
-        try:
-            return warm_up()
-        except Exception:  # the first plan compiles instead
-            return 0.0
-        finally:
-            _KERNELS["loaded"] = True
-
-
-def where() -> dict[str, Any]:
-    """Where this call runs: ``{"engine", "worker", "host", "pid"}``; ``worker`` is the Dask
-    worker's address, else ``host:pid``."""
-    host, pid = socket.gethostname(), os.getpid()
-    if "distributed" in sys.modules:  # only a Dask worker (or client) has imported it
-        try:
-            from distributed import get_worker
-
-            return {"engine": "dask", "worker": get_worker().address, "host": host, "pid": pid}
-        except (ImportError, ValueError):  # ValueError: not inside a Dask task
-            pass
-    return {"engine": _ENGINE["name"], "worker": f"{host}:{pid}", "host": host, "pid": pid}
-
-
-def warm_worker(engine: str = "local", nice: int = 0, memory_mb: int | None = None,
-                parent: int | None = None) -> float:
-    """Load the compiled kernels (``planner.warm_up``) and mark this process as ``engine``;
-    ``nice`` > 0 lowers its CPU priority (the service's batch workers yield to interactive
-    plans); ``memory_mb`` caps the address space of the planning processes its items run in
-    (:func:`app.executors.child_pool`), as the API's planning workers (an item that needs more
-    fails with ``too_much_memory`` and the worker plans the next). Runs once per worker
-    process, never per item. ``parent``: the pid of the process that started this one (a
-    local pool's worker ends when it does: :mod:`app.lifeline`). Returns the seconds taken."""
-    import signal
-
-    if parent is not None:
-        from app.lifeline import exit_with_parent
-
-        exit_with_parent(parent)
-    _ENGINE["name"] = engine
-    if threading.current_thread() is threading.main_thread() and engine == "local":
-        # Ctrl-C reaches the whole process group: the parent decides what stops
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-    if nice > 0:
-        try:
-            os.nice(nice)
-        except OSError:
-            pass
-    seconds = _load_kernels()
-    if memory_mb:
-        _ENGINE["memory_mb"] = int(memory_mb)
-    return seconds
-
 
 def request_kind(request: str | bytes | dict | PlanRequest | ContourRequest) -> str:
     """``"contour"`` for a contour request (a G-code program: an object with ``program``, the
@@ -165,7 +96,7 @@ def plan_item(request: str | bytes | dict | PlanRequest | ContourRequest, fmt: s
         out["kind"] = request_kind(request)
         job = _job(request, fmt)
         out["name"] = job.request.name
-        outcome = run_bounded(job, timeout_s, _ENGINE["memory_mb"])
+        outcome = run_bounded(job, timeout_s, WORKER["memory_mb"])
     except PlannerError as exc:
         outcome = failed(exc.to_dict())
     except ValidationError as exc:
