@@ -50,6 +50,7 @@ from typing import Any  # noqa: E402
 
 from app.failures import limit_memory, out_of_memory  # noqa: E402
 from app.jobs import Failed, Job, Outcome, run_job  # noqa: E402
+from app.worker_process import WORKER_NICE, load_planner  # noqa: E402  (the worker template's too)
 
 
 class JobTimeout(Exception):
@@ -72,8 +73,6 @@ class WorkerOutOfMemory(WorkerCrashed):
 #: default address-space limit of a worker process [MiB] (the interpreter with the planner
 #: loaded takes ~0.5 GiB of it; the largest plan within the request bounds peaked at 0.8 GiB)
 DEFAULT_MEMORY_MB = 2048
-#: CPU priority of the workers relative to the server process
-WORKER_NICE = 5
 
 
 def _worker_main(conn, memory_mb: int | None = None, parent: int | None = None, pdeathsig: bool = False) -> None:
@@ -87,24 +86,6 @@ def _worker_main(conn, memory_mb: int | None = None, parent: int | None = None, 
     except OSError:
         pass
     _serve(conn, memory_mb, load_planner())
-
-
-def load_planner() -> tuple[str, str | None]:
-    """Import the planner and load its compiled kernels (before the first job, not during it;
-    and the storage and the export writers): ``("ready", None)`` or ``("failed", reason)``."""
-    import app.formats
-    import app.storage  # noqa: F401
-    import planner
-    from planner.orchestrator.background import kernels_ready, running_compile
-    try:
-        if not kernels_ready() and running_compile() is not None:
-            # they compile in the background (app.service.JobService): jobs plan on the reference meanwhile
-            planner.warm_up(backend="reference")
-        else:
-            planner.warm_up()  # ~0.3 s from numba's on-disk cache; compiles after an install
-    except Exception as exc:  # the worker cannot plan: say why (the pool reports it, /ready stays 503)
-        return ("failed", f"{type(exc).__name__}: {exc}")
-    return ("ready", None)
 
 
 def _forked_worker(conn, memory_mb: int | None = None) -> None:

@@ -1,0 +1,121 @@
+"""Plans per second over HTTP with the service's jobs on a Dask cluster (``RANGEPLAN_EXECUTOR=dask``)
+at 1 and 2 Dask workers, against the local process pool at 1 and 2 workers, in one run.
+
+For each configuration: a Dask ``LocalCluster`` of N worker processes (1 thread each, on this
+host; none for the local pool), a real ``rangeplan serve`` (uvicorn, no editor) on a free
+loopback port pointed at it, a warm-up (every worker's planning process started), then
+``--runs`` runs of ``--requests`` Table I plans (``POST /v1/plan``, the default constrained
+mode) from ``--concurrency`` keep-alive clients (benchmarks/bench_http.py's client). Prints
+per configuration the median plans/s, latency p50/p90 (ms) of the median run, the planner's
+compute time, and the ratios: 2 workers against 1 of the same executor, and Dask against the
+local pool at the same worker count.
+
+    .venv/bin/python benchmarks/bench_dask_service.py                      # defaults
+    .venv/bin/python benchmarks/bench_dask_service.py --requests 80 --runs 3 --concurrency 4
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import httpx
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from bench_http import free_port, run_load  # noqa: E402
+
+
+def start_server(env_extra: dict[str, str], data_dir: str) -> tuple[subprocess.Popen, str]:
+    port = free_port()
+    env = {**os.environ, "RANGEPLAN_DATA_DIR": data_dir, "RANGEPLAN_ACCESS_LOG": "0",
+           "RANGEPLAN_LOG_LEVEL": "warning", "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
+           "MKL_NUM_THREADS": "1", "PYTHONPATH": str(ROOT), **env_extra}
+    proc = subprocess.Popen([sys.executable, "-m", "app.cli", "serve", "--no-editor", "--port", str(port)],
+                            env=env, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    url = f"http://127.0.0.1:{port}"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        try:
+            if httpx.get(url + "/ready", timeout=2).status_code == 200:
+                return proc, url
+        except httpx.HTTPError:
+            pass
+        time.sleep(0.2)
+    proc.kill()
+    raise RuntimeError("server did not become ready")
+
+
+def stop_server(proc: subprocess.Popen) -> None:
+    proc.send_signal(signal.SIGTERM)
+    try:
+        proc.wait(30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
+def measure(executor: str, workers: int, args: argparse.Namespace) -> dict:
+    cluster = None
+    env = {"RANGEPLAN_EXECUTOR": executor, "RANGEPLAN_WORKERS": str(workers)}
+    if executor == "dask":
+        from distributed import LocalCluster
+
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address=None, env={"PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"})
+        env["RANGEPLAN_DASK_SCHEDULER"] = cluster.scheduler_address
+    try:
+        with tempfile.TemporaryDirectory() as data:
+            proc, url = start_server(env, data)
+            try:
+                warm = asyncio.run(run_load(url, max(args.concurrency, 2 * workers), 4 * workers))
+                assert warm["errors"] == 0, warm
+                runs = [asyncio.run(run_load(url, args.concurrency, args.requests)) for _ in range(args.runs)]
+            finally:
+                stop_server(proc)
+    finally:
+        if cluster is not None:
+            cluster.close()
+    assert all(r["errors"] == 0 for r in runs), runs
+    runs.sort(key=lambda r: r["rate"])
+    mid = runs[len(runs) // 2]
+    return {"executor": executor, "workers": workers, "rate": mid["rate"], "p50": mid["p50"], "p90": mid["p90"],
+            "compute_ms": mid["compute_ms"], "rates": [r["rate"] for r in runs]}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--requests", type=int, default=60, help="plans per run (default 60)")
+    ap.add_argument("--runs", type=int, default=3, help="runs per configuration; the median is shown (default 3)")
+    ap.add_argument("--concurrency", type=int, default=4, help="concurrent clients (default 4)")
+    args = ap.parse_args()
+    rows = {}
+    for executor in ("process", "dask"):
+        for workers in (1, 2):
+            r = rows[executor, workers] = measure(executor, workers, args)
+            print(f"# {executor} x{workers}: runs {', '.join(f'{x:.1f}' for x in r['rates'])} plans/s",
+                  file=sys.stderr, flush=True)
+    print(f"\nTable I (constrained) over HTTP, {args.concurrency} clients, {args.requests} plans x {args.runs} runs "
+          f"(median), {os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}\n")
+    print("| executor | workers | plans/s | 2 workers vs 1 | Dask vs local pool | p50 [ms] | p90 [ms] | "
+          "compute [ms] |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    for (executor, workers), r in rows.items():
+        scale = f"{r['rate'] / rows[executor, 1]['rate']:.2f}x" if workers == 2 else ""
+        vs = f"{r['rate'] / rows['process', workers]['rate']:.2f}x" if executor == "dask" else ""
+        print(f"| {executor} | {workers} | {r['rate']:.1f} | {scale} | {vs} | {r['p50']:.0f} | {r['p90']:.0f} | "
+              f"{statistics.median([r['compute_ms']]):.1f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
