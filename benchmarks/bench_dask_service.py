@@ -3,12 +3,14 @@ at 1 and 2 Dask workers, against the local process pool at 1 and 2 workers, in o
 
 For each configuration: a Dask ``LocalCluster`` of N worker processes (1 thread each, on this
 host; none for the local pool), a real ``rangeplan serve`` (uvicorn, no editor) on a free
-loopback port pointed at it, a warm-up (every worker's planning process started), then
-``--runs`` runs of ``--requests`` Table I plans (``POST /v1/plan``, the default constrained
-mode) from ``--concurrency`` keep-alive clients (benchmarks/bench_http.py's client). Prints
-per configuration the median plans/s, latency p50/p90 (ms) of the median run, the planner's
-compute time, and the ratios: 2 workers against 1 of the same executor, and Dask against the
-local pool at the same worker count.
+loopback port pointed at it, a warm-up (every worker's planning process started). All four
+are started first (idle, they take no CPU), then measured in interleaved rounds (a change in
+the shared machine's load hits all four alike): ``--runs`` rounds of ``--requests`` Table I
+plans (``POST /v1/plan``, the default constrained mode) from ``--concurrency`` keep-alive
+clients (benchmarks/bench_http.py's client). Prints per configuration the median plans/s,
+latency p50/p90 (ms) of the median run, the planner's compute time, and the ratios (median of
+each round's): 2 workers against 1 of the same executor, and Dask against the local pool at
+the same worker count.
 
     .venv/bin/python benchmarks/bench_dask_service.py                      # defaults
     .venv/bin/python benchmarks/bench_dask_service.py --requests 80 --runs 3 --concurrency 4
@@ -64,32 +66,41 @@ def stop_server(proc: subprocess.Popen) -> None:
         proc.wait()
 
 
-def measure(executor: str, workers: int, args: argparse.Namespace) -> dict:
-    cluster = None
-    env = {"RANGEPLAN_EXECUTOR": executor, "RANGEPLAN_WORKERS": str(workers)}
-    if executor == "dask":
-        from distributed import LocalCluster
+class Config:
+    """One configuration, started and warmed: a server (and for Dask its cluster)."""
 
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address=None, env={"PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"})
-        env["RANGEPLAN_DASK_SCHEDULER"] = cluster.scheduler_address
-    try:
-        with tempfile.TemporaryDirectory() as data:
-            proc, url = start_server(env, data)
-            try:
-                warm = asyncio.run(run_load(url, max(args.concurrency, 2 * workers), 4 * workers))
-                assert warm["errors"] == 0, warm
-                runs = [asyncio.run(run_load(url, args.concurrency, args.requests)) for _ in range(args.runs)]
-            finally:
-                stop_server(proc)
-    finally:
-        if cluster is not None:
-            cluster.close()
-    assert all(r["errors"] == 0 for r in runs), runs
-    runs.sort(key=lambda r: r["rate"])
-    mid = runs[len(runs) // 2]
-    return {"executor": executor, "workers": workers, "rate": mid["rate"], "p50": mid["p50"], "p90": mid["p90"],
-            "compute_ms": mid["compute_ms"], "rates": [r["rate"] for r in runs]}
+    def __init__(self, executor: str, workers: int, concurrency: int):
+        from contextlib import ExitStack
+
+        self.executor, self.workers = executor, workers
+        self.stack = ExitStack()
+        env = {"RANGEPLAN_EXECUTOR": executor, "RANGEPLAN_WORKERS": str(workers)}
+        if executor == "dask":
+            from distributed import LocalCluster
+
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                   dashboard_address=None, env={"PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"})
+            self.stack.callback(cluster.close)
+            env["RANGEPLAN_DASK_SCHEDULER"] = cluster.scheduler_address
+        data = self.stack.enter_context(tempfile.TemporaryDirectory())
+        proc, self.url = start_server(env, data)
+        self.stack.callback(stop_server, proc)
+        warm = asyncio.run(run_load(self.url, max(concurrency, 2 * workers), 4 * workers))
+        assert warm["errors"] == 0, warm
+        self.runs: list[dict] = []
+
+    def run(self, concurrency: int, requests: int) -> dict:
+        r = asyncio.run(run_load(self.url, concurrency, requests))
+        assert r["errors"] == 0, r
+        self.runs.append(r)
+        return r
+
+    def median(self) -> dict:
+        runs = sorted(self.runs, key=lambda r: r["rate"])
+        return runs[len(runs) // 2]
+
+    def close(self) -> None:
+        self.stack.close()
 
 
 def main() -> int:
@@ -98,22 +109,36 @@ def main() -> int:
     ap.add_argument("--runs", type=int, default=3, help="runs per configuration; the median is shown (default 3)")
     ap.add_argument("--concurrency", type=int, default=4, help="concurrent clients (default 4)")
     args = ap.parse_args()
-    rows = {}
-    for executor in ("process", "dask"):
-        for workers in (1, 2):
-            r = rows[executor, workers] = measure(executor, workers, args)
-            print(f"# {executor} x{workers}: runs {', '.join(f'{x:.1f}' for x in r['rates'])} plans/s",
-                  file=sys.stderr, flush=True)
-    print(f"\nTable I (constrained) over HTTP, {args.concurrency} clients, {args.requests} plans x {args.runs} runs "
-          f"(median), {os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}\n")
+    configs: dict[tuple[str, int], Config] = {}
+    try:
+        for executor in ("process", "dask"):  # all started (idle ones take no CPU), then measured interleaved
+            for workers in (1, 2):
+                configs[executor, workers] = Config(executor, workers, args.concurrency)
+        for rnd in range(args.runs):
+            for (executor, workers), cfg in configs.items():
+                r = cfg.run(args.concurrency, args.requests)
+                print(f"# round {rnd + 1} {executor} x{workers}: {r['rate']:.1f} plans/s, load "
+                      f"{os.getloadavg()[0]:.2f}", file=sys.stderr, flush=True)
+    finally:
+        for cfg in configs.values():
+            cfg.close()
+    rows = {k: {**cfg.median(), "ratios": cfg.runs} for k, cfg in configs.items()}
+
+    def ratio(a: tuple[str, int], b: tuple[str, int]) -> float:
+        """The median over rounds of each round's ratio of plans/s (a shared machine's load hits both alike)."""
+        return statistics.median(x["rate"] / y["rate"] for x, y in zip(configs[a].runs, configs[b].runs))
+
+    print(f"\nTable I (constrained) over HTTP, {args.concurrency} clients, {args.requests} plans x {args.runs} "
+          f"interleaved rounds (median; ratios: median of each round's ratio), {os.cpu_count()} cores, load "
+          f"{os.getloadavg()[0]:.2f}\n")
     print("| executor | workers | plans/s | 2 workers vs 1 | Dask vs local pool | p50 [ms] | p90 [ms] | "
           "compute [ms] |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- |")
     for (executor, workers), r in rows.items():
-        scale = f"{r['rate'] / rows[executor, 1]['rate']:.2f}x" if workers == 2 else ""
-        vs = f"{r['rate'] / rows['process', workers]['rate']:.2f}x" if executor == "dask" else ""
+        scale = f"{ratio((executor, 2), (executor, 1)):.2f}x" if workers == 2 else ""
+        vs = f"{ratio((executor, workers), ('process', workers)):.2f}x" if executor == "dask" else ""
         print(f"| {executor} | {workers} | {r['rate']:.1f} | {scale} | {vs} | {r['p50']:.0f} | {r['p90']:.0f} | "
-              f"{statistics.median([r['compute_ms']]):.1f} |")
+              f"{r['compute_ms']:.1f} |")
     return 0
 
 
