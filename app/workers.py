@@ -76,11 +76,16 @@ DEFAULT_MEMORY_MB = 2048
 
 
 def _worker_main(conn, memory_mb: int | None = None, parent: int | None = None, pdeathsig: bool = False) -> None:
-    """A worker started as a fresh interpreter (``start="exec"``)."""
+    """A worker started as a fresh interpreter (``start="exec"``). It ignores Ctrl-C, which
+    reaches the whole process group: its parent decides what stops (a batch worker's planning
+    process killed by the terminal's SIGINT would report its item as a dead worker's)."""
+    import signal
+
     if parent is not None:  # end with the server, even a kill -9 of it (app.lifeline)
         from app.lifeline import exit_with_parent
 
         exit_with_parent(parent, thread_bound=pdeathsig)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         os.nice(WORKER_NICE)
     except OSError:

@@ -458,13 +458,16 @@ TABLE1_FILE = Path(__file__).resolve().parents[1] / "app" / "static" / "examples
 
 
 @pytest.mark.slow
-def test_cli_batch_ctrl_c_keeps_finished_results_and_resumes(tmp_path):
+@pytest.mark.parametrize("limit", [[], ["--timeout", "60"]], ids=["no-limit", "time-limited"])
+def test_cli_batch_ctrl_c_keeps_finished_results_and_resumes(tmp_path, limit):
+    # time-limited: each item runs in a planning process of its worker, which the terminal's
+    # SIGINT reaches too; it must not turn the items in flight into errors (resume skips errors)
     study = write_jsonl(tmp_path / "s.jsonl", [variant(i % 5, "constrained") for i in range(40)])
     out = tmp_path / "out"
     # SIGINT at its default in the batch, as in a terminal: a test run started in the background
     # of a non-interactive shell (`make test &`) ignores SIGINT, and so would the batch
-    proc = subprocess.Popen([*CLI, "batch", str(study), "-o", str(out), "--workers", "2", "--progress", "lines"],
-                            stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=env(),
+    proc = subprocess.Popen([*CLI, "batch", str(study), "-o", str(out), "--workers", "2", "--progress", "lines",
+                             *limit], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=env(),
                             start_new_session=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     seen = 0
@@ -483,7 +486,7 @@ def test_cli_batch_ctrl_c_keeps_finished_results_and_resumes(tmp_path):
     assert all(r["status"] == "ok" and (out / r["file"]).is_file() for r in rows)
     assert len(list(out.glob("*.json"))) == len(rows)  # no partial result file left behind
     assert not list(out.glob(".rangeplan-staging-*"))  # nor what the killed workers had staged
-    r = subprocess.run([*CLI, "batch", str(study), "-o", str(out), "--workers", "2", "--progress", "lines"],
+    r = subprocess.run([*CLI, "batch", str(study), "-o", str(out), "--workers", "2", "--progress", "lines", *limit],
                        capture_output=True, text=True, env=env(), timeout=600)
     assert r.returncode == 0, r.stderr
     planned = [ln for ln in r.stderr.splitlines() if ln.startswith("[")]
