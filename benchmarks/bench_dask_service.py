@@ -8,9 +8,12 @@ are started first (idle, they take no CPU), then measured in interleaved rounds 
 the shared machine's load hits all four alike): ``--runs`` rounds of ``--requests`` Table I
 plans (``POST /v1/plan``, the default constrained mode) from ``--concurrency`` keep-alive
 clients (benchmarks/bench_http.py's client). Prints per configuration the median plans/s,
-latency p50/p90 (ms) of the median run, the planner's compute time, and the ratios (median of
-each round's): 2 workers against 1 of the same executor, and Dask against the local pool at
-the same worker count.
+latency p50/p90 (ms) of the median run, the planner's compute time, the CPU per plan of all
+the processes involved (the server, its workers or the Dask workers and their planning
+processes, and this process: load generator and Dask scheduler; a figure the load of other jobs
+on a shared machine changes far less than plans/s), and the ratios (median of each round's):
+2 workers against 1 of the same executor, and Dask against the local pool at the same worker
+count, in plans/s and in CPU per plan.
 
     .venv/bin/python benchmarks/bench_dask_service.py                      # defaults
     .venv/bin/python benchmarks/bench_dask_service.py --requests 80 --runs 3 --concurrency 4
@@ -87,10 +90,35 @@ class Config:
         self.stack.callback(stop_server, proc)
         warm = asyncio.run(run_load(self.url, max(concurrency, 2 * workers), 4 * workers))
         assert warm["errors"] == 0, warm
+        # the processes that do this configuration's work: the server and its workers, and for
+        # Dask the cluster's worker processes and their planning processes (the scheduler runs
+        # in this process, with the load generator: counted for every configuration alike)
+        import psutil
+
+        roots = [psutil.Process(proc.pid)]
+        if executor == "dask":
+            from distributed import Client
+
+            with Client(env["RANGEPLAN_DASK_SCHEDULER"], timeout="20s") as c:
+                roots += [psutil.Process(pid) for pid in c.run(os.getpid).values()]
+        self.procs = [q for r in roots for q in (r, *r.children(recursive=True))]
         self.runs: list[dict] = []
 
+    def cpu_s(self) -> float:
+        """CPU time [s] of this configuration's processes and of this process so far."""
+        total = time.process_time()
+        for q in self.procs:
+            try:
+                t = q.cpu_times()
+                total += t.user + t.system
+            except Exception:  # a process that ended (a replaced worker): its time is lost
+                pass
+        return total
+
     def run(self, concurrency: int, requests: int) -> dict:
+        cpu0 = self.cpu_s()
         r = asyncio.run(run_load(self.url, concurrency, requests))
+        r["cpu_ms"] = (self.cpu_s() - cpu0) / requests * 1e3
         assert r["errors"] == 0, r
         self.runs.append(r)
         return r
@@ -117,7 +145,8 @@ def main() -> int:
         for rnd in range(args.runs):
             for (executor, workers), cfg in configs.items():
                 r = cfg.run(args.concurrency, args.requests)
-                print(f"# round {rnd + 1} {executor} x{workers}: {r['rate']:.1f} plans/s, load "
+                print(f"# round {rnd + 1} {executor} x{workers}: {r['rate']:.1f} plans/s, {r['cpu_ms']:.1f} ms CPU "
+                      f"a plan, load "
                       f"{os.getloadavg()[0]:.2f}", file=sys.stderr, flush=True)
     finally:
         for cfg in configs.values():
@@ -132,13 +161,19 @@ def main() -> int:
           f"interleaved rounds (median; ratios: median of each round's ratio), {os.cpu_count()} cores, load "
           f"{os.getloadavg()[0]:.2f}\n")
     print("| executor | workers | plans/s | 2 workers vs 1 | Dask vs local pool | p50 [ms] | p90 [ms] | "
-          "compute [ms] |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+          "compute [ms] | all CPU per plan [ms] | Dask CPU vs local pool |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for (executor, workers), r in rows.items():
         scale = f"{ratio((executor, 2), (executor, 1)):.2f}x" if workers == 2 else ""
         vs = f"{ratio((executor, workers), ('process', workers)):.2f}x" if executor == "dask" else ""
+        runs = configs[executor, workers].runs
+        cpu = statistics.median(x["cpu_ms"] for x in runs)
+        cpu_vs = ""
+        if executor == "dask":
+            pool = configs["process", workers].runs
+            cpu_vs = f"{statistics.median(x['cpu_ms'] / y['cpu_ms'] for x, y in zip(runs, pool)):.2f}x"
         print(f"| {executor} | {workers} | {r['rate']:.1f} | {scale} | {vs} | {r['p50']:.0f} | {r['p90']:.0f} | "
-              f"{r['compute_ms']:.1f} |")
+              f"{r['compute_ms']:.1f} | {cpu:.1f} | {cpu_vs} |")
     return 0
 
 
