@@ -17,21 +17,19 @@ branch of :func:`_execute`, and, if it can be estimated, one in :func:`estimate`
 
 Outcomes (:data:`Outcome`) are :class:`Done` (bytes ready to send, the stored plan id, the
 plan's summary, or the spool file) or :class:`Failed` (an :class:`ErrorDetail` and the HTTP
-status it answers). Who runs a job: :class:`app.service.JobService` (the API, the editor;
-worker processes of :class:`app.workers.PlanPool`) and :func:`run_bounded` (a batch item on a
-local pool or a Dask worker, or inline): the same estimate, bounds and error mapping.
+status it answers). :func:`run_job` runs a job here and now, with no time limit; a time limit
+is enforced only by running the job in a process that is killed at the limit (the executors
+of :mod:`app.executors`, which :class:`app.service.JobService` and the batches use).
 
 No web framework or editor import: workers import this module.
 """
 
 from __future__ import annotations
 
-import ctypes
 import dataclasses
 import json
 import math
 import os
-import threading
 import time
 from dataclasses import dataclass
 from itertools import chain
@@ -40,12 +38,12 @@ from typing import Any, ClassVar
 import orjson
 from pydantic import BaseModel, Field
 
-from app.failures import degenerate, out_of_memory, timeout, too_much_work
+from app.failures import degenerate, out_of_memory, too_much_work
 from planner.schema import ContourRequest, ImportOptions, PlanRequest, PlanResult, SegmentationResult
 
 __all__ = ["ContourJob", "ContourWork", "Done", "EditorJob", "EditorPlan", "ErrorDetail", "ExportJob", "Failed",
-           "ImportJob", "ItemTimeout", "Job", "Outcome", "PlanJob", "SegmentJob", "SleepJob", "bounded",
-           "check_estimate", "clean_spool", "crashed", "estimate", "failed", "run_bounded", "run_job",
+           "ImportJob", "Job", "Outcome", "PlanJob", "SegmentJob", "SleepJob", "bounded",
+           "check_estimate", "clean_spool", "crashed", "estimate", "failed", "run_job",
            "segmentation_module", "spool_dir", "spool_plan_json"]
 
 
@@ -342,10 +340,17 @@ def _contour(job: ContourJob) -> Done:
 
 
 def _summary(result) -> dict[str, Any]:
+    """A plan's figures (a batch's summary row); a contour plan's adds its two-sided deviation,
+    the tolerance and the cycle and cut times."""
     m = result.metrics
-    return {"duration_s": m.duration_s, "energy": m.energy, "max_force_ratio": m.max_force_ratio,
-            "contained": m.contained, "settled": m.settled, "end_error_m": m.end_error_m,
-            "max_corridor_violation_m": m.max_corridor_violation_m, "steps": m.steps, "compute_ms": m.compute_ms}
+    out = {"duration_s": m.duration_s, "energy": m.energy, "max_force_ratio": m.max_force_ratio,
+           "contained": m.contained, "settled": m.settled, "end_error_m": m.end_error_m,
+           "max_corridor_violation_m": m.max_corridor_violation_m, "steps": m.steps, "compute_ms": m.compute_ms}
+    c = getattr(result, "contour", None)
+    if c is not None:
+        out.update(max_deviation_m=c.max_deviation_m, tolerance_m=c.tolerance_m, cycle_time_s=c.cycle_time_s,
+                   cut_time_s=c.cut_time_s, passes=len(c.passes))
+    return out
 
 
 def _export(job: ExportJob) -> Done:
@@ -484,49 +489,7 @@ def _editor_plan(req) -> bytes:
 
 
 # ---------------------------------------------------------------------------------------
-# the in-process executor: estimate, deadline, error mapping (batch items, inline runs)
-
-class ItemTimeout(BaseException):
-    """Raised inside the running thread when a job passes its time limit (a BaseException
-    so that no ``except Exception`` in the planner swallows it)."""
-
-
-class _Deadline:
-    """Raise :class:`ItemTimeout` in the calling thread after ``seconds`` (at the next Python
-    bytecode: a single compiled kernel call is not interrupted, the request bounds keep those
-    short). Works in any thread (Dask runs tasks in a thread pool), unlike ``SIGALRM``."""
-
-    def __init__(self, seconds: float | None):
-        self.seconds = seconds
-        self._lock = threading.Lock()
-        self._armed = False
-        self._fired = False
-        self._timer: threading.Timer | None = None
-
-    def _fire(self) -> None:
-        with self._lock:
-            if self._armed:
-                self._fired = True
-                ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(self._tid), ctypes.py_object(ItemTimeout))
-
-    def __enter__(self):
-        if self.seconds and self.seconds > 0:
-            self._tid = threading.get_ident()
-            self._armed = True
-            self._timer = threading.Timer(self.seconds, self._fire)
-            self._timer.daemon = True
-            self._timer.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        if self._timer is None:
-            return
-        with self._lock:
-            self._armed = False
-            self._timer.cancel()
-            if self._fired:  # fired but maybe not yet delivered: withdraw it
-                ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(self._tid), None)
-
+# bounds every executor applies before a job runs (app.executors, app.service)
 
 def check_estimate(job: Job, timeout_s: float | None) -> Failed | None:
     """A :class:`Failed` ``too_much_work`` if the job's work estimate exceeds ``timeout_s``."""
@@ -545,21 +508,6 @@ def bounded(job: Job, timeout_s: float | None) -> Job:
     if isinstance(job, (PlanJob, ContourJob)) and job.work_limit_s is None and timeout_s and timeout_s > 0:
         return dataclasses.replace(job, work_limit_s=float(timeout_s))
     return job
-
-
-def run_bounded(job: Job, timeout_s: float | None = None, memory_mb: int | None = None) -> Outcome:
-    """Run ``job`` in this thread under the same bounds as the service's workers: refused
-    before it starts if its work estimate exceeds ``timeout_s`` (``too_much_work``), stopped
-    at ``timeout_s`` (``timeout``), every failure mapped by :func:`run_job`."""
-    refused = check_estimate(job, timeout_s)
-    if refused is not None:
-        return refused
-    job = bounded(job, timeout_s)
-    try:
-        with _Deadline(timeout_s):
-            return run_job(job, memory_mb)
-    except ItemTimeout:
-        return failed(timeout(timeout_s or 0.0))
 
 
 # ---------------------------------------------------------------------------------------

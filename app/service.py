@@ -6,14 +6,17 @@ batches submit typed jobs (:data:`app.jobs.Job`) and get a typed outcome
 
 1. **estimate**: a job that plans is refused (``too_much_work``, in microseconds) when the
    planner's work estimate exceeds the time limit;
-2. **bound and run on a worker**: :class:`app.workers.PlanPool` (worker processes with a time
-   limit, a memory cap and a bounded queue; or inline threads);
+2. **bound and run on an executor** (:class:`app.executors.JobExecutor`): the local
+   :class:`app.workers.PlanPool` (worker processes with a time limit, a memory cap and a bounded
+   queue; or inline threads), a Dask cluster (:class:`app.cluster.DaskExecutor`) or the calling
+   thread (:class:`app.executors.InProcessExecutor`, no time limit);
 3. **map errors once**: the pool's exceptions become :class:`app.jobs.Failed` with the HTTP
    status they answer (``timeout`` and ``too_much_memory`` 422, ``busy`` 503, a dead worker
    500), as the worker maps the planner's.
 
-Batch items on a local process pool or a Dask cluster run :func:`app.jobs.run_bounded`, the
-same estimate, limit and mapping in the process that runs them.
+Batch items on a local process pool or a Dask cluster run :func:`app.executors.run_bounded`,
+the same estimate, limit and mapping, in a planning process of the process that runs them
+(a time limit is always enforced by killing a process: :mod:`app.executors`).
 """
 
 from __future__ import annotations
@@ -26,23 +29,19 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
-from app.failures import import_timeout, out_of_memory, timeout
+from app.executors import InProcessExecutor, JobExecutor, describe_failure
 from app.jobs import (
     ContourJob,
     EditorJob,
     ExportJob,
-    Failed,
-    ImportJob,
     Job,
     Outcome,
     PlanJob,
     SegmentJob,
     bounded,
     check_estimate,
-    failed,
-    run_bounded,
 )
-from app.workers import JobTimeout, PlanPool, PoolBusy, WorkerCrashed, WorkerOutOfMemory
+from app.workers import JobTimeout, PlanPool, PoolBusy, WorkerCrashed
 
 __all__ = ["JobService", "KernelCompile", "describe_failure", "on_reference"]
 
@@ -115,44 +114,31 @@ class KernelCompile:
         self._stop.set()
 
 
-def describe_failure(exc: Exception, job: Job, timeout_s: float, memory_mb: int | None = None) -> Failed:
-    """The outcome of a job the pool did not run to the end (the one wording of a time
-    limit, a memory limit, a full queue or a dead worker)."""
-    if isinstance(exc, WorkerOutOfMemory):
-        return failed({"code": "too_much_memory", "message": str(exc) or out_of_memory(memory_mb, job.kind)["message"],
-                       "field": "drawing" if job.kind == "import" else None})
-    if isinstance(exc, JobTimeout):
-        if isinstance(job, ExportJob):
-            return failed({"code": "timeout", "field": "format", "message": f"writing the plan as {job.format} took "
-                           f"longer than the export limit of {timeout_s:g} s (RANGEPLAN_EXPORT_TIMEOUT_S)"})
-        return failed(import_timeout(timeout_s) if isinstance(job, ImportJob) else timeout(timeout_s))
-    if isinstance(exc, PoolBusy):
-        return failed({"code": "busy", "message": f"too many plans in progress ({exc}); retry shortly"}, 503)
-    if isinstance(exc, WorkerCrashed):
-        return failed({"code": "internal_error", "message": f"the planning process died: {exc}"}, 500)
-    raise exc
-
-
 #: threads of :meth:`JobService.arun` started with the service (at most)
 PRESTARTED_THREADS = 256
 
 
 class JobService:
-    """Runs jobs on ``pool`` (a :class:`PlanPool`; None: inline in the calling thread under
-    ``timeout_s``, the editor started on its own). :meth:`run` blocks; :meth:`arun` awaits
-    it from an event loop on a thread pool sized to the pool's capacity."""
+    """Runs jobs on ``pool``, any :class:`app.executors.JobExecutor`: a :class:`PlanPool` (local
+    planning processes), a :class:`app.cluster.DaskExecutor` (a Dask cluster) or None: an
+    :class:`~app.executors.InProcessExecutor` (the calling thread, the editor started on its own:
+    the work estimate is checked against ``timeout_s``, but a thread cannot be stopped, so no
+    time limit is armed; a time limit needs a process). :meth:`run` blocks; :meth:`arun` awaits
+    it from an event loop on a thread pool sized to the executor's capacity."""
 
-    def __init__(self, pool: PlanPool | None = None, *, timeout_s: float = 30.0, memory_mb: int | None = None,
+    def __init__(self, pool: JobExecutor | None = None, *, timeout_s: float = 30.0, memory_mb: int | None = None,
                  export_timeout_s: float | None = None, compiling: Any = None):
-        self.pool = pool
+        #: where jobs run (named ``pool`` since the local pool was the only one)
+        self.pool: JobExecutor = pool if pool is not None else InProcessExecutor(timeout_s, memory_mb)
+        self.inline = pool is None
         #: the background compile of the kernels while it runs (``compiling``: a
         #: :class:`~planner.orchestrator.background.BackgroundCompile`): jobs then plan on the
         #: numpy reference, estimated at its costs; once it is done the pool's workers are renewed
         self.kernels: KernelCompile | None = None
         if compiling is not None:
             self.kernels = KernelCompile(compiling, self._kernels_compiled)
-        self.timeout_s = pool.timeout_s if pool is not None else float(timeout_s)
-        self.memory_mb = pool.memory_mb if pool is not None else memory_mb
+        self.timeout_s = self.pool.timeout_s
+        self.memory_mb = self.pool.memory_mb if pool is not None else memory_mb
         #: the time limit of an export (a stored plan is bounded by its size, not its work)
         self.export_timeout_s = max(self.timeout_s, export_timeout_s or 0.0)
         self._threads: ThreadPoolExecutor | None = None
@@ -161,12 +147,26 @@ class JobService:
     @classmethod
     def start(cls, workers: int, timeout_s: float, max_queue: int, mode: str = "process",
               memory_mb: int | None = None, export_timeout_s: float | None = None,
-              start: str | None = None, reference_while_compiling: bool = False) -> JobService:
-        """A service with a new pool of its own (:meth:`close` ends it); ``start``: how its
-        worker processes start (:data:`app.workers.START_METHODS`). ``reference_while_compiling``:
-        when the kernels are not compiled, compile them in the background
+              start: str | None = None, reference_while_compiling: bool = False,
+              scheduler: str | None = None) -> JobService:
+        """A service with a new executor of its own (:meth:`close` ends it): ``mode``
+        ``"process"`` or ``"thread"`` (a :class:`PlanPool` of ``workers``; ``start``: how its
+        worker processes start, :data:`app.workers.START_METHODS`) or ``"dask"`` (the cluster at
+        ``scheduler``, default ``RANGEPLAN_DASK_SCHEDULER``; ``OSError`` when it cannot be
+        reached, ``ValueError`` when none is given). ``reference_while_compiling``: when the
+        kernels are not compiled, compile them in the background
         (:func:`planner.orchestrator.background.while_compiling`) and plan on the numpy
-        reference meanwhile (the workers start at once, on the reference)."""
+        reference meanwhile (the workers start at once, on the reference; not on Dask, whose
+        workers load or compile their own)."""
+        if mode == "dask":
+            from app.cluster import DaskExecutor
+            from app.settings import settings
+
+            address = scheduler or settings().dask_scheduler
+            if not address:
+                raise ValueError("RANGEPLAN_EXECUTOR=dask needs the scheduler's address in RANGEPLAN_DASK_SCHEDULER "
+                                 "(tcp://host:8786)")
+            return cls(DaskExecutor(address, timeout_s, max_queue, memory_mb), export_timeout_s=export_timeout_s)
         compiling = None
         if reference_while_compiling:
             from planner.orchestrator.background import while_compiling
@@ -176,8 +176,7 @@ class JobService:
                    export_timeout_s=export_timeout_s, compiling=compiling)
 
     def _kernels_compiled(self) -> None:
-        if self.pool is not None:
-            threading.Thread(target=self.pool.renew, name="rangeplan-pool-renew", daemon=True).start()
+        threading.Thread(target=self.pool.renew, name="rangeplan-pool-renew", daemon=True).start()
 
     def run(self, job: Job) -> Outcome:
         """Estimate, bound, run ``job`` on a worker; never raises for the input's fault, a
@@ -199,8 +198,6 @@ class JobService:
             return refused
         limit = self.export_timeout_s if isinstance(job, ExportJob) else self.timeout_s
         job = bounded(job, limit)
-        if self.pool is None:
-            return run_bounded(job, limit, self.memory_mb)
         try:
             return self.pool.run(job, limit)
         except (JobTimeout, PoolBusy, WorkerCrashed) as exc:
@@ -214,7 +211,7 @@ class JobService:
         with self._threads_lock:
             if self._threads is not None:
                 return
-            capacity = (self.pool.capacity if self.pool is not None else 0) + 4
+            capacity = self.pool.capacity + 4
             self._threads = ex = ThreadPoolExecutor(max_workers=capacity, thread_name_prefix="rangeplan-wait")
         # each task waits at the barrier, so every submit starts a thread of its own; beyond
         # PRESTARTED_THREADS (a queue configured huge) the executor starts them when needed
@@ -234,11 +231,10 @@ class JobService:
         return await asyncio.get_running_loop().run_in_executor(self._threads, self.run, job)
 
     def stats(self) -> dict[str, Any]:
-        return self.pool.stats() if self.pool is not None else {}
+        return self.pool.stats()
 
     def readiness(self) -> dict[str, Any]:
-        state = {"ready": True, "workers_ready": 1, "workers": 1, "failures": []} if self.pool is None \
-            else self.pool.readiness()
+        state = self.pool.readiness()
         running = self.kernels.running() if self.kernels is not None else None
         if running is None:
             state["kernels"] = "compiled"
@@ -257,5 +253,5 @@ class JobService:
         if self._threads is not None:
             self._threads.shutdown(wait=False, cancel_futures=True)
             self._threads = None
-        if pool and self.pool is not None:
+        if pool:
             self.pool.close()

@@ -65,8 +65,10 @@ class Settings(BaseSettings):
                                  default_text="the package's app/static/")
     # -- planning
     workers: int = _f(None, "Planning worker processes", factory=_cpus, default_text="CPU count", ge=1)
-    executor: Literal["process", "thread"] = _f("process", "Where plans run: worker processes, or threads of the "
-                                                "server process (no parallelism, no stopping; for measurements)")
+    executor: Literal["process", "thread", "dask"] = _f("process", "Where plans run: worker processes, threads of "
+                                                        "the server process (no parallelism, no stopping; for "
+                                                        "measurements), or the Dask cluster at "
+                                                        "RANGEPLAN_DASK_SCHEDULER (dask)")
     plan_timeout_s: float = _f(30.0, "Compute limit of one plan, import or batch item [s]; work estimated above it is "
                                "refused before it starts", cli="batch --timeout (default there: none)", gt=0)
     export_timeout_s: float = _f(120.0, "Time limit of writing a stored plan in an export format (GET /v1/plans/{id}?"
@@ -101,7 +103,8 @@ class Settings(BaseSettings):
     max_batches: int = _f(100, "Finished batches kept", ge=1)
     max_batch_items: int = _f(10_000, "Items of one batch", ge=1)
     max_batch_queue: int = _f(100_000, "Items of all queued batches", ge=1)
-    dask_scheduler: str | None = _f(None, "Dask scheduler address (tcp://host:8786): batches run on that cluster",
+    dask_scheduler: str | None = _f(None, "Dask scheduler address (tcp://host:8786): batches run on that cluster "
+                                    "(and the service's plans with RANGEPLAN_EXECUTOR=dask)",
                                     cli="batch --scheduler")
     dask_malloc: str = _f("relax", "glibc malloc tuning of Dask workers (relax | keep)")
     # -- the command line
@@ -117,6 +120,9 @@ class Settings(BaseSettings):
     xdg_data_home: Path | None = _f(None, "Base directory of user data (the XDG variable); the store defaults to "
                                     "its rangeplan/", validation_alias="XDG_DATA_HOME",
                                     default_text="~/.local/share")
+    malloc_trim_threshold: int | None = _f(None, "glibc's trim threshold [bytes] (glibc's own variable; Dask's nanny "
+                                           "sets 65536 in its workers, which rangeplan relaxes unless "
+                                           "RANGEPLAN_DASK_MALLOC=keep)", validation_alias="MALLOC_TRIM_THRESHOLD_")
 
 
 def env_name(field: str) -> str:

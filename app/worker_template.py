@@ -4,9 +4,10 @@ server only (``set_forkserver_preload``, :class:`app.workers.PlanPool` with
 
 Importing it lowers the CPU priority (the workers' ``nice``), imports the planner and loads
 (or, after an install, compiles) its kernels, as a worker started by ``python -m app.workers``
-does. Every worker is then a ``fork()`` of this process: it has the planner and its kernels
-in memory from the start (copy-on-write pages, shared until written) and is ready to plan in
-milliseconds instead of the 1-3 s of a new interpreter loading numba and the kernels.
+does (:mod:`app.worker_process`: this module never imports the pool's). Every worker is then
+a ``fork()`` of this process: it has the planner and its kernels in memory from the start
+(copy-on-write pages, shared until written) and is ready to plan in milliseconds instead of the
+1-3 s of a new interpreter loading numba and the kernels.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import os
 from multiprocessing import spawn
 from typing import Any
 
-from app.workers import WORKER_NICE, load_planner
+from app.worker_process import WORKER_NICE, load_planner
 
 __all__ = ["PID", "STATUS"]
 

@@ -50,6 +50,7 @@ from typing import Any  # noqa: E402
 
 from app.failures import limit_memory, out_of_memory  # noqa: E402
 from app.jobs import Failed, Job, Outcome, run_job  # noqa: E402
+from app.worker_process import WORKER_NICE, load_planner  # noqa: E402  (the worker template's too)
 
 
 class JobTimeout(Exception):
@@ -72,39 +73,24 @@ class WorkerOutOfMemory(WorkerCrashed):
 #: default address-space limit of a worker process [MiB] (the interpreter with the planner
 #: loaded takes ~0.5 GiB of it; the largest plan within the request bounds peaked at 0.8 GiB)
 DEFAULT_MEMORY_MB = 2048
-#: CPU priority of the workers relative to the server process
-WORKER_NICE = 5
 
 
 def _worker_main(conn, memory_mb: int | None = None, parent: int | None = None, pdeathsig: bool = False) -> None:
-    """A worker started as a fresh interpreter (``start="exec"``)."""
+    """A worker started as a fresh interpreter (``start="exec"``). It ignores Ctrl-C, which
+    reaches the whole process group: its parent decides what stops (a batch worker's planning
+    process killed by the terminal's SIGINT would report its item as a dead worker's)."""
+    import signal
+
     if parent is not None:  # end with the server, even a kill -9 of it (app.lifeline)
         from app.lifeline import exit_with_parent
 
         exit_with_parent(parent, thread_bound=pdeathsig)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         os.nice(WORKER_NICE)
     except OSError:
         pass
     _serve(conn, memory_mb, load_planner())
-
-
-def load_planner() -> tuple[str, str | None]:
-    """Import the planner and load its compiled kernels (before the first job, not during it;
-    and the storage and the export writers): ``("ready", None)`` or ``("failed", reason)``."""
-    import app.formats
-    import app.storage  # noqa: F401
-    import planner
-    from planner.orchestrator.background import kernels_ready, running_compile
-    try:
-        if not kernels_ready() and running_compile() is not None:
-            # they compile in the background (app.service.JobService): jobs plan on the reference meanwhile
-            planner.warm_up(backend="reference")
-        else:
-            planner.warm_up()  # ~0.3 s from numba's on-disk cache; compiles after an install
-    except Exception as exc:  # the worker cannot plan: say why (the pool reports it, /ready stays 503)
-        return ("failed", f"{type(exc).__name__}: {exc}")
-    return ("ready", None)
 
 
 def _forked_worker(conn, memory_mb: int | None = None) -> None:
@@ -274,7 +260,7 @@ class _Worker:
         finally:
             self.started.set()
 
-    def call(self, job: Job, timeout: float) -> Outcome:
+    def call(self, job: Job, timeout: float | None) -> Outcome:
         try:
             # interpreter start and imports do not count against the job
             if not self.started.wait(STARTUP_TIMEOUT_S + 1) or not self.ready:
@@ -413,8 +399,8 @@ class PlanPool:
     def run(self, job: Job, timeout_s: float | None = None) -> Outcome:
         """Run a job (blocking); returns its outcome (:func:`app.jobs.run_job`), or raises
         :class:`JobTimeout`, :class:`PoolBusy` or :class:`WorkerCrashed` (the process died).
-        ``timeout_s`` overrides the pool's time limit for this job. The work estimate is the
-        caller's (:class:`app.service.JobService`)."""
+        ``timeout_s`` overrides the pool's time limit for this job (0: none). The work estimate
+        is the caller's (:class:`app.service.JobService`, :func:`app.executors.run_bounded`)."""
         limit = self.timeout_s if timeout_s is None else float(timeout_s)
         with self._lock:
             if self._closed:
@@ -428,7 +414,7 @@ class PlanPool:
                 with self._sem:
                     t0 = time.perf_counter()
                     out = run_job(job)
-                    if time.perf_counter() - t0 > limit:
+                    if 0 < limit < time.perf_counter() - t0:
                         raise JobTimeout  # cannot stop a thread: only report it afterwards
                     return out
             w = self._idle.get()
@@ -437,7 +423,7 @@ class PlanPool:
                 if not w.alive():
                     w.kill()
                     replacement = w = self._replace(w)
-                out = w.call(job, limit)
+                out = w.call(job, limit if limit > 0 else None)
                 if isinstance(out, Failed) and out.error.code == "too_much_memory":
                     w.exit_status()  # it exits after a memory error (or is killed): replace it now
                     w.kill()

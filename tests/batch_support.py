@@ -67,3 +67,51 @@ def assert_same_plan(a: dict[str, Any], b: dict[str, Any], tol: float = 1e-9) ->
     assert np.max(np.abs(fa - fb)) <= tol
     assert a["metrics"]["energy"] == b["metrics"]["energy"] or abs(a["metrics"]["energy"] - b["metrics"]["energy"]) \
         <= tol * max(1.0, abs(a["metrics"]["energy"]))
+
+
+def planning_children() -> list[int]:
+    """The pids of this process's planning processes (:func:`app.executors.child_pool`; run
+    in a batch worker: its children that enforce the time limit)."""
+    from app.executors import child_pool
+
+    return sorted(p for p in (w.pid for w in child_pool()._workers) if p is not None)
+
+
+def worker_pid() -> int:
+    """The pid of the process this runs in (a batch worker's)."""
+    return os.getpid()
+
+
+def contour_items() -> list[dict[str, Any]]:
+    """Contour requests (bodies of POST /v1/contour): the small program of tests/test_contour.py
+    at three origins and two tolerances, and one the reader refuses (G41, cutter compensation,
+    on line 11)."""
+    from tests.test_contour import ORIGIN, SMALL
+
+    ox, oy = ORIGIN
+    return [{"name": "small", "program": SMALL, "origin": ORIGIN, "feed": "program"},
+            {"name": "small right", "program": SMALL, "origin": [ox + 0.002, oy], "tolerance_m": 3e-5},
+            {"name": "small fastest", "program": SMALL, "origin": [ox, oy + 0.001], "feed": "fastest"},
+            {"name": "compensated", "program": SMALL.replace("G1 X0", "G41 X0"), "origin": ORIGIN}]
+
+
+def assert_same_contour(result: dict[str, Any], request: dict[str, Any]) -> None:
+    """``result`` (a batch item's JSON) equals ``request`` contoured directly in this process
+    (:func:`planner.contour.plan_contour`): the same trajectory and the same contour metrics."""
+    from planner.contour import plan_contour
+
+    direct = plan_contour(request).to_json_dict()
+    assert_same_plan(result, direct)
+    a, b = result["contour"], direct["contour"]
+    for key in ("max_deviation_m", "max_path_deviation_m", "tolerance_m", "cycle_time_s", "cut_time_s", "origin",
+                "program_line", "cutting", "feed"):
+        assert a[key] == b[key], key
+    assert len(a["passes"]) == len(b["passes"]) and a["max_deviation_m"] <= a["tolerance_m"]
+
+
+def jobs_run_here() -> int:
+    """Jobs this process has run through :func:`app.executors.run_bounded` (on a Dask worker:
+    the service's jobs and batch items sent to it)."""
+    from app.executors import WORKER
+
+    return int(WORKER.get("jobs", 0))

@@ -32,6 +32,7 @@ from tests.batch_support import (
     UNREACHABLE,
     assert_same_plan,
     env,
+    planning_children,
     read_summary,
     single_plan,
     variant,
@@ -77,27 +78,62 @@ def test_plan_item_reports_the_requests_fault_with_its_code(request_, code, fiel
 @pytest.mark.serial  # two plan times compared
 def test_plan_item_stops_at_the_compute_limit(monkeypatch):
     # a constrained plan of 12 x 1000 samples (~0.5 s or more), limited to a quarter of its
-    # time: the limit lands inside the compiled loop, which hands back control every
-    # planner.orchestrator.simulate.RETURN_EVERY steps (1/6 of them), so it stops well before the end.
+    # time: the planning process it runs in (a child of this one) is killed at the limit.
     # The work estimate is a lower estimate (what it accepts may still run into the limit):
     # here it accepts everything, so that the plan starts and the limit has to stop it
     import app.jobs as jobs
     from planner import WorkEstimate
 
-    # (the estimate of every job: batch items are jobs of the service's job model)
+    # (the estimate of every job, made in this process before the job is sent)
     monkeypatch.setattr(jobs, "estimate", lambda job: WorkEstimate(0.0, 1, 1, "segments", "none"))
     req = variant(0, "constrained")
     req["settings"]["samples_per_segment"] = 1000
-    assert plan_item(variant(0, "constrained"))["status"] == "ok"  # the kernels loaded: full_s is the plan's
+    assert plan_item(variant(0, "constrained"), timeout_s=120)["status"] == "ok"  # the planning process started
     t0 = time.perf_counter()
-    full = plan_item(req)
+    full = plan_item(req, timeout_s=120)
     full_s = time.perf_counter() - t0
     assert full["status"] == "ok"
+    before = planning_children()
     t0 = time.perf_counter()
     out = plan_item(req, timeout_s=0.25 * full_s)
     assert out["status"] == "error" and out["error"]["code"] == "timeout"
     assert time.perf_counter() - t0 < 0.75 * full_s, (time.perf_counter() - t0, full_s)
-    assert plan_item(req, timeout_s=60)["status"] == "ok"  # the limit is withdrawn after the plan
+    after = planning_children()
+    assert after and not set(before) & set(after)  # the process was killed and replaced
+    assert all(not os.path.exists(f"/proc/{p}") or "zombie" in open(f"/proc/{p}/status").read().lower()
+               for p in before) or sys.platform != "linux"
+    ok = plan_item(req, timeout_s=120)  # the next item plans in the new process
+    assert ok["status"] == "ok" and ok["summary"] == full["summary"] | {"compute_ms": ok["summary"]["compute_ms"]}
+
+
+@pytest.mark.slow
+def test_a_sleep_job_is_cut_at_its_limit_and_the_local_worker_plans_the_next():
+    """On a local pool: the job runs in a child of the pool's worker, which is killed at the
+    limit; the worker itself (same pid) lives on and plans the next item."""
+    from app.batch.executors import LocalEngine
+    from app.executors import run_bounded
+    from app.jobs import SleepJob
+    from tests.batch_support import planning_children, worker_pid
+
+    engine = LocalEngine(1)
+    try:
+        ex = engine.executor
+        pid = ex.submit(worker_pid).result(300)
+        assert ex.submit(run_bounded, SleepJob(0.05), 30.0).result(300).ok  # its planning process started
+        child = ex.submit(planning_children).result(60)
+        assert child and pid not in child
+        t0 = time.perf_counter()
+        out = ex.submit(run_bounded, SleepJob(120.0), 1.0).result(300)
+        took = time.perf_counter() - t0
+        assert not out.ok and out.error.code == "timeout" and "1 s" in out.error.message, out
+        assert 1.0 <= took < 20.0, took
+        assert ex.submit(worker_pid).result(60) == pid  # the same worker
+        assert not set(ex.submit(planning_children).result(60)) & set(child)  # a new planning process
+        res = ex.submit(plan_item, TABLE1, "json", 60.0).result(300)
+        assert res["status"] == "ok" and res["pid"] == pid
+        assert json.loads(bytes(res["payload"]))["metrics"]["duration_s"] == plan(TABLE1).metrics.duration_s
+    finally:
+        engine.close(cancel=True)
 
 
 class _InlineEngine(Engine):
@@ -422,13 +458,16 @@ TABLE1_FILE = Path(__file__).resolve().parents[1] / "app" / "static" / "examples
 
 
 @pytest.mark.slow
-def test_cli_batch_ctrl_c_keeps_finished_results_and_resumes(tmp_path):
+@pytest.mark.parametrize("limit", [[], ["--timeout", "60"]], ids=["no-limit", "time-limited"])
+def test_cli_batch_ctrl_c_keeps_finished_results_and_resumes(tmp_path, limit):
+    # time-limited: each item runs in a planning process of its worker, which the terminal's
+    # SIGINT reaches too; it must not turn the items in flight into errors (resume skips errors)
     study = write_jsonl(tmp_path / "s.jsonl", [variant(i % 5, "constrained") for i in range(40)])
     out = tmp_path / "out"
     # SIGINT at its default in the batch, as in a terminal: a test run started in the background
     # of a non-interactive shell (`make test &`) ignores SIGINT, and so would the batch
-    proc = subprocess.Popen([*CLI, "batch", str(study), "-o", str(out), "--workers", "2", "--progress", "lines"],
-                            stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=env(),
+    proc = subprocess.Popen([*CLI, "batch", str(study), "-o", str(out), "--workers", "2", "--progress", "lines",
+                             *limit], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=env(),
                             start_new_session=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     seen = 0
@@ -447,7 +486,7 @@ def test_cli_batch_ctrl_c_keeps_finished_results_and_resumes(tmp_path):
     assert all(r["status"] == "ok" and (out / r["file"]).is_file() for r in rows)
     assert len(list(out.glob("*.json"))) == len(rows)  # no partial result file left behind
     assert not list(out.glob(".rangeplan-staging-*"))  # nor what the killed workers had staged
-    r = subprocess.run([*CLI, "batch", str(study), "-o", str(out), "--workers", "2", "--progress", "lines"],
+    r = subprocess.run([*CLI, "batch", str(study), "-o", str(out), "--workers", "2", "--progress", "lines", *limit],
                        capture_output=True, text=True, env=env(), timeout=600)
     assert r.returncode == 0, r.stderr
     planned = [ln for ln in r.stderr.splitlines() if ln.startswith("[")]
@@ -771,3 +810,91 @@ def test_batch_counters_count_what_they_say(tmp_path):
     bar.start("test")
     assert bar.bar.tasks[0].completed == 11 and bar.done == 11 and bar.new == 0
     bar.close()
+
+
+# ---------------------------------------------------------------------------------------
+# contour items (G-code programs) beside plan items
+
+def test_request_kind_tells_a_contour_request_by_its_program():
+    from app.batch.engine import request_kind
+
+    assert request_kind({"program": "G1 X1\n"}) == "contour" and request_kind(json.dumps({"program": ""})) == "contour"
+    assert request_kind(TABLE1) == "plan" and request_kind(json.dumps(TABLE1)) == "plan"
+    # "program" inside a string (a name) is no contour request; neither is text that is no JSON
+    assert request_kind(json.dumps({**TABLE1, "name": 'the "program" study'})) == "plan"
+    assert request_kind(b'{"program": ') == "plan"
+
+
+def test_plan_item_contours_a_program_as_post_v1_contour():
+    from tests.batch_support import assert_same_contour, contour_items
+
+    good, _, _, bad = contour_items()
+    out = plan_item(json.dumps(good))
+    assert out["status"] == "ok" and out["kind"] == "contour" and out["name"] == "small", out["error"]
+    result = json.loads(bytes(out["payload"]))
+    assert_same_contour(result, good)
+    s = out["summary"]
+    assert s["max_deviation_m"] == result["contour"]["max_deviation_m"] <= s["tolerance_m"] == 5e-5
+    assert s["cycle_time_s"] == result["contour"]["cycle_time_s"] and s["passes"] == 1
+    refused = plan_item(bad)
+    assert refused["status"] == "error" and refused["kind"] == "contour"
+    assert refused["error"]["code"] == "invalid_input" and refused["error"]["field"] == "program"
+    assert "line 11" in refused["error"]["message"] and "G41" in refused["error"]["message"]
+    invalid = plan_item({"program": good["program"], "tolerance_m": -1})
+    assert invalid["error"]["code"] == "invalid_input" and invalid["error"]["field"] == "tolerance_m"
+
+
+@pytest.mark.slow
+def test_run_batch_contours_beside_plans_on_the_local_pool_and_resumes(tmp_path):
+    from app.batch.cli import run_batch
+    from tests.batch_support import assert_same_contour, contour_items
+
+    contours = contour_items()
+    reqs = [variant(0), contours[0], variant(1, "constrained"), contours[1], contours[3], contours[2]]
+    study = write_jsonl(tmp_path / "mixed.jsonl", reqs)
+    out = tmp_path / "out"
+    res = run_batch([str(study)], out, workers=2, progress="none", timeout_s=120)
+    assert (res["ok"], res["failed"], res["total"]) == (5, 1, 6), res
+    rows = {r["key"]: r for r in read_summary(out)}
+    assert [rows[f"mixed-{i:06d}"]["kind"] for i in range(1, 7)] == ["plan", "contour", "plan", "contour",
+                                                                      "contour", "contour"]
+    assert rows["mixed-000005"]["error_code"] == "invalid_input" and rows["mixed-000005"]["error_field"] == "program"
+    for i in (2, 4, 6):
+        row = rows[f"mixed-{i:06d}"]
+        result = json.loads((out / row["file"]).read_text())
+        assert_same_contour(result, reqs[i - 1])
+        assert float(row["max_deviation_m"]) == result["contour"]["max_deviation_m"] <= float(row["tolerance_m"])
+        assert float(row["cycle_time_s"]) == result["contour"]["cycle_time_s"] and row["engine"] == "local"
+    assert rows["mixed-000001"]["max_deviation_m"] == "" and rows["mixed-000001"]["duration_s"] != ""
+    # resume: every item done (the refused program too: the request's fault) is skipped
+    mtimes = {p.name: p.stat().st_mtime_ns for p in out.glob("*.json")}
+    again = run_batch([str(study)], out, workers=1, progress="none", timeout_s=120)
+    assert (again["skipped"], again["ok"], again["failed"]) == (6, 0, 0), again
+    assert {p.name: p.stat().st_mtime_ns for p in out.glob("*.json")} == mtimes
+    # a changed program is contoured again, the rest skipped
+    reqs[3] = {**contours[1], "tolerance_m": 4e-5}
+    write_jsonl(study, reqs)
+    third = run_batch([str(study)], out, workers=1, progress="none", timeout_s=120)
+    assert (third["skipped"], third["ok"]) == (5, 1), third
+    assert_same_contour(json.loads((out / "mixed-000004.json").read_text()), reqs[3])
+    assert len(read_summary(out)) == 6
+
+
+@pytest.mark.slow
+def test_api_batch_contours_beside_plans(api):
+    from tests.batch_support import assert_same_contour, contour_items
+
+    contours = contour_items()
+    reqs = [contours[0], variant(2), contours[3]]
+    r = api.post("/v1/batches", json={"requests": reqs})
+    assert r.status_code == 202, r.text
+    bid = r.json()["id"]
+    items = [json.loads(ln) for ln in api.get(f"/v1/batches/{bid}/results?wait=true").text.splitlines()]
+    assert [(it["kind"], it["status"]) for it in items] == [("contour", "ok"), ("plan", "ok"), ("contour", "error")]
+    assert_same_contour(items[0]["result"], contours[0])
+    assert items[0]["summary"]["max_deviation_m"] == items[0]["result"]["contour"]["max_deviation_m"]
+    assert items[2]["error"]["code"] == "invalid_input" and items[2]["error"]["field"] == "program"
+    csv_rows = api.get(f"/v1/batches/{bid}/results?format=csv").text.splitlines()
+    assert csv_rows[0].split(",")[-6:] == ["kind", "max_deviation_m", "tolerance_m", "cycle_time_s", "cut_time_s",
+                                           "passes"]
+    assert csv_rows[1].split(",")[20] == "contour" and csv_rows[2].split(",")[20] == "plan"

@@ -148,6 +148,62 @@ def test_warm_up_plugin_relaxes_the_nannys_malloc_trim(local_cluster):
     assert set(state.values()) == {True}
 
 
+def test_a_job_past_its_limit_is_cut_on_a_dask_worker_which_plans_the_next(local_cluster):
+    """On a Dask worker the job runs in a planning process of the worker (a child of it),
+    killed at the limit; the worker (same pid, same address) plans the next item."""
+    from app.batch.engine import plan_item
+    from app.executors import run_bounded
+    from app.jobs import SleepJob
+    from tests.batch_support import planning_children, worker_pid
+
+    with distributed.Client(local_cluster.scheduler_address, timeout="20s") as c:
+        addr = sorted(local_cluster.scheduler_info["workers"])[0]
+
+        def on(fn, *args):
+            return c.submit(fn, *args, workers=[addr], pure=False).result(300)
+
+        pid = on(worker_pid)
+        assert on(run_bounded, SleepJob(0.05), 30.0).ok
+        child = on(planning_children)
+        assert child and pid not in child
+        t0 = time.perf_counter()
+        out = on(run_bounded, SleepJob(120.0), 1.0)
+        assert not out.ok and out.error.code == "timeout", out
+        assert time.perf_counter() - t0 < 20.0
+        assert on(worker_pid) == pid and c.run(os.getpid)[addr] == pid
+        assert not set(on(planning_children)) & set(child)
+        res = on(plan_item, variant(3), "json", 60.0)
+    assert res["status"] == "ok" and res["worker"] == addr and res["pid"] == pid
+    assert_same_plan(json.loads(bytes(res["payload"])), json.loads(plan_item(variant(3))["payload"]))
+
+
+def test_contour_items_on_a_local_cluster_equal_direct_plans_and_resume(local_cluster, tmp_path):
+    """Contour requests (G-code programs) beside plan requests on Dask: each contour item's
+    result is the program contoured directly (same contour metrics), the refused program is
+    that item's error naming the line, and a second run skips every item done."""
+    from app.batch.cli import run_batch
+    from tests.batch_support import assert_same_contour, contour_items
+
+    contours = contour_items()
+    reqs = [contours[0], variant(4), contours[3], contours[1], contours[2]]
+    study = write_jsonl(tmp_path / "cam.jsonl", reqs)
+    out = tmp_path / "out"
+    res = run_batch([str(study)], out, scheduler=local_cluster.scheduler_address, progress="none", timeout_s=120)
+    assert (res["ok"], res["failed"], res["engine"]) == (4, 1, "dask"), res
+    rows = {r["key"]: r for r in read_summary(out)}
+    workers = set(local_cluster.scheduler_info["workers"])
+    for i in (1, 4, 5):
+        row = rows[f"cam-{i:06d}"]
+        assert row["kind"] == "contour" and row["engine"] == "dask" and row["worker"] in workers, row
+        result = json.loads((out / row["file"]).read_text())
+        assert_same_contour(result, reqs[i - 1])
+        assert float(row["max_deviation_m"]) == result["contour"]["max_deviation_m"]
+    assert rows["cam-000002"]["kind"] == "plan" and rows["cam-000002"]["status"] == "ok"
+    assert rows["cam-000003"]["error_code"] == "invalid_input" and "line 11" in rows["cam-000003"]["error_message"]
+    again = run_batch([str(study)], out, scheduler=local_cluster.scheduler_address, progress="none", timeout_s=120)
+    assert (again["skipped"], again["ok"], again["failed"]) == (5, 0, 0), again
+
+
 def test_api_on_a_local_cluster(local_cluster, tmp_path, monkeypatch):
     monkeypatch.setenv("RANGEPLAN_DASK_SCHEDULER", local_cluster.scheduler_address)
     app = create_app(Store(tmp_path), workers=1)
@@ -162,6 +218,81 @@ def test_api_on_a_local_cluster(local_cluster, tmp_path, monkeypatch):
     workers = set(local_cluster.scheduler_info["workers"])
     assert all(it["engine"] == "dask" and it["worker"] in workers for it in items if it["status"] == "ok")
     assert_same_plan(items[2]["result"], single_plan(reqs[2], tmp_path))
+
+
+# ---------------------------------------------------------------------------------------
+# the service's jobs on the cluster (RANGEPLAN_EXECUTOR=dask)
+
+def test_plans_over_http_run_on_dask_workers_with_the_local_result(local_cluster, tmp_path, monkeypatch):
+    """POST /v1/plan and POST /v1/contour with RANGEPLAN_EXECUTOR=dask: planned on a Dask worker
+    (in its planning process), the same result as planned here, stored as usual."""
+    from planner import plan
+    from planner.contour import plan_contour
+    from tests.batch_support import assert_same_contour, contour_items, jobs_run_here
+
+    monkeypatch.setenv("RANGEPLAN_DASK_SCHEDULER", local_cluster.scheduler_address)
+    monkeypatch.setenv("RANGEPLAN_EXECUTOR", "dask")
+    with distributed.Client(local_cluster.scheduler_address, timeout="20s") as c:
+        before = c.run(jobs_run_here)
+    app = create_app(Store(tmp_path), timeout_s=120)
+    with api_client(app) as client:
+        assert client.get("/ready").status_code == 200
+        r = client.post("/v1/plan", json=variant(5, "constrained"))
+        assert r.status_code == 200, r.text
+        assert_same_plan(r.json(), plan(variant(5, "constrained")).to_json_dict())
+        stored = client.get(f"/v1/plans/{r.headers['X-Plan-Id']}")
+        assert stored.status_code == 200 and stored.json()["metrics"] == r.json()["metrics"]
+        good = contour_items()[0]
+        rc = client.post("/v1/contour", json=good)
+        assert rc.status_code == 200, rc.text
+        assert_same_contour(rc.json(), good)
+        bad = client.post("/v1/plan", json=UNREACHABLE)  # the planner's error, from the worker
+        assert bad.status_code == 422 and bad.json()["error"]["code"] == "unreachable", bad.text
+        stats = app.state.service.stats()
+    assert stats["mode"] == "dask" and stats["scheduler"] == local_cluster.scheduler_address
+    with distributed.Client(local_cluster.scheduler_address, timeout="20s") as c:
+        after = c.run(jobs_run_here)
+    assert sum(after.values()) - sum(before.values()) == 3  # each job (plan, contour, unreachable) ran on a worker
+    assert plan_contour(good).contour.max_deviation_m == rc.json()["contour"]["max_deviation_m"]
+
+
+def test_service_on_dask_cuts_a_job_at_its_limit_and_plans_the_next(local_cluster):
+    from app.cluster import DaskExecutor
+    from app.jobs import PlanJob, SleepJob
+    from app.service import JobService
+    from planner.schema import PlanRequest
+
+    svc = JobService(DaskExecutor(local_cluster.scheduler_address, timeout_s=2.0, max_queue=2))
+    try:
+        assert svc.readiness()["ready"] and svc.readiness()["workers"] == 2
+        t0 = time.perf_counter()
+        out = svc.run(SleepJob(60.0))
+        assert not out.ok and out.error.code == "timeout" and "2 s" in out.error.message, out
+        assert time.perf_counter() - t0 < 30
+        done = svc.run(PlanJob(PlanRequest.model_validate(variant(6)), "none"))
+        assert done.ok and done.summary["duration_s"] > 0
+        # more jobs than the cluster's 2 threads + 2 waiting: the rest are busy (503), not queued forever
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(8) as ex:
+            outs = list(ex.map(lambda _: svc.run(SleepJob(1.0)), range(8)))
+        codes = sorted(o.error.code if not o.ok else "ok" for o in outs)
+        assert codes.count("busy") >= 1 and codes.count("ok") >= 4, codes
+    finally:
+        svc.close()
+
+
+def test_dask_executor_without_a_scheduler_is_a_clear_error(monkeypatch):
+    from app.service import JobService
+
+    monkeypatch.delenv("RANGEPLAN_DASK_SCHEDULER", raising=False)
+    with pytest.raises(ValueError, match="RANGEPLAN_DASK_SCHEDULER"):
+        JobService.start(1, 30.0, 4, mode="dask")
+    with pytest.raises(OSError, match=f"cannot reach the Dask scheduler at {UNREACHABLE_ADDRESS}"):
+        JobService.start(1, 30.0, 4, mode="dask", scheduler=UNREACHABLE_ADDRESS)
+
+
+UNREACHABLE_ADDRESS = "tcp://127.0.0.1:9"
 
 
 # ---------------------------------------------------------------------------------------

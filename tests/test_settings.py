@@ -59,8 +59,6 @@ def test_a_mapping_is_read_alone_and_a_bad_value_names_its_variable(monkeypatch)
 
 #: environment reads outside app/settings.py that are not configuration, with the reason
 _NOT_CONFIGURATION = {
-    # glibc's trim threshold as Dask's nanny set it for this worker process: process state
-    ("app/batch/cluster.py", "MALLOC_TRIM_THRESHOLD_"),
     # the CLI's resident planner: its client keys the socket by the environment and sends it on
     # before pydantic loads (the start-up must stay light); RANGEPLAN_RESIDENT_S is a field of
     # the settings, checked by them when a resident starts

@@ -211,7 +211,8 @@ def test_fastest_over_the_limit_is_refused_up_front_with_what_to_change(table1):
     at the 30 s limit): the horizon N Ts = 60 ms covers 1.2 force ramps, the search ends at
     ~1 200 samples a segment after 121 candidates. Now refused before it starts, naming the
     horizon, Ts and another timing."""
-    from app.jobs import PlanJob, run_bounded
+    from app.executors import run_bounded
+    from app.jobs import PlanJob
     from planner.schema import PlanRequest
 
     slow = with_settings(table1, fastest=True, Ts=0.002)
@@ -302,7 +303,8 @@ def test_contour_estimate_grows_with_lines_chords_and_passes():
 def test_huge_program_is_refused_with_its_estimate(program, says):
     """A contour job over the limit is refused where its program is read, before any plan,
     with the estimate and what to change."""
-    from app.jobs import ContourJob, run_bounded
+    from app.executors import run_bounded
+    from app.jobs import ContourJob
     from planner.schema import ContourRequest
 
     t0 = time.process_time()

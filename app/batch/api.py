@@ -1,4 +1,5 @@
-"""``/v1/batches``: plan many requests in the background, with progress and stored results.
+"""``/v1/batches``: plan many requests in the background, with progress and stored results
+(plan requests and contour requests, G-code programs, side by side).
 
     POST   /v1/batches                 {"requests": [...], "name": ...} or JSON Lines -> 202 {id, state, ...}
     GET    /v1/batches                 the newest batches' progress
@@ -62,8 +63,9 @@ class BatchProgress(BaseModel):
 
 class BatchCreate(BaseModel):
     requests: list[dict[str, Any]] = Field(description="Plan requests, each the body of POST /v1/plan "
-                                           "(m, m, rad, s); each is validated on its own, an invalid one is "
-                                           "that item's error")
+                                           "(m, m, rad, s), or contour requests, each the body of POST "
+                                           "/v1/contour (an object with 'program': a G-code program); each is "
+                                           "validated on its own, an invalid one is that item's error")
     name: str | None = Field(None, description="Batch name")
 
 
@@ -114,9 +116,10 @@ def _parse_body(body: bytes, content_type: str) -> tuple[list[str], str | None] 
             if not ln.strip():
                 continue
             problem = _not_an_object(ln)
-            if problem:  # each line is one plan request, a JSON object: anything else is the body's error
+            if problem:  # each line is one request, a JSON object: anything else is the body's error
                 return error_response(422, "invalid_input", f"line {number} of the JSON Lines body {problem}: each "
-                                      "line must be one plan request, a JSON object (the body of POST /v1/plan)",
+                                      "line must be one request, a JSON object (the body of POST /v1/plan or "
+                                      "POST /v1/contour)",
                                       f"requests[{len(reqs)}]")
             reqs.append(ln.decode("utf-8"))
         if not reqs:
@@ -133,11 +136,12 @@ def _parse_body(body: bytes, content_type: str) -> tuple[list[str], str | None] 
         return error_response(422, "invalid_input", "unknown field: not a field of this object", unknown[0])
     reqs, name = doc.get("requests"), doc.get("name")
     if not isinstance(reqs, list) or not reqs:
-        return error_response(422, "invalid_input", "must be a non-empty list of plan requests", "requests")
-    for i, r in enumerate(reqs):  # each is validated as a plan request later; what is no object is none
+        return error_response(422, "invalid_input", "must be a non-empty list of plan or contour requests",
+                                  "requests")
+    for i, r in enumerate(reqs):  # each is validated as a plan or contour request later; no object is none
         if not isinstance(r, dict):
             return error_response(422, "invalid_input", "must be a JSON object: a plan request (the body of "
-                                  "POST /v1/plan)", f"requests[{i}]")
+                                  "POST /v1/plan) or a contour request (of POST /v1/contour)", f"requests[{i}]")
     if name is not None and not isinstance(name, str):
         return error_response(422, "invalid_input", "must be a string", "name")
     return [orjson.dumps(r).decode() for r in reqs], name
@@ -152,11 +156,13 @@ def batch_router() -> APIRouter:
                  responses={k: errs[k] for k in (413, 422, 503)},
                  openapi_extra={"requestBody": {"required": True, "content": {
                      "application/json": {"schema": BatchCreate.model_json_schema()},
-                     "application/x-ndjson": {"schema": {"type": "string", "description": "One plan request per "
-                                                         "line (JSON Lines)"}}}}})
+                     "application/x-ndjson": {"schema": {"type": "string", "description": "One plan or contour "
+                                                         "request per line (JSON Lines)"}}}}})
     async def create_batch(request: Request, name: str | None = Query(None, description="Batch name (JSON Lines "
                                                                              "bodies; a JSON body has its own)")):
-        """Queue a batch of plan requests; answers 202 at once with its id (``Location``).
+        """Queue a batch of plan requests (bodies of ``POST /v1/plan``) and contour requests (bodies
+        of ``POST /v1/contour``: a G-code program), mixed as you like; answers 202 at once with its
+        id (``Location``).
         Each item is validated and planned on its own: a bad item is reported in the results
         with its code, the others are planned."""
         svc = _service(request.app)
@@ -191,8 +197,9 @@ def batch_router() -> APIRouter:
         return out
 
     @router.get("/v1/batches/{batch_id}/results", response_class=Response, responses={
-        200: {"description": "JSON Lines, one object per item in item order: {item, status, name, engine, "
-              "worker, attempts, summary | error, result} (result: the plan result, as POST /v1/plan); or the "
+        200: {"description": "JSON Lines, one object per item in item order: {item, status, kind, name, engine, "
+              "worker, attempts, summary | error, result} (kind: plan | contour; result: the plan result, as "
+              "POST /v1/plan or POST /v1/contour); or the "
               "summary CSV (one row per item; units in the column names)",
               "content": {"application/x-ndjson": {"schema": {"type": "string"}},
                           "text/csv": {"schema": {"type": "string"}}}}, 404: errs[404], 422: errs[422]})

@@ -1,5 +1,6 @@
-"""``rangeplan batch INPUT... -o OUTDIR``: plan many requests on a local process pool or a
-Dask cluster, with progress, one result file per item and ``summary.csv``.
+"""``rangeplan batch INPUT... -o OUTDIR``: plan many requests (plan requests and contour
+requests: G-code programs) on a local process pool or a Dask cluster, with progress, one
+result file per item and ``summary.csv``.
 
 Exit status: 0 every item planned; 1 some items failed (``summary.csv`` says which and why);
 2 a usage error (a missing input, an unreachable scheduler); 130 interrupted (Ctrl-C: every
@@ -28,7 +29,9 @@ def add_parser(sub: Any) -> None:
     pb = sub.add_parser(
         "batch", help="plan many requests: a local process pool, or a Dask cluster with --scheduler",
         description="Plan every request in INPUT (request files, directories of them, JSON Lines files with one "
-                    "request per line). Writes OUTDIR/<key>.<format> per item and OUTDIR/summary.csv. A failing "
+                    "request per line). A request is a plan request (as 'rangeplan plan' and POST /v1/plan take) or "
+                    "a contour request (an object with 'program', the G-code text, as POST /v1/contour takes). "
+                    "Writes OUTDIR/<key>.<format> per item and OUTDIR/summary.csv. A failing "
                     "item never stops the batch; re-running with the same OUTDIR skips items already done.")
     pb.add_argument("inputs", nargs="+", metavar="INPUT", help="request .json file, directory, or .jsonl file")
     pb.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="output directory (created)")

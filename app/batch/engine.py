@@ -2,13 +2,15 @@
 picklable outcome (plain types and the result's bytes in the requested format).
 
 :func:`plan_item` is what every engine runs: the calling process (``inline``), a local
-process pool (``local``) or a Dask worker (``dask``). It validates the request and runs it
-as the service's typed job (:class:`app.jobs.PlanJob`) through the service's in-process
-executor (:func:`app.jobs.run_bounded`: the same work estimate, time limit and error mapping
-as the HTTP API's workers). It never raises for a request's fault: a planner error comes
-back as ``{"status": "error", "error": {code, message, field}}``, like the HTTP API's 422
-body. :func:`plan_chunk` plans several requests in one
-task (fewer round trips to a pool or a scheduler per plan; each item still has its own time
+process pool (``local``) or a Dask worker (``dask``). It validates the request (a plan request, or a
+contour request: a G-code program, :func:`request_kind`) and runs it as the service's typed job
+(:class:`app.jobs.PlanJob` or :class:`app.jobs.ContourJob`) through
+:func:`app.executors.run_bounded` (the same work estimate, time limit and error mapping as the
+HTTP API's workers): with a time limit or a memory cap the item runs in a planning process of
+the worker (a child of it, killed at the limit: the worker itself lives on). It never raises
+for a request's fault: a planner error comes back as ``{"status": "error", "error": {code,
+message, field}}``, like the HTTP API's 422 body. :func:`plan_chunk` plans several requests in
+one task (fewer round trips to a pool or a scheduler per plan; each item still has its own time
 limit and outcome) and, where the worker sees the caller's output directory, writes each
 result there itself so that only a summary travels back (the task-attempt files of an output
 committer: written under a temporary name, renamed into place by the caller).
@@ -21,20 +23,19 @@ Workers import this module once and load the compiled kernels once
 from __future__ import annotations
 
 import os
-import socket
-import sys
-import threading
 import time
 from typing import Any
 
-from app.failures import limit_memory
-from app.formats import OUTPUT_FORMATS
-from app.jobs import Failed, ItemTimeout, PlanJob, failed, run_bounded
-from planner import PlannerError, warm_up
-from planner.schema import PlanRequest, error_details
+import orjson
 
-__all__ = ["FORMATS", "STAGING_PREFIX", "plan_item", "plan_chunk", "unpack_chunk", "warm_worker", "where",
-           "ItemTimeout"]
+from app.executors import WORKER, run_bounded, warm_worker, where
+from app.formats import OUTPUT_FORMATS
+from app.jobs import ContourJob, Failed, PlanJob, failed
+from planner import PlannerError
+from planner.schema import ContourRequest, PlanRequest, error_details
+
+__all__ = ["FORMATS", "STAGING_PREFIX", "plan_item", "request_kind", "plan_chunk", "unpack_chunk", "warm_worker",
+           "where"]
 
 #: output formats: file extension and the function writing a result's bytes (``none``: the
 #: summary only, no result file; what a million-corridor study keeps, see docs/batch-scale.md)
@@ -43,100 +44,59 @@ FORMATS: dict[str, tuple[str | None, Any]] = {
     "none": (None, None),
 }
 
-#: set in a worker by :func:`warm_worker` (``local``); Dask workers are recognised by
-#: ``distributed.get_worker()``; anything else is the calling process (``inline``).
-#: ``memory_mb``: this process's memory cap (:func:`warm_worker`), named by a memory error
-_ENGINE: dict[str, Any] = {"name": "inline", "memory_mb": None}
-#: whether this process has loaded the compiled kernels (:func:`_load_kernels`)
-_KERNELS = {"loaded": False}
-_KERNELS_LOCK = threading.Lock()
+def request_kind(request: str | bytes | dict | PlanRequest | ContourRequest) -> str:
+    """``"contour"`` for a contour request (a G-code program: an object with ``program``, the
+    body of ``POST /v1/contour``), else ``"plan"`` (the body of ``POST /v1/plan``). Text is
+    parsed only when it names ``"program"`` at all."""
+    if isinstance(request, ContourRequest):
+        return "contour"
+    if isinstance(request, dict):
+        return "contour" if "program" in request else "plan"
+    if isinstance(request, (str, bytes)):
+        raw = request.encode("utf-8", "surrogateescape") if isinstance(request, str) else request
+        if b'"program"' in raw:
+            try:
+                obj = orjson.loads(raw)
+            except orjson.JSONDecodeError:
+                return "plan"
+            return "contour" if isinstance(obj, dict) and "program" in obj else "plan"
+    return "plan"
 
 
-def _load_kernels() -> float:
-    """Load (or compile) the planner's kernels once per process; returns the seconds taken.
-    Done before the first compute limit is armed: the limit raises its exception in the
-    planning thread at the next bytecode, and raised inside numba while it loads a kernel
-    from its cache it crashed the process (a segmentation fault in ``set_env``)."""
-    with _KERNELS_LOCK:
-        if _KERNELS["loaded"]:
-            return 0.0
-        try:
-            return warm_up()
-        except Exception:  # the first plan compiles instead
-            return 0.0
-        finally:
-            _KERNELS["loaded"] = True
+def _job(request: str | bytes | dict | PlanRequest | ContourRequest, fmt: str) -> PlanJob | ContourJob:
+    """The typed job of one item (validated here: an invalid request raises ValidationError)."""
+    if isinstance(request, PlanRequest):
+        return PlanJob(request, fmt)
+    if isinstance(request, ContourRequest):
+        return ContourJob(request, fmt)
+    model = ContourRequest if request_kind(request) == "contour" else PlanRequest
+    req = model.model_validate(request) if isinstance(request, dict) else model.model_validate_json(request)
+    return ContourJob(req, fmt) if isinstance(req, ContourRequest) else PlanJob(req, fmt)
 
 
-def where() -> dict[str, Any]:
-    """Where this call runs: ``{"engine", "worker", "host", "pid"}``; ``worker`` is the Dask
-    worker's address, else ``host:pid``."""
-    host, pid = socket.gethostname(), os.getpid()
-    if "distributed" in sys.modules:  # only a Dask worker (or client) has imported it
-        try:
-            from distributed import get_worker
-
-            return {"engine": "dask", "worker": get_worker().address, "host": host, "pid": pid}
-        except (ImportError, ValueError):  # ValueError: not inside a Dask task
-            pass
-    return {"engine": _ENGINE["name"], "worker": f"{host}:{pid}", "host": host, "pid": pid}
-
-
-def warm_worker(engine: str = "local", nice: int = 0, memory_mb: int | None = None,
-                parent: int | None = None) -> float:
-    """Load the compiled kernels (``planner.warm_up``) and mark this process as ``engine``;
-    ``nice`` > 0 lowers its CPU priority (the service's batch workers yield to interactive
-    plans); ``memory_mb`` caps its address space after the warm-up, as the API's planning
-    workers (an item that needs more fails with ``too_much_memory``). Runs once per worker
-    process, never per item. ``parent``: the pid of the process that started this one (a
-    local pool's worker ends when it does: :mod:`app.lifeline`). Returns the seconds taken."""
-    import signal
-
-    if parent is not None:
-        from app.lifeline import exit_with_parent
-
-        exit_with_parent(parent)
-    _ENGINE["name"] = engine
-    if threading.current_thread() is threading.main_thread() and engine == "local":
-        # Ctrl-C reaches the whole process group: the parent decides what stops
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-    if nice > 0:
-        try:
-            os.nice(nice)
-        except OSError:
-            pass
-    seconds = _load_kernels()
-    if memory_mb:
-        limit_memory(memory_mb)
-        _ENGINE["memory_mb"] = int(memory_mb)
-    return seconds
-
-
-def plan_item(request: str | bytes | dict | PlanRequest, fmt: str = "json",
+def plan_item(request: str | bytes | dict | PlanRequest | ContourRequest, fmt: str = "json",
               timeout_s: float | None = None) -> dict[str, Any]:
-    """Plan one request (JSON text, a dict or a :class:`PlanRequest`) and return
-    ``{"status": "ok" | "error", "name", "payload": bytes | None, "summary": {...} | None,
+    """Plan one request (JSON text, a dict, a :class:`PlanRequest` or, for a G-code program, a
+    :class:`ContourRequest`: :func:`request_kind`) and return ``{"status": "ok" | "error",
+    "kind": "plan" | "contour", "name", "payload": bytes | None, "summary": {...} | None,
     "error": {code, message, field} | None, "wall_ms", **where()}``. ``payload`` is the result
-    in ``fmt`` (:data:`FORMATS`). ``timeout_s`` bounds the planning time (code ``timeout``),
-    and, as for ``POST /v1/plan``, a request whose work estimate exceeds it is not planned
-    (code ``too_much_work``, in microseconds)."""
+    in ``fmt`` (:data:`FORMATS`; a contour item's is the result of ``POST /v1/contour``, with
+    its ``contour`` section). ``timeout_s`` bounds the planning time (code ``timeout``), and,
+    as for ``POST /v1/plan`` and ``POST /v1/contour``, a request whose work estimate exceeds it
+    is not planned (code ``too_much_work``; a contour item's is estimated once its program is
+    read)."""
     from pydantic import ValidationError
 
     t0 = time.perf_counter()
-    out: dict[str, Any] = {"status": "error", "name": None, "payload": None, "summary": None, "error": None}
+    out: dict[str, Any] = {"status": "error", "kind": "plan", "name": None, "payload": None, "summary": None,
+                           "error": None}
     try:
         if fmt not in FORMATS:
             raise PlannerError("invalid_input", f"unknown format {fmt!r}; one of {', '.join(FORMATS)}", "format")
-        if timeout_s:
-            _load_kernels()  # never under the limit (see there)
-        req = request
-        if isinstance(request, (str, bytes)):
-            req = PlanRequest.model_validate_json(request)
-        elif isinstance(request, dict):
-            req = PlanRequest.model_validate(request)
-        assert isinstance(req, PlanRequest)
-        out["name"] = req.name
-        outcome = run_bounded(PlanJob(req, fmt), timeout_s, _ENGINE["memory_mb"])
+        out["kind"] = request_kind(request)
+        job = _job(request, fmt)
+        out["name"] = job.request.name
+        outcome = run_bounded(job, timeout_s, WORKER["memory_mb"])
     except PlannerError as exc:
         outcome = failed(exc.to_dict())
     except ValidationError as exc:

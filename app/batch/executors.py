@@ -9,6 +9,9 @@
 * :class:`app.batch.cluster.DaskEngine`: a Dask distributed cluster through
   ``Client.get_executor()`` (imported only when a scheduler address is given).
 
+:class:`app.batch.base.Engine` is what the runner needs of each. Items run the service's jobs
+under the service's bounds wherever they run (:func:`app.executors.run_bounded`).
+
 :func:`open_engine` picks one: a scheduler address (argument or ``RANGEPLAN_DASK_SCHEDULER``)
 means Dask, else a local pool of ``workers`` (default: the CPU count).
 """
@@ -20,42 +23,12 @@ import os
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 
+from app.executors import warm_worker
+
+from .base import Engine
 from .config import SCHEDULER_ENV
-from .engine import warm_worker
 
 __all__ = ["Engine", "InlineEngine", "LocalEngine", "open_engine", "SCHEDULER_ENV"]
-
-
-class Engine:
-    """What the runner needs of an engine: an executor, how many tasks it runs at once, and
-    what to do when it loses a worker."""
-
-    name = "engine"
-    #: True if the engine itself retries the tasks of a lost worker and knows which task
-    #: killed it (Dask's scheduler); False if the runner must (a broken process pool)
-    attributes_failures = False
-
-    @property
-    def executor(self) -> Executor:
-        raise NotImplementedError
-
-    @property
-    def slots(self) -> int:
-        """Tasks that run at once (workers x threads)."""
-        return 1
-
-    def is_lost_worker(self, exc: BaseException) -> bool:
-        """Whether ``exc`` (a future's exception) means the worker died, not the item failed."""
-        return False
-
-    def restart(self) -> None:
-        """Make the executor usable again after a lost worker."""
-
-    def describe(self) -> str:
-        return self.name
-
-    def close(self, cancel: bool = False) -> None:
-        """Stop the workers (``cancel``: now, dropping running tasks)."""
 
 
 class _InlineExecutor(Executor):

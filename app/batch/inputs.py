@@ -1,15 +1,18 @@
 """The batch CLI's inputs: request files, directories of them, JSON Lines files.
 
-* ``*.json`` (or any file not ending in ``.jsonl``/``.ndjson``): one plan request; its key is
+* ``*.json`` (or any file not ending in ``.jsonl``/``.ndjson``): one request; its key is
   the file name without the extension.
 * ``*.jsonl`` / ``*.ndjson``: one request per line (blank lines skipped); keys
   ``<stem>-<line>`` with the 1-based line number (``study-000017``).
 * a directory: its ``*.json``, ``*.jsonl`` and ``*.ndjson`` files, sorted by name (not
   recursive).
 
-Requests are read lazily (a JSON Lines file of a million corridors is not held in memory)
-and sent to the workers as text: they are validated there, and an invalid one is that
-item's ``invalid_input`` error, not the batch's. A key that repeats gets ``-2``, ``-3``...
+A request is a plan request (the body of ``POST /v1/plan``) or a contour request (the body of
+``POST /v1/contour``: an object with ``program``, a G-code program's text, and its settings;
+:func:`app.batch.engine.request_kind`). Requests are read lazily (a JSON Lines file of a
+million corridors is not held in memory) and sent to the workers as text: they are validated
+there, and an invalid one is that item's ``invalid_input`` error, not the batch's. A key
+that repeats gets ``-2``, ``-3``...
 """
 
 from __future__ import annotations

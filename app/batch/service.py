@@ -143,7 +143,7 @@ class BatchService:
         return self.store.delete(id_)
 
     def results(self, id_: str, wait: bool = False, poll_s: float = 0.2) -> Iterator[bytes] | None:
-        """JSON Lines, one per item in item order: ``{"item", "status", "name", "engine",
+        """JSON Lines, one per item in item order: ``{"item", "status", "kind", "name", "engine",
         "worker", "attempts", "summary" | "error", "result"}``. Without ``wait``, the items
         finished so far; with it, every item as it finishes (until the batch ends)."""
         seq = self.store.seq_of(id_)
@@ -264,7 +264,7 @@ class BatchService:
 
 def _line(item: int, status: str, outcome: str | None, result: bytes | None) -> bytes:
     oc = orjson.loads(outcome) if outcome else {}
-    head = {"item": item, "status": status, "name": oc.get("name"), "engine": oc.get("engine"),
+    head = {"item": item, "status": status, "kind": oc.get("kind"), "name": oc.get("name"), "engine": oc.get("engine"),
             "worker": oc.get("worker"), "attempts": oc.get("attempts")}
     if status == "ok":
         head["summary"] = oc.get("summary")

@@ -15,14 +15,19 @@ __all__ = ["COLUMNS", "summary_row", "row_line", "read_summary", "write_summary"
 #: the columns, in order: the item's position (0-based) and key, the request's name, its
 #: status (ok | error | failed | cancelled), the error (a planner code such as unreachable
 #: or invalid_input, its message and field), figures of the plan (s, N^2 s, ratios, m, ms),
-#: where it ran, attempts, a hash of the request text and the result file
+#: where it ran, attempts, a hash of the request text and the result file; then the item's
+#: kind (plan | contour) and a contour item's figures (the two-sided deviation from the
+#: program and the tolerance, m; the cycle and cut times, s; the cut passes; empty for a plan)
 COLUMNS = ["item", "key", "name", "status", "error_code", "error_message", "error_field", "duration_s",
            "energy_n2_s", "max_force_ratio", "contained", "settled", "end_error_m", "max_corridor_violation_m",
-           "compute_ms", "engine", "worker", "attempts", "request_sha", "file"]
+           "compute_ms", "engine", "worker", "attempts", "request_sha", "file", "kind", "max_deviation_m",
+           "tolerance_m", "cycle_time_s", "cut_time_s", "passes"]
 
 _FROM_SUMMARY = {"duration_s": "duration_s", "energy_n2_s": "energy", "max_force_ratio": "max_force_ratio",
                  "contained": "contained", "settled": "settled", "end_error_m": "end_error_m",
-                 "max_corridor_violation_m": "max_corridor_violation_m", "compute_ms": "compute_ms"}
+                 "max_corridor_violation_m": "max_corridor_violation_m", "compute_ms": "compute_ms",
+                 "max_deviation_m": "max_deviation_m", "tolerance_m": "tolerance_m", "cycle_time_s": "cycle_time_s",
+                 "cut_time_s": "cut_time_s", "passes": "passes"}
 
 
 def _cell(v: Any) -> str:
@@ -43,7 +48,7 @@ def summary_row(index: int, key: str, outcome: dict[str, Any], request_sha: str 
            "error_code": err.get("code") or "", "error_message": err.get("message") or "",
            "error_field": err.get("field") or "", "engine": outcome.get("engine") or "",
            "worker": outcome.get("worker") or "", "attempts": _cell(outcome.get("attempts")),
-           "request_sha": request_sha, "file": file}
+           "request_sha": request_sha, "file": file, "kind": outcome.get("kind") or ""}
     for col, k in _FROM_SUMMARY.items():
         row[col] = _cell(summ.get(k))
     return row

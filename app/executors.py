@@ -1,0 +1,267 @@
+"""Where a job runs: one executor interface, three implementations; and the one way a time
+limit is enforced: a process killed at the limit.
+
+:class:`JobExecutor` is what :class:`app.service.JobService` (the API, the editor, contour
+plans) submits typed jobs to:
+
+* :class:`InProcessExecutor`: the calling thread (a command, the editor on its own); it
+  cannot stop a job, so it arms no time limit;
+* :class:`app.workers.PlanPool`: a local pool of planning processes, each killed and replaced
+  at the time limit (the server's default; ``RANGEPLAN_EXECUTOR=process``);
+* :class:`app.cluster.DaskExecutor`: a Dask cluster (``RANGEPLAN_EXECUTOR=dask``,
+  ``RANGEPLAN_DASK_SCHEDULER``); each job runs :func:`run_bounded` on a worker.
+
+Batches run their items through the same :func:`run_bounded` on their engines (inline, a local
+process pool, the same Dask cluster: :mod:`app.batch.executors`).
+
+A job (:data:`app.jobs.Job`) never has its time limit enforced inside the thread that runs
+it (an exception injected into a running thread can land anywhere, in numba's cache loader
+included). It runs in a planning process of a :class:`app.workers.PlanPool`, which is
+killed and replaced when the job passes its limit; the caller gets ``timeout``.
+
+* :func:`run_bounded` runs a job under the service's bounds from any process: the work
+  estimate (``too_much_work`` before it starts), then the job in a planning process of this
+  process's own pool (:func:`child_pool`, started on first use: one process per thread that
+  may call it; a batch's local worker or a Dask worker thus plans in a child of its own).
+  Without a time limit or a memory cap the job runs in the calling thread (nothing to enforce).
+* :func:`describe_failure`: the one wording of a time limit, a memory limit, a full queue or
+  a dead worker (the pool's exceptions) as an outcome.
+
+No web framework or editor import.
+"""
+
+from __future__ import annotations
+
+import atexit
+import os
+import socket
+import sys
+import threading
+from typing import Any, Protocol, runtime_checkable
+
+from app.failures import import_timeout, out_of_memory, timeout
+from app.jobs import ExportJob, Failed, ImportJob, Job, Outcome, bounded, check_estimate, failed, run_job
+from app.workers import JobTimeout, PlanPool, PoolBusy, WorkerCrashed, WorkerOutOfMemory
+
+__all__ = ["InProcessExecutor", "JobExecutor", "WORKER", "child_pool", "close_child_pool", "describe_failure",
+           "run_bounded", "warm_worker", "where"]
+
+
+@runtime_checkable
+class JobExecutor(Protocol):
+    """Runs typed jobs (:data:`app.jobs.Job`). :meth:`run` blocks and returns the job's outcome
+    (:func:`app.jobs.run_job`), or raises :class:`~app.workers.JobTimeout` (the job passed
+    ``timeout_s``, default :attr:`timeout_s`; 0: none), :class:`~app.workers.PoolBusy` (more
+    than :attr:`capacity` jobs at once) or :class:`~app.workers.WorkerCrashed` (the process
+    running it died); :class:`app.service.JobService` maps these once (:func:`describe_failure`).
+    The work estimate is the caller's."""
+
+    mode: str
+    timeout_s: float
+    memory_mb: int
+
+    @property
+    def capacity(self) -> int: ...
+
+    def run(self, job: Job, timeout_s: float | None = None) -> Outcome: ...
+
+    def stats(self) -> dict[str, Any]: ...
+
+    def readiness(self) -> dict[str, Any]: ...
+
+    def renew(self) -> None: ...
+
+    def close(self) -> None: ...
+
+
+class InProcessExecutor:
+    """Jobs in the calling thread (:class:`JobExecutor`): no parallelism beyond the callers'
+    threads and no time limit (a thread cannot be stopped; the caller's work estimate still
+    refuses work over ``timeout_s``). ``memory_mb`` only names the cap in a memory error."""
+
+    mode = "inline"
+
+    def __init__(self, timeout_s: float = 30.0, memory_mb: int | None = None):
+        self.timeout_s = float(timeout_s)
+        self.memory_mb = int(memory_mb or 0)
+        self.jobs_run = 0
+
+    @property
+    def capacity(self) -> int:
+        return 0
+
+    def run(self, job: Job, timeout_s: float | None = None) -> Outcome:
+        self.jobs_run += 1
+        return run_job(job, self.memory_mb or None)
+
+    def stats(self) -> dict[str, Any]:
+        return {}
+
+    def readiness(self) -> dict[str, Any]:
+        return {"ready": True, "workers_ready": 1, "workers": 1, "failures": []}
+
+    def renew(self) -> None:
+        """Nothing to renew: the next job loads what this process has."""
+
+    def close(self) -> None:
+        """Nothing to stop."""
+
+
+def describe_failure(exc: Exception, job: Job, timeout_s: float, memory_mb: int | None = None) -> Failed:
+    """The outcome of a job the pool did not run to the end (the one wording of a time
+    limit, a memory limit, a full queue or a dead worker)."""
+    if isinstance(exc, WorkerOutOfMemory):
+        return failed({"code": "too_much_memory", "message": str(exc) or out_of_memory(memory_mb, job.kind)["message"],
+                       "field": "drawing" if job.kind == "import" else None})
+    if isinstance(exc, JobTimeout):
+        if isinstance(job, ExportJob):
+            return failed({"code": "timeout", "field": "format", "message": f"writing the plan as {job.format} took "
+                           f"longer than the export limit of {timeout_s:g} s (RANGEPLAN_EXPORT_TIMEOUT_S)"})
+        return failed(import_timeout(timeout_s) if isinstance(job, ImportJob) else timeout(timeout_s))
+    if isinstance(exc, PoolBusy):
+        return failed({"code": "busy", "message": f"too many plans in progress ({exc}); retry shortly"}, 503)
+    if isinstance(exc, WorkerCrashed):
+        return failed({"code": "internal_error", "message": f"the planning process died: {exc}"}, 500)
+    raise exc
+
+
+# ---------------------------------------------------------------------------------------
+# a process that runs jobs for others (a batch's local worker, a Dask worker)
+
+#: set in a worker by :func:`warm_worker` (``local``); Dask workers are recognised by
+#: ``distributed.get_worker()``; anything else is the calling process (``inline``).
+#: ``memory_mb``: this process's memory cap (:func:`warm_worker`), named by a memory error;
+#: ``jobs``: jobs run here through :func:`run_bounded` (count)
+WORKER: dict[str, Any] = {"name": "inline", "memory_mb": None}
+#: whether this process has loaded the compiled kernels (:func:`_load_kernels`)
+_KERNELS = {"loaded": False}
+_KERNELS_LOCK = threading.Lock()
+
+
+def _load_kernels() -> float:
+    """Load (or compile) the planner's kernels once per process; returns the seconds taken."""
+    with _KERNELS_LOCK:
+        if _KERNELS["loaded"]:
+            return 0.0
+        try:
+            from planner import warm_up
+
+            return warm_up()
+        except Exception:  # the first plan compiles instead
+            return 0.0
+        finally:
+            _KERNELS["loaded"] = True
+
+
+def where() -> dict[str, Any]:
+    """Where this call runs: ``{"engine", "worker", "host", "pid"}``; ``worker`` is the Dask
+    worker's address, else ``host:pid``."""
+    host, pid = socket.gethostname(), os.getpid()
+    if "distributed" in sys.modules:  # only a Dask worker (or client) has imported it
+        try:
+            from distributed import get_worker
+
+            return {"engine": "dask", "worker": get_worker().address, "host": host, "pid": pid}
+        except (ImportError, ValueError):  # ValueError: not inside a Dask task
+            pass
+    return {"engine": WORKER["name"], "worker": f"{host}:{pid}", "host": host, "pid": pid}
+
+
+def warm_worker(engine: str = "local", nice: int = 0, memory_mb: int | None = None,
+                parent: int | None = None) -> float:
+    """Load the compiled kernels (``planner.warm_up``) and mark this process as ``engine``;
+    ``nice`` > 0 lowers its CPU priority (the service's batch workers yield to interactive
+    plans); ``memory_mb`` caps the address space of the planning processes its items run in
+    (:func:`child_pool`), as the API's planning workers (an item that needs more
+    fails with ``too_much_memory`` and the worker plans the next). Runs once per worker
+    process, never per item. ``parent``: the pid of the process that started this one (a
+    local pool's worker ends when it does: :mod:`app.lifeline`). Returns the seconds taken."""
+    import signal
+
+    if parent is not None:
+        from app.lifeline import exit_with_parent
+
+        exit_with_parent(parent)
+    WORKER["name"] = engine
+    if threading.current_thread() is threading.main_thread() and engine == "local":
+        # Ctrl-C reaches the whole process group: the parent decides what stops
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if nice > 0:
+        try:
+            os.nice(nice)
+        except OSError:
+            pass
+    seconds = _load_kernels()
+    if memory_mb:
+        WORKER["memory_mb"] = int(memory_mb)
+    return seconds
+
+
+# ---------------------------------------------------------------------------------------
+# this process's own planning processes
+
+_CHILD: dict[str, PlanPool | None] = {"pool": None}
+_CHILD_LOCK = threading.Lock()
+
+
+def _threads_here() -> int:
+    """How many threads of this process may run jobs at once: a Dask worker's thread count
+    inside a Dask worker, else 1 (a local pool's worker, a command)."""
+    if "distributed" in sys.modules:
+        try:
+            from distributed import get_worker
+
+            return max(1, int(getattr(get_worker(), "nthreads", 1)))
+        except (ImportError, ValueError, AttributeError):  # not inside a Dask task
+            pass
+    return 1
+
+
+def child_pool(memory_mb: int | None = None, workers: int | None = None) -> PlanPool:
+    """This process's planning processes (started on the first call; ``workers``: how many,
+    default one per thread that may run jobs here), each capped at ``memory_mb`` MiB. They
+    are fresh interpreters (``start="exec"``: a Dask worker is a daemonic process, which
+    multiprocessing refuses children) that end with this process. A different memory cap
+    replaces the pool."""
+    mb = int(memory_mb or 0)
+    with _CHILD_LOCK:
+        pool = _CHILD["pool"]
+        if pool is not None and pool.memory_mb != mb:
+            pool.close()
+            pool = None
+        if pool is None:
+            pool = _CHILD["pool"] = PlanPool(workers or _threads_here(), timeout_s=0.0, max_queue=1024,
+                                             memory_mb=mb, start="exec")
+        return pool
+
+
+def close_child_pool() -> None:
+    """End this process's planning processes (they are started again when needed)."""
+    with _CHILD_LOCK:
+        pool, _CHILD["pool"] = _CHILD["pool"], None
+    if pool is not None:
+        pool.close()
+
+
+atexit.register(close_child_pool)
+
+
+def run_bounded(job: Job, timeout_s: float | None = None, memory_mb: int | None = None) -> Outcome:
+    """Run ``job`` under the service's bounds: refused before it starts if its work estimate
+    exceeds ``timeout_s`` (``too_much_work``), else run in a planning process of
+    :func:`child_pool` that is killed at ``timeout_s`` (``timeout``; the next job gets a new
+    process) and capped at ``memory_mb`` MiB (``too_much_memory``). With neither bound the job
+    runs in the calling thread. Never raises for the input's fault, a limit or a dead process."""
+    with _CHILD_LOCK:
+        WORKER["jobs"] = WORKER.get("jobs", 0) + 1
+    refused = check_estimate(job, timeout_s)
+    if refused is not None:
+        return refused
+    limit = float(timeout_s) if timeout_s and timeout_s > 0 else 0.0
+    job = bounded(job, limit)
+    if not limit and not memory_mb:
+        return run_job(job)
+    try:
+        return child_pool(memory_mb).run(job, limit)
+    except (JobTimeout, PoolBusy, WorkerCrashed) as exc:
+        return describe_failure(exc, job, limit, memory_mb)
