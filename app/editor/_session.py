@@ -23,7 +23,7 @@ import logging
 import re
 import threading
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, Any, Protocol, cast
 
 import numpy as np
 
@@ -33,17 +33,16 @@ from ._files import EditorFiles
 from ._gui import EditorGui, error_body, error_title
 from ._history import History
 from ._placement import reachable_region
-from ._planning import PlannerError, PlanWorker, compute_plan, is_contour, program_toolpath, tube_cells
+from ._planning import PlannerError, PlanWorker, RobotCache, compute_plan, is_contour, program_toolpath, tube_cells
 from ._preview import Previewer
 from ._result import leg_legend_html
 from ._scene import EditorScene
 from ._session_segments import SegmentEdits
 
 if TYPE_CHECKING:
-    from ._editor import Editor
     from ._planning import ErrorDetail, PlanResult, SegmentationResult, Toolpath
 
-__all__ = ["Session"]
+__all__ = ["Session", "SessionHost"]
 
 log = logging.getLogger("rangeplan.editor")
 #: where a validation message lists the next field ("; settings.N: ..."); a "; " inside one
@@ -51,11 +50,38 @@ log = logging.getLogger("rangeplan.editor")
 _OTHER_FIELD = re.compile(r"; (?=[A-Za-z_][\w.\[\]]*: )")
 
 
-class Session(SegmentEdits):
-    """The editing session of one viser ``client`` (a browser tab) of ``editor``,
-    starting from ``request`` (the one JSON shape)."""
+class SessionHost(Protocol):
+    """What a session takes from the server that made it (:class:`app.editor.Editor`): the
+    robots loaded once for every tab, the corridor store (an :class:`app.storage.Store`, or
+    None: no saving), the quiet time after an edit before a re-plan [s], and
+    :meth:`stored_changed`, which re-reads every tab's list of stored corridors after a save.
+    Declared here so that the session never imports the server (the server imports it)."""
 
-    def __init__(self, editor: Editor, client, request: dict):
+    @property
+    def robots(self) -> RobotCache: ...
+
+    @property
+    def store(self) -> Any: ...
+
+    @property
+    def debounce(self) -> float: ...
+
+    def stored_changed(self) -> None: ...
+
+
+class Session(SegmentEdits):
+    """The editing session of one viser ``client`` (a browser tab) of ``editor`` (the
+    :class:`app.editor.Editor` that made it, or any :class:`SessionHost`), starting from
+    ``request`` (the one JSON shape).
+
+    The session owns the tab's state and builds its collaborators, handing each itself:
+    the files (:class:`._files.EditorFiles`), the G-code preview (:class:`._preview.Previewer`)
+    and the panel (:class:`._gui.EditorGui` with its folders). Each of them declares, as a
+    protocol in its own module, the few session members it uses (``FilesHost``,
+    ``PreviewHost``, ``PanelActions``), so the imports run one way: this module imports
+    them, never the reverse."""
+
+    def __init__(self, editor: SessionHost, client, request: dict):
         self.editor = editor
         self.client = client
         self.robots = editor.robots
