@@ -137,3 +137,32 @@ def test_the_check_finds_a_type_only_cycle(tmp_path):
     assert cycles(graph) == [["pkg.c", "pkg.sub.a", "pkg.c"]]
     (pkg / "c.py").write_text("C = 3\n")
     assert cycles(module_graph(tmp_path, "pkg")) == []
+
+
+def test_editor_has_no_import_cycle():
+    """app/editor/ has no import cycle, type-only and function-level imports included: the
+    session (``_session.py``) imports its files, preview, panel and scene, and each of those
+    declares what it uses of the session as a protocol of its own (``FilesHost``,
+    ``PreviewHost``, ``PanelActions``, ...) instead of importing it; the session declares what it
+    takes of the server that made it (``SessionHost``). The graph is the whole of app/, so a
+    cycle that leaves the editor and comes back through another app module counts too."""
+    graph = module_graph(ROOT, "app")
+    editor = sorted(m for m in graph if m == "app.editor" or m.startswith("app.editor."))
+    # the graph is read: the session's imports, and a type-only one (the scene's GcodePreview)
+    assert len(editor) > 15 and graph["app.editor._session"] >= {"app.editor._files", "app.editor._gui",
+                                                                "app.editor._preview", "app.editor._scene"}
+    assert "app.editor._preview" in graph["app.editor._scene"]
+
+    def reach(start: set[str]) -> set[str]:
+        seen, todo = set(start), list(start)
+        while todo:
+            for w in graph[todo.pop()] - seen:
+                seen.add(w)
+                todo.append(w)
+        return seen
+
+    looped = [m for m in editor if m in reach(graph[m])]
+    around = {n for m in looped for n in reach(graph[m]) if m in reach(graph[n])}  # their components
+    found = cycles({n: graph[n] & around for n in around})
+    assert not looped, (f"modules of app/editor on an import cycle: {', '.join(looped)}; cycles: "
+                        + "; ".join(" -> ".join(c) for c in found))

@@ -7,7 +7,8 @@ editor's state is a plan request in the one JSON shape. The parts:
   session, and :func:`start_editor`
 - :mod:`._session`: :class:`Session`, one tab's editing session: edits, undo, snapping,
   the re-plan, errors; :mod:`._session_segments`: its segment-list edits
-- :mod:`._state`: the edited request and the newest plan outcome (no viser)
+- :mod:`._state`: the edited request and the newest plan outcome, and the session's
+  read-only views of them (no viser)
 - :mod:`._history`: undo / redo steps (no viser)
 - :mod:`._planning`: the re-plan worker; the only editor module that imports ``planner``
 - :mod:`._scene`: the 3-D scene of one tab, its nodes created once and updated in place

@@ -13,7 +13,7 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -26,6 +26,7 @@ from ._planning import (
     PlannerError,
     PlanRequest,
     PlanResult,
+    RobotCache,
     drawing_request,
     editable,
     export_result,
@@ -34,11 +35,9 @@ from ._planning import (
     to_csv,
     validate_request,
 )
+from ._state import EditorState
 
-if TYPE_CHECKING:
-    from ._session import Session
-
-__all__ = ["EditorFiles", "MachineFiles", "request_hash"]
+__all__ = ["EditorFiles", "FilesHost", "FilesPanel", "MachineFiles", "ProgramPlacement", "request_hash"]
 
 
 def request_hash(request: dict) -> str:
@@ -74,12 +73,59 @@ class MachineFiles:
                 f"request sha256: {request_hash(self.request)} (the request JSON, keys sorted, no spaces)")
 
 
-class EditorFiles:
-    """Save / load / import / export for ``editor``. ``store`` is an
-    :class:`app.storage.Store` (its corridor methods), or None: saving is off. ``client``
-    arguments are the viser client that asked (its notifications and downloads go to it)."""
+class ProgramPlacement(Protocol):
+    """The G-code program folder's fields (:class:`._gui_program.ProgramPanel`)."""
 
-    def __init__(self, editor: Session, store):
+    @property
+    def placement(self) -> dict[str, Any]: ...
+
+
+class FilesPanel(Protocol):
+    """What the files read of the session's panel (:class:`._gui.EditorGui`): the dropdown of
+    stored corridors (None: no store) and the placement typed in the program folder."""
+
+    @property
+    def stored(self) -> Any: ...
+
+    @property
+    def program(self) -> ProgramPlacement: ...
+
+
+class FilesHost(Protocol):
+    """What the files take from their session (:class:`._session.Session`): its state,
+    robots and panel, its notifications, and the edits that replace the design. Declared
+    here so that this module never imports the session (the session imports it)."""
+
+    @property
+    def state(self) -> EditorState: ...
+
+    @property
+    def request(self) -> dict: ...
+
+    @property
+    def robots(self) -> RobotCache: ...
+
+    @property
+    def gui(self) -> FilesPanel: ...
+
+    def notify(self, title: str, body: str, color: str = "red", client=None) -> None: ...
+
+    def stored_changed(self) -> None: ...
+
+    def open_design(self, request: dict) -> None: ...
+
+    def set_request(self, request: dict, *, replan: bool = True, immediate: bool = False) -> None: ...
+
+    def place_cameras(self, fit_layout: bool = False) -> None: ...
+
+
+class EditorFiles:
+    """Save / load / import / export for ``editor`` (the session, or any :class:`FilesHost`).
+    ``store`` is an :class:`app.storage.Store` (its corridor methods), or None: saving is
+    off. ``client`` arguments are the viser client that asked (its notifications and
+    downloads go to it)."""
+
+    def __init__(self, editor: FilesHost, store):
         self._editor = editor
         self.store = store
         self.stored_ids: dict[str, str] = {}  #: stored corridor id by its label in the dropdown

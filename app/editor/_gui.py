@@ -20,13 +20,13 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from . import _state
 from ._cursor import CursorReadout
 from ._fields import Bounds, NumberField, VectorField, syncing
-from ._gui_program import ProgramPanel
-from ._gui_segments import SegmentsPanel
+from ._gui_program import ProgramActions, ProgramPanel
+from ._gui_segments import SegmentActions, SegmentsPanel
 from ._planning import (
     DEFAULT_LAYOUT_SPEED_M_S,
     DEFAULT_MODE,
@@ -41,10 +41,12 @@ from ._planning import (
 from ._result import ResultPanel, leg_legend_html
 
 if TYPE_CHECKING:
-    from ._planning import ErrorDetail
-    from ._session import Session
+    from ._planning import ErrorDetail, PlanResult
+    from ._preview import Previewer
+    from ._scene import EditorScene
+    from ._state import EditorState
 
-__all__ = ["PLAY_FPS", "EditorGui", "Playback", "error_body", "error_title"]
+__all__ = ["PLAY_FPS", "EditorGui", "PanelActions", "Playback", "error_body", "error_title"]
 
 PLAY_FPS = 30.0  #: playback frame rate [1/s]
 #: the tab group's content (viser puts it in a Mantine ScrollArea nested in the panel's own) scrolls
@@ -112,11 +114,51 @@ def _bounds(model: str, field: str) -> Bounds:
     return Bounds(**field_bounds(model, field))
 
 
+class PanelActions(SegmentActions, ProgramActions, Protocol):
+    """What the panel's callbacks ask of their session (:class:`._session.Session`): its
+    edits, undo, planning and playback, the files, the preview and the scene (the folders'
+    own needs included). Declared here so that this module never imports the session (the
+    session imports it and hands itself to :class:`EditorGui`)."""
+
+    @property
+    def state(self) -> EditorState: ...
+
+    @property
+    def scene(self) -> EditorScene: ...
+
+    @property
+    def preview(self) -> Previewer: ...
+
+    @property
+    def last_result(self) -> PlanResult | None: ...
+
+    @property
+    def last_error(self) -> ErrorDetail | None: ...
+
+    def plan_now(self) -> int: ...
+
+    def undo(self) -> bool: ...
+
+    def redo(self) -> bool: ...
+
+    def show_time(self, t: float) -> None: ...
+
+    def grid_changed(self) -> None: ...
+
+    def notify(self, title: str, body: str, color: str = "red", client=None) -> None: ...
+
+    def add_rectangle(self, lower, upper) -> None: ...
+
+    def set_robot(self, name: str) -> None: ...
+
+    def set_mode(self, mode: str) -> None: ...
+
+
 class EditorGui:
     """The panel of one session: the widgets (public attributes, for the session and
-    tests) and their callbacks into ``session``."""
+    tests) and their callbacks into ``session`` (any :class:`PanelActions`)."""
 
-    def __init__(self, gui, session: Session, *, has_store: bool):
+    def __init__(self, gui, session: PanelActions, *, has_store: bool):
         self._session = session
         gui.configure_theme(control_width="large", dark_mode=False, show_logo=False, show_share_button=False)
         gui.add_markdown("**rangeplan corridor editor** — x right, y up; m, rad, s, N")

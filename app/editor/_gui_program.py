@@ -11,15 +11,14 @@ or "Close program", brings a corridor back); changing a field of an opened progr
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable
+from typing import Any, Protocol
 
 from ._fields import Bounds, NumberField, VectorField, syncing
+from ._files import EditorFiles
 from ._planning import MAX_CONTOUR_TOLERANCE_M, MIN_CONTOUR_TOLERANCE_M, is_contour
 
-if TYPE_CHECKING:
-    from ._session import Session
-
-__all__ = ["PROGRAM_MIME", "ProgramPanel", "set_contour_field"]
+__all__ = ["PROGRAM_MIME", "ProgramActions", "ProgramPanel", "set_contour_field"]
 
 #: what the upload dialog offers: G-code files by their usual extensions (and any text)
 PROGRAM_MIME = ".ngc,.nc,.gcode,.tap,.cnc,.txt,text/plain"
@@ -38,10 +37,24 @@ def set_contour_field(request: dict, key: str, value: Any) -> None:
         request[key] = value
 
 
-class ProgramPanel:
-    """The "G-code program" folder (``gui`` the tab's panel, ``session`` its session)."""
+class ProgramActions(Protocol):
+    """What the program folder asks of its session (:class:`._session.Session`): an edit of
+    the request, the files (which open a program) and a new layout. Declared here so that
+    this module never imports the session (the session imports it)."""
 
-    def __init__(self, gui, session: Session):
+    @property
+    def files(self) -> EditorFiles: ...
+
+    def edit(self, fn: Callable[[dict], object], *, immediate: bool = False, key: str | None = None) -> bool: ...
+
+    def new_layout(self) -> None: ...
+
+
+class ProgramPanel:
+    """The "G-code program" folder (``gui`` the tab's panel, ``session`` its session: any
+    :class:`ProgramActions`)."""
+
+    def __init__(self, gui, session: ProgramActions):
         self._session = session
         self.folder = gui.add_folder("G-code program (contour)")
         with self.folder:

@@ -9,14 +9,11 @@ edit goes through the session (undo, re-plan) as for layouts.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 from ._fields import VectorField, format_number, syncing
 
-if TYPE_CHECKING:
-    from ._session import Session
-
-__all__ = ["SegmentsPanel", "segment_label", "segments_table"]
+__all__ = ["SegmentActions", "SegmentsPanel", "segment_label", "segments_table"]
 
 _XY_PSI = ("x", "y", "ψ")
 
@@ -40,10 +37,26 @@ def segments_table(segments: list[dict], selected: int | None) -> str:
     return "\n".join(rows)
 
 
-class SegmentsPanel:
-    """The widgets of the Segments folder for ``session``."""
+class SegmentActions(Protocol):
+    """What the Segments folder asks of its session (the segment-list edits of
+    :class:`._session_segments.SegmentEdits`). Declared here so that this module never
+    imports the session (the session imports it)."""
 
-    def __init__(self, gui, session: Session):
+    def select_segment(self, i: int | None) -> None: ...
+
+    def set_segment_corner(self, which: str, value) -> None: ...
+
+    def insert_segment(self) -> None: ...
+
+    def remove_segment(self) -> None: ...
+
+    def set_psi_range_all(self, lo: float, hi: float) -> None: ...
+
+
+class SegmentsPanel:
+    """The widgets of the Segments folder for ``session`` (any :class:`SegmentActions`)."""
+
+    def __init__(self, gui, session: SegmentActions):
         self._session = session
         self.folder = gui.add_folder("Segments (boxes of the corridor)")
         with self.folder:

@@ -19,20 +19,17 @@ from __future__ import annotations
 import logging
 import threading
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
 import numpy as np
 
 from app.formats import GCODE_FORMAT
 
 from . import _geometry as geo
-from ._files import MachineFiles, request_hash
+from ._files import EditorFiles, MachineFiles, request_hash
 from ._planning import PlannerError, export_result, read_gcode, toolpath
 
-if TYPE_CHECKING:
-    from ._session import Session
-
-__all__ = ["GcodePreview", "Previewer", "build_preview"]
+__all__ = ["GcodePreview", "PreviewHost", "PreviewPanel", "PreviewScene", "Previewer", "build_preview"]
 
 log = logging.getLogger("rangeplan.editor")
 
@@ -91,11 +88,43 @@ def build_preview(files: MachineFiles) -> GcodePreview:
         psi_deviation_rad=float(np.max(np.abs(at[:, 2] - pose[:, 2]))), text=text)
 
 
-class Previewer:
-    """The preview of one session: follows the newest plan of the design on screen while the
-    toggle is on (:meth:`refresh` after every edit and every published plan)."""
+class PreviewPanel(Protocol):
+    """What the preview uses of the session's panel (:class:`._gui.EditorGui`): the toggle
+    (its ``value``) and the line under it."""
 
-    def __init__(self, session: Session):
+    @property
+    def preview(self) -> Any: ...
+
+    def show_preview(self, enabled: bool, text: str | None) -> None: ...
+
+
+class PreviewScene(Protocol):
+    """Where the preview is drawn (:class:`._scene.EditorScene`)."""
+
+    def show_preview(self, preview: GcodePreview | None) -> None: ...
+
+
+class PreviewHost(Protocol):
+    """What the preview takes from its session (:class:`._session.Session`): the files (which
+    plan may be downloaded), the panel and the scene. Declared here so that this module
+    never imports the session (the session imports it)."""
+
+    @property
+    def files(self) -> EditorFiles: ...
+
+    @property
+    def gui(self) -> PreviewPanel: ...
+
+    @property
+    def scene(self) -> PreviewScene: ...
+
+
+class Previewer:
+    """The preview of one session (any :class:`PreviewHost`): follows the newest plan of the
+    design on screen while the toggle is on (:meth:`refresh` after every edit and every
+    published plan)."""
+
+    def __init__(self, session: PreviewHost):
         self._session = session
         self._lock = threading.Lock()
         self._shown: tuple[int, str] | None = None  # key of the preview on screen

@@ -23,7 +23,7 @@ import logging
 import re
 import threading
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, Any, Protocol, cast
 
 import numpy as np
 
@@ -33,17 +33,17 @@ from ._files import EditorFiles
 from ._gui import EditorGui, error_body, error_title
 from ._history import History
 from ._placement import reachable_region
-from ._planning import PlannerError, PlanWorker, compute_plan, is_contour, program_toolpath, tube_cells
+from ._planning import PlannerError, PlanWorker, RobotCache, compute_plan, is_contour, program_toolpath, tube_cells
 from ._preview import Previewer
 from ._result import leg_legend_html
 from ._scene import EditorScene
 from ._session_segments import SegmentEdits
+from ._state import StateViews
 
 if TYPE_CHECKING:
-    from ._editor import Editor
-    from ._planning import ErrorDetail, PlanResult, SegmentationResult, Toolpath
+    from ._planning import ErrorDetail, PlanResult, Toolpath
 
-__all__ = ["Session"]
+__all__ = ["Session", "SessionHost"]
 
 log = logging.getLogger("rangeplan.editor")
 #: where a validation message lists the next field ("; settings.N: ..."); a "; " inside one
@@ -51,11 +51,32 @@ log = logging.getLogger("rangeplan.editor")
 _OTHER_FIELD = re.compile(r"; (?=[A-Za-z_][\w.\[\]]*: )")
 
 
-class Session(SegmentEdits):
-    """The editing session of one viser ``client`` (a browser tab) of ``editor``,
-    starting from ``request`` (the one JSON shape)."""
+class SessionHost(Protocol):
+    """What a session takes of the server that made it (:class:`app.editor.Editor`): the
+    robots loaded once for every tab, the corridor store (an :class:`app.storage.Store`, or
+    None: no saving), the quiet time after an edit before a re-plan [s], and
+    :meth:`stored_changed`. Declared here, so the session never imports the server."""
 
-    def __init__(self, editor: Editor, client, request: dict):
+    robots: RobotCache
+    store: Any
+    debounce: float
+
+    def stored_changed(self) -> None:
+        """Re-read every tab's list of stored corridors (after a save)."""
+        ...
+
+
+class Session(StateViews, SegmentEdits):
+    """The editing session of one viser ``client`` (a browser tab) of ``editor`` (the
+    :class:`SessionHost` that made it), starting from ``request`` (the one JSON shape).
+
+    The session owns the tab's state (read through :class:`._state.StateViews`) and builds
+    its collaborators, handing each itself: the files, the G-code preview, the panel and its
+    folders. Each declares the few session members it uses as a protocol of its own module
+    (``FilesHost``, ``PreviewHost``, ``PanelActions``, ``ProgramActions``,
+    ``SegmentActions``), so the imports run one way: they never import this module."""
+
+    def __init__(self, editor: SessionHost, client, request: dict):
         self.editor = editor
         self.client = client
         self.robots = editor.robots
@@ -86,46 +107,11 @@ class Session(SegmentEdits):
         self._on_camera(client.camera)
         self.worker.schedule(immediate=True)
 
-    # ------------------------------------------------------------------ read-only views
-    @property
-    def request(self) -> dict:
-        """A copy of the current request (the one JSON shape)."""
-        return self.state.request
-
+    # ------------------------------------------------------------------ read-only views (more: StateViews)
     @property
     def store(self):
         """The corridor store shared by all sessions (or None)."""
         return self.files.store
-
-    @property
-    def plans_done(self) -> int:
-        """Number of plan results published."""
-        return self.state.plans_done
-
-    @property
-    def last_result(self) -> PlanResult | None:
-        """Newest published plan result."""
-        return self.state.last_result
-
-    @property
-    def last_segmentation(self) -> SegmentationResult | None:
-        """Newest published segmentation."""
-        return self.state.last_segmentation
-
-    @property
-    def last_error(self) -> ErrorDetail | None:
-        """Newest error (code, message, field), or None after a successful plan."""
-        return self.state.last_error
-
-    @property
-    def last_plan_generation(self) -> int:
-        """Re-plan generation of the newest published result (the plan number shown)."""
-        return self.state.last_plan_generation
-
-    @property
-    def stale_discarded(self) -> int:
-        """Results dropped because a newer edit arrived while they were computed."""
-        return self.state.stale_discarded
 
     # ------------------------------------------------------------------ edits
     def edit(self, fn: Callable[[dict], object], *, immediate: bool = False, key: str | None = None) -> bool:

@@ -29,6 +29,7 @@ __all__ = [
     "DEFAULT_REQUEST",
     "EDGES",
     "EditorState",
+    "StateViews",
     "add_obstacle",
     "clear_obstacles",
     "insert_segment",
@@ -128,6 +129,48 @@ class EditorState:
         """Count a result dropped because a newer edit arrived while it was computed."""
         with self.lock:
             self.stale_discarded += 1
+
+
+class StateViews:
+    """Read-only views of an :class:`EditorState` ``state`` (mixed into
+    :class:`app.editor._session.Session`, whose panels and tests read them)."""
+
+    state: EditorState
+
+    @property
+    def request(self) -> dict:
+        """A copy of the current request (the one JSON shape)."""
+        return self.state.request
+
+    @property
+    def plans_done(self) -> int:
+        """Number of plan results published."""
+        return self.state.plans_done
+
+    @property
+    def last_result(self) -> PlanResult | None:
+        """Newest published plan result."""
+        return self.state.last_result
+
+    @property
+    def last_segmentation(self) -> SegmentationResult | None:
+        """Newest published segmentation."""
+        return self.state.last_segmentation
+
+    @property
+    def last_error(self) -> ErrorDetail | None:
+        """Newest error (code, message, field), or None after a successful plan."""
+        return self.state.last_error
+
+    @property
+    def last_plan_generation(self) -> int:
+        """Re-plan generation of the newest published result (the plan number shown)."""
+        return self.state.last_plan_generation
+
+    @property
+    def stale_discarded(self) -> int:
+        """Results dropped because a newer edit arrived while they were computed."""
+        return self.state.stale_discarded
 
 
 # ---------------------------------------------------------------------------- request edits
