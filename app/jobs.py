@@ -105,6 +105,9 @@ class ImportJob:
     options: ImportOptions
     filename: str | None = None
     content_type: str | None = None
+    #: refuse a drawing whose estimated work is over this many seconds before any curve is
+    #: flattened (:func:`planner.exchange.import_drawing`'s ``work_limit_s``; set by :func:`bounded`)
+    work_limit_s: float | None = None
     kind: ClassVar[str] = "import"
 
 
@@ -265,7 +268,8 @@ def _execute(job: Job) -> Done:
     if isinstance(job, ImportJob):
         from planner.exchange import import_drawing
 
-        res = import_drawing(job.data, job.options, filename=job.filename, content_type=job.content_type)
+        res = import_drawing(job.data, job.options, filename=job.filename, content_type=job.content_type,
+                             work_limit_s=job.work_limit_s)
         return Done(_dumps(res.to_json_dict()))
     if isinstance(job, SegmentJob):
         from planner import segment
@@ -318,7 +322,7 @@ def _contour(job: ContourJob) -> Done:
         work = ContourWork(*estimate_contour(req, program))
         if work.seconds > job.work_limit_s:
             raise PlannerError(**too_much_work(work, job.work_limit_s))
-    result = plan_contour(req, program=program)
+    result = plan_contour(req, program=program, work_limit_s=job.work_limit_s)
     del program
     plan_id = new_id() if job.store else None
     result.plan_id = plan_id
@@ -504,8 +508,8 @@ def check_estimate(job: Job, timeout_s: float | None) -> Failed | None:
 def bounded(job: Job, timeout_s: float | None) -> Job:
     """``job`` with the time limit as its work limit (a plan job whose layout, once segmented,
     is estimated again before it is simulated: issue 20; a contour job, estimated once its
-    program is read)."""
-    if isinstance(job, (PlanJob, ContourJob)) and job.work_limit_s is None and timeout_s and timeout_s > 0:
+    program is read; a drawing import, estimated once its file is parsed)."""
+    if isinstance(job, (PlanJob, ContourJob, ImportJob)) and job.work_limit_s is None and timeout_s and timeout_s > 0:
         return dataclasses.replace(job, work_limit_s=float(timeout_s))
     return job
 

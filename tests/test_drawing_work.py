@@ -162,3 +162,25 @@ def test_the_estimate_holds(name, data, fmt):
     import_drawing(data, options, format=fmt)
     cpu = time.process_time() - t0
     assert est / 3 <= cpu <= 1.5 * est, (name, cpu, est)
+
+
+def test_the_service_refuses_a_drawing_over_its_time_limit(tmp_path):
+    """``POST /v1/import`` passes the server's time limit to the import (app.jobs.bounded):
+    a drawing estimated over it is refused 422 ``too_much_work`` on the field ``drawing``,
+    naming the estimate, at once; a drawing estimated under the same limit imports."""
+    from app.api import create_app
+    from app.storage import Store
+    from tests.support import api_client
+
+    big, small = circles(800, 50.0, 1.0), circles(200, 50.0, 1.0)  # ~13 s and ~1 s estimated
+    est = estimate_import(big, MM, format="dxf").seconds
+    assert est > 4 * estimate_import(small, MM, format="dxf").seconds
+    for data, limit, status in ((big, est / 2, 422), (small, est / 2, 200)):
+        app = create_app(Store(tmp_path / f"data{status}"), workers=1, timeout_s=limit)
+        with api_client(app) as client:
+            r = client.post("/v1/import", params=MM, content=data, headers={"Content-Type": "application/dxf"})
+        assert r.status_code == status, r.text
+        if status == 422:
+            err = r.json()["error"]
+            assert err["code"] == "too_much_work" and err["field"] == "drawing", err
+            assert f"{est:.3g} s" in err["message"]

@@ -24,7 +24,7 @@ def test_manual_table_is_the_settings_object():
     rows = [r for r in m.group(1).splitlines() if r.startswith("| `")]
     assert [r.split("`")[1] for r in rows] == [env_name(k) for k in Settings.model_fields]
     assert {env_name(k) for k in Settings.model_fields if not env_name(k).startswith("RANGEPLAN_")} == {
-        "XDG_DATA_HOME", "NUMBA_CACHE_DIR"}
+        "XDG_DATA_HOME", "NUMBA_CACHE_DIR", "MALLOC_TRIM_THRESHOLD_"}
 
 
 def test_values_come_from_the_environment(monkeypatch):
