@@ -107,10 +107,6 @@ class Settings(BaseSettings):
                                     "(and the service's plans with RANGEPLAN_EXECUTOR=dask)",
                                     cli="batch --scheduler")
     dask_malloc: str = _f("relax", "glibc malloc tuning of Dask workers (relax | keep)")
-    # -- the command line
-    resident_s: float = _f(600.0, "Seconds the CLI's resident planner stays without a request before it exits "
-                           "(0: no resident; README \"The resident planner\")", cli="plan/contour --no-resident",
-                           ge=0)
     # -- kernels
     kernel_seed: Path | None = _f(None, "Compiled-kernel cache copied into NUMBA_CACHE_DIR before the planner loads")
     # -- other programs' variables the service follows (named as they are, no prefix)

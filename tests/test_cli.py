@@ -55,3 +55,125 @@ def test_bad_input_exits_2_with_one_line(tmp_path, content, needle):
 def test_missing_file_exits_2():
     r = run("plan", "/nonexistent/x.json")
     assert r.returncode == 2 and "cannot read" in r.stderr
+
+
+def test_output_to_a_directory_exits_2(tmp_path):
+    r = run("plan", str(TABLE1), "-o", str(tmp_path))
+    assert r.returncode == 2 and str(tmp_path) in r.stderr and "cannot write" in r.stderr
+    assert "Traceback" not in r.stderr and list(tmp_path.iterdir()) == []
+
+
+def test_compact_json_is_the_apis_serialisation_and_the_default_indents_it(tmp_path):
+    """``--compact`` writes the job's own bytes (what ``POST /v1/plan`` answers); the default is
+    the same document indented: one serializer for JSON."""
+    compact, pretty = run("plan", str(TABLE1), "--compact"), run("plan", str(TABLE1))
+    assert compact.returncode == 0 and pretty.returncode == 0
+    assert compact.stdout.count("\n") == 1 and ", " not in compact.stdout[:2000]  # no separator spaces
+    a, b = json.loads(compact.stdout), json.loads(pretty.stdout)
+    for doc in (a, b):  # the only fields two runs may differ in: the time the plan took
+        for k in [k for k in doc["metrics"] if k.endswith("_ms")]:
+            del doc["metrics"][k]
+    assert a == b and pretty.stdout.startswith('{\n "plan_id": null')
+
+
+# ---------------------------------------------------------------------------------------
+# no hidden processes (issue 34): a command plans in its own process, and a command that is
+# stopped never writes its output afterwards
+
+def _ours(marker: str) -> set[int]:
+    """Processes whose environment carries ``marker`` (a command and anything it started,
+    detached or not: children inherit the environment)."""
+    import os
+    from pathlib import Path
+
+    found = set()
+    for proc in Path("/proc").iterdir():
+        if proc.name.isdigit() and int(proc.name) != os.getpid():
+            try:
+                if f"RANGEPLAN_TEST_MARKER={marker}\0".encode() in (proc / "environ").read_bytes():
+                    found.add(int(proc.name))
+            except OSError:
+                pass
+    return found
+
+
+def _cpu_s(pid: int) -> float:
+    """CPU seconds (user + system) ``pid`` has used so far."""
+    import os
+
+    fields = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+@pytest.fixture(scope="module")
+def slow_request(tmp_path_factory):
+    """(file, CPU s of a whole command, CPU s of its plan): Table I on the numpy reference (a
+    plan of seconds, much longer than the command's start-up), measured by running it once."""
+    import os
+    import resource
+    import time
+
+    from planner.orchestrator.background import kernels_ready
+
+    if not kernels_ready(None):
+        pytest.skip("the kernels are not compiled: a plan would start the background compile")
+    d = tmp_path_factory.mktemp("slow")
+    req = {**json.loads(TABLE1.read_text()), "settings": {"backend": "reference"}}
+    path = d / "slow.json"
+    path.write_text(json.dumps(req))
+    marker = f"measure-{os.getpid()}"
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.monotonic()
+    r = subprocess.run([*CLI, "plan", str(path), "-o", str(d / "out.json")], capture_output=True, text=True,
+                       timeout=300, env={**os.environ, "RANGEPLAN_TEST_MARKER": marker})
+    wall = time.monotonic() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    assert r.returncode == 0, r.stderr
+    assert not _ours(marker)  # a command that ended left no process behind (no resident, no daemon)
+    cpu = after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime
+    plan_s = json.loads((d / "out.json").read_text())["metrics"]["compute_ms"] / 1e3
+    assert plan_s > 0.4 * cpu, (plan_s, cpu)  # the plan is most of the command: a kill can land inside it
+    return path, cpu, plan_s, wall
+
+
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGKILL"])
+def test_a_stopped_command_never_writes_its_output_later(tmp_path, slow_request, sig):
+    """The bug of the resident planner: a command stopped mid-plan (Ctrl-C, or killed) whose
+    plan then ran to the end elsewhere and overwrote the output of a newer command. Stop one
+    halfway through its plan, run a newer command to the same file, wait until well after the
+    stopped one would have finished: the file is the newer command's, no process of the
+    stopped command is left, and nothing else was written beside it."""
+    import os
+    import signal
+    import time
+
+    path, cpu, plan_s, wall = slow_request
+    out = tmp_path / "out.json"
+    marker = f"stop-{sig}-{os.getpid()}"
+    t0 = time.monotonic()
+    p = subprocess.Popen([*CLI, "plan", str(path), "-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True, env={**os.environ, "RANGEPLAN_TEST_MARKER": marker})
+    halfway = cpu - plan_s / 2  # its start-up done, half its plan still to go
+    while _cpu_s(p.pid) < halfway:
+        assert p.poll() is None, p.communicate()
+        time.sleep(0.02)
+    p.send_signal(getattr(signal, sig))
+    _, err = p.communicate(timeout=60)
+    assert p.returncode == (130 if sig == "SIGINT" else -signal.SIGKILL), err
+    assert "Traceback" not in err and not out.exists()
+    newer = run("plan", str(TABLE1), "--compact", "-o", str(out))
+    assert newer.returncode == 0, newer.stderr
+    written = out.read_bytes()
+    while time.monotonic() < t0 + 2 * wall:  # the stopped plan would have ended by now, and more
+        assert not _ours(marker)
+        time.sleep(0.1)
+    assert out.read_bytes() == written and json.loads(written)["settings"]["backend"] == "compiled"
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["out.json"]
+
+
+def test_no_resident_is_accepted_and_ignored(tmp_path):
+    """``--no-resident`` (before issue 34: plan without the resident planner) still parses, so
+    scripts that pass it keep working; every plan runs in the command's own process."""
+    r = run("plan", str(TABLE1), "--no-resident", "-o", str(tmp_path / "t.csv"))
+    assert r.returncode == 0 and (tmp_path / "t.csv").read_text().startswith("time_s,")
+    assert "--no-resident" not in run("plan", "--help").stdout
