@@ -111,11 +111,12 @@ def reference_while_compiling(job):
     starts the background compile; :func:`app.service.on_reference` moves the job to the numpy
     reference); one line on stderr says so, with the plan's work estimate on the reference
     where there is one (:func:`app.jobs.estimate`). Other jobs as they are."""
+    from app.jobs import PlanJob
     from planner import PlannerError
     from planner.orchestrator.background import while_compiling
 
-    try:
-        st = job.request.settings if hasattr(job.request.settings, "backend") else job.request.plan_settings()
+    try:  # a contour request's settings are filled by the program's (its plan_settings)
+        st = job.request.settings if isinstance(job, PlanJob) else job.request.plan_settings()
     except PlannerError:
         return job  # the job names the fault
     running = while_compiling(st.backend, st.mode)

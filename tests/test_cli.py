@@ -177,3 +177,43 @@ def test_no_resident_is_accepted_and_ignored(tmp_path):
     r = run("plan", str(TABLE1), "--no-resident", "-o", str(tmp_path / "t.csv"))
     assert r.returncode == 0 and (tmp_path / "t.csv").read_text().startswith("time_s,")
     assert "--no-resident" not in run("plan", "--help").stdout
+
+
+def test_while_the_kernels_compile_plan_and_contour_jobs_move_to_the_reference(monkeypatch, capsys):
+    """The CLI applies the service's rule (app.service.on_reference) when the one decision
+    (while_compiling) says the kernels are compiling: a plan and a contour job plan on the numpy
+    reference, one note on stderr (with the plan's estimate on the reference); asked for another
+    backend, or with the kernels compiled, the job is left as it is."""
+    import planner.orchestrator.background as background
+    from app.cli import reference_while_compiling
+    from app.jobs import ContourJob, PlanJob
+    from planner.schema import ContourRequest, PlanRequest
+
+    asked = []
+
+    class Running:
+        def note(self, plan_s):
+            return f"compiling; plan {plan_s}"
+
+    def while_compiling(backend, mode):
+        asked.append((backend, mode))
+        return Running() if compiling and backend == "compiled" else None
+
+    monkeypatch.setattr(background, "while_compiling", while_compiling)
+    req = json.loads(TABLE1.read_text())
+    plan = PlanJob(PlanRequest.model_validate(req))
+    contour = ContourJob(ContourRequest.model_validate({"program": "G1 X1 F100\n", "settings": {"Ts": 0.01}}))
+    compiling = True
+    moved = reference_while_compiling(plan)
+    assert moved.request.settings.backend == "reference" and plan.request.settings.backend == "compiled"
+    note = capsys.readouterr().err
+    assert note.startswith("compiling; plan ") and float(note.split()[-1]) > 0  # its estimate on the reference
+    moved = reference_while_compiling(contour)
+    assert moved.request.settings == {"Ts": 0.01, "backend": "reference"}
+    assert capsys.readouterr().err == "compiling; plan None\n"
+    assert asked == [("compiled", plan.request.settings.mode), ("compiled", contour.request.plan_settings().mode)]
+    on_ref = PlanJob(PlanRequest.model_validate({**req, "settings": {"backend": "reference"}}))
+    assert reference_while_compiling(on_ref) is on_ref
+    compiling = False
+    assert reference_while_compiling(plan) is plan and reference_while_compiling(contour) is contour
+    assert capsys.readouterr().err == ""
