@@ -431,8 +431,36 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """``rangeplan``: every command runs in this process and ends with it (no resident
     planner; the background compile after installing is the one process a command may start,
-    README "the first plan")."""
-    return run(sys.argv[1:] if argv is None else argv)
+    README "the first plan"). Run as the program (``argv`` None: the console script,
+    ``python -m app.cli``), ``plan`` and ``contour`` end the process themselves once done
+    (:func:`_end_process`); given an ``argv`` (a caller in Python), it returns the status."""
+    if argv is not None:
+        return run(argv)
+    code = run(sys.argv[1:])
+    if _command(sys.argv[1:]) in ("plan", "contour"):
+        _end_process(code)
+    return code
+
+
+def _end_process(code: int) -> None:
+    """End this process with ``code`` after the exit handlers (:mod:`atexit`: a temporary
+    kernel cache removed, weakref finalizers, logging) and the standard streams are flushed,
+    without the interpreter's teardown: freeing the ~830 modules of a plan, numba's and
+    LLVM's objects among them, takes ~0.26 CPU s (a quarter of a warm plan's; measured by
+    benchmarks/bench_cli.py), for a process about to end. Returns (the normal exit follows)
+    where the interpreter has no ``atexit._run_exitfuncs``."""
+    import atexit
+
+    run_exit_handlers = getattr(atexit, "_run_exitfuncs", None)
+    if run_exit_handlers is None:
+        return
+    run_exit_handlers()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe: the status Python gives a failed flush at exit
+            code = 120
+    os._exit(code)
 
 
 def _command(argv: list[str]) -> str:
@@ -452,11 +480,10 @@ def seed_kernels() -> None:
 
 
 def run(argv: list[str]) -> int:
-    """The CLI in this process."""
+    """The CLI in this process (Ctrl-C: status 130, from the first import on)."""
     command = _command(argv)
-    parser = build_parser(command)
-    args = parser.parse_args(argv)
     try:
+        args = build_parser(command).parse_args(argv)
         if command in ("plan", "contour", "batch"):
             seed_kernels()
         return args.func(args)

@@ -1,7 +1,7 @@
 """The command line's start-up and warm plan (issue 34 goal 3), this tree against another
 revision, side by side: median wall and CPU seconds of each command in its own process.
 
-    python benchmarks/bench_cli.py [--base REV] [--rounds 7] [--imports]
+    python benchmarks/bench_cli.py [--base REV] [--rounds 7] [--imports] [--phases]
 
 - ``--help``: ``python -m app.cli --help`` (goal <= 0.2 s)
 - ``plan warm``: ``python -m app.cli plan app/static/examples/table1.json -o OUT.json``, the
@@ -13,6 +13,8 @@ revision, side by side: median wall and CPU seconds of each command in its own p
 - ``10 plans, batch --inline``: ``rangeplan batch TEN.jsonl -o DIR --inline`` (ten Table I
   requests planned one after another in the command's own process; a new DIR each run): what
   repeated planning costs without any process that outlives its command
+- ``--phases``: where a warm plan's CPU time goes in this tree (:data:`PHASES`, run in a new
+  process per round: each phase's ``time.process_time`` difference, median over the rounds)
 - ``--imports``: the heaviest top-level imports of ``plan warm`` (``python -X importtime``, one
   run each, ms cumulative)
 
@@ -110,11 +112,59 @@ def importtime(tree: Path, out: Path, top: int = 8) -> list[tuple[str, float]]:
     return [("(all top-level imports)", sum(ms for _, ms in rows)), *rows[:top]]
 
 
+#: a warm plan of Table I as ``rangeplan plan`` runs it, phase by phase (CPU ms each, as JSON)
+PHASES = """
+import json, sys, time
+T = time.process_time
+marks = [("interpreter start", T())]
+def m(name):
+    marks.append((name, T()))
+from app import cli
+m("app.cli")
+args = cli.build_parser("plan").parse_args(["plan", sys.argv[1], "-o", sys.argv[2]])
+m("argument parser")
+cli.seed_kernels()
+m("settings (kernel seed; pydantic)")
+request = cli.load_request(args.input)
+m("request model (planner.schema)")
+import numba
+m("numba")
+import app.formats
+m("orchestrator and constraint modules (app.formats)")
+from app.jobs import PlanJob, run_job
+m("app.jobs")
+import scipy.linalg.cython_blas
+m("scipy.linalg (numba's BLAS binding)")
+job = PlanJob(request, format="json")
+out = run_job(job)
+m("load the cached kernels and plan")
+run_job(job)
+m("(the same plan again: the plan alone)")
+cli.write_output(out.payload, args, "json", "")
+m("write the indented JSON")
+print(json.dumps([(marks[0][0], marks[0][1] * 1e3)] + [(n, (t - marks[i][1]) * 1e3) for i, (n, t) in
+                  enumerate(marks[1:])] + [("total", T() * 1e3)]))
+"""
+
+
+def phases(rounds: int, out: Path) -> None:
+    """Print the median CPU ms of each phase of :data:`PHASES` in this tree."""
+    runs = []
+    for _ in range(rounds):
+        r = subprocess.run([PY, "-c", PHASES, str(TABLE1), str(out)], cwd=ROOT, env=_env(), capture_output=True,
+                           text=True, check=True)
+        runs.append(json.loads(r.stdout.strip().splitlines()[-1]))
+    print(f"\nwhere a warm plan's CPU goes, head (ms, median of {rounds}):")
+    for i, (name, _) in enumerate(runs[0]):
+        print(f"  {statistics.median(run[i][1] for run in runs):8.1f}  {name}")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("--base", default="main", help="revision to compare with (default main)")
     ap.add_argument("--rounds", type=int, default=7)
     ap.add_argument("--imports", action="store_true", help="also the heaviest imports of a warm plan")
+    ap.add_argument("--phases", action="store_true", help="also where a warm plan's CPU time goes (this tree)")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory(prefix="bench-cli-") as tmpdir:
         tmp = Path(tmpdir)
@@ -176,6 +226,8 @@ def main() -> int:
                 print(f"\nheaviest top-level imports of `plan warm`, {name} (ms, cumulative, one run):")
                 for mod, ms in importtime(tree, tmp / "imp.json"):
                     print(f"  {ms:8.1f}  {mod}")
+        if args.phases:
+            phases(args.rounds, tmp / "phases.json")
     return 0
 
 
