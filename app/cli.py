@@ -24,6 +24,10 @@ import contextlib  # noqa: E402
 import json  # noqa: E402
 import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
+from typing import TYPE_CHECKING  # noqa: E402
+
+if TYPE_CHECKING:
+    from app.jobs import ContourJob, Done, Job, PlanJob
 
 
 class InputError(Exception):
@@ -82,7 +86,7 @@ def cmd_plan(args) -> int:
     return 0
 
 
-def run_here(job, name: str, compile_first: bool):
+def run_here(job: PlanJob | ContourJob, name: str, compile_first: bool) -> Done:
     """Run a planning ``job`` (:class:`app.jobs.PlanJob` / :class:`app.jobs.ContourJob`) in this
     process, the way the service's workers run it (:func:`app.jobs.run_job`: the same error
     mapping and serialisation); its :class:`app.jobs.Done`, or an :class:`InputError` naming
@@ -92,10 +96,9 @@ def run_here(job, name: str, compile_first: bool):
     from app.jobs import Failed, run_job
     from planner.orchestrator.compiling import compile_progress
 
-    if not compile_first:
-        job = reference_while_compiling(job)
+    runs: Job = job if compile_first else reference_while_compiling(job)
     with compile_progress():  # the first plan after installing compiles the kernels: progress on stderr
-        out = run_job(job)
+        out = run_job(runs)
     if isinstance(out, Failed):
         e = out.error
         why = f"{name}: {e.code}: {e.field + ': ' if e.field else ''}{e.message}"
@@ -105,7 +108,7 @@ def run_here(job, name: str, compile_first: bool):
     return out
 
 
-def reference_while_compiling(job):
+def reference_while_compiling(job: PlanJob | ContourJob) -> Job:
     """``job`` as it runs while the kernels are not compiled: the edges' one rule, as the
     service applies it (:func:`planner.orchestrator.background.while_compiling` decides and
     starts the background compile; :func:`app.service.on_reference` moves the job to the numpy
@@ -125,14 +128,14 @@ def reference_while_compiling(job):
     from app.jobs import estimate
     from app.service import on_reference  # (only here: the warm path never loads the service)
 
-    job = on_reference(job)
+    moved = on_reference(job)
     try:
-        work = estimate(job)
+        work = estimate(moved)
         plan_s = work.seconds if work is not None else None
     except PlannerError:
         plan_s = None  # the plan names the fault
     print(running.note(plan_s), file=sys.stderr, flush=True)
-    return job
+    return moved
 
 
 def write_output(payload: bytes, args, fmt: str, summary: str, warnings: tuple[str, ...] = ()) -> None:

@@ -213,11 +213,13 @@ def test_while_the_kernels_compile_plan_and_contour_jobs_move_to_the_reference(m
     contour = ContourJob(ContourRequest.model_validate({"program": "G1 X1 F100\n", "settings": {"Ts": 0.01}}))
     compiling = True
     moved = reference_while_compiling(plan)
+    assert isinstance(moved, PlanJob)
     assert moved.request.settings.backend == "reference" and plan.request.settings.backend == "compiled"
     note = capsys.readouterr().err
     assert note.startswith("compiling; plan ") and float(note.split()[-1]) > 0  # its estimate on the reference
-    moved = reference_while_compiling(contour)
-    assert moved.request.settings == {"Ts": 0.01, "backend": "reference"}
+    moved_contour = reference_while_compiling(contour)
+    assert isinstance(moved_contour, ContourJob)
+    assert moved_contour.request.settings == {"Ts": 0.01, "backend": "reference"}
     assert capsys.readouterr().err == "compiling; plan None\n"
     assert asked == [("compiled", plan.request.settings.mode), ("compiled", contour.request.plan_settings().mode)]
     on_ref = PlanJob(PlanRequest.model_validate({**req, "settings": {"backend": "reference"}}))
