@@ -1,5 +1,7 @@
 """The command line's start-up and warm plan (issue 34 goal 3), this tree against another
-revision, side by side: median wall and CPU seconds of each command in its own process.
+revision, side by side: median wall and CPU seconds of each command in its own process, and
+its wall time less the time it waited for a CPU ("core free": what it takes on an idle
+machine; the main thread's run-queue wait from ``/proc/PID/schedstat``).
 
     python benchmarks/bench_cli.py [--base REV] [--rounds 7] [--imports] [--phases]
 
@@ -52,16 +54,28 @@ def _env(extra: dict[str, str] | None = None) -> dict[str, str]:
             "RANGEPLAN_RESIDENT_S": "0", **(extra or {})}
 
 
-def timed(cmd: list[str], cwd: Path, env: dict[str, str] | None = None) -> tuple[float, float]:
-    """Run ``cmd``; (wall s, CPU s of the child). Raises on failure, with its stderr."""
+def timed(cmd: list[str], cwd: Path, env: dict[str, str] | None = None) -> tuple[float, float, float]:
+    """Run ``cmd``; (wall s, CPU s of the child, wall s less the time it waited for a CPU).
+    The last is the wall time the command takes with a core free for it (its I/O and sleeps
+    included): the kernel's run-queue wait of the process's main thread
+    (``/proc/PID/schedstat``, read while the exited child is not yet reaped), subtracted
+    from the wall time. Raises on failure, with its stderr."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    out = subprocess.run(cmd, cwd=cwd, env=_env(env), capture_output=True, text=True)
-    wall = time.perf_counter() - t0
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if out.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)} in {cwd}: exit {out.returncode}\n{out.stderr[-2000:]}")
-    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    with tempfile.TemporaryFile("w+") as err:
+        p = subprocess.Popen(cmd, cwd=cwd, env=_env(env), stdout=subprocess.DEVNULL, stderr=err, text=True)
+        os.waitid(os.P_PID, p.pid, os.WEXITED | os.WNOWAIT)
+        wall = time.perf_counter() - t0
+        try:
+            waited = int(Path(f"/proc/{p.pid}/schedstat").read_text().split()[1]) / 1e9
+        except (OSError, IndexError, ValueError):
+            waited = float("nan")
+        code = p.wait()
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        if code != 0:
+            err.seek(0)
+            raise RuntimeError(f"{' '.join(cmd)} in {cwd}: exit {code}\n{err.read()[-2000:]}")
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), wall - waited
 
 
 #: the base's resident (if it has one): a key of this run's own (any RANGEPLAN_* variable keys it)
@@ -179,7 +193,7 @@ def main() -> int:
         cmds = {"--help": [PY, "-m", "app.cli", "--help"],
                 "plan warm": [PY, "-m", "app.cli", "plan", str(TABLE1), "-o", str(tmp / "out.json")]}
         batch = [PY, "-m", "app.cli", "batch", str(ten), "--inline", "--progress", "none", "-o"]
-        rows: dict[tuple[str, str], list[tuple[float, float]]] = {}
+        rows: dict[tuple[str, str], list[tuple[float, float, float]]] = {}
         for name, tree in trees.items():  # once each, untimed: byte-compiled sources, kernels in the page cache
             timed(cmds["plan warm"], tree)
             timed([*batch, str(tmp / f"batch-{name}-warm")], tree)
@@ -212,15 +226,18 @@ def main() -> int:
                               text=True).stdout.strip()
         print(f"median of {args.rounds} rounds; head = {ROOT} (HEAD {head}, uncommitted changes included), "
               f"base = {args.base}; load average {os.getloadavg()[0]:.2f}")
-        print("| command | base wall s | head wall s | head/base | base CPU s | head CPU s |")
-        print("|---|---|---|---|---|---|")
+        print("| command | base wall s | head wall s | base wall, core free s | head wall, core free s | head/base "
+              "(core free) | base CPU s | head CPU s |")
+        print("|---|---|---|---|---|---|---|---|")
         for label in [*cmds, "plan warm, resident", "10 plans, batch --inline"]:
             bw, hw = med((label, "base"), 0), med((label, "head"), 0)
             bc, hc = med((label, "base"), 1), med((label, "head"), 1)
+            bf, hf = med((label, "base"), 2), med((label, "head"), 2)
             if bw is None and hw is None:
                 continue
-            ratio = f"{hw / bw:.2f}" if hw is not None and bw is not None else "-"
-            print(f"| {label} | {cell(bw)} | {cell(hw)} | {ratio} | {cell(bc)} | {cell(hc)} |")
+            ratio = f"{hf / bf:.2f}" if hf is not None and bf is not None else "-"
+            print(f"| {label} | {cell(bw)} | {cell(hw)} | {cell(bf)} | {cell(hf)} | {ratio} | {cell(bc)} | "
+                  f"{cell(hc)} |")
         if args.imports:
             for name, tree in trees.items():
                 print(f"\nheaviest top-level imports of `plan warm`, {name} (ms, cumulative, one run):")
