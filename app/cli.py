@@ -5,7 +5,7 @@
 Bad input exits with status 2 and one line naming the field and the cause.
 
 ``plan`` and ``contour`` submit the API's typed jobs (:class:`app.jobs.PlanJob`,
-:class:`app.jobs.ContourJob`) and run them in this process (:func:`run_here`): the same error
+:class:`app.jobs.ContourJob`) to the in-process executor (:func:`run_here`): the same error
 mapping and the same bytes per output format as ``POST /v1/plan`` answers (JSON indented
 unless ``--compact``). Every command runs in its own process and ends with it: no resident
 planner, nothing written after the command has ended (an output file is replaced whole).
@@ -87,18 +87,20 @@ def cmd_plan(args) -> int:
 
 
 def run_here(job: PlanJob | ContourJob, name: str, compile_first: bool) -> Done:
-    """Run a planning ``job`` (:class:`app.jobs.PlanJob` / :class:`app.jobs.ContourJob`) in this
-    process, the way the service's workers run it (:func:`app.jobs.run_job`: the same error
-    mapping and serialisation); its :class:`app.jobs.Done`, or an :class:`InputError` naming
+    """Run a planning ``job`` (:class:`app.jobs.PlanJob` / :class:`app.jobs.ContourJob`) on the
+    in-process executor (:class:`app.executors.InProcessExecutor`: :func:`app.jobs.run_job`, as
+    the service's workers run it, the same error mapping and serialisation; no time limit: the
+    command is the user's to stop); its :class:`app.jobs.Done`, or an :class:`InputError` naming
     ``name`` and the cause (exit 2). A planner bug is an ``internal_error`` (exit 1, with its
     traceback). Unless ``compile_first``, a job whose kernels are not compiled yet plans on the
     numpy reference (:func:`reference_while_compiling`)."""
-    from app.jobs import Failed, run_job
+    from app.executors import InProcessExecutor
+    from app.jobs import Failed
     from planner.orchestrator.compiling import compile_progress
 
     runs: Job = job if compile_first else reference_while_compiling(job)
     with compile_progress():  # the first plan after installing compiles the kernels: progress on stderr
-        out = run_job(runs)
+        out = InProcessExecutor().run(runs)
     if isinstance(out, Failed):
         e = out.error
         why = f"{name}: {e.code}: {e.field + ': ' if e.field else ''}{e.message}"
