@@ -3,6 +3,12 @@
 ``rangeplan import DRAWING.dxf|.svg [options] -o request.json`` and ``rangeplan serve``.
 
 Bad input exits with status 2 and one line naming the field and the cause.
+
+``plan`` and ``contour`` submit the API's typed jobs (:class:`app.jobs.PlanJob`,
+:class:`app.jobs.ContourJob`) to the in-process executor (:func:`run_here`): the same error
+mapping and the same bytes per output format as ``POST /v1/plan`` answers (JSON indented
+unless ``--compact``). Every command runs in its own process and ends with it: no resident
+planner, nothing written after the command has ended (an output file is replaced whole).
 """
 
 from __future__ import annotations
@@ -17,12 +23,24 @@ import argparse  # noqa: E402
 import contextlib  # noqa: E402
 import json  # noqa: E402
 import sys  # noqa: E402
-from collections.abc import Callable  # noqa: E402
 from pathlib import Path  # noqa: E402
+from typing import TYPE_CHECKING  # noqa: E402
+
+if TYPE_CHECKING:
+    from app.jobs import ContourJob, Done, Job, PlanJob
 
 
 class InputError(Exception):
     """A user error: printed as one line, exit status 2."""
+
+
+class PlannerBug(Exception):
+    """A planner failure that is not the input's fault (``internal_error``): printed with its
+    traceback, exit status 1."""
+
+    def __init__(self, message: str, trace: str | None = None) -> None:
+        super().__init__(message)
+        self.trace = trace
 
 
 def load_request(path: str):
@@ -55,63 +73,129 @@ def output_format(args) -> str:
 
 
 def cmd_plan(args) -> int:
-    from planner import PlannerError, estimate_work, plan
-    from planner.orchestrator.compiling import compile_progress
+    """``rangeplan plan REQUEST.json``: the API's :class:`app.jobs.PlanJob`, run in this process."""
+    from app.jobs import PlanJob
 
     request = load_request(args.input)
-    fmt = output_format(args)
-    st = request.settings
-    on_ref = request.model_copy(update={"settings": st.model_copy(update={"backend": "reference"})})
-    if not args.compile and on_reference_while_compiling(st.backend, st.mode, lambda: estimate_work(on_ref).seconds):
-        request = on_ref
-    try:
-        with compile_progress():  # the first plan after installing compiles the kernels: progress on stderr
-            result = plan(request)
-    except PlannerError as exc:
-        raise InputError(f"{args.input}: {exc.code}: {exc}") from None
-    m = result.metrics
-    emit(result, args, fmt, layout=request.layout,
-         summary=f"{m.steps} steps, {m.duration_s:.2f} s, end error {m.end_error_m * 1e3:.3f} mm, "
-         f"max force {m.max_drive_force_n:.1f} N, compute {m.compute_ms:.0f} ms")
+    job = PlanJob(request, format=output_format(args), forces=args.forces, source=args.input)
+    out = run_here(job, args.input, args.compile)
+    s = out.summary or {}
+    write_output(out.payload or b"", args, job.format,
+                 f"{s['steps']} steps, {s['duration_s']:.2f} s, end error {s['end_error_m'] * 1e3:.3f} mm, "
+                 f"max force {s['max_drive_force_n']:.1f} N, compute {s['compute_ms']:.0f} ms")
     return 0
 
 
-def on_reference_while_compiling(backend: str, mode: str, estimate: Callable[[], float] | None = None) -> bool:
-    """The CLI's fallback after installing (:func:`planner.orchestrator.background.while_compiling`):
-    True when the plan should run on the numpy reference because its kernels are not compiled
-    yet (they compile in a background process meanwhile; one line on stderr says so, with the
-    plan's work estimate on the reference where ``estimate`` gives it [s])."""
+def run_here(job: PlanJob | ContourJob, name: str, compile_first: bool) -> Done:
+    """Run a planning ``job`` (:class:`app.jobs.PlanJob` / :class:`app.jobs.ContourJob`) on the
+    in-process executor (:class:`app.executors.InProcessExecutor`: :func:`app.jobs.run_job`, as
+    the service's workers run it, the same error mapping and serialisation; no time limit: the
+    command is the user's to stop); its :class:`app.jobs.Done`, or an :class:`InputError` naming
+    ``name`` and the cause (exit 2). A planner bug is an ``internal_error`` (exit 1, with its
+    traceback). Unless ``compile_first``, a job whose kernels are not compiled yet plans on the
+    numpy reference (:func:`reference_while_compiling`)."""
+    from app.executors import InProcessExecutor
+    from app.jobs import Failed
+    from planner.orchestrator.compiling import compile_progress
+
+    runs: Job = job if compile_first else reference_while_compiling(job)
+    with compile_progress():  # the first plan after installing compiles the kernels: progress on stderr
+        out = InProcessExecutor().run(runs)
+    if isinstance(out, Failed):
+        e = out.error
+        why = f"{name}: {e.code}: {e.field + ': ' if e.field else ''}{e.message}"
+        if out.status >= 500:
+            raise PlannerBug(why, out.trace)
+        raise InputError(why)
+    return out
+
+
+def reference_while_compiling(job: PlanJob | ContourJob) -> Job:
+    """``job`` as it runs while the kernels are not compiled: the edges' one rule, as the
+    service applies it (:func:`planner.orchestrator.background.while_compiling` decides and
+    starts the background compile; :func:`app.service.on_reference` moves the job to the numpy
+    reference); one line on stderr says so, with the plan's work estimate on the reference
+    where there is one (:func:`app.jobs.estimate`). Other jobs as they are."""
+    from app.jobs import PlanJob
     from planner import PlannerError
     from planner.orchestrator.background import while_compiling
 
-    running = while_compiling(backend, mode)
+    try:  # a contour request's settings are filled by the program's (its plan_settings)
+        st = job.request.settings if isinstance(job, PlanJob) else job.request.plan_settings()
+    except PlannerError:
+        return job  # the job names the fault
+    running = while_compiling(st.backend, st.mode)
     if running is None:
-        return False
+        return job
+    from app.jobs import estimate
+    from app.service import on_reference  # (only here: the warm path never loads the service)
+
+    moved = on_reference(job)
     try:
-        plan_s = estimate() if estimate is not None else None
+        work = estimate(moved)
+        plan_s = work.seconds if work is not None else None
     except PlannerError:
         plan_s = None  # the plan names the fault
     print(running.note(plan_s), file=sys.stderr, flush=True)
-    return True
+    return moved
 
 
-def emit(result, args, fmt: str, *, summary: str, layout=None, warnings: tuple[str, ...] = ()) -> None:
-    """Write a plan result in ``fmt`` to ``args.output`` (a one-line ``summary`` and any
-    ``warnings`` on stderr) or to standard output (``args.output`` unset or ``-``)."""
-    from app.formats import write
-
-    if fmt == "json":
-        text = json.dumps(result.to_json_dict(), indent=None if args.compact else 1)
-    else:
-        text = write(result, fmt, layout=layout, forces=args.forces, source=getattr(args, "input", None)
-                     or getattr(args, "program", None)).decode()
+def write_output(payload: bytes, args, fmt: str, summary: str, warnings: tuple[str, ...] = ()) -> None:
+    """Write a job's ``payload`` (``fmt``, serialised by the job as the API serialises it:
+    :data:`app.formats.OUTPUT_FORMATS`) to ``args.output`` (a one-line ``summary`` and any
+    ``warnings`` on stderr) or to standard output (``args.output`` unset or ``-``). JSON is
+    indented (one space) unless ``--compact``. A file is replaced whole (written beside it,
+    then renamed): a command stopped while writing leaves the previous file as it was."""
+    if fmt == "json" and not args.compact:
+        payload = json.dumps(json.loads(payload), indent=1).encode()
+    if not payload.endswith(b"\n"):
+        payload += b"\n"
     if args.output and args.output != "-":
-        Path(args.output).write_text(text + ("" if text.endswith("\n") else "\n"))
+        _replace_file(Path(args.output), payload)
         print(f"wrote {args.output}: {summary}", file=sys.stderr)
         for w in warnings:
             print(f"  warning: {w}", file=sys.stderr)
     else:
-        sys.stdout.write(text if text.endswith("\n") else text + "\n")
+        sys.stdout.flush()
+        sys.stdout.buffer.write(payload)
+        sys.stdout.flush()
+
+
+def _replace_file(path: Path, data: bytes) -> None:
+    """``path`` holding ``data``: a regular file (or a new one) is replaced at once by a renamed
+    temporary file beside it (its mode kept); anything else (a device, a pipe, a symlink's
+    target that is no regular file) is written in place."""
+    import stat
+
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        st = None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write: {exc.strerror or exc}") from None
+    if st is not None and not stat.S_ISREG(st.st_mode):
+        try:
+            path.write_bytes(data)
+        except OSError as exc:
+            raise InputError(f"{path}: cannot write: {exc.strerror or exc}") from None
+        return
+    target = path.resolve() if path.is_symlink() else path
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    try:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)  # the umask applies, as to a new file
+        try:
+            if st is not None:
+                os.fchmod(fd, stat.S_IMODE(st.st_mode))
+            with os.fdopen(fd, "wb", closefd=False) as f:
+                f.write(data)
+        finally:
+            os.close(fd)
+        os.replace(tmp, target)
+    except BaseException as exc:
+        tmp.unlink(missing_ok=True)
+        if isinstance(exc, OSError):
+            raise InputError(f"{path}: cannot write: {exc.strerror or exc}") from None
+        raise
 
 
 def parse_pair(text: str, option: str) -> list[float]:
@@ -126,7 +210,7 @@ def parse_pair(text: str, option: str) -> list[float]:
 def cmd_contour(args) -> int:
     """``rangeplan contour PROGRAM.ngc``: plan a G-code program (issue 22)."""
     from planner import PlannerError
-    from planner.contour import parse_contour_request, plan_contour
+    from planner.contour import parse_contour_request
     from planner.schema import MAX_PROGRAM_BYTES
 
     try:
@@ -147,24 +231,20 @@ def cmd_contour(args) -> int:
         request["origin"] = "fit" if args.origin.strip().lower() == "fit" else parse_pair(args.origin, "--origin")
     if args.tolerance is not None:
         request["tolerance_m"] = args.tolerance
-    fmt = output_format(args)
+    from app.jobs import ContourJob
+
     try:
-        st = parse_contour_request(request).plan_settings()
-    except PlannerError:
-        st = None  # plan_contour names the fault
-    if st is not None and not args.compile and on_reference_while_compiling(st.backend, st.mode):
-        request["settings"] = {**settings, "backend": "reference"}
-    try:
-        result = plan_contour(request)
+        job = ContourJob(parse_contour_request(request), format=output_format(args), forces=args.forces,
+                         source=args.program)
     except PlannerError as exc:
         raise InputError(f"{args.program}: {exc.code}: {exc}") from None
-    c = result.contour
-    assert c is not None
-    emit(result, args, fmt, warnings=tuple(c.warnings),
-         summary=f"origin [{c.origin[0]:g}, {c.origin[1]:g}] m, {len(c.passes)} passes, cycle {c.cycle_time_s:.2f} s "
-         f"(cutting {c.cut_time_s:.2f} s), deviation "
-         f"{c.max_deviation_m * 1e3:.4f} mm of {c.tolerance_m * 1e3:.4f} mm, max force "
-         f"{result.metrics.max_drive_force_n:.1f} N, compute {result.metrics.compute_ms:.0f} ms")
+    out = run_here(job, args.program, args.compile)
+    s = out.summary or {}
+    write_output(out.payload or b"", args, job.format, warnings=tuple(s["warnings"]),
+                 summary=f"origin [{s['origin'][0]:g}, {s['origin'][1]:g}] m, {s['passes']} passes, cycle "
+                 f"{s['cycle_time_s']:.2f} s (cutting {s['cut_time_s']:.2f} s), deviation "
+                 f"{s['max_deviation_m'] * 1e3:.4f} mm of {s['tolerance_m'] * 1e3:.4f} mm, max force "
+                 f"{s['max_drive_force_n']:.1f} N, compute {s['compute_ms']:.0f} ms")
     return 0
 
 
@@ -293,10 +373,6 @@ def _format_name(text: str) -> str:
     return text
 
 
-NO_RESIDENT = ("plan in this process: neither use the resident planner nor start one (README \"The resident "
-               "planner\"; RANGEPLAN_RESIDENT_S=0 for every command)")
-
-
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The whole parser; given the ``command`` about to run, the other commands' options that
     need heavy imports are left out (``rangeplan --help`` in well under a second)."""
@@ -317,7 +393,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     pp.add_argument("--compile", action="store_true", help="compile the kernels first if they are not compiled yet "
                     "(minutes, once after installing) instead of planning on the numpy reference while they compile "
                     "in the background")
-    pp.add_argument("--no-resident", action="store_true", help=NO_RESIDENT)
+    pp.add_argument("--no-resident", action="store_true", help=argparse.SUPPRESS)  # no resident any more: accepted
     pp.set_defaults(func=cmd_plan)
     add_import_parser(sub, full=command in (None, "import"))
     pc = sub.add_parser("contour", help="plan a G-code program (CAM tool path) within its tolerance",
@@ -342,7 +418,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     pc.add_argument("--compile", action="store_true", help="compile the kernels first if they are not compiled yet "
                     "(minutes, once after installing) instead of planning on the numpy reference while they compile "
                     "in the background")
-    pc.add_argument("--no-resident", action="store_true", help=NO_RESIDENT)
+    pc.add_argument("--no-resident", action="store_true", help=argparse.SUPPRESS)
     pc.set_defaults(func=cmd_contour)
     ps = sub.add_parser("serve", help="serve the HTTP API and the browser editor")
     ps.add_argument("--host", help="API host (env RANGEPLAN_HOST, default 127.0.0.1)")
@@ -358,47 +434,43 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``rangeplan``: ``plan`` and ``contour`` are handed to the resident planner when one runs
-    (:mod:`app.resident`: the same output, messages and exit status in ~0.1 s), else run here
-    and then start one (after the output is written)."""
-    argv = sys.argv[1:] if argv is None else argv
-    command = _command(argv)
-    if command in ("plan", "contour"):
-        from app import resident
+    """``rangeplan``: every command runs in this process and ends with it (no resident
+    planner; the background compile after installing is the one process a command may start,
+    README "the first plan"). Run as the program (``argv`` None: the console script,
+    ``python -m app.cli``), ``plan`` and ``contour`` end the process themselves once done
+    (:func:`_end_process`); given an ``argv`` (a caller in Python), it returns the status."""
+    if argv is not None:
+        return run(argv)
+    code = run(sys.argv[1:])
+    if _command(sys.argv[1:]) in ("plan", "contour"):
+        _end_process(code)
+    return code
 
+
+def _end_process(code: int) -> None:
+    """End this process with ``code`` after the exit handlers (:mod:`atexit`: a temporary
+    kernel cache removed, weakref finalizers, logging) and the standard streams are flushed,
+    without the interpreter's teardown: freeing the ~830 modules of a plan, numba's and
+    LLVM's objects among them, takes ~0.26 CPU s (a quarter of a warm plan's; measured by
+    benchmarks/bench_cli.py), for a process about to end. Returns (the normal exit follows)
+    where the interpreter has no ``atexit._run_exitfuncs``."""
+    import atexit
+
+    run_exit_handlers = getattr(atexit, "_run_exitfuncs", None)
+    if run_exit_handlers is None:
+        return
+    run_exit_handlers()
+    for stream in (sys.stdout, sys.stderr):
         try:
-            code, start = resident.client_main(argv, command)
-        except KeyboardInterrupt:  # waiting for the resident's answer (its plan goes on)
-            return 130
-        if code is not None:
-            return code
-        code = run(argv)
-        if start:
-            sys.stdout.flush()
-            sys.stderr.flush()
-            resident.start_resident()
-        return code
-    return run(argv)
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe: the status Python gives a failed flush at exit
+            code = 120
+    os._exit(code)
 
 
 def _command(argv: list[str]) -> str:
     """The first word that is no option names the command ("" for ``rangeplan --help``)."""
     return next((a for a in argv if not a.startswith("-")), "")
-
-
-def resident_main() -> None:
-    """The resident planner's process (started by :func:`app.resident.start_resident`, its key
-    as the argument): loads the planner and every kernel, then serves ``plan`` and ``contour``."""
-    from app import resident
-
-    def warm() -> None:
-        from planner import warm_up
-
-        warm_up()  # every kernel loaded from the cache
-        import app.formats  # noqa: F401  what the commands import when they run
-        import planner.contour  # noqa: F401
-
-    sys.exit(resident.serve(sys.argv[1], run, warm))
 
 
 def seed_kernels() -> None:
@@ -413,17 +485,21 @@ def seed_kernels() -> None:
 
 
 def run(argv: list[str]) -> int:
-    """The CLI in this process."""
+    """The CLI in this process (Ctrl-C: status 130, from the first import on)."""
     command = _command(argv)
-    parser = build_parser(command)
-    args = parser.parse_args(argv)
     try:
+        args = build_parser(command).parse_args(argv)
         if command in ("plan", "contour", "batch"):
             seed_kernels()
         return args.func(args)
     except InputError as exc:
         print(f"rangeplan: error: {exc}", file=sys.stderr)
         return 2
+    except PlannerBug as exc:
+        if exc.trace:
+            print(exc.trace, end="", file=sys.stderr)
+        print(f"rangeplan: error: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         return 130
 

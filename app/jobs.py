@@ -349,11 +349,12 @@ def _summary(result) -> dict[str, Any]:
     m = result.metrics
     out = {"duration_s": m.duration_s, "energy": m.energy, "max_force_ratio": m.max_force_ratio,
            "contained": m.contained, "settled": m.settled, "end_error_m": m.end_error_m,
-           "max_corridor_violation_m": m.max_corridor_violation_m, "steps": m.steps, "compute_ms": m.compute_ms}
+           "max_corridor_violation_m": m.max_corridor_violation_m, "steps": m.steps, "compute_ms": m.compute_ms,
+           "max_drive_force_n": m.max_drive_force_n}
     c = getattr(result, "contour", None)
-    if c is not None:
+    if c is not None:  # (the CLI's summary line says these of a contour)
         out.update(max_deviation_m=c.max_deviation_m, tolerance_m=c.tolerance_m, cycle_time_s=c.cycle_time_s,
-                   cut_time_s=c.cut_time_s, passes=len(c.passes))
+                   cut_time_s=c.cut_time_s, passes=len(c.passes), origin=list(c.origin), warnings=list(c.warnings))
     return out
 
 

@@ -18,8 +18,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import Field, JsonValue, ValidationError
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic import BaseModel, ConfigDict, Field, JsonValue, ValidationError
 
 __all__ = ["Settings", "SettingsError", "client_token", "env_name", "settings", "settings_table"]
 
@@ -44,12 +43,14 @@ def _f(default: Any = None, description: str = "", *, cli: str | None = None, de
     return Field(default, description=description, json_schema_extra=extra, **kw)
 
 
-class Settings(BaseSettings):
-    """Configuration of ``rangeplan serve``, the HTTP API, its workers, storage, batches and
-    the editor: each field is the environment variable ``RANGEPLAN_<FIELD>``."""
+class Settings(BaseModel):
+    """Configuration of ``rangeplan serve``, the HTTP API, its workers, storage, batches, the
+    editor and the command line: each field is the environment variable ``RANGEPLAN_<FIELD>``
+    (read by :func:`settings`; a plain pydantic model: pydantic-settings' sources import
+    asyncio and more, ~0.1 s of every ``rangeplan plan``, for what is one loop over the
+    environment here)."""
 
-    model_config = SettingsConfigDict(env_prefix="RANGEPLAN_", extra="ignore", frozen=True,
-                                      env_ignore_empty=True)
+    model_config = ConfigDict(extra="ignore", frozen=True)
 
     # -- serving
     host: str = _f("127.0.0.1", "Address the API binds (a non-loopback address needs a token)", cli="serve --host")
@@ -107,10 +108,6 @@ class Settings(BaseSettings):
                                     "(and the service's plans with RANGEPLAN_EXECUTOR=dask)",
                                     cli="batch --scheduler")
     dask_malloc: str = _f("relax", "glibc malloc tuning of Dask workers (relax | keep)")
-    # -- the command line
-    resident_s: float = _f(600.0, "Seconds the CLI's resident planner stays without a request before it exits "
-                           "(0: no resident; README \"The resident planner\")", cli="plan/contour --no-resident",
-                           ge=0)
     # -- kernels
     kernel_seed: Path | None = _f(None, "Compiled-kernel cache copied into NUMBA_CACHE_DIR before the planner loads")
     # -- other programs' variables the service follows (named as they are, no prefix)
@@ -135,15 +132,6 @@ def env_name(field: str) -> str:
 _BY_ENV = {env_name(f): f for f in Settings.model_fields}
 
 
-class _Given(Settings):
-    """:class:`Settings` from given values only (no environment, no dotenv)."""
-
-    @classmethod
-    def settings_customise_sources(cls, settings_cls, init_settings, env_settings, dotenv_settings,
-                                   file_secret_settings):
-        return (init_settings,)
-
-
 class SettingsError(ValueError):
     """An environment variable whose value does not parse (its name and the cause)."""
 
@@ -152,12 +140,14 @@ def settings(environ: Mapping[str, str] | None = None) -> Settings:
     """The settings of the current environment (or of the variables in ``environ``: a
     policy or a path computed for another environment, tests); raises
     :class:`SettingsError` for a value that does not parse."""
+    if environ is None:  # the process environment: names in any case (as pydantic-settings read them)
+        given = {name.upper(): v for name, v in os.environ.items()}
+    else:
+        given = dict(environ)
+    values: dict[str, Any] = {str(Settings.model_fields[f].validation_alias or f): v for name, v in given.items()
+                              if (f := _BY_ENV.get(name)) is not None and v != ""}  # empty: the default
     try:
-        if environ is None:
-            return Settings()
-        values: dict[str, Any] = {str(Settings.model_fields[f].validation_alias or f): v for name, v in environ.items()
-                  if (f := _BY_ENV.get(name)) is not None and v != ""}
-        return _Given(**values)
+        return Settings.model_validate(values)
     except ValidationError as exc:
         e = exc.errors()[0]
         loc = str(e["loc"][0]) if e.get("loc") else ""

@@ -55,3 +55,175 @@ def test_bad_input_exits_2_with_one_line(tmp_path, content, needle):
 def test_missing_file_exits_2():
     r = run("plan", "/nonexistent/x.json")
     assert r.returncode == 2 and "cannot read" in r.stderr
+
+
+def test_output_to_a_directory_exits_2(tmp_path):
+    r = run("plan", str(TABLE1), "-o", str(tmp_path))
+    assert r.returncode == 2 and str(tmp_path) in r.stderr and "cannot write" in r.stderr
+    assert "Traceback" not in r.stderr and list(tmp_path.iterdir()) == []
+
+
+def test_compact_json_is_the_apis_serialisation_and_the_default_indents_it(tmp_path):
+    """``--compact`` writes the job's own bytes (what ``POST /v1/plan`` answers); the default is
+    the same document indented: one serializer for JSON."""
+    compact, pretty = run("plan", str(TABLE1), "--compact"), run("plan", str(TABLE1))
+    assert compact.returncode == 0 and pretty.returncode == 0
+    assert compact.stdout.count("\n") == 1 and ", " not in compact.stdout[:2000]  # no separator spaces
+    a, b = json.loads(compact.stdout), json.loads(pretty.stdout)
+    for doc in (a, b):  # the only fields two runs may differ in: the time the plan took
+        for k in [k for k in doc["metrics"] if k.endswith("_ms")]:
+            del doc["metrics"][k]
+    assert a == b and pretty.stdout.startswith('{\n "plan_id": null')
+
+
+# ---------------------------------------------------------------------------------------
+# no hidden processes (issue 34): a command plans in its own process, and a command that is
+# stopped never writes its output afterwards
+
+def _ours(marker: str) -> set[int]:
+    """Processes whose environment carries ``marker`` (a command and anything it started,
+    detached or not: children inherit the environment)."""
+    import os
+    from pathlib import Path
+
+    found = set()
+    for proc in Path("/proc").iterdir():
+        if proc.name.isdigit() and int(proc.name) != os.getpid():
+            try:
+                if f"RANGEPLAN_TEST_MARKER={marker}\0".encode() in (proc / "environ").read_bytes():
+                    found.add(int(proc.name))
+            except OSError:
+                pass
+    return found
+
+
+def _cpu_s(pid: int) -> float:
+    """CPU seconds (user + system) ``pid`` has used so far."""
+    import os
+
+    fields = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _command_cpu(path, out, marker: str) -> tuple[float, float]:
+    """(CPU s, wall s) of ``rangeplan plan PATH -o OUT`` run to the end, which must leave no
+    process behind (no resident, no daemon: nothing outlives the command)."""
+    import os
+    import resource
+    import time
+
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.monotonic()
+    r = subprocess.run([*CLI, "plan", str(path), "-o", str(out)], capture_output=True, text=True, timeout=300,
+                       env={**os.environ, "RANGEPLAN_TEST_MARKER": marker})
+    wall = time.monotonic() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    assert r.returncode == 0, r.stderr
+    assert not _ours(marker)
+    return after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime, wall
+
+
+@pytest.fixture(scope="module")
+def slow_request(tmp_path_factory):
+    """(file, CPU s at which a command of it is halfway through its plan, wall s of the whole
+    command): Table I on the numpy reference, a plan of CPU seconds, much longer than the
+    command's start-up (measured: a compiled Table I command is start-up and a ~0.03 s plan)."""
+    import os
+
+    from planner.orchestrator.background import kernels_ready
+
+    if not kernels_ready(None):
+        pytest.skip("the kernels are not compiled: a plan would start the background compile")
+    d = tmp_path_factory.mktemp("slow")
+    req = {**json.loads(TABLE1.read_text()), "settings": {"backend": "reference"}}
+    path = d / "slow.json"
+    path.write_text(json.dumps(req))
+    start_cpu, _ = _command_cpu(TABLE1, d / "fast.json", f"start-{os.getpid()}")
+    cpu, wall = _command_cpu(path, d / "out.json", f"slow-{os.getpid()}")
+    assert json.loads((d / "out.json").read_text())["settings"]["backend"] == "reference"
+    assert cpu - start_cpu > 0.5, (cpu, start_cpu)  # the plan is CPU seconds: a kill can land inside it
+    return path, start_cpu + (cpu - start_cpu) / 2, wall
+
+
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGKILL"])
+def test_a_stopped_command_never_writes_its_output_later(tmp_path, slow_request, sig):
+    """The bug of the resident planner: a command stopped mid-plan (Ctrl-C, or killed) whose
+    plan then ran to the end elsewhere and overwrote the output of a newer command. Stop one
+    halfway through its plan, run a newer command to the same file, wait until well after the
+    stopped one would have finished: the file is the newer command's, no process of the
+    stopped command is left, and nothing else was written beside it."""
+    import os
+    import signal
+    import time
+
+    path, halfway, wall = slow_request
+    out = tmp_path / "out.json"
+    marker = f"stop-{sig}-{os.getpid()}"
+    t0 = time.monotonic()
+    p = subprocess.Popen([*CLI, "plan", str(path), "-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True, env={**os.environ, "RANGEPLAN_TEST_MARKER": marker})
+    while _cpu_s(p.pid) < halfway:
+        assert p.poll() is None, p.communicate()
+        time.sleep(0.02)
+    p.send_signal(getattr(signal, sig))
+    _, err = p.communicate(timeout=60)
+    assert p.returncode == (130 if sig == "SIGINT" else -signal.SIGKILL), err
+    assert "Traceback" not in err and not out.exists()
+    newer = run("plan", str(TABLE1), "--compact", "-o", str(out))
+    assert newer.returncode == 0, newer.stderr
+    written = out.read_bytes()
+    while time.monotonic() < t0 + 2 * wall:  # the stopped plan would have ended by now, and more
+        assert not _ours(marker)
+        time.sleep(0.1)
+    assert out.read_bytes() == written and json.loads(written)["settings"]["backend"] == "compiled"
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["out.json"]
+
+
+def test_no_resident_is_accepted_and_ignored(tmp_path):
+    """``--no-resident`` (before issue 34: plan without the resident planner) still parses, so
+    scripts that pass it keep working; every plan runs in the command's own process."""
+    r = run("plan", str(TABLE1), "--no-resident", "-o", str(tmp_path / "t.csv"))
+    assert r.returncode == 0 and (tmp_path / "t.csv").read_text().startswith("time_s,")
+    assert "--no-resident" not in run("plan", "--help").stdout
+
+
+def test_while_the_kernels_compile_plan_and_contour_jobs_move_to_the_reference(monkeypatch, capsys):
+    """The CLI applies the service's rule (app.service.on_reference) when the one decision
+    (while_compiling) says the kernels are compiling: a plan and a contour job plan on the numpy
+    reference, one note on stderr (with the plan's estimate on the reference); asked for another
+    backend, or with the kernels compiled, the job is left as it is."""
+    import planner.orchestrator.background as background
+    from app.cli import reference_while_compiling
+    from app.jobs import ContourJob, PlanJob
+    from planner.schema import ContourRequest, PlanRequest
+
+    asked = []
+
+    class Running:
+        def note(self, plan_s):
+            return f"compiling; plan {plan_s}"
+
+    def while_compiling(backend, mode):
+        asked.append((backend, mode))
+        return Running() if compiling and backend == "compiled" else None
+
+    monkeypatch.setattr(background, "while_compiling", while_compiling)
+    req = json.loads(TABLE1.read_text())
+    plan = PlanJob(PlanRequest.model_validate(req))
+    contour = ContourJob(ContourRequest.model_validate({"program": "G1 X1 F100\n", "settings": {"Ts": 0.01}}))
+    compiling = True
+    moved = reference_while_compiling(plan)
+    assert isinstance(moved, PlanJob)
+    assert moved.request.settings.backend == "reference" and plan.request.settings.backend == "compiled"
+    note = capsys.readouterr().err
+    assert note.startswith("compiling; plan ") and float(note.split()[-1]) > 0  # its estimate on the reference
+    moved_contour = reference_while_compiling(contour)
+    assert isinstance(moved_contour, ContourJob)
+    assert moved_contour.request.settings == {"Ts": 0.01, "backend": "reference"}
+    assert capsys.readouterr().err == "compiling; plan None\n"
+    assert asked == [("compiled", plan.request.settings.mode), ("compiled", contour.request.plan_settings().mode)]
+    on_ref = PlanJob(PlanRequest.model_validate({**req, "settings": {"backend": "reference"}}))
+    assert reference_while_compiling(on_ref) is on_ref
+    compiling = False
+    assert reference_while_compiling(plan) is plan and reference_while_compiling(contour) is contour
+    assert capsys.readouterr().err == ""

@@ -57,15 +57,9 @@ def test_a_mapping_is_read_alone_and_a_bad_value_names_its_variable(monkeypatch)
         settings({"RANGEPLAN_MAX_QUEUE": "many"})
 
 
-#: environment reads outside app/settings.py that are not configuration, with the reason
-_NOT_CONFIGURATION = {
-    # the CLI's resident planner: its client keys the socket by the environment and sends it on
-    # before pydantic loads (the start-up must stay light); RANGEPLAN_RESIDENT_S is a field of
-    # the settings, checked by them when a resident starts
-    ("app/resident.py", "other"),
-    # ... and gives argparse the client's terminal width while the resident runs its command
-    ("app/resident.py", "COLUMNS"),
-}
+#: environment reads outside app/settings.py that are not configuration, with the reason (none
+#: since the CLI's resident planner, which keyed its socket by the environment, is gone)
+_NOT_CONFIGURATION: set[tuple[str, str]] = set()
 
 
 def _environment_uses(path: Path) -> list[tuple[str, str]]:
