@@ -73,8 +73,7 @@ ENV OPENBLAS_NUM_THREADS=1 \
     RANGEPLAN_KERNEL_SEED=/opt/rangeplan/kernels \
     RANGEPLAN_DATA_DIR=/data \
     RANGEPLAN_PORT=8000 \
-    RANGEPLAN_EDITOR_PORT=8080 \
-    RANGEPLAN_RESIDENT_S=0
+    RANGEPLAN_EDITOR_PORT=8080
 
 # the service user owns only /data; group 0 may write it too (any uid run with gid 0)
 RUN useradd --uid 10001 --gid 0 --no-create-home --home-dir /tmp --shell /usr/sbin/nologin rangeplan \

@@ -1,7 +1,5 @@
 """Whether a directory is one only this user (or root) can change (issue 30): the one check of
-the places the planner loads compiled code from (:mod:`planner._jit`) and of the CLI's
-resident socket directory (``app/resident.py``). Standard library only, so that the CLI's
-light client can use it.
+the places the planner loads compiled code from (:mod:`planner._jit`). Standard library only.
 
 The rule (:func:`distrust`): the directory and each of its parents up to the root the user
 chose are real directories (``lstat``: no symlink to swap; the chosen root itself may be one),

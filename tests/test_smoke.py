@@ -73,9 +73,9 @@ class VenvTarget:
         self.site = venv / "lib"
 
     def env(self, **extra: str) -> dict[str, str]:
-        """The user's environment: no PYTHONPATH into the tree, no resident left behind."""
+        """The user's environment: no PYTHONPATH into the tree."""
         env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}
-        return {**env, "RANGEPLAN_RESIDENT_S": "0", **extra}
+        return {**env, **extra}
 
     def cli(self, args: list[str], cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess:
         return subprocess.run([str(self.bin / "rangeplan"), *args], cwd=cwd, env=self.env(), capture_output=True,
