@@ -56,6 +56,10 @@ router = APIRouter(tags=["jobs"])
 
 #: how often a handler looks at a contour's row for its estimate while it waits [s]
 POLL_S = 0.05
+#: the time after a contour's last pass (joining the passes, the contour section, storing the
+#: plan) as a share of the passes' own time: 0.25-0.32 measured on 4-40 passes
+#: (benchmarks/bench_jobs.py); counted in ``eta_s`` as that many passes per pass
+JOIN_SHARE = 0.3
 
 
 class JobProgress(BaseModel):
@@ -76,7 +80,8 @@ class JobStatus(BaseModel):
     updated: float = Field(description="When its row last changed (progress), s since the Unix epoch")
     eta_s: float | None = Field(description="Estimated time left, s: the work estimate less the time run until the "
                                 "first unit is done (not below a tenth of it), then the measured time per unit "
-                                "times the units left; 0 once every unit is done, null when unknown")
+                                "times the units left and the join after them (0.3 units per unit); 0 once ended, "
+                                "null when unknown")
     result: str | None = Field(description="Once done: the stored plan's URL (GET it, with ?format= if you like)")
     plan_id: str | None = Field(description="Once done: the stored plan's id")
     error: ErrorDetail | None = Field(description="Once failed: the error the synchronous call would have answered")
@@ -244,10 +249,10 @@ def job_status(row: dict) -> dict[str, Any]:
     if state in ("done", "failed"):
         eta = 0.0
     elif done > 0 and total and started is not None:
-        # the time per unit measured up to the last unit done, for the units left, less the
-        # time since that unit (0 once every unit is done: the plan is being joined and stored)
+        # the time per unit measured up to the last unit done, for the units left and the join
+        # after them, less the time since that unit
         updated = row["updated"] or now
-        eta = max((updated - started) / done * (total - done) - (now - updated), 0.0)
+        eta = max((updated - started) / done * (total - done + JOIN_SHARE * total) - (now - updated), 0.0)
     elif est is not None:  # nothing done yet: the work estimate less the time run (not below a tenth of it)
         eta = max(est - (elapsed or 0.0), 0.1 * est)
     err = row["error"]
