@@ -144,6 +144,17 @@ def test_the_server_answers_202_by_itself_over_the_threshold(tmp_path):
         assert r.json()["kind"] == "plan" and r.json()["progress"]["unit"] == "plans"
         final = poll(c, r.headers["Location"])[-1]
         assert final["state"] == "done" and final["progress"] == {"done": 1, "total": 1, "unit": "plans"}
+        # the typed client follows a job to its plan
+        from app.client import Client, RangeplanError
+
+        jobs = jobs_kept(app.state.store)
+        with Client(str(c.base_url), transport=c._transport) as rp:
+            res = rp.contour(PROGRAM, origin=ORIGIN)
+            assert jobs_kept(app.state.store) == jobs + 1  # it was a job
+            assert res.contour is not None and len(res.contour.passes) == PASSES and res.plan_id
+            with pytest.raises(RangeplanError) as err:
+                rp.contour(PROGRAM.replace("G1 Y20", "G41 Y20", 1), origin=ORIGIN)
+            assert err.value.code == "invalid_input" and "line 8" in err.value.message
         app.state.job_limits = JobLimits(10.0, 120.0, 600.0, 100, 3600.0)
         sync = c.post("/v1/plan", json=plan)
         assert sync.status_code == 200
