@@ -169,14 +169,20 @@ def test_unknown_job_is_404(client):
 
 
 def test_jobs_need_the_token(tmp_path):
-    app = create_app(Store(tmp_path), workers=1, executor="thread", access=AccessPolicy(token=TOKEN))
+    app = create_app(Store(tmp_path), workers=1, executor="thread",
+                     access=AccessPolicy(token=TOKEN, cors_origins=("http://cad.local:3000",)))
     with api_client(app) as c:
+        # a browser page of an allowed origin may send Prefer and read Preference-Applied
+        pre = c.options("/v1/contour", headers={"Origin": "http://cad.local:3000", "Access-Control-Request-Method":
+                                                "POST", "Access-Control-Request-Headers": "prefer, content-type"})
+        assert pre.status_code == 200 and "prefer" in pre.headers["access-control-allow-headers"].lower()
         assert c.get("/v1/jobs/abc").status_code == 401
         assert c.post("/v1/contour", json=BODY, headers=ASYNC).status_code == 401
         auth = {"Authorization": f"Bearer {TOKEN}"}
         assert c.get("/v1/jobs/abc", headers=auth).status_code == 404
-        r = c.post("/v1/contour", json=BODY, headers={**ASYNC, **auth})
+        r = c.post("/v1/contour", json=BODY, headers={**ASYNC, **auth, "Origin": "http://cad.local:3000"})
         assert r.status_code == 202
+        assert "preference-applied" in r.headers["access-control-expose-headers"].lower()
         assert c.get(r.headers["Location"]).status_code == 401
         assert poll(c, r.headers["Location"], headers=auth)[-1]["state"] == "done"
 
