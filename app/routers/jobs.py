@@ -45,10 +45,10 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from app import storage_io
 from app.errors import error_response, errors_doc
-from app.jobs import ContourJob, Done, ErrorDetail, Job, Outcome, PlanJob, estimate
+from app.jobs import ContourJob, Done, ErrorDetail, Job, Outcome, PlanJob, crashed, estimate
 from app.observability import observe_job
 from app.routers.deps import outcome_response, store, submit
-from app.storage import new_id
+from app.storage import Store, new_id
 
 __all__ = ["ACCEPTED_DOC", "JobStatus", "PREFER", "job_limits", "job_status", "parse_prefer", "router", "run_as_job"]
 
@@ -221,10 +221,20 @@ def _tasks(app: FastAPI) -> set:
 async def _run(app: FastAPI, job: ContourJob | PlanJob, fmt: str, limit_s: float) -> Outcome:
     """Run ``job`` on the app's job service under the job limit; end its row with the outcome."""
     t0 = time.perf_counter()
-    svc = app.state.ensure_service()
-    outcome = await svc.arun(job, limit_s)
+    try:
+        outcome = await app.state.ensure_service().arun(job, limit_s)
+    except Exception as exc:  # the service closing under it (the server stopping): the job failed
+        outcome = crashed(exc)
     observe_job(app, job, time.perf_counter() - t0, outcome)
-    st = app.state.store
+    try:
+        await _finish(app.state.store, job, outcome)
+    except Exception:  # the store's threads stopped with the server: the next one ends the row
+        pass
+    return outcome
+
+
+async def _finish(st: Store, job: ContourJob | PlanJob, outcome: Outcome) -> None:
+    """End the job's row with its outcome."""
     assert job.job_id is not None
     if isinstance(outcome, Done):
         if outcome.plan_id is None:
@@ -236,7 +246,6 @@ async def _run(app: FastAPI, job: ContourJob | PlanJob, fmt: str, limit_s: float
             await storage_io.write(st.job_finished, job.job_id, plan_id=outcome.plan_id)
     else:
         await storage_io.write(st.job_finished, job.job_id, error={**outcome.error.to_dict(), "status": outcome.status})
-    return outcome
 
 
 def job_status(row: dict) -> dict[str, Any]:
