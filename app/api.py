@@ -44,7 +44,7 @@ from app.handlers import install_error_handlers
 from app.jobs import clean_spool, spool_dir
 from app.middleware import BodySizeLimit
 from app.observability import install_observability
-from app.routers import corridors, planning, robots
+from app.routers import corridors, jobs, planning, robots
 from app.routers import service as service_routes
 from app.routers.contour import router as contour_router
 from app.routers.pages import STATIC_DIR, install_pages
@@ -144,7 +144,7 @@ def create_app(store: Store | None = None, *, workers: int | None = None, timeou
     install_observability(app, access_log=cfg.access_log)  # request ids, JSON access lines, GET /metrics
     app.state.access = access
     install_error_handlers(app)
-    for routes in (service_routes, robots, planning, corridors):
+    for routes in (service_routes, robots, planning, corridors, jobs):
         app.include_router(routes.router)
     install_docs(app)
     install_pages(app, cfg.static_dir)

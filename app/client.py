@@ -17,6 +17,7 @@ service answers (4xx, 5xx) is raised as :class:`RangeplanError` with its ``code`
 
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
@@ -99,11 +100,30 @@ class Client:
                 raise RangeplanError("http_error", r.text[:500], None, r.status_code) from None
         return r
 
+    def _plan_result(self, r: httpx.Response) -> PlanResult:
+        """The plan of a planning call's answer: the body (200), or, for a long request the
+        service answered ``202 Accepted`` as a job, the stored plan once the job at
+        ``Location`` is done (polled as its ``Retry-After`` says); a failed job raises its error."""
+        if r.status_code != 202:
+            return PlanResult.model_validate_json(r.content)
+        url = r.headers["Location"]
+        while True:
+            time.sleep(float(r.headers.get("Retry-After", "1")))
+            r = self._call("GET", url)
+            job = r.json()
+            if job["state"] == "done":
+                return self.fetch_plan(job["plan_id"])
+            if job["state"] == "failed":
+                e = job["error"] or {}
+                raise RangeplanError(e.get("code", "internal_error"), e.get("message", "the job failed"),
+                                     e.get("field"))
+
     # ------------------------------------------------------------------ planning
     def plan(self, request: Request) -> PlanResult:
         """Plan a request (``segments``, ``reference`` or ``layout``); the result carries
-        its ``plan_id`` for :meth:`fetch_plan` and :meth:`export`."""
-        return PlanResult.model_validate_json(self._call("POST", "/v1/plan", json=_body(request)).content)
+        its ``plan_id`` for :meth:`fetch_plan` and :meth:`export`. A long one the service runs
+        as a job (202) is followed to its end."""
+        return self._plan_result(self._call("POST", "/v1/plan", json=_body(request)))
 
     def plan_corridor(self, corridor_id: str) -> PlanResult:
         """Plan a saved corridor."""
@@ -139,7 +159,7 @@ class Client:
             e = planner_error(exc)
             raise RangeplanError(e.code, e.message, e.field) from None
         r = self._call("POST", "/v1/contour", json=body.model_dump(mode="json", exclude_none=True))
-        return PlanResult.model_validate_json(r.content)
+        return self._plan_result(r)  # a long program: a job (202), followed to its end
 
     # ------------------------------------------------------------------ drawings
     def import_drawing(self, drawing: str | Path | bytes, *, format: Literal["dxf", "svg"] | None = None,

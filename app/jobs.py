@@ -43,7 +43,7 @@ from planner.schema import ContourRequest, ImportOptions, PlanRequest, PlanResul
 
 __all__ = ["ContourJob", "ContourWork", "Done", "EditorJob", "EditorPlan", "ErrorDetail", "ExportJob", "Failed",
            "ImportJob", "Job", "Outcome", "PlanJob", "SegmentJob", "SleepJob", "bounded",
-           "check_estimate", "clean_spool", "crashed", "estimate", "failed", "run_job",
+           "check_estimate", "clean_spool", "crashed", "estimate", "failed", "job_progress", "run_job",
            "segmentation_module", "spool_dir", "spool_plan_json"]
 
 
@@ -90,6 +90,8 @@ class PlanJob:
     #: a layout's corridor, once segmented, is estimated again and refused over this [s]
     #: (:func:`planner.plan`'s ``work_limit_s``; set from the time limit by :func:`bounded`)
     work_limit_s: float | None = None
+    #: the HTTP job this runs as (a row of the store's ``jobs``, marked running by the worker)
+    job_id: str | None = None
     kind: ClassVar[str] = "plan"
 
 
@@ -148,6 +150,9 @@ class ContourJob:
     store: str | None = None
     #: refused over this estimate [s] (set from the time limit by :func:`bounded`)
     work_limit_s: float | None = None
+    #: the HTTP job this runs as (a row of the store's ``jobs``): the worker writes its
+    #: estimate and its progress (cut passes done) there (:func:`job_progress`)
+    job_id: str | None = None
     kind: ClassVar[str] = "contour"
 
 
@@ -288,6 +293,8 @@ def _plan(job: PlanJob) -> Done:
     from planner import plan
 
     req = job.request
+    if job.job_id:
+        job_progress(job.store, job.job_id)(0, 1)
     result = plan(req, work_limit_s=job.work_limit_s)
     plan_id = new_id() if job.store else None
     result.plan_id = plan_id
@@ -318,11 +325,15 @@ def _contour(job: ContourJob) -> Done:
 
     req = job.request
     program = read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
-    if job.work_limit_s:
+    progress = None
+    if job.work_limit_s or job.job_id:
         work = ContourWork(*estimate_contour(req, program))
-        if work.seconds > job.work_limit_s:
+        if job.work_limit_s and work.seconds > job.work_limit_s:
             raise PlannerError(**too_much_work(work, job.work_limit_s))
-    result = plan_contour(req, program=program, work_limit_s=job.work_limit_s)
+        if job.job_id:
+            progress = job_progress(job.store, job.job_id, work.seconds)
+            progress(0, len(program.passes))
+    result = plan_contour(req, program=program, work_limit_s=job.work_limit_s, progress=progress)
     del program
     plan_id = new_id() if job.store else None
     result.plan_id = plan_id
@@ -341,6 +352,36 @@ def _contour(job: ContourJob) -> Done:
 
         payload = write(result, job.format, layout=None, forces=job.forces, source=job.source)
     return Done(payload, plan_id, _summary(result))
+
+
+#: the least time between two progress writes of a job [s] (the first and the last are always
+#: written): a program of 2000 passes writes ~4 rows a second, not 2000
+PROGRESS_EVERY_S = 0.25
+
+
+def job_progress(store: str | None, job_id: str, estimate_s: float | None = None):
+    """The progress callback ``(done, total)`` of the HTTP job ``job_id``: its first call marks
+    the job running with ``total`` and the work estimate ``estimate_s``, later ones write the
+    units done to the store's ``jobs`` row, at most every :data:`PROGRESS_EVERY_S` but always
+    the last (``done == total``). The worker's SQLite store carries progress across the process
+    boundary (and to a Dask worker sharing the data directory): no pipe message, and any
+    server process reading the store answers ``GET /v1/jobs/{id}``."""
+    st = _store(store)
+    state = {"started": False, "at": 0.0}
+
+    def report(done: int, total: int) -> None:
+        if st is None:
+            return
+        now = time.monotonic()
+        if not state["started"]:
+            st.job_started(job_id, total, estimate_s)
+            state["started"], state["at"] = True, now
+            return
+        if done >= total or now - state["at"] >= PROGRESS_EVERY_S:
+            st.job_progress(job_id, done, total)
+            state["at"] = now
+
+    return report
 
 
 def _summary(result) -> dict[str, Any]:

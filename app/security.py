@@ -365,8 +365,8 @@ def install_access_control(app: Any, policy: AccessPolicy) -> None:
 
         app.add_middleware(CORSMiddleware, allow_origins=list(policy.cors_origins),
                            allow_methods=["GET", "POST", "PUT", "DELETE"],
-                           allow_headers=["Authorization", "Content-Type", "Accept"],
-                           expose_headers=["Location", "X-Plan-Id", "Retry-After"], max_age=600)
+                           allow_headers=["Authorization", "Content-Type", "Accept", "Prefer"],
+                           expose_headers=["Location", "X-Plan-Id", "Retry-After", "Preference-Applied"], max_age=600)
     if policy.auth_required:
         _document_bearer(app)
 

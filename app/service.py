@@ -178,14 +178,16 @@ class JobService:
     def _kernels_compiled(self) -> None:
         threading.Thread(target=self.pool.renew, name="rangeplan-pool-renew", daemon=True).start()
 
-    def run(self, job: Job) -> Outcome:
+    def run(self, job: Job, limit_s: float | None = None) -> Outcome:
         """Estimate, bound, run ``job`` on a worker; never raises for the input's fault, a
         limit, a full queue or a dead worker: those are :class:`Failed`. While the kernels
-        compile in the background a planning job runs on the numpy reference."""
+        compile in the background a planning job runs on the numpy reference. ``limit_s``: the
+        time limit of this job instead of the service's (an HTTP job's, ``RANGEPLAN_JOB_TIMEOUT_S``)."""
         running = self.kernels.running() if self.kernels is not None else None
         if running is not None:
             job = on_reference(job)
-        refused = check_estimate(job, self.timeout_s)
+        timeout_s = self.timeout_s if limit_s is None else float(limit_s)
+        refused = check_estimate(job, timeout_s)
         if refused is not None:
             if running is not None and refused.error.code == "too_much_work":
                 when = ("are not compiled (the background compile ended without finishing)"
@@ -196,7 +198,7 @@ class JobService:
                     f"server plans on until then) {when}")})
                 return dataclasses.replace(refused, error=error)
             return refused
-        limit = self.export_timeout_s if isinstance(job, ExportJob) else self.timeout_s
+        limit = self.export_timeout_s if isinstance(job, ExportJob) else timeout_s
         job = bounded(job, limit)
         try:
             return self.pool.run(job, limit)
@@ -224,11 +226,11 @@ class JobService:
         except threading.BrokenBarrierError:  # a thread that did not start in 30 s: it starts later
             pass
 
-    async def arun(self, job: Job) -> Outcome:
+    async def arun(self, job: Job, limit_s: float | None = None) -> Outcome:
         """:meth:`run` from an event loop (on a thread: the pool blocks)."""
         if self._threads is None:
             self.start_threads()
-        return await asyncio.get_running_loop().run_in_executor(self._threads, self.run, job)
+        return await asyncio.get_running_loop().run_in_executor(self._threads, self.run, job, limit_s)
 
     def stats(self) -> dict[str, Any]:
         return self.pool.stats()

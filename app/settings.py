@@ -78,6 +78,14 @@ class Settings(BaseModel):
     worker_start: Literal["forkserver", "exec"] = _f("forkserver", "How a planning process starts: forked from one "
                                                      "that loaded the planner once (ready in ~0.1 s), or a fresh "
                                                      "interpreter loading it (1-6 s each)")
+    async_after_s: float = _f(10.0, "A contour or plan whose work estimate is over this [s] is answered 202 Accepted "
+                              "as a job (GET /v1/jobs/{id}); a request's Prefer: respond-async asks for a job at any "
+                              "estimate, Prefer: wait=N sets N for that request", gt=0)
+    job_timeout_s: float = _f(600.0, "Compute limit of a contour, and of a plan run as a job [s]; work estimated above "
+                              "it is refused before it starts; at least RANGEPLAN_PLAN_TIMEOUT_S", gt=0)
+    max_jobs: int = _f(100, "Jobs kept (the oldest finished are dropped; with this many unfinished the API answers "
+                       "503 busy)", ge=1)
+    job_max_age_s: float = _f(86400.0, "Seconds a finished job is kept", gt=0)
     max_queue: int = _f(64, "Jobs waiting for a worker beyond which the API answers 503 busy", ge=0)
     admission_queue: int = _f(1024, "Requests waiting for the event loop (it starts one new request a turn, so that "
                               "/health and /ready answer at once under any burst) beyond which the API answers "

@@ -8,7 +8,8 @@ the server process (a program of tens of thousands of lines takes seconds and ~9
 read), once, under the job's time limit and memory cap: a bad program is a 422 naming the
 line (field ``program``) and the cause, one whose work estimate exceeds the compute limit is
 refused (``too_much_work``) before it is planned; the body size limit bounds the program's
-text (413).
+text (413). A long program is a job (:mod:`app.routers.jobs`): 202 Accepted, its progress,
+then its result.
 """
 
 from __future__ import annotations
@@ -22,7 +23,8 @@ from app.errors import errors_doc
 from app.formats import PlanFormat
 from app.http_exchange import plan_content
 from app.jobs import ContourJob
-from app.routers.deps import Forces, Format, plan_format, store, submit
+from app.routers.deps import Forces, Format, plan_format, store
+from app.routers.jobs import ACCEPTED_DOC, PREFER, run_as_job
 from planner.schema import ContourRequest, PlanResult
 
 __all__ = ["router"]
@@ -32,16 +34,19 @@ router = APIRouter(tags=["planning"])
 _RESPONSES: dict[int | str, dict[str, Any]] = {
     200: {"model": PlanResult, "description": "The planned trajectory of the whole program with its `contour` "
           "section (JSON), or CSV, G-code, leg lengths or DXF with ?format=", "content": plan_content()},
-    **errors_doc(413, 422, 503)}
+    **ACCEPTED_DOC, **errors_doc(413, 422, 503)}
 
 
 @router.post("/v1/contour", response_class=Response, responses=_RESPONSES)
 async def contour(body: ContourRequest, request: Request, format: PlanFormat | None = Format,
-                  forces: bool = Forces):
+                  forces: bool = Forces, prefer: str | None = PREFER):
     """Contour a G-code program (RS274NGC: G0 G1 G2 G3 G4 G17 G20 G21 G90 G91 G61 G64 P, F, S, T,
     M3/M5/M6): every cut pass within `tolerance_m` of the programmed path (each sample and the
     straight move to the next), `feed` `program` (never faster than F) or `fastest` (as the
-    drives allow); `origin` places program zero in the robot frame (m). Stored like a plan."""
+    drives allow); `origin` places program zero in the robot frame (m). Stored like a plan.
+    A long program (work estimate over RANGEPLAN_ASYNC_AFTER_S, or `Prefer: respond-async`) is
+    answered 202 Accepted with a job (`Location: /v1/jobs/{id}`: progress in cut passes, time
+    left, then the stored plan's URL)."""
     fmt = plan_format(request, format)
     job = ContourJob(body, fmt, forces, source="POST /v1/contour", store=str(store(request).path))
-    return await submit(request, job, fmt)
+    return await run_as_job(request, job, fmt)

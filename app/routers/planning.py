@@ -16,6 +16,7 @@ from app.formats import PlanFormat
 from app.http_exchange import import_openapi, import_options, plan_content, read_drawing
 from app.jobs import ExportJob, ImportJob, PlanJob, SegmentJob, spool_dir, spool_plan_json
 from app.routers.deps import Forces, Format, outcome_response, plan_format, store, submit
+from app.routers.jobs import ACCEPTED_DOC, PREFER, run_as_job
 from planner.schema import ImportOptions, ImportResult, PlanRequest, PlanResult, SegmentationResult, planner_error
 
 __all__ = ["PLAN_RESPONSES", "plan_response", "router"]
@@ -34,19 +35,25 @@ PLAN_RESPONSES = {200: {"model": PlanResult, "description": "The planned traject
 
 
 async def plan_response(request: Request, req: PlanRequest, fmt: str | None, corridor_id: str | None = None,
-                        forces: bool = False) -> Response:
-    """Plan ``req`` on a worker (stored, linked to ``corridor_id``) and answer in ``fmt``."""
+                        forces: bool = False, as_job: bool = False) -> Response:
+    """Plan ``req`` on a worker (stored, linked to ``corridor_id``) and answer in ``fmt``
+    (``as_job``: or as a job, 202, when long or asked: :func:`app.routers.jobs.run_as_job`)."""
     fmt = plan_format(request, fmt)
     job = PlanJob(req, fmt, forces, source=f"corridor {corridor_id}" if corridor_id else "POST /v1/plan",
                   store=str(store(request).path), corridor_id=corridor_id)
+    if as_job:
+        return await run_as_job(request, job, fmt)
     return await submit(request, job, fmt)
 
 
-@router.post("/v1/plan", response_class=Response, responses=PLAN_RESPONSES)
-async def plan(body: PlanRequest, request: Request, format: PlanFormat | None = Format, forces: bool = Forces):
+@router.post("/v1/plan", response_class=Response, responses={**PLAN_RESPONSES, **ACCEPTED_DOC})
+async def plan(body: PlanRequest, request: Request, format: PlanFormat | None = Format, forces: bool = Forces,
+               prefer: str | None = PREFER):
     """Plan a trajectory for a corridor (``segments``), a reference or a ``layout``.
-    The result is stored: fetch it again at ``GET /v1/plans/{plan_id}``."""
-    return await plan_response(request, body, format, forces=forces)
+    The result is stored: fetch it again at ``GET /v1/plans/{plan_id}``. A long plan (work
+    estimate over RANGEPLAN_ASYNC_AFTER_S, or `Prefer: respond-async`) is answered 202
+    Accepted with a job (`Location: /v1/jobs/{id}`)."""
+    return await plan_response(request, body, format, forces=forces, as_job=True)
 
 
 @router.post("/v1/import", response_class=Response, openapi_extra=import_openapi(),

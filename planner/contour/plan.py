@@ -36,6 +36,7 @@ the parts into one result; :mod:`.placement` checks and fits the program's origi
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -74,20 +75,22 @@ from .tube import PathGeometry, path_to_cut
 __all__ = ["CONTOUR_CELL_PLAN_S", "CONTOUR_CELL_S", "CONTOUR_PIECE_S", "CONTOUR_STEP_S", "CONTOUR_TRAVEL_S",
            "estimate_contour", "largest_feasible", "parse_contour_request", "plan_contour", "plan_cut"]
 
-def plan_contour(request: Any, *, program: Program | None = None, work_limit_s: float | None = None) -> PlanResult:
+def plan_contour(request: Any, *, program: Program | None = None, work_limit_s: float | None = None,
+                 progress: Callable[[int, int], None] | None = None) -> PlanResult:
     """Plan a whole G-code program (module docstring). ``program``: the parsed program, if the
     caller has read it already. ``work_limit_s``: the compute time [s] the caller allows (a
     server's limit, which admitted the program by :func:`estimate_contour`): an infeasible
     pass's advice is checked only within what it leaves. Raises
     :class:`~planner.errors.PlannerError` naming the field (``program`` with the line,
-    ``tolerance_m``, ``origin``, ``settings.*``)."""
+    ``tolerance_m``, ``origin``, ``settings.*``). ``progress``: called with (cut passes done,
+    cut passes in the program) once the program is placed and after each cut pass."""
     t0 = time.perf_counter()
     limit_at = time.process_time() + work_limit_s if work_limit_s is not None and work_limit_s > 0 else None
     req = parse_contour_request(request)
     st = req.plan_settings()
     with numpy_only(st.backend == "reference"):  # the numpy reference compiles nothing (issue 24)
         try:
-            return _plan_contour(req, st, program, t0, limit_at)
+            return _plan_contour(req, st, program, t0, limit_at, progress)
         except PlannerError as err:
             if req.origin == "fit" or err.code not in ("unreachable", "singular") or "origin that fits" in err.message \
                     or "no origin fits" in err.message:
@@ -100,7 +103,7 @@ def plan_contour(request: Any, *, program: Program | None = None, work_limit_s: 
 
 
 def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0: float,
-                  limit_at: float | None = None) -> PlanResult:
+                  limit_at: float | None = None, progress: Callable[[int, int], None] | None = None) -> PlanResult:
     """:func:`plan_contour` of a validated request: the program read, its tolerance checked,
     its origin placed and checked (:mod:`.placement`), its blocks planned in order
     (:class:`_Walk`), the parts joined (:func:`~planner.contour.join.join_parts`) with the
@@ -118,6 +121,7 @@ def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0
         check_reach(program, origin)
         check_reachable(program, model, origin, tol)
     walk = _Walk(req, st, model, program, origin, tol, limit_at)
+    walk.progress = progress
     walk.run()
     result = join_parts(walk.parts, req, st, model)
     result.contour = contour_section(walk.parts, walk.summaries, result, req, program, origin, tol, st.Ts)
@@ -141,10 +145,13 @@ class _Walk:
         self.summaries: list[PassSummary] = []
         self.hint: Scale | None = None  # fastest: the timing of the cut before
         self.memo: dict = {}  # fastest: the time-optimal profiles of the passes (alike passes share one)
+        self.progress: Callable[[int, int], None] | None = None  # (cut passes done, cut passes)
 
     def run(self) -> None:
         """Every block: a run of travels as one free move, a dwell at rest, a cut pass."""
         blocks = self.program.blocks
+        if self.progress is not None:
+            self.progress(0, len(self.program.passes))
         i = 0
         while i < len(blocks):
             b = blocks[i]
@@ -200,6 +207,8 @@ class _Walk:
             self.pos = part.result.pose[-1, :2].copy()
         self.summaries.append(_pass_summary(len(self.summaries), b, self.parts[first:], geo, tol))
         self.z = b.elements[-1].z_end_m
+        if self.progress is not None:
+            self.progress(len(self.summaries), len(self.program.passes))
 
 
 def _pass_summary(index: int, b: ProgramBlock, cut_parts: list[Part], geo: PathGeometry, tol: float) -> PassSummary:

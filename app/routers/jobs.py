@@ -1,0 +1,287 @@
+"""Long contours and plans as jobs (issue 35 goal 6): ``202 Accepted``, ``GET /v1/jobs/{id}``.
+
+``POST /v1/contour`` and ``POST /v1/plan`` answer synchronously (200 and the plan) when the
+work is short, and ``202 Accepted`` with a job (``Location: /v1/jobs/{id}``) when
+
+* the request asks for it: ``Prefer: respond-async`` (RFC 7240; the answer says
+  ``Preference-Applied: respond-async``), or
+* the work estimate is over the threshold: ``RANGEPLAN_ASYNC_AFTER_S`` (10 s), or the request's
+  ``Prefer: wait=N`` (RFC 7240: "I will wait N seconds"), never above the synchronous limit
+  ``RANGEPLAN_PLAN_TIMEOUT_S``; a plan is estimated by the server before it is queued, a
+  contour by the worker that reads its program (the handler waits for that estimate: a row
+  of the store), or
+* a synchronous contour is still running at the synchronous limit (the estimate was low): it
+  becomes a job then, rather than a timeout.
+
+A job runs under ``RANGEPLAN_JOB_TIMEOUT_S`` (600 s; a contour always does, as it may become
+one). ``GET /v1/jobs/{id}`` says ``state`` (queued | running | done | failed), ``progress``
+``{done, total, unit}`` (a contour's cut passes, written by the worker after each pass), the
+work estimate, ``eta_s`` and, once done, ``result``: the stored plan's URL (``/v1/plans/{id}``,
+any ``?format=``), or ``error`` (the error the synchronous call would have answered).
+
+Progress crosses the process boundary through the SQLite store the worker already opens to
+store its plan (:func:`app.jobs.job_progress`): the same for a local planning process, the
+in-process executor and a Dask worker sharing the data directory, and readable by any thread
+of the server; a pipe message would have needed every executor to carry a second kind of
+message. Jobs are bounded: ``RANGEPLAN_MAX_JOBS`` kept (503 when that many are unfinished),
+finished ones dropped after ``RANGEPLAN_JOB_MAX_AGE_S``; unfinished ones of a server that
+stopped are ended ``failed`` when the next one starts jobs. The token and Host rules cover
+``/v1/jobs`` as every ``/v1`` path.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from fastapi import APIRouter, FastAPI, Header, Request
+from fastapi.responses import JSONResponse, Response
+from pydantic import BaseModel, Field
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from app import storage_io
+from app.errors import error_response, errors_doc
+from app.jobs import ContourJob, Done, ErrorDetail, Job, Outcome, PlanJob, crashed, estimate
+from app.observability import observe_job
+from app.routers.deps import outcome_response, store, submit
+from app.storage import Store, new_id
+
+__all__ = ["ACCEPTED_DOC", "JobStatus", "PREFER", "job_limits", "job_status", "parse_prefer", "router", "run_as_job"]
+
+router = APIRouter(tags=["jobs"])
+
+#: how often a handler looks at a contour's row for its estimate while it waits [s]
+POLL_S = 0.05
+#: the time after a contour's last pass (joining the passes, the contour section, storing the
+#: plan) as a share of the passes' own time: 0.25-0.32 measured on 4-40 passes
+#: (benchmarks/bench_jobs.py); counted in ``eta_s`` as that many passes per pass
+JOIN_SHARE = 0.3
+
+
+class JobProgress(BaseModel):
+    done: int = Field(description="Units done (count)")
+    total: int | None = Field(description="Units in all (count); null until the worker has read the request")
+    unit: Literal["passes", "plans"] = Field(description="What is counted: a contour's cut passes, or one plan")
+
+
+class JobStatus(BaseModel):
+    id: str = Field(description="Job id (GET /v1/jobs/{id})")
+    kind: Literal["contour", "plan"] = Field(description="What the job computes")
+    state: Literal["queued", "running", "done", "failed"] = Field(description="queued (waiting for a worker), "
+                                                                  "running, done (result) or failed (error)")
+    created: float = Field(description="When it was accepted, s since the Unix epoch")
+    progress: JobProgress
+    estimate_s: float | None = Field(description="The planner's work estimate (CPU s); null until it is known")
+    elapsed_s: float | None = Field(description="Time since it started running (until it ended), s")
+    updated: float = Field(description="When its row last changed (progress), s since the Unix epoch")
+    eta_s: float | None = Field(description="Estimated time left, s: the work estimate less the time run until the "
+                                "first unit is done (not below a tenth of it), then the measured time per unit "
+                                "times the units left and the join after them (0.3 units per unit); 0 once ended, "
+                                "null when unknown")
+    result: str | None = Field(description="Once done: the stored plan's URL (GET it, with ?format= if you like)")
+    plan_id: str | None = Field(description="Once done: the stored plan's id")
+    error: ErrorDetail | None = Field(description="Once failed: the error the synchronous call would have answered")
+
+
+PREFER = Header(None, description="RFC 7240. `respond-async`: answer 202 Accepted with a job at once; `wait=N`: "
+                "answer synchronously only if the work estimate is at most N s (else 202; default "
+                "RANGEPLAN_ASYNC_AFTER_S)")
+
+ACCEPTED_DOC: dict[int | str, dict[str, Any]] = {202: {
+    "model": JobStatus, "description": "Accepted as a job (asked by `Prefer: respond-async`, or the work "
+    "estimate is over the threshold): poll `Location` (GET /v1/jobs/{id}) until `state` is done, then GET its "
+    "`result`", "headers": {
+        "Location": {"description": "The job: GET /v1/jobs/{id}", "schema": {"type": "string"}},
+        "Retry-After": {"description": "Seconds before polling it", "schema": {"type": "integer"}},
+        "Preference-Applied": {"description": "respond-async when the request asked for it",
+                               "schema": {"type": "string"}}},
+    "links": {"GetJob": {"operationId": "get_job", "parameters": {"job_id": "$response.body#/id"}}}}}
+
+
+@dataclass(frozen=True)
+class JobLimits:
+    async_after_s: float  #: work estimate [s] over which a request is answered 202
+    sync_limit_s: float  #: the synchronous limit: no synchronous answer waits longer [s]
+    job_timeout_s: float  #: compute limit of a job [s]
+    max_jobs: int
+    max_age_s: float
+
+
+_LOCK = threading.Lock()
+
+
+def job_limits(app: FastAPI) -> JobLimits:
+    """The app's job bounds (``app.state.job_limits``; from the settings on first use, when the
+    unfinished jobs of a server before this one are ended ``failed``)."""
+    with _LOCK:
+        limits = getattr(app.state, "job_limits", None)
+        if limits is None:
+            from app.settings import settings
+
+            cfg = settings()
+            sync = float((getattr(app.state, "plan_limits", None) or {}).get("timeout_s") or cfg.plan_timeout_s)
+            limits = app.state.job_limits = JobLimits(min(cfg.async_after_s, sync), sync,
+                                                      max(cfg.job_timeout_s, sync), cfg.max_jobs, cfg.job_max_age_s)
+        if not getattr(app.state, "jobs_recovered", False):
+            app.state.jobs_recovered = True
+            app.state.store.abandon_jobs("the server stopped while this job ran; submit it again")
+        return limits
+
+
+@dataclass(frozen=True)
+class Preference:
+    respond_async: bool = False
+    wait_s: float | None = None
+
+
+def parse_prefer(values: list[str]) -> Preference:
+    """The ``Prefer`` headers' ``respond-async`` and ``wait=N`` (RFC 7240: comma-separated
+    preferences, each ``token[=value]`` with optional ``;`` parameters; unknown ones ignored)."""
+    respond_async, wait = False, None
+    for value in values:
+        for item in value.split(","):
+            name, _, arg = item.split(";")[0].strip().partition("=")
+            name = name.strip().lower()
+            if name == "respond-async":
+                respond_async = True
+            elif name == "wait":
+                try:
+                    wait = max(0.0, float(arg.strip().strip('"')))
+                except ValueError:
+                    pass
+    return Preference(respond_async, wait)
+
+
+def _unit(job: Job) -> str:
+    return "passes" if isinstance(job, ContourJob) else "plans"
+
+
+def _accepted(row: dict, applied: bool) -> JSONResponse:
+    headers = {"Location": f"/v1/jobs/{row['id']}", "Retry-After": "1"}
+    if applied:
+        headers["Preference-Applied"] = "respond-async"
+    return JSONResponse(job_status(row), status_code=202, headers=headers)
+
+
+async def run_as_job(request: Request, job: ContourJob | PlanJob, fmt: str) -> Response:
+    """Answer ``job`` synchronously (the plan) or as a job (202), as the module docstring says."""
+    app = request.app
+    limits = job_limits(app)
+    pref = parse_prefer(request.headers.getlist("prefer"))
+    threshold = min(pref.wait_s if pref.wait_s is not None else limits.async_after_s, limits.sync_limit_s)
+    est_s: float | None = None
+    if isinstance(job, PlanJob):  # estimated here, before it is queued (as the service does)
+        est = await asyncio.get_running_loop().run_in_executor(None, estimate, job)
+        est_s = est.seconds if est is not None else None
+        if not pref.respond_async and (est_s is None or est_s <= threshold):
+            return await submit(request, job, fmt)  # short: synchronous, under the synchronous limit
+    st = store(request)
+    job_id = new_id()
+    if not await storage_io.write(st.create_job, job_id, job.kind, _unit(job), total=1 if isinstance(job, PlanJob)
+                                  else None, estimate_s=est_s, max_jobs=limits.max_jobs,
+                                  max_age_s=limits.max_age_s):
+        return error_response(503, "busy", f"{limits.max_jobs} jobs are unfinished (RANGEPLAN_MAX_JOBS); retry when "
+                              "one has ended", headers={"Retry-After": "5"})
+    job = dataclasses.replace(job, job_id=job_id)
+    task = asyncio.ensure_future(_run(app, job, fmt, limits.job_timeout_s))
+    tasks = _tasks(app)  # held until it ends (the loop keeps only weak references to tasks)
+    tasks.add(task)
+    task.add_done_callback(tasks.discard)
+    if pref.respond_async or (est_s is not None and est_s > threshold):
+        row = await storage_io.read(st.get_job, job_id)
+        if row is not None:  # (a job that ended already and was dropped: never within max_jobs)
+            return _accepted(row, pref.respond_async)
+    t0 = time.monotonic()
+    while True:  # a contour: synchronous unless its worker's estimate is over the threshold
+        await asyncio.wait({task}, timeout=POLL_S)
+        if task.done():
+            outcome = task.result()
+            await storage_io.write(st.delete_job, job_id)  # answered here: nothing to poll
+            return outcome_response(outcome, fmt)
+        row = await storage_io.read(st.get_job, job_id)
+        if row is None:
+            raise RuntimeError(f"job {job_id} vanished")
+        est_s = row["estimate_s"]
+        if (est_s is not None and est_s > threshold) or time.monotonic() - t0 > limits.sync_limit_s:
+            return _accepted(row, False)
+
+
+def _tasks(app: FastAPI) -> set:
+    with _LOCK:
+        tasks = getattr(app.state, "job_tasks", None)
+        if tasks is None:
+            tasks = app.state.job_tasks = set()
+        return tasks
+
+
+async def _run(app: FastAPI, job: ContourJob | PlanJob, fmt: str, limit_s: float) -> Outcome:
+    """Run ``job`` on the app's job service under the job limit; end its row with the outcome."""
+    t0 = time.perf_counter()
+    try:
+        outcome = await app.state.ensure_service().arun(job, limit_s)
+    except Exception as exc:  # the service closing under it (the server stopping): the job failed
+        outcome = crashed(exc)
+    observe_job(app, job, time.perf_counter() - t0, outcome)
+    try:
+        await _finish(app.state.store, job, outcome)
+    except Exception:  # the store's threads stopped with the server: the next one ends the row
+        pass
+    return outcome
+
+
+async def _finish(st: Store, job: ContourJob | PlanJob, outcome: Outcome) -> None:
+    """End the job's row with its outcome."""
+    assert job.job_id is not None
+    if isinstance(outcome, Done):
+        if outcome.plan_id is None:
+            await storage_io.write(st.job_finished, job.job_id, error={
+                "code": "too_large", "field": None, "status": 422, "message": "the plan is larger than this server "
+                "stores (RANGEPLAN_MAX_PLAN_BYTES, RANGEPLAN_MAX_STORE_BYTES): ask for it synchronously "
+                "(Prefer: wait=...) or split the program"})
+        else:
+            await storage_io.write(st.job_finished, job.job_id, plan_id=outcome.plan_id)
+    else:
+        await storage_io.write(st.job_finished, job.job_id, error={**outcome.error.to_dict(), "status": outcome.status})
+
+
+def job_status(row: dict) -> dict[str, Any]:
+    """A job's row as :class:`JobStatus` (JSON)."""
+    now = time.time()
+    state, done, total, est = row["state"], int(row["done"]), row["total"], row["estimate_s"]
+    started, finished = row["started"], row["finished"]
+    elapsed = None if started is None else max(0.0, (finished or now) - started)
+    eta: float | None = None
+    if state in ("done", "failed"):
+        eta = 0.0
+    elif done > 0 and total and started is not None:
+        # the time per unit measured up to the last unit done, for the units left and the join
+        # after them, less the time since that unit
+        updated = row["updated"] or now
+        eta = max((updated - started) / done * (total - done + JOIN_SHARE * total) - (now - updated), 0.0)
+    elif est is not None:  # nothing done yet: the work estimate less the time run (not below a tenth of it)
+        eta = max(est - (elapsed or 0.0), 0.1 * est)
+    err = row["error"]
+    plan_id = row["plan_id"]
+    return {"id": row["id"], "kind": row["kind"], "state": state, "created": row["created"],
+            "progress": {"done": done, "total": total, "unit": row["unit"]}, "estimate_s": est,
+            "elapsed_s": elapsed, "updated": row["updated"], "eta_s": eta,
+            "result": f"/v1/plans/{plan_id}" if plan_id else None, "plan_id": plan_id,
+            "error": None if err is None else {k: err.get(k) for k in ("code", "message", "field")}}
+
+
+@router.get("/v1/jobs/{job_id}", response_model=JobStatus, operation_id="get_job",
+            responses={**errors_doc(404, descriptions={404: "Unknown job id (or a finished job dropped: "
+                                                       "RANGEPLAN_MAX_JOBS, RANGEPLAN_JOB_MAX_AGE_S)"})})
+async def get_job(job_id: str, request: Request):
+    """A job's state, progress (units done of total), work estimate, time left and, once done,
+    its result's URL (the stored plan) or its error. ``Retry-After`` while it runs."""
+    row = await storage_io.read(store(request).get_job, job_id)
+    if row is None:
+        raise StarletteHTTPException(404, f"no job with id {job_id!r}")
+    headers = {"Retry-After": "1"} if row["state"] in ("queued", "running") else None
+    return JSONResponse(job_status(row), headers=headers)
+
