@@ -238,7 +238,14 @@ def cmd_contour(args) -> int:
                          source=args.program)
     except PlannerError as exc:
         raise InputError(f"{args.program}: {exc.code}: {exc}") from None
-    out = run_here(job, args.program, args.compile)
+    from app.jobs import progress_here
+
+    line = ProgressLine(sys.stderr, args.progress)
+    try:
+        with progress_here(line):
+            out = run_here(job, args.program, args.compile)
+    finally:
+        line.close()
     s = out.summary or {}
     write_output(out.payload or b"", args, job.format, warnings=tuple(s["warnings"]),
                  summary=f"origin [{s['origin'][0]:g}, {s['origin'][1]:g}] m, {s['passes']} passes, cycle "
@@ -246,6 +253,52 @@ def cmd_contour(args) -> int:
                  f"{s['max_deviation_m'] * 1e3:.4f} mm of {s['tolerance_m'] * 1e3:.4f} mm, max force "
                  f"{s['max_drive_force_n']:.1f} N, compute {s['compute_ms']:.0f} ms")
     return 0
+
+
+#: a contour shows its progress once it has run this long [s] (``--progress auto``)
+PROGRESS_AFTER_S = 2.0
+
+
+class ProgressLine:
+    """The progress of a contour on stderr (issue 35): ``contour: 3/15 passes, 4 s, ~12 s
+    left``, the time left as ``GET /v1/jobs/{id}`` states it (:func:`app.jobs.time_left`).
+    ``auto``: from :data:`PROGRESS_AFTER_S` on; ``always``: from the first pass; ``never``.
+    On a terminal one line rewritten in place (at most 10 times a second); else a line at most
+    every 5 s and at the last pass, so a log stays short."""
+
+    def __init__(self, stream, mode: str = "auto"):
+        import time
+
+        self._clock = time.monotonic
+        self.stream, self.mode = stream, mode
+        self.tty = bool(getattr(stream, "isatty", lambda: False)())
+        self.t0 = self._clock()
+        self.started: float | None = None
+        self.shown_at: float | None = None
+
+    def __call__(self, done: int, total: int, estimate_s: float | None) -> None:
+        now = self._clock()
+        if self.started is None:
+            self.started = now  # the program is read and estimated: the passes start
+        if self.mode == "never" or (self.mode == "auto" and now - self.t0 < PROGRESS_AFTER_S):
+            return
+        last = done >= total
+        if self.shown_at is not None and not last and now - self.shown_at < (0.1 if self.tty else 5.0):
+            return
+        from app.jobs import time_left
+
+        left = time_left(done, total, self.started, now, now, estimate_s)
+        text = f"contour: {done}/{total} passes, {now - self.t0:.0f} s"
+        text += "" if left is None else f", ~{left:.0f} s left"
+        self.stream.write(f"\r{text}\x1b[K" if self.tty else text + "\n")
+        self.stream.flush()
+        self.shown_at = now
+
+    def close(self) -> None:
+        """End the terminal's line (nothing was shown: nothing to end)."""
+        if self.tty and self.shown_at is not None:
+            self.stream.write("\n")
+            self.stream.flush()
 
 
 def cmd_import(args) -> int:
@@ -418,6 +471,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     pc.add_argument("--compile", action="store_true", help="compile the kernels first if they are not compiled yet "
                     "(minutes, once after installing) instead of planning on the numpy reference while they compile "
                     "in the background")
+    pc.add_argument("--progress", choices=("auto", "always", "never"), default="auto",
+                    help="passes done and the time left on stderr: 'auto' once the contour has run "
+                    f"{PROGRESS_AFTER_S:g} s (default), 'always', 'never'")
     pc.add_argument("--no-resident", action="store_true", help=argparse.SUPPRESS)
     pc.set_defaults(func=cmd_contour)
     ps = sub.add_parser("serve", help="serve the HTTP API and the browser editor")

@@ -26,11 +26,14 @@ No web framework or editor import: workers import this module.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import dataclasses
 import json
 import math
 import os
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from itertools import chain
 from typing import Any, ClassVar
@@ -43,7 +46,7 @@ from planner.schema import ContourRequest, ImportOptions, PlanRequest, PlanResul
 
 __all__ = ["ContourJob", "ContourWork", "Done", "EditorJob", "EditorPlan", "ErrorDetail", "ExportJob", "Failed",
            "ImportJob", "Job", "Outcome", "PlanJob", "SegmentJob", "SleepJob", "bounded",
-           "check_estimate", "clean_spool", "crashed", "estimate", "failed", "job_progress", "run_job",
+           "check_estimate", "clean_spool", "crashed", "estimate", "failed", "job_progress", "progress_here", "run_job",
            "segmentation_module", "spool_dir", "spool_plan_json"]
 
 
@@ -326,12 +329,16 @@ def _contour(job: ContourJob) -> Done:
     req = job.request
     program = read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
     progress = None
-    if job.work_limit_s or job.job_id:
+    here = _HERE.get()
+    if job.work_limit_s or job.job_id or here is not None:
         work = ContourWork(*estimate_contour(req, program))
         if job.work_limit_s and work.seconds > job.work_limit_s:
             raise PlannerError(**too_much_work(work, job.work_limit_s))
         if job.job_id:
             progress = job_progress(job.store, job.job_id, work.seconds)
+        elif here is not None:
+            progress = _with_estimate(here, work.seconds)
+        if progress is not None:
             progress(0, len(program.passes))
     result = plan_contour(req, program=program, work_limit_s=job.work_limit_s, progress=progress)
     del program
@@ -352,6 +359,49 @@ def _contour(job: ContourJob) -> Done:
 
         payload = write(result, job.format, layout=None, forces=job.forces, source=job.source)
     return Done(payload, plan_id, _summary(result))
+
+
+#: the time after a contour's last pass (joining the passes, the contour section, storing the
+#: plan) as a share of the passes' own time: 0.25-0.32 measured on 4-40 passes
+#: (benchmarks/bench_jobs.py); counted in :func:`time_left` as that many passes per pass
+JOIN_SHARE = 0.3
+
+
+def time_left(done: int, total: int | None, started: float | None, updated: float | None, now: float,
+              estimate_s: float | None) -> float | None:
+    """Estimated time left of a job [s], the one rule of ``GET /v1/jobs/{id}`` and of the CLI's
+    progress line: once a unit is done, the time per unit measured up to the last unit done
+    (``updated``), for the units left and the join after them (:data:`JOIN_SHARE`), less the
+    time since that unit; before, the work estimate less the time run (not below a tenth of
+    it); ``None`` without either."""
+    if done > 0 and total and started is not None:
+        updated = now if updated is None else updated
+        return max((updated - started) / done * (total - done + JOIN_SHARE * total) - (now - updated), 0.0)
+    if estimate_s is not None:
+        return max(estimate_s - max(0.0, now - (now if started is None else started)), 0.1 * estimate_s)
+    return None
+
+
+#: a progress callback ``(done, total, estimate_s)`` of a job run in this thread (the CLI's
+#: progress line: :func:`progress_here`); a worker's jobs report through the store instead
+_HERE: contextvars.ContextVar[Callable[[int, int, float | None], None] | None] = contextvars.ContextVar(
+    "rangeplan_progress_here", default=None)
+
+
+@contextlib.contextmanager
+def progress_here(callback: Callable[[int, int, float | None], None]) -> Iterator[None]:
+    """Jobs run in this thread meanwhile (:class:`app.executors.InProcessExecutor`) report their
+    progress to ``callback(done, total, estimate_s)``: a contour its cut passes, with its work
+    estimate."""
+    token = _HERE.set(callback)
+    try:
+        yield
+    finally:
+        _HERE.reset(token)
+
+
+def _with_estimate(callback: Callable[[int, int, float | None], None], estimate_s: float) -> Callable[[int, int], None]:
+    return lambda done, total: callback(done, total, estimate_s)
 
 
 #: the least time between two progress writes of a job [s] (the first and the last are always

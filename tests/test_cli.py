@@ -227,3 +227,67 @@ def test_while_the_kernels_compile_plan_and_contour_jobs_move_to_the_reference(m
     compiling = False
     assert reference_while_compiling(plan) is plan and reference_while_compiling(contour) is contour
     assert capsys.readouterr().err == ""
+
+
+CAM = __import__("pathlib").Path(__file__).resolve().parent / "data" / "cam"
+
+
+def test_contour_progress_on_stderr(tmp_path):
+    """``rangeplan contour --progress always``: lines ``contour: k/N passes, ..., ~T s left`` on
+    stderr (not a terminal: the first pass's line and the last), k rising to N, N the plan's
+    passes; the output file is the same plan as with ``--progress never``, which says nothing."""
+    import re
+
+    prog = CAM / "freecad_linuxcnc.ngc"
+    outs = {}
+    for mode in ("always", "never"):
+        out = tmp_path / f"{mode}.json"
+        r = run("contour", str(prog), "--origin", "fit", "--progress", mode, "-o", str(out))
+        assert r.returncode == 0, r.stderr
+        outs[mode] = (json.loads(out.read_text()), r.stderr)
+    lines = re.findall(r"contour: (\d+)/(\d+) passes, \d+ s(?:, ~(\d+) s left)?", outs["always"][1])
+    passes = outs["always"][0]["contour"]["passes"]
+    total = passes if isinstance(passes, int) else len(passes)
+    assert lines and {int(n) for _, n, _ in lines} == {total}, outs["always"][1]
+    done = [int(k) for k, _, _ in lines]
+    assert done == sorted(done) and done[0] == 0 and done[-1] == total
+    assert "contour:" not in outs["never"][1]
+    a, b = outs["always"][0], outs["never"][0]
+    assert np.array_equal(np.array(a["pose"]), np.array(b["pose"]))
+
+
+def test_progress_line_on_a_terminal_is_one_line_rewritten():
+    """On a terminal the line is rewritten in place (carriage return, erase to the end), at
+    most 10 times a second, and the last pass always shown; ``auto`` shows nothing before
+    2 s; the time left is :func:`app.jobs.time_left`'s."""
+    import io
+
+    from app.cli import PROGRESS_AFTER_S, ProgressLine
+    from app.jobs import time_left
+
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+
+    clock = [100.0]
+    for mode, expect_lines in (("always", True), ("auto", False)):
+        out = Tty()
+        line = ProgressLine(out, mode)
+        line._clock = lambda: clock[0]
+        line.t0 = clock[0] = 100.0
+        line(0, 4, 8.0)
+        clock[0] += 0.05
+        line(1, 4, 8.0)  # within 0.1 s of the last line: not shown
+        clock[0] += 0.5
+        line(2, 4, 8.0)
+        clock[0] += 0.01
+        line(4, 4, 8.0)  # the last: always shown
+        line.close()
+        text = out.getvalue()
+        if expect_lines:
+            shown = [s for s in text.split("\r") if s]
+            assert [s.split(" passes")[0] for s in shown] == ["contour: 0/4", "contour: 2/4", "contour: 4/4"], text
+            left = time_left(2, 4, 100.0, 100.55, 100.55, 8.0)
+            assert f"~{left:.0f} s left" in shown[1] and text.endswith("\n")
+        else:  # 0.56 s < PROGRESS_AFTER_S: nothing
+            assert PROGRESS_AFTER_S > 0.56 and text == ""

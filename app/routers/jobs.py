@@ -45,7 +45,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from app import storage_io
 from app.errors import error_response, errors_doc
-from app.jobs import ContourJob, Done, ErrorDetail, Job, Outcome, PlanJob, crashed, estimate
+from app.jobs import ContourJob, Done, ErrorDetail, Job, Outcome, PlanJob, crashed, estimate, time_left
 from app.observability import observe_job
 from app.routers.deps import outcome_response, store, submit
 from app.storage import Store, new_id
@@ -56,12 +56,6 @@ router = APIRouter(tags=["jobs"])
 
 #: how often a handler looks at a contour's row for its estimate while it waits [s]
 POLL_S = 0.05
-#: the time after a contour's last pass (joining the passes, the contour section, storing the
-#: plan) as a share of the passes' own time: 0.25-0.32 measured on 4-40 passes
-#: (benchmarks/bench_jobs.py); counted in ``eta_s`` as that many passes per pass
-JOIN_SHARE = 0.3
-
-
 class JobProgress(BaseModel):
     done: int = Field(description="Units done (count)")
     total: int | None = Field(description="Units in all (count); null until the worker has read the request")
@@ -254,16 +248,7 @@ def job_status(row: dict) -> dict[str, Any]:
     state, done, total, est = row["state"], int(row["done"]), row["total"], row["estimate_s"]
     started, finished = row["started"], row["finished"]
     elapsed = None if started is None else max(0.0, (finished or now) - started)
-    eta: float | None = None
-    if state in ("done", "failed"):
-        eta = 0.0
-    elif done > 0 and total and started is not None:
-        # the time per unit measured up to the last unit done, for the units left and the join
-        # after them, less the time since that unit
-        updated = row["updated"] or now
-        eta = max((updated - started) / done * (total - done + JOIN_SHARE * total) - (now - updated), 0.0)
-    elif est is not None:  # nothing done yet: the work estimate less the time run (not below a tenth of it)
-        eta = max(est - (elapsed or 0.0), 0.1 * est)
+    eta = 0.0 if state in ("done", "failed") else time_left(done, total, started, row["updated"], now, est)
     err = row["error"]
     plan_id = row["plan_id"]
     return {"id": row["id"], "kind": row["kind"], "state": state, "created": row["created"],
