@@ -13,10 +13,12 @@ written here from the equations of motion, not from the planner's code):
   the robot frame at the plan's origin, the platform angle ``psi`` fixed at 0 (as the planner
   contours), parameterised by arc length ``s``: ``q(s)``, ``q'(s)`` (unit tangent),
   ``q''(s)`` (curvature), analytic per element;
-* the motion ``s(t)`` in the time domain, per element ``N`` equal time steps ``h_e`` (a
-  decision variable per element); at every node the path speed ``v = s_dot >= 0``, the path
-  acceleration ``a = s_dd`` and the four drive forces ``f``; ``a`` piecewise linear in time
-  (``v`` and ``s`` integrated exactly from it), ``f`` piecewise linear in time;
+* the motion ``s(t)`` in the time domain, per element ``N`` time steps in three blocks
+  (speeding up, cruising, slowing down: ``N / 3`` equal steps each, each block's step a
+  decision variable, so the transients are resolved on a long move at F); at every node the
+  path speed ``v = s_dot >= 0``, the path acceleration ``a = s_dd`` and the four drive forces
+  ``f``; ``a`` piecewise linear in time (``v`` and ``s`` integrated exactly from it), ``f``
+  piecewise linear in time;
 * the robot's full rigid-body dynamics (the 4RPR model ``moving-slide``: platform, rods,
   viscous leg friction) in CasADi symbols, inverse form ``J_l^T f = M_r(q) y_dd - h_r(q,
   y_dot)`` with ``y_dot = q' v``, ``y_dd = q' a + q'' v^2``, at every node (checked against
@@ -34,10 +36,17 @@ written here from the equations of motion, not from the planner's code):
 * the pass starts and ends at rest, with a zero generalised acceleration (it holds its pose
   before and after: the forces are a preload in the null space of ``J_l^T``, free); with
   ``--from-zero`` the forces start and end at 0 instead;
-* minimise ``sum_e N h_e``; IPOPT (MUMPS) from a minimum-jerk guess per element.
+* minimise the sum of the steps (plus ``1e-6`` of the squared forces' time integral: the
+  drives' internal force is otherwise free); IPOPT (MUMPS) from a minimum-jerk guess per
+  element, each finer grid from the coarser solution; each solve bounded (1000 iterations,
+  120 CPU s: its status is in the grid table).
 
-Grid refinement: each optimum at ``N`` in ``--grids`` (nodes per element); the table gives the
-finest, the convergence table all of them (the relative change from the previous grid).
+Grid refinement: each optimum at ``N`` in ``--grids`` (steps per element); the table gives the
+finest, the convergence table all of them (the relative change from the previous grid). The
+dynamics hold at the nodes (forces and ``a`` linear between them), so the time converges as
+the grid is refined; with free blocks it converges from below (the finer grid is slower), with
+one uniform step per element (``--blocks 1``) from above: on the benchmark pass the two
+bracket the optimum.
 
 **The second-order optimum**: TOPP-RA on the same exact path, drive forces and leg speeds, no
 force-rate limit (``bench_contour.topp_time``: stops only at corners).
@@ -88,7 +97,7 @@ def casadi_inverse_dynamics(robot: RobotModel):
     y = ca.SX.sym("y", 3)
     yd = ca.SX.sym("yd", 3)
     px, py, psi = y[0], y[1], y[2]
-    vx, vy, w = yd[0], yd[1], yd[2]
+    w = yd[2]
     c, s = ca.cos(psi), ca.sin(psi)
     M = ca.SX.zeros(3, 3)
     h = ca.SX.zeros(3)
@@ -289,7 +298,10 @@ def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: 
         opti.subject_to(A[0, k] == 0)
         if from_zero:
             opti.subject_to(U[:, k] == 0)
-    opti.minimize(ca.sum2(1e3 * hk))
+    # the time [ms], plus a tiny force regulariser: the drives' internal force (the null space of
+    # J_l^T) is otherwise free, which leaves IPOPT a flat direction on a cruise at F; its weight
+    # changes the time by < 1e-5 relative (|U| <= 1)
+    opti.minimize(ca.sum2(1e3 * hk) + 1e-6 * ca.sum2(1e3 * hk * ca.sum1(U[:, i0] ** 2)))
 
     # guess: per element a minimum-jerk rest-to-rest motion in T_e
     Tg = np.asarray(guess["T"]) if guess else np.maximum(2.5 * np.sqrt(L / 5.0), 0.01)
@@ -326,7 +338,7 @@ def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: 
     opti.set_initial(U, Ug)
     opti.set_initial(H, 1e3 * hb.reshape(1, -1))
     opti.solver("ipopt", {"print_time": False},
-                {"print_level": 5 if verbose else 0, "sb": "yes", "max_iter": 3000, "tol": 1e-9,
+                {"print_level": 5 if verbose else 0, "sb": "yes", "max_iter": 1000, "max_cpu_time": 120.0, "tol": 1e-9,
                  "acceptable_tol": 1e-7, "mu_strategy": "adaptive", "linear_solver": "mumps"})
     c0 = time.process_time()
     try:
@@ -351,12 +363,21 @@ def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: 
 
 
 def converged_optimum(robot: RobotModel, elements: list[PathElement], origin: np.ndarray, grids: list[int],
-                      rate: np.ndarray | None, feed_cap: bool, from_zero: bool = False) -> list[Optimum]:
-    """The optimum at each grid (coarse to fine, each started from the previous)."""
+                      rate: np.ndarray | None, feed_cap: bool, from_zero: bool = False, blocks: int = 3,
+                      tol: float = 1e-3, finest: int = 192) -> list[Optimum]:
+    """The optimum at each grid (coarse to fine, each started from the previous), then on
+    doubled grids until the last two agree within ``tol`` (relative) or ``finest`` is passed."""
     out, guess = [], None
-    for N in grids:
-        opt, guess = third_order_optimum(robot, elements, origin, N, rate, feed_cap, from_zero, guess)
+    grids = list(grids)
+    k = 0
+    while k < len(grids):
+        opt, guess = third_order_optimum(robot, elements, origin, grids[k], rate, feed_cap, from_zero, guess,
+                                         B=blocks)
         out.append(opt)
+        k += 1
+        if (k == len(grids) and len(out) > 1 and abs(out[-1].time_s / out[-2].time_s - 1) > tol
+                and 2 * grids[-1] <= finest):
+            grids.append(2 * grids[-1])
     return out
 
 
@@ -379,20 +400,22 @@ def plan(text: str, origin, feed: str) -> tuple[object, float]:
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--grids", default="24,48,96", help="nodes per element, coarse to fine (multiples of 3: three time blocks)")
-    ap.add_argument("--programs", default="bench,freecad_linuxcnc.ngc,fusion360.nc",
+    ap.add_argument("--grids", default="24,48,96",
+                    help="time steps per element, coarse to fine (three time blocks each)")
+    ap.add_argument("--programs",
+                    default="bench,freecad_linuxcnc.ngc,fusion360.nc,pcb_gcode.ngc,estlcam.nc,dxf2gcode.ngc",
                     help="'bench' (bench_contour's part) and/or files in tests/data/cam")
     ap.add_argument("--from-zero", action="store_true", help="forces 0 at each pass's start and end")
     ap.add_argument("--no-planner", action="store_true", help="the optima only")
+    ap.add_argument("--blocks", type=int, default=3, help="time blocks per element (1: uniform steps)")
     args = ap.parse_args()
     grids = [int(g) for g in args.grids.split(",")]
     robot = load_robot(ROBOT)
     rate = np.asarray(robot.force_max, float) / DEFAULT_FORCE_RISE_S
     print(f"load: {os.getloadavg()[0]:.1f} (1-min average) on {os.cpu_count()} cores")
-    import casadi as ca
-    import toppra
+    from importlib.metadata import version
 
-    print(f"CasADi {ca.__version__} + IPOPT (MUMPS), TOPP-RA {toppra.__version__}; robot {ROBOT}; "
+    print(f"CasADi {version('casadi')} + IPOPT (MUMPS), TOPP-RA {version('toppra')}; robot {ROBOT}; "
           f"force rate {rate[0]:g} N/s per drive; grids {grids} nodes per element")
     err = check_dynamics(robot, casadi_inverse_dynamics(robot))
     print(f"CasADi dynamics against planner.model.dynamics and bench_optimality: largest relative "
@@ -401,8 +424,9 @@ def main() -> None:
     from bench_contour import topp_time
 
     if not args.no_planner:
-        plan_contour({"program": load_program("bench")[1].split("G0 Z3", 2)[0] + "G0 Z3\nM2\n",
-                      "origin": load_program("bench")[2]})  # load the kernels
+        import bench_contour
+
+        plan_contour({"program": bench_contour.program(1), "origin": bench_contour.ORIGIN})  # load the kernels
     memo: dict = {}
     conv_rows: list[str] = []
     summary: list[str] = []
@@ -415,53 +439,68 @@ def main() -> None:
                 res[feed] = plan(text, origin, feed)
             c = res["fastest"][0].contour  # type: ignore[attr-defined]
         else:
-            c = plan_contour({"program": text, "origin": origin, "feed": "program",
-                              "settings": {}}).contour  # type: ignore[attr-defined]
+            c = plan_contour({"program": text, "origin": origin, "feed": "program"}).contour  # type: ignore[attr-defined]
         org = np.asarray(c.origin, float)
-        print(f"### {label}: {len(prog.passes)} passes, origin {list(np.round(org, 5))} m\n")
-        print("| pass | elements | mm | F mm/min | fastest s | program s | TOPP-RA s (2nd order) | "
+        print(f"### {label}: {len(prog.passes)} passes, origin {[float(x) for x in np.round(org, 5)]} m\n")
+        print("| pass | elements | mm | F mm/min | L / F s | fastest s | program s | TOPP-RA s (2nd order) | "
               "3rd order s | 3rd order at F s | fastest / 3rd | program / 3rd at F | fastest / TOPP-RA |")
-        print("|---|---|---|---|---|---|---|---|---|---|---|---|")
-        tot = np.zeros(6)
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+        tot = np.zeros(7)
+        rows: list[tuple[int, str]] = []
         for i, b in enumerate(prog.passes):
             els = b.elements
             key = (tuple((e.kind, *np.round(e.start, 9), *np.round(e.end, 9), round(e.sweep_rad or 0.0, 9),
                           round(e.feed_m_s, 9)) for e in els), tuple(np.round(org, 9)))
             if key not in memo:
                 topp = topp_time(els, org, leg_speed=True)
-                third = converged_optimum(robot, els, org, grids, rate, False, args.from_zero)
-                capped = converged_optimum(robot, els, org, grids, rate, True, args.from_zero)
+                third = converged_optimum(robot, els, org, grids, rate, False, args.from_zero, args.blocks)
+                capped = converged_optimum(robot, els, org, grids, rate, True, args.from_zero, args.blocks)
                 memo[key] = (topp, third, capped)
                 for lab, runs in (("3rd order", third), ("3rd order at F", capped)):
                     times = " / ".join(f"{r.time_s:.5f}" for r in runs)
                     change = " / ".join(f"{abs(r.time_s / p.time_s - 1) * 100:.3f}" for p, r in zip(runs, runs[1:]))
-                    conv_rows.append(f"| {label} pass {i} | {lab} | {times} | {change} | "
-                                     f"{', '.join(r.status for r in runs)} | {runs[-1].max_residual:.1e} | "
-                                     f"{sum(r.cpu_s for r in runs):.1f} |")
+                    conv_rows.append(f"| {label} pass {i} | {lab} | {', '.join(str(r.nodes) for r in runs)} | "
+                                     f"{times} | {change} | {', '.join(r.status for r in runs)} | "
+                                     f"{runs[-1].max_residual:.1e} | {sum(r.cpu_s for r in runs):.1f} |")
             topp, third, capped = memo[key]
             t3, t3f = third[-1].time_s, capped[-1].time_s
             L = sum(e.length_m for e in els)
+            nominal = sum(e.length_m / e.feed_m_s for e in els)
+            # the optima's order: each adds a limit to the one before
+            assert topp <= t3 * (1 + 1e-3) and t3 <= t3f * (1 + 1e-3) and nominal <= t3f * (1 + 1e-3), \
+                (topp, t3, t3f, nominal)
             feeds = sorted({round(e.feed_m_s * 60000) for e in els})
             fast = res["fastest"][0].contour.passes[i].time_s if res else math.nan  # type: ignore[attr-defined]
             prg = res["program"][0].contour.passes[i].time_s if res else math.nan  # type: ignore[attr-defined]
-            tot += (fast, prg, topp, t3, t3f, L)
-            print(f"| {i} | {len(els)} | {L * 1e3:.1f} | {', '.join(map(str, feeds))} | {fast:.3f} | {prg:.3f} | "
-                  f"{topp:.4f} | {t3:.4f} | {t3f:.4f} | {fast / t3:.3f}x | {prg / t3f:.3f}x | {fast / topp:.3f}x |")
-        fast, prg, topp, t3, t3f, L = tot
+            tot += (fast, prg, topp, t3, t3f, L, nominal)
+            row = (f"| {len(els)} | {L * 1e3:.1f} | {', '.join(map(str, feeds))} | {nominal:.3f} | {fast:.3f} | "
+                   f"{prg:.3f} | {topp:.4f} | {t3:.4f} | {t3f:.4f} | {fast / t3:.3f}x | {prg / t3f:.3f}x | "
+                   f"{fast / topp:.3f}x |")
+            rows.append((i, row))
+        k = 0
+        while k < len(rows):  # passes alike in a row: one line
+            j = k
+            while j + 1 < len(rows) and rows[j + 1][1] == rows[k][1]:
+                j += 1
+            print(f"| {rows[k][0]}{'' if j == k else f'-{rows[j][0]}'} {rows[k][1]}")
+            k = j + 1
+        fast, prg, topp, t3, t3f, L, nominal = tot
         cf = res["fastest"][1] if res else math.nan
         cp = res["program"][1] if res else math.nan
-        print(f"| all | | {L * 1e3:.1f} | | {fast:.3f} | {prg:.3f} | {topp:.4f} | {t3:.4f} | {t3f:.4f} | "
-              f"{fast / t3:.3f}x | {prg / t3f:.3f}x | {fast / topp:.3f}x |\n")
-        summary.append(f"| {label} | {len(prog.passes)} | {L * 1e3:.0f} | {fast:.2f} | {cf:.1f} | {prg:.2f} | "
-                       f"{cp:.1f} | {topp:.3f} | {t3:.3f} | {t3f:.3f} | {fast / t3:.3f}x | {prg / t3f:.3f}x |")
-    print("### per program (cutting time; compute: CPU s of the whole plan)\n")
-    print("| program | passes | mm | fastest s | CPU s | program s | CPU s | TOPP-RA s | 3rd order s | "
+        print(f"| all | | {L * 1e3:.1f} | | {nominal:.3f} | {fast:.3f} | {prg:.3f} | {topp:.4f} | {t3:.4f} | "
+              f"{t3f:.4f} | {fast / t3:.3f}x | {prg / t3f:.3f}x | {fast / topp:.3f}x |\n")
+        summary.append(f"| {label} | {len(prog.passes)} | {L * 1e3:.0f} | {nominal:.2f} | {fast:.2f} | {cf:.1f} | "
+                       f"{prg:.2f} | {cp:.1f} | {topp:.3f} | {t3:.3f} | {t3f:.3f} | {fast / t3:.3f}x | "
+                       f"{prg / t3f:.3f}x |")
+    print("### per program (cutting time; compute: CPU s of the whole plan at the defaults)\n")
+    print("| program | passes | mm | L / F s | fastest s | CPU s | program s | CPU s | TOPP-RA s | 3rd order s | "
           "3rd order at F s | fastest / 3rd | program / 3rd at F |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     print("\n".join(summary))
-    print(f"\n### grid refinement (nodes per element {grids}; change: from the previous grid, %)\n")
-    print("| pass | optimum | time s per grid | change % | IPOPT | max residual N | IPOPT CPU s |")
-    print("|---|---|---|---|---|---|---|")
+    print(f"\n### grid refinement (steps per element {grids}, doubled until two agree within 0.1 %; "
+          "change: from the previous grid, %)\n")
+    print("| pass | optimum | nodes | time s per grid | change % | IPOPT | max residual N | IPOPT CPU s |")
+    print("|---|---|---|---|---|---|---|---|")
     print("\n".join(conv_rows))
 
 
