@@ -36,8 +36,7 @@ written here from the equations of motion, not from the planner's code):
 * the pass starts and ends at rest, with a zero generalised acceleration (it holds its pose
   before and after: the forces are a preload in the null space of ``J_l^T``, free); with
   ``--from-zero`` the forces start and end at 0 instead;
-* minimise the sum of the steps (plus ``1e-6`` of the squared forces' time integral: the
-  drives' internal force is otherwise free); IPOPT (MUMPS) from a minimum-jerk guess per
+* minimise the sum of the steps; IPOPT (MUMPS) from a minimum-jerk guess per
   element, each finer grid from the coarser solution; each solve bounded (1000 iterations,
   120 CPU s: its status is in the grid table).
 
@@ -298,10 +297,7 @@ def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: 
         opti.subject_to(A[0, k] == 0)
         if from_zero:
             opti.subject_to(U[:, k] == 0)
-    # the time [ms], plus a tiny force regulariser: the drives' internal force (the null space of
-    # J_l^T) is otherwise free, which leaves IPOPT a flat direction on a cruise at F; its weight
-    # changes the time by < 1e-5 relative (|U| <= 1)
-    opti.minimize(ca.sum2(1e3 * hk) + 1e-6 * ca.sum2(1e3 * hk * ca.sum1(U[:, i0] ** 2)))
+    opti.minimize(ca.sum2(1e3 * hk))  # the time [ms]
 
     # guess: per element a minimum-jerk rest-to-rest motion in T_e
     Tg = np.asarray(guess["T"]) if guess else np.maximum(2.5 * np.sqrt(L / 5.0), 0.01)
@@ -403,7 +399,7 @@ def main() -> None:
     ap.add_argument("--grids", default="24,48,96",
                     help="time steps per element, coarse to fine (three time blocks each)")
     ap.add_argument("--programs",
-                    default="bench,freecad_linuxcnc.ngc,fusion360.nc,pcb_gcode.ngc,estlcam.nc,dxf2gcode.ngc",
+                    default="bench,freecad_linuxcnc.ngc,fusion360.nc",
                     help="'bench' (bench_contour's part) and/or files in tests/data/cam")
     ap.add_argument("--from-zero", action="store_true", help="forces 0 at each pass's start and end")
     ap.add_argument("--no-planner", action="store_true", help="the optima only")
