@@ -1,0 +1,119 @@
+"""Fine sample times (issue 31, goals 3 and 4): the constrained mode's default horizon and
+segment time follow ``Ts`` and the robot, a range spreading out of the start point keeps the
+point in its rows, and a step that only DAQP's numerics call infeasible is not reported as
+infeasible. Every plan here is checked by the independent checker (tests/certify_support.py)."""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import pytest
+
+from planner import plan
+from planner.constraints import MARGIN_M
+from planner.constraints.corridor import CorridorConstraint
+from planner.corridor import range_sequence
+from planner.schema import (
+    DEFAULT_FORCE_RISE_S,
+    DEFAULT_HORIZON_BRAKES,
+    DEFAULT_HORIZON_MAX,
+    DEFAULT_HORIZON_RAMPS,
+    DEFAULT_SEGMENT_S,
+    Settings,
+    builtin_description,
+    parse_request,
+)
+
+from .certify_support import check_plan
+from .support import TABLE1
+
+
+def short_corridor(seed: int, case: int) -> list[dict]:
+    """The issue's short [point, box, point] corridors (3-30 mm boxes, the start and the end
+    at opposite corners): case ``case`` of the generator seeded with ``seed``."""
+    rng = np.random.default_rng(seed)
+    for _ in range(case + 1):
+        size = rng.uniform(0.003, 0.03)
+        p = rng.uniform(-0.03, 0.03, 2)
+        q = p + rng.uniform(0.3, 1.0, 2) * size * rng.choice([-1, 1], 2)
+    lo, hi = np.minimum(p, q), np.maximum(p, q)
+    return [{"lower": [*p, 0.0], "upper": [*p, 0.0]}, {"lower": [*lo, 0.0], "upper": [*hi, 0.0]},
+            {"lower": [*q, 0.0], "upper": [*q, 0.0]}]
+
+
+def test_default_horizon_follows_the_sample_time_and_the_robot():
+    # Table I's sample time keeps the 30 samples and 20 a segment it had
+    st = Settings.model_validate({"Ts": 0.01})
+    assert (st.N, st.samples_per_segment) == (30, 20)
+    desc = builtin_description("moving-slide")
+    legs = desc.leg_list()
+    mass = desc.platform.mass + sum(g.cylinder.mass + g.rod.mass for g in legs)
+    brake = max(g.speed_max for g in legs) * mass / sum(g.force_max for g in legs)
+    horizon = DEFAULT_HORIZON_RAMPS * DEFAULT_FORCE_RISE_S + DEFAULT_HORIZON_BRAKES * brake
+    for Ts in (0.005, 0.002, 0.001):
+        st = Settings.model_validate({"Ts": Ts})
+        # the horizon covers the force ramps and braking times, or is at its cap
+        assert st.N * Ts >= horizon - Ts or st.N == DEFAULT_HORIZON_MAX
+        assert st.N > 30
+        # a segment is held the same time as at Ts 10 ms
+        assert math.isclose(st.samples_per_segment * Ts, DEFAULT_SEGMENT_S, rel_tol=1e-9)
+    # the paper mode, a given N, and a given samples_per_segment are as before
+    assert Settings.model_validate({"Ts": 0.002, "mode": "paper"}).N == 20
+    assert Settings.model_validate({"Ts": 0.002, "N": 40}).samples_per_segment == 40
+    assert Settings.model_validate({"Ts": 0.002, "samples_per_segment": 7}).N == 100
+    # no force-rate limit: only the braking times (shorter)
+    assert Settings.model_validate({"Ts": 0.001, "force_rate_n_s": "off"}).N < 100
+    # a heavier robot brakes longer: its own horizon, from the request's robot
+    heavy = desc.model_dump(mode="json")
+    heavy["platform"]["mass"] *= 10
+    segs = short_corridor(1, 2)
+    light_N = parse_request({"segments": segs, "settings": {"Ts": 0.005}}).settings.N
+    heavy_N = parse_request({"robot": heavy, "segments": segs, "settings": {"Ts": 0.005}}).settings.N
+    assert heavy_N > light_N
+
+
+def test_spread_rows_keep_the_start_point():
+    """The rows of the samples spreading out of the start point contain it, where the point
+    is a corner of the box (the margin would have excluded it at every spread sample)."""
+    req = parse_request({"segments": short_corridor(1, 0), "settings": {"Ts": 0.001}})
+    segs = req.segments
+    assert segs is not None
+    seq = range_sequence(list(segs), req.settings, 4)
+    rows = CorridorConstraint(seq, segs)
+    p = segs[0].centre
+    # the samples spreading out of the point (the first half: the box lies between two points)
+    spread = (seq.segment == 1) & np.all((seq.lower <= p) & (p <= seq.upper), axis=1)
+    assert spread.sum() == req.settings.samples_per_segment // 2
+    for lo, hi in ((rows.lo, rows.hi), (rows.lo_deep, rows.hi_deep)):
+        assert np.all(lo[spread] <= p + 1e-15) and np.all(hi[spread] >= p - 1e-15)
+    # and on the sides away from the point the range is still shrunk by the margin
+    j = np.nonzero(spread)[0][-1]
+    for ax in range(2):
+        if seq.upper[j, ax] - p[ax] > 2 * MARGIN_M:
+            assert rows.hi[j, ax] <= seq.upper[j, ax] - MARGIN_M + 1e-15
+        if p[ax] - seq.lower[j, ax] > 2 * MARGIN_M:
+            assert rows.lo[j, ax] >= seq.lower[j, ax] + MARGIN_M - 1e-15
+
+
+@pytest.mark.parametrize("Ts", [0.002, 0.001])
+def test_table1_plans_at_fine_sample_times_by_default(Ts):
+    req = copy.deepcopy(TABLE1)
+    req.setdefault("settings", {})["Ts"] = Ts
+    res = plan(req)
+    verdict = check_plan(req, res)
+    assert verdict.ok, verdict.problems
+    assert res.settings.N == DEFAULT_HORIZON_MAX and res.metrics.contained and res.metrics.settled
+    assert math.isclose(res.metrics.duration_s, 2.4, abs_tol=Ts)  # 12 segments x 0.2 s, as at Ts 10 ms
+
+
+# short corridors of the issue at Ts 2 ms that the defaults refused: (seed, case); (0, 4) needed
+# the slack problem solved again (DAQP cycled on it: "no solution ... even with the corridor softened")
+@pytest.mark.parametrize("seed, case", [(1, 2), (1, 3), (1, 6), (0, 4)])
+def test_short_corridors_plan_at_ts_2ms_by_default(seed, case):
+    req = {"segments": short_corridor(seed, case), "settings": {"Ts": 0.002}}
+    res = plan(req)
+    verdict = check_plan(req, res)
+    assert verdict.ok, verdict.problems
+    assert res.metrics.infeasible_steps == 0 and res.metrics.contained
