@@ -117,3 +117,57 @@ def test_short_corridors_plan_at_ts_2ms_by_default(seed, case):
     verdict = check_plan(req, res)
     assert verdict.ok, verdict.problems
     assert res.metrics.infeasible_steps == 0 and res.metrics.contained
+
+
+# ---------------------------------------------------------------- the plant follows the robot's stiffness (goal 5)
+
+
+def stiff_robot(friction: float) -> dict:
+    desc = builtin_description("moving-slide").model_dump(mode="json")
+    desc["legs"]["friction"] = friction
+    return desc
+
+
+def reference_deviation(res, robot: dict, Ts: float) -> float:
+    """The largest distance [m] of a sample from RK4 with 16 steps a sample of the plan's own
+    forces from the sample before (the fine reference integration)."""
+    from planner.model import load_robot
+    from planner.model.plant import rk4_sample
+
+    model = load_robot(robot)
+    X = np.hstack((res.pose, res.velocity))
+    U = res.drives.force
+    return max(float(np.hypot(*(rk4_sample(model, X[k], U[k], Ts, 16)[:2] - X[k + 1][:2])))
+               for k in range(len(X) - 1))
+
+
+def test_plant_substeps_follow_the_stiffness_and_a_given_count_overrides():
+    from planner.model import load_robot
+    from planner.model.plant import plant_substeps
+
+    assert plant_substeps(load_robot("moving-slide"), 0.01) == 1
+    soft = plant_substeps(load_robot(stiff_robot(500.0)), 0.01)
+    stiff = plant_substeps(load_robot(stiff_robot(2000.0)), 0.01)
+    assert 1 < soft < stiff <= 50
+    # finer samples need fewer steps a sample (the step length is what matters)
+    assert plant_substeps(load_robot(stiff_robot(2000.0)), 0.002) < stiff
+    # the count a plan runs with is reported; a given count is kept
+    segs = short_corridor(1, 2)
+    res = plan({"robot": stiff_robot(500.0), "segments": segs, "settings": {"Ts": 0.01}})
+    assert res.settings.plant_substeps == soft
+    res = plan({"robot": stiff_robot(500.0), "segments": segs, "settings": {"Ts": 0.01, "plant_substeps": 2}})
+    assert res.settings.plant_substeps == 2
+
+
+@pytest.mark.parametrize("friction, settings", [(500.0, {}), (2000.0, {"total_time_s": 9.6})])
+def test_stiff_legs_plan_within_1um_of_a_fine_integration(friction, settings):
+    """Table I with a leg friction of 500 N s/m was refused at one RK4 step a sample (and
+    accepted plans differed by 8.3 um from a fine integration); 2000 N s/m plans at 9.6 s."""
+    req = copy.deepcopy(TABLE1)
+    req["robot"] = stiff_robot(friction)
+    req["settings"] = settings
+    res = plan(req)
+    verdict = check_plan(req, res)
+    assert verdict.ok, verdict.problems
+    assert res.settings.plant_substeps > 1
+    assert reference_deviation(res, req["robot"], 0.01) <= 1e-6

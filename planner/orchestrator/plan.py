@@ -23,6 +23,7 @@ from ..corridor.geometry import corridor_gaps
 from ..corridor.workspace import parse_layout
 from ..errors import PlannerError, invalid
 from ..model import RobotModel, load_robot
+from ..model.plant import plant_substeps
 from ..model.reach import check_pose, check_segments
 from ..schema import (
     MAX_SAMPLES_PER_SEGMENT,
@@ -82,7 +83,7 @@ def plan(request: Any, *, robot: RobotModel | None = None, segments: Sequence[Se
 def _plan(req: PlanRequest, t0: float, robot: RobotModel | None, segments: Sequence[Segment] | None,
           work_limit_s: float | None) -> PlanResult:
     model = _robot(req, robot)
-    st = req.settings
+    st = _with_substeps(req, model)
     if segments is None:
         segments = req.segments
     if segments is None and req.layout is not None:
@@ -115,6 +116,19 @@ def _plan(req: PlanRequest, t0: float, robot: RobotModel | None, segments: Seque
                            f"speed {mt.end_speed_m_s * 1e3:.3f} mm/s); lengthen settings.tail_max_s, "
                            "add samples per segment or raise k_r", "settings.tail_max_s")
     return result
+
+
+def _with_substeps(req: PlanRequest, model: RobotModel) -> Settings:
+    """The request's settings with ``plant_substeps`` following the robot's stiffness and
+    ``Ts`` (:func:`planner.model.plant.plant_substeps`, at the corridor's start) where the
+    request leaves it out: a given ``plant_substeps`` overrides (issue 31)."""
+    st = req.settings
+    if "plant_substeps" in st.model_fields_set:
+        return st
+    start = (req.segments[0].centre if req.segments is not None else
+             req.reference.pose[0] if req.reference is not None else None)
+    n = plant_substeps(model, st.Ts, start)
+    return st if n == st.plant_substeps else st.model_copy(update={"plant_substeps": n})
 
 
 def _default_cell_size(req: PlanRequest) -> float | None:

@@ -49,6 +49,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -203,6 +204,29 @@ def _ramp_s(req: PlanRequest) -> float | None:
     return float(np.max(force / np.broadcast_to(np.asarray(rate, float), force.shape)))
 
 
+@lru_cache(maxsize=64)
+def _builtin_substeps(robot: str, Ts: float) -> int:
+    from ..model import load_robot
+    from ..model.plant import plant_substeps
+
+    return plant_substeps(load_robot(robot), Ts)
+
+
+def _substeps(req: PlanRequest) -> int:
+    """The plant's RK4 steps a sample the plan will take: the request's ``plant_substeps``, or
+    those the robot's stiffness needs (:func:`planner.model.plant.plant_substeps`, at the home
+    pose: the stiffness hardly changes over the workspace)."""
+    st = req.settings
+    if "plant_substeps" in st.model_fields_set:
+        return st.plant_substeps
+    if isinstance(req.robot, str):
+        return _builtin_substeps(req.robot, st.Ts)
+    from ..model import load_robot
+    from ..model.plant import plant_substeps
+
+    return plant_substeps(load_robot(req.robot), st.Ts)
+
+
 def fastest_count(step_m: float, Ts: float, N: int, ramp_s: float | None) -> int:
     """The uniform samples per segment the ``fastest`` search is estimated to end at: a move
     of ``step_m`` from rest to rest at :data:`FASTEST_A_M_S2` (``2 sqrt(d / a)``), or
@@ -295,7 +319,7 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
                       f"{st.Ts:g} s (N Ts covering {FASTEST_RAMPS:g} force ramps of {ramp:g} s: with less the "
                       "fastest timing found is ~10-25x slower and takes as many more candidates), a larger "
                       "settings.Ts, or " + advice)
-    step_s = _step_cost(st.mode, st.backend, st.solver, st.N, st.plant_substeps)
+    step_s = _step_cost(st.mode, st.backend, st.solver, st.N, _substeps(req))
     loop_s = steps * step_s
     metrics_s = steps * (c["sample"] + (c["sample_polygon"] if polygons else 0.0))
     segment_s = (c["segmentation"] if req.layout is not None else 0.0) + cells * c["cell"] + obstacles * c["obstacle"]
