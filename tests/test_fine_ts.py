@@ -171,3 +171,34 @@ def test_stiff_legs_plan_within_1um_of_a_fine_integration(friction, settings):
     assert verdict.ok, verdict.problems
     assert res.settings.plant_substeps > 1
     assert reference_deviation(res, req["robot"], 0.01) <= 1e-6
+
+
+# ---------------------------------------------------------------- the fastest estimate follows the robot (goal 6)
+
+
+def test_fastest_estimate_depends_on_the_robot():
+    """The estimated count of the ``fastest`` search grows with the robot's mass (its
+    acceleration) and its leg friction (the speed it allows); the Moving Slide's is as before
+    (measured on these four: benchmarks/bench_fine_ts.py, <= 1.5x)."""
+    from planner import estimate_work
+    from planner.orchestrator.work import FASTEST_A_M_S2, fastest_count, robot_motion
+
+    def req(robot):
+        r = copy.deepcopy(TABLE1)
+        r["robot"] = robot
+        r["settings"] = {"fastest": True}
+        return r
+
+    heavy = builtin_description("moving-slide").model_dump(mode="json")
+    heavy["platform"]["mass"] = 150.0
+    base = parse_request(req("moving-slide"))
+    a0, v0 = robot_motion(base)
+    assert math.isclose(a0, FASTEST_A_M_S2) and v0 > 1.0
+    counts = []
+    for robot in ("moving-slide", heavy, stiff_robot(500.0), stiff_robot(2000.0)):
+        motion = robot_motion(parse_request(req(robot)))
+        counts.append(fastest_count(0.028, 0.01, 30, 0.05, motion))
+    assert counts[0] == fastest_count(0.028, 0.01, 30, 0.05)  # the Moving Slide as before
+    assert counts[1] > counts[0] and counts[3] > counts[2] > counts[0]
+    seconds = [estimate_work(req(r)).seconds for r in ("moving-slide", heavy, stiff_robot(2000.0))]
+    assert seconds[1] > seconds[0] and seconds[2] > seconds[0]
