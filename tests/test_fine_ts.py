@@ -202,3 +202,22 @@ def test_fastest_estimate_depends_on_the_robot():
     assert counts[1] > counts[0] and counts[3] > counts[2] > counts[0]
     seconds = [estimate_work(req(r)).seconds for r in ("moving-slide", heavy, stiff_robot(2000.0))]
     assert seconds[1] > seconds[0] and seconds[2] > seconds[0]
+
+
+# ---------------------------------------------------------------- a refusal names a remedy that plans (goal 2)
+
+
+def test_refusal_names_fastest_when_more_time_does_not_help():
+    """At Ts 2 ms with N = 30 (S = 30), 2x-16x the time do not plan this corridor, but
+    ``fastest`` does: the error names it, and the advice plans (confirmed independently)."""
+    from planner import PlannerError
+
+    from .certify_support import confirm_error
+
+    req = {"segments": short_corridor(1, 0), "settings": {"Ts": 0.002, "N": 30}}
+    with pytest.raises(PlannerError) as exc:
+        plan(req)
+    msg = exc.value.message
+    assert exc.value.code == "infeasible" and "settings.fastest plans it" in msg, msg
+    assert "too narrow" not in msg
+    assert confirm_error(req, exc.value.code, msg, exc.value.field) is None
