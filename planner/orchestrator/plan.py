@@ -249,7 +249,7 @@ def _other_advice(exc: PlannerError, req: PlanRequest, model: RobotModel, st: Se
                 budget_s -= time.perf_counter() - t_try
     if not st.fastest:
         fast = req.model_copy(update={"settings": Settings.model_validate(
-            {**req.settings.model_dump(exclude_unset=True, exclude={*TIMING_FIELDS}), "fastest": True})})
+            {**req.settings.model_dump(mode="json", exclude_unset=True, exclude={*TIMING_FIELDS}), "fastest": True})})
         cost = estimate_work(fast, segments).seconds
         if budget_s is None or cost <= budget_s:
             fst = st.model_copy(update={"fastest": True, "speed_m_s": None, "total_time_s": None,

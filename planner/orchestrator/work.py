@@ -402,7 +402,14 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
     if st.mode == "constrained" and not st.fastest and req.reference is None:  # infeasible: more time
         more = [f for f in MORE_TIME
                 if S * f <= MAX_SAMPLES_PER_SEGMENT and n * S * f + st.tail_steps <= MAX_TOTAL_STEPS]
-        advice_s = max(advice_s, sum(more) * plan_s)
+        # then a longer horizon (at most MAX_HORIZON: the step's cost about linear in N) and
+        # settings.fastest (orchestrator.plan._other_advice)
+        from ..schema import MAX_HORIZON, TIMING_FIELDS
+
+        fast = req.model_copy(update={"settings": Settings.model_validate(
+            {**st.model_dump(mode="json", exclude_unset=True, exclude={*TIMING_FIELDS}), "fastest": True})})
+        other = plan_s * MAX_HORIZON / st.N + estimate_work(fast, segments).seconds
+        advice_s = max(advice_s, sum(more) * plan_s + other)
     return WorkEstimate(seconds=seconds, steps=steps, plans=plans, field=field, detail=detail,
                         advice_seconds=advice_s, advice=advice)
 
