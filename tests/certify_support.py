@@ -805,7 +805,7 @@ def confirm_error(request: dict, code: str, message: str, field_name: str | None
                 plan(fixed)
             except PlannerError as exc:
                 return f"the advised {factor}x the time still fails: {exc.code}: {exc}"
-        elif "more time" in message and "does not help" not in message:
+        elif "more time" in message and not re.search(r"do(es)? not help", message):
             return f"advice of more time that was not checked: {message}"
     return None
 
