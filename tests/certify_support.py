@@ -766,6 +766,24 @@ def confirm_error(request: dict, code: str, message: str, field_name: str | None
         if not np.any(apart > -2.1e-6):  # the planner's gaps allow for its 1 um margins
             return f"segments {m.group(1)} and {m.group(2)} overlap, yet the error says they do not touch"
         return None
+    if code == "infeasible" and re.search(r"settings\.N = \d+ plans|settings\.fastest plans", message):
+        fixed = copy.deepcopy(request)
+        fixed.setdefault("settings", {})
+        m = re.search(r"settings\.N = (\d+) plans", message)
+        if m:  # a longer horizon at the same timing
+            fixed["settings"]["N"] = int(m.group(1))
+            if not any(fixed["settings"].get(k) not in (None, False) for k in
+                       ("speed_m_s", "total_time_s", "samples_per_segment", "segment_samples", "fastest")):
+                fixed["settings"]["samples_per_segment"] = int(plan_settings(request)["samples_per_segment"])
+        else:
+            for k in ("speed_m_s", "total_time_s", "samples_per_segment", "segment_samples"):
+                fixed["settings"].pop(k, None)
+            fixed["settings"]["fastest"] = True
+        try:
+            plan(fixed)
+        except PlannerError as exc:
+            return f"the advised setting still fails: {exc.code}: {exc}"
+        return None
     if code == "infeasible":
         m = re.search(r"(\d+)x the time plans", message)
         if m:  # the advice must plan: every segment's samples times the factor
@@ -787,9 +805,16 @@ def confirm_error(request: dict, code: str, message: str, field_name: str | None
                 plan(fixed)
             except PlannerError as exc:
                 return f"the advised {factor}x the time still fails: {exc.code}: {exc}"
-        elif "more time" in message and "does not help" not in message:
+        elif "more time" in message and not re.search(r"do(es)? not help", message):
             return f"advice of more time that was not checked: {message}"
     return None
+
+
+def plan_settings(request: dict) -> dict:
+    """The request's settings as validated (the defaults filled in), as a dict."""
+    from planner import parse_request
+
+    return parse_request(request).settings.model_dump()
 
 
 def certify_case(case: dict, modes: tuple[str, ...] = ("constrained", "paper")) -> dict:
@@ -841,3 +866,48 @@ def certify_case(case: dict, modes: tuple[str, ...] = ("constrained", "paper")) 
             rec["problem"] = "; ".join(verdict.problems[:3])
         out[mode] = rec
     return out
+
+
+def user_robot(rng: np.random.Generator) -> dict:
+    """A Moving-Slide-like robot of 3 to 6 legs (pivots on circles, the legs turned 0.32 rad
+    off the radial direction as in the Moving Slide, 0.316 m at the home pose), its platform's
+    mass x0.1 to x10 and a leg friction of 5 to 2000 N s/m (issue 31)."""
+    n = int(rng.integers(3, 7))
+    th = 2 * np.pi * np.arange(n) / n + float(rng.uniform(0, np.pi))
+    base = 0.4472 * np.column_stack((np.cos(th), np.sin(th)))
+    plat = 0.1414 * np.column_stack((np.cos(th + 0.32), np.sin(th + 0.32)))
+    desc = json.loads((DATA / "moving-slide.json").read_text())
+    desc.update(name=f"user-{n}", base_pivots=base.tolist(), platform_pivots=plat.tolist())
+    desc["platform"]["mass"] = float(15.0 * 10 ** rng.uniform(-1, 1))
+    desc["legs"]["friction"] = float([5.0, 50.0, 500.0, 2000.0][int(rng.integers(4))])
+    return desc
+
+
+def user_case(rng: np.random.Generator, Ts_choices: tuple[float, ...] = (0.001, 0.002, 0.005, 0.01)) -> dict:
+    """Where users go (issue 31): a robot of :func:`user_robot` or a built-in one, a short
+    corridor of 1-3 boxes of 3-30 mm between a start and an end point, Ts from ``Ts_choices``
+    with or without a fixed N, the default timing, a speed of 0.005-0.1 m/s or ``fastest``,
+    the default force rate, 'off' or 300 N/s."""
+    robot: Any = user_robot(rng) if rng.random() < 0.6 else ["moving-slide", "tri-slide"][int(rng.integers(2))]
+    p = rng.uniform(-0.02, 0.02, 2)
+    segs = [{"lower": [*p, 0.0], "upper": [*p, 0.0]}]
+    for _ in range(int(rng.integers(1, 4))):
+        q = p + rng.uniform(0.3, 1.0, 2) * rng.uniform(0.003, 0.03) * rng.choice([-1, 1], 2)
+        lo, hi = np.minimum(p, q), np.maximum(p, q)
+        segs.append({"lower": [*lo, 0.0], "upper": [*hi, 0.0]})
+        p = q
+    segs.append({"lower": [*p, 0.0], "upper": [*p, 0.0]})
+    st: dict[str, Any] = {"Ts": float(Ts_choices[int(rng.integers(len(Ts_choices)))])}
+    if rng.random() < 0.25:
+        st["N"] = int(rng.choice([20, 30, 60]))
+    timing = int(rng.integers(3))
+    if timing == 1:
+        st["speed_m_s"] = float(10 ** rng.uniform(np.log10(0.005), -1))
+    elif timing == 2:
+        st["fastest"] = True
+    rate = int(rng.integers(3))
+    if rate == 1:
+        st["force_rate_n_s"] = "off"
+    elif rate == 2:
+        st["force_rate_n_s"] = 300.0
+    return {"robot": robot, "segments": segs, "settings": st}

@@ -24,6 +24,7 @@ from tests.certify_support import (
     draw_cases,
     grid_path_exists,
     robot_of,
+    user_case,
 )
 from tests.support import TABLE1, with_settings
 
@@ -216,6 +217,24 @@ def test_certification_slice(part):
             if rec.get("problem"):
                 problems.append((mode, rec["outcome"], rec["problem"], case))
     assert not problems, problems[:3]
+
+
+@pytest.mark.slow
+def test_where_users_go_slice():
+    """A fixed-seed slice of the issue 31 generator (:func:`tests.certify_support.user_case`:
+    robots of 3-6 legs, platform x0.1-x10, leg friction 5-2000 N s/m; Ts 2-10 ms with and
+    without N; the default timing, speeds, fastest; force rates): every plan certified by the
+    independent checker, every error confirmed or its advice applied (~10 s CPU)."""
+    problems = []
+    outcomes = []
+    for i in range(12):
+        case = user_case(np.random.default_rng([31, i]), (0.002, 0.005, 0.01))
+        rec = certify_case(case, modes=("constrained",))["constrained"]
+        outcomes.append(rec["outcome"])
+        if rec.get("problem"):
+            problems.append((rec["outcome"], rec["problem"], case["settings"]))
+    assert not problems, problems[:3]
+    assert outcomes.count("ok") >= 10, outcomes  # these plan (12 of 12 on branch certify)
 
 
 def test_the_advice_bound_counts_every_cell_the_remedy_search_segments(monkeypatch):

@@ -210,12 +210,13 @@ def test_fastest_over_the_limit_is_refused_up_front_with_what_to_change(table1):
     """Table I with fastest at Ts 2 ms took 46 CPU s (estimated 1.22 s: admitted, then cut off
     at the 30 s limit): the horizon N Ts = 60 ms covers 1.2 force ramps, the search ends at
     ~1 200 samples a segment after 121 candidates. Now refused before it starts, naming the
-    horizon, Ts and another timing."""
+    horizon, Ts and another timing. (The default horizon at Ts 2 ms is 100 samples since issue
+    31: N = 30 is given.)"""
     from app.executors import run_bounded
     from app.jobs import PlanJob
     from planner.schema import PlanRequest
 
-    slow = with_settings(table1, fastest=True, Ts=0.002)
+    slow = with_settings(table1, fastest=True, Ts=0.002, N=30)
     est = estimate_work(slow)
     assert est.seconds > 30.0 and est.field == "settings.fastest"
     t0 = time.process_time()

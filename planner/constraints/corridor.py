@@ -182,9 +182,26 @@ class CorridorConstraint(RowConstraint):
                         V = seq.lower[j, :2] + (np.asarray(poly, float) - seg.lower[:2]) * (w[j, :2] / sw)
                         A, b = _halfplanes(V)
                         self.hp[j] = (A, b - MARGIN_M)
-        self.lo, self.hi = lo, hi
         extra = np.minimum(np.array([RECOURSE_M, RECOURSE_M, RECOURSE_RAD]), 0.5 * (hi - lo))
-        self.lo_deep, self.hi_deep = lo + extra, hi - extra
+        lo_deep, hi_deep = lo + extra, hi - extra
+        if segments is not None:
+            # a range spreading out of a point (the start) keeps that point inside its rows: shrunk
+            # by the margin, the first spread samples of a start at a corner of its cell excluded
+            # it, so a robot at rest there had to move a margin (1 um) within one sample, which a
+            # force rising at its rate limit cannot at a fine Ts (0.05 um at Ts 1 ms: every
+            # default request refused, issue 31). Being at the point is inside the corridor (the
+            # point is a segment); away from it the rows are the shrunk range's.
+            for i in range(1, len(segments)):
+                if segments[i - 1].is_point and not segments[i].is_point:
+                    p = segments[i - 1].centre
+                    # the samples whose range holds the point (the spreading ones; not those
+                    # narrowing onto the end point when the segment is between two points)
+                    spread = (seq.segment == i) & np.all((seq.lower <= p + 1e-12) & (p <= seq.upper + 1e-12), axis=1)
+                    for a, b in ((lo, hi), (lo_deep, hi_deep)):
+                        a[spread] = np.minimum(a[spread], p)
+                        b[spread] = np.maximum(b[spread], p)
+        self.lo, self.hi = lo, hi
+        self.lo_deep, self.hi_deep = lo_deep, hi_deep
         self.has_hp = np.array([h is not None for h in self.hp], bool)
         # the half-planes flattened for the compiled rows: those of sequence index s are
         # hp_A[hp_ptr[s]:hp_ptr[s + 1]]

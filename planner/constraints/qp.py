@@ -17,7 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ARRIVAL_SLACK_WEIGHT", "DAQP_SETTINGS", "SLACK_ITER_LIMIT", "SLACK_RHO1", "SLACK_RHO2", "DenseQP",
+__all__ = ["ARRIVAL_SLACK_WEIGHT", "DAQP_SETTINGS", "RETRY_FLAGS", "RETRY_SETTINGS", "SLACK_ITER_LIMIT", "SLACK_RHO1",
+           "SLACK_RHO2", "DenseQP",
            "QPSolution", "solve_qp"]
 
 #: DAQP's tolerances (rows in row units: 1e-9 of a millimetre) and iteration limit
@@ -25,6 +26,14 @@ DAQP_SETTINGS = {"primal_tol": 1e-9, "dual_tol": 1e-12, "iter_limit": 2000}
 #: the slack problem's iteration limit: far outside the corridor hundreds of rows are
 #: violated and DAQP needs thousands of iterations (2000-9000 measured)
 SLACK_ITER_LIMIT = 20000
+#: DAQP exit flags of a numerical failure (cycling, a singular factorisation, an overdetermined
+#: start) after which the slack problem is solved again with each of :data:`RETRY_SETTINGS`
+RETRY_FLAGS = (-2, -5, -6)
+#: DAQP settings tried in turn after a numerical failure of the slack problem (issue 31: at Ts
+#: 2 ms the slack problems of the samples before the end point cycled; the primal tolerance of
+#: 1e-7 row units, 1e-10 m, solved them in a sixth of the iterations, a larger cycle tolerance
+#: in 4x; proximal regularisation, ``eps_prox``, cycled too)
+RETRY_SETTINGS: tuple[dict, ...] = ({"primal_tol": 1e-7}, {"cycle_tol": 1000})
 #: penalty weights of the slack variables (relative to the scaled criterion, which is O(1))
 SLACK_RHO2 = 1e8
 SLACK_RHO1 = 1e6
@@ -56,7 +65,8 @@ class QPSolution:
 
 
 def solve_qp(H: np.ndarray, f: np.ndarray, A: np.ndarray, upper: np.ndarray, lower: np.ndarray,
-             sense: np.ndarray, start: np.ndarray | None = None, iter_limit: int | None = None) -> QPSolution:
+             sense: np.ndarray, start: np.ndarray | None = None, iter_limit: int | None = None,
+             retry: dict | None = None) -> QPSolution:
     """``min 0.5 x'Hx + f'x`` s.t. ``lower <= (x_bounds, A x) <= upper`` by DAQP with
     :data:`DAQP_SETTINGS`: the first ``len(upper) - len(A)`` entries of the bounds are simple
     bounds on ``x``, the rest bound the rows of ``A``; ``sense`` per bound (0, or
@@ -64,6 +74,8 @@ def solve_qp(H: np.ndarray, f: np.ndarray, A: np.ndarray, upper: np.ndarray, low
     kw = dict(DAQP_SETTINGS)
     if iter_limit is not None:
         kw["iter_limit"] = iter_limit
+    if retry:
+        kw.update(retry)
     if start is not None:
         kw["primal_start"] = start
     import daqp  # loaded on first use: the compiled stage-wise solve rarely falls back to it
@@ -133,5 +145,14 @@ class DenseQP:
         As, bu, bl = As[keep], np.where(np.isfinite(bu), bu, 1e30)[keep], np.where(np.isfinite(bl), bl, -1e30)[keep]
         ub = np.concatenate((self.zmax, np.full(ns, 1e30), bu))
         lb = np.concatenate((-self.zmax, np.zeros(ns), bl))
-        return solve_qp(Hs, fs, As, ub, lb, np.zeros(len(ub), dtype=np.int32),
-                        iter_limit=SLACK_ITER_LIMIT if iter_limit is None else iter_limit)
+        sense = np.zeros(len(ub), dtype=np.int32)
+        limit = SLACK_ITER_LIMIT if iter_limit is None else iter_limit
+        sol = solve_qp(Hs, fs, As, ub, lb, sense, iter_limit=limit)
+        for retry in RETRY_SETTINGS:
+            if sol.flag not in RETRY_FLAGS or sol.iterations >= limit:
+                break
+            # the slack problem always has a solution (the previous forces meet the hard rows):
+            # DAQP cycled or lost its factorisation, a numerical failure; solved again
+            again = solve_qp(Hs, fs, As, ub, lb, sense, iter_limit=limit - sol.iterations, retry=retry)
+            sol = QPSolution(again.z, again.flag, sol.iterations + again.iterations)
+        return sol

@@ -23,15 +23,19 @@ from ..corridor.geometry import corridor_gaps
 from ..corridor.workspace import parse_layout
 from ..errors import PlannerError, invalid
 from ..model import RobotModel, load_robot
+from ..model.plant import plant_substeps
 from ..model.reach import check_pose, check_segments
 from ..schema import (
+    MAX_HORIZON,
     MAX_SAMPLES_PER_SEGMENT,
     MAX_TOTAL_STEPS,
+    TIMING_FIELDS,
     PlanRequest,
     PlanResult,
     Reference,
     Segment,
     Settings,
+    default_horizon,
     parse_request,
 )
 from .fastest import search as search_fastest
@@ -82,7 +86,7 @@ def plan(request: Any, *, robot: RobotModel | None = None, segments: Sequence[Se
 def _plan(req: PlanRequest, t0: float, robot: RobotModel | None, segments: Sequence[Segment] | None,
           work_limit_s: float | None) -> PlanResult:
     model = _robot(req, robot)
-    st = req.settings
+    st = _with_substeps(req, model)
     if segments is None:
         segments = req.segments
     if segments is None and req.layout is not None:
@@ -104,8 +108,14 @@ def _plan(req: PlanRequest, t0: float, robot: RobotModel | None, segments: Seque
             budget = None
             if work_limit_s is not None and work_limit_s > 0:  # what the limit leaves for the checks
                 budget = work_limit_s - (time.perf_counter() - t0)
-            raise _more_time_advice(exc, req.name, model, given, st, segments, budget,
-                                    estimate_work(req, segments).seconds, _default_cell_size(req)) from None
+            estimate_s = estimate_work(req, segments).seconds
+            advised = _more_time_advice(exc, req.name, model, given, st, segments, budget, estimate_s,
+                                        _default_cell_size(req))
+            if "the time plans" not in advised.message:
+                if budget is not None:
+                    budget = work_limit_s - (time.perf_counter() - t0)  # type: ignore[operator]
+                advised = _other_advice(advised, req, model, st, segments, budget, estimate_s)
+            raise advised from None
         raise
     result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3  # everything, result arrays included
     mt = result.metrics
@@ -115,6 +125,19 @@ def _plan(req: PlanRequest, t0: float, robot: RobotModel | None, segments: Seque
                            f"speed {mt.end_speed_m_s * 1e3:.3f} mm/s); lengthen settings.tail_max_s, "
                            "add samples per segment or raise k_r", "settings.tail_max_s")
     return result
+
+
+def _with_substeps(req: PlanRequest, model: RobotModel) -> Settings:
+    """The request's settings with ``plant_substeps`` following the robot's stiffness and
+    ``Ts`` (:func:`planner.model.plant.plant_substeps`, at the corridor's start) where the
+    request leaves it out: a given ``plant_substeps`` overrides (issue 31)."""
+    st = req.settings
+    if "plant_substeps" in st.model_fields_set:
+        return st
+    start = (req.segments[0].centre if req.segments is not None else
+             req.reference.pose[0] if req.reference is not None else None)
+    n = plant_substeps(model, st.Ts, start)
+    return st if n == st.plant_substeps else st.model_copy(update={"plant_substeps": n})
 
 
 def _default_cell_size(req: PlanRequest) -> float | None:
@@ -194,6 +217,53 @@ def _more_time_advice(exc: PlannerError, name: str | None, model: RobotModel, gi
                             exc.field)
     return PlannerError("infeasible", f"{exc.message}; {times} the time do not help either (checked): the "
                         "corridor is too narrow there for the robot's drive limits", exc.field)
+
+
+def _other_advice(exc: PlannerError, req: PlanRequest, model: RobotModel, st: Settings,
+                  segments: Sequence[Segment], budget_s: float | None, estimate_s: float) -> PlannerError:
+    """``exc`` (an infeasible plan that more time did not cure, or more time was not tried)
+    with the first of these remedies that plans, checked (issue 31: at Ts 2 ms a third of the
+    short corridors were refused with "2x ... 16x the time do not help" while a longer horizon
+    or ``fastest`` planned): a longer horizon ``N`` (the robot's default horizon where the
+    request gave a shorter one, else twice the horizon, at most MAX_HORIZON) at the timing the
+    request asked for, then ``settings.fastest``; each within ``budget_s`` (its estimate, from
+    ``estimate_s`` of the request, must fit). Unchanged if none plans."""
+    tried: list[str] = []
+    # a remedy found: the time factors did not help, but the corridor is not too narrow
+    head = exc.message.replace(": the corridor is too narrow there for the robot's drive limits", "")
+    default_N = default_horizon(st.Ts, req.robot_description, st.force_rate_n_s)
+    N = default_N if "N" in st.model_fields_set and st.N < default_N else min(2 * st.N, MAX_HORIZON)
+    if N > st.N:
+        cost = estimate_s * N / st.N
+        if budget_s is None or cost <= budget_s:
+            t_try = time.perf_counter()
+            sub = st.model_copy(update={"N": N, "require_settled": True})
+            try:
+                if _run(req.name, model, sub, segments, None, abandon=True)[0].metrics.settled:
+                    return PlannerError("infeasible", f"{head}; settings.N = {N} plans (a longer horizon at "
+                                        "the same timing, checked)", "settings.N")
+            except PlannerError:
+                pass
+            tried.append(f"settings.N = {N}")
+            if budget_s is not None:
+                budget_s -= time.perf_counter() - t_try
+    if not st.fastest:
+        fast = req.model_copy(update={"settings": Settings.model_validate(
+            {**req.settings.model_dump(mode="json", exclude_unset=True, exclude={*TIMING_FIELDS}), "fastest": True})})
+        cost = estimate_work(fast, segments).seconds
+        if budget_s is None or cost <= budget_s:
+            fst = st.model_copy(update={"fastest": True, "speed_m_s": None, "total_time_s": None,
+                                        "segment_samples": None})
+            try:
+                res = _fastest(req.name, model, fst, segments)
+                return PlannerError("infeasible", f"{head}; settings.fastest plans it in "
+                                    f"{res.metrics.duration_s:.3g} s (checked)", "settings.fastest")
+            except PlannerError:
+                tried.append("settings.fastest")
+    if tried:
+        return PlannerError("infeasible", f"{exc.message}; {' and '.join(tried)} do not plan either (checked)",
+                            exc.field)
+    return exc
 
 
 def _plan_once(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment] | None,

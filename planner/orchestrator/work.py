@@ -49,6 +49,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -69,7 +70,8 @@ from ..schema import (
 )
 from .timing import centre_path_length, method_of, moving_segments
 
-__all__ = ["FASTEST_A_M_S2", "FASTEST_BISECTION", "FASTEST_RAMPS", "FASTEST_SLOW_S", "MORE_TIME", "WorkEstimate",
+__all__ = ["FASTEST_A_M_S2", "FASTEST_BISECTION", "FASTEST_RAMPS", "FASTEST_SLOW_S", "FASTEST_V_SHARE", "MORE_TIME",
+           "WorkEstimate", "robot_motion",
            "check_work", "estimate_work", "fastest_count", "fastest_steps", "slack_allowance", "slack_costs"]
 
 #: the time factors the advice of an infeasible constrained plan tries, in this order (each
@@ -80,6 +82,10 @@ MORE_TIME = (2, 4, 8, 16)
 #: between two segment centres that sets the uniform count the search finds (Table I, 2 cm
 #: steps: ~0.1 s a segment measured, at Ts 5 and 10 ms; this takes 0.13 s)
 FASTEST_A_M_S2 = 5.0
+#: ``fastest``: the share of the speed at which the legs' friction takes the drives' whole force
+#: that the estimated move reaches (Table I with 2000 N s/m: 0.075 m/s, the search found ~0.67 s
+#: a 2.8 cm step, 0.6 s at half that speed)
+FASTEST_V_SHARE = 0.5
 #: ``fastest``: horizons ``N Ts`` of fewer force ramps (``force_max / force_rate``) than this
 #: leave the robot too little preview to brake within the force-rate limit: the search ends at
 #: 10-25x the counts (Table I: 1.5 ramps as usual, 1.2 ramps ~1 200 samples a segment at Ts
@@ -203,12 +209,67 @@ def _ramp_s(req: PlanRequest) -> float | None:
     return float(np.max(force / np.broadcast_to(np.asarray(rate, float), force.shape)))
 
 
-def fastest_count(step_m: float, Ts: float, N: int, ramp_s: float | None) -> int:
+@lru_cache(maxsize=64)
+def _builtin_substeps(robot: str, Ts: float) -> int:
+    from ..model import load_robot
+    from ..model.plant import plant_substeps
+
+    return plant_substeps(load_robot(robot), Ts)
+
+
+def _substeps(req: PlanRequest) -> int:
+    """The plant's RK4 steps a sample the plan will take: the request's ``plant_substeps``, or
+    those the robot's stiffness needs (:func:`planner.model.plant.plant_substeps`, at the home
+    pose: the stiffness hardly changes over the workspace)."""
+    st = req.settings
+    if "plant_substeps" in st.model_fields_set:
+        return st.plant_substeps
+    if isinstance(req.robot, str):
+        return _builtin_substeps(req.robot, st.Ts)
+    from ..model import load_robot
+    from ..model.plant import plant_substeps
+
+    return plant_substeps(load_robot(req.robot), st.Ts)
+
+
+def _motion(desc: Any) -> tuple[float, float]:
+    """``(a, v)`` of a robot description: the acceleration of its whole mass under the sum of
+    its drives' force limits [m/s^2] and the speed at which the sum of its leg frictions takes
+    that force [m/s] (inf without friction)."""
+    legs = desc.leg_list()
+    force = sum(g.force_max for g in legs)
+    mass = desc.platform.mass + sum(g.cylinder.mass + g.rod.mass for g in legs)
+    friction = sum(g.friction for g in legs)
+    return force / mass, (force / friction if friction > 0 else math.inf)
+
+
+@lru_cache(maxsize=16)
+def _builtin_motion(name: str) -> tuple[float, float]:
+    from ..schema import builtin_description
+
+    return _motion(builtin_description(name))
+
+
+def robot_motion(req: PlanRequest) -> tuple[float, float]:
+    """The ``fastest`` estimate's move: :data:`FASTEST_A_M_S2` scaled by the request's robot's
+    acceleration over the Moving Slide's, and :data:`FASTEST_V_SHARE` of the speed its leg
+    friction allows (issue 31: 0.433 s estimated for Table I whatever the robot; measured 3.5x
+    with a 150 kg platform, 6x with a leg friction of 2000 N s/m)."""
+    a_ref = _builtin_motion("moving-slide")[0]
+    a, v = _builtin_motion(req.robot) if isinstance(req.robot, str) else _motion(req.robot)
+    return FASTEST_A_M_S2 * a / a_ref, FASTEST_V_SHARE * v
+
+
+def fastest_count(step_m: float, Ts: float, N: int, ramp_s: float | None,
+                  motion: tuple[float, float] = (FASTEST_A_M_S2, math.inf)) -> int:
     """The uniform samples per segment the ``fastest`` search is estimated to end at: a move
-    of ``step_m`` from rest to rest at :data:`FASTEST_A_M_S2` (``2 sqrt(d / a)``), or
-    :data:`FASTEST_SLOW_S` a segment where the horizon ``N Ts`` covers fewer than
-    :data:`FASTEST_RAMPS` force ramps of ``ramp_s`` (None: no force-rate limit)."""
-    t = 2.0 * math.sqrt(max(step_m, 0.0) / FASTEST_A_M_S2)
+    of ``step_m`` from rest to rest at the acceleration ``a`` and at most the speed ``v`` of
+    ``motion`` (:func:`robot_motion`; ``2 sqrt(d / a)``, or ``d / v + v / a`` where the move
+    reaches ``v``), or :data:`FASTEST_SLOW_S` a segment where the horizon ``N Ts`` covers
+    fewer than :data:`FASTEST_RAMPS` force ramps of ``ramp_s`` (None: no force-rate limit)."""
+    a, v = motion
+    d = max(step_m, 0.0)
+    t = 2.0 * math.sqrt(d / a) if d <= v * v / a else d / v + v / a
     if ramp_s is not None and N * Ts < FASTEST_RAMPS * ramp_s:
         t = max(t, FASTEST_SLOW_S)
     return max(1, min(math.ceil(t / Ts), MAX_SAMPLES_PER_SEGMENT))
@@ -284,7 +345,7 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
             step_m = math.sqrt(2.0) * (req.layout.cell.size or cell_size_rule(
                 req.layout.bounds.lower, req.layout.bounds.upper, req.layout.start_pose, req.layout.end_pose,
                 req.layout.cell.shape, st))
-        S = fastest_count(step_m, st.Ts, st.N, _ramp_s(req))
+        S = fastest_count(step_m, st.Ts, st.N, _ramp_s(req), robot_motion(req))
         steps_one = n * S + st.tail_steps
         plans, steps = fastest_steps(n, S, st.N, st.tail_steps)
         ramp = _ramp_s(req)
@@ -295,7 +356,7 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
                       f"{st.Ts:g} s (N Ts covering {FASTEST_RAMPS:g} force ramps of {ramp:g} s: with less the "
                       "fastest timing found is ~10-25x slower and takes as many more candidates), a larger "
                       "settings.Ts, or " + advice)
-    step_s = _step_cost(st.mode, st.backend, st.solver, st.N, st.plant_substeps)
+    step_s = _step_cost(st.mode, st.backend, st.solver, st.N, _substeps(req))
     loop_s = steps * step_s
     metrics_s = steps * (c["sample"] + (c["sample_polygon"] if polygons else 0.0))
     segment_s = (c["segmentation"] if req.layout is not None else 0.0) + cells * c["cell"] + obstacles * c["obstacle"]
@@ -341,7 +402,14 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
     if st.mode == "constrained" and not st.fastest and req.reference is None:  # infeasible: more time
         more = [f for f in MORE_TIME
                 if S * f <= MAX_SAMPLES_PER_SEGMENT and n * S * f + st.tail_steps <= MAX_TOTAL_STEPS]
-        advice_s = max(advice_s, sum(more) * plan_s)
+        # then a longer horizon (at most MAX_HORIZON: the step's cost about linear in N) and
+        # settings.fastest (orchestrator.plan._other_advice)
+        from ..schema import MAX_HORIZON, TIMING_FIELDS
+
+        fast = req.model_copy(update={"settings": Settings.model_validate(
+            {**st.model_dump(mode="json", exclude_unset=True, exclude={*TIMING_FIELDS}), "fastest": True})})
+        other = plan_s * MAX_HORIZON / st.N + estimate_work(fast, segments).seconds
+        advice_s = max(advice_s, sum(more) * plan_s + other)
     return WorkEstimate(seconds=seconds, steps=steps, plans=plans, field=field, detail=detail,
                         advice_seconds=advice_s, advice=advice)
 

@@ -38,10 +38,14 @@ from .errors import error_details, field_path, format_validation_error, planner_
 from .layout import SQRT3_2, Bounds, Cell, Circle, Layout, Obstacle, Polygon, Rectangle, cell_count
 from .limits import (
                      DEFAULT_FORCE_RISE_S,
+                     DEFAULT_HORIZON_BRAKES,
+                     DEFAULT_HORIZON_MAX,
+                     DEFAULT_HORIZON_RAMPS,
                      DEFAULT_LAYOUT_SPEED_M_S,
                      DEFAULT_MODE,
                      DEFAULT_ROBOT,
                      DEFAULT_SAMPLES_PER_SEGMENT,
+                     DEFAULT_SEGMENT_S,
                      MAX_CELLS,
                      MAX_COORDINATE,
                      MAX_HOLES,
@@ -63,7 +67,16 @@ from .limits import (
                      WORK_COSTS,
 )
 from .records import CorridorRecord
-from .request import TIMING_FIELDS, PlanRequest, Reference, Segment, Settings, parse_request
+from .request import (
+                     TIMING_FIELDS,
+                     PlanRequest,
+                     Reference,
+                     Segment,
+                     Settings,
+                     default_horizon,
+                     default_samples_per_segment,
+                     parse_request,
+)
 from .result import (
                      UNITS,
                      CorridorSamples,
@@ -99,7 +112,9 @@ __all__ = [
     "ContourSection", "PassSummary", "PathElement", "Program", "ProgramBlock", "ProgramComment", "ProgramWord",
     "error_details", "field_path", "format_validation_error", "planner_error",
     "DEFAULT_FORCE_RISE_S", "DEFAULT_LAYOUT_SPEED_M_S", "DEFAULT_MODE",
-    "DEFAULT_ROBOT", "DEFAULT_SAMPLES_PER_SEGMENT", "MAX_CELLS", "MAX_HORIZON", "MAX_LEGS", "MAX_OBSTACLES",
+    "DEFAULT_ROBOT", "DEFAULT_SAMPLES_PER_SEGMENT", "DEFAULT_HORIZON_RAMPS",
+    "DEFAULT_HORIZON_BRAKES", "DEFAULT_HORIZON_MAX", "DEFAULT_SEGMENT_S", "default_horizon",
+    "default_samples_per_segment", "MAX_CELLS", "MAX_HORIZON", "MAX_LEGS", "MAX_OBSTACLES",
     "MAX_HOLES", "MAX_POLYGON_POINTS", "MAX_SAMPLES_PER_SEGMENT", "MAX_SEGMENTS", "MAX_TOTAL_STEPS", "MIN_TS",
     "MODE_DEFAULTS", "SLACK_BUDGET_S",
     "MAX_COORDINATE", "MAX_PENALTY", "MAX_PENALTY_RATIO", "MAX_PHYSICAL", "MIN_CELL_SIZE", "MIN_SPEED", "WORK_COSTS",

@@ -11,7 +11,8 @@ __all__ = [
     "MAX_OBSTACLES", "MAX_POLYGON_POINTS", "MAX_HOLES", "MAX_LEGS", "MIN_TS", "MAX_COORDINATE", "MIN_CELL_SIZE",
     "MIN_SPEED", "MAX_PENALTY", "MAX_PENALTY_RATIO", "MAX_PHYSICAL", "MODE_DEFAULTS",
     "DEFAULT_SAMPLES_PER_SEGMENT", "DEFAULT_ROBOT", "WORK_COSTS", "DEFAULT_FORCE_RISE_S",
-    "DEFAULT_LAYOUT_SPEED_M_S", "DEFAULT_MODE", "SLACK_BUDGET_S",
+    "DEFAULT_LAYOUT_SPEED_M_S", "DEFAULT_MODE", "SLACK_BUDGET_S", "DEFAULT_HORIZON_RAMPS", "DEFAULT_HORIZON_BRAKES",
+    "DEFAULT_HORIZON_MAX", "DEFAULT_SEGMENT_S",
 ]
 
 #: longest prediction horizon N [samples]
@@ -57,8 +58,27 @@ MAX_PHYSICAL = 1e9
 #: settled (benchmarks/README.md, issue 6; on Table I 1.14x the IPOPT optimum instead of 1.5x).
 MODE_DEFAULTS: dict[str, dict[str, float]] = {"paper": {"N": 20, "k_r": 1.0, "k_u": 1e-3},
                                               "constrained": {"N": 30, "k_r": 0.1, "k_u": 2e-4}}
-#: samples each segment is held when neither samples_per_segment nor N is given
+#: samples each segment is held when neither samples_per_segment nor N is given (paper mode;
+#: the constrained mode's is at least this, :data:`DEFAULT_SEGMENT_S` at fine sample times)
 DEFAULT_SAMPLES_PER_SEGMENT = 20
+#: the constrained mode's default horizon follows the sample time and the robot (issue 31: a
+#: fixed 30 samples is 0.3 s at Ts 10 ms but 0.03 s at Ts 1 ms, less than one force ramp, and
+#: every default request at Ts 1 ms was refused): ``N Ts`` covers this many force ramps
+#: (``force_max / force_rate``) ...
+DEFAULT_HORIZON_RAMPS = 4.0
+#: ... plus this many braking times from the drives' speed limit at the platform's acceleration
+#: with every drive at its force limit (``speed_max m / sum force_max``, the legs' and
+#: platform's mass ``m``): 0.25 s for the Moving Slide, 26 samples at Ts 10 ms ...
+DEFAULT_HORIZON_BRAKES = 2.0
+#: ... at least the mode's N (30: Table I at Ts 10 ms plans as before) and at most this many
+#: samples (the step's cost is linear in N; 100 at Ts 1 and 2 ms planned every short corridor
+#: of issue 31 that planned at any N but one, and 200 cost up to 40 s on the numerical
+#: fallbacks of the last samples before the end point)
+DEFAULT_HORIZON_MAX = 100
+#: the constrained mode's default time [s] a segment is held (20 samples at Ts 10 ms, as
+#: before; 100 at Ts 2 ms instead of 20, which gave 0.04 s a segment: every short corridor of
+#: issue 31 refused)
+DEFAULT_SEGMENT_S = 0.2
 #: the robot a request without ``robot`` plans for
 DEFAULT_ROBOT = "moving-slide"
 #: the constrained mode's default drive-force rate limit: each drive may go from zero to its

@@ -39,10 +39,14 @@ from .errors import planner_error
 from .layout import Layout
 from .limits import (
     DEFAULT_FORCE_RISE_S,
+    DEFAULT_HORIZON_BRAKES,
+    DEFAULT_HORIZON_MAX,
+    DEFAULT_HORIZON_RAMPS,
     DEFAULT_LAYOUT_SPEED_M_S,
     DEFAULT_MODE,
     DEFAULT_ROBOT,
     DEFAULT_SAMPLES_PER_SEGMENT,
+    DEFAULT_SEGMENT_S,
     MAX_HORIZON,
     MAX_PENALTY,
     MAX_PENALTY_RATIO,
@@ -55,7 +59,8 @@ from .limits import (
 )
 from .robot import RobotDescription, builtin_description, builtin_robot_names
 
-__all__ = ["PlanRequest", "Reference", "Segment", "Settings", "parse_request", "TIMING_FIELDS", "EXAMPLE_REQUEST"]
+__all__ = ["PlanRequest", "Reference", "Segment", "Settings", "parse_request", "TIMING_FIELDS", "EXAMPLE_REQUEST",
+           "default_horizon", "default_samples_per_segment"]
 
 #: the settings that choose the timing of a corridor; at most one per request
 TIMING_FIELDS = ("samples_per_segment", "segment_samples", "speed_m_s", "total_time_s", "fastest")
@@ -63,6 +68,39 @@ _MODE_FIELDS = ("N", "k_r", "k_u", "samples_per_segment")
 #: the default of a setting the mode decides: replaced by a number in :meth:`Settings._resolve`
 #: (typed ``Any`` so that the field keeps its number type for the code that reads it)
 MODE_DECIDES: Any = None
+
+
+def default_horizon(Ts: float, robot: RobotDescription, force_rate: Any) -> int:
+    """The constrained mode's default horizon ``N`` [samples]: ``N Ts`` covers
+    :data:`~planner.schema.limits.DEFAULT_HORIZON_RAMPS` force ramps (``force_max / force_rate``
+    of the slowest drive; none with ``force_rate`` "off") and
+    :data:`~planner.schema.limits.DEFAULT_HORIZON_BRAKES` braking times (a drive's ``speed_max``
+    at the acceleration of the robot's whole mass under the sum of the drives' ``force_max``),
+    at least the mode's 30 samples and at most
+    :data:`~planner.schema.limits.DEFAULT_HORIZON_MAX`. The Moving Slide: 0.25 s, so 30 samples at
+    Ts 10 ms (as before), 51 at 5 ms, 100 at 2 and 1 ms."""
+    legs = robot.leg_list()
+    fmax = np.array([g.force_max for g in legs], float)
+    if isinstance(force_rate, str):
+        ramp = 0.0
+    elif force_rate is None:
+        ramp = DEFAULT_FORCE_RISE_S
+    else:
+        ramp = float(np.max(fmax / np.broadcast_to(np.asarray(force_rate, float), fmax.shape)))
+    mass = robot.platform.mass + sum(g.cylinder.mass + g.rod.mass for g in legs)
+    brake = max(g.speed_max for g in legs) * mass / float(fmax.sum())
+    horizon_s = DEFAULT_HORIZON_RAMPS * ramp + DEFAULT_HORIZON_BRAKES * brake
+    low = int(MODE_DEFAULTS["constrained"]["N"])
+    return int(min(max(low, math.ceil(horizon_s / Ts - 1e-9)), DEFAULT_HORIZON_MAX, MAX_HORIZON))
+
+
+def default_samples_per_segment(Ts: float, mode: str) -> int:
+    """Samples a segment is held when neither ``samples_per_segment`` nor ``N`` is given:
+    :data:`~planner.schema.limits.DEFAULT_SAMPLES_PER_SEGMENT` in paper mode; in constrained
+    mode :data:`~planner.schema.limits.DEFAULT_SEGMENT_S` of time, at least that many."""
+    if mode != "constrained":
+        return DEFAULT_SAMPLES_PER_SEGMENT
+    return int(min(max(DEFAULT_SAMPLES_PER_SEGMENT, round(DEFAULT_SEGMENT_S / Ts)), MAX_SAMPLES_PER_SEGMENT))
 
 
 #: a convex cell's vertices [[x, y], ...] in m
@@ -131,11 +169,14 @@ class Settings(Strict):
 
     Ts: Finite = Field(0.01, ge=MIN_TS, le=1.0, description="Sample time in s")
     N: Count = Field(MODE_DECIDES, ge=1, le=MAX_HORIZON, description="Prediction horizon in samples; default "
-                   f"{MODE_DEFAULTS['paper']['N']:g} in paper mode, {MODE_DEFAULTS['constrained']['N']:g} in "
-                   "constrained mode")
+                   f"{MODE_DEFAULTS['paper']['N']:g} in paper mode; in constrained mode one that covers "
+                   f"{DEFAULT_HORIZON_RAMPS:g} force ramps and {DEFAULT_HORIZON_BRAKES:g} braking times of the robot, "
+                   f"at least {MODE_DEFAULTS['constrained']['N']:g} and at most {DEFAULT_HORIZON_MAX} samples "
+                   "(30 for the moving-slide at Ts 0.01 s, 100 at Ts 0.002 s)")
     samples_per_segment: Count = Field(MODE_DECIDES, ge=1, le=MAX_SAMPLES_PER_SEGMENT,
                                      description="Samples each segment is held (count); default N if N is given, "
-                                     f"else {DEFAULT_SAMPLES_PER_SEGMENT}")
+                                     f"else {DEFAULT_SAMPLES_PER_SEGMENT} (constrained mode: {DEFAULT_SEGMENT_S:g} s "
+                                     f"of samples, at least {DEFAULT_SAMPLES_PER_SEGMENT})")
     segment_samples: Annotated[list[Annotated[int, Field(ge=1, le=MAX_SAMPLES_PER_SEGMENT)]],
                                Field(min_length=2, max_length=MAX_SEGMENTS)] | None = Field(
         None, description="Samples each segment is held, one count per segment (a corridor's own timing, e.g. the "
@@ -234,8 +275,11 @@ class Settings(Strict):
         # fill in what the mode decides, bypassing pydantic's __setattr__ so that they stay out
         # of model_fields_set: a dump with exclude_unset gives back what the client sent
         filled: dict[str, Any] = {k: v for k, v in MODE_DEFAULTS[self.mode].items() if getattr(self, k) is None}
+        if self.N is None and self.mode == "constrained":  # the default robot's; a request's own: PlanRequest
+            filled["N"] = default_horizon(self.Ts, builtin_description(DEFAULT_ROBOT), self.force_rate_n_s)
         if self.samples_per_segment is None:
-            filled["samples_per_segment"] = self.N if self.N is not None else DEFAULT_SAMPLES_PER_SEGMENT
+            filled["samples_per_segment"] = (self.N if self.N is not None
+                                             else default_samples_per_segment(self.Ts, self.mode))
         if self.backend is None:
             filled["backend"] = "compiled" if self.solver == "riccati" else "reference"
         for key, value in filled.items():
@@ -339,6 +383,10 @@ class PlanRequest(Strict):
             raise fail(f"give exactly one of 'segments' (a corridor), 'reference' (a trajectory to track) or "
                        f"'layout' (obstacles to segment); got {', '.join(given) or 'none'}", "segments")
         st = self.settings
+        if st.mode == "constrained" and "N" not in st.model_fields_set and self.robot != DEFAULT_ROBOT:
+            # the default horizon of the request's robot (Settings alone knows only the default robot's)
+            N = default_horizon(st.Ts, self.robot_description, st.force_rate_n_s)
+            object.__setattr__(st, "N", N)
         n_legs = self.robot_description.n_legs
         if st.q_u is not None and len(st.q_u) != n_legs:
             raise fail(f"must have one entry per drive ({n_legs}), got {len(st.q_u)}", "settings.q_u")
