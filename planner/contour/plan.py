@@ -218,6 +218,14 @@ def _pass_summary(index: int, b: ProgramBlock, cut_parts: list[Part], geo: PathG
         max_speed_m_s=speed, max_programmed_feed_m_s=max(e.feed_m_s for e in b.elements))
 
 
+def speed_caps(feed: str, els: list[PathElement], z_max_m_s: float | None) -> np.ndarray:
+    """Per move, the bound on the XY speed of its time-optimal profile [m/s]: the Z axis speed's
+    (:func:`~planner.contour.search.z_caps`), and in ``program`` feed its own F (F is the
+    process limit: each move capped at its own, not the pass at its slowest)."""
+    cap = z_caps(els, z_max_m_s)
+    return np.minimum(cap, [e.feed_m_s for e in els]) if feed == "program" else cap
+
+
 def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int], origin: np.ndarray, tol: float,
              psi: float, pos: np.ndarray, geo: PathGeometry, elements: list[PathElement],
              hint: Scale | None = None, passes: int = 1, memo: dict | None = None,
@@ -230,8 +238,8 @@ def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[i
     st = st.model_copy(update={"settle_speed_m_s": min(st.settle_speed_m_s, 1e-4)})
     found = search_timing(req.feed, model, st, TubeSizes(model, st, chunk, els, origin, tol, psi, pos, elements),
                           chunk, els, hint, z_max_m_s=req.z_rapid_m_s,
-                          optimal=OptimalProfiles(model, st, chunk, els, origin, psi, memo,
-                                                  z_caps(els, req.z_rapid_m_s)))
+                          optimal=OptimalProfiles(model, st, chunk, els, origin, psi, memo, speed_caps(req.feed, els,
+                                                  req.z_rapid_m_s)))
     if found.result is None:
         raise confirmed_infeasible(req, model, st, chunk, els, origin, tol, psi, pos, elements, found, hint, passes,
                                    limit_at)
