@@ -215,7 +215,20 @@ def _pass_summary(index: int, b: ProgramBlock, cut_parts: list[Part], geo: PathG
         elements=len(b.elements), cells=sum(p.cells for p in cut_parts),
         length_m=float(sum(e.length_m for e in b.elements)), time_s=float(t_pass),
         max_deviation_m=max(dev, path_dev), max_path_deviation_m=path_dev,
-        max_speed_m_s=speed, max_programmed_feed_m_s=max(e.feed_m_s for e in b.elements))
+        max_speed_m_s=speed, max_programmed_feed_m_s=max(e.feed_m_s for e in b.elements),
+        max_feed_ratio=max(feed_ratio(p, b.elements) for p in cut_parts))
+
+
+def feed_ratio(part: Part, elements: list[PathElement]) -> float:
+    """A cut part's largest tool speed over the programmed F of the move being cut: each
+    sample's speed against its move's F, each straight move between two samples (its length
+    over its time, as the exported program runs it) against the smaller F of its two ends."""
+    res = part.result
+    f = np.array([e.feed_m_s for e in elements])[part.elem]
+    ratio = np.hypot(*res.velocity[:, :2].T) / np.maximum(f, 1e-12)
+    dt = np.maximum(np.diff(res.time), 1e-12)
+    chord = np.hypot(*np.diff(res.pose[:, :2], axis=0).T) / dt / np.maximum(np.minimum(f[:-1], f[1:]), 1e-12)
+    return float(max(ratio.max(), chord.max(initial=0.0)))
 
 
 def speed_caps(feed: str, els: list[PathElement], z_max_m_s: float | None) -> np.ndarray:

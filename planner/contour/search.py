@@ -26,6 +26,7 @@ from ..model import RobotModel
 from ..orchestrator import feasible, plan_timed
 from ..schema import MAX_CONTOUR_TOLERANCE_M, MAX_TOTAL_STEPS, MIN_TS, ContourRequest, PathElement, PlanResult, Settings
 from .estimate import ADVICE_MIN_S, ADVICE_WORK, piece_estimate
+from .estimate import FEED_MARGIN as FEED_CELL_MARGIN
 from .passes import CELL_SAMPLES, PROGRAM_MARGIN, V0_M_S, TubeSizes, segment_of
 from .profiles import Optimal, optimal_counts, profile_counts
 from .tube import Tube
@@ -52,10 +53,13 @@ PROGRAM_FIXES = 3
 #: program feed, the time-optimal timing's tube (:meth:`TimingSearch.program_optimal`): its
 #: cells' first margin under a sample's travel at F, the tubes tried, and the margin's step
 #: beyond the excess measured
-FEED_MARGIN = 0.01
+FEED_MARGIN = FEED_CELL_MARGIN
 FEED_MARGIN_TRIES = 5
 FEED_MARGIN_STEP = 0.005
-PROGRAM_FIX_MARGIN = 0.02
+#: program feed: a segment's excess over F beyond this is a spike (more samples in its cells),
+#: not a move's cells too long (shorter cells on the whole move)
+FEED_SPIKE = 1.03
+PROGRAM_FIX_MARGIN = 0.0
 #: program feed: the time-optimal timing's scale, where 1 does not plan, to this resolution
 PROGRAM_RESOLUTION = 1 / 128
 #: an infeasible piece's advice, checked: the tolerance times this, then the sample time times this
@@ -300,7 +304,7 @@ class TimingSearch:
             if not bad.any():
                 return None  # a lead cell (one sample) too fast: not a count to raise
             counts = counts.copy()
-            counts[bad] = np.ceil(counts[bad] * over[bad] * (1 + PROGRAM_FIX_MARGIN)).astype(np.int64)
+            counts[bad] = np.maximum(np.ceil(counts[bad] * over[bad] * (1 + PROGRAM_FIX_MARGIN)), counts[bad] + 1)
         return None
 
     def program_optimal(self) -> tuple[PlanResult, Tube] | None:
@@ -318,30 +322,41 @@ class TimingSearch:
             return None
         margin = np.full(len(self.els), FEED_MARGIN)
         t: Tube | None = None
+        counts = np.zeros(0, np.int64)
         for _ in range(FEED_MARGIN_TRIES):
             try:
-                t = at_feed(margin)
+                cur: Tube = at_feed(margin)
             except PlannerError as err:  # too many cells at that size: the heuristic profile's coarser ones
                 if err.code != "too_large":
                     raise
                 return None
-            times = optimal(t).times
+            t = cur
+            times = optimal(cur).times
             if not (np.all(np.isfinite(times)) and times[-1] > 0):  # pragma: no cover - a profile that never moves
                 return None
-            counts = self.feed_counts(t, optimal_counts(t, times, self.st.Ts))
-            res = self.attempt(t, counts)
+            counts = self.feed_counts(cur, optimal_counts(cur, times, self.st.Ts))
+            res = self.attempt(cur, counts)
             if res is None:
                 break
-            over_seg = overspeed_of(res, counts, np.minimum(self.feed_on(t), self.zcap_on(t)))
+            over_seg = overspeed_of(res, counts, np.minimum(self.feed_on(cur), self.zcap_on(cur)))
             if over_seg.max() <= 1.0:
-                return res, t
-            loc = np.searchsorted(self.chunk, t.element)
-            over = np.zeros(len(self.els))  # per move, its cells' largest excess
-            np.maximum.at(over, loc, over_seg)
-            # and at least one cell more on it (its cells are its length over a whole number)
-            cells = np.bincount(loc[t.length > 0], minlength=len(self.els)).clip(1)
+                return res, cur
+            # a move whose cells run a little faster than F throughout: shorter cells (at least one
+            # more); a spike (the robot speeding up into a faster move ahead of its first cell):
+            # more samples in those cells only (below)
+            loc = np.searchsorted(self.chunk, cur.element)
+            over = np.zeros(len(self.els))  # per move, its cells' largest excess short of a spike
+            np.maximum.at(over, loc, np.where(over_seg <= FEED_SPIKE, over_seg, 0.0))
+            if not (over > 1.0).any():
+                break
+            cells = np.bincount(loc[cur.length > 0], minlength=len(self.els)).clip(1)
             raised = np.maximum((1 + margin) * over * (1 + FEED_MARGIN_STEP), (1 + margin) * (cells + 1) / cells)
             margin = np.where(over > 1.0, raised * (1 + 1e-6) - 1, margin)
+        assert t is not None
+        if len(counts) == len(t.segments):  # the spikes: more samples where the samples run faster than F
+            got = self.within_feed(t, counts, np.minimum(self.feed_on(t), self.zcap_on(t)))
+            if got is not None:
+                return got, t
         assert t is not None
         times = optimal(t).times
         feed_of = np.minimum(self.feed_on(t), self.zcap_on(t))
