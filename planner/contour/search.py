@@ -320,7 +320,11 @@ class TimingSearch:
         at_feed = getattr(self.tube_at, "at_feed", None)
         if optimal is None or at_feed is None:
             return None
-        margin = np.full(len(self.els), FEED_MARGIN)
+        # the margins a pass of the same moves found (depth passes: one plan each after the first)
+        memo, geo = getattr(optimal, "memo", None), getattr(optimal, "geo", None)
+        key = ("feed margin", geo, self.st.Ts)
+        margin = memo.get(key, np.full(len(self.els), FEED_MARGIN)) if memo is not None and geo else \
+            np.full(len(self.els), FEED_MARGIN)
         t: Tube | None = None
         counts = np.zeros(0, np.int64)
         for _ in range(FEED_MARGIN_TRIES):
@@ -340,6 +344,8 @@ class TimingSearch:
                 break
             over_seg = overspeed_of(res, counts, np.minimum(self.feed_on(cur), self.zcap_on(cur)))
             if over_seg.max() <= 1.0:
+                if memo is not None and geo:
+                    memo[key] = margin
                 return res, cur
             # a move whose cells run a little faster than F throughout: shorter cells (at least one
             # more); a spike (the robot speeding up into a faster move ahead of its first cell):
