@@ -67,11 +67,9 @@ def test_estimate_names_the_advice_check_apart():
     """estimate_contour is the work of a program that plans (issue 33: the 4 s floor of the
     advice check made it 2-16x the work of small programs); the bound on checking an
     infeasible pass's advice (at least ADVICE_MIN_S) is named in the detail, not added."""
-    from planner.contour.estimate import ADVICE_MIN_S
-
     import re
 
-    from planner.contour.estimate import ADVICE_WORK
+    from planner.contour.estimate import ADVICE_MIN_S, ADVICE_WORK
 
     seconds, detail = estimate_contour({"program": SMALL, "origin": ORIGIN})
     m = re.search(r"checked within ([0-9.]+) s more", detail)
