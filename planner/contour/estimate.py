@@ -13,6 +13,10 @@ from ..schema import DEFAULT_CONTOUR_TOLERANCE_M, PathElement, Program
 from .passes import CELL_SAMPLES, PROGRAM_MARGIN, V0_M_S, chunks, parse_contour_request, read_program, tolerance_of
 from .tube import SAGITTA_FRACTION
 
+#: program feed's tube cells: a whole number of samples at F, this much shorter
+#: (:data:`planner.contour.search.FEED_MARGIN`, which imports this module)
+FEED_MARGIN = 0.01
+
 __all__ = ["ADVICE_MIN_S", "ADVICE_WORK", "CONTOUR_CELL_PLAN_S", "CONTOUR_CELL_S", "CONTOUR_PIECE_S", "CONTOUR_STEP_S",
            "CONTOUR_TRAVEL_S", "estimate_contour", "piece_estimate"]
 
@@ -33,8 +37,9 @@ CONTOUR_STEP_S = {"program": 4.5e-4, "fastest": 1.1e-3}
 #: seconds a tube cell costs each candidate plan (its rows), by feed
 CONTOUR_CELL_PLAN_S = {"program": 3e-4, "fastest": 0.0}
 #: seconds a tube cell costs once a piece (built, its deviation and join): ``fastest`` adds the
-#: time-optimal profile and the search's candidates' cell rows
-CONTOUR_CELL_S = {"program": 0.0, "fastest": 3.5e-3}
+#: time-optimal profile and the search's candidates' cell rows; ``program`` the F-capped
+#: time-optimal profile and the tubes of shorter cells (issue 35)
+CONTOUR_CELL_S = {"program": 3e-4, "fastest": 3.5e-3}
 #: seconds of a piece besides its cells and samples (the search, the plan's start and settling)
 CONTOUR_PIECE_S = 0.017
 #: seconds of a move of the program (its path geometry, deviation candidates, Z)
@@ -61,6 +66,9 @@ def _cells(feed: str, elements: list[PathElement], tol: float, Ts: float) -> int
     for e in elements:
         if e.length_m < 1e-9:
             continue
+        if feed == "program":  # planner.contour.passes.TubeSizes.at_feed: a whole number of samples at F
+            step_f = max(e.feed_m_s, 1e-9) * Ts
+            piece_max = step_f * max(math.ceil(4 * tol / step_f - 1e-9), 1) / (1 + FEED_MARGIN)
         if e.kind == "arc" and e.radius_m and e.sweep_rad is not None:
             r = e.radius_m
             step = 2 * math.acos(max(1 - s_a / r, -1.0)) if s_a < r else math.pi / 2
@@ -76,7 +84,7 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
     from the program's counts (no tube built, no plan): per piece (a pass, or its parts
     between exact stops) its tube cells (:func:`_cells`: lines, arc chords, junctions) built
     once and planned by each candidate, and its cut samples at the programmed feed
-    (``program``; ~1.5 plans) or at the reference speed (``fastest``: ~17 candidate plans for
+    (``program``; ~3 plans) or at the reference speed (``fastest``: ~17 candidate plans for
     the first pass, ~2.5 for the next) and its moves (:func:`piece_estimate`); the free moves
     between passes (:data:`CONTOUR_TRAVEL_S` each); the program's lines read. Not counted: the
     check of an infeasible verdict's advice, bounded apart
@@ -127,10 +135,12 @@ def _samples(feed: str, elements: list[PathElement], Ts: float) -> float:
 
 
 def _plans(feed: str, passes: int) -> float:
-    """Candidate plans per pass: ~1.5 (``program``); ``fastest``: ~17 for the first pass (both
-    timings, ~8 candidates each), ~2.5 for each next (the first pass's faster timing, its search
-    started at the scale found before: two plans when the passes are alike)."""
-    return 1.5 if feed == "program" else 2.5 + 15.0 / max(passes, 1)
+    """Candidate plans per pass: ~3 (``program``: the F-capped time-optimal profile in cells at
+    F, then shorter cells on the moves and more samples where the samples ran faster than F,
+    issue 35); ``fastest``: ~17 for the first pass (both timings, ~8 candidates each), ~2.5 for
+    each next (the first pass's faster timing, its search started at the scale found before:
+    two plans when the passes are alike)."""
+    return 3.0 if feed == "program" else 2.5 + 15.0 / max(passes, 1)
 
 
 def piece_estimate(feed: str, elements: list[PathElement], Ts: float, passes: int = 1,

@@ -277,5 +277,6 @@ def contour_section(parts: list[Part], summaries: list[PassSummary], result: Pla
         tolerance_m=tol, max_deviation_m=max(float(deviation.max()), path_max), max_path_deviation_m=path_max,
         deviation_m=deviation, feed=req.feed,
         cycle_time_s=float(result.time[-1]), cut_time_s=float(cutting.sum() * Ts), passes=summaries,
+        max_feed_ratio=max((p.max_feed_ratio or 0.0 for p in summaries), default=None),
         origin=[float(x) for x in origin], words=program.words, comments=program.comments,
         warnings=list(program.warnings), z_m=z_m, source_line=[int(x) for x in source], dwell=dwell)

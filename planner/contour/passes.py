@@ -119,6 +119,7 @@ class TubeSizes:
         self.model, self.st, self.chunk, self.els, self.origin = model, st, chunk, els, origin
         self.tol, self.psi, self.pos, self.elements = tol, psi, pos, elements
         self.made: dict[float, Tube] = {}
+        self.feed_tubes: dict[bytes, Tube] = {}
 
     def __call__(self, v: float) -> Tube:
         """The tube whose cells hold :data:`CELL_SAMPLES` samples at the speed ``v`` [m/s]."""
@@ -129,9 +130,24 @@ class TubeSizes:
                                         self.elements, piece_max)
         return self.made[key]
 
+    def at_feed(self, margin: np.ndarray) -> Tube:
+        """``program`` feed's tube: on each move cells of a whole number of samples' travel at
+        its F (one sample, or the fewest whose travel is at least 4 tolerances), shortened by
+        the move's fraction ``margin`` (per element of the piece): a timing of one sample per
+        cell cruising at F then runs the moves between samples at about F / (1 + margin) (the
+        criterion holds each sample near its cell's centre, the next one a cell further)."""
+        margin = np.round(np.asarray(margin, float), 6)
+        key = margin.tobytes()
+        if key not in self.feed_tubes:
+            step = np.array([e.feed_m_s for e in self.els]) * self.st.Ts
+            piece_max = step * np.ceil(4 * self.tol / step - 1e-9).clip(1.0) / (1 + margin)
+            self.feed_tubes[key] = piece_tube(self.model, self.chunk, self.els, self.origin, self.tol, self.psi,
+                                              self.pos, self.elements, piece_max)
+        return self.feed_tubes[key]
+
 
 def piece_tube(model: RobotModel, chunk: list[int], els: list[PathElement], origin: np.ndarray, tol: float,
-               psi: float, pos: np.ndarray, elements: list[PathElement], piece_max: float) -> Tube:
+               psi: float, pos: np.ndarray, elements: list[PathElement], piece_max: float | np.ndarray) -> Tube:
     """The tube of a piece, starting where the robot is, its reach checked."""
     t = tube(els, origin, tol, psi, piece_max)
     t.element = np.asarray(chunk)[t.element]

@@ -224,7 +224,28 @@ def _pass_summary(index: int, b: ProgramBlock, cut_parts: list[Part], geo: PathG
         elements=len(b.elements), cells=sum(p.cells for p in cut_parts),
         length_m=float(sum(e.length_m for e in b.elements)), time_s=float(t_pass),
         max_deviation_m=max(dev, path_dev), max_path_deviation_m=path_dev,
-        max_speed_m_s=speed, max_programmed_feed_m_s=max(e.feed_m_s for e in b.elements))
+        max_speed_m_s=speed, max_programmed_feed_m_s=max(e.feed_m_s for e in b.elements),
+        max_feed_ratio=max(feed_ratio(p, b.elements) for p in cut_parts))
+
+
+def feed_ratio(part: Part, elements: list[PathElement]) -> float:
+    """A cut part's largest tool speed over the programmed F of the move being cut: each
+    sample's speed against its move's F, each straight move between two samples (its length
+    over its time, as the exported program runs it) against the smaller F of its two ends."""
+    res = part.result
+    f = np.array([e.feed_m_s for e in elements])[part.elem]
+    ratio = np.hypot(*res.velocity[:, :2].T) / np.maximum(f, 1e-12)
+    dt = np.maximum(np.diff(res.time), 1e-12)
+    chord = np.hypot(*np.diff(res.pose[:, :2], axis=0).T) / dt / np.maximum(np.minimum(f[:-1], f[1:]), 1e-12)
+    return float(max(ratio.max(), chord.max(initial=0.0)))
+
+
+def speed_caps(feed: str, els: list[PathElement], z_max_m_s: float | None) -> np.ndarray:
+    """Per move, the bound on the XY speed of its time-optimal profile [m/s]: the Z axis speed's
+    (:func:`~planner.contour.search.z_caps`), and in ``program`` feed its own F (F is the
+    process limit: each move capped at its own, not the pass at its slowest)."""
+    cap = z_caps(els, z_max_m_s)
+    return np.minimum(cap, [e.feed_m_s for e in els]) if feed == "program" else cap
 
 
 def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int], origin: np.ndarray, tol: float,
@@ -239,8 +260,8 @@ def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[i
     st = st.model_copy(update={"settle_speed_m_s": min(st.settle_speed_m_s, 1e-4)})
     found = search_timing(req.feed, model, st, TubeSizes(model, st, chunk, els, origin, tol, psi, pos, elements),
                           chunk, els, hint, z_max_m_s=req.z_rapid_m_s,
-                          optimal=OptimalProfiles(model, st, chunk, els, origin, psi, memo,
-                                                  z_caps(els, req.z_rapid_m_s)))
+                          optimal=OptimalProfiles(model, st, chunk, els, origin, psi, memo, speed_caps(req.feed, els,
+                                                  req.z_rapid_m_s)))
     if found.result is None:
         raise confirmed_infeasible(req, model, st, chunk, els, origin, tol, psi, pos, elements, found, hint, passes,
                                    limit_at)

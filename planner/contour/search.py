@@ -26,12 +26,13 @@ from ..model import RobotModel
 from ..orchestrator import feasible, plan_timed
 from ..schema import MAX_CONTOUR_TOLERANCE_M, MAX_TOTAL_STEPS, MIN_TS, ContourRequest, PathElement, PlanResult, Settings
 from .estimate import ADVICE_MIN_S, ADVICE_WORK, piece_estimate
+from .estimate import FEED_MARGIN as FEED_CELL_MARGIN
 from .passes import CELL_SAMPLES, PROGRAM_MARGIN, V0_M_S, TubeSizes, segment_of
 from .profiles import Optimal, optimal_counts, profile_counts
 from .tube import Tube
 
 __all__ = ["SCALE_MAX", "SCALE_MIN", "SCALE_RESOLUTION", "Found", "Scale", "TimingSearch", "confirmed_infeasible",
-           "largest_feasible", "overspeed", "search_timing", "z_caps"]
+           "largest_feasible", "overspeed", "overspeed_of", "search_timing", "z_caps"]
 
 #: fastest: the reference acceleration the scale's square multiplies [m/s^2] (the reference
 #: cell speed: :data:`planner.contour.passes.V0_M_S`)
@@ -46,6 +47,21 @@ SCALE_RESOLUTION = 1 / 64
 SCALE_MIN, SCALE_MAX = 1 / 64, 64.0
 #: program feed: the profile's scales tried (from PROGRAM_MARGIN down by 0.7 each)
 PROGRAM_TRIES = 8
+#: program feed, the time-optimal timing (:meth:`TimingSearch.within_feed`): rounds of more
+#: samples for the segments faster than F, each raising their count by their excess and this
+PROGRAM_FIXES = 3
+#: program feed, the time-optimal timing's tube (:meth:`TimingSearch.program_optimal`): its
+#: cells' first margin under a sample's travel at F, the tubes tried, and the margin's step
+#: beyond the excess measured
+FEED_MARGIN = FEED_CELL_MARGIN
+FEED_MARGIN_TRIES = 5
+FEED_MARGIN_STEP = 0.005
+#: program feed: a segment's excess over F beyond this is a spike (more samples in its cells),
+#: not a move's cells too long (shorter cells on the whole move)
+FEED_SPIKE = 1.03
+PROGRAM_FIX_MARGIN = 0.0
+#: program feed: the time-optimal timing's scale, where 1 does not plan, to this resolution
+PROGRAM_RESOLUTION = 1 / 128
 #: an infeasible piece's advice, checked: the tolerance times this, then the sample time times this
 ADVICE_TOLERANCE = 2.0
 ADVICE_TS = 0.5
@@ -263,10 +279,116 @@ class TimingSearch:
             return None
         return best, t, Scale("optimal", lam)
 
+    def feed_counts(self, t: Tube, counts: np.ndarray) -> np.ndarray:
+        """``counts`` raised where a cell would be crossed faster than its move's F on average:
+        at least its length over F Ts samples (the profile's rounding to whole samples would
+        give a cell of 2.6 samples' travel 2 samples, 30 % over F); the lead cells stay one."""
+        need = np.ceil(t.length / (np.minimum(self.feed_on(t), self.zcap_on(t)) * self.st.Ts) - 1e-9)
+        out = np.maximum(counts, need.astype(np.int64))
+        out[t.lead] = counts[t.lead]
+        return out
+
+    def within_feed(self, t: Tube, counts: np.ndarray, feed_of: np.ndarray) -> PlanResult | None:
+        """``counts`` planned in ``t`` and kept where no sample nor straight move between samples
+        is faster than ``feed_of`` (per segment, :func:`overspeed_of`); where some are, only
+        their segments get more samples (their count times their excess), at most
+        :data:`PROGRAM_FIXES` times. None: infeasible, or still faster than F."""
+        for _ in range(PROGRAM_FIXES + 1):
+            res = self.attempt(t, counts)
+            if res is None:
+                return None
+            over = overspeed_of(res, counts, feed_of)
+            bad = (over > 1.0) & ~t.lead
+            if over.max() <= 1.0:
+                return res
+            if not bad.any():
+                return None  # a lead cell (one sample) too fast: not a count to raise
+            counts = counts.copy()
+            counts[bad] = np.maximum(np.ceil(counts[bad] * over[bad] * (1 + PROGRAM_FIX_MARGIN)), counts[bad] + 1)
+        return None
+
+    def program_optimal(self) -> tuple[PlanResult, Tube] | None:
+        """The ``program`` feed's timing: the exact path's time-optimal profile with each move's
+        speed capped at its own F (``optimal``, built capped: :func:`~planner.contour.plan.plan_cut`),
+        in cells of a whole number of samples at each move's F shortened by a margin
+        (:meth:`~planner.contour.passes.TubeSizes.at_feed`), from :data:`FEED_MARGIN`, raised
+        by the excess on the moves where a plan runs faster than F (at most
+        :data:`FEED_MARGIN_TRIES` tubes);
+        then at the scale 1 where that plans within F (:meth:`within_feed`: a segment faster
+        than F gets more samples, not the whole pass), else the largest feasible slower scale."""
+        optimal = self.optimal
+        at_feed = getattr(self.tube_at, "at_feed", None)
+        if optimal is None or at_feed is None:
+            return None
+        # the margins a pass of the same moves found (depth passes: one plan each after the first)
+        memo, geo = getattr(optimal, "memo", None), getattr(optimal, "geo", None)
+        key = ("feed margin", geo, self.st.Ts)
+        margin = memo.get(key, np.full(len(self.els), FEED_MARGIN)) if memo is not None and geo else \
+            np.full(len(self.els), FEED_MARGIN)
+        t: Tube | None = None
+        counts = np.zeros(0, np.int64)
+        for _ in range(FEED_MARGIN_TRIES):
+            try:
+                cur: Tube = at_feed(margin)
+            except PlannerError as err:  # too many cells at that size: the heuristic profile's coarser ones
+                if err.code != "too_large":
+                    raise
+                return None
+            t = cur
+            times = optimal(cur).times
+            if not (np.all(np.isfinite(times)) and times[-1] > 0):  # pragma: no cover - a profile that never moves
+                return None
+            counts = self.feed_counts(cur, optimal_counts(cur, times, self.st.Ts))
+            res = self.attempt(cur, counts)
+            if res is None:
+                break
+            over_seg = overspeed_of(res, counts, np.minimum(self.feed_on(cur), self.zcap_on(cur)))
+            if over_seg.max() <= 1.0:
+                if memo is not None and geo:
+                    memo[key] = margin
+                return res, cur
+            # a move whose cells run a little faster than F throughout: shorter cells (at least one
+            # more); a spike (the robot speeding up into a faster move ahead of its first cell):
+            # more samples in those cells only (below)
+            loc = np.searchsorted(self.chunk, cur.element)
+            over = np.zeros(len(self.els))  # per move, its cells' largest excess short of a spike
+            np.maximum.at(over, loc, np.where(over_seg <= FEED_SPIKE, over_seg, 0.0))
+            if not (over > 1.0).any():
+                break
+            cells = np.bincount(loc[cur.length > 0], minlength=len(self.els)).clip(1)
+            raised = np.maximum((1 + margin) * over * (1 + FEED_MARGIN_STEP), (1 + margin) * (cells + 1) / cells)
+            margin = np.where(over > 1.0, raised * (1 + 1e-6) - 1, margin)
+        assert t is not None
+        if len(counts) == len(t.segments):  # the spikes: more samples where the samples run faster than F
+            got = self.within_feed(t, counts, np.minimum(self.feed_on(t), self.zcap_on(t)))
+            if got is not None:
+                return got, t
+        assert t is not None
+        times = optimal(t).times
+        feed_of = np.minimum(self.feed_on(t), self.zcap_on(t))
+        tried: dict[bytes, PlanResult | None] = {}
+
+        def run(lam: float) -> PlanResult | None:
+            counts = self.feed_counts(t, optimal_counts(t, times, lam * self.st.Ts))
+            key = counts.tobytes()
+            if key not in tried:
+                tried[key] = self.within_feed(t, counts, feed_of)
+            return tried[key]
+
+        lam = largest_feasible(lambda x: run(x) is not None, 1.0, PROGRAM_RESOLUTION, low=SCALE_MIN, high=1.0)
+        if lam is None:
+            return None
+        best = run(lam)
+        assert best is not None
+        return best, t
+
     def program_feed(self) -> tuple[PlanResult, Tube] | None:
-        """The ``program`` feed's search: :meth:`program_loop`, else the ``fastest`` heuristic
-        profile capped by F (cells sized for half of it), kept where no sample exceeds F."""
-        got_p = self.program_loop()
+        """The ``program`` feed's search: :meth:`program_optimal`, else :meth:`program_loop`,
+        else the ``fastest`` heuristic profile capped by F (cells sized for half of it), kept
+        where no sample exceeds F."""
+        got_p = self.program_optimal()
+        if got_p is None:
+            got_p = self.program_loop()
         if got_p is None:  # the fastest profile under F
             t = self.tube_at(float(self.feed.max()) * 0.5)
             got = self.scaled(t, self.feed_on(t) * PROGRAM_MARGIN, True, 0.5, 1.0, 1.0)
@@ -440,11 +562,22 @@ def check_counts(counts: np.ndarray, line: int) -> None:
 
 
 def overspeed(res: PlanResult, t: Tube, counts: np.ndarray, feed: np.ndarray) -> float:
-    """Largest tool speed / the programmed F of the move being cut (samples and chords)."""
+    """Largest tool speed / the programmed F of the move being cut (:func:`overspeed_of`)."""
+    return float(overspeed_of(res, counts, feed).max())
+
+
+def overspeed_of(res: PlanResult, counts: np.ndarray, feed: np.ndarray) -> np.ndarray:
+    """Per segment, the largest tool speed / the programmed F of the move being cut: the
+    samples' speeds, and the straight moves between samples as the exported program runs them
+    (chord / Ts), each against the smaller F of the segments at its two ends (a move that
+    crosses into a slower move's cells runs at most that F); 0 where a segment has no sample."""
     K = len(res.time)
     seg = segment_of(counts, K)
-    speed = np.hypot(*res.velocity[:, :2].T)
-    chord = np.zeros(K)
-    chord[:-1] = np.hypot(*np.diff(res.pose[:, :2], axis=0).T) / res.settings.Ts
-    f = feed[seg]
-    return float(np.max(np.maximum(speed, chord) / np.maximum(f, 1e-12)))
+    speed = np.hypot(*res.velocity[:, :2].T) / np.maximum(feed[seg], 1e-12)
+    chord = np.hypot(*np.diff(res.pose[:, :2], axis=0).T) / res.settings.Ts
+    chord = chord / np.maximum(np.minimum(feed[seg[:-1]], feed[seg[1:]]), 1e-12)
+    out = np.zeros(len(counts))
+    np.maximum.at(out, seg, speed)
+    np.maximum.at(out, seg[:-1], chord)
+    np.maximum.at(out, seg[1:], chord)
+    return out

@@ -136,12 +136,14 @@ def _clip(poly: np.ndarray, clip: np.ndarray) -> np.ndarray:
     return out
 
 
-def _pieces(elements: list[PathElement], origin: np.ndarray, s_a: float, piece_max: float):
-    """(p0, p1, element index, curvature radius) per piece, robot frame."""
+def _pieces(elements: list[PathElement], origin: np.ndarray, s_a: float, piece_max_of: float | np.ndarray):
+    """(p0, p1, element index, curvature radius) per piece, robot frame (``piece_max_of``: one
+    longest piece, or one per element)."""
     out = []
     for i, e in enumerate(elements):
         if e.length_m < 1e-9:
             continue
+        piece_max = float(piece_max_of if np.ndim(piece_max_of) == 0 else np.asarray(piece_max_of)[i])
         if e.kind == "arc":
             assert e.radius_m is not None and e.sweep_rad is not None and e.start_angle_rad is not None
             r = e.radius_m
@@ -162,8 +164,10 @@ def _pieces(elements: list[PathElement], origin: np.ndarray, s_a: float, piece_m
     return out
 
 
-def tube(elements: list[PathElement], origin: np.ndarray, tol: float, psi: float, piece_max: float) -> Tube:
-    """The tube corridor of a pass (module docstring): point, cells (and junctions), point."""
+def tube(elements: list[PathElement], origin: np.ndarray, tol: float, psi: float,
+         piece_max: float | np.ndarray) -> Tube:
+    """The tube corridor of a pass (module docstring): point, cells (and junctions), point
+    (``piece_max``: the longest piece, one or per element)."""
     s_a = SAGITTA_FRACTION * tol
     pieces = _pieces(elements, origin, s_a, piece_max)
     rho_arc = TUBE_FRACTION * tol - BEND_SAGITTAS * s_a * (1 + 1e-9)

@@ -216,6 +216,11 @@ class PassSummary(_Out):
                                         "between them), m")
     max_speed_m_s: float = Field(description="Largest tool speed (sample to sample), m/s")
     max_programmed_feed_m_s: float = Field(description="Largest programmed F of its moves, m/s")
+    max_feed_ratio: float | None = Field(default=None, description="Largest tool speed over the programmed F of "
+                                         "the move being cut (the samples' speeds and the straight moves between "
+                                         "samples as the exported program runs them, each against the smaller F "
+                                         "of its two ends): at most 1 in feed 'program', by how much F was "
+                                         "exceeded in 'fastest'")
 
 
 class ContourSection(_Out):
@@ -237,6 +242,10 @@ class ContourSection(_Out):
     feed: Literal["program", "fastest"] = Field(description="The feed planned")
     cycle_time_s: float = Field(description="The whole program's time, s")
     cut_time_s: float = Field(description="Time spent cutting, s")
+    max_feed_ratio: float | None = Field(default=None, description="Largest tool speed while cutting over the "
+                                         "programmed F of the move being cut (the passes' largest): at most 1 in "
+                                         "feed 'program' (F is the process limit); in 'fastest', which ignores F, "
+                                         "by how much F was exceeded")
     passes: list[PassSummary] = Field(description="One summary per cut pass")
     origin: list[float] = Field(description="Program zero in the robot frame [x, y], m")
     words: list[ProgramWord] = Field(description="Spindle, tool and mode words of the program")
