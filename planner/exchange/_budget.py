@@ -179,6 +179,12 @@ def svg_expanded_elements(root: Any, limit: int = MAX_SVG_SEGMENTS, max_depth: i
         raise _too_many("levels of nested elements", max_depth) from None
 
 
+def entity_ref(entity: Any, kind: str) -> str:
+    """How a message names a DXF entity: its type and handle (a block's exploded copy has none)."""
+    handle = entity.dxf.get("handle") if entity.dxf.hasattr("handle") else None
+    return f"{kind} (handle {handle})" if handle else f"{kind} (in a block reference)"
+
+
 def spline_points(spline: Any, ref: str) -> None:
     """Refuse a DXF spline (an entity's ``SPLINE`` or a hatch's spline edge) whose curve would
     cost more than a drawing may before ezdxf builds it, from its point counts alone:

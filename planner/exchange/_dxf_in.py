@@ -13,7 +13,7 @@ import numpy as np
 
 from ..errors import PlannerError
 from . import _flatten as fl
-from ._budget import MAX_BLOCK_DEPTH, charge, dxf_expanded_entities, spline_points
+from ._budget import MAX_BLOCK_DEPTH, charge, dxf_expanded_entities, entity_ref, spline_points
 from ._pieces import Drawing, Piece, check_finite
 from ._work import ImportWork, check_import_work, dxf_work
 
@@ -102,10 +102,7 @@ def read_dxf(data: bytes, units: tuple[str, float] | None,
     return Drawing(pieces, layers, dict(ignored), name, mpu, source)
 
 
-def _ref(entity: Any, kind: str) -> str:
-    """How a message names a DXF entity: its type and handle (a block's exploded copy has none)."""
-    handle = entity.dxf.get("handle") if entity.dxf.hasattr("handle") else None
-    return f"{kind} (handle {handle})" if handle else f"{kind} (in a block reference)"
+_ref = entity_ref  # how a message names a DXF entity (planner.exchange._budget)
 
 
 def _entities(space: Any, insert_layer: str | None, depth: int, ignored: Counter) -> Iterator[tuple[Any, str]]:

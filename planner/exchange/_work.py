@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..errors import PlannerError
-from ._budget import MAX_BLOCK_DEPTH, svg_expanded_elements
+from ._budget import MAX_BLOCK_DEPTH, entity_ref, spline_points, svg_expanded_elements
 from ._flatten import MAX_CHORD_ANGLE
 
 __all__ = ["IMPORT_COSTS", "ImportWork", "check_import_work", "dxf_work", "overlap", "svg_work"]
@@ -180,8 +180,11 @@ def _bulges(rows: Any, closed: bool, tol: float) -> tuple[int, int]:
     return total, arcs
 
 
-def _spline(s: Any) -> tuple[float, float]:
-    """(vertices, squared fit points where ezdxf interpolates them) of a spline."""
+def _spline(s: Any, ref: str) -> tuple[float, float]:
+    """(vertices, squared fit points where ezdxf interpolates them) of a spline; a spline over
+    the drawing's hard bounds is refused here already (``too_large`` naming ``ref``:
+    :func:`planner.exchange._budget.spline_points`), as the reading would refuse it."""
+    spline_points(s, ref)
     control, fit = len(s.control_points), len(s.fit_points)
     return SPLINE_VERTICES_PER_POINT * max(control, fit, 1), float(fit * fit) if control == 0 else 0.0
 
@@ -208,7 +211,7 @@ def _entity_counts(e: Any, kind: str, tol: float) -> tuple[float, float, float, 
     if kind == "POLYLINE":
         return len(e.vertices), 1, 0, 0
     if kind == "SPLINE":
-        v, fit2 = _spline(e)
+        v, fit2 = _spline(e, entity_ref(e, kind))
         return v, 1, 1, fit2
     if kind in ("HATCH", "MPOLYGON"):
         vertices = pieces = curves = fit2 = 0.0
@@ -230,7 +233,7 @@ def _entity_counts(e: Any, kind: str, tol: float) -> tuple[float, float, float, 
                     vertices += _chords(max(major, major * abs(float(edge.ratio))), 2 * math.pi, tol) + 1
                     curves += 1
                 elif t == "SPLINE":
-                    v, f2 = _spline(edge)
+                    v, f2 = _spline(edge, f"a spline edge of {entity_ref(e, kind)}")
                     vertices, curves, fit2 = vertices + v, curves + 1, fit2 + f2
                 else:
                     vertices += 2
