@@ -394,6 +394,34 @@ def test_settings_controls_change_the_request(editor):
     assert editor.last_result.settings.N == 30
 
 
+def test_an_unset_horizon_stays_unset_and_its_auto_value_is_the_planners():
+    """N left out of the editor's request stays out through mode switches (the planner
+    chooses it); the value the N field announces for an empty field is the one the planner
+    fills in: per mode, Ts and robot (a description's own masses and limits count)."""
+    from app.editor import _state
+    from planner import PlanRequest
+    from planner.schema import MODE_DEFAULTS, builtin_description
+
+    r = copy.deepcopy(_state.DEFAULT_REQUEST)
+    assert "N" not in r["settings"] and _state.mode_settings(r)["N"] is None
+    for mode in ("paper", "constrained"):
+        _state.switch_mode(r, mode)
+        assert "N" not in r["settings"] and _state.mode_settings(r)["N"] is None
+    heavy = builtin_description("moving-slide").model_dump(mode="json")
+    heavy["platform"]["mass"] *= 20  # longer braking: a longer default horizon
+    for mode, Ts, robot in (("paper", 0.002, "moving-slide"), ("constrained", 0.01, "moving-slide"),
+                            ("constrained", 0.002, "moving-slide"), ("constrained", 0.005, "moving-slide"),
+                            ("constrained", 0.01, heavy)):
+        r["settings"].update(mode=mode, Ts=Ts)
+        r["robot"] = robot
+        used = PlanRequest.model_validate(r).settings.N
+        assert _planning.auto_horizon(r) == used, (mode, Ts)
+    heavy_N = _planning.auto_horizon(r)
+    assert heavy_N is not None and heavy_N > MODE_DEFAULTS["constrained"]["N"], "the heavy robot's is longer"
+    r["settings"]["Ts"] = -1.0
+    assert _planning.auto_horizon(r) is None  # invalid settings: nothing announced, the planner names Ts
+
+
 def test_mode_switch_moves_untouched_penalties_to_the_mode_defaults(editor):
     """N, k_r, k_u still at the paper defaults follow the mode to the constrained defaults;
     a value the user changed stays; the plan uses what the request says."""

@@ -246,6 +246,35 @@ def test_negative_and_exponent_numbers_typed_with_real_keys(tab):
     assert s.wait_idle(60) and s.last_error is None and s.last_result.settings.k_u == 2.5e-4
 
 
+def test_the_horizon_field_says_the_planners_default_and_empties_to_it(tab):
+    """In the page: the empty N field's label says the horizon the planner uses for the
+    current Ts ("auto (100)" at Ts 2 ms for the Moving Slide), a typed N is sent, and
+    deleting it with the keyboard goes back to auto."""
+    from planner.schema import builtin_description, default_horizon
+
+    s, page = tab.session, tab.page
+    robot = builtin_description(s.request["robot"])
+    tab.tab("Settings")
+    label = page.locator("xpath=//label[contains(normalize-space(), 'Horizon N')]")
+    auto = default_horizon(0.01, robot, None)
+    assert wait_for(lambda: f"empty = auto ({auto})" in label.inner_text(), 10), label.inner_text()
+    assert tab.field("Horizon N").input_value() == "" and "N" not in s.request["settings"]
+    tab.type_into("Sample time Ts", "0.002")
+    auto = default_horizon(0.002, robot, None)
+    assert wait_for(lambda: f"empty = auto ({auto})" in label.inner_text(), 10), label.inner_text()
+    assert s.wait_idle(60) and s.last_error is None and s.last_result.settings.N == auto
+    tab.type_into("Horizon N", "40")
+    assert wait_for(lambda: s.request["settings"].get("N") == 40, 10)
+    assert s.wait_idle(60) and s.last_error is None and s.last_result.settings.N == 40
+    box = tab.field("Horizon N")
+    box.click()
+    box.press("Control+a")
+    box.press("Backspace")
+    assert wait_for(lambda: "N" not in s.request["settings"], 10)
+    assert s.wait_idle(60) and s.last_error is None and s.last_result.settings.N == auto
+    assert "\u26a0" not in label.inner_text(), "an empty N is valid"
+
+
 # ---------------------------------------------------------------------------- tabs
 def test_two_tabs_are_independent(server, tab):
     editor, context, _, shots = server

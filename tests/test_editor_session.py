@@ -613,3 +613,48 @@ def test_a_placed_real_drawing_plans_at_once(tab):
     assert s.last_error is None, s.last_error
     assert np.allclose(s.last_result.pose[-1][:2], layout["end"][:2], atol=1e-3)
     assert "Reachable at ψ 0 rad" in s.gui.reach_note.content
+
+
+def test_the_horizon_is_the_planners_default_unless_typed(tab):
+    """The editor sends no N unless the person typed one: at Ts 2 ms the plan uses the
+    planner's default horizon for the robot (not the 30 samples of Ts 10 ms), the field's
+    label says which; a typed N is sent, an emptied field goes back to auto. Exports carry
+    N only when it was typed; a loaded request's own N is kept."""
+    from app.editor._gui import horizon_label
+    from planner.schema import MODE_DEFAULTS, builtin_description, default_horizon
+
+    s, client = tab.session, tab.clients[0]
+    sent = []
+    s.client.send_file_download = lambda name, content, **kw: sent.append(json.loads(content))
+    robot = builtin_description(s.request["robot"])
+    assert "N" not in s.request["settings"] and "samples_per_segment" not in s.request["settings"]
+    assert s.gui.N.text.value == "" and s.gui.N.text.label == horizon_label(default_horizon(0.01, robot, None))
+    client.type(s.gui.Ts.text, "0.002")
+    assert wait_for(lambda: s.request["settings"]["Ts"] == 0.002) and s.wait_idle(180)
+    auto = default_horizon(0.002, robot, None)
+    assert auto > MODE_DEFAULTS["constrained"]["N"], "at a fine Ts the default horizon is longer than Ts 10 ms's"
+    assert s.gui.N.text.label == horizon_label(auto) and f"auto ({auto})" in s.gui.N.text.label
+    assert "N" not in s.request["settings"], "the editor leaves the horizon to the planner"
+    assert s.last_error is None and s.last_result.settings.Ts == 0.002
+    assert s.last_result.settings.N == auto  # the planner's default was used (100 for the Moving Slide)
+    s.files.export_request(s.client)
+    assert "N" not in sent[-1]["settings"] and "samples_per_segment" not in sent[-1]["settings"]
+    done = s.plans_done
+    client.type(s.gui.N.text, "40")
+    assert wait_for(lambda: s.request["settings"].get("N") == 40) and s.wait_idle(180)
+    assert s.plans_done > done and s.last_error is None and s.last_result.settings.N == 40
+    s.files.export_request(s.client)
+    assert sent[-1]["settings"]["N"] == 40
+    done = s.plans_done
+    client.type(s.gui.N.text, "")
+    assert wait_for(lambda: "N" not in s.request["settings"]) and s.wait_idle(180)
+    assert s.plans_done > done and s.last_error is None and s.last_result.settings.N == auto
+    assert s.gui.N.error is None and s.gui.N.text.label == horizon_label(auto)
+    # an older save that says N 30 keeps it (shown, sent as it is) where the default is longer
+    old = s.request
+    old["settings"].update(N=30, Ts=0.005)
+    assert default_horizon(0.005, robot, None) > 30
+    done = s.plans_done
+    s.set_request(old)
+    assert s.gui.N.text.value == "30" and s.request["settings"]["N"] == 30 and s.wait_idle(180)
+    assert s.plans_done > done and s.last_error is None and s.last_result.settings.N == 30

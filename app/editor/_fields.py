@@ -188,6 +188,13 @@ class _Field:
         self._error_line.content = _error_html(self.text._impl.uuid, message)
         self._error_line.visible = True
 
+    def set_label(self, label: str) -> None:
+        """Change the label (e.g. the default an empty field stands for), keeping an error's mark."""
+        if label == self.label:
+            return
+        self.label = label
+        self.text.label = f"\u26a0 {label}" if self.error is not None else label
+
     def clear_error(self, source: str | None = None) -> None:
         """Remove the error (only one from ``source``, when given)."""
         if self.error is None or (source is not None and source != self._error_source):

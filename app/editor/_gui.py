@@ -35,6 +35,7 @@ from ._planning import (
     MACHINE_FORMATS,
     MODE_DEFAULTS,
     OUTPUT_FORMATS,
+    auto_horizon,
     builtin_robot_names,
     field_bounds,
 )
@@ -46,7 +47,7 @@ if TYPE_CHECKING:
     from ._scene import EditorScene
     from ._state import EditorState
 
-__all__ = ["PLAY_FPS", "EditorGui", "PanelActions", "Playback", "error_body", "error_title"]
+__all__ = ["PLAY_FPS", "EditorGui", "PanelActions", "Playback", "error_body", "error_title", "horizon_label"]
 
 PLAY_FPS = 30.0  #: playback frame rate [1/s]
 #: the tab group's content (viser puts it in a Mantine ScrollArea nested in the panel's own) scrolls
@@ -288,7 +289,10 @@ class EditorGui:
                                bounds=_bounds("Settings", key), **kw)
 
         self.Ts = setting("Ts", "Sample time Ts (s)", 0.01)
-        self.N = setting("N", "Horizon N (samples)", defaults["N"], integer=True)
+        # empty (auto): the planner's default for the current Ts, robot and mode, shown in the label
+        self.N = setting("N", horizon_label(auto_horizon(_state.DEFAULT_REQUEST)), None, integer=True, optional=True,
+                         hint="Empty: the planner's default, which follows the sample time and the robot "
+                         "(constrained mode); a typed value is sent as settings.N")
         self.k_r = setting("k_r", "k_r, range penalty (1/m)", defaults["k_r"])
         self.k_u = setting("k_u", "k_u, force penalty (1/N)", defaults["k_u"])
         speed_label = f"Speed (m/s), empty: {DEFAULT_LAYOUT_SPEED_M_S:g} on a layout"
@@ -381,15 +385,21 @@ class EditorGui:
             self.mode.value = settings.get("mode", DEFAULT_MODE)
             self.Ts.show(float(settings.get("Ts", 0.01)))
             self.show_mode_settings(_state.mode_settings(request))
+            self.show_auto_horizon(request)
             if self.speed is not None:
                 self.speed.show(settings.get("speed_m_s"))
             self.name.value = request.get("name") or ""
 
     def show_mode_settings(self, values: dict) -> None:
-        """Show N [samples], k_r [1/m] and k_u [1/N] of ``values``."""
-        self.N.show(int(values["N"]))
+        """Show N [samples] (None: empty, auto), k_r [1/m] and k_u [1/N] of ``values``."""
+        self.N.show(None if values["N"] is None else int(values["N"]))
         self.k_r.show(float(values["k_r"]))
         self.k_u.show(float(values["k_u"]))
+
+    def show_auto_horizon(self, request: dict) -> None:
+        """Say in the N field's label which horizon the planner uses when the field is empty
+        (it follows Ts, the robot and the mode)."""
+        self.N.set_label(horizon_label(auto_horizon(request)))
 
     def show_point(self, which: str, pose) -> None:
         """Show the ``which`` ("start" | "end") pose [x, y, psi] (m, m, rad)."""
@@ -449,6 +459,13 @@ class EditorGui:
 
 
 # ---------------------------------------------------------------------------- texts
+def horizon_label(auto: int | None) -> str:
+    """The N field's label: what an empty field stands for (``auto``: the planner's default
+    horizon [samples] for the current settings; None: not known, the settings are invalid)."""
+    return f"Horizon N (samples), empty = auto ({auto})" if auto is not None else \
+        "Horizon N (samples), empty = auto"
+
+
 _ERROR_TITLES = {"no_path": "No path", "unreachable": "Unreachable", "invalid_input": "Invalid input",
                  "too_large": "Too large", "singular": "Singular pose", "not_settled": "Not settled",
                  "diverged": "Diverged"}

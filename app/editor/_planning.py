@@ -23,6 +23,7 @@ estimate and limit (``RANGEPLAN_PLAN_TIMEOUT_S``).
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import logging
@@ -57,9 +58,12 @@ from planner.schema import (
     ImportOptions,
     ImportResult,
     Layout,
+    RobotDescription,
     SegmentationResult,
     Settings,
+    builtin_description,
     builtin_robot_names,
+    default_horizon,
     format_validation_error,
     planner_error,
 )
@@ -98,6 +102,7 @@ __all__ = [
     "validate_request",
     "editable",
     "field_bounds",
+    "auto_horizon",
     "Placement",
     "fit_shape",
     "reachable_mask",
@@ -168,6 +173,28 @@ def field_bounds(model: str, field: str) -> dict[str, float]:
             if value is not None:
                 out[key] = value  # as declared (1.0, 200): messages print it as the planner does
     return out
+
+
+@functools.lru_cache(maxsize=32)
+def _builtin_description(name: str) -> RobotDescription:
+    return builtin_description(name)
+
+
+def auto_horizon(request: dict) -> int | None:
+    """The horizon ``N`` [samples] the planner uses for ``request`` when its settings give
+    none: the paper mode's fixed default, or the constrained mode's from the sample time, the
+    robot and the force-rate limit (:func:`planner.schema.default_horizon`). None when the
+    settings or the robot do not validate (the planner then says what is wrong)."""
+    given = request.get("settings") or {}
+    try:
+        st = Settings.model_validate({k: v for k, v in given.items() if k != "N"})
+        if st.mode != "constrained":
+            return int(st.N)
+        robot = request.get("robot", DEFAULT_ROBOT)
+        desc = _builtin_description(robot) if isinstance(robot, str) else RobotDescription.model_validate(robot)
+        return default_horizon(st.Ts, desc, st.force_rate_n_s)
+    except (ValidationError, PlannerError, KeyError, TypeError, ValueError):
+        return None
 
 
 def robot_geometry(robot: RobotModel, pose) -> dict:

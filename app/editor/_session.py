@@ -129,6 +129,7 @@ class Session(StateViews, SegmentEdits):
                 self._schedule(immediate)
         if changed:
             self._show_drawing()
+            self.gui.show_auto_horizon(self.state.request)  # Ts, robot or mode may have changed
             self.gui.show_history(self.history.can_undo, self.history.can_redo)
         return changed
 

@@ -26,6 +26,7 @@ if TYPE_CHECKING:
     from ._planning import ContourRequest, ErrorDetail, PlanRequest, PlanResult, SegmentationResult
 
 __all__ = [
+    "AUTO_SETTINGS",
     "DEFAULT_REQUEST",
     "EDGES",
     "EditorState",
@@ -50,6 +51,11 @@ __all__ = [
     "with_new_layout",
 ]
 
+#: settings the editor leaves out of the request unless the person typed a value: the planner
+#: chooses them (the horizon N from the sample time and the robot, and from N's default the
+#: samples a segment is held)
+AUTO_SETTINGS = ("N", "samples_per_segment")
+
 #: what the editor shows on first start: a wall with a gap between start and end
 DEFAULT_REQUEST: dict[str, Any] = {
     "name": "editor example",
@@ -62,7 +68,10 @@ DEFAULT_REQUEST: dict[str, Any] = {
         "start": [-0.08, 0.0, 0.0],
         "end": [0.06, 0.04, 0.0],
     },
-    "settings": {"mode": DEFAULT_MODE, "Ts": 0.01, **MODE_DEFAULTS[DEFAULT_MODE]},
+    # no N: the planner's default horizon follows Ts and the robot (the constrained mode's
+    # 30 samples at Ts 10 ms, 100 at 2 ms); the person types one to fix it
+    "settings": {"mode": DEFAULT_MODE, "Ts": 0.01,
+                 **{k: v for k, v in MODE_DEFAULTS[DEFAULT_MODE].items() if k not in AUTO_SETTINGS}},
 }
 
 Edit = Callable[[dict], Any]  #: changes a request dict in place; its return value is ignored
@@ -211,20 +220,22 @@ def set_setting(request: dict, key: str, value) -> None:
 
 def switch_mode(request: dict, mode: str) -> None:
     """Switch ``settings.mode``; N, k_r and k_u still at the old mode's defaults follow to
-    the new mode's defaults (``MODE_DEFAULTS``), values the user changed stay."""
+    the new mode's defaults (``MODE_DEFAULTS``), values the user changed stay, and one the
+    request leaves out stays out (the new mode's default applies: an unset N stays auto)."""
     settings = request.setdefault("settings", {})
     old = MODE_DEFAULTS.get(settings.get("mode", DEFAULT_MODE), MODE_DEFAULTS[DEFAULT_MODE])
     settings["mode"] = mode
     for key, value in MODE_DEFAULTS[mode].items():
-        if settings.get(key, old[key]) == old[key]:
+        if key in settings and settings[key] == old[key]:
             settings[key] = value
 
 
 def mode_settings(request: dict) -> dict:
-    """The request's N, k_r and k_u, each its mode's default where the request has none."""
+    """The request's N, k_r and k_u, each its mode's default where the request has none;
+    N None where the request has none (the planner chooses it: :data:`AUTO_SETTINGS`)."""
     settings = request.get("settings", {})
     defaults = MODE_DEFAULTS.get(settings.get("mode", DEFAULT_MODE), MODE_DEFAULTS[DEFAULT_MODE])
-    return {key: settings.get(key, value) for key, value in defaults.items()}
+    return {key: settings.get(key, None if key in AUTO_SETTINGS else value) for key, value in defaults.items()}
 
 
 def set_name(request: dict, name: str | None) -> None:
