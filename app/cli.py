@@ -238,7 +238,7 @@ def cmd_contour(args) -> int:
                          source=args.program)
     except PlannerError as exc:
         raise InputError(f"{args.program}: {exc.code}: {exc}") from None
-    from app.jobs import progress_here
+    from app.job_progress import progress_here
 
     line = ProgressLine(sys.stderr, args.progress)
     try:
@@ -261,7 +261,7 @@ PROGRESS_AFTER_S = 2.0
 
 class ProgressLine:
     """The progress of a contour on stderr (issue 35): ``contour: 3/15 passes, 4 s, ~12 s
-    left``, the time left as ``GET /v1/jobs/{id}`` states it (:func:`app.jobs.time_left`).
+    left``, the time left as ``GET /v1/jobs/{id}`` states it (:func:`app.job_progress.time_left`).
     ``auto``: from :data:`PROGRESS_AFTER_S` on; ``always``: from the first pass; ``never``.
     On a terminal one line rewritten in place (at most 10 times a second); else a line at most
     every 5 s and at the last pass, so a log stays short."""
@@ -285,7 +285,7 @@ class ProgressLine:
         last = done >= total
         if self.shown_at is not None and not last and now - self.shown_at < (0.1 if self.tty else 5.0):
             return
-        from app.jobs import time_left
+        from app.job_progress import time_left
 
         left = time_left(done, total, self.started, now, now, estimate_s)
         text = f"contour: {done}/{total} passes, {now - self.t0:.0f} s"

@@ -26,27 +26,22 @@ No web framework or editor import: workers import this module.
 
 from __future__ import annotations
 
-import contextlib
-import contextvars
 import dataclasses
-import json
-import math
 import os
 import time
-from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from itertools import chain
 from typing import Any, ClassVar
 
-import orjson
 from pydantic import BaseModel, Field
 
+from app import job_progress
 from app.failures import degenerate, out_of_memory, too_much_work
+from app.result_json import dumps
 from planner.schema import ContourRequest, ImportOptions, PlanRequest, PlanResult, SegmentationResult
 
 __all__ = ["ContourJob", "ContourWork", "Done", "EditorJob", "EditorPlan", "ErrorDetail", "ExportJob", "Failed",
            "ImportJob", "Job", "Outcome", "PlanJob", "SegmentJob", "SleepJob", "bounded",
-           "check_estimate", "clean_spool", "crashed", "estimate", "failed", "job_progress", "progress_here", "run_job",
+           "check_estimate", "clean_spool", "crashed", "estimate", "failed", "run_job",
            "segmentation_module", "spool_dir", "spool_plan_json"]
 
 
@@ -154,7 +149,7 @@ class ContourJob:
     #: refused over this estimate [s] (set from the time limit by :func:`bounded`)
     work_limit_s: float | None = None
     #: the HTTP job this runs as (a row of the store's ``jobs``): the worker writes its
-    #: estimate and its progress (cut passes done) there (:func:`job_progress`)
+    #: estimate and its progress (cut passes done) there (:func:`app.job_progress.job_progress`)
     job_id: str | None = None
     kind: ClassVar[str] = "contour"
 
@@ -278,11 +273,11 @@ def _execute(job: Job) -> Done:
 
         res = import_drawing(job.data, job.options, filename=job.filename, content_type=job.content_type,
                              work_limit_s=job.work_limit_s)
-        return Done(_dumps(res.to_json_dict()))
+        return Done(dumps(res.to_json_dict()))
     if isinstance(job, SegmentJob):
         from planner import segment
 
-        return Done(_dumps(segment(job.request).to_dict()))
+        return Done(dumps(segment(job.request).to_dict()))
     if isinstance(job, EditorJob):
         return Done(_editor_plan(job.request))
     if isinstance(job, SleepJob):
@@ -297,7 +292,7 @@ def _plan(job: PlanJob) -> Done:
 
     req = job.request
     if job.job_id:
-        job_progress(job.store, job.job_id)(0, 1)
+        job_progress.job_progress(_store(job.store), job.job_id)(0, 1)
     result = plan(req, work_limit_s=job.work_limit_s)
     plan_id = new_id() if job.store else None
     result.plan_id = plan_id
@@ -329,15 +324,15 @@ def _contour(job: ContourJob) -> Done:
     req = job.request
     program = read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
     progress = None
-    here = _HERE.get()
+    here = job_progress.here()
     if job.work_limit_s or job.job_id or here is not None:
         work = ContourWork(*estimate_contour(req, program))
         if job.work_limit_s and work.seconds > job.work_limit_s:
             raise PlannerError(**too_much_work(work, job.work_limit_s))
         if job.job_id:
-            progress = job_progress(job.store, job.job_id, work.seconds)
+            progress = job_progress.job_progress(_store(job.store), job.job_id, work.seconds)
         elif here is not None:
-            progress = _with_estimate(here, work.seconds)
+            progress = job_progress.with_estimate(here, work.seconds)
         if progress is not None:
             progress(0, len(program.passes))
     result = plan_contour(req, program=program, work_limit_s=job.work_limit_s, progress=progress)
@@ -359,79 +354,6 @@ def _contour(job: ContourJob) -> Done:
 
         payload = write(result, job.format, layout=None, forces=job.forces, source=job.source)
     return Done(payload, plan_id, _summary(result))
-
-
-#: the time after a contour's last pass (joining the passes, the contour section, storing the
-#: plan) as a share of the passes' own time: 0.25-0.32 measured on 4-40 passes
-#: (benchmarks/bench_jobs.py); counted in :func:`time_left` as that many passes per pass
-JOIN_SHARE = 0.3
-
-
-def time_left(done: int, total: int | None, started: float | None, updated: float | None, now: float,
-              estimate_s: float | None) -> float | None:
-    """Estimated time left of a job [s], the one rule of ``GET /v1/jobs/{id}`` and of the CLI's
-    progress line: once a unit is done, the time per unit measured up to the last unit done
-    (``updated``), for the units left and the join after them (:data:`JOIN_SHARE`), less the
-    time since that unit; before, the work estimate less the time run (not below a tenth of
-    it); ``None`` without either."""
-    if done > 0 and total and started is not None:
-        updated = now if updated is None else updated
-        return max((updated - started) / done * (total - done + JOIN_SHARE * total) - (now - updated), 0.0)
-    if estimate_s is not None:
-        return max(estimate_s - max(0.0, now - (now if started is None else started)), 0.1 * estimate_s)
-    return None
-
-
-#: a progress callback ``(done, total, estimate_s)`` of a job run in this thread (the CLI's
-#: progress line: :func:`progress_here`); a worker's jobs report through the store instead
-_HERE: contextvars.ContextVar[Callable[[int, int, float | None], None] | None] = contextvars.ContextVar(
-    "rangeplan_progress_here", default=None)
-
-
-@contextlib.contextmanager
-def progress_here(callback: Callable[[int, int, float | None], None]) -> Iterator[None]:
-    """Jobs run in this thread meanwhile (:class:`app.executors.InProcessExecutor`) report their
-    progress to ``callback(done, total, estimate_s)``: a contour its cut passes, with its work
-    estimate."""
-    token = _HERE.set(callback)
-    try:
-        yield
-    finally:
-        _HERE.reset(token)
-
-
-def _with_estimate(callback: Callable[[int, int, float | None], None], estimate_s: float) -> Callable[[int, int], None]:
-    return lambda done, total: callback(done, total, estimate_s)
-
-
-#: the least time between two progress writes of a job [s] (the first and the last are always
-#: written): a program of 2000 passes writes ~4 rows a second, not 2000
-PROGRESS_EVERY_S = 0.25
-
-
-def job_progress(store: str | None, job_id: str, estimate_s: float | None = None):
-    """The progress callback ``(done, total)`` of the HTTP job ``job_id``: its first call marks
-    the job running with ``total`` and the work estimate ``estimate_s``, later ones write the
-    units done to the store's ``jobs`` row, at most every :data:`PROGRESS_EVERY_S` but always
-    the last (``done == total``). The worker's SQLite store carries progress across the process
-    boundary (and to a Dask worker sharing the data directory): no pipe message, and any
-    server process reading the store answers ``GET /v1/jobs/{id}``."""
-    st = _store(store)
-    state = {"started": False, "at": 0.0}
-
-    def report(done: int, total: int) -> None:
-        if st is None:
-            return
-        now = time.monotonic()
-        if not state["started"]:
-            st.job_started(job_id, total, estimate_s)
-            state["started"], state["at"] = True, now
-            return
-        if done >= total or now - state["at"] >= PROGRESS_EVERY_S:
-            st.job_progress(job_id, done, total)
-            state["at"] = now
-
-    return report
 
 
 def _summary(result) -> dict[str, Any]:
@@ -579,9 +501,9 @@ def _editor_plan(req) -> bytes:
             seg = segmentation_module().segment(req.layout, robot, req.settings)
             segments = seg.segments
         result = plan(req, robot=robot, segments=segments).to_json_dict()
-        return _dumps({"segmentation": seg.to_dict() if seg else None, "result": result, "error": None})
+        return dumps({"segmentation": seg.to_dict() if seg else None, "result": result, "error": None})
     except PlannerError as exc:
-        return _dumps({"segmentation": seg.to_dict() if seg else None, "result": None, "error": exc.to_dict()})
+        return dumps({"segmentation": seg.to_dict() if seg else None, "result": None, "error": exc.to_dict()})
 
 
 # ---------------------------------------------------------------------------------------
@@ -604,80 +526,3 @@ def bounded(job: Job, timeout_s: float | None) -> Job:
     if isinstance(job, (PlanJob, ContourJob, ImportJob)) and job.work_limit_s is None and timeout_s and timeout_s > 0:
         return dataclasses.replace(job, work_limit_s=float(timeout_s))
     return job
-
-
-# ---------------------------------------------------------------------------------------
-# JSON out
-
-def _check_finite(obj, path="result"):
-    """json.dumps(allow_nan=False) says only *that* a value is not finite; say where."""
-    if isinstance(obj, float):
-        if not math.isfinite(obj):
-            return path
-    elif isinstance(obj, dict):
-        for k, v in obj.items():
-            p = _check_finite(v, f"{path}.{k}")
-            if p:
-                return p
-    elif isinstance(obj, (list, tuple)):
-        for i, v in enumerate(obj):
-            p = _check_finite(v, f"{path}[{i}]")
-            if p:
-                return p
-    return None
-
-
-def _all_finite(obj) -> bool:
-    """Quick test that ``obj`` holds no NaN or infinity (the JSON encoder would write them as
-    null): each flat list of numbers, and each list of such rows, is summed in C, and a NaN
-    or infinity makes the sum non-finite. May answer False for finite numbers whose sum
-    overflows; :func:`_check_finite` then decides. ~20x cheaper than walking every float."""
-    if isinstance(obj, float):
-        return math.isfinite(obj)
-    if isinstance(obj, dict):
-        return all(map(_all_finite, obj.values()))
-    if isinstance(obj, (list, tuple)):
-        try:
-            return math.isfinite(sum(obj))
-        except TypeError:  # not a flat list of numbers
-            pass
-        except OverflowError:  # an int too large for a float
-            return all(map(_all_finite, obj))
-        try:  # rows of numbers, e.g. a pose per sample
-            # (a row that is a dict sums its keys, not its values; but a dict with number
-            # keys is not orjson's to encode: _dumps then checks with the stdlib encoder)
-            return math.isfinite(sum(chain.from_iterable(obj)))
-        except (TypeError, OverflowError):
-            return all(map(_all_finite, obj))
-    return True
-
-
-# orjson writes a Table I result (~145 kB, ~8000 floats) in ~0.3 ms against ~4.5 ms for the
-# stdlib encoder; the numbers are the same (shortest round-trip form; only the exponent
-# spelling differs: 1e-7 vs 1e-07). Anything orjson would encode differently from the stdlib
-# (dataclasses, datetimes, subclasses of dict/str/int, non-str keys, huge ints) makes it
-# raise TypeError, and the stdlib encodes that result as before.
-_ORJSON_OPT = (orjson.OPT_PASSTHROUGH_DATACLASS | orjson.OPT_PASSTHROUGH_DATETIME
-               | orjson.OPT_PASSTHROUGH_SUBCLASS)
-
-
-def _float_subclass(obj):
-    if isinstance(obj, float):  # e.g. numpy.float64: the same number as a float
-        return float(obj)
-    raise TypeError
-
-
-def _dumps(result: dict) -> bytes:
-    """``result`` as compact UTF-8 JSON; a NaN or infinity anywhere is a ``diverged``
-    PlannerError naming where it is."""
-    if _all_finite(result):
-        try:
-            return orjson.dumps(result, default=_float_subclass, option=_ORJSON_OPT)
-        except TypeError:
-            pass
-    try:
-        return json.dumps(result, allow_nan=False, separators=(",", ":")).encode()
-    except ValueError:
-        from planner.errors import PlannerError
-        raise PlannerError("diverged", f"the planner produced a non-finite number at {_check_finite(result)}; "
-                           "try a smaller sample time or larger k_u", "settings") from None

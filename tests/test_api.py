@@ -331,10 +331,12 @@ def test_compute_limit_stops_runaway_plan(store, monkeypatch, tmp_path):
 
 
 @pytest.mark.serial  # a bound of 0.5 s
-def test_too_much_work_is_refused_in_well_under_a_second(store):
-    """The largest corridor the schema accepts (200 000 steps) against a 1 s limit: refused
-    with too_much_work naming the estimate, the limit and the field, before any worker is
-    busy (the pool stays idle and plans Table I at once)."""
+def test_too_much_work_is_refused_in_well_under_a_second(store, monkeypatch):
+    """The largest corridor the schema accepts (200 000 steps) against a 1 s limit (the
+    synchronous one and a job's): refused with too_much_work naming the estimate, the limit and
+    the field, before any worker is busy (the pool stays idle and plans Table I at once), not
+    turned into a job (issue 35: over the jobs' limit too)."""
+    monkeypatch.setenv("RANGEPLAN_JOB_TIMEOUT_S", "1")
     app = create_app(store, workers=1, timeout_s=1.0)
     with api_client(app) as c:
         assert c.post("/v1/plan", json=TABLE1).status_code == 200
@@ -513,7 +515,7 @@ def _same_json_values(a, b) -> bool:
 
 
 def test_result_encoding_has_the_stdlib_numbers():
-    from app.jobs import _dumps
+    from app.result_json import dumps as _dumps
     rng = np.random.default_rng(7)
     rows = (rng.normal(size=(50, 3)) * 10.0 ** rng.integers(-300, 300, size=(50, 3))).tolist()
     result = {"name": "coin\u00e7on \u2013 \u00b5m", "plan_id": None, "steps": 3, "settled": True,
@@ -536,7 +538,7 @@ def test_result_encoding_has_the_stdlib_numbers():
     ("result.drives.force[0][2]", lambda r: r["drives"]["force"][0].__setitem__(2, float("nan"))),
 ])
 def test_non_finite_result_is_diverged_naming_the_number(where, put):
-    from app.jobs import _dumps
+    from app.result_json import dumps as _dumps
     from planner.errors import PlannerError
     result = {"time": [0.01 * k for k in range(20)], "pose": [[0.1, 0.2, 0.0]] * 20,
               "metrics": {"energy": 1.0, "steps": 19}, "pair": (1.0, 2.0),

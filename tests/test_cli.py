@@ -259,11 +259,11 @@ def test_contour_progress_on_stderr(tmp_path):
 def test_progress_line_on_a_terminal_is_one_line_rewritten():
     """On a terminal the line is rewritten in place (carriage return, erase to the end), at
     most 10 times a second, and the last pass always shown; ``auto`` shows nothing before
-    2 s; the time left is :func:`app.jobs.time_left`'s."""
+    2 s; the time left is :func:`app.job_progress.time_left`'s."""
     import io
 
     from app.cli import PROGRESS_AFTER_S, ProgressLine
-    from app.jobs import time_left
+    from app.job_progress import time_left
 
     class Tty(io.StringIO):
         def isatty(self):

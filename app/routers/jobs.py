@@ -20,7 +20,7 @@ work estimate, ``eta_s`` and, once done, ``result``: the stored plan's URL (``/v
 any ``?format=``), or ``error`` (the error the synchronous call would have answered).
 
 Progress crosses the process boundary through the SQLite store the worker already opens to
-store its plan (:func:`app.jobs.job_progress`): the same for a local planning process, the
+store its plan (:func:`app.job_progress.job_progress`): the same for a local planning process, the
 in-process executor and a Dask worker sharing the data directory, and readable by any thread
 of the server; a pipe message would have needed every executor to carry a second kind of
 message. Jobs are bounded: ``RANGEPLAN_MAX_JOBS`` kept (503 when that many are unfinished),
@@ -45,7 +45,8 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from app import storage_io
 from app.errors import error_response, errors_doc
-from app.jobs import ContourJob, Done, ErrorDetail, Job, Outcome, PlanJob, crashed, estimate, time_left
+from app.job_progress import time_left
+from app.jobs import ContourJob, Done, ErrorDetail, Job, Outcome, PlanJob, check_estimate, crashed, estimate
 from app.observability import observe_job
 from app.routers.deps import outcome_response, store, submit
 from app.storage import Store, new_id
@@ -171,6 +172,10 @@ async def run_as_job(request: Request, job: ContourJob | PlanJob, fmt: str) -> R
     if isinstance(job, PlanJob):  # estimated here, before it is queued (as the service does)
         est = await asyncio.get_running_loop().run_in_executor(None, estimate, job)
         est_s = est.seconds if est is not None else None
+        if est_s is not None and est_s > limits.job_timeout_s:  # over every limit: refused now, naming the job's
+            refused = check_estimate(job, limits.job_timeout_s)
+            if refused is not None:
+                return outcome_response(refused, fmt)
         if not pref.respond_async and (est_s is None or est_s <= threshold):
             return await submit(request, job, fmt)  # short: synchronous, under the synchronous limit
     st = store(request)
