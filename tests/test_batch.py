@@ -633,10 +633,12 @@ def test_api_batch_limits(tmp_path):
         assert c.post("/v1/batches", json={"requests": [TABLE1]}).status_code == 202  # 3 + 1 <= 4
 
 
-def test_api_batch_items_have_the_bounds_of_a_single_plan(tmp_path):
+def test_api_batch_items_have_the_bounds_of_a_single_plan(tmp_path, monkeypatch):
     """A batch item is refused for too much work as POST /v1/plan refuses it on the same
     server (the same estimate, limit, code, field and message), in well under a second and
-    without planning; the other items plan."""
+    without planning; the other items plan. (The server's jobs have the same 5 s limit: a
+    plan over it is refused, not made a job.)"""
+    monkeypatch.setenv("RANGEPLAN_JOB_TIMEOUT_S", "5")
     heavy = {**TABLE1, "settings": {"mode": "constrained", "N": 150, "backend": "reference"}}
     app = create_app(Store(tmp_path), workers=1, timeout_s=5.0)
     with api_client(app) as c:

@@ -68,3 +68,18 @@ def test_rate_setting_is_validated():
         with pytest.raises(PlannerError) as exc:
             plan(with_settings(TABLE1, mode="constrained", force_rate_n_s=bad))
         assert exc.value.code == "invalid_input" and exc.value.field == field, exc.value
+
+
+def test_a_rate_per_drive_of_a_robot_with_other_legs_is_accepted():
+    """One force rate per drive of a 3-leg robot (the built-in tri-slide): the settings, sized
+    for the default 4-leg robot before the request's robot is known, take it (the default
+    horizon is the request's robot's), and the plan keeps each drive within its own rate; a
+    count that fits neither robot is named on its field."""
+    from planner.schema import PlanRequest
+
+    req = PlanRequest.model_validate({**TABLE1, "robot": "tri-slide",
+                                      "settings": {"mode": "constrained", "force_rate_n_s": [3000.0, 2500.0, 2000.0]}})
+    assert req.robot_description.n_legs == 3 and len(req.settings.force_rate_n_s) == 3
+    with pytest.raises(PlannerError) as exc:
+        plan({**TABLE1, "robot": "tri-slide", "settings": {"mode": "constrained", "force_rate_n_s": [3000.0, 2500.0]}})
+    assert exc.value.code == "invalid_input" and exc.value.field == "settings.force_rate_n_s", exc.value

@@ -85,8 +85,11 @@ def default_horizon(Ts: float, robot: RobotDescription, force_rate: Any) -> int:
         ramp = 0.0
     elif force_rate is None:
         ramp = DEFAULT_FORCE_RISE_S
-    else:
-        ramp = float(np.max(fmax / np.broadcast_to(np.asarray(force_rate, float), fmax.shape)))
+    else:  # one rate or one per drive; another count (named by the request's own check, or
+        # Settings sized for the default robot while the request's has other legs): the
+        # slowest ramp any drive could have
+        rates = np.asarray(force_rate, float).ravel()
+        ramp = float(np.max(fmax / rates) if rates.size in (1, fmax.size) else fmax.max() / rates.min())
     mass = robot.platform.mass + sum(g.cylinder.mass + g.rod.mass for g in legs)
     brake = max(g.speed_max for g in legs) * mass / float(fmax.sum())
     horizon_s = DEFAULT_HORIZON_RAMPS * ramp + DEFAULT_HORIZON_BRAKES * brake
