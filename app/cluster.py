@@ -41,7 +41,7 @@ from distributed.diagnostics.plugin import WorkerPlugin
 
 from app.executors import run_bounded, warm_worker
 from app.jobs import Job, Outcome
-from app.workers import PoolBusy, WorkerCrashed
+from app.workers import Admission, WorkerCrashed
 
 __all__ = ["DaskExecutor", "WarmUp", "MALLOC_ENV", "STATE", "connect", "lost_worker", "relax_malloc_trim"]
 
@@ -129,7 +129,7 @@ def slots(client: Client) -> int:
     return max(1, sum(nthreads.values()))
 
 
-class DaskExecutor:
+class DaskExecutor(Admission):
     """The service's jobs on a Dask cluster (:class:`app.executors.JobExecutor`): each
     :meth:`run` is one task, :func:`app.executors.run_bounded` on a worker (the estimate,
     the time limit as a killed planning process, the memory cap ``memory_mb`` MiB). At most
@@ -164,14 +164,7 @@ class DaskExecutor:
 
     def run(self, job: Job, timeout_s: float | None = None) -> Outcome:
         limit = self.timeout_s if timeout_s is None else float(timeout_s)
-        with self._lock:
-            if self._closed:
-                raise PoolBusy("the server is shutting down")
-            if self._inflight >= self.capacity:
-                raise PoolBusy(f"{self._inflight} jobs in progress")
-            self._inflight += 1
-            self.jobs_run += 1
-        try:
+        with self._admitted():
             fut = self.client.submit(run_bounded, job, limit, self.memory_mb or None, pure=False)
             try:
                 return fut.result()
@@ -179,9 +172,6 @@ class DaskExecutor:
                 if lost_worker(exc) or isinstance(exc, OSError):
                     raise WorkerCrashed(f"the Dask worker was lost ({type(exc).__name__}: {exc})") from None
                 raise
-        finally:
-            with self._lock:
-                self._inflight -= 1
 
     def stats(self) -> dict[str, Any]:
         return {"mode": self.mode, "workers": self.n, "in_flight": self._inflight, "timeout_s": self.timeout_s,

@@ -45,6 +45,8 @@ import subprocess  # noqa: E402
 import sys  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
+from collections.abc import Iterator  # noqa: E402
+from contextlib import contextmanager  # noqa: E402
 from multiprocessing.connection import Connection  # noqa: E402
 from typing import Any  # noqa: E402
 
@@ -325,7 +327,38 @@ class _Worker:
 _ALLOCATION_FAILURE = (-6, -9)
 
 
-class PlanPool:
+class Admission:
+    """The bounded queue of an executor (:class:`PlanPool`, :class:`app.cluster.DaskExecutor`):
+    at most :attr:`capacity` jobs in flight, more are :class:`PoolBusy`, and none once closed.
+    The executor sets ``_lock``, ``_inflight``, ``_closed`` and ``jobs_run``."""
+
+    _lock: threading.Lock
+    _inflight: int
+    _closed: bool
+    jobs_run: int
+
+    @property
+    def capacity(self) -> int:
+        raise NotImplementedError
+
+    @contextmanager
+    def _admitted(self) -> Iterator[None]:
+        """One job in flight while the block runs (:class:`PoolBusy` when full or shutting down)."""
+        with self._lock:
+            if self._closed:
+                raise PoolBusy("the server is shutting down")
+            if self._inflight >= self.capacity:
+                raise PoolBusy(f"{self._inflight} jobs in progress")
+            self._inflight += 1
+            self.jobs_run += 1
+        try:
+            yield
+        finally:
+            with self._lock:
+                self._inflight -= 1
+
+
+class PlanPool(Admission):
     """``workers`` planning processes (``mode="process"``) or inline execution
     (``mode="thread"``); ``timeout_s`` bounds each job's compute time (and, through the work
     estimate, what is accepted); at most ``max_queue`` jobs wait for a worker (more:
@@ -402,14 +435,7 @@ class PlanPool:
         ``timeout_s`` overrides the pool's time limit for this job (0: none). The work estimate
         is the caller's (:class:`app.service.JobService`, :func:`app.executors.run_bounded`)."""
         limit = self.timeout_s if timeout_s is None else float(timeout_s)
-        with self._lock:
-            if self._closed:
-                raise PoolBusy("the server is shutting down")
-            if self._inflight >= self.capacity:
-                raise PoolBusy(f"{self._inflight} jobs in progress")
-            self._inflight += 1
-            self.jobs_run += 1
-        try:
+        with self._admitted():
             if self.mode == "thread":
                 with self._sem:
                     t0 = time.perf_counter()
@@ -440,9 +466,6 @@ class PlanPool:
                 raise
             finally:
                 self._idle.put(replacement)
-        finally:
-            with self._lock:
-                self._inflight -= 1
 
     def renew(self) -> None:
         """Replace every worker by a new one (after the background compile of the kernels: the
