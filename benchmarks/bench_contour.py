@@ -98,13 +98,15 @@ def _smooth_pieces(elements: list[PathElement]) -> list[list[PathElement]]:
 
 
 def topp_time(elements: list[PathElement], origin: np.ndarray, leg_speed: bool = False, Ts: float | None = None,
-              tol: float = TOL) -> float:
+              tol: float = TOL, feed: bool = False, step: float = 2e-4) -> float:
     """Time-optimal traversal of the exact path (rest at both ends and at every corner) under
     the drive-force box, by TOPP-RA. ``leg_speed``: the legs' speed limit too (``|J_l q'(s)| sdot
     <= speed_max``, a bound on ``sdot^2``); ``Ts``: the output's chord bound too: a controller
     that interpolates linearly between samples ``Ts`` apart runs a chord of length ``sdot Ts``
     whose sagitta on an arc of radius R, ``(sdot Ts)^2 / (8 R)``, must stay within the tolerance:
-    ``sdot <= sqrt(8 R tol) / Ts`` (a bound for an exact tracker; any tracking error takes from it)."""
+    ``sdot <= sqrt(8 R tol) / Ts`` (a bound for an exact tracker; any tracking error takes from it);
+    ``feed``: the tool speed capped at each move's F (a move's end point takes the smaller F of
+    the two moves meeting there). Grid points ``step`` [m] apart (at least 60 a piece)."""
     import toppra as ta
     import toppra.algorithm as algo
     import toppra.constraint as constraint
@@ -188,11 +190,13 @@ def topp_time(elements: list[PathElement], origin: np.ndarray, leg_speed: bool =
                 for k in range(len(gridpoints)):
                     _, _, J = generalised_forces(model, q[k], np.zeros(3))
                     x_max[k] = float(np.min(model.speed_max / np.maximum(np.abs(J @ dq[k]), 1e-12))) ** 2
-            if Ts is not None:
+            if Ts is not None or feed:
                 for k, s in enumerate(gridpoints):
                     i = int(np.clip(np.searchsorted(path.cum, s, side="right") - 1, 0, len(self.els) - 1))
                     for e in {i, max(i - 1, 0)} if abs(s - path.cum[i]) < 1e-12 else {i}:
-                        if self.els[e].kind == "arc":
+                        if feed:
+                            x_max[k] = min(x_max[k], self.els[e].feed_m_s ** 2)
+                        if Ts is not None and self.els[e].kind == "arc":
                             assert self.els[e].radius_m is not None
                             x_max[k] = min(x_max[k], 8 * self.els[e].radius_m * tol / Ts ** 2)
             xbound = np.column_stack((np.zeros(len(gridpoints)), x_max))
@@ -202,10 +206,10 @@ def topp_time(elements: list[PathElement], origin: np.ndarray, leg_speed: bool =
     for piece in _smooth_pieces(elements):
         path = Piecewise(piece)
         L = path.cum[-1]
-        grid = np.unique(np.concatenate((np.linspace(0, L, max(60, int(L / 2e-4))), path.cum)))
+        grid = np.unique(np.concatenate((np.linspace(0, L, max(60, int(L / step))), path.cum)))
         pc = constraint.SecondOrderConstraint(inv_dyn, cF, cg, dof=3,
                                               discretization_scheme=constraint.DiscretizationType.Interpolation)
-        cons = [pc] + ([PathSpeed(piece)] if leg_speed or Ts is not None else [])
+        cons = [pc] + ([PathSpeed(piece)] if leg_speed or Ts is not None or feed else [])
         inst = algo.TOPPRA(cons, path, gridpoints=grid, parametrizer="ParametrizeConstAccel")
         traj = inst.compute_trajectory(0, 0)
         assert traj is not None, "TOPP-RA found no parametrisation"

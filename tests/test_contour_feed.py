@@ -24,8 +24,6 @@ import pytest
 from planner.contour import plan_contour
 from planner.exchange import read_gcode
 from planner.exchange.gcode import to_gcode
-from planner.model import load_robot
-from planner.model.dynamics import generalised_forces
 from planner.schema import PathElement
 
 #: the relative tolerance on "never faster than F" (float rounding of the plan's own samples)
@@ -103,106 +101,26 @@ def toppra_at_feed(elements: list[PathElement], origin) -> float:
     """The exact path's second-order time optimum with the tool speed capped at each move's F:
     TOPP-RA (``toppra``) under the drive-force box (its generalised forces' zonotope facets) and
     the leg speeds, from rest to rest, stopping where the tangent jumps; a move's end point
-    takes the smaller F of the two moves meeting there."""
-    ta = pytest.importorskip("toppra")
-    import toppra.algorithm as algo  # pyright: ignore[reportMissingImports]
-    import toppra.constraint as constraint  # pyright: ignore[reportMissingImports]
-    from toppra.interpolator import AbstractGeometricPath  # pyright: ignore[reportMissingImports]
+    takes the smaller F of the two moves meeting there (``benchmarks/bench_contour.py``'s
+    ``topp_time``, the peer of the contour benchmark, on a 0.1 mm grid)."""
+    pytest.importorskip("toppra")
+    return _bench_contour().topp_time(elements, np.asarray(origin, float), leg_speed=True, feed=True, step=1e-4)
 
-    model = load_robot("moving-slide")
-    umax = np.array(model.force_max, float) * np.ones(model.n_legs)
-    org = np.asarray(origin, float)
 
-    def tangent(e: PathElement, at_end: bool) -> np.ndarray:
-        if e.kind == "line":
-            return (e.end - e.start) / e.length_m
-        a0, sweep = float(e.start_angle_rad or 0.0), float(e.sweep_rad or 0.0)
-        a = a0 + (sweep if at_end else 0.0)
-        return math.copysign(1.0, sweep) * np.array([-math.sin(a), math.cos(a)])
+def _bench_contour():
+    """benchmarks/bench_contour.py (benchmarks/ is no package: loaded by path, once)."""
+    import importlib.util
+    import sys
+    from pathlib import Path
 
-    pieces: list[list[PathElement]] = [[elements[0]]]
-    for a, b in zip(elements, elements[1:]):
-        if float(np.dot(tangent(a, True), tangent(b, False))) < 1 - 1e-9:
-            pieces.append([])
-        pieces[-1].append(b)
-
-    class Piecewise(AbstractGeometricPath):
-        def __init__(self, els: list[PathElement]):
-            self.els = els
-            self.cum = np.concatenate(([0.0], np.cumsum([e.length_m for e in els])))
-
-        @property
-        def dof(self) -> int:
-            return 3
-
-        @property
-        def path_interval(self) -> np.ndarray:
-            return np.array([0.0, self.cum[-1]])
-
-        @property
-        def waypoints(self):  # pragma: no cover - not used by TOPP-RA
-            return None
-
-        def __call__(self, ss, order=0):
-            ss = np.atleast_1d(np.asarray(ss, float))
-            out = np.zeros((len(ss), 3))
-            for k, s in enumerate(ss):
-                i = int(np.clip(np.searchsorted(self.cum, s, side="right") - 1, 0, len(self.els) - 1))
-                e, u = self.els[i], s - self.cum[i]
-                if e.kind == "line":
-                    d = (e.end - e.start) / e.length_m
-                    val = [e.start + org + u * d, d, np.zeros(2)][order]
-                else:
-                    assert e.centre is not None and e.radius_m is not None
-                    assert e.start_angle_rad is not None and e.sweep_rad is not None
-                    sg = math.copysign(1.0, e.sweep_rad)
-                    a = e.start_angle_rad + sg * u / e.radius_m
-                    c, sn = math.cos(a), math.sin(a)
-                    val = [e.centre + org + e.radius_m * np.array([c, sn]), sg * np.array([-sn, c]),
-                           -np.array([c, sn]) / e.radius_m][order]
-                out[k, :2] = val
-            return out
-
-    def facets(q):
-        _, _, J = generalised_forces(model, q, np.zeros(3))
-        A = J.T
-        rows = [np.cross(A[:, i], A[:, j]) for i in range(A.shape[1]) for j in range(i + 1, A.shape[1])]
-        F = np.array([r / np.linalg.norm(r) for r in rows if np.linalg.norm(r) > 1e-12])
-        h = np.abs(F @ A) @ umax
-        return np.vstack((F, -F)), np.concatenate((h, h))
-
-    def inv_dyn(q, qd, qdd):
-        M_r, h_r, _ = generalised_forces(model, q, qd)
-        return M_r @ qdd - h_r
-
-    class SpeedCap(constraint.LinearConstraint):
-        """sdot^2 at most the leg speeds' bound and the move's F squared (the smaller of two
-        moves at their common point)."""
-
-        def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
-            q, dq = path(gridpoints), path(gridpoints, 1)
-            x_max = np.empty(len(gridpoints))
-            for k, s in enumerate(gridpoints):
-                _, _, J = generalised_forces(model, q[k], np.zeros(3))
-                x_max[k] = float(np.min(model.speed_max / np.maximum(np.abs(J @ dq[k]), 1e-12))) ** 2
-                i = int(np.clip(np.searchsorted(path.cum, s, side="right") - 1, 0, len(path.els) - 1))
-                near = {i, max(i - 1, 0)} if abs(s - path.cum[i]) < 1e-12 else {i}
-                x_max[k] = min(x_max[k], min(path.els[j].feed_m_s for j in near) ** 2)
-            return None, None, None, None, None, None, np.column_stack((np.zeros(len(gridpoints)), x_max))
-
-    total = 0.0
-    for piece in pieces:
-        path = Piecewise(piece)
-        L = path.cum[-1]
-        grid = np.unique(np.concatenate((np.linspace(0, L, max(60, int(L / 1e-4))), path.cum)))
-        pc = constraint.SecondOrderConstraint(inv_dyn, lambda q: facets(q)[0], lambda q: facets(q)[1], dof=3,
-                                              discretization_scheme=constraint.DiscretizationType.Interpolation)
-        inst = algo.TOPPRA([pc, SpeedCap()], path, gridpoints=grid, parametrizer="ParametrizeConstAccel")
-        traj = inst.compute_trajectory(0, 0)
-        assert traj is not None, "TOPP-RA found no parametrisation"
-        total += float(traj.duration)
-    del ta
-    return total
+    if "bench_contour" not in sys.modules:
+        spec = importlib.util.spec_from_file_location(
+            "bench_contour", Path(__file__).resolve().parent.parent / "benchmarks" / "bench_contour.py")
+        assert spec is not None and spec.loader is not None
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        sys.modules["bench_contour"] = module
+    return sys.modules["bench_contour"]
 
 
 @pytest.fixture(scope="module", params=range(4))
