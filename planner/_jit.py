@@ -64,7 +64,8 @@ _ROOT = Path(__file__).resolve().parent
 #: the kernel modules (relative to ``planner/``) whose content keys the cache
 KERNEL_SOURCES = ("model/kernels.py", "horizon/kernels.py", "corridor/kernels.py", "constraints/kernels.py",
                   "constraints/dense_kernels.py", "constraints/stagewise_kernels.py",
-                  "constraints/dual_kernels.py", "constraints/step_kernels.py", "orchestrator/kernels.py")
+                  "constraints/dual_kernels.py", "constraints/step_kernels.py", "constraints/registry.py",
+                  "orchestrator/kernels.py")
 
 
 @lru_cache(maxsize=1)

@@ -1,6 +1,6 @@
 """The compiled assembly (``settings.backend = "compiled"``): each step in one compiled call
-(:func:`planner.constraints.step_kernels.constrained_step`: the rows by the kernels of
-:mod:`planner.constraints.kernels`, the QP solved by the stage-wise dual active-set method of
+(:func:`planner.constraints.step_kernels.constrained_step`: the rows by the registry's fused
+assembly of the kernels of :mod:`planner.constraints.kernels`, the QP solved by the stage-wise dual active-set method of
 :mod:`planner.constraints.stagewise`), and the same step on the Python path (the dense QP,
 every row given to DAQP: :mod:`planner.constraints.step`) where that call does not finish
 it. Same interface as :class:`~planner.constraints.reference.ReferenceAssembly`, the numpy
@@ -18,9 +18,9 @@ from ..model import RobotModel
 from ..schema import Settings
 from . import kernels as ck
 from .composed import Constraints
-from .corridor import ArrivalConstraint, CorridorConstraint, EndApproachConstraint
-from .drives import DriveForceRateConstraint, LegSpeedConstraint, LegStrokeConstraint
 from .qp import DenseQP, QPSolution
+from .registry import SECTIONS
+from .registry import assemble as fused_assemble
 from .rows import RELAX_M, ROW_UNIT_M, Rows
 from .stagewise import DEPENDENT_TOL, SOLVE_TOL, WARM_TOL
 from .step import FullQP, StepQP
@@ -31,14 +31,13 @@ __all__ = ["KERNEL_SECTIONS", "MAX_ITERATIONS", "RELAX_M", "AssemblyInputs", "Co
 #: most active-set changes of one stage-wise solve before the step goes to DAQP
 MAX_ITERATIONS = 400
 
-#: the row constraints :func:`kernels.assemble` fuses, in its (the row) order
-KERNEL_SECTIONS = (CorridorConstraint, EndApproachConstraint, ArrivalConstraint, LegSpeedConstraint,
-                   DriveForceRateConstraint, LegStrokeConstraint)
+#: the row constraints the fused ``registry.assemble`` takes, in its (the row) order: the registry's
+KERNEL_SECTIONS = tuple(s.row_class for s in SECTIONS)
 
 
 @dataclass(frozen=True, eq=False)
 class AssemblyInputs:
-    """What :func:`kernels.assemble` reads that does not change during a plan."""
+    """What the fused ``registry.assemble`` reads that does not change during a plan."""
 
     N: int  #: horizon [samples]
     K: int  #: samples of the range sequence
@@ -48,7 +47,9 @@ class AssemblyInputs:
     qb: np.ndarray  #: (K + N, 3) diagonals of ``Q_rb``
     r0: np.ndarray  #: (n_legs, 2) platform pivots relative to the tool point [m]
     base: np.ndarray  #: (n_legs, 2) base pivots [m]
-    constraint_args: tuple  #: the row constraints' kernel arguments, in row order
+    lmin: np.ndarray  #: (n_legs,) shortest leg lengths [m] (sample 0's stroke rows, ``kernels.first_legs``)
+    lmax: np.ndarray  #: (n_legs,) longest
+    sections: tuple  #: the row constraints' typed tuples (``kernel_args``), in row order
 
     @classmethod
     def of(cls, model: RobotModel, seq: RangeSequence, N: int, constraints: Constraints) -> AssemblyInputs:
@@ -57,26 +58,34 @@ class AssemblyInputs:
         if tuple(type(c) for c in constraints.rows) != KERNEL_SECTIONS:
             raise TypeError("the compiled assembly fuses the rows of "
                             f"{', '.join(c.__name__ for c in KERNEL_SECTIONS)}, in this order")
+        sections = tuple(c.kernel_args for c in constraints.rows)
+        for s, a in zip(SECTIONS, sections):
+            if type(a) is not s.args:
+                raise TypeError(f"{s.row_class.__name__}.kernel_args gives {type(a).__name__}, not {s.args.__name__}")
 
         def pad(a: np.ndarray) -> np.ndarray:
             return np.ascontiguousarray(np.concatenate((a, np.repeat(a[-1:], N, axis=0))), dtype=float)
 
-        args = tuple(a for c in constraints.rows for a in c.kernel_args)
         return cls(N, seq.K, pad(seq.lower), pad(seq.upper), pad(seq.qa), pad(seq.qb),
-                   np.ascontiguousarray(model.r0, dtype=float), np.ascontiguousarray(model.base, dtype=float), args)
+                   np.ascontiguousarray(model.r0, dtype=float), np.ascontiguousarray(model.base, dtype=float),
+                   constraints.stroke.lmin, constraints.stroke.lmax, sections)
 
     @property
     def kernel_inputs(self) -> tuple:
-        """The arguments of :func:`kernels.assemble` from ``K`` on."""
-        return (self.K, self.lower, self.upper, self.qa, self.qb, self.r0, self.base, *self.constraint_args)
+        """The constant inputs of the compiled step (``step_kernels.constrained_step``'s
+        ``inputs``): ``K``, the padded range sequence, the legs, their strokes and the
+        sections' typed tuples."""
+        return (self.K, self.lower, self.upper, self.qa, self.qb, self.r0, self.base, self.lmin, self.lmax,
+                self.sections)
 
     def assemble(self, k: int, x: np.ndarray, y_prev: np.ndarray,
                  u_prev: np.ndarray) -> tuple[np.ndarray, np.ndarray, Rows]:
         """The criterion's weights and targets (3N,) and the rows of step ``k`` at state ``x``,
         the legs linearised at ``y_prev`` (N, 3) (or at ``x``: ``y_prev`` empty), the forces
         applied over the previous sample ``u_prev`` [N]."""
-        W, tgt, col, val, lower, upper, kinds, n_hard, speed0, stroke0 = ck.assemble(
-            k, self.N, x, y_prev, u_prev, ROW_UNIT_M, *self.kernel_inputs)
+        W, tgt, col, val, lower, upper, kinds, n_hard, speed0, stroke0 = fused_assemble(
+            k, self.N, x, y_prev, u_prev, ROW_UNIT_M, self.K, self.lower, self.upper, self.qa, self.qb, self.r0,
+            self.base, self.sections)
         return W, tgt, Rows(col, val, lower, upper, kinds, int(n_hard), int(speed0), int(stroke0))
 
 
@@ -109,7 +118,7 @@ class CompiledAssembly:
         self.du = np.ascontiguousarray((np.asarray(seq.qu, float) * self.umax) ** 2)
         self.du_moves = np.tile(self.du, self.N)
         self.inputs = AssemblyInputs.of(model, seq, self.N, constraints)
-        self._legs = (self.inputs.r0, self.inputs.base, constraints.stroke.lmin, constraints.stroke.lmax)
+        self._legs = (self.inputs.r0, self.inputs.base, self.inputs.lmin, self.inputs.lmax)
         self._no_poses = np.zeros((0, 3))
         self._no_warm = np.zeros(0)
         self._kernel_inputs = self.inputs.kernel_inputs

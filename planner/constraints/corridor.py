@@ -60,7 +60,9 @@ import numpy as np
 
 from ..corridor import RangeSequence
 from ..corridor.geometry import approach_direction, clip_halfplanes, halfplanes
-from ..schema import Segment
+from ..model import RobotModel
+from ..schema import Segment, Settings
+from . import kernels as ck
 from .rows import RowBlock, RowConstraint, RowKind, StepContext
 
 __all__ = ["ARRIVAL_RATE_RAD_S", "ARRIVAL_SPEED_M_S", "END_TOL_M", "END_TOL_RAD", "MARGIN_M", "MARGIN_RAD",
@@ -117,6 +119,11 @@ class CorridorConstraint(RowConstraint):
     lowered by :data:`RECOURSE_M` for the later samples)."""
 
     kind = RowKind.CORRIDOR
+
+    @classmethod
+    def of(cls, model: RobotModel, seq: RangeSequence, segments: Sequence[Segment] | None,
+           st: Settings) -> CorridorConstraint:
+        return cls(seq, segments)
 
     def __init__(self, seq: RangeSequence, segments: Sequence[Segment] | None):
         K = seq.K
@@ -249,8 +256,9 @@ class CorridorConstraint(RowConstraint):
         return hp
 
     @property
-    def kernel_args(self) -> tuple:
-        return self.lo, self.hi, self.lo_deep, self.hi_deep, self.has_hp, self.hp_ptr, self.hp_A, self.hp_b, RECOURSE_M
+    def kernel_args(self) -> ck.CorridorArgs:
+        return ck.CorridorArgs(self.lo, self.hi, self.lo_deep, self.hi_deep, self.has_hp, self.hp_ptr, self.hp_A,
+                               self.hp_b, float(RECOURSE_M))
 
 
 def _stop_in_cell(cell: Segment, p: np.ndarray, blo: np.ndarray, bhi: np.ndarray,
@@ -315,6 +323,11 @@ class EndApproachConstraint(RowConstraint):
 
     kind = RowKind.CORRIDOR
 
+    @classmethod
+    def of(cls, model: RobotModel, seq: RangeSequence, segments: Sequence[Segment] | None,
+           st: Settings) -> EndApproachConstraint:
+        return cls(seq, segments)
+
     def __init__(self, seq: RangeSequence, segments: Sequence[Segment] | None):
         #: approach direction (2,) and bound [m], or None (no rows)
         self.half_plane: tuple[np.ndarray, float] | None = None
@@ -338,9 +351,10 @@ class EndApproachConstraint(RowConstraint):
         return self.half_plane if self.half_plane is not None else (np.zeros(2), 0.0)
 
     @property
-    def kernel_args(self) -> tuple:
+    def kernel_args(self) -> ck.ApproachArgs:
         d, b = self._half_plane()
-        return self.half_plane is not None, np.asarray(d, dtype=float), float(b), int(self.start_index)
+        return ck.ApproachArgs(self.half_plane is not None, np.ascontiguousarray(d, dtype=float), float(b),
+                               int(self.start_index), float(RECOURSE_M))
 
 
 class ArrivalConstraint(RowConstraint):
@@ -351,6 +365,11 @@ class ArrivalConstraint(RowConstraint):
     of the taper). Only for corridors that end in a point. Compiled twin: ``kernels.arrival_fill``."""
 
     kind = RowKind.SPEED
+
+    @classmethod
+    def of(cls, model: RobotModel, seq: RangeSequence, segments: Sequence[Segment] | None,
+           st: Settings) -> ArrivalConstraint:
+        return cls(seq, segments)
 
     def __init__(self, seq: RangeSequence, segments: Sequence[Segment] | None):
         #: first sequence index with the rows (``K``: none)
@@ -374,5 +393,5 @@ class ArrivalConstraint(RowConstraint):
         return RowBlock(cols, np.ones((cols.shape[0], 1)), -lim, lim, self.kind)
 
     @property
-    def kernel_args(self) -> tuple:
-        return int(self.start_index), self.limit
+    def kernel_args(self) -> ck.ArrivalArgs:
+        return ck.ArrivalArgs(int(self.start_index), self.limit)

@@ -27,11 +27,16 @@ from __future__ import annotations
 
 import numpy as np
 
+from collections.abc import Sequence
+
+from ..corridor import RangeSequence
 from ..model import RobotModel
+from ..schema import DEFAULT_FORCE_RISE_S, Segment, Settings
+from . import kernels as ck
 from .rows import ROW_UNIT_M, RowBlock, RowConstraint, RowKind, Rows, StepContext
 
 __all__ = ["FORCE_RECOURSE", "RATE_RECOURSE", "SPEED_MARGIN", "DriveForceConstraint", "DriveForceRateConstraint",
-           "LegSpeedConstraint", "LegStrokeConstraint"]
+           "LegSpeedConstraint", "LegStrokeConstraint", "force_rate"]
 
 #: relative margin on the leg speed limit [-]
 SPEED_MARGIN = 1e-5
@@ -78,6 +83,11 @@ class DriveForceRateConstraint(RowConstraint):
 
     kind = RowKind.RATE
 
+    @classmethod
+    def of(cls, model: RobotModel, seq: RangeSequence, segments: Sequence[Segment] | None,
+           st: Settings) -> DriveForceRateConstraint:
+        return cls(model, force_rate(model, st), st.Ts)
+
     def __init__(self, model: RobotModel, rate: np.ndarray | None, Ts: float):
         self.umax = np.ascontiguousarray(model.force_max, dtype=float)
         #: largest change of each drive force over one sample [N], or None
@@ -97,9 +107,9 @@ class DriveForceRateConstraint(RowConstraint):
         return RowBlock(col, val, first - lim, first + lim, self.kind, unit=1.0)
 
     @property
-    def kernel_args(self) -> tuple:
+    def kernel_args(self) -> ck.RateArgs:
         step = self.step if self.step is not None else np.zeros_like(self.umax)
-        return self.step is not None, self.umax, step, RATE_RECOURSE
+        return ck.RateArgs(self.step is not None, self.umax, step, float(RATE_RECOURSE))
 
 
 class LegSpeedConstraint(RowConstraint):
@@ -107,6 +117,11 @@ class LegSpeedConstraint(RowConstraint):
     SPEED_MARGIN)`` [m/s]. Compiled twin: ``kernels.speed_fill``."""
 
     kind = RowKind.SPEED
+
+    @classmethod
+    def of(cls, model: RobotModel, seq: RangeSequence, segments: Sequence[Segment] | None,
+           st: Settings) -> LegSpeedConstraint:
+        return cls(model)
 
     def __init__(self, model: RobotModel):
         self.vmax = np.ascontiguousarray(model.speed_max * (1.0 - SPEED_MARGIN), dtype=float)
@@ -123,8 +138,8 @@ class LegSpeedConstraint(RowConstraint):
         rows.val[rows.speed0:rows.speed0 + len(J0)] = J0 / ROW_UNIT_M
 
     @property
-    def kernel_args(self) -> tuple:
-        return (self.vmax,)
+    def kernel_args(self) -> ck.LegSpeedArgs:
+        return ck.LegSpeedArgs(self.vmax)
 
 
 class LegStrokeConstraint(RowConstraint):
@@ -134,6 +149,11 @@ class LegStrokeConstraint(RowConstraint):
 
     kind = RowKind.STROKE
     hard = False
+
+    @classmethod
+    def of(cls, model: RobotModel, seq: RangeSequence, segments: Sequence[Segment] | None,
+           st: Settings) -> LegStrokeConstraint:
+        return cls(model)
 
     def __init__(self, model: RobotModel):
         self.lmin = np.ascontiguousarray(model.length_min, dtype=float)
@@ -156,5 +176,16 @@ class LegStrokeConstraint(RowConstraint):
         rows.upper[s] = self.lmax / ROW_UNIT_M - off
 
     @property
-    def kernel_args(self) -> tuple:
-        return self.lmin, self.lmax
+    def kernel_args(self) -> ck.StrokeArgs:
+        return ck.StrokeArgs(self.lmin, self.lmax)
+
+
+def force_rate(model: RobotModel, st: Settings) -> np.ndarray | None:
+    """The drive-force rate limit [N/s] per drive of ``settings.force_rate_n_s`` (None: no limit):
+    by default each drive's ``force_max`` per :data:`~planner.schema.limits.DEFAULT_FORCE_RISE_S`."""
+    rate = st.force_rate_n_s
+    if isinstance(rate, str):  # "off"
+        return None
+    if rate is None:
+        return np.asarray(model.force_max, float) / DEFAULT_FORCE_RISE_S
+    return np.broadcast_to(np.asarray(rate, float), (model.n_legs,)).copy()

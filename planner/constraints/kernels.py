@@ -12,8 +12,10 @@ half-plane normal, a leg Jacobian row, a move and its predecessor).
 ``tests/test_constraints_kernels.py`` checks that both assemblies give the same rows and QP.
 
 The kernels are positional and internal: they are called only from methods of the typed
-step data (:mod:`~planner.constraints.rows`, :mod:`~planner.constraints.step`) and of the
-compiled assembly (:mod:`~planner.constraints.compiled`), which name what they pass.
+step data (:mod:`~planner.constraints.rows`, :mod:`~planner.constraints.step`), of the
+compiled assembly (:mod:`~planner.constraints.compiled`), which name what they pass, and from
+the fused ``assemble`` of :mod:`planner.constraints.registry`, which calls each row
+constraint's count and fill in row order.
 
 Layout: states are stacked per sample, ``X[6 i + a]`` (``a`` = x, y, psi, x_dot, y_dot,
 psi_dot of sample ``i + 1``); the scaled moves ``z = u / force_max`` per sample,
@@ -25,15 +27,18 @@ of ``Y``: row ``r`` is ``sum_k val[r, k] Y[col[r, k]]`` (``col`` -1: unused) wit
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from .._jit import njit
 from ..model.kernels import leg_jacobians, rk4, state_derivative
 
-__all__ = ["KIND_CORRIDOR", "KIND_RATE", "KIND_SPEED", "KIND_STROKE", "approach_count", "approach_fill",
-           "arrival_count", "arrival_fill", "assemble", "corridor_count", "corridor_fill", "finish", "first_legs",
-           "offset", "one_step_error", "plant_step", "rate_fill", "speed_fill", "stroke_fill"]
+__all__ = ["KIND_CORRIDOR", "KIND_RATE", "KIND_SPEED", "KIND_STROKE", "ApproachArgs", "ArrivalArgs", "CorridorArgs",
+           "LegSpeedArgs", "RateArgs", "RowStep", "StrokeArgs", "ToolSpeedArgs", "approach_count", "approach_fill",
+           "arrival_count", "arrival_fill", "corridor_count", "corridor_fill", "criterion", "finish", "first_legs",
+           "legs_count", "offset", "one_step_error", "plant_step", "rate_count", "rate_fill", "speed_fill",
+           "step_context", "stroke_fill", "tool_speed_count", "tool_speed_fill"]
 
 #: kinds of rows (the slack variable that softens each in the slack problem; rate rows are
 #: never softened); the values of :class:`planner.constraints.rows.RowKind`
@@ -41,120 +46,215 @@ KIND_CORRIDOR, KIND_STROKE, KIND_SPEED, KIND_RATE = 0, 1, 2, 3
 
 
 # ---- the rows of each constraint (compiled twins of the constraint objects' ``rows``) -------
-# Each constraint has a count and a fill: ``*_count`` gives its number of rows for the
-# samples' sequence indices ``idx`` (N,), ``*_fill`` writes them from row ``r`` on and returns
-# the next free row. :func:`assemble` calls them in row order.
+# Each row constraint has a typed tuple of its arrays (``*Args``, what its
+# ``RowConstraint.kernel_args`` gives), a count and a fill, all with the same signature:
+# ``*_count(step, a)`` its number of rows in the step :class:`RowStep`, ``*_fill(step, a, col,
+# val, b0l, b0u, kinds, r)`` writes them from row ``r`` on and returns the next free row. The
+# registry (:mod:`planner.constraints.registry`) lists them in row order and its fused
+# ``assemble`` calls them.
+
+
+class RowStep(NamedTuple):
+    """What every constraint's rows of one step read (``N`` samples, ``m`` legs)."""
+
+    idx: np.ndarray  #: (N,) int64 sequence index of each sample (``min(k + j, K - 1)``)
+    unit: float  #: the row unit (:data:`~planner.constraints.rows.ROW_UNIT_M`)
+    u_prev: np.ndarray  #: (m,) the drive forces applied over the previous sample [N]
+    J: np.ndarray  #: (N, m, 3) leg Jacobians at the nominal poses
+    L: np.ndarray  #: (N, m) leg lengths there [m]
+    y_nom: np.ndarray  #: (N, 3) the nominal poses [m, m, rad]
+
+
+class CorridorArgs(NamedTuple):
+    """:class:`~planner.constraints.corridor.CorridorConstraint`'s arrays."""
+
+    lo: np.ndarray  #: (K, 3) the shrunk box of the horizon's first sample
+    hi: np.ndarray
+    lo_deep: np.ndarray  #: (K, 3) the box of the later samples
+    hi_deep: np.ndarray
+    has_hp: np.ndarray  #: (K,) bool: half-planes replace the x/y box rows
+    hp_ptr: np.ndarray  #: (K + 1,) int64: those of sequence index s are hp_A[hp_ptr[s]:hp_ptr[s + 1]]
+    hp_A: np.ndarray  #: (h, 2)
+    hp_b: np.ndarray  #: (h,)
+    recourse: float  #: the later samples' half-planes are this much tighter [m]
+
 
 @njit(cache=True)
-def corridor_count(idx, has_hp, hp_ptr):
+def corridor_count(step, a):
     """Rows of :class:`~planner.constraints.corridor.CorridorConstraint`: one per sample and
     box axis (x and y only where the sample has no half-planes), and its half-planes."""
+    idx = step.idx
     N = idx.shape[0]
     n = 0
     for ax in range(3):
         for j in range(N):
-            if ax == 2 or not has_hp[idx[j]]:
+            if ax == 2 or not a.has_hp[idx[j]]:
                 n += 1
     for j in range(N):
         s = idx[j]
-        if has_hp[s]:
-            n += hp_ptr[s + 1] - hp_ptr[s]
+        if a.has_hp[s]:
+            n += a.hp_ptr[s + 1] - a.hp_ptr[s]
     return n
 
 
 @njit(cache=True)
-def corridor_fill(idx, unit, lo, hi, lo_deep, hi_deep, has_hp, hp_ptr, hp_A, hp_b, recourse, col, val, b0l, b0u, kinds,
-                  r):
+def corridor_fill(step, a, col, val, b0l, b0u, kinds, r):
     """The corridor rows: ``lo <= pose_j <= hi`` per axis (sorted by axis, then sample; the
     horizon's first sample with ``lo, hi``, the later with ``lo_deep, hi_deep``), then the
     half-planes ``A (x, y)_j <= b`` (``b - recourse`` after the first sample) of the samples
-    that have them (the pose sets per sequence index; half-planes of sequence index ``s`` are
-    ``hp_A[hp_ptr[s]:hp_ptr[s+1]]``)."""
+    that have them."""
+    idx, unit = step.idx, step.unit
     N = idx.shape[0]
     for ax in range(3):
         for j in range(N):
             s = idx[j]
-            if ax == 2 or not has_hp[s]:
+            if ax == 2 or not a.has_hp[s]:
                 col[r, 0] = 6 * j + ax
                 val[r, 0] = 1.0 / unit
-                b0l[r] = (lo[s, ax] if j == 0 else lo_deep[s, ax]) / unit
-                b0u[r] = (hi[s, ax] if j == 0 else hi_deep[s, ax]) / unit
+                b0l[r] = (a.lo[s, ax] if j == 0 else a.lo_deep[s, ax]) / unit
+                b0u[r] = (a.hi[s, ax] if j == 0 else a.hi_deep[s, ax]) / unit
                 kinds[r] = KIND_CORRIDOR
                 r += 1
     for j in range(N):
         s = idx[j]
-        if has_hp[s]:
-            for h in range(hp_ptr[s], hp_ptr[s + 1]):
+        if a.has_hp[s]:
+            for h in range(a.hp_ptr[s], a.hp_ptr[s + 1]):
                 col[r, 0], col[r, 1] = 6 * j, 6 * j + 1
-                val[r, 0], val[r, 1] = hp_A[h, 0] / unit, hp_A[h, 1] / unit
+                val[r, 0], val[r, 1] = a.hp_A[h, 0] / unit, a.hp_A[h, 1] / unit
                 b0l[r] = -np.inf
-                b0u[r] = (hp_b[h] - (recourse if j > 0 else 0.0)) / unit
+                b0u[r] = (a.hp_b[h] - (a.recourse if j > 0 else 0.0)) / unit
                 kinds[r] = KIND_CORRIDOR
                 r += 1
     return r
 
 
+class ApproachArgs(NamedTuple):
+    """:class:`~planner.constraints.corridor.EndApproachConstraint`'s arrays."""
+
+    on: bool  #: the corridor has the half-plane
+    d: np.ndarray  #: (2,) the approach direction
+    b: float  #: the bound ``d . end`` [m]
+    start: int  #: first sequence index with the row
+    recourse: float  #: the later samples' rows are this much tighter [m]
+
+
 @njit(cache=True)
-def approach_count(idx, app_on, app_from):
+def approach_count(step, a):
     """Rows of :class:`~planner.constraints.corridor.EndApproachConstraint`: one per sample
-    from sequence index ``app_from`` on."""
+    from sequence index ``a.start`` on."""
     n = 0
-    if app_on:
-        for j in range(idx.shape[0]):
-            if idx[j] >= app_from:
+    if a.on:
+        for j in range(step.idx.shape[0]):
+            if step.idx[j] >= a.start:
                 n += 1
     return n
 
 
 @njit(cache=True)
-def approach_fill(idx, unit, app_on, app_d, app_b, app_from, recourse, col, val, b0l, b0u, kinds, r):
+def approach_fill(step, a, col, val, b0l, b0u, kinds, r):
     """The no-overshoot rows ``d . (x, y)_j <= b`` (``b - recourse`` after the first sample)."""
-    if app_on:
-        for j in range(idx.shape[0]):
-            if idx[j] >= app_from:
+    unit = step.unit
+    if a.on:
+        for j in range(step.idx.shape[0]):
+            if step.idx[j] >= a.start:
                 col[r, 0], col[r, 1] = 6 * j, 6 * j + 1
-                val[r, 0], val[r, 1] = app_d[0] / unit, app_d[1] / unit
+                val[r, 0], val[r, 1] = a.d[0] / unit, a.d[1] / unit
                 b0l[r] = -np.inf
-                b0u[r] = (app_b - (recourse if j > 0 else 0.0)) / unit
+                b0u[r] = (a.b - (a.recourse if j > 0 else 0.0)) / unit
                 kinds[r] = KIND_CORRIDOR
                 r += 1
     return r
 
 
+class ArrivalArgs(NamedTuple):
+    """:class:`~planner.constraints.corridor.ArrivalConstraint`'s arrays."""
+
+    start: int  #: first sequence index with the rows
+    limit: np.ndarray  #: (3,) [m/s, m/s, rad/s]
+
+
 @njit(cache=True)
-def arrival_count(idx, arr_from):
+def arrival_count(step, a):
     """Rows of :class:`~planner.constraints.corridor.ArrivalConstraint`: three per sample from
-    sequence index ``arr_from`` on."""
+    sequence index ``a.start`` on."""
     n = 0
-    for j in range(idx.shape[0]):
-        if idx[j] >= arr_from:
+    for j in range(step.idx.shape[0]):
+        if step.idx[j] >= a.start:
             n += 3
     return n
 
 
 @njit(cache=True)
-def arrival_fill(idx, unit, arr_from, arr_lim, col, val, b0l, b0u, kinds, r):
-    """The arrival rows ``|velocity_j| <= arr_lim`` (x, y, psi rates)."""
-    for j in range(idx.shape[0]):
-        if idx[j] >= arr_from:
-            for a in range(3):
-                col[r, 0] = 6 * j + 3 + a
+def arrival_fill(step, a, col, val, b0l, b0u, kinds, r):
+    """The arrival rows ``|velocity_j| <= limit`` (x, y, psi rates)."""
+    unit = step.unit
+    for j in range(step.idx.shape[0]):
+        if step.idx[j] >= a.start:
+            for ax in range(3):
+                col[r, 0] = 6 * j + 3 + ax
                 val[r, 0] = 1.0 / unit
-                b0l[r] = -arr_lim[a] / unit
-                b0u[r] = arr_lim[a] / unit
+                b0l[r] = -a.limit[ax] / unit
+                b0u[r] = a.limit[ax] / unit
                 kinds[r] = KIND_SPEED
                 r += 1
     return r
 
 
+class LegSpeedArgs(NamedTuple):
+    """:class:`~planner.constraints.drives.LegSpeedConstraint`'s arrays."""
+
+    vmax: np.ndarray  #: (m,) [m/s]
+
+
 @njit(cache=True)
-def rate_fill(N, u_prev, unit, rate_on, umax, rate_step, recourse, col, val, b0l, b0u, kinds, r):
+def legs_count(step, a):
+    """Rows of the leg constraints (speed, stroke): one per sample and leg."""
+    return step.J.shape[0] * step.J.shape[1]
+
+
+@njit(cache=True)
+def speed_fill(step, a, col, val, b0l, b0u, kinds, r):
+    """:class:`~planner.constraints.drives.LegSpeedConstraint`: ``|J_l(y0_j) y_dot_j| <= vmax``
+    per sample and leg (``J`` (N, m, 3) at the nominal poses)."""
+    J, unit = step.J, step.unit
+    for j in range(J.shape[0]):
+        for i in range(J.shape[1]):
+            for ax in range(3):
+                col[r, ax] = 6 * j + 3 + ax
+                val[r, ax] = J[j, i, ax] / unit
+            b0l[r] = -a.vmax[i] / unit
+            b0u[r] = a.vmax[i] / unit
+            kinds[r] = KIND_SPEED
+            r += 1
+    return r
+
+
+class RateArgs(NamedTuple):
+    """:class:`~planner.constraints.drives.DriveForceRateConstraint`'s arrays."""
+
+    on: bool  #: a force-rate limit is set
+    umax: np.ndarray  #: (m,) force_max [N]
+    step: np.ndarray  #: (m,) largest force change over one sample [N]
+    recourse: float  #: the moves after the first: this fraction less
+
+
+@njit(cache=True)
+def rate_count(step, a):
+    """Rows of :class:`~planner.constraints.drives.DriveForceRateConstraint`: one per move
+    and drive (none without a limit)."""
+    return step.idx.shape[0] * a.umax.shape[0] if a.on else 0
+
+
+@njit(cache=True)
+def rate_fill(step, a, col, val, b0l, b0u, kinds, r):
     """:class:`~planner.constraints.drives.DriveForceRateConstraint`: ``|u(j) - u(j-1)| <=
-    rate_step`` (``(1 - recourse) rate_step`` for ``j >= 1``) per move and drive, on the
-    moves (``Y[6N + m j + i]``; ``u(-1) = u_prev``), in the scaled moves' unit (divided by
-    ``umax``; ``unit`` is not used)."""
-    if not rate_on:
+    step`` (``(1 - recourse) step`` for ``j >= 1``) per move and drive, on the moves
+    (``Y[6N + m j + i]``; ``u(-1) = u_prev``), in the scaled moves' unit (divided by
+    ``umax``; the row unit is not used)."""
+    if not a.on:
         return r
+    N = step.idx.shape[0]
+    umax, rs = a.umax, a.step
     m = umax.shape[0]
     for j in range(N):
         for i in range(m):
@@ -163,77 +263,79 @@ def rate_fill(N, u_prev, unit, rate_on, umax, rate_step, recourse, col, val, b0l
             if j > 0:
                 col[r, 1] = 6 * N + m * (j - 1) + i
                 val[r, 1] = -1.0
-                b0l[r] = -(1.0 - recourse) * rate_step[i] / umax[i]
-                b0u[r] = (1.0 - recourse) * rate_step[i] / umax[i]
+                b0l[r] = -(1.0 - a.recourse) * rs[i] / umax[i]
+                b0u[r] = (1.0 - a.recourse) * rs[i] / umax[i]
             else:
-                b0l[r] = (u_prev[i] - rate_step[i]) / umax[i]
-                b0u[r] = (u_prev[i] + rate_step[i]) / umax[i]
+                b0l[r] = (step.u_prev[i] - rs[i]) / umax[i]
+                b0u[r] = (step.u_prev[i] + rs[i]) / umax[i]
             kinds[r] = KIND_RATE
             r += 1
     return r
 
 
+class ToolSpeedArgs(NamedTuple):
+    """:class:`~planner.constraints.motion.ToolSpeedConstraint`'s arrays."""
+
+    on: bool  #: a tool-speed limit is set
+    normals: np.ndarray  #: (n, 2) unit directions of the polygon's sides (half of them: rows are two-sided)
+    limit: float  #: ``|normal . (x_dot, y_dot)| <=`` this [m/s]
+
+
 @njit(cache=True)
-def speed_fill(J, unit, vmax, col, val, b0l, b0u, kinds, r):
-    """:class:`~planner.constraints.drives.LegSpeedConstraint`: ``|J_l(y0_j) y_dot_j| <= vmax``
-    per sample and leg (``J`` (N, n, 3) at the nominal poses)."""
-    for j in range(J.shape[0]):
-        for i in range(J.shape[1]):
-            for a in range(3):
-                col[r, a] = 6 * j + 3 + a
-                val[r, a] = J[j, i, a] / unit
-            b0l[r] = -vmax[i] / unit
-            b0u[r] = vmax[i] / unit
+def tool_speed_count(step, a):
+    """Rows of :class:`~planner.constraints.motion.ToolSpeedConstraint`: one per sample and
+    direction (none without a limit)."""
+    return step.idx.shape[0] * a.normals.shape[0] if a.on else 0
+
+
+@njit(cache=True)
+def tool_speed_fill(step, a, col, val, b0l, b0u, kinds, r):
+    """:class:`~planner.constraints.motion.ToolSpeedConstraint`: ``|n_h . (x_dot, y_dot)_j| <=
+    limit`` per sample ``j`` and direction ``h`` (sample by sample)."""
+    if not a.on:
+        return r
+    unit = step.unit
+    for j in range(step.idx.shape[0]):
+        for h in range(a.normals.shape[0]):
+            col[r, 0], col[r, 1] = 6 * j + 3, 6 * j + 4
+            val[r, 0], val[r, 1] = a.normals[h, 0] / unit, a.normals[h, 1] / unit
+            b0l[r] = -a.limit / unit
+            b0u[r] = a.limit / unit
             kinds[r] = KIND_SPEED
             r += 1
     return r
 
 
+class StrokeArgs(NamedTuple):
+    """:class:`~planner.constraints.drives.LegStrokeConstraint`'s arrays."""
+
+    lmin: np.ndarray  #: (m,) [m]
+    lmax: np.ndarray  #: (m,) [m]
+
+
 @njit(cache=True)
-def stroke_fill(J, L, y_nom, unit, lmin, lmax, col, val, b0l, b0u, kinds, r):
+def stroke_fill(step, a, col, val, b0l, b0u, kinds, r):
     """:class:`~planner.constraints.drives.LegStrokeConstraint`: ``lmin <= l(y0_j) + J_l(y0_j)
-    (y_j - y0_j) <= lmax`` per sample and leg (``L`` (N, n) leg lengths at ``y_nom``)."""
+    (y_j - y0_j) <= lmax`` per sample and leg (``L`` (N, m) leg lengths at ``y_nom``)."""
+    J, L, y_nom, unit = step.J, step.L, step.y_nom, step.unit
     for j in range(J.shape[0]):
         for i in range(J.shape[1]):
             off = L[j, i] - (J[j, i, 0] * y_nom[j, 0] + J[j, i, 1] * y_nom[j, 1] + J[j, i, 2] * y_nom[j, 2])
-            for a in range(3):
-                col[r, a] = 6 * j + a
-                val[r, a] = J[j, i, a] / unit
-            b0l[r] = (lmin[i] - off) / unit
-            b0u[r] = (lmax[i] - off) / unit
+            for ax in range(3):
+                col[r, ax] = 6 * j + ax
+                val[r, ax] = J[j, i, ax] / unit
+            b0l[r] = (a.lmin[i] - off) / unit
+            b0u[r] = (a.lmax[i] - off) / unit
             kinds[r] = KIND_STROKE
             r += 1
     return r
 
 
 @njit(cache=True)
-def assemble(k, N, x, y_prev, u_prev, unit, K, lower, upper, qa, qb, r0, base,
-             lo, hi, lo_deep, hi_deep, has_hp, hp_ptr, hp_A, hp_b, recourse, app_on, app_d, app_b, app_from, arr_from,
-             arr_lim, vmax,
-             rate_on, umax, rate_step, rate_recourse, lmin, lmax):
-    """The rows and criterion of step ``k`` in one call (few calls per step: numpy's per-call
-    cost dominated these sizes). Inputs: the step (``k``, horizon ``N``, state ``x``, the
-    previous step's predicted poses shifted ``y_prev`` (N, 3), empty at the first step: then
-    the legs are linearised at ``x``; the forces applied over the previous sample ``u_prev``),
-    the row unit, the range sequence padded with ``N`` copies of its last sample (``K``
-    samples; ``lower, upper, qa, qb`` as ``RangeSequence.window``), the legs (``r0``,
-    ``base``), then each constraint's arrays in row order: corridor (``lo .. recourse``), end
-    approach (``app_*``), arrival (``arr_*``), leg speed (``vmax``), force rate (``rate_on``,
-    ``umax``, ``rate_step``, ``rate_recourse``), stroke (``lmin``, ``lmax``).
-
-    Returns ``(W, tgt, col, val, b0l, b0u, kinds, n_hard, speed0, stroke0)``: the criterion's
-    weights ``W = qa^2 + qb^2`` and targets ``tgt = qa^2 r_a + qb^2 r_b`` of samples
-    ``k+1..k+N`` (3N,), the rows, the number of hard rows (the stroke rows after them enter
-    only the slack problem) and the first leg-speed and stroke rows (those of sample 0)."""
+def step_context(k, N, x, y_prev, u_prev, unit, K, r0, base):
+    """The :class:`RowStep` of step ``k``: the samples' sequence indices, the legs linearised
+    at ``y_prev`` (N, 3), or at ``x`` where ``y_prev`` is empty."""
     m = r0.shape[0]
-    kw = min(k, K)
-    W = np.empty(3 * N)
-    tgt = np.empty(3 * N)
-    for i in range(N):
-        for a in range(3):
-            ca, cb = qa[kw + i, a] * qa[kw + i, a], qb[kw + i, a] * qb[kw + i, a]
-            W[3 * i + a] = ca + cb
-            tgt[3 * i + a] = ca * lower[kw + i, a] + cb * upper[kw + i, a]
     idx = np.empty(N, np.int64)
     for j in range(N):
         idx[j] = min(k + j, K - 1)
@@ -244,23 +346,23 @@ def assemble(k, N, x, y_prev, u_prev, unit, K, lower, upper, qa, qb, r0, base,
     J = np.empty((N, m, 3))
     L = np.empty((N, m))
     leg_jacobians(r0, base, y_nom, J, L)
-    nrow = (corridor_count(idx, has_hp, hp_ptr) + approach_count(idx, app_on, app_from) + arrival_count(idx, arr_from)
-            + (3 if rate_on else 2) * N * m)
-    col = np.full((nrow, 3), -1, np.int64)
-    val = np.zeros((nrow, 3))
-    b0l = np.empty(nrow)
-    b0u = np.empty(nrow)
-    kinds = np.zeros(nrow, np.int64)
-    r = corridor_fill(idx, unit, lo, hi, lo_deep, hi_deep, has_hp, hp_ptr, hp_A, hp_b, recourse, col, val, b0l, b0u,
-                      kinds, 0)
-    r = approach_fill(idx, unit, app_on, app_d, app_b, app_from, recourse, col, val, b0l, b0u, kinds, r)
-    r = arrival_fill(idx, unit, arr_from, arr_lim, col, val, b0l, b0u, kinds, r)
-    speed0 = r
-    r = speed_fill(J, unit, vmax, col, val, b0l, b0u, kinds, r)
-    r = rate_fill(N, u_prev, unit, rate_on, umax, rate_step, rate_recourse, col, val, b0l, b0u, kinds, r)
-    n_hard = r
-    stroke_fill(J, L, y_nom, unit, lmin, lmax, col, val, b0l, b0u, kinds, r)
-    return W, tgt, col, val, b0l, b0u, kinds, n_hard, speed0, n_hard
+    return RowStep(idx, unit, u_prev, J, L, y_nom)
+
+
+@njit(cache=True)
+def criterion(k, N, K, lower, upper, qa, qb):
+    """The criterion's weights ``W = qa^2 + qb^2`` and targets ``tgt = qa^2 r_a + qb^2 r_b``
+    of samples ``k+1..k+N`` (3N,) (the range sequence padded with ``N`` copies of its last
+    sample: ``K + N`` rows)."""
+    kw = min(k, K)
+    W = np.empty(3 * N)
+    tgt = np.empty(3 * N)
+    for i in range(N):
+        for a in range(3):
+            ca, cb = qa[kw + i, a] * qa[kw + i, a], qb[kw + i, a] * qb[kw + i, a]
+            W[3 * i + a] = ca + cb
+            tgt[3 * i + a] = ca * lower[kw + i, a] + cb * upper[kw + i, a]
+    return W, tgt
 
 
 @njit(cache=True)

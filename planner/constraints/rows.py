@@ -15,10 +15,12 @@ meaningful in every kind; the force-rate rows are in the scaled moves' unit (``f
 like the force bounds, so that their coefficients are 1 (in newtons they were 1e4 times the
 other rows' and the slack problem's DAQP solve failed on it).
 
-A constraint object (:class:`RowConstraint`) gives its :class:`RowBlock` for a step from a
-:class:`StepContext` (its numpy reference), and the arrays its compiled twin in
-:mod:`planner.constraints.kernels` reads (:attr:`RowConstraint.kernel_args`). The rows of a
-step (:class:`Rows`) are the blocks of all constraints in the order they are composed.
+A constraint object (:class:`RowConstraint`) is made for a plan (:meth:`RowConstraint.of`),
+gives its :class:`RowBlock` for a step from a :class:`StepContext` (its numpy reference), and
+the typed tuple of arrays its compiled twin in :mod:`planner.constraints.kernels` reads
+(:attr:`RowConstraint.kernel_args`). The row constraints of the constrained mode, in row
+order, are the one list of :mod:`planner.constraints.registry`; the rows of a step
+(:class:`Rows`) are the blocks of all of them in that order.
 """
 
 from __future__ import annotations
@@ -27,9 +29,13 @@ from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import NamedTuple
 
 import numpy as np
 
+from ..corridor import RangeSequence
+from ..model import RobotModel
+from ..schema import Segment, Settings
 from . import kernels as ck
 
 __all__ = ["RELAX_M", "ROW_UNIT_M", "RowBlock", "RowConstraint", "RowKind", "Rows", "StepContext"]
@@ -156,12 +162,19 @@ class RowConstraint(ABC):
     #: hard (the hard QP) or only in the slack problem
     hard: bool = True
 
+    @classmethod
+    @abstractmethod
+    def of(cls, model: RobotModel, seq: RangeSequence, segments: Sequence[Segment] | None,
+           st: Settings) -> RowConstraint:
+        """The constraint of a plan (the robot, its range sequence, its segments if known and
+        its settings); one with no rows where the plan does not ask for it."""
+
     @abstractmethod
     def rows(self, step: StepContext) -> RowBlock:
         """Its rows of one step, numpy (the reference of its compiled twin)."""
 
     @property
     @abstractmethod
-    def kernel_args(self) -> tuple:
-        """The arrays its section of :func:`planner.constraints.kernels.assemble` reads, in
-        that kernel's order."""
+    def kernel_args(self) -> NamedTuple:
+        """The typed tuple its count and fill kernels read (its section of the fused
+        ``assemble``, :mod:`planner.constraints.registry`)."""

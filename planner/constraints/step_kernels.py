@@ -18,7 +18,8 @@ import numpy as np
 
 from .._jit import njit
 from .dual_kernels import SOLVED, dual_solve
-from .kernels import KIND_RATE, assemble, finish, first_legs, offset, plant_step
+from .kernels import KIND_RATE, finish, first_legs, offset, plant_step
+from .registry import assemble
 from .stagewise_kernels import stage_setup
 
 __all__ = ["ACCEPT_TOL", "INACCURATE", "NOT_ELIMINATED", "constrained_step", "prediction_violation"]
@@ -42,7 +43,8 @@ ACCEPT_TOL = 1e-6
 def constrained_step(k, x, Ad, Bd, y_prev, u_prev, u0, warm, packed, Ts, substeps, umax, zmax, du, unit, N,
                      refine_tol_m, refine_tol_rad, refine_max, tol, dep_tol, warm_tol, relax, max_iter, V, Lm, inputs):
     """Step ``k`` at state ``x`` with the model ``Ad, Bd`` (eq. 9): the rows and criterion
-    (``kernels.assemble`` with ``inputs`` = its arguments from ``K`` on), the legs linearised at
+    (``registry.assemble``; ``inputs``: ``K``, the padded range sequence ``lower, upper, qa, qb``,
+    the legs ``r0, base``, their strokes ``lmin, lmax`` and the sections' typed tuples), the legs linearised at
     ``y_prev`` (or at ``x``: empty), the force bounds ``|z| <= zmax`` (N m,) of the scaled
     moves, the forces applied over the previous sample ``u_prev``
     [N] (the rate rows), the warm start ``warm`` (the previous solution shifted: the rows
@@ -66,8 +68,9 @@ def constrained_step(k, x, Ad, Bd, y_prev, u_prev, u0, warm, packed, Ts, substep
     the predicted states (N, 6), the next step's nominal poses (N, 3), the active-set changes,
     the re-solves and the largest row violation of the predicted states (row units)."""
     m = Bd.shape[1]
-    W, tgt, col, val, lower, upper, kinds, n_hard, speed0, stroke0 = assemble(k, N, x, y_prev, u_prev, unit, *inputs)
-    r0, base, lmin, lmax = inputs[5], inputs[6], inputs[-2], inputs[-1]
+    n_seq, lo_seq, hi_seq, qa, qb, r0, base, lmin, lmax, sections = inputs
+    W, tgt, col, val, lower, upper, kinds, n_hard, speed0, stroke0 = assemble(k, N, x, y_prev, u_prev, unit, n_seq, lo_seq,
+                                                                              hi_seq, qa, qb, r0, base, sections)
     x1 = plant_step(packed, x, u0, Ts, substeps)
     d = offset(x1, x, u0, Ad, Bd)
     first_legs(x1, r0, base, lmin, lmax, unit, speed0, stroke0, val, lower, upper)

@@ -28,29 +28,36 @@ from numba.core import event
 from numba.core.registry import CPUDispatcher
 
 from .. import _jit
+from ..constraints import registry as _registry
 
 __all__ = ["compile_progress", "kernel_dispatchers", "pending_kernels", "COMPILE_COST", "KERNEL_MODULES"]
 
-#: the modules holding the compiled kernels (numba dispatchers)
-KERNEL_MODULES = ("planner.model.kernels", "planner.horizon.kernels", "planner.corridor.kernels",
-                  "planner.constraints.kernels", "planner.constraints.dense_kernels",
-                  "planner.constraints.stagewise_kernels", "planner.constraints.dual_kernels",
-                  "planner.constraints.step_kernels", "planner.orchestrator.kernels")
+#: the modules holding the compiled kernels (numba dispatchers) other than the constraint
+#: registry's
+_BASE_MODULES = ("planner.model.kernels", "planner.horizon.kernels", "planner.corridor.kernels",
+                 "planner.constraints.dense_kernels", "planner.constraints.stagewise_kernels",
+                 "planner.constraints.dual_kernels", "planner.constraints.step_kernels",
+                 "planner.orchestrator.kernels")
+#: the modules holding the compiled kernels: those above, the registry's fused assembly and the
+#: modules of the registry's row kernels (:data:`planner.constraints.registry.SECTIONS`)
+KERNEL_MODULES = tuple(dict.fromkeys((*_BASE_MODULES, _registry.__name__,
+                                      *(k.py_func.__module__ for s in _registry.SECTIONS for k in (s.count, s.fill)))))
 
 #: each kernel's own compile time [CPU s] (callees excluded, numba's own overloads spread over
 #: the kernels), measured by ``python benchmarks/bench_start.py --profile-compile`` (a full
-#: warm-up with an empty cache: 164 CPU s, 2026-11-25); only ratios matter to the estimate
+#: warm-up with an empty cache: 164 CPU s, 2026-11-25); only ratios matter to the estimate.
+#: The row constraints' count and fill kernels: their registry sections'
+#: (:func:`planner.constraints.registry.compile_costs`)
 COMPILE_COST: dict[str, float] = {
     "simulate_constrained": 24.2, "constrained_step": 20.33, "dual_solve": 19.38, "simulate_paper": 13.47,
     "stage_setup": 11.77, "substitute_many": 7.64, "substitute": 6.37, "riccati": 6.18, "zoh": 4.47, "_terms": 4.29,
     "hessian": 4.05, "_drop": 3.13, "assemble": 3.11, "model_step": 2.82, "union_distances": 2.49,
     "free_parts": 2.39, "affine": 1.98, "_expm": 1.82, "_on_working_set": 1.73, "build_grid": 1.62,
     "_eliminate": 1.6, "factorised_blocks": 1.52, "prediction": 1.5, "_polygon_distance": 1.36, "rk4": 1.19,
-    "corridor_fill": 0.96, "acceleration": 0.89, "first_legs": 0.82, "_most_violated": 0.78, "_chol3_solve": 0.7,
-    "predict": 0.65, "_matrix_row_into": 0.61, "arrival_fill": 0.56, "plant_step": 0.54, "state_derivative": 0.53,
-    "finish": 0.49, "speed_fill": 0.46, "leg_rows": 0.43, "approach_fill": 0.42, "stroke_fill": 0.4,
-    "constraint_matrix": 0.4, "rate_fill": 0.38, "offset": 0.36, "_row_value": 0.35, "blocks_derivative": 0.32,
-    "corridor_count": 0.32, "approach_count": 0.19, "arrival_count": 0.13,
+    "acceleration": 0.89, "first_legs": 0.82, "_most_violated": 0.78, "_chol3_solve": 0.7,
+    "predict": 0.65, "_matrix_row_into": 0.61, "plant_step": 0.54, "state_derivative": 0.53,
+    "finish": 0.49, "leg_rows": 0.43, "constraint_matrix": 0.4, "offset": 0.36, "_row_value": 0.35,
+    "blocks_derivative": 0.32, **_registry.compile_costs(),
 }
 _DEFAULT_COST = 0.5  # a kernel not in the table
 

@@ -230,6 +230,10 @@ class Settings(Strict):
         None, description="Constrained mode: largest rate of change of each drive force, N/s: one number for every "
         "drive or one per drive; null (default): each drive's force_max per "
         f"{DEFAULT_FORCE_RISE_S:g} s; 'off': no limit")
+    tool_speed_max_m_s: Finite | None = Field(
+        None, gt=0, le=100, description="Constrained mode: largest speed of the tool point, |(x_dot, y_dot)| in "
+        "m/s, held at every sample (by a 16-sided polygon inside the circle of that radius: the plan's speed stays "
+        "within 2 % below the limit in the worst direction); null (default): no limit")
     fastest: StrictBool = Field(False, description="Constrained mode: the shortest timing (samples_per_segment) whose "
                           "plan keeps the corridor and the drive force, stroke and speed limits")
 
@@ -272,6 +276,8 @@ class Settings(Strict):
                        given[1])
         if self.fastest and self.mode != "constrained":
             raise fail("needs mode 'constrained' (only that mode keeps the drive limits)", "fastest")
+        if self.tool_speed_max_m_s is not None and self.mode != "constrained":
+            raise fail("needs mode 'constrained' (only that mode keeps a speed limit)", "tool_speed_max_m_s")
         if self.backend == "compiled" and self.solver != "riccati":
             raise fail(f"the compiled backend solves the horizon problem by the Riccati recursion; use backend "
                        f"'reference' for the {self.solver} solver", "solver")
