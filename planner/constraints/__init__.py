@@ -1,5 +1,5 @@
 """The constrained mode (beyond the paper): the range-space criterion with hard corridor,
-drive-force, leg-speed, stroke and no-overshoot constraints, solved every sample as a
+drive-force, leg-speed, stroke, no-overshoot and (optional) tool-speed constraints, solved every sample as a
 quadratic program (a dual active-set method on the stage-wise problem; DAQP as its
 reference and fallback).
 
@@ -9,6 +9,10 @@ Modules, by concept:
 ``rows``        what a constraint gives: rows on the predicted states (:class:`Rows`)
 ``corridor``    corridor boxes and cell half-planes, the end box; no overshoot at the end
 ``drives``      drive-force bounds, leg-speed and leg-stroke rows
+``motion``      the tool-speed limit rows (optional, off by default)
+``registry``    the row constraints in row order, the one list (``SECTIONS``: row class, typed
+                tuple, count and fill kernels, compile costs), and the fused compiled assembly
+                of a step's rows generated from it
 ``qp``          the DAQP wrapper, the dense QP of a step and its slack problem
 ``step``        the step's dense QP in compiled form (DAQP's fallback and the slack problem)
 ``stagewise``   the step's QP as a stage-wise problem: Riccati factorisation, dual active set

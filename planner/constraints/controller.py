@@ -460,5 +460,5 @@ def _slack_words(solved: bool, slack_m: float, speed_m_s: float) -> str:
         parts.append(f"the corridor would be left by {slack_m * 1e3:.3g} mm" if slack_m >= 1e-3
                      else f"the corridor would be left by {slack_m * 1e6:.3g} um")
     if speed_m_s >= 1e-9:
-        parts.append(f"a leg or the arrival would be {speed_m_s * 1e3:.3g} mm/s too fast")
+        parts.append(f"a leg, the tool or the arrival would be {speed_m_s * 1e3:.3g} mm/s too fast")
     return "; ".join(parts) if parts else "its QP is infeasible by less than 1 nm, a numerical failure"

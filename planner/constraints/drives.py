@@ -25,9 +25,9 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 from collections.abc import Sequence
+
+import numpy as np
 
 from ..corridor import RangeSequence
 from ..model import RobotModel

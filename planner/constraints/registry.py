@@ -125,9 +125,11 @@ def section_fill(step: ck.RowStep, args: NamedTuple, col: np.ndarray, val: np.nd
 
 
 def _section(args: Any) -> Section:
-    if not isinstance(args, types.BaseNamedTuple) or args.instance_class not in _BY_ARGS:
+    """The section whose typed tuple has the numba type ``args`` (at compile time)."""
+    cls = getattr(args, "instance_class", None) if isinstance(args, types.BaseNamedTuple) else None
+    if cls not in _BY_ARGS:
         raise TypeError(f"not a row constraint's typed tuple: {args}")
-    return _BY_ARGS[args.instance_class]
+    return _BY_ARGS[cls]
 
 
 # (the typing functions' parameters carry no annotations: numba compares them with the impl's)

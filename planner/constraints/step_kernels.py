@@ -69,8 +69,8 @@ def constrained_step(k, x, Ad, Bd, y_prev, u_prev, u0, warm, packed, Ts, substep
     the re-solves and the largest row violation of the predicted states (row units)."""
     m = Bd.shape[1]
     n_seq, lo_seq, hi_seq, qa, qb, r0, base, lmin, lmax, sections = inputs
-    W, tgt, col, val, lower, upper, kinds, n_hard, speed0, stroke0 = assemble(k, N, x, y_prev, u_prev, unit, n_seq, lo_seq,
-                                                                              hi_seq, qa, qb, r0, base, sections)
+    W, tgt, col, val, lower, upper, kinds, n_hard, speed0, stroke0 = assemble(
+        k, N, x, y_prev, u_prev, unit, n_seq, lo_seq, hi_seq, qa, qb, r0, base, sections)
     x1 = plant_step(packed, x, u0, Ts, substeps)
     d = offset(x1, x, u0, Ad, Bd)
     first_legs(x1, r0, base, lmin, lmax, unit, speed0, stroke0, val, lower, upper)
