@@ -254,10 +254,12 @@ def robot_motion(req: PlanRequest) -> tuple[float, float]:
     """The ``fastest`` estimate's move: :data:`FASTEST_A_M_S2` scaled by the request's robot's
     acceleration over the Moving Slide's, and :data:`FASTEST_V_SHARE` of the speed its leg
     friction allows (issue 31: 0.433 s estimated for Table I whatever the robot; measured 3.5x
-    with a 150 kg platform, 6x with a leg friction of 2000 N s/m)."""
+    with a 150 kg platform, 6x with a leg friction of 2000 N s/m), at most the request's
+    ``tool_speed_max_m_s``."""
     a_ref = _builtin_motion("moving-slide")[0]
     a, v = _builtin_motion(req.robot) if isinstance(req.robot, str) else _motion(req.robot)
-    return FASTEST_A_M_S2 * a / a_ref, FASTEST_V_SHARE * v
+    limit = req.settings.tool_speed_max_m_s
+    return FASTEST_A_M_S2 * a / a_ref, min(FASTEST_V_SHARE * v, limit if limit is not None else math.inf)
 
 
 def fastest_count(step_m: float, Ts: float, N: int, ramp_s: float | None,
