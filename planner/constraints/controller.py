@@ -293,7 +293,7 @@ class ConstrainedController:
             # how well the solver met the rows it was given (m, m/s, rad)
             stats.violation_max_m = max(stats.violation_max_m, float(asm.violation(qp, sol) * ROW_UNIT_M))
         else:
-            rows = qp.rows  # the arrival rows: the speed rows before the legs' (kernels.assemble's order)
+            rows = qp.rows  # the arrival rows: the speed rows before the legs' (the registry's row order)
             arrival = (rows.kinds == RowKind.SPEED) & (np.arange(rows.n_rows) < rows.speed0)
             z, slack_iterations = self._slack_step(k, asm.dense(qp), arrival)
             hard = None
