@@ -41,7 +41,7 @@ def peak(res) -> float:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description="What the tool-speed limit costs a Table I plan.")
     ap.add_argument("--rounds", type=int, default=7)
     args = ap.parse_args()
     free = peak(plan(request()))
