@@ -12,8 +12,8 @@ those states the compiled assembly of a step's rows and criterion
 rows, offset, stage-wise solve, refinement), each state ``--repeat`` times, both called from
 Python (each call unboxes its arguments: the dispatch is part of the time), and the step within
 the compiled loop of a whole plan (``metrics.qp_time_ms / steps``, one dispatch a plan) and the
-plan's ``compute_ms`` (``2 repeat + 1`` plans); it reports the medians. The table gives the median over rounds and head / base
-(with the median of each round's ratio).
+plan's ``compute_ms`` (``2 repeat + 1`` plans); it reports the medians. The table gives the
+median over rounds and head / base (with the median of each round's ratio).
 """
 
 from __future__ import annotations
