@@ -49,7 +49,7 @@ class AssemblyInputs:
     base: np.ndarray  #: (n_legs, 2) base pivots [m]
     lmin: np.ndarray  #: (n_legs,) shortest leg lengths [m] (sample 0's stroke rows, ``kernels.first_legs``)
     lmax: np.ndarray  #: (n_legs,) longest
-    sections: tuple  #: the row constraints' typed tuples (``kernel_args``), in row order
+    sections: tuple  #: the row constraints' ``kernel_args`` as plain tuples, in row order
 
     @classmethod
     def of(cls, model: RobotModel, seq: RangeSequence, N: int, constraints: Constraints) -> AssemblyInputs:
@@ -58,10 +58,11 @@ class AssemblyInputs:
         if tuple(type(c) for c in constraints.rows) != KERNEL_SECTIONS:
             raise TypeError("the compiled assembly fuses the rows of "
                             f"{', '.join(c.__name__ for c in KERNEL_SECTIONS)}, in this order")
-        sections = tuple(c.kernel_args for c in constraints.rows)
-        for s, a in zip(SECTIONS, sections):
+        args = tuple(c.kernel_args for c in constraints.rows)
+        for s, a in zip(SECTIONS, args):
             if type(a) is not s.args:
                 raise TypeError(f"{s.row_class.__name__}.kernel_args gives {type(a).__name__}, not {s.args.__name__}")
+        sections = tuple(tuple(a) for a in args)  # plain: they unbox fastest (registry.typed_sections)
 
         def pad(a: np.ndarray) -> np.ndarray:
             return np.ascontiguousarray(np.concatenate((a, np.repeat(a[-1:], N, axis=0))), dtype=float)
@@ -74,7 +75,7 @@ class AssemblyInputs:
     def kernel_inputs(self) -> tuple:
         """The constant inputs of the compiled step (``step_kernels.constrained_step``'s
         ``inputs``): ``K``, the padded range sequence, the legs, their strokes and the
-        sections' typed tuples."""
+        sections' tuples."""
         return (self.K, self.lower, self.upper, self.qa, self.qb, self.r0, self.base, self.lmin, self.lmax,
                 self.sections)
 

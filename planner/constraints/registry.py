@@ -21,8 +21,9 @@ Adding a row constraint (as :class:`~planner.constraints.motion.ToolSpeedConstra
 
 (and, when users set it, the request field it reads, :mod:`planner.schema.request`).
 
-How the fused kernel is generated: :func:`assemble` takes the sections' typed tuples as one
-tuple, counts the rows of each (``numba.literal_unroll``: the loop body is compiled once per
+How the fused kernel is generated: :func:`assemble` takes the sections' tuples as one tuple
+(plain tuples: they unbox fastest; :func:`typed_sections`, generated from the list, makes them
+the sections' typed tuples again), counts the rows of each (``numba.literal_unroll``: the loop body is compiled once per
 section type), allocates them and fills them in order; :func:`section_rows` and
 :func:`section_fill` dispatch on the typed tuple's type to the section's kernels
 (``numba.extending.overload``, at compile time: no call through a pointer). numba's cache key
@@ -46,7 +47,8 @@ from .drives import DriveForceRateConstraint, LegSpeedConstraint, LegStrokeConst
 from .motion import ToolSpeedConstraint
 from .rows import RowConstraint
 
-__all__ = ["SECTIONS", "Section", "assemble", "compile_costs", "section_of", "section_fill", "section_rows"]
+__all__ = ["SECTIONS", "Section", "assemble", "compile_costs", "section_fill", "section_of", "section_rows",
+           "typed_sections"]
 
 
 @dataclass(frozen=True)
@@ -151,21 +153,41 @@ def _section_fill(step, args, col, val, b0l, b0u, kinds, r):  # type: ignore[no-
     return impl
 
 
+def typed_sections(plain: tuple) -> tuple:
+    """The sections' plain tuples (as the compiled step is given them) as their typed tuples, in
+    :data:`SECTIONS` order (compiled code only)."""
+    raise NotImplementedError("called within compiled code only")
+
+
+@overload(typed_sections)
+def _typed_sections(plain):  # type: ignore[no-untyped-def]
+    # generated: ``return (Args0(*plain[0]), Args1(*plain[1]), ...)`` for the registry's sections
+    # (a tuple of plain tuples unboxes 3x faster than one of named tuples: numba's dispatcher
+    # types a named tuple in Python, a plain one in C; 1.2 against 3.9 us for the 7 sections)
+    if not isinstance(plain, types.BaseTuple) or len(plain) != N_SECTIONS:
+        raise TypeError(f"the compiled step takes the {N_SECTIONS} sections' tuples, got {plain}")
+    scope = {f"_Args{i}": s.args for i, s in enumerate(SECTIONS)}
+    src = "def impl(plain):\n    return (" + "".join(f"_Args{i}(*plain[{i}]), " for i in range(N_SECTIONS)) + ")\n"
+    exec(compile(src, f"<{__name__}.typed_sections>", "exec"), scope)
+    return scope["impl"]
+
+
 @njit(cache=True)
-def assemble(k, N, x, y_prev, u_prev, unit, K, lower, upper, qa, qb, r0, base, sections):
+def assemble(k, N, x, y_prev, u_prev, unit, K, lower, upper, qa, qb, r0, base, plain_sections):
     """The rows and criterion of step ``k`` in one call (few calls per step: numpy's per-call
     cost dominated these sizes). Inputs: the step (``k``, horizon ``N``, state ``x``, the
     previous step's predicted poses shifted ``y_prev`` (N, 3), empty at the first step: then
     the legs are linearised at ``x``; the forces applied over the previous sample ``u_prev``),
     the row unit, the range sequence padded with ``N`` copies of its last sample (``K``
     samples; ``lower, upper, qa, qb`` as ``RangeSequence.window``), the legs (``r0``,
-    ``base``), then ``sections``: the typed tuple of each section of :data:`SECTIONS`, in
-    that order.
+    ``base``), then ``plain_sections``: the ``kernel_args`` of each section of :data:`SECTIONS`,
+    in that order, each as a plain tuple (typed again here: :func:`typed_sections`).
 
     Returns ``(W, tgt, col, val, b0l, b0u, kinds, n_hard, speed0, stroke0)``: the criterion's
     weights ``W = qa^2 + qb^2`` and targets ``tgt = qa^2 r_a + qb^2 r_b`` of samples
     ``k+1..k+N`` (3N,), the rows, the number of hard rows (the rows after them enter only the
     slack problem) and the first leg-speed and stroke rows (those of sample 0)."""
+    sections = typed_sections(plain_sections)
     W, tgt = ck.criterion(k, N, K, lower, upper, qa, qb)
     step = ck.step_context(k, N, x, y_prev, u_prev, unit, K, r0, base)
     nrow = 0

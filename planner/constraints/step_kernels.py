@@ -44,7 +44,7 @@ def constrained_step(k, x, Ad, Bd, y_prev, u_prev, u0, warm, packed, Ts, substep
                      refine_tol_m, refine_tol_rad, refine_max, tol, dep_tol, warm_tol, relax, max_iter, V, Lm, inputs):
     """Step ``k`` at state ``x`` with the model ``Ad, Bd`` (eq. 9): the rows and criterion
     (``registry.assemble``; ``inputs``: ``K``, the padded range sequence ``lower, upper, qa, qb``,
-    the legs ``r0, base``, their strokes ``lmin, lmax`` and the sections' typed tuples), the legs linearised at
+    the legs ``r0, base``, their strokes ``lmin, lmax`` and the sections' tuples), the legs linearised at
     ``y_prev`` (or at ``x``: empty), the force bounds ``|z| <= zmax`` (N m,) of the scaled
     moves, the forces applied over the previous sample ``u_prev``
     [N] (the rate rows), the warm start ``warm`` (the previous solution shifted: the rows
