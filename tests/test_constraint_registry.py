@@ -9,6 +9,7 @@ from __future__ import annotations
 import ast
 import math
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -129,12 +130,38 @@ def test_tool_speed_limit_holds_and_binds(limited, free_speed):
     assert m.contained and m.within_limits and m.settled and m.infeasible_steps == 0
     speeds = _speeds(res)
     assert speeds.max() <= limit
+    assert m.max_tool_speed_m_s == pytest.approx(speeds.max(), rel=1e-12)
     P = np.asarray(res.pose)
     chord = np.hypot(np.diff(P[:, 0]), np.diff(P[:, 1])) / res.settings.Ts
     assert chord.max() <= limit
     assert speeds.max() >= limit * math.cos(math.pi / TOOL_SPEED_SIDES) * (1 - 1e-4)
     # the same corridor and timing: the robot is slower, so it reaches the end later or no sooner
     assert res.metrics.duration_s >= plan(with_settings(TABLE1, mode="constrained")).metrics.duration_s
+
+
+def test_within_limits_judges_the_tool_speed_both_ways(free_speed):
+    """``within_limits`` covers the tool speed where the request sets it: the plan without the
+    limit, judged against a limit it exceeds, is not within limits; the same plan judged against
+    a limit it keeps is (the result is rebuilt from the same simulation, so only the verdict
+    differs)."""
+    plan_module = sys.modules["planner.orchestrator.plan"]
+
+    captured = {}
+    orig = plan_module.build_result
+
+    def spy(robot, name, st, *rest):
+        captured["args"] = (robot, name, st, *rest)
+        return orig(robot, name, st, *rest)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(plan_module, "build_result", spy)
+        free = plan(with_settings(TABLE1, mode="constrained"))
+    assert free.metrics.within_limits and free.metrics.max_tool_speed_m_s == pytest.approx(free_speed, rel=1e-12)
+    robot, name, st, *rest = captured["args"]
+    below = orig(robot, name, st.model_copy(update={"tool_speed_max_m_s": 0.9 * free_speed}), *rest)
+    above = orig(robot, name, st.model_copy(update={"tool_speed_max_m_s": 1.01 * free_speed}), *rest)
+    assert not below.metrics.within_limits
+    assert above.metrics.within_limits
 
 
 def test_fastest_with_a_tool_speed_limit_is_slower(free_speed):
@@ -189,15 +216,16 @@ def test_a_new_row_constraint_touches_three_files():
     """The tool-speed limit, added through the registry: its row class and numpy rows
     (motion.py), its typed tuple and kernels (kernels.py) and its registry entry are the only
     places in the code that name it; its request field is read by its row class and the work
-    estimate of ``fastest`` only. No other
+    estimate of ``fastest`` and the result's ``within_limits`` verdict (and its description) only. No other
     list of the row constraints exists: every module but the registry and the composed
     constraints (named accessors of the ones the controller reads) names at most three of them."""
     assert _files_naming(r"\b(ToolSpeedConstraint|ToolSpeedArgs|tool_speed_count|tool_speed_fill)\b") == {
         "planner/constraints/motion.py", "planner/constraints/kernels.py", "planner/constraints/registry.py"}
     # the user's option: its field, the row class that reads it, and the ``fastest`` work estimate
-    # (the speed of its estimated move)
-    assert _files_naming(r"\btool_speed_max_m_s\b") == {"planner/schema/request.py", "planner/constraints/motion.py",
-                                                          "planner/orchestrator/work.py"}
+    # (the speed of its estimated move), the result's verdict on it
+    assert _files_naming(r"\btool_speed_max_m_s\b") == {
+        "planner/schema/request.py", "planner/constraints/motion.py", "planner/orchestrator/work.py",
+        "planner/orchestrator/result.py", "planner/schema/result.py"}
     names = {s.row_class.__name__ for s in SECTIONS}
     for p in _planner_files():
         rel = p.relative_to(ROOT).as_posix()

@@ -50,6 +50,10 @@ def _check_finite(**arrays: np.ndarray) -> None:
 #: forces' differences; the applied moves are clipped to their rate rows, issue 31)
 RATE_TOL_REL = 1e-9
 
+#: relative tolerance of the tool speed in ``within_limits`` (``settings.tool_speed_max_m_s``;
+#: the rows hold a polygon inside the speed circle, so the plan keeps below it)
+TOOL_SPEED_TOL_REL = 1e-9
+
 
 def build_result(robot: RobotModel, name: str | None, st: Settings, seq: RangeSequence,
                  segments: Sequence[Segment] | None, sim: Simulation, controller_report: dict,
@@ -106,6 +110,7 @@ def build_result(robot: RobotModel, name: str | None, st: Settings, seq: RangeSe
         "max_drive_speed_m_s": float(np.abs(leg_vel).max()),
         "max_speed_ratio": float((np.abs(leg_vel) / robot.speed_max).max()),
         "max_stroke_violation_m": stroke,
+        "max_tool_speed_m_s": float(np.hypot(vel[:, 0], vel[:, 1]).max()),
         "min_singularity_measure": float(kinematics.singularity_measure(robot, poses).min()),
         "energy": float(np.sum(U * U) * st.Ts),
         "path_length_m": float(np.sum(np.hypot(*np.diff(poses[:, :2], axis=0).T))),
@@ -122,8 +127,10 @@ def build_result(robot: RobotModel, name: str | None, st: Settings, seq: RangeSe
                                     and metrics["max_corridor_violation_rad"] <= CONTAIN_TOL_RAD)
         rate = force_rate(robot, st)  # per drive [N/s], None: no limit
         rate_ok = rate is None or bool(np.all(np.abs(dU) <= rate * st.Ts * (1.0 + RATE_TOL_REL)))
+        tool_ok = (st.tool_speed_max_m_s is None
+                   or metrics["max_tool_speed_m_s"] <= st.tool_speed_max_m_s * (1.0 + TOOL_SPEED_TOL_REL))
         metrics["within_limits"] = bool(metrics["max_force_ratio"] <= 1.0 + 1e-12 and metrics["max_speed_ratio"] <= 1.0
-                                        and stroke <= CONTAIN_TOL_M and rate_ok)
+                                        and stroke <= CONTAIN_TOL_M and rate_ok and tool_ok)
     corridor = CorridorSamples.model_construct(
         lower=lower, upper=upper, violation_m=ti_violation,
         segments=None if segments is None else

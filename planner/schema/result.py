@@ -76,6 +76,8 @@ class Metrics(_Out):
     max_drive_speed_m_s: float = Field(description="Largest leg sliding speed, m/s")
     max_speed_ratio: float = Field(description="Largest |leg speed| / speed limit (dimensionless)")
     max_stroke_violation_m: float = Field(description="Largest leg length outside its stroke, m")
+    max_tool_speed_m_s: float = Field(description="Largest speed of the tool point, |(x_dot, y_dot)|, over the "
+                                      "samples, m/s")
     min_singularity_measure: float = Field(description="Smallest singularity measure along the path "
                                            "(dimensionless; singular near 0)")
     energy: float = Field(description="Sum of squared drive forces times Ts, N^2 s")
@@ -86,9 +88,10 @@ class Metrics(_Out):
                                    "trajectory lies in the corridor: (x, y) in the union of the segments (and of the "
                                    "exact cells) to 1e-9 m, psi in the psi ranges of the segments it is in to 1e-7 rad")
     within_limits: bool | None = Field(None, description="Constrained mode: drive forces, leg speeds and strokes "
-                                       "within their limits on the actual trajectory, and each drive-force change "
+                                       "within their limits on the actual trajectory, each drive-force change "
                                        "from one sample to the next (from zero before the start) within its "
-                                       "force_rate_n_s x Ts to 1e-9 relative")
+                                       "force_rate_n_s x Ts to 1e-9 relative, and the tool speed within "
+                                       "settings.tool_speed_max_m_s (where set) to 1e-9 relative")
     max_polygon_violation_m: float | None = Field(None, description="Constrained mode, corridors with exact cell "
                                                   "polygons: largest distance outside their union, m")
     infeasible_steps: int | None = Field(None, description="Constrained mode: steps whose QP needed slack (count)")
