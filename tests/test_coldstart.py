@@ -224,8 +224,8 @@ print(json.dumps(seen))
 def test_service_renews_its_workers_when_the_kernels_are_compiled():
     """KernelCompile calls back once the marker appears; the pool's renewal replaces every
     worker (forkserver: a new fork server) and the new ones plan."""
+    from app.executors import on_reference
     from app.jobs import PlanJob
-    from app.service import on_reference
     from app.workers import PlanPool
     from planner.schema import PlanRequest
 
