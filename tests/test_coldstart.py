@@ -230,7 +230,8 @@ def test_service_renews_its_workers_when_the_kernels_are_compiled():
     from planner.schema import PlanRequest
 
     job = PlanJob(PlanRequest.model_validate(TABLE1))
-    assert on_reference(job).request.settings.backend == "reference"
+    moved = on_reference(job)
+    assert isinstance(moved, PlanJob) and moved.request.settings.backend == "reference"
     assert job.request.settings.backend == "compiled"  # the job itself unchanged
     pool = PlanPool(workers=1, timeout_s=60, start="exec")
     try:
