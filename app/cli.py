@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import os
 
-# small dense matrices: single-threaded BLAS is much faster (must be set before numpy loads)
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+from planner._config import single_threaded_blas
+
+single_threaded_blas()  # before numpy loads
 
 import argparse  # noqa: E402
 import contextlib  # noqa: E402
@@ -113,7 +113,7 @@ def run_here(job: PlanJob | ContourJob, name: str, compile_first: bool) -> Done:
 def reference_while_compiling(job: PlanJob | ContourJob) -> Job:
     """``job`` as it runs while the kernels are not compiled: the edges' one rule, as the
     service applies it (:func:`planner.orchestrator.background.while_compiling` decides and
-    starts the background compile; :func:`app.service.on_reference` moves the job to the numpy
+    starts the background compile; :func:`app.executors.on_reference` moves the job to the numpy
     reference); one line on stderr says so, with the plan's work estimate on the reference
     where there is one (:func:`app.jobs.estimate`). Other jobs as they are."""
     from app.jobs import PlanJob
@@ -127,8 +127,8 @@ def reference_while_compiling(job: PlanJob | ContourJob) -> Job:
     running = while_compiling(st.backend, st.mode)
     if running is None:
         return job
+    from app.executors import on_reference
     from app.jobs import estimate
-    from app.service import on_reference  # (only here: the warm path never loads the service)
 
     moved = on_reference(job)
     try:

@@ -26,6 +26,8 @@ killed and replaced when the job passes its limit; the caller gets ``timeout``.
   Without a time limit or a memory cap the job runs in the calling thread (nothing to enforce).
 * :func:`describe_failure`: the one wording of a time limit, a memory limit, a full queue or
   a dead worker (the pool's exceptions) as an outcome.
+* :func:`on_reference`: the one rule of a job submitted while the kernels compile in the
+  background: it plans on the numpy reference (the service and the CLI apply it).
 
 No web framework or editor import.
 """
@@ -33,6 +35,7 @@ No web framework or editor import.
 from __future__ import annotations
 
 import atexit
+import dataclasses
 import os
 import socket
 import sys
@@ -40,11 +43,25 @@ import threading
 from typing import Any, Protocol, runtime_checkable
 
 from app.failures import import_timeout, out_of_memory, timeout
-from app.jobs import ExportJob, Failed, ImportJob, Job, Outcome, bounded, check_estimate, failed, run_job
+from app.jobs import (
+    ContourJob,
+    EditorJob,
+    ExportJob,
+    Failed,
+    ImportJob,
+    Job,
+    Outcome,
+    PlanJob,
+    SegmentJob,
+    bounded,
+    check_estimate,
+    failed,
+    run_job,
+)
 from app.workers import JobTimeout, PlanPool, PoolBusy, WorkerCrashed, WorkerOutOfMemory
 
 __all__ = ["InProcessExecutor", "JobExecutor", "WORKER", "child_pool", "close_child_pool", "describe_failure",
-           "run_bounded", "warm_worker", "where"]
+           "on_reference", "run_bounded", "warm_worker", "where"]
 
 
 @runtime_checkable
@@ -105,6 +122,27 @@ class InProcessExecutor:
 
     def close(self) -> None:
         """Nothing to stop."""
+
+
+def on_reference(job: Job) -> Job:
+    """``job`` planning on the numpy reference (``settings.backend = "reference"``) where it
+    would plan on the compiled kernels; other jobs as they are. The one rule of a job submitted
+    while the kernels compile in the background (issue 24): :class:`app.service.JobService`
+    applies it to every job while its :class:`~app.service.KernelCompile` runs, the CLI when
+    :func:`planner.orchestrator.background.while_compiling` says so (``app.cli``)."""
+    if isinstance(job, (PlanJob, EditorJob, SegmentJob)):
+        st = job.request.settings
+        if st.backend != "compiled":
+            return job
+        return dataclasses.replace(job, request=job.request.model_copy(
+            update={"settings": st.model_copy(update={"backend": "reference"})}))
+    if isinstance(job, ContourJob):
+        given = job.request.settings
+        if given.get("backend") not in (None, "compiled") or given.get("solver", "riccati") != "riccati":
+            return job
+        return dataclasses.replace(job, request=job.request.model_copy(
+            update={"settings": {**given, "backend": "reference"}}))
+    return job
 
 
 def describe_failure(exc: Exception, job: Job, timeout_s: float, memory_mb: int | None = None) -> Failed:

@@ -29,39 +29,11 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
-from app.executors import InProcessExecutor, JobExecutor, describe_failure
-from app.jobs import (
-    ContourJob,
-    EditorJob,
-    ExportJob,
-    Job,
-    Outcome,
-    PlanJob,
-    SegmentJob,
-    bounded,
-    check_estimate,
-)
+from app.executors import InProcessExecutor, JobExecutor, describe_failure, on_reference
+from app.jobs import ExportJob, Job, Outcome, bounded, check_estimate
 from app.workers import JobTimeout, PlanPool, PoolBusy, WorkerCrashed
 
-__all__ = ["JobService", "KernelCompile", "describe_failure", "on_reference"]
-
-
-def on_reference(job: Job) -> Job:
-    """``job`` planning on the numpy reference (``settings.backend = "reference"``) where it
-    would plan on the compiled kernels; other jobs as they are."""
-    if isinstance(job, (PlanJob, EditorJob, SegmentJob)):
-        st = job.request.settings
-        if st.backend != "compiled":
-            return job
-        return dataclasses.replace(job, request=job.request.model_copy(
-            update={"settings": st.model_copy(update={"backend": "reference"})}))
-    if isinstance(job, ContourJob):
-        given = job.request.settings
-        if given.get("backend") not in (None, "compiled") or given.get("solver", "riccati") != "riccati":
-            return job
-        return dataclasses.replace(job, request=job.request.model_copy(
-            update={"settings": {**given, "backend": "reference"}}))
-    return job
+__all__ = ["JobService", "KernelCompile", "describe_failure"]
 
 
 class KernelCompile:
@@ -181,7 +153,8 @@ class JobService:
     def run(self, job: Job, limit_s: float | None = None) -> Outcome:
         """Estimate, bound, run ``job`` on a worker; never raises for the input's fault, a
         limit, a full queue or a dead worker: those are :class:`Failed`. While the kernels
-        compile in the background a planning job runs on the numpy reference. ``limit_s``: the
+        compile in the background a planning job runs on the numpy reference
+        (:func:`app.executors.on_reference`, the rule the CLI applies too). ``limit_s``: the
         time limit of this job instead of the service's (an HTTP job's, ``RANGEPLAN_JOB_TIMEOUT_S``)."""
         running = self.kernels.running() if self.kernels is not None else None
         if running is not None:

@@ -36,8 +36,9 @@ from __future__ import annotations
 
 import os
 
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+from planner._config import single_threaded_blas
+
+single_threaded_blas()  # before numpy loads
 
 import queue  # noqa: E402
 import socket  # noqa: E402

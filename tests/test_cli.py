@@ -188,7 +188,7 @@ def test_no_resident_is_accepted_and_ignored(tmp_path):
 
 
 def test_while_the_kernels_compile_plan_and_contour_jobs_move_to_the_reference(monkeypatch, capsys):
-    """The CLI applies the service's rule (app.service.on_reference) when the one decision
+    """The CLI applies the service's rule (app.executors.on_reference) when the one decision
     (while_compiling) says the kernels are compiling: a plan and a contour job plan on the numpy
     reference, one note on stderr (with the plan's estimate on the reference); asked for another
     backend, or with the kernels compiled, the job is left as it is."""

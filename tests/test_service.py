@@ -189,3 +189,31 @@ def test_editor_plans_on_the_pool_under_the_same_limits():
     finally:
         _planning.use_pool(None)
         pool.close()
+
+
+def test_on_reference_is_the_one_rule_of_jobs_submitted_while_the_kernels_compile():
+    """A planning job moves to the numpy reference (a copy: the job itself unchanged); a job
+    asked on another backend, a contour on a solver the reference lacks and a job that plans
+    nothing stay as they are. The service and the CLI take the rule from app.executors."""
+    import app.cli
+    import app.service
+    from app.executors import on_reference
+    from app.jobs import ContourJob, PlanJob, SleepJob
+    from planner.schema import ContourRequest, PlanRequest
+
+    table1 = json.loads((Path(__file__).resolve().parent.parent / "app/static/examples/table1.json").read_text())
+    plan = PlanJob(PlanRequest.model_validate(table1))
+    moved = on_reference(plan)
+    assert isinstance(moved, PlanJob)
+    assert moved.request.settings.backend == "reference" and plan.request.settings.backend == "compiled"
+    assert moved.request.segments == plan.request.segments and moved.format == plan.format
+    asked = PlanJob(PlanRequest.model_validate({**table1, "settings": {"backend": "reference"}}))
+    assert on_reference(asked) is asked
+    contour = ContourJob(ContourRequest.model_validate({"program": "G1 X1 F100\n"}))
+    moved_contour = on_reference(contour)
+    assert isinstance(moved_contour, ContourJob) and moved_contour.request.settings == {"backend": "reference"}
+    dense = ContourJob(ContourRequest.model_validate({"program": "G1 X1 F100\n", "settings": {"solver": "qr"}}))
+    assert on_reference(dense) is dense
+    sleep = SleepJob(0.0)
+    assert on_reference(sleep) is sleep
+    assert app.service.on_reference is on_reference and "def on_reference" not in Path(app.cli.__file__).read_text()
