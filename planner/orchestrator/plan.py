@@ -17,10 +17,9 @@ import numpy as np
 
 from .._jit import numpy_only
 from ..constraints import MARGIN_M, MARGIN_RAD, ConstrainedController
-from ..corridor import RangeSequence, Segmentation, cell_size_rule, range_sequence, reference_sequence
+from ..corridor import RangeSequence, Segmentation, range_sequence, reference_sequence
 from ..corridor import segment as segment_layout
 from ..corridor.geometry import corridor_gaps
-from ..corridor.workspace import parse_layout
 from ..errors import PlannerError, invalid
 from ..model import RobotModel, load_robot
 from ..model.plant import plant_substeps
@@ -89,8 +88,12 @@ def _plan(req: PlanRequest, t0: float, robot: RobotModel | None, segments: Seque
     st = _with_substeps(req, model)
     if segments is None:
         segments = req.segments
+    cells: tuple[str, float] | None = None  # a layout's cells where the request leaves their size out
     if segments is None and req.layout is not None:
-        segments = segment_layout(req.layout, model, st).segments
+        seg = segment_layout(req.layout, model, st)
+        segments = seg.segments
+        if req.layout.cell.size is None:
+            cells = (seg.shape, seg.size)
         check_work(req, segments, work_limit_s)
     if segments is not None:
         check_segments(model, segments)
@@ -109,8 +112,7 @@ def _plan(req: PlanRequest, t0: float, robot: RobotModel | None, segments: Seque
             if work_limit_s is not None and work_limit_s > 0:  # what the limit leaves for the checks
                 budget = work_limit_s - (time.perf_counter() - t0)
             estimate_s = estimate_work(req, segments).seconds
-            advised = _more_time_advice(exc, req.name, model, given, st, segments, budget, estimate_s,
-                                        _default_cell_size(req))
+            advised = _more_time_advice(exc, req.name, model, given, st, segments, budget, estimate_s, cells)
             if "the time plans" not in advised.message:
                 if budget is not None:
                     budget = work_limit_s - (time.perf_counter() - t0)  # type: ignore[operator]
@@ -140,27 +142,19 @@ def _with_substeps(req: PlanRequest, model: RobotModel) -> Settings:
     return st if n == st.plant_substeps else st.model_copy(update={"plant_substeps": n})
 
 
-def _default_cell_size(req: PlanRequest) -> float | None:
-    """The cell size [m] the request's layout is segmented with when it leaves
-    ``layout.cell.size`` out (:func:`~planner.corridor.cell_size_rule`); None otherwise."""
-    if req.layout is None or req.layout.cell.size is not None:
-        return None
-    ws = parse_layout(req.layout)
-    return cell_size_rule(ws.lower, ws.upper, ws.start, ws.end, ws.shape, req.settings)
-
-
 def _more_time_advice(exc: PlannerError, name: str | None, model: RobotModel, given: Settings, st: Settings,
                       segments: Sequence[Segment], budget_s: float | None = None,
-                      estimate_s: float = 0.0, cell_size: float | None = None) -> PlannerError:
+                      estimate_s: float = 0.0, cells: tuple[str, float] | None = None) -> PlannerError:
     """``exc`` (an infeasible constrained plan) with advice that was checked: the corridor
     planned again with :data:`MORE_TIME` times the samples of every segment (each candidate
     abandoned at its first infeasible step); the first that plans is named in the timing field
     the request used. If none plans, the error says that more time does not help.
     ``budget_s``: the compute time the checks may take (None: no bound); a candidate whose
     estimate (``estimate_s`` of the request times the factor) does not fit is not planned.
-    ``cell_size``: the default cell size of the request's layout [m]; more samples a segment
-    give another default (:func:`~planner.corridor.cell_size_rule`), so advice in samples names
-    this size too, which keeps the corridor the check planned."""
+    ``cells``: the shape and size [m] of the cells the request's layout was segmented into where
+    it left their size out; more samples a segment give another default
+    (:func:`~planner.corridor.cell_size_rule`), so advice in samples names these cells too,
+    which keeps the corridor the check planned."""
     counts = np.asarray(st.segment_samples if st.segment_samples is not None
                         else [st.samples_per_segment] * len(segments), dtype=np.int64)
     tried: list[int] = []
@@ -184,8 +178,10 @@ def _more_time_advice(exc: PlannerError, name: str | None, model: RobotModel, gi
         else:
             advised = st.model_copy(update={"samples_per_segment": int(st.samples_per_segment * factor)})
             how = f"settings.samples_per_segment = {st.samples_per_segment * factor}"
-            if cell_size is not None:
-                how += f" with layout.cell.size = {float(cell_size)!r} m, the cell size it has now"
+            if cells is not None:
+                how += f" with layout.cell.size = {float(cells[1])!r} m, the cell size it has now"
+                if cells[0] != "square":
+                    how += f" (layout.cell.shape = {cells[0]})"
         try:
             sub = resolve_timing(advised, segments).model_copy(update={"require_settled": True})
         except PlannerError:
