@@ -200,8 +200,9 @@ def _cells_and_path(ws: Workspace, model: Any, s: float, grown: tuple, field_pat
 
 
 #: the remedy search of a failed segmentation segments at most this many cells in all (x MAX_CELLS):
-#: both shapes at every size of its grid down to MAX_CELLS cells take ~5.6x (issue 31)
-REMEDY_CELL_BUDGET = 6
+#: both shapes at every size of its grid down to MAX_CELLS cells take ~5.6x, the sizes halfway
+#: between in the rest (issue 31)
+REMEDY_CELL_BUDGET = 10
 #: the remedy search's cell sizes: each this factor smaller than the one before, down to the
 #: smallest whose grid has at most MAX_CELLS cells (issue 31: halving skipped the sizes between,
 #: where a grid's alignment lets a narrow gap through: 1.2 mm triangles or 0.8 mm squares planned
@@ -228,37 +229,68 @@ def _fits(lower: np.ndarray, upper: np.ndarray, shape: str, size: float) -> bool
             and cell_count(lower, upper, shape, size)[0] <= MAX_CELLS)
 
 
+def _limit_size(lower: np.ndarray, upper: np.ndarray, shape: str) -> float:
+    """The smallest cell edge [m] (4 digits) whose grid of ``shape`` over the bounds has at most
+    ``MAX_CELLS`` cells."""
+    W, H = (np.asarray(upper, float) - np.asarray(lower, float)).tolist()
+    area = W * H if shape == "square" else 2.0 * W * H / SQRT3_2  # cells ~ area / size^2
+    size = float(np.sqrt(area / MAX_CELLS))
+    size = max(float(f"{size:.4g}"), MIN_CELL_SIZE)
+    for _ in range(1000):
+        if cell_count(lower, upper, shape, size)[0] <= MAX_CELLS:
+            break
+        size = float(f"{size * 1.0005:.4g}") if float(f"{size * 1.0005:.4g}") > size else size * 1.001
+    return size
+
+
 def _remedy_sizes(lower: np.ndarray, upper: np.ndarray, shape: str, s: float,
                   shapes: tuple[str, ...] | None = None) -> list[tuple[str, float]]:
     """The cells ``(shape, size)`` the remedy search of a layout with ``shape`` cells of edge
-    ``s`` [m] segments, in order: sizes from ``s`` down by :data:`REMEDY_RATIO` (rounded to 4
-    digits, so that a message's figure gives the same grid) to the smallest whose grid has at
-    most ``MAX_CELLS`` cells, at each size ``shape`` first and then the other shape (``shapes``:
-    only these), the given ``(shape, s)`` itself left out; the largest first (the fewest
-    segments), as many as fit :data:`REMEDY_CELL_BUDGET` x ``MAX_CELLS`` cells in all."""
+    ``s`` [m] segments, the largest first (the fewest segments), at equal sizes ``shape`` first:
+    sizes from ``s`` down by :data:`REMEDY_RATIO` (rounded to 4 digits, so that a message's
+    figure gives the same grid) and the smallest whose grid has at most ``MAX_CELLS`` cells, in
+    both shapes (``shapes``: only these), the given ``(shape, s)`` left out; the smallest dropped
+    beyond :data:`REMEDY_CELL_BUDGET` x ``MAX_CELLS`` cells in all; with budget left, the sizes
+    halfway between (a factor ``sqrt(REMEDY_RATIO)``), the smallest first (a narrow gap passes
+    where a grid's lines fall about it: sizes apart by less find more of them)."""
     order = (shape, "triangle" if shape == "square" else "square")
     if shapes is not None:
         order = tuple(sh for sh in order if sh in shapes)
+    main: list[tuple[str, float]] = []
+    for sh in order:
+        least = _limit_size(lower, upper, sh)
+        size, k = s, 0
+        while size >= least * (1.0 + 1e-9):
+            if not (k == 0 and sh == shape) and _fits(lower, upper, sh, size):
+                main.append((sh, size))
+            k += 1
+            size = float(f"{s / REMEDY_RATIO ** k:.4g}")
+        if least < s and _fits(lower, upper, sh, least) and (sh, least) not in main:
+            main.append((sh, least))
+    rank = {sh: i for i, sh in enumerate(order)}
+
+    def ordered(cells: list[tuple[str, float]]) -> list[tuple[str, float]]:
+        return sorted(cells, key=lambda c: (-c[1], rank[c[0]]))
+
+    budget = REMEDY_CELL_BUDGET * MAX_CELLS
     out: list[tuple[str, float]] = []
     spent = 0
-    size, k = s, 0
-    while size >= MIN_CELL_SIZE:
-        any_fits = False
-        for sh in order:
-            if k == 0 and sh == shape:
-                continue
-            if not _fits(lower, upper, sh, size):
-                continue
-            any_fits = True
-            spent += cell_count(lower, upper, sh, size)[0]
-            if spent > REMEDY_CELL_BUDGET * MAX_CELLS:
-                return out
-            out.append((sh, size))
-        if not any_fits and k > 0 and all(cell_count(lower, upper, sh, size)[0] > MAX_CELLS for sh in order):
-            break  # smaller cells only make more of them
-        k += 1
-        size = float(f"{s / REMEDY_RATIO ** k:.4g}")
-    return out
+    for c in ordered(main):
+        spent += cell_count(lower, upper, *c)[0]
+        if spent > budget:
+            return out
+        out.append(c)
+    halves = []
+    for sh in order:
+        sizes = sorted(size for shp, size in out if shp == sh)
+        halves += [(sh, float(f"{np.sqrt(a * b):.4g}")) for a, b in zip(sizes[:-1], sizes[1:])]
+    for c in sorted(halves, key=lambda c: c[1]):  # the smallest first
+        n = cell_count(lower, upper, *c)[0]
+        if c in out or spent + n > budget:
+            continue
+        spent += n
+        out.append(c)
+    return ordered(out)
 
 
 def _other_sizes(lower: np.ndarray, upper: np.ndarray, shape: str, s: float) -> list[float]:
