@@ -41,12 +41,19 @@ def apply_advice(request: dict, message: str) -> dict | None:
         if m.group(3):
             lay.setdefault("cell", {})["size"] = float(m.group(3))
         return fixed
-    if "settings.fastest plans" in message:
+    # an infeasible plan's advice: the clause that says what plans (not those that do not)
+    clause = next((c for c in message.split("; ") if re.search(r"\bplans\b", c) and "do not plan" not in c), None)
+    if clause is None:
+        return None
+    if "settings.fastest plans" in clause:
         for key in ("speed_m_s", "total_time_s", "samples_per_segment", "segment_samples"):
             fixed["settings"].pop(key, None)
         fixed["settings"]["fastest"] = True
         return fixed
-    if m := _SAMPLES.search(message):
+    if m := re.match(r"settings\.N = (\d+) with \d+x the time \((.*)\) plans", clause):
+        fixed["settings"]["N"] = int(m.group(1))
+        clause = m.group(2)  # and the timing, below
+    if m := _SAMPLES.search(clause):
         fixed["settings"]["samples_per_segment"] = int(m.group(1))
         for key in ("speed_m_s", "total_time_s"):
             fixed["settings"].pop(key, None)
@@ -55,16 +62,18 @@ def apply_advice(request: dict, message: str) -> dict | None:
             if m.group(3):
                 lay["cell"]["shape"] = m.group(3)
         return fixed
-    if m := _SEGMENT_SAMPLES.search(message):
+    if m := _SEGMENT_SAMPLES.search(clause):
         f = int(m.group(1))
         fixed["settings"]["segment_samples"] = [c * f for c in fixed["settings"]["segment_samples"]]
         return fixed
-    if m := _SETTING.search(message):
+    if m := _SETTING.search(clause):
         key, value = m.group(1), m.group(2)
         fixed["settings"][key] = int(value) if key in ("N", "plant_substeps") else float(value)
-        # a setting named with others ("... = X and settings.plant_substeps = Y")
-        for extra in _SETTING.finditer(message[m.end():m.end() + 80]):
-            k2, v2 = extra.group(1), extra.group(2)
-            fixed["settings"][k2] = int(v2) if k2 in ("N", "plant_substeps") else float(v2)
+        if key == "N" and not any(fixed["settings"].get(k) not in (None, False) for k in
+                                  ("speed_m_s", "total_time_s", "samples_per_segment", "segment_samples", "fastest")):
+            # a longer horizon at the same timing: the samples a segment the request had
+            from planner import parse_request
+
+            fixed["settings"]["samples_per_segment"] = int(parse_request(request).settings.samples_per_segment)
         return fixed
     return None
