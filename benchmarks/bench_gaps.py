@@ -114,7 +114,7 @@ def run_case(req: dict, ratio: float | None) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
     ap.add_argument("--n", type=int, default=100)
     ap.add_argument("--seed", type=int, default=31)
     ap.add_argument("--proof-ratio", type=float, default=1.1)

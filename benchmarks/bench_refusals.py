@@ -55,7 +55,7 @@ def cases(slow: bool) -> list[tuple[str, dict]]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
     ap.add_argument("--skip-slow", action="store_true")
     args = ap.parse_args()
     rows = []

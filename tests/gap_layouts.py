@@ -58,6 +58,7 @@ def _holed(rng: np.random.Generator, lo: np.ndarray, hi: np.ndarray, gap: float,
         passage = shapely.affinity.rotate(passage, rng.uniform(-35, 35), origin=(xm, yp))
     passage = shapely.intersection(passage, shapely.box(lo[0] + 0.004, lo[1] + 0.004, hi[0] - 0.004, hi[1] - 0.004))
     hole = shapely.union_all([left, right, passage]).simplify(0.0)
+    assert isinstance(hole, shapely.Polygon)  # the rooms and the passage overlap: one piece
     outline = shapely.box(lo[0] - 0.01, lo[1] - 0.01, hi[0] + 0.01, hi[1] + 0.01)
     ring = [[float(x), float(y)] for x, y in np.asarray(hole.exterior.coords)[:-1]]
     obs = [{"type": "polygon", "points": [[float(x), float(y)] for x, y in np.asarray(outline.exterior.coords)[:-1]],

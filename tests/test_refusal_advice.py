@@ -41,6 +41,7 @@ def _plans_checked(req: dict) -> float:
     res = plan(req)
     v = check_plan(req, res, req["segments"])
     assert v.ok, v.problems
+    assert res.timing.moving_time_s is not None
     return res.timing.moving_time_s
 
 
@@ -75,8 +76,9 @@ def test_the_time_bound_is_below_every_plan_the_planner_finds():
         req = {**copy.deepcopy(TABLE1), "robot": robot, "settings": {"fastest": True}}
         res = plan(req)
         pr = parse_request(req)
+        assert pr.segments is not None
         bound = _time_needed(load_robot(robot), pr.settings, pr.segments)
-        assert bound is not None
+        assert bound is not None and res.timing.moving_time_s is not None
         assert res.timing.moving_time_s + TABLE1_TS >= bound[0], (res.timing.moving_time_s, bound)
 
 
