@@ -16,6 +16,7 @@ import pytest
 
 from planner import PlannerError, estimate_work, plan
 from planner import segment as segment_layout
+from planner.schema import MAX_CELLS
 from tests.certify_support import (
     ZERO_FIGURE,
     box_leg_range,
@@ -240,8 +241,10 @@ def test_where_users_go_slice():
 def test_the_advice_bound_counts_every_cell_the_remedy_search_segments(monkeypatch):
     """``estimate_work(...).advice_seconds`` bounds an error's advice checks by the cells the
     remedy search may segment (:func:`planner.corridor.remedy_cells`): with no remedy that
-    works (a wall across the bounds, a clearance, a psi range wider than the end angles) every
-    candidate is tried, and the cells segmented are exactly that count."""
+    works (a wall with a 0.1 mm gap, narrower than the smallest cells within MAX_CELLS, a
+    clearance, a psi range wider than the end angles) every candidate is tried, and the cells
+    segmented are exactly that count; a wall across the bounds is named without a search of
+    cell sizes (none can pass it), within that count."""
     from planner.corridor import remedy_cells, segmentation
 
     seen: list[int] = []
@@ -255,16 +258,26 @@ def test_the_advice_bound_counts_every_cell_the_remedy_search_segments(monkeypat
 
     lay = copy.deepcopy(WALL)
     lay["psi_range"] = [-0.1, 0.1]
+    lay["clearance"] = 1e-5
+    lay["obstacles"] = [{"type": "rectangle", "lower": [-0.01, -0.06], "upper": [0.01, 0.0]},
+                        {"type": "rectangle", "lower": [-0.01, 0.0001 + 2 * lay["clearance"]], "upper": [0.01, 0.06]}]
     req = {"robot": "moving-slide", "layout": lay}
     monkeypatch.setattr(segmentation, "_cells_and_path", counting)
     err = _error(req)
-    assert err.code == "no_path" and "no cell size can pass it" in err.message
+    assert err.code == "no_path" and "were tried and give no path" in err.message, err.message
     first, remedies = seen[0], seen[1:]
     cells, runs = remedy_cells(np.array(lay["bounds"]["lower"]), np.array(lay["bounds"]["upper"]), "square",
                                lay["cell"]["size"], lay["clearance"], True)
     assert first == 16 * 12 and (sum(remedies), len(remedies)) == (cells, runs)
+    assert cells > 2 * MAX_CELLS  # both shapes, down to the limit of cells
     est = estimate_work(req)
     assert est.advice_seconds > 0.0
+    # a wall across the bounds: no search of cell sizes, within the bound
+    seen.clear()
+    wall = {"robot": "moving-slide", "layout": {**copy.deepcopy(WALL), "psi_range": [-0.1, 0.1]}}
+    err = _error(wall)
+    assert err.code == "no_path" and "no cell size can pass it" in err.message
+    assert sum(seen[1:]) <= cells and len(seen) - 1 <= runs
 
 
 #: found by the 10 000-case run (seed 20): an end point a few micrometres from a triangle's

@@ -209,7 +209,9 @@ def test_fastest_estimate_depends_on_the_robot():
 
 def test_refusal_names_fastest_when_more_time_does_not_help():
     """At Ts 2 ms with N = 30 (S = 30), 2x-16x the time do not plan this corridor, but
-    ``fastest`` does: the error names it, and the advice plans (confirmed independently)."""
+    ``fastest`` does, and so does 32x the time (issue 31: the time factors go past 16x where
+    the limits allow): the error names one of them, and the advice plans (confirmed
+    independently)."""
     from planner import PlannerError
 
     from .certify_support import confirm_error
@@ -218,6 +220,6 @@ def test_refusal_names_fastest_when_more_time_does_not_help():
     with pytest.raises(PlannerError) as exc:
         plan(req)
     msg = exc.value.message
-    assert exc.value.code == "infeasible" and "settings.fastest plans it" in msg, msg
+    assert exc.value.code == "infeasible" and ("settings.fastest plans it" in msg or "32x the time plans" in msg), msg
     assert "too narrow" not in msg
     assert confirm_error(req, exc.value.code, msg, exc.value.field) is None

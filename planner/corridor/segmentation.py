@@ -53,6 +53,7 @@ from ..schema import (
     MAX_SEGMENTS,
     MAX_TOTAL_STEPS,
     MIN_CELL_SIZE,
+    SQRT3_2,
     Layout,
     Segment,
     SegmentationResult,
@@ -198,10 +199,17 @@ def _cells_and_path(ws: Workspace, model: Any, s: float, grown: tuple, field_pat
     return grid, state, found
 
 
-#: the remedy search of a failed segmentation tries at most this many cells in all (x MAX_CELLS)
-REMEDY_CELL_BUDGET = 3
-#: and cells down to this fraction of the requested size
-REMEDY_SMALLEST = 1 / 8
+#: the remedy search of a failed segmentation segments at most this many cells in all (x MAX_CELLS):
+#: both shapes at every size of its grid down to MAX_CELLS cells take ~5.6x, the sizes halfway
+#: between in the rest (issue 31)
+REMEDY_CELL_BUDGET = 10
+#: the remedy search's cell sizes: each this factor smaller than the one before, down to the
+#: smallest whose grid has at most MAX_CELLS cells (issue 31: halving skipped the sizes between,
+#: where a grid's alignment lets a narrow gap through: 1.2 mm triangles or 0.8 mm squares planned
+#: 6 of 30 layouts with 1-3 mm gaps refused after 5, 2.5 ... mm squares)
+REMEDY_RATIO = 1.25
+#: the psi-range and clearance remedies try cells of the given size and these fractions of it
+REMEDY_OTHER_SIZES = (1.0, 0.5, 0.25)
 
 
 def _has_path(ws: Workspace, model: Any, s: float, field_path: str) -> bool:
@@ -212,37 +220,95 @@ def _has_path(ws: Workspace, model: Any, s: float, field_path: str) -> bool:
     return True
 
 
-def _remedy_sizes(lower: np.ndarray, upper: np.ndarray, shape: str, s: float) -> tuple[list[float], int]:
-    """The smaller cell sizes the remedy search considers (halving down to
-    :data:`REMEDY_SMALLEST` of ``s``, each within :data:`MAX_CELLS`) and how many of them,
-    smallest last, fit the budget of :data:`REMEDY_CELL_BUDGET` x ``MAX_CELLS`` cells in all."""
-    sizes: list[float] = []
-    size = s
-    while size > s * REMEDY_SMALLEST * 1.0001:
-        size *= 0.5
-        if size < MIN_CELL_SIZE or cell_count(lower, upper, shape, size)[0] > MAX_CELLS:
+def _fits(lower: np.ndarray, upper: np.ndarray, shape: str, size: float) -> bool:
+    """Whether a grid of ``shape`` cells of edge ``size`` [m] is allowed over the bounds (at
+    least :data:`~planner.schema.MIN_CELL_SIZE`, one cell fits, at most ``MAX_CELLS`` cells)."""
+    W, H = (np.asarray(upper, float) - np.asarray(lower, float)).tolist()
+    high = size if shape == "square" else size * SQRT3_2
+    return (size >= MIN_CELL_SIZE and size <= W + 1e-12 and high <= H + 1e-12
+            and cell_count(lower, upper, shape, size)[0] <= MAX_CELLS)
+
+
+def _limit_size(lower: np.ndarray, upper: np.ndarray, shape: str) -> float:
+    """The smallest cell edge [m] (4 digits) whose grid of ``shape`` over the bounds has at most
+    ``MAX_CELLS`` cells."""
+    W, H = (np.asarray(upper, float) - np.asarray(lower, float)).tolist()
+    area = W * H if shape == "square" else 2.0 * W * H / SQRT3_2  # cells ~ area / size^2
+    size = float(np.sqrt(area / MAX_CELLS))
+    size = max(float(f"{size:.4g}"), MIN_CELL_SIZE)
+    for _ in range(1000):
+        if cell_count(lower, upper, shape, size)[0] <= MAX_CELLS:
             break
-        sizes.append(size)
-    spent = tried = 0
-    for size in sizes:
-        spent += cell_count(lower, upper, shape, size)[0]
-        if spent > REMEDY_CELL_BUDGET * MAX_CELLS:
-            break
-        tried += 1
-    return sizes, tried
+        size = float(f"{size * 1.0005:.4g}") if float(f"{size * 1.0005:.4g}") > size else size * 1.001
+    return size
+
+
+def _remedy_sizes(lower: np.ndarray, upper: np.ndarray, shape: str, s: float,
+                  shapes: tuple[str, ...] | None = None) -> list[tuple[str, float]]:
+    """The cells ``(shape, size)`` the remedy search of a layout with ``shape`` cells of edge
+    ``s`` [m] segments, the largest first (the fewest segments), at equal sizes ``shape`` first:
+    sizes from ``s`` down by :data:`REMEDY_RATIO` (rounded to 4 digits, so that a message's
+    figure gives the same grid) and the smallest whose grid has at most ``MAX_CELLS`` cells, in
+    both shapes (``shapes``: only these), the given ``(shape, s)`` left out; the smallest dropped
+    beyond :data:`REMEDY_CELL_BUDGET` x ``MAX_CELLS`` cells in all; with budget left, the sizes
+    halfway between (a factor ``sqrt(REMEDY_RATIO)``), the smallest first (a narrow gap passes
+    where a grid's lines fall about it: sizes apart by less find more of them)."""
+    order = (shape, "triangle" if shape == "square" else "square")
+    if shapes is not None:
+        order = tuple(sh for sh in order if sh in shapes)
+    main: list[tuple[str, float]] = []
+    for sh in order:
+        least = _limit_size(lower, upper, sh)
+        size, k = s, 0
+        while size >= least * (1.0 + 1e-9):
+            if not (k == 0 and sh == shape) and _fits(lower, upper, sh, size):
+                main.append((sh, size))
+            k += 1
+            size = float(f"{s / REMEDY_RATIO ** k:.4g}")
+        if least < s and _fits(lower, upper, sh, least) and (sh, least) not in main:
+            main.append((sh, least))
+    rank = {sh: i for i, sh in enumerate(order)}
+
+    def ordered(cells: list[tuple[str, float]]) -> list[tuple[str, float]]:
+        return sorted(cells, key=lambda c: (-c[1], rank[c[0]]))
+
+    budget = REMEDY_CELL_BUDGET * MAX_CELLS
+    out: list[tuple[str, float]] = []
+    spent = 0
+    for c in ordered(main):
+        spent += cell_count(lower, upper, *c)[0]
+        if spent > budget:
+            return out
+        out.append(c)
+    halves = []
+    for sh in order:
+        sizes = sorted(size for shp, size in out if shp == sh)
+        halves += [(sh, float(f"{np.sqrt(a * b):.4g}")) for a, b in zip(sizes[:-1], sizes[1:])]
+    for c in sorted(halves, key=lambda c: c[1]):  # the smallest first
+        n = cell_count(lower, upper, *c)[0]
+        if c in out or spent + n > budget:
+            continue
+        spent += n
+        out.append(c)
+    return ordered(out)
+
+
+def _other_sizes(lower: np.ndarray, upper: np.ndarray, shape: str, s: float) -> list[float]:
+    """The cell sizes the psi-range and clearance remedies try (:data:`REMEDY_OTHER_SIZES`)."""
+    return [s * f for f in REMEDY_OTHER_SIZES if f == 1.0 or _fits(lower, upper, shape, s * f)]
 
 
 def remedy_cells(lower: np.ndarray, upper: np.ndarray, shape: str, s: float, clearance: float,
                  psi_narrows: bool) -> tuple[int, int]:
     """(cells, segmentations): the most that :func:`_remedies` segments when a layout of cells
-    of edge ``s`` has no path; the bound of the advice's work, known before the request starts
+    of edge ``s`` has no path (and that :func:`segment` segments at the default size before it
+    finds one); the bound of the advice's work, known before the request starts
     (:func:`planner.orchestrator.estimate_work`). ``psi_narrows``: the layout's psi_range is
     wider than its start and end angles (a narrower one is tried)."""
-    sizes, tried = _remedy_sizes(lower, upper, shape, s)
-    counts = [cell_count(lower, upper, shape, size)[0] for size in [s, *sizes]]
-    cells, runs = sum(counts[1:1 + tried]), tried
-    again = sum(counts[:3])  # psi_range and clearance: the given size and the next two
-    k = len(counts[:3])
+    cand = _remedy_sizes(lower, upper, shape, s)
+    cells, runs = sum(cell_count(lower, upper, sh, size)[0] for sh, size in cand), len(cand)
+    others = _other_sizes(lower, upper, shape, s)
+    again, k = sum(cell_count(lower, upper, shape, size)[0] for size in others), len(others)
     if psi_narrows:
         cells, runs = cells + again, runs + k
     if clearance > 0:
@@ -250,20 +316,47 @@ def remedy_cells(lower: np.ndarray, upper: np.ndarray, shape: str, s: float, cle
     return cells, runs
 
 
-def _remedies(ws: Workspace, model: Any, s: float, field_path: str) -> list[str]:
+def _cell_words(shape: str, size: float, ws: Workspace, s: float, field_path: str) -> str:
+    """How a message names cells of ``shape`` and ``size`` [m] as a change of the layout's."""
+    if shape == ws.shape:
+        return f"cells of {size:g} m ({field_path}.cell.size; now {s:g} m)"
+    return (f"{shape} cells of {size:g} m ({field_path}.cell.shape and {field_path}.cell.size; now {ws.shape} "
+            f"cells of {s:g} m)")
+
+
+def _first_path(ws: Workspace, model: Any, cand: list[tuple[str, float]],
+                field_path: str) -> tuple[str, float, tuple[Grid, np.ndarray, tuple[list[int], int]]] | None:
+    """The first of the cells ``cand`` ``(shape, size)`` that give a path, with the grid,
+    states and path; None if none does."""
+    grown = ws.grown_parts()
+    for shape, size in cand:
+        try:
+            got = _cells_and_path(replace(ws, shape=shape), model, size, grown, field_path,
+                                  f"{field_path}.cell.size")
+        except PlannerError:
+            continue
+        return shape, size, got
+    return None
+
+
+def _remedies(ws: Workspace, model: Any, s: float, field_path: str,
+              tried: tuple[tuple[str, float], ...] = ()) -> list[str]:
     """The changes of the layout that were tried and give a path (checked by segmenting
-    again, within a budget of cells, :func:`remedy_cells`): smaller cells, a narrower
-    psi_range, a smaller clearance. Empty: none of the tried changes helps."""
-    sizes, tried = _remedy_sizes(ws.lower, ws.upper, ws.shape, s)
+    again, within a budget of cells, :func:`remedy_cells`): other cells (both shapes, every
+    size of :func:`_remedy_sizes`; none where the grown obstacles themselves cut the start off
+    from the end), a narrower psi_range, a smaller clearance. Empty: none of the tried changes
+    helps. ``tried``: cells already segmented without a path (the default size's search)."""
     out: list[str] = []
-    for size in sizes[:tried]:
-        if _has_path(ws, model, size, field_path):
-            out.append(f"cells of {size:g} m ({field_path}.cell.size; now {s:g} m) give a path")
-            break
+    if _separation(ws) is None:
+        cand = [c for c in _remedy_sizes(ws.lower, ws.upper, ws.shape, s) if c not in tried]
+        got = _first_path(ws, model, cand, field_path)
+        if got is not None:
+            out.append(f"{_cell_words(got[0], got[1], ws, s, field_path)} give a path")
+    others = _other_sizes(ws.lower, ws.upper, ws.shape, s)
     default_psi = np.array([min(ws.start[2], ws.end[2]), max(ws.start[2], ws.end[2])])
     if np.any(np.abs(ws.psi_range - default_psi) > 1e-12):
         narrow = replace(ws, psi_range=default_psi)
-        for size in [s, *sizes[:2]]:
+        for size in others:
             if _has_path(narrow, model, size, field_path):
                 out.append(f"psi_range [{default_psi[0]:g}, {default_psi[1]:g}] rad"
                            + (f" with cells of {size:g} m" if size != s else "") + " gives a path")
@@ -271,7 +364,7 @@ def _remedies(ws: Workspace, model: Any, s: float, field_path: str) -> list[str]
     if ws.clearance > 0:
         for c in (0.5 * ws.clearance, 0.0):
             less = replace(ws, clearance=c)
-            ok = next((size for size in [s, *sizes[:2]] if _has_path(less, model, size, field_path)), None)
+            ok = next((size for size in others if _has_path(less, model, size, field_path)), None)
             if ok is not None:
                 out.append(f"a clearance of {c:g} m ({field_path}.clearance; now {ws.clearance:g} m)"
                            + (f" with cells of {ok:g} m" if ok != s else "") + " gives a path")
@@ -335,10 +428,20 @@ def _endpoint_blocker(ws: Workspace, key: str) -> str | None:
     return f"the {key} lies on the edge of obstacle {int(owner[i])} (layout.obstacles[{int(owner[i])}]){grown}"
 
 
-def _no_path_error(exc: PlannerError, ws: Workspace, model: Any, s: float, field_path: str) -> PlannerError:
+def _smallest_words(cand: list[tuple[str, float]], ws: Workspace, s: float) -> str:
+    """The smallest cells of each shape the remedy search tried, in words."""
+    least: dict[str, float] = {ws.shape: s}
+    for shape, size in cand:
+        least[shape] = min(least.get(shape, size), size)
+    return " and ".join(f"{shape} cells down to {size:g} m" for shape, size in least.items())
+
+
+def _no_path_error(exc: PlannerError, ws: Workspace, model: Any, s: float, field_path: str,
+                   tried: tuple[tuple[str, float], ...] = ()) -> PlannerError:
     """The failed segmentation's error with advice that works: the remedies checked by
-    segmenting again, or the obstacle that makes every cell size hopeless."""
-    fixes = _remedies(ws, model, s, field_path)
+    segmenting again, or the obstacle that makes every cell size hopeless. ``tried``: the
+    cells the default size's search segmented already (not segmented again)."""
+    fixes = _remedies(ws, model, s, field_path, tried)
     if fixes:
         return PlannerError(exc.code, f"{exc.message}; " + "; or ".join(fixes), exc.field)
     cut = _separation(ws)
@@ -349,20 +452,22 @@ def _no_path_error(exc: PlannerError, ws: Workspace, model: Any, s: float, field
             "; a smaller clearance opens a gap narrower than the smallest cells tried")
         return PlannerError(exc.code, f"{exc.message}; the {cut}: {hopeless}; move the start or the end",
                             exc.field)
+    cand = list(tried) + [c for c in _remedy_sizes(ws.lower, ws.upper, ws.shape, s) if c not in tried]
+    down_to = _smallest_words(cand, ws, s)
     if exc.field is not None and exc.field.endswith((".start", ".end")):
         key = exc.field.rsplit(".", 1)[1]
         why = _endpoint_blocker(ws, key)
         if why is not None:
             return PlannerError(exc.code, f"{exc.message}; {why}: no cell holding it is wholly free, at any size "
-                                "(tried down to " f"{s * REMEDY_SMALLEST:g} m); move the {key}", exc.field)
-    return PlannerError(exc.code, f"{exc.message}; cells down to {s * REMEDY_SMALLEST:g} m, a smaller clearance "
-                        "and the narrowest psi_range were tried and give no path: the free space that joins them "
-                        "is narrower than that, or the robot cannot reach it; move the start or the end",
-                        exc.field)
+                                f"(tried {down_to}); move the {key}", exc.field)
+    return PlannerError(exc.code, f"{exc.message}; {down_to} (every size a factor {REMEDY_RATIO:g} apart, to the "
+                        f"limit of {MAX_CELLS} cells), a smaller clearance and the narrowest psi_range were tried and "
+                        "give no path: the free space that joins them is narrower than that, or the robot cannot "
+                        "reach it; move the start or the end", exc.field)
 
 
 def segment(layout: Layout | dict[str, Any], robot: Any, settings: Settings | None = None,
-            field_path: str = "layout") -> Segmentation:
+            field_path: str = "layout", advise: bool = True) -> Segmentation:
     """Segment a layout (the module docstring) into cells and a corridor for ``robot`` (a
     :class:`~planner.model.RobotModel` or what :func:`~planner.model.load_robot` takes).
 
@@ -370,6 +475,8 @@ def segment(layout: Layout | dict[str, Any], robot: Any, settings: Settings | No
     the bounds or inside an obstacle grown by the clearance), ``unreachable``/``singular``
     (start or end not reachable by the robot, or its cell not wholly reachable), ``no_path``
     (no chain of free cells joins start and end), ``too_large`` (too many cells or samples).
+    ``advise=False``: a ``no_path`` at the given cells as it is, without the remedy search
+    (and without the default size's search of other cells).
     """
     t0 = time.perf_counter()
     model = load_robot(robot)
@@ -386,7 +493,20 @@ def segment(layout: Layout | dict[str, Any], robot: Any, settings: Settings | No
         if exc.code not in ("no_path", "unreachable") or exc.field not in (field_path, f"{field_path}.start",
                                                                               f"{field_path}.end"):
             raise
-        raise _no_path_error(exc, ws, model, s, field_path) from None
+        if not advise:
+            raise
+        got, tried = None, ()
+        if ws.size is None and _separation(ws) is None:
+            # the default size: the first of the remedy search's cells that gives a path (issue 31:
+            # 1-3 mm gaps were refused at the default size while smaller cells planned them); a
+            # shape the request gave is kept
+            cand = _remedy_sizes(ws.lower, ws.upper, ws.shape, s, (ws.shape,) if ws.shape_given else None)
+            got = _first_path(ws, model, cand, field_path)
+            tried = tuple(cand)
+        if got is None:
+            raise _no_path_error(exc, ws, model, s, field_path, tried) from None
+        shape, s, (grid, state, found) = got
+        ws = replace(ws, shape=shape)
     path, turns = found
     n_seg = len(path) + 2
     S = settings.samples_per_segment

@@ -42,6 +42,7 @@ class Workspace:
     end: np.ndarray  # (3,)
     psi_range: np.ndarray  # (2,) allowed platform angle [rad]
     circles: dict = field(default_factory=dict)  # obstacle index -> (centre (2,), radius) [m]
+    shape_given: bool = True  # the request gave the cell shape (False: the default, square)
 
     def grown_parts(self) -> tuple[np.ndarray, np.ndarray]:
         """The obstacles grown by the clearance, as pieces whose union is each grown obstacle
@@ -100,7 +101,8 @@ def parse_layout(raw: Layout | dict[str, Any], path: str = "layout") -> Workspac
             obstacles.append(o.shape)  # with its holes
     return Workspace(np.array(raw.bounds.lower, float), np.array(raw.bounds.upper, float), obstacles,
                      float(raw.clearance), raw.cell.shape, raw.cell.size, np.array(raw.start_pose, float),
-                     np.array(raw.end_pose, float), np.array(raw.angle_range, float), circles)
+                     np.array(raw.end_pose, float), np.array(raw.angle_range, float), circles,
+                     "shape" in raw.cell.model_fields_set)
 
 
 def format_point(p: np.ndarray) -> str:

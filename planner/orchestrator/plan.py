@@ -17,15 +17,15 @@ import numpy as np
 
 from .._jit import numpy_only
 from ..constraints import MARGIN_M, MARGIN_RAD, ConstrainedController
-from ..corridor import RangeSequence, Segmentation, cell_size_rule, range_sequence, reference_sequence
+from ..corridor import RangeSequence, Segmentation, range_sequence, reference_sequence
 from ..corridor import segment as segment_layout
 from ..corridor.geometry import corridor_gaps
-from ..corridor.workspace import parse_layout
 from ..errors import PlannerError, invalid
 from ..model import RobotModel, load_robot
 from ..model.plant import plant_substeps
 from ..model.reach import check_pose, check_segments
 from ..schema import (
+    DEFAULT_FORCE_RISE_S,
     MAX_HORIZON,
     MAX_SAMPLES_PER_SEGMENT,
     MAX_TOTAL_STEPS,
@@ -89,8 +89,12 @@ def _plan(req: PlanRequest, t0: float, robot: RobotModel | None, segments: Seque
     st = _with_substeps(req, model)
     if segments is None:
         segments = req.segments
+    cells: tuple[str, float] | None = None  # a layout's cells where the request leaves their size out
     if segments is None and req.layout is not None:
-        segments = segment_layout(req.layout, model, st).segments
+        seg = segment_layout(req.layout, model, st)
+        segments = seg.segments
+        if req.layout.cell.size is None:
+            cells = (seg.shape, seg.size)
         check_work(req, segments, work_limit_s)
     if segments is not None:
         check_segments(model, segments)
@@ -109,12 +113,11 @@ def _plan(req: PlanRequest, t0: float, robot: RobotModel | None, segments: Seque
             if work_limit_s is not None and work_limit_s > 0:  # what the limit leaves for the checks
                 budget = work_limit_s - (time.perf_counter() - t0)
             estimate_s = estimate_work(req, segments).seconds
-            advised = _more_time_advice(exc, req.name, model, given, st, segments, budget, estimate_s,
-                                        _default_cell_size(req))
+            advised = _more_time_advice(exc, req.name, model, given, st, segments, budget, estimate_s, cells)
             if "the time plans" not in advised.message:
                 if budget is not None:
                     budget = work_limit_s - (time.perf_counter() - t0)  # type: ignore[operator]
-                advised = _other_advice(advised, req, model, st, segments, budget, estimate_s)
+                advised = _other_advice(advised, req, model, st, segments, budget, estimate_s, given, cells)
             raise advised from None
         raise
     result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3  # everything, result arrays included
@@ -140,57 +143,137 @@ def _with_substeps(req: PlanRequest, model: RobotModel) -> Settings:
     return st if n == st.plant_substeps else st.model_copy(update={"plant_substeps": n})
 
 
-def _default_cell_size(req: PlanRequest) -> float | None:
-    """The cell size [m] the request's layout is segmented with when it leaves
-    ``layout.cell.size`` out (:func:`~planner.corridor.cell_size_rule`); None otherwise."""
-    if req.layout is None or req.layout.cell.size is not None:
+def _rest_to_rest_s(d: float, a: float, j: float | None) -> float:
+    """The shortest time [s] a point mass takes over ``d`` [m] from rest to rest with its
+    acceleration at most ``a`` [m/s^2] and its jerk at most ``j`` [m/s^3] (None: no bound)."""
+    if d <= 0.0:
+        return 0.0
+    if j is None:
+        return 2.0 * float(np.sqrt(d / a))
+    if d <= 2.0 * a ** 3 / j ** 2:  # the acceleration never reaches a: four jerk phases
+        return 4.0 * float(np.cbrt(d / (2.0 * j)))
+    t1 = a / j  # ramps of the acceleration, then phases at a
+    t2 = 0.5 * (-3.0 * t1 + float(np.sqrt(t1 * t1 + 4.0 * d / a)))
+    return 4.0 * t1 + 2.0 * t2
+
+
+def _time_needed(model: RobotModel, st: Settings, segments: Sequence[Segment]) -> tuple[float, str] | None:
+    """A lower bound [s] on the time the robot takes from the corridor's start point to its end
+    point, and the limit that sets it, in words (issue 31: a request that asks less time than
+    this is impossible as asked, and no other horizon or solver helps): each leg changes its
+    length from the start's to the end's at most at its ``speed_max``; and, where the platform
+    keeps its angle, the platform alone (without the legs' masses and friction, which only slow
+    it) pushed by all drives together at their ``force_max`` and, with a force-rate limit,
+    changing that push at most at the sum of the drives' rates, from rest to rest along the
+    straight line. None if the corridor does not start and end at a point."""
+    first, last = segments[0], segments[-1]
+    if not (np.array_equal(first.lower, first.upper) and np.array_equal(last.lower, last.upper)):
         return None
-    ws = parse_layout(req.layout)
-    return cell_size_rule(ws.lower, ws.upper, ws.start, ws.end, ws.shape, req.settings)
+    a, b = np.asarray(first.lower, float), np.asarray(last.lower, float)
+    from ..model.kinematics import leg_lengths
+
+    change = np.abs(np.diff(leg_lengths(model, np.array([a, b])), axis=0)[0])
+    legs = change / model.speed_max
+    i = int(np.argmax(legs))
+    out = [(float(legs[i]), f"leg {i}'s speed limit of {model.speed_max[i]:g} m/s (the leg changes by "
+            f"{change[i] * 1e3:.4g} mm)")]
+    if all(float(s.lower[2]) == float(s.upper[2]) == float(a[2]) for s in segments):
+        d = float(np.hypot(*(b[:2] - a[:2])))
+        force = float(np.sum(model.force_max))
+        rate = st.force_rate_n_s
+        if isinstance(rate, str):
+            j = None
+        else:
+            rates = (model.force_max / DEFAULT_FORCE_RISE_S if rate is None
+                     else np.broadcast_to(np.asarray(rate, float), model.force_max.shape))
+            j = float(np.sum(rates)) / model.platform_mass
+        t = _rest_to_rest_s(d, force / model.platform_mass, j)
+        words = (f"the drive forces ({force:g} N together on the {model.platform_mass:g} kg platform alone, from "
+                 f"rest to rest over the {d * 1e3:.4g} mm from the start to the end")
+        if j is not None and t > 1.001 * _rest_to_rest_s(d, force / model.platform_mass, None):
+            words += f", their force rates at most {j * model.platform_mass:g} N/s together (settings.force_rate_n_s)"
+        out.append((t, words + ")"))
+    return max(out)
+
+
+def _moving_time(st: Settings, segments: Sequence[Segment]) -> float:
+    """The time [s] a resolved timing gives the robot from leaving the start point to being
+    at the end point: the moving segments' samples and one more."""
+    counts = (np.asarray(st.segment_samples, float) if st.segment_samples is not None
+              else np.full(len(segments), float(st.samples_per_segment)))
+    return float((counts[1:-1].sum() + 1.0) * st.Ts)
+
+
+def _with_more_time(given: Settings, st: Settings, segments: Sequence[Segment], factor: int,
+                    cells: tuple[str, float] | None) -> tuple[Settings, str] | None:
+    """The settings of a plan with ``factor`` times the time (``st`` resolved from the request's
+    ``given`` settings), resolved as a request would be, with ``require_settled``, and how the
+    advice names them in the timing field the request used; None over the limits on samples.
+    ``cells``: see :func:`_more_time_advice`."""
+    counts = np.asarray(st.segment_samples if st.segment_samples is not None
+                        else [st.samples_per_segment] * len(segments), dtype=np.int64)
+    new = counts * factor
+    if int(new.max()) > MAX_SAMPLES_PER_SEGMENT or int(new.sum()) + st.tail_steps > MAX_TOTAL_STEPS:
+        return None
+    if given.speed_m_s is not None:
+        advised = given.model_copy(update={"speed_m_s": given.speed_m_s / factor})
+        how = f"settings.speed_m_s = {given.speed_m_s / factor:.6g} m/s"
+    elif given.total_time_s is not None:
+        advised = given.model_copy(update={"total_time_s": given.total_time_s * factor})
+        how = f"settings.total_time_s = {given.total_time_s * factor:.6g} s"
+    elif given.segment_samples is not None:
+        advised = st.model_copy(update={"segment_samples": [int(c) for c in new],
+                                        "samples_per_segment": int(new.max())})
+        how = f"settings.segment_samples x {factor}"
+    else:
+        advised = st.model_copy(update={"samples_per_segment": int(st.samples_per_segment * factor)})
+        how = f"settings.samples_per_segment = {st.samples_per_segment * factor}"
+        if cells is not None:
+            how += f" with layout.cell.size = {float(cells[1])!r} m, the cell size it has now"
+            if cells[0] != "square":
+                how += f" (layout.cell.shape = {cells[0]})"
+    try:
+        return resolve_timing(advised, segments).model_copy(update={"require_settled": True}), how
+    except PlannerError:
+        return None
 
 
 def _more_time_advice(exc: PlannerError, name: str | None, model: RobotModel, given: Settings, st: Settings,
                       segments: Sequence[Segment], budget_s: float | None = None,
-                      estimate_s: float = 0.0, cell_size: float | None = None) -> PlannerError:
+                      estimate_s: float = 0.0, cells: tuple[str, float] | None = None) -> PlannerError:
     """``exc`` (an infeasible constrained plan) with advice that was checked: the corridor
     planned again with :data:`MORE_TIME` times the samples of every segment (each candidate
-    abandoned at its first infeasible step); the first that plans is named in the timing field
-    the request used. If none plans, the error says that more time does not help.
+    abandoned at its first infeasible step; a factor that gives less time than
+    :func:`_time_needed` is not planned: it cannot plan), as far as the limits on samples and
+    the budget allow; the first that plans is named in the timing field the request used. If
+    the request's time is under that bound, the error says so, with the limit and the amount.
+    If none plans, the error says that more time does not help.
     ``budget_s``: the compute time the checks may take (None: no bound); a candidate whose
     estimate (``estimate_s`` of the request times the factor) does not fit is not planned.
-    ``cell_size``: the default cell size of the request's layout [m]; more samples a segment
-    give another default (:func:`~planner.corridor.cell_size_rule`), so advice in samples names
-    this size too, which keeps the corridor the check planned."""
-    counts = np.asarray(st.segment_samples if st.segment_samples is not None
-                        else [st.samples_per_segment] * len(segments), dtype=np.int64)
+    ``cells``: the shape and size [m] of the cells the request's layout was segmented into where
+    it left their size out; more samples a segment give another default
+    (:func:`~planner.corridor.cell_size_rule`), so advice in samples names these cells too,
+    which keeps the corridor the check planned."""
     tried: list[int] = []
     stop = ""  # why the search stopped early
+    needed = _time_needed(model, st, segments)
+    moving_s = _moving_time(st, segments)
+    below: list[int] = []  # factors that give less time than the bound: not planned
+    head = exc.message
+    if needed is not None and moving_s < needed[0]:
+        head += (f"; the request is impossible as asked: with {needed[1]}, the robot needs at least {needed[0]:.3g} s "
+                 f"from the start to the end, its timing gives {moving_s:.3g} s "
+                 f"({needed[0] / moving_s:.3g}x too little)")
+    exc = PlannerError(exc.code, head, exc.field)
     for factor in MORE_TIME:
-        new = counts * factor
-        if int(new.max()) > MAX_SAMPLES_PER_SEGMENT or int(new.sum()) + st.tail_steps > MAX_TOTAL_STEPS:
+        if needed is not None and moving_s * factor < needed[0]:
+            below.append(factor)
+            continue
+        timed = _with_more_time(given, st, segments, factor, cells)
+        if timed is None:
             stop = "more time exceeds the limits on samples"
             break
-        # the settings advised, in the timing field the request used, resolved as a request would be
-        if given.speed_m_s is not None:
-            advised = given.model_copy(update={"speed_m_s": given.speed_m_s / factor})
-            how = f"settings.speed_m_s = {given.speed_m_s / factor:.6g} m/s"
-        elif given.total_time_s is not None:
-            advised = given.model_copy(update={"total_time_s": given.total_time_s * factor})
-            how = f"settings.total_time_s = {given.total_time_s * factor:.6g} s"
-        elif given.segment_samples is not None:
-            advised = st.model_copy(update={"segment_samples": [int(c) for c in new],
-                                            "samples_per_segment": int(new.max())})
-            how = f"settings.segment_samples x {factor}"
-        else:
-            advised = st.model_copy(update={"samples_per_segment": int(st.samples_per_segment * factor)})
-            how = f"settings.samples_per_segment = {st.samples_per_segment * factor}"
-            if cell_size is not None:
-                how += f" with layout.cell.size = {float(cell_size)!r} m, the cell size it has now"
-        try:
-            sub = resolve_timing(advised, segments).model_copy(update={"require_settled": True})
-        except PlannerError:
-            stop = "more time exceeds the limits on samples"
-            break
+        sub, how = timed
         if budget_s is not None and estimate_s * factor > budget_s:
             stop = "more was not tried within the work limit"
             break
@@ -210,7 +293,9 @@ def _more_time_advice(exc: PlannerError, name: str | None, model: RobotModel, gi
             break
         return PlannerError("infeasible", f"{exc.message}; {factor}x the time plans ({how}, checked)", exc.field)
     if not tried:
-        return PlannerError("infeasible", f"{exc.message}; more time was not tried ({stop})", exc.field)
+        more = f"up to {below[-1]}x the time cannot plan (under that bound); more" if below else "more time"
+        return PlannerError("infeasible", f"{exc.message}; {more} was not tried ({stop or 'no factor left'})",
+                            exc.field)
     times = ", ".join(f"{f}x" for f in tried)
     if stop:
         return PlannerError("infeasible", f"{exc.message}; {times} the time do not help either (checked; {stop})",
@@ -219,15 +304,28 @@ def _more_time_advice(exc: PlannerError, name: str | None, model: RobotModel, gi
                         "corridor is too narrow there for the robot's drive limits", exc.field)
 
 
+#: the compute time [s] the advice of a longer horizon with more time may take where the request
+#: has no work limit of its own (a server's limit bounds it otherwise)
+COMBINED_ADVICE_S = 60.0
+
+
 def _other_advice(exc: PlannerError, req: PlanRequest, model: RobotModel, st: Settings,
-                  segments: Sequence[Segment], budget_s: float | None, estimate_s: float) -> PlannerError:
+                  segments: Sequence[Segment], budget_s: float | None, estimate_s: float,
+                  given: Settings | None = None, cells: tuple[str, float] | None = None) -> PlannerError:
     """``exc`` (an infeasible plan that more time did not cure, or more time was not tried)
     with the first of these remedies that plans, checked (issue 31: at Ts 2 ms a third of the
     short corridors were refused with "2x ... 16x the time do not help" while a longer horizon
     or ``fastest`` planned): a longer horizon ``N`` (the robot's default horizon where the
     request gave a shorter one, else twice the horizon, at most MAX_HORIZON) at the timing the
-    request asked for, then ``settings.fastest``; each within ``budget_s`` (its estimate, from
-    ``estimate_s`` of the request, must fit). Unchanged if none plans."""
+    request asked for; a horizon that previews as much of the corridor as the request's did with
+    more time (``f N`` samples, at most MAX_HORIZON, at ``f`` times the time, ``f`` the first of
+    :data:`MORE_TIME` at least twice what :func:`_time_needed` asks and at least 2; issue 31: a
+    leg speed of 0.01 m/s planned Table I with N 200 and 16x the time, not with either alone;
+    within :data:`COMBINED_ADVICE_S` where the request has no work limit; ``given`` and
+    ``cells`` as :func:`_more_time_advice` takes them); then ``settings.fastest``, then more
+    plant sub-steps (the robot's own
+    count where the request gave fewer, else twice, at most 50); each within ``budget_s`` (its
+    estimate, from ``estimate_s`` of the request, must fit). Unchanged if none plans."""
     tried: list[str] = []
     # a remedy found: the time factors did not help, but the corridor is not too narrow
     head = exc.message.replace(": the corridor is too narrow there for the robot's drive limits", "")
@@ -247,6 +345,26 @@ def _other_advice(exc: PlannerError, req: PlanRequest, model: RobotModel, st: Se
             tried.append(f"settings.N = {N}")
             if budget_s is not None:
                 budget_s -= time.perf_counter() - t_try
+    needed = _time_needed(model, st, segments)
+    ratio = max(1.0, needed[0] / _moving_time(st, segments)) if needed is not None else 1.0
+    factor = next((f for f in MORE_TIME if f >= 2.0 * ratio), None)
+    timed = _with_more_time(given, st, segments, factor, cells) if factor is not None and given is not None else None
+    if timed is not None and factor is not None:
+        sub, how = timed
+        N_far = min(MAX_HORIZON, st.N * factor)
+        cost = estimate_s * factor * N_far / st.N
+        if N_far > st.N and cost <= (budget_s if budget_s is not None else COMBINED_ADVICE_S):
+            t_try = time.perf_counter()
+            sub = sub.model_copy(update={"N": N_far})
+            try:
+                if _run(req.name, model, sub, segments, None, abandon=True)[0].metrics.settled:
+                    return PlannerError("infeasible", f"{head}; settings.N = {N_far} with {factor}x the time ({how}) "
+                                        "plans (checked)", "settings.N")
+            except PlannerError:
+                pass
+            tried.append(f"settings.N = {N_far} with {factor}x the time")
+            if budget_s is not None:
+                budget_s -= time.perf_counter() - t_try
     if not st.fastest:
         fast = req.model_copy(update={"settings": Settings.model_validate(
             {**req.settings.model_dump(mode="json", exclude_unset=True, exclude={*TIMING_FIELDS}), "fastest": True})})
@@ -260,6 +378,22 @@ def _other_advice(exc: PlannerError, req: PlanRequest, model: RobotModel, st: Se
                                     f"{res.metrics.duration_s:.3g} s (checked)", "settings.fastest")
             except PlannerError:
                 tried.append("settings.fastest")
+    # finer plant integration (issue 31: stiff legs, friction 2000 N s/m, planned with 8 RK4 steps a
+    # sample): the robot's own count where the request gave fewer, else twice the steps
+    auto = plant_substeps(model, st.Ts, np.asarray(segments[0].centre, float))
+    steps = auto if st.plant_substeps < auto else min(2 * st.plant_substeps, 50)
+    if steps > st.plant_substeps and auto > 1:  # (a robot whose stiffness one step a sample suits: no)
+        cost = estimate_s * steps / st.plant_substeps
+        if budget_s is None or cost <= budget_s:
+            sub = st.model_copy(update={"plant_substeps": steps, "require_settled": True})
+            try:
+                if _run(req.name, model, sub, segments, None, abandon=True)[0].metrics.settled:
+                    return PlannerError("infeasible", f"{head}; settings.plant_substeps = {steps} plans (a finer "
+                                        "integration of the robot at the same timing, checked)",
+                                        "settings.plant_substeps")
+            except PlannerError:
+                pass
+            tried.append(f"settings.plant_substeps = {steps}")
     if tried:
         return PlannerError("infeasible", f"{exc.message}; {' and '.join(tried)} do not plan either (checked)",
                             exc.field)

@@ -75,8 +75,9 @@ __all__ = ["FASTEST_A_M_S2", "FASTEST_BISECTION", "FASTEST_RAMPS", "FASTEST_SLOW
            "check_work", "estimate_work", "fastest_count", "fastest_steps", "slack_allowance", "slack_costs"]
 
 #: the time factors the advice of an infeasible constrained plan tries, in this order (each
-#: planned until its first infeasible step; the first that plans is advised)
-MORE_TIME = (2, 4, 8, 16)
+#: planned until its first infeasible step; the first that plans is advised), as far as the
+#: limits on samples allow (issue 31: a speed of 5 m/s on Table I planned at 1/32 of it)
+MORE_TIME = (2, 4, 8, 16, 32, 64, 128, 256)
 
 #: ``fastest``: the acceleration [m/s^2] of the move from rest to rest over the longest step
 #: between two segment centres that sets the uniform count the search finds (Table I, 2 cm
