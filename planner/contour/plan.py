@@ -69,6 +69,7 @@ from .placement import CONTOUR_PSI, check_reach, check_reachable, fit_origin, pr
 from .profiles import OptimalProfiles
 from .search import Scale, confirmed_infeasible, largest_feasible, search_timing, z_caps
 from .tube import PathGeometry, path_to_cut
+from .zaxis import ZPlan, plan_z, programmed_z, z_speed_caps
 
 # the names this module had before issue 34 split it (the estimate's constants, the search's
 # scale finder) stay importable from it
@@ -202,7 +203,6 @@ class _Walk:
             part = plan_cut(req, model, st, chunk, origin, tol, CONTOUR_PSI, self.pos, geo, b.elements, self.hint,
                             len(self.program.passes), self.memo, self.limit_at)
             self.hint = part.scale if part.scale is not None else self.hint
-            cut_z(part, b.elements, origin)
             self.parts.append(part)
             self.pos = part.result.pose[-1, :2].copy()
         self.summaries.append(_pass_summary(len(self.summaries), b, self.parts[first:], geo, tol))
@@ -252,19 +252,66 @@ def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[i
              psi: float, pos: np.ndarray, geo: PathGeometry, elements: list[PathElement],
              hint: Scale | None = None, passes: int = 1, memo: dict | None = None,
              limit_at: float | None = None) -> Part:
-    """One piece of a pass planned rest to rest. ``hint``: the ``fastest`` scale found for the
-    piece before (where its search starts; the search's result is bracketed the same way from
-    any start). No timing found: the ``infeasible`` error with its advice checked
-    (:func:`confirmed_infeasible`, its checks stopped at the ``time.process_time`` ``limit_at``)."""
-    els = [elements[k] for k in chunk]
+    """One piece of a pass planned rest to rest, its Z planned with it (:func:`plan_piece_z`).
+    ``hint``: the ``fastest`` scale found for the piece before (where its search starts; the
+    search's result is bracketed the same way from any start). No timing found: the
+    ``infeasible`` error with its advice checked (:func:`confirmed_infeasible`, its checks
+    stopped at the ``time.process_time`` ``limit_at``)."""
+    els0 = [elements[k] for k in chunk]
     st = st.model_copy(update={"settle_speed_m_s": min(st.settle_speed_m_s, 1e-4)})
-    found = search_timing(req.feed, model, st, TubeSizes(model, st, chunk, els, origin, tol, psi, pos, elements),
-                          chunk, els, hint, z_max_m_s=req.z_rapid_m_s,
-                          optimal=OptimalProfiles(model, st, chunk, els, origin, psi, memo, speed_caps(req.feed, els,
-                                                  req.z_rapid_m_s)))
-    if found.result is None:
-        raise confirmed_infeasible(req, model, st, chunk, els, origin, tol, psi, pos, elements, found, hint, passes,
-                                   limit_at)
+    # the Z axis acceleration's first XY speed caps (issue 32, goal 3), lowered where the Z planned misses
+    caps = z_speed_caps(els0, tol, req.z_rapid_m_s, req.z_accel_m_s2)
+    for attempt in range(Z_TRIES):
+        # program feed: a move's F is the process limit, and the Z axis lowers it as cap_z_speed does
+        els = [e.model_copy(update={"feed_m_s": float(c)}) if req.feed == "program" and c < e.feed_m_s else e
+               for e, c in zip(els0, caps)]
+        zcaps = np.where(np.isfinite(caps), caps, np.inf)
+        found = search_timing(req.feed, model, st, TubeSizes(model, st, chunk, els, origin, tol, psi, pos, elements),
+                              chunk, els, hint, z_max_m_s=req.z_rapid_m_s, caps=zcaps,
+                              optimal=OptimalProfiles(model, st, chunk, els, origin, psi, memo,
+                                                      np.minimum(speed_caps(req.feed, els, req.z_rapid_m_s), zcaps)))
+        if found.result is None:
+            raise confirmed_infeasible(req, model, st, chunk, els, origin, tol, psi, pos, elements, found, hint,
+                                       passes, limit_at)
+        part = _cut_part(found, geo, tol)
+        zp = plan_piece_z(part, elements, origin, tol, st.Ts, req)
+        if zp.ok:
+            return part
+        # the moves whose samples Z could not follow: slower than their samples ran
+        speed = np.hypot(*part.result.velocity[:, :2].T)
+        for k in np.unique(part.elem[zp.miss > 0]):
+            j = chunk.index(int(k))
+            for jj in (j - 1, j, j + 1):  # a slope change is the junction of two moves: both
+                if 0 <= jj < len(chunk):
+                    top = float(speed[part.elem == chunk[jj]].max(initial=0.0))
+                    caps[jj] = min(caps[jj], Z_SLOWER * top) if top > 0 else caps[jj]
+    line = elements[int(part.elem[int(np.argmax(zp.miss))])].line
+    raise PlannerError("infeasible", f"line {line}: the Z axis cannot follow the path within the tolerance "
+                       f"({tol * 1e3:g} mm) at a Z acceleration of {req.z_accel_m_s2:g} m/s^2 and a Z speed of "
+                       f"{req.z_rapid_m_s:g} m/s, even {Z_TRIES} times slower there; give a larger z_accel_m_s2 "
+                       "or tolerance_m", "z_accel_m_s2")
+
+
+#: a piece whose Z cannot follow is planned again at most this many times, each time the moves
+#: Z missed on capped at this share of the speed their samples ran
+Z_TRIES = 8
+Z_SLOWER = 0.7
+
+
+def plan_piece_z(part: Part, elements: list[PathElement], origin: np.ndarray, tol: float, Ts: float,
+                 req: ContourRequest) -> ZPlan:
+    """Fill the Z and source line of a cut part: the programmed Z where each sample projects
+    onto its move, planned within the Z axis speed and acceleration and the 3-D tolerance
+    (:func:`planner.contour.zaxis.plan_z`); the plan (``ok``: it holds)."""
+    cut_z(part, elements, origin)
+    zp, d = programmed_z(part.result.pose[:, :2], part.elem, elements, origin)
+    got = plan_z(zp, np.sqrt(np.maximum(tol * tol - d * d, 0.0)), Ts, req.z_rapid_m_s, req.z_accel_m_s2)
+    part.z = got.z
+    return got
+
+
+def _cut_part(found: Any, geo: PathGeometry, tol: float) -> Part:
+    """The part of a piece's timing found: per sample its move, source line and deviation."""
     result, t = found.result, found.tube
     assert t is not None
     K = len(result.time)

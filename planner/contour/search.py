@@ -122,11 +122,13 @@ class TimingSearch:
 
     def __init__(self, model: RobotModel, st: Settings, tube_at: Callable[[float], Tube], chunk: list[int],
                  els: list[PathElement], deadline: float | None, optimal: Callable[[Tube], Optimal] | None,
-                 z_max_m_s: float | None = None) -> None:
+                 z_max_m_s: float | None = None, caps: np.ndarray | None = None) -> None:
         self.model, self.st, self.tube_at, self.chunk, self.els = model, st, tube_at, chunk, els
         self.deadline, self.optimal = deadline, optimal
         self.feed = np.array([e.feed_m_s for e in els])
         self.zcap = z_caps(els, z_max_m_s)  # the XY speed that keeps each move's Z within the axis speed
+        if caps is not None:  # and its acceleration (planner.contour.zaxis.z_speed_caps)
+            self.zcap = np.minimum(self.zcap, caps)
         self.z_capped = bool(np.isfinite(self.zcap).any())
         self.name = f"line {els[0].line}"
         self.found = Found(st.Ts)
@@ -413,7 +415,8 @@ class TimingSearch:
 
 def search_timing(feed_mode: str, model: RobotModel, st: Settings, tube_at: Callable[[float], Tube], chunk: list[int],
                   els: list[PathElement], hint: Scale | None, deadline: float | None = None,
-                  optimal: Callable[[Tube], Optimal] | None = None, z_max_m_s: float | None = None) -> Found:
+                  optimal: Callable[[Tube], Optimal] | None = None, z_max_m_s: float | None = None,
+                  caps: np.ndarray | None = None) -> Found:
     """A timing of the piece for the feed mode, in the tube ``tube_at(v)`` with cells sized for
     the profile's speed ``v`` (``program``: the programmed F times the profile's scale, so that
     a slower profile has shorter cells: the criterion pulls the robot toward each cell's
@@ -427,8 +430,9 @@ def search_timing(feed_mode: str, model: RobotModel, st: Settings, tube_at: Call
     :func:`~planner.contour.estimate.estimate_contour` counts it): candidates after it are not
     planned. ``z_max_m_s``: the Z axis speed, which bounds the XY speed along a move whose Z
     changes (:func:`z_caps`), in both feeds (the program feed's F is capped by it already:
-    :func:`planner.exchange._tabs.cap_z_speed`)."""
-    search = TimingSearch(model, st, tube_at, chunk, els, deadline, optimal, z_max_m_s)
+    :func:`planner.exchange._tabs.cap_z_speed`); ``caps``: per move a further bound on its XY
+    speed [m/s] (the Z axis acceleration's, :func:`planner.contour.zaxis.z_speed_caps`)."""
+    search = TimingSearch(model, st, tube_at, chunk, els, deadline, optimal, z_max_m_s, caps)
     found = search.found
     if feed_mode == "program":
         got_p = search.program_feed()

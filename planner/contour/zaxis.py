@@ -1,0 +1,165 @@
+"""The Z of a cut whose Z moves (issue 32, goal 3: ramps, helices, tabs planned with the XY
+motion) within the Z axis speed and acceleration.
+
+The programmed Z is a function of the path position (:func:`programmed_z`: per sample, the Z of
+its move where the sample projects onto it), so where the slope ``dZ/ds`` changes (a ramp's
+start and end, a tab's flanks) it turns a corner in time: its velocity jumps by the slope's
+change times the XY speed there, an unbounded acceleration. The Z planned instead
+(:func:`plan_z`) is the sample sequence nearest the programmed Z that keeps
+
+* ``|z[k+1] - z[k]| <= v_max Ts`` (the axis speed, between samples),
+* ``|z[k+1] - 2 z[k] + z[k-1]| <= a_max Ts^2`` (the axis acceleration, the exported samples'
+  second differences; at rest before the first sample and after the last),
+* ``|z[k] - zp[k]| <= sqrt(tol^2 - d[k]^2)``: the tool point (X, Y, Z) within the tolerance of
+  the programmed 3-D path, ``d[k]`` the sample's XY distance from the point of its move it
+  projects onto (at most 0.95 tol in the tube); the first and the last sample at the programmed Z,
+
+a linear programme (scipy's HiGHS) in units of ``a_max Ts^2``. Where no such sequence exists
+(the XY motion too fast where the slope changes, or accelerating along a slope faster than Z
+may), the samples it misses name their moves, and :func:`planner.contour.plan.plan_cut` plans
+the piece again with those moves slower. :func:`z_speed_caps` gives the XY speed caps a
+first plan starts with: a slope change ``g`` blended within ``tol_z`` at the axis acceleration
+turns at an XY speed of at most ``sqrt(8 a tol_z) / g`` (a parabola's deviation from the
+corner it rounds, ``(g v)^2 / (8 a)``), taken at half the 3-D budget's worst case.
+
+Units: m, s.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..schema import PathElement
+
+__all__ = ["Z_SLACK", "ZPlan", "plan_z", "programmed_z", "slopes", "z_speed_caps"]
+
+#: a sample whose Z misses its budget by more than this share of ``a_max Ts^2`` fails (the LP's
+#: own feasibility tolerance is 1e-7 of that unit)
+Z_SLACK = 1e-4
+#: the share of the tolerance a slope change's blend may use in the first caps (the 3-D budget
+#: at the tube's widest, sqrt(1 - 0.95^2) = 0.31 of it, halved)
+FIRST_BUDGET = 0.15
+
+
+def slopes(els: list[PathElement]) -> np.ndarray:
+    """Per move its Z slope ``dZ/ds`` over its XY length (0 where Z stays or it has none)."""
+    return np.array([(e.z_end_m - e.z_start_m) / e.length_m if e.length_m > 0 else 0.0 for e in els])
+
+
+def z_speed_caps(els: list[PathElement], tol: float, v_max: float, a_max: float) -> np.ndarray:
+    """Per move, the XY speed [m/s] a first plan keeps it under so that its Z can follow: the
+    axis speed's ``v_max / |g|`` and, where its slope ``g`` differs from a neighbour's by ``dg``
+    (the moves of the piece in order; at its ends the robot is at rest), the blend's
+    ``sqrt(8 a_max FIRST_BUDGET tol) / dg``; inf for a move whose Z stays (its sloped neighbours
+    bound the speed at their junction)."""
+    g = slopes(els)
+    out = np.full(len(els), np.inf)
+    blend = math.sqrt(8.0 * a_max * FIRST_BUDGET * tol)
+    for k, gk in enumerate(g):
+        if gk == 0.0:
+            continue
+        out[k] = v_max / abs(gk)
+        dg = max(abs(gk - g[k - 1]) if k > 0 else 0.0, abs(gk - g[k + 1]) if k + 1 < len(g) else 0.0)
+        if dg > 0:
+            out[k] = min(out[k], blend / dg)
+    return out
+
+
+def programmed_z(pose: np.ndarray, elem: np.ndarray, elements: list[PathElement],
+                 origin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per sample (``pose`` (K, 2) robot frame, ``elem`` the index of its move in ``elements``)
+    the programmed Z where it projects onto its move and its XY distance from that point [m]."""
+    p_all = np.asarray(pose, float)[:, :2] - origin
+    z = np.zeros(len(p_all))
+    d = np.zeros(len(p_all))
+    for e_index in np.unique(elem):
+        e = elements[int(e_index)]
+        mask = elem == e_index
+        p = p_all[mask]
+        if e.kind == "arc" and e.centre is not None and e.sweep_rad and e.start_angle_rad is not None:
+            c = np.asarray(e.centre, float)
+            ang = np.arctan2(p[:, 1] - c[1], p[:, 0] - c[0])
+            rel = ((ang - e.start_angle_rad) * np.sign(e.sweep_rad)) % (2 * math.pi)
+            sweep = abs(e.sweep_rad)
+            f = np.where(rel <= sweep, rel / sweep, np.where(rel - sweep < 2 * math.pi - rel, 1.0, 0.0))
+            q = e.point_at(f * e.length_m)
+        else:
+            a, v = np.asarray(e.start, float), np.asarray(e.end, float) - np.asarray(e.start, float)
+            f = np.clip((p - a) @ v / max(float(v @ v), 1e-24), 0.0, 1.0)
+            q = a + f[:, None] * v
+        z[mask] = e.z_start_m + f * (e.z_end_m - e.z_start_m)
+        d[mask] = np.hypot(*(p - q).T)
+    return z, d
+
+
+class ZPlan:
+    """:func:`plan_z`'s outcome: ``z`` the planned Z per sample [m]; ``miss`` per sample by how
+    much it misses its 3-D budget [m] (0 everywhere: the plan holds)."""
+
+    def __init__(self, z: np.ndarray, miss: np.ndarray) -> None:
+        self.z, self.miss = z, miss
+
+    @property
+    def ok(self) -> bool:
+        return bool(np.all(self.miss <= 0.0))
+
+
+def plan_z(zp: np.ndarray, budget: np.ndarray, Ts: float, v_max: float, a_max: float) -> ZPlan:
+    """The Z per sample nearest ``zp`` (the programmed Z, module docstring) within ``budget`` of
+    it (per sample [m]; the first and last samples held at ``zp``), its steps within ``v_max Ts``
+    and its second differences within ``a_max Ts^2``, the robot at rest before and after (the
+    first and last steps within ``a_max Ts^2``). Where no sequence keeps every budget, the one
+    that misses it least (in sum) and by how much each sample misses it."""
+    from scipy.optimize import linprog
+    from scipy.sparse import coo_matrix, csr_matrix, vstack
+
+    K = len(zp)
+    unit = a_max * Ts * Ts
+    if K < 3 or float(np.ptp(zp)) == 0.0:  # Z stays (or no step to plan): the programmed Z
+        return ZPlan(np.asarray(zp, float).copy(), np.zeros(K))
+    base = float(zp[0])
+    w = (np.asarray(zp, float) - base) / unit  # the programmed Z in units of a_max Ts^2 from its start
+    b = np.maximum(np.asarray(budget, float), 0.0) / unit
+    b[0] = b[-1] = 0.0
+    vs = v_max * Ts / unit
+    # variables: x (K), e (K) >= |x - w|, u (K) >= 0 the miss beyond the budget
+    k = np.arange(K)
+    eye = coo_matrix((np.ones(K), (k, k)), shape=(K, K))
+    zero = csr_matrix((K, K))
+    rows: list = []
+    rhs: list[np.ndarray] = []
+    # x - e <= w, -x - e <= -w
+    rows += [vstack([eye, -eye, zero]).T, vstack([-eye, -eye, zero]).T]
+    rhs += [w, -w]
+    # x - u <= w + b, -x - u <= -w + b
+    rows += [vstack([eye, zero, -eye]).T, vstack([-eye, zero, -eye]).T]
+    rhs += [w + b, b - w]
+    # steps: |x[k+1] - x[k]| <= vs
+    n1 = K - 1
+    r1 = np.arange(n1)
+    d1 = coo_matrix((np.r_[-np.ones(n1), np.ones(n1)], (np.r_[r1, r1], np.r_[r1, r1 + 1])), shape=(n1, 3 * K))
+    rows += [d1, -d1]
+    rhs += [np.full(n1, vs), np.full(n1, vs)]
+    # second differences, at rest before and after: the padded sequence x[0], x[0..K-1], x[K-1]
+    n2 = K
+    r2 = np.arange(n2)
+    # row j: x[j+1] - 2 x[j] + x[j-1], with x[-1] = x[0] and x[K] = x[K-1]
+    ii = np.r_[r2, r2, r2]
+    jj = np.r_[np.minimum(r2 + 1, K - 1), r2, np.maximum(r2 - 1, 0)]
+    vv = np.r_[np.ones(n2), -2 * np.ones(n2), np.ones(n2)]
+    d2 = coo_matrix((vv, (ii, jj)), shape=(n2, 3 * K)).tocsr()
+    rows += [d2, -d2]
+    rhs += [np.ones(n2), np.ones(n2)]
+    A = vstack([r.tocsr() if hasattr(r, "tocsr") else r for r in rows]).tocsr()
+    scale_u = 1e3 * K  # missing the budget costs far more than any distance inside it
+    c = np.r_[np.zeros(K), np.ones(K), np.full(K, scale_u)]
+    bounds = [(None, None)] * K + [(0, None)] * (2 * K)
+    res = linprog(c, A_ub=A, b_ub=np.concatenate(rhs), bounds=bounds, method="highs")
+    if res.status != 0 or res.x is None:  # pragma: no cover - the LP is always feasible (x = w[0] throughout)
+        return ZPlan(np.asarray(zp, float), np.full(K, np.inf))
+    x = res.x[:K]
+    z = base + x * unit
+    miss = np.maximum(np.abs(x - w) - b - Z_SLACK, 0.0) * unit
+    return ZPlan(z, miss)
