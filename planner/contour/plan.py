@@ -69,7 +69,7 @@ from .placement import CONTOUR_PSI, check_reach, check_reachable, fit_origin, pr
 from .profiles import OptimalProfiles
 from .search import Scale, confirmed_infeasible, largest_feasible, search_timing, z_caps
 from .tube import PathGeometry, path_to_cut
-from .zaxis import ZPlan, plan_z, programmed_z, z_speed_caps
+from .zaxis import ZCaps, ZPlan, plan_z, programmed_z
 
 # the names this module had before issue 34 split it (the estimate's constants, the search's
 # scale finder) stay importable from it
@@ -259,17 +259,18 @@ def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[i
     stopped at the ``time.process_time`` ``limit_at``)."""
     els0 = [elements[k] for k in chunk]
     st = st.model_copy(update={"settle_speed_m_s": min(st.settle_speed_m_s, 1e-4)})
-    # the Z axis acceleration's first XY speed caps (issue 32, goal 3), lowered where the Z planned misses
-    caps = z_speed_caps(els0, tol, req.z_rapid_m_s, req.z_accel_m_s2)
-    for attempt in range(Z_TRIES):
-        # program feed: a move's F is the process limit, and the Z axis lowers it as cap_z_speed does
+    # the Z axis acceleration's XY speed bounds (issue 32, goal 3); per move lower where the Z planned missed
+    slow = np.full(len(chunk), np.inf)
+    for _ in range(Z_TRIES):
+        zc = ZCaps(els0, chunk, tol, req.z_rapid_m_s, req.z_accel_m_s2, slow)
+        # program feed, a plan again: the moves Z missed on at a lower F (every timing of the search keeps it)
         els = [e.model_copy(update={"feed_m_s": float(c)}) if req.feed == "program" and c < e.feed_m_s else e
-               for e, c in zip(els0, caps)]
-        zcaps = np.where(np.isfinite(caps), caps, np.inf)
+               for e, c in zip(els0, slow)]
         found = search_timing(req.feed, model, st, TubeSizes(model, st, chunk, els, origin, tol, psi, pos, elements),
-                              chunk, els, hint, z_max_m_s=req.z_rapid_m_s, caps=zcaps,
+                              chunk, els, hint, z_max_m_s=req.z_rapid_m_s, cell_caps=zc if zc.active else None,
                               optimal=OptimalProfiles(model, st, chunk, els, origin, psi, memo,
-                                                      np.minimum(speed_caps(req.feed, els, req.z_rapid_m_s), zcaps)))
+                                                      speed_caps(req.feed, els, req.z_rapid_m_s),
+                                                      zc if zc.active else None))
         if found.result is None:
             raise confirmed_infeasible(req, model, st, chunk, els, origin, tol, psi, pos, elements, found, hint,
                                        passes, limit_at)
@@ -282,9 +283,9 @@ def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[i
         for k in np.unique(part.elem[zp.miss > 0]):
             j = chunk.index(int(k))
             for jj in (j - 1, j, j + 1):  # a slope change is the junction of two moves: both
-                if 0 <= jj < len(chunk):
-                    top = float(speed[part.elem == chunk[jj]].max(initial=0.0))
-                    caps[jj] = min(caps[jj], Z_SLOWER * top) if top > 0 else caps[jj]
+                top = float(speed[part.elem == chunk[jj]].max(initial=0.0)) if 0 <= jj < len(chunk) else 0.0
+                if top > 0:
+                    slow[jj] = min(slow[jj], Z_SLOWER * top)
     line = elements[int(part.elem[int(np.argmax(zp.miss))])].line
     raise PlannerError("infeasible", f"line {line}: the Z axis cannot follow the path within the tolerance "
                        f"({tol * 1e3:g} mm) at a Z acceleration of {req.z_accel_m_s2:g} m/s^2 and a Z speed of "

@@ -17,10 +17,11 @@ change times the XY speed there, an unbounded acceleration. The Z planned instea
 a linear programme (scipy's HiGHS) in units of ``a_max Ts^2``. Where no such sequence exists
 (the XY motion too fast where the slope changes, or accelerating along a slope faster than Z
 may), the samples it misses name their moves, and :func:`planner.contour.plan.plan_cut` plans
-the piece again with those moves slower. :func:`z_speed_caps` gives the XY speed caps a
-first plan starts with: a slope change ``g`` blended within ``tol_z`` at the axis acceleration
-turns at an XY speed of at most ``sqrt(8 a tol_z) / g`` (a parabola's deviation from the
-corner it rounds, ``(g v)^2 / (8 a)``), taken at half the 3-D budget's worst case.
+the piece again with those moves slower. :class:`ZCaps` gives the XY speed bounds a first plan
+starts with: a slope change ``dg`` blended within ``tol_z`` at the axis acceleration turns at an
+XY speed of at most ``sqrt(8 a tol_z) / dg`` (a parabola's deviation from the corner it rounds,
+``(dg v)^2 / (8 a)``), ``tol_z`` half the 3-D budget's worst case; along a slope ``g`` the XY
+speed then rises at most at ``a / |g|``.
 
 Units: m, s.
 """
@@ -28,12 +29,13 @@ Units: m, s.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
 from ..schema import PathElement
 
-__all__ = ["Z_SLACK", "ZPlan", "plan_z", "programmed_z", "slopes", "z_speed_caps"]
+__all__ = ["Z_SLACK", "ZCaps", "ZPlan", "plan_z", "programmed_z", "slopes"]
 
 #: a sample whose Z misses its budget by more than this share of ``a_max Ts^2`` fails (the LP's
 #: own feasibility tolerance is 1e-7 of that unit)
@@ -48,23 +50,76 @@ def slopes(els: list[PathElement]) -> np.ndarray:
     return np.array([(e.z_end_m - e.z_start_m) / e.length_m if e.length_m > 0 else 0.0 for e in els])
 
 
-def z_speed_caps(els: list[PathElement], tol: float, v_max: float, a_max: float) -> np.ndarray:
-    """Per move, the XY speed [m/s] a first plan keeps it under so that its Z can follow: the
-    axis speed's ``v_max / |g|`` and, where its slope ``g`` differs from a neighbour's by ``dg``
-    (the moves of the piece in order; at its ends the robot is at rest), the blend's
-    ``sqrt(8 a_max FIRST_BUDGET tol) / dg``; inf for a move whose Z stays (its sloped neighbours
-    bound the speed at their junction)."""
-    g = slopes(els)
-    out = np.full(len(els), np.inf)
-    blend = math.sqrt(8.0 * a_max * FIRST_BUDGET * tol)
-    for k, gk in enumerate(g):
-        if gk == 0.0:
-            continue
-        out[k] = v_max / abs(gk)
-        dg = max(abs(gk - g[k - 1]) if k > 0 else 0.0, abs(gk - g[k + 1]) if k + 1 < len(g) else 0.0)
-        if dg > 0:
-            out[k] = min(out[k], blend / dg)
-    return out
+class ZCaps:
+    """The XY speed [m/s] along a piece (its moves ``els`` in order) under which its Z can follow
+    (module docstring), by path position ``s`` from the piece's start:
+
+    * on a move of slope ``g``: the axis speed's ``v_max / |g|``, and ``slow`` (per move, inf
+      unless a plan before missed there);
+    * at a slope change ``dg`` at ``s_j`` (a junction of two moves; at the piece's ends the robot
+      is at rest): the blend's ``v_j = sqrt(8 a_max FIRST_BUDGET tol) / dg``, and away from it
+      along a sloped move the speed reached from ``v_j`` at the XY acceleration that keeps Z's
+      ``g s''`` within ``a_max``: ``sqrt(v_j^2 + 2 (a_max / |g|) |s - s_j|)`` (a move whose Z
+      stays is bounded only at the junction itself).
+
+    :meth:`at_s` by position (the time-optimal profile's grid), :meth:`__call__` per segment of
+    a tube (the lowest over the segment's extent: the heuristic profile's cells); ``key`` for
+    memos."""
+
+    def __init__(self, els: list[PathElement], chunk: list[int], tol: float, v_max: float, a_max: float,
+                 slow: np.ndarray | None = None) -> None:
+        self.g = slopes(els)
+        self.chunk = np.asarray(chunk)
+        self.lengths = np.array([max(e.length_m, 0.0) for e in els])
+        self.start = np.concatenate(([0.0], np.cumsum(self.lengths)))
+        move = np.where(self.g != 0.0, v_max / np.maximum(np.abs(self.g), 1e-300), np.inf)
+        self.move = move if slow is None else np.minimum(move, slow)
+        blend = math.sqrt(8.0 * a_max * FIRST_BUDGET * tol)
+        dg = np.abs(np.diff(self.g))
+        j = np.flatnonzero(dg > 0)
+        self.s_j = self.start[1:-1][j] if len(els) > 1 else np.zeros(0)
+        self.v_j = blend / dg[j] if len(els) > 1 else np.zeros(0)
+        self.a_max = a_max
+        self.key = (tuple(self.move), tuple(self.s_j), tuple(self.v_j), a_max)
+
+    @property
+    def active(self) -> bool:
+        """Whether any move's Z changes (else every bound is inf)."""
+        return bool(np.any(self.g != 0.0))
+
+    def _at(self, k: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """The bound at positions ``s`` on the piece's moves ``k``."""
+        g = np.abs(self.g[k])
+        cap = self.move[k].astype(float)
+        acc = np.where(g > 0, self.a_max / np.maximum(g, 1e-300), np.inf)
+        for sj, vj in zip(self.s_j, self.v_j):
+            d = np.abs(s - sj)
+            with np.errstate(invalid="ignore"):
+                c = np.where(d <= 1e-12, vj, np.sqrt(vj * vj + 2.0 * acc * d))
+            cap = np.minimum(cap, np.where(np.isnan(c), np.inf, c))
+        return cap
+
+    def at_s(self, s: np.ndarray) -> np.ndarray:
+        """The bound [m/s] at path positions ``s`` [m] from the piece's start (at a junction the
+        lower of its two moves')."""
+        s = np.asarray(s, float)
+        k0 = np.clip(np.searchsorted(self.start[1:], s, side="left"), 0, len(self.g) - 1)
+        k1 = np.clip(np.searchsorted(self.start[1:], s, side="right"), 0, len(self.g) - 1)
+        return np.minimum(self._at(k0, s), self._at(k1, s))
+
+    def __call__(self, t: Any) -> np.ndarray:
+        """Per segment of the tube ``t`` the lowest bound over its extent [m/s]: at the point of
+        it nearest each slope change, and the move's own."""
+        loc = np.searchsorted(self.chunk, t.element)
+        total = np.bincount(loc, weights=t.length, minlength=len(self.g))
+        before = np.concatenate(([0.0], np.cumsum(total)))[loc]
+        share = self.lengths[loc] / np.maximum(total[loc], 1e-300)
+        s1 = self.start[loc] + np.clip((np.cumsum(t.length) - before) * share, 0.0, self.lengths[loc])
+        s0 = np.maximum(s1 - t.length * share, self.start[loc])
+        cap = self.move[loc].astype(float)
+        for sj in self.s_j:
+            cap = np.minimum(cap, self._at(loc, np.clip(sj, s0, s1)))
+        return cap
 
 
 def programmed_z(pose: np.ndarray, elem: np.ndarray, elements: list[PathElement],
