@@ -259,17 +259,17 @@ def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[i
     stopped at the ``time.process_time`` ``limit_at``)."""
     els0 = [elements[k] for k in chunk]
     st = st.model_copy(update={"settle_speed_m_s": min(st.settle_speed_m_s, 1e-4)})
-    # the Z axis acceleration's XY speed bounds (issue 32, goal 3); per move lower where the Z planned missed
-    slow = np.full(len(chunk), np.inf)
+    # the Z axis acceleration's XY speed bounds (issue 32, goal 3), shaping the profiles; where the Z
+    # planned misses, the piece again as a program feed whose F is lower on the moves Z missed on (the
+    # program feed keeps every sample under its move's F, and sizes its cells by it)
+    slow, gentle = np.full(len(chunk), np.inf), np.ones(len(chunk))
+    feed, els, top0 = req.feed, els0, None
     for _ in range(Z_TRIES):
-        zc = ZCaps(els0, chunk, tol, req.z_rapid_m_s, req.z_accel_m_s2, slow)
-        # program feed, a plan again: the moves Z missed on at a lower F (every timing of the search keeps it)
-        els = [e.model_copy(update={"feed_m_s": float(c)}) if req.feed == "program" and c < e.feed_m_s else e
-               for e, c in zip(els0, slow)]
-        found = search_timing(req.feed, model, st, TubeSizes(model, st, chunk, els, origin, tol, psi, pos, elements),
+        zc = ZCaps(els0, chunk, tol, req.z_rapid_m_s, req.z_accel_m_s2, slow, gentle)
+        found = search_timing(feed, model, st, TubeSizes(model, st, chunk, els, origin, tol, psi, pos, elements),
                               chunk, els, hint, z_max_m_s=req.z_rapid_m_s, cell_caps=zc if zc.active else None,
                               optimal=OptimalProfiles(model, st, chunk, els, origin, psi, memo,
-                                                      speed_caps(req.feed, els, req.z_rapid_m_s),
+                                                      speed_caps(feed, els, req.z_rapid_m_s),
                                                       zc if zc.active else None))
         if found.result is None:
             raise confirmed_infeasible(req, model, st, chunk, els, origin, tol, psi, pos, elements, found, hint,
@@ -278,14 +278,21 @@ def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[i
         zp = plan_piece_z(part, elements, origin, tol, st.Ts, req)
         if zp.ok:
             return part
-        # the moves whose samples Z could not follow: slower than their samples ran
         speed = np.hypot(*part.result.velocity[:, :2].T)
+        top = np.array([float(speed[part.elem == k].max(initial=0.0)) for k in chunk])
+        if top0 is None:  # fastest: the speeds its first timing ran each move at stand for F
+            top0 = top
         for k in np.unique(part.elem[zp.miss > 0]):
             j = chunk.index(int(k))
-            for jj in (j - 1, j, j + 1):  # a slope change is the junction of two moves: both
-                top = float(speed[part.elem == chunk[jj]].max(initial=0.0)) if 0 <= jj < len(chunk) else 0.0
-                if top > 0:
-                    slow[jj] = min(slow[jj], Z_SLOWER * top)
+            near = [jj for jj in range(max(j - 1, 0), min(j + 2, len(chunk))) if zc.g[jj] != 0.0]
+            for jj in near or [j]:  # the sloped moves at the slope change: a level one's Z needs no cap
+                cap = zc.junction_cap(jj)
+                slow[jj] = min(slow[jj], Z_SLOWER * top[jj] if top[jj] > 0 else np.inf, 2.0 * cap)
+                gentle[jj] *= Z_SLOWER
+        feed = "program"
+        base = [e.feed_m_s if req.feed == "program" else max(float(t) * Z_ROOM, 1e-4) for e, t in zip(els0, top0)]
+        els = [e.model_copy(update={"feed_m_s": float(min(f, c))}) if min(f, c) != e.feed_m_s else e
+               for e, f, c in zip(els0, base, slow)]
     line = elements[int(part.elem[int(np.argmax(zp.miss))])].line
     raise PlannerError("infeasible", f"line {line}: the Z axis cannot follow the path within the tolerance "
                        f"({tol * 1e3:g} mm) at a Z acceleration of {req.z_accel_m_s2:g} m/s^2 and a Z speed of "
@@ -294,9 +301,13 @@ def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[i
 
 
 #: a piece whose Z cannot follow is planned again at most this many times, each time the moves
-#: Z missed on capped at this share of the speed their samples ran
+#: Z missed on (and their neighbours) capped at this share of the speed their samples ran, and
+#: their XY speed's rise along a slope at this share of the one before
 Z_TRIES = 8
 Z_SLOWER = 0.7
+#: fastest, planned again as a program feed: each move's F the speed its first timing ran it at
+#: times this (the moves Z missed on lower)
+Z_ROOM = 1.1
 
 
 def plan_piece_z(part: Part, elements: list[PathElement], origin: np.ndarray, tol: float, Ts: float,

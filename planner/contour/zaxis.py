@@ -67,7 +67,7 @@ class ZCaps:
     memos."""
 
     def __init__(self, els: list[PathElement], chunk: list[int], tol: float, v_max: float, a_max: float,
-                 slow: np.ndarray | None = None) -> None:
+                 slow: np.ndarray | None = None, gentle: np.ndarray | None = None) -> None:
         self.g = slopes(els)
         self.chunk = np.asarray(chunk)
         self.lengths = np.array([max(e.length_m, 0.0) for e in els])
@@ -75,12 +75,21 @@ class ZCaps:
         move = np.where(self.g != 0.0, v_max / np.maximum(np.abs(self.g), 1e-300), np.inf)
         self.move = move if slow is None else np.minimum(move, slow)
         blend = math.sqrt(8.0 * a_max * FIRST_BUDGET * tol)
-        dg = np.abs(np.diff(self.g))
+        # the slope changes, the piece's ends included (at rest there: the slope "changes" from none)
+        g_ext = np.r_[0.0, self.g, 0.0]
+        dg = np.abs(np.diff(g_ext))
         j = np.flatnonzero(dg > 0)
-        self.s_j = self.start[1:-1][j] if len(els) > 1 else np.zeros(0)
-        self.v_j = blend / dg[j] if len(els) > 1 else np.zeros(0)
-        self.a_max = a_max
-        self.key = (tuple(self.move), tuple(self.s_j), tuple(self.v_j), a_max)
+        self.s_j = self.start[j]
+        self.v_j = blend / dg[j]
+        #: per move the XY acceleration's share of a_max / |g| (lowered where a plan before missed)
+        self.acc = a_max * (np.ones(len(els)) if gentle is None else np.asarray(gentle, float))
+        self.key = (tuple(self.move), tuple(self.s_j), tuple(self.v_j), tuple(self.acc))
+
+    def junction_cap(self, k: int) -> float:
+        """The lowest blend speed at the ends of the piece's move ``k`` [m/s] (inf: no slope
+        change there)."""
+        at = (self.s_j >= self.start[k] - 1e-12) & (self.s_j <= self.start[k + 1] + 1e-12)
+        return float(self.v_j[at].min()) if at.any() else math.inf
 
     @property
     def active(self) -> bool:
@@ -91,7 +100,7 @@ class ZCaps:
         """The bound at positions ``s`` on the piece's moves ``k``."""
         g = np.abs(self.g[k])
         cap = self.move[k].astype(float)
-        acc = np.where(g > 0, self.a_max / np.maximum(g, 1e-300), np.inf)
+        acc = np.where(g > 0, self.acc[k] / np.maximum(g, 1e-300), np.inf)
         for sj, vj in zip(self.s_j, self.v_j):
             d = np.abs(s - sj)
             with np.errstate(invalid="ignore"):
