@@ -108,7 +108,7 @@ def test_fit_places_a_part_that_fits_only_off_centre(size):
     X, Y = np.meshgrid(xs, ys)
     centroid = np.array([X[mask].mean(), Y[mask].mean()])
     half = 0.5e-3 * np.array([w, h])
-    assert not _outline_reachable(model, w, h, centroid - half, 0.003), "the part fits centred: not a test of the search"
+    assert not _outline_reachable(model, w, h, centroid - half, 0.003), "fits centred: not a test of the search"
     res = plan_contour({"program": rect(w, h), "origin": "fit"})
     c = res.contour
     assert c is not None

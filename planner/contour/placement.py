@@ -152,7 +152,7 @@ def _offsets(model: RobotModel, body: Any, margin: float, k: float = 1.0) -> tup
         fit &= shifted
         if not fit.any():
             return np.zeros((0, 2)), np.zeros(0)
-    clear = distance_transform_edt(fit)
+    clear = np.asarray(distance_transform_edt(fit), float)
     iy, ix = np.nonzero(fit)
     order = np.argsort(-clear[iy, ix], kind="stable")
     iy, ix = iy[order], ix[order]

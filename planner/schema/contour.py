@@ -19,8 +19,8 @@ from .limits import MAX_COORDINATE
 from .request import TIMING_FIELDS, Settings
 from .robot import RobotDescription
 
-__all__ = ["CONTOUR_FEEDS", "DEFAULT_CONTOUR_TOLERANCE_M", "DEFAULT_Z_ACCEL_M_S2", "MAX_CONTOUR_TOLERANCE_M", "MAX_PROGRAM_BYTES",
-           "MIN_CONTOUR_TOLERANCE_M",
+__all__ = ["CONTOUR_FEEDS", "DEFAULT_CONTOUR_TOLERANCE_M", "DEFAULT_Z_ACCEL_M_S2", "MAX_CONTOUR_TOLERANCE_M",
+           "MAX_PROGRAM_BYTES", "MIN_CONTOUR_TOLERANCE_M",
            "ContourRequest", "ContourSection", "PassSummary", "PathElement", "Program", "ProgramBlock",
            "ProgramComment", "ProgramWord"]
 
