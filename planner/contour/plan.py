@@ -69,7 +69,7 @@ from .placement import CONTOUR_PSI, check_reach, check_reachable, fit_origin, pr
 from .profiles import OptimalProfiles
 from .search import Scale, confirmed_infeasible, largest_feasible, search_timing, z_caps
 from .tube import PathGeometry, path_to_cut
-from .zaxis import ZCaps, ZPlan, plan_z, programmed_z
+from .zaxis import ZCaps, ZPlan, accel_dwell, plan_z, programmed_z
 
 # the names this module had before issue 34 split it (the estimate's constants, the search's
 # scale finder) stay importable from it
@@ -179,9 +179,13 @@ class _Walk:
         self.z = run[-1].elements[-1].z_end_m
 
     def dwell(self, b: ProgramBlock) -> None:
-        """A plunge, retract, G4 or pause: the robot at rest."""
+        """A plunge, retract, G4 or pause: the robot at rest; a plunge's or retract's Z moves
+        within the Z acceleration (:func:`~planner.contour.zaxis.accel_dwell`)."""
+        b, z_at = accel_dwell(b, self.z, self.req.z_accel_m_s2)  # Z from rest to rest within its acceleration
         part = plan_dwell(self.pos, CONTOUR_PSI, b.duration_s, self.st.Ts)
         dwell_z(part, b, self.z)
+        if z_at is not None:
+            part.z = z_at(np.linspace(0.0, b.duration_s, len(part.z)))
         self.parts.append(part)
         self.z = float(part.z[-1])
 

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..schema import PathElement
 
-__all__ = ["Z_SLACK", "ZCaps", "ZPlan", "plan_z", "programmed_z", "slopes"]
+__all__ = ["Z_SLACK", "ZCaps", "ZPlan", "accel_dwell", "plan_z", "programmed_z", "slopes"]
 
 #: a sample whose Z misses its budget by more than this share of ``a_max Ts^2`` fails (the LP's
 #: own feasibility tolerance is 1e-7 of that unit)
@@ -227,3 +227,59 @@ def plan_z(zp: np.ndarray, budget: np.ndarray, Ts: float, v_max: float, a_max: f
     z = base + x * unit
     miss = np.maximum(np.abs(x - w) - b - Z_SLACK, 0.0) * unit
     return ZPlan(z, miss)
+
+
+def _trapezoid(dz: float, v: float, a: float) -> tuple[float, float]:
+    """A move of ``|dz|`` from rest to rest at most at speed ``v`` and acceleration ``a``: its
+    time and top speed."""
+    d = abs(dz)
+    if d * a >= v * v:
+        return d / v + v / a, v
+    return 2.0 * math.sqrt(d / a), math.sqrt(d * a)
+
+
+def _trapezoid_at(t: np.ndarray, dz: float, a: float, v: float, T: float) -> np.ndarray:
+    """The distance covered (signed as ``dz``) at times ``t`` in [0, T] of :func:`_trapezoid`'s move."""
+    ta = v / a
+    t = np.clip(t, 0.0, T)
+    s = np.where(t < ta, 0.5 * a * t * t, np.where(t > T - ta, abs(dz) - 0.5 * a * (T - t) ** 2,
+                                                     0.5 * a * ta * ta + v * (t - ta)))
+    return math.copysign(1.0, dz) * np.clip(s, 0.0, abs(dz))
+
+
+def accel_dwell(block: Any, z: float, a_max: float) -> tuple[Any, Any]:
+    """A plunge's or retract's Z moves (``block.z_moves``, each at its programmed speed
+    ``|dZ| / seconds``) within the Z acceleration: each from rest to rest at most at its speed
+    and at ``a_max`` (its time grows by ``v / a_max``, or to ``2 sqrt(|dZ| / a_max)`` for a
+    short one). The block with those times and its Z as a function of the time from its start
+    [s] -> [m]; the block as it is and None where it moves no Z."""
+    moves = list(block.z_moves)
+    z0 = block.z_start_m if block.z_start_m is not None else z
+    if not moves or all(abs(m[1] - (moves[k - 1][1] if k else z0)) == 0.0 for k, m in enumerate(moves)):
+        return block, None
+    pieces: list[tuple[float, float, float, float, float]] = []  # start time, z0, dz, top speed, duration
+    new_moves: list[tuple[float, float, int]] = []
+    t, zs = 0.0, float(z0)
+    for secs, z_end, line in moves:
+        dz = float(z_end) - zs
+        if dz != 0.0 and secs > 0:
+            T, v = _trapezoid(dz, abs(dz) / secs, a_max)
+        else:
+            T, v = float(secs), 0.0
+        pieces.append((t, zs, dz, v, T))
+        new_moves.append((T, float(z_end), line))
+        t, zs = t + T, float(z_end)
+    out = block.model_copy(update={"z_moves": new_moves, "duration_s": t})
+
+    def z_at(times: np.ndarray) -> np.ndarray:
+        times = np.asarray(times, float)
+        zz = np.full(len(times), float(z0))
+        for t0, zs0, dz, v, T in pieces:
+            on = times >= t0
+            if dz != 0.0 and v > 0:
+                zz[on] = zs0 + _trapezoid_at(times[on] - t0, dz, a_max, v, T)
+            else:
+                zz[on] = zs0 + dz
+        return zz
+
+    return out, z_at
