@@ -284,9 +284,10 @@ def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[i
             return part
         speed = np.hypot(*part.result.velocity[:, :2].T)
         top = np.array([float(speed[part.elem == k].max(initial=0.0)) for k in chunk])
+        switch = feed != "program"  # fastest's first miss: the bounds as a program feed first (cells by F)
         if top0 is None:  # fastest: the speeds its first timing ran each move at stand for F
             top0 = top
-        for k in np.unique(part.elem[zp.miss > 0]):
+        for k in np.unique(part.elem[zp.miss > 0]) if not switch else []:
             j = chunk.index(int(k))
             near = [jj for jj in range(max(j - 1, 0), min(j + 2, len(chunk))) if zc.g[jj] != 0.0]
             for jj in near or [j]:  # the sloped moves at the slope change: a level one's Z needs no cap
