@@ -64,7 +64,7 @@ def test_plunges_and_retracts_start_and_stop_within_the_z_acceleration():
     a, ts = 0.5, 0.001
     for b in dwells:
         out, z_at = accel_dwell(b, 0.0, a)
-        assert z_at is not None
+        assert z_at is not None and b.z_start_m is not None
         n = int(np.ceil(out.duration_s / ts)) + 1
         t = np.linspace(0.0, out.duration_s, n)
         z = z_at(t)
