@@ -30,7 +30,8 @@ The modules (issue 34): :mod:`.passes` reads the program into passes and a pass'
 tube corridors; :mod:`.profiles` turns speed profiles into sample counts per cell; :mod:`.search`
 finds a piece's timing; :mod:`.join` plans the moves between passes and the rests, and joins
 the parts into one result; :mod:`.placement` checks and fits the program's origin;
-:mod:`.estimate` counts the work before it starts. This module walks the program.
+:mod:`.estimate` counts the work before it starts; :mod:`.zaxis` plans a cut's Z within the Z axis
+speed and acceleration (issue 32, goal 3). This module walks the program.
 """
 
 from __future__ import annotations
