@@ -2,7 +2,8 @@
 (:func:`check_reach`: the numbers; :func:`check_reachable`: every move's path and travel box
 inside the robot's reach, else the line and an origin that fits, :func:`proposal`) or fitted
 (``origin: "fit"``, :func:`fit_origin`: the program's moves centred on the reachable region
-with a margin, as the drawing import places a drawing)."""
+with a margin, as the drawing import places a drawing, else wherever they fit: the most
+inscribed placement on the rasterised region, :func:`_offsets`)."""
 
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ import numpy as np
 
 from ..errors import PlannerError
 from ..model import RobotModel
-from ..model.placement import fit_shape, reach_extent, reachable_points
+from ..model.placement import fit_shape, reach_extent, reachable_mask, reachable_points
 from ..schema import MAX_COORDINATE, Program
 from .passes import RAPID_MARGIN_M, travel_run_end
 
@@ -97,45 +98,137 @@ def _reach(model: RobotModel) -> Callable[[np.ndarray, np.ndarray, float], np.nd
     return lambda x, y, psi: reachable_points(model, x, y, psi)
 
 
+#: the reachable region is rasterised on this many grid points per side (over its extent) for
+#: the placement search: about 1.2 mm a pixel on the default robot
+SEARCH_GRID = 241
+#: candidates of the search verified on the exact reach test before it gives up on the raster's
+SEARCH_CANDIDATES = 24
+_grids: dict[tuple, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+
+def _reach_grid(model: RobotModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The reachable region at ψ :data:`CONTOUR_PSI` rasterised: grid coordinates ``xs``, ``ys``
+    [m] and the mask [iy, ix] of the points whose pixel lies wholly inside it (the reach test's
+    mask eroded by one pixel: a point rounded to its nearest grid point is then reachable)."""
+    from scipy.ndimage import binary_erosion
+
+    key = (id(model), np.asarray(model.packed).tobytes())
+    if key not in _grids:
+        lo, hi, _ = reach_extent(model, CONTOUR_PSI)
+        pad = (hi - lo) / (SEARCH_GRID - 1) * 2
+        xs, ys, mask = reachable_mask(model, lo - pad, hi + pad, CONTOUR_PSI, n=SEARCH_GRID)
+        if len(_grids) > 8:
+            _grids.clear()
+        _grids[key] = (xs, ys, binary_erosion(mask))
+    return _grids[key]
+
+
+def _offsets(model: RobotModel, body: Any, margin: float, k: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Where the middle of ``body``'s bounding box may go (scaled by ``k`` about it, grown by
+    ``margin``) so that all of it is reachable, on the reach grid (:func:`_reach_grid`): the
+    grid points' coordinates (N, 2) [m] and their clearance (pixels to the nearest grid point
+    that does not fit: the largest first is the most inscribed placement). The outline
+    suffices: the region has no holes."""
+    import shapely
+    from scipy.ndimage import distance_transform_edt
+    from shapely import affinity
+
+    xs, ys, safe = _reach_grid(model)
+    h = float(xs[1] - xs[0])
+    x0, y0, x1, y1 = body.bounds
+    mid = (0.5 * (x0 + x1), 0.5 * (y0 + y1))
+    shape = affinity.scale(body, k, k, origin=mid) if k != 1.0 else body
+    grown = shape.buffer(margin, quad_segs=4) if margin > 0 else shape
+    pts = np.asarray(shapely.get_coordinates(shapely.segmentize(grown.boundary, 0.5 * h))) - mid
+    rel = np.unique(np.round(pts / h).astype(np.int64), axis=0)  # (dx, dy) in pixels
+    ny, nx = safe.shape
+    fit = np.ones_like(safe)
+    for dx, dy in rel:
+        if abs(dx) >= nx or abs(dy) >= ny:
+            return np.zeros((0, 2)), np.zeros(0)
+        shifted = np.zeros_like(safe)  # shifted[i, j] = safe[i + dy, j + dx]
+        shifted[max(-dy, 0):ny - max(dy, 0), max(-dx, 0):nx - max(dx, 0)] = \
+            safe[max(dy, 0):ny - max(-dy, 0), max(dx, 0):nx - max(-dx, 0)]
+        fit &= shifted
+        if not fit.any():
+            return np.zeros((0, 2)), np.zeros(0)
+    clear = np.asarray(distance_transform_edt(fit), float)
+    iy, ix = np.nonzero(fit)
+    order = np.argsort(-clear[iy, ix], kind="stable")
+    iy, ix = iy[order], ix[order]
+    return np.column_stack((xs[ix], ys[iy])), clear[iy, ix]
+
+
 def _fit(program: Program, model: RobotModel, tol: float) -> tuple[np.ndarray | None, str]:
-    """The origin [m] that centres the program's moves (:func:`_program_shapes`) on the robot's
-    reachable region, grown by ``FIT_MARGIN_M`` + ``tol``, all of it reachable (the drawing
-    import's placement, :func:`planner.model.placement.fit_shape`, unscaled); or None and
-    why none does and by how much the program is too large."""
+    """The origin [m] at which the program's moves (:func:`_program_shapes`) grown by
+    ``FIT_MARGIN_M`` + ``tol`` are all reachable: centred on the robot's reachable region where
+    they fit there (the drawing import's placement, :func:`planner.model.placement.fit_shape`,
+    unscaled), else the most inscribed placement the search over the rasterised region finds
+    (:func:`_offsets`), verified on the reach test; or None and why none does and by how much the
+    program is too large (the largest scale that fits anywhere)."""
     import shapely
 
     shapes = [g for _, g in _program_shapes(program, tol)]
     margin = FIT_MARGIN_M + tol
-    x0, y0, x1, y1 = shapely.union_all(shapes).bounds
+    body = shapely.union_all(shapes)
+    x0, y0, x1, y1 = body.bounds
+    mid = np.array([0.5 * (x0 + x1), 0.5 * (y0 + y1)])
     size = f"{x1 - x0:.4g} m x {y1 - y0:.4g} m"
     try:
         _, _, centre = reach_extent(model, CONTOUR_PSI)
         p = fit_shape(shapes, centre, margin, _reach(model), CONTOUR_PSI)
+        if not p.shrunk:
+            origin = _rounded(program, model, np.asarray(p.offset, float), tol)
+            if origin is not None:
+                return origin, ""
     except ValueError:
+        pass
+    where, _ = _offsets(model, body, margin)
+    for q in where[:SEARCH_CANDIDATES]:
+        origin = _rounded(program, model, q - mid, tol)
+        if origin is not None:
+            return origin, ""
+    k = _largest_scale(model, body, margin)
+    if k <= 0.0:
         return None, (f"no origin fits: the program's moves ({size}) grown by a margin of {margin:g} m do not fit "
                       "where the robot reaches at any scale")
-    if p.shrunk:
-        k = p.factor
-        return None, (f"no origin fits: the program's moves span {size} (cuts, and the boxes its travel moves plan "
-                      f"in); centred on the robot's reach with a margin of {margin:g} m they fit only at {k:.1%} of "
-                      f"their size, {1 / k:.3g} times too large (about {(1 - k) * (x1 - x0):.3g} m too wide and "
-                      f"{(1 - k) * (y1 - y0):.3g} m too tall)")
-    origin = np.round(np.asarray(p.offset, float), 4) + 0.0
-    if not _reachable_at(program, model, origin, tol):  # rounded off the fit: the unrounded one
-        origin = np.asarray(p.offset, float)
-    return origin, ""
+    return None, (f"no origin fits: the program's moves span {size} (cuts, and the boxes its travel moves plan "
+                  f"in); with a margin of {margin:g} m they fit where the robot reaches only at {k:.1%} of their "
+                  f"size, {1 / k:.3g} times too large (about {(1 - k) * (x1 - x0):.3g} m too wide and "
+                  f"{(1 - k) * (y1 - y0):.3g} m too tall)")
+
+
+def _rounded(program: Program, model: RobotModel, origin: np.ndarray, tol: float) -> np.ndarray | None:
+    """``origin`` rounded to 0.1 mm where that is reachable (:func:`_reachable_at`), else as it
+    is where that is, else None."""
+    for cand in (np.round(origin, 4) + 0.0, origin):
+        if _reachable_at(program, model, cand, tol):
+            return cand
+    return None
+
+
+def _largest_scale(model: RobotModel, body: Any, margin: float) -> float:
+    """The largest factor (to 0.1 %) at which ``body`` scaled about its middle and grown by
+    ``margin`` fits somewhere in the rasterised reach (:func:`_offsets`); 0: not even tiny."""
+    lo, hi = 1e-3, 1.0
+    if not len(_offsets(model, body, margin, lo)[0]):
+        return 0.0
+    while hi / lo > 1.001:
+        k = math.sqrt(lo * hi)
+        lo, hi = (k, hi) if len(_offsets(model, body, margin, k)[0]) else (lo, k)
+    return lo
 
 
 def _reachable_at(program: Program, model: RobotModel, origin: np.ndarray, tol: float) -> bool:
     """Whether the program's moves placed at ``origin``, grown by the fit's margin, are all
-    within the robot's reach (the boundary sampled every 2 mm)."""
+    within the robot's reach (the boundary sampled every mm)."""
     import shapely
 
     shapes = [g for _, g in _program_shapes(program, tol)]
     from shapely import affinity
 
     placed = affinity.translate(shapely.union_all(shapes), *origin).buffer(FIT_MARGIN_M + tol, quad_segs=4)
-    pts = np.asarray(shapely.get_coordinates(shapely.segmentize(placed.boundary, 0.002)))
+    pts = np.asarray(shapely.get_coordinates(shapely.segmentize(placed.boundary, 0.001)))
     return bool(np.all(reachable_points(model, pts[:, 0], pts[:, 1], CONTOUR_PSI)))
 
 

@@ -30,7 +30,8 @@ The modules (issue 34): :mod:`.passes` reads the program into passes and a pass'
 tube corridors; :mod:`.profiles` turns speed profiles into sample counts per cell; :mod:`.search`
 finds a piece's timing; :mod:`.join` plans the moves between passes and the rests, and joins
 the parts into one result; :mod:`.placement` checks and fits the program's origin;
-:mod:`.estimate` counts the work before it starts. This module walks the program.
+:mod:`.estimate` counts the work before it starts; :mod:`.zaxis` plans a cut's Z within the Z axis
+speed and acceleration (issue 32, goal 3). This module walks the program.
 """
 
 from __future__ import annotations
@@ -69,6 +70,7 @@ from .placement import CONTOUR_PSI, check_reach, check_reachable, fit_origin, pr
 from .profiles import OptimalProfiles
 from .search import Scale, confirmed_infeasible, largest_feasible, search_timing, z_caps
 from .tube import PathGeometry, path_to_cut
+from .zaxis import ZCaps, ZPlan, accel_dwell, plan_z, programmed_z
 
 # the names this module had before issue 34 split it (the estimate's constants, the search's
 # scale finder) stay importable from it
@@ -178,9 +180,13 @@ class _Walk:
         self.z = run[-1].elements[-1].z_end_m
 
     def dwell(self, b: ProgramBlock) -> None:
-        """A plunge, retract, G4 or pause: the robot at rest."""
+        """A plunge, retract, G4 or pause: the robot at rest; a plunge's or retract's Z moves
+        within the Z acceleration (:func:`~planner.contour.zaxis.accel_dwell`)."""
+        b, z_at = accel_dwell(b, self.z, self.req.z_accel_m_s2)  # Z from rest to rest within its acceleration
         part = plan_dwell(self.pos, CONTOUR_PSI, b.duration_s, self.st.Ts)
         dwell_z(part, b, self.z)
+        if z_at is not None:
+            part.z = z_at(np.linspace(0.0, b.duration_s, len(part.z)))
         self.parts.append(part)
         self.z = float(part.z[-1])
 
@@ -202,7 +208,6 @@ class _Walk:
             part = plan_cut(req, model, st, chunk, origin, tol, CONTOUR_PSI, self.pos, geo, b.elements, self.hint,
                             len(self.program.passes), self.memo, self.limit_at)
             self.hint = part.scale if part.scale is not None else self.hint
-            cut_z(part, b.elements, origin)
             self.parts.append(part)
             self.pos = part.result.pose[-1, :2].copy()
         self.summaries.append(_pass_summary(len(self.summaries), b, self.parts[first:], geo, tol))
@@ -252,19 +257,79 @@ def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[i
              psi: float, pos: np.ndarray, geo: PathGeometry, elements: list[PathElement],
              hint: Scale | None = None, passes: int = 1, memo: dict | None = None,
              limit_at: float | None = None) -> Part:
-    """One piece of a pass planned rest to rest. ``hint``: the ``fastest`` scale found for the
-    piece before (where its search starts; the search's result is bracketed the same way from
-    any start). No timing found: the ``infeasible`` error with its advice checked
-    (:func:`confirmed_infeasible`, its checks stopped at the ``time.process_time`` ``limit_at``)."""
-    els = [elements[k] for k in chunk]
+    """One piece of a pass planned rest to rest, its Z planned with it (:func:`plan_piece_z`).
+    ``hint``: the ``fastest`` scale found for the piece before (where its search starts; the
+    search's result is bracketed the same way from any start). No timing found: the
+    ``infeasible`` error with its advice checked (:func:`confirmed_infeasible`, its checks
+    stopped at the ``time.process_time`` ``limit_at``)."""
+    els0 = [elements[k] for k in chunk]
     st = st.model_copy(update={"settle_speed_m_s": min(st.settle_speed_m_s, 1e-4)})
-    found = search_timing(req.feed, model, st, TubeSizes(model, st, chunk, els, origin, tol, psi, pos, elements),
-                          chunk, els, hint, z_max_m_s=req.z_rapid_m_s,
-                          optimal=OptimalProfiles(model, st, chunk, els, origin, psi, memo, speed_caps(req.feed, els,
-                                                  req.z_rapid_m_s)))
-    if found.result is None:
-        raise confirmed_infeasible(req, model, st, chunk, els, origin, tol, psi, pos, elements, found, hint, passes,
-                                   limit_at)
+    # the Z axis acceleration's XY speed bounds (issue 32, goal 3), shaping the profiles; where the Z
+    # planned misses, the piece again as a program feed whose F is lower on the moves Z missed on (the
+    # program feed keeps every sample under its move's F, and sizes its cells by it)
+    slow, gentle = np.full(len(chunk), np.inf), np.ones(len(chunk))
+    feed, els, top0 = req.feed, els0, None
+    for _ in range(Z_TRIES):
+        zc = ZCaps(els0, chunk, tol, req.z_rapid_m_s, req.z_accel_m_s2, slow, gentle)
+        found = search_timing(feed, model, st, TubeSizes(model, st, chunk, els, origin, tol, psi, pos, elements),
+                              chunk, els, hint, z_max_m_s=req.z_rapid_m_s, cell_caps=zc if zc.active else None,
+                              optimal=OptimalProfiles(model, st, chunk, els, origin, psi, memo,
+                                                      speed_caps(feed, els, req.z_rapid_m_s),
+                                                      zc if zc.active else None))
+        if found.result is None:
+            raise confirmed_infeasible(req, model, st, chunk, els, origin, tol, psi, pos, elements, found, hint,
+                                       passes, limit_at)
+        part = _cut_part(found, geo, tol)
+        zp = plan_piece_z(part, elements, origin, tol, st.Ts, req)
+        if zp.ok:
+            return part
+        speed = np.hypot(*part.result.velocity[:, :2].T)
+        top = np.array([float(speed[part.elem == k].max(initial=0.0)) for k in chunk])
+        switch = feed != "program"  # fastest's first miss: the bounds as a program feed first (cells by F)
+        if top0 is None:  # fastest: the speeds its first timing ran each move at stand for F
+            top0 = top
+        for k in np.unique(part.elem[zp.miss > 0]) if not switch else []:
+            j = chunk.index(int(k))
+            near = [jj for jj in range(max(j - 1, 0), min(j + 2, len(chunk))) if zc.g[jj] != 0.0]
+            for jj in near or [j]:  # the sloped moves at the slope change: a level one's Z needs no cap
+                cap = zc.junction_cap(jj)
+                slow[jj] = min(slow[jj], Z_SLOWER * top[jj] if top[jj] > 0 else np.inf, 2.0 * cap)
+                gentle[jj] *= Z_SLOWER
+        feed = "program"
+        base = [e.feed_m_s if req.feed == "program" else max(float(t) * Z_ROOM, 1e-4) for e, t in zip(els0, top0)]
+        els = [e.model_copy(update={"feed_m_s": float(min(f, c))}) if min(f, c) != e.feed_m_s else e
+               for e, f, c in zip(els0, base, slow)]
+    line = elements[int(part.elem[int(np.argmax(zp.miss))])].line
+    raise PlannerError("infeasible", f"line {line}: the Z axis cannot follow the path within the tolerance "
+                       f"({tol * 1e3:g} mm) at a Z acceleration of {req.z_accel_m_s2:g} m/s^2 and a Z speed of "
+                       f"{req.z_rapid_m_s:g} m/s, even {Z_TRIES} times slower there; give a larger z_accel_m_s2 "
+                       "or tolerance_m", "z_accel_m_s2")
+
+
+#: a piece whose Z cannot follow is planned again at most this many times, each time the moves
+#: Z missed on (and their neighbours) capped at this share of the speed their samples ran, and
+#: their XY speed's rise along a slope at this share of the one before
+Z_TRIES = 8
+Z_SLOWER = 0.7
+#: fastest, planned again as a program feed: each move's F the speed its first timing ran it at
+#: times this (the moves Z missed on lower)
+Z_ROOM = 1.1
+
+
+def plan_piece_z(part: Part, elements: list[PathElement], origin: np.ndarray, tol: float, Ts: float,
+                 req: ContourRequest) -> ZPlan:
+    """Fill the Z and source line of a cut part: the programmed Z where each sample projects
+    onto its move, planned within the Z axis speed and acceleration and the 3-D tolerance
+    (:func:`planner.contour.zaxis.plan_z`); the plan (``ok``: it holds)."""
+    cut_z(part, elements, origin)
+    zp, d = programmed_z(part.result.pose[:, :2], part.elem, elements, origin)
+    got = plan_z(zp, np.sqrt(np.maximum(tol * tol - d * d, 0.0)), Ts, req.z_rapid_m_s, req.z_accel_m_s2)
+    part.z = got.z
+    return got
+
+
+def _cut_part(found: Any, geo: PathGeometry, tol: float) -> Part:
+    """The part of a piece's timing found: per sample its move, source line and deviation."""
     result, t = found.result, found.tube
     assert t is not None
     K = len(result.time)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from functools import partial
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -73,15 +73,18 @@ def profile_counts(t: Tube, v_cap: np.ndarray, a: float, Ts: float, a_turn: floa
 
 
 def optimal_caps(path: PathSamples, a_all: np.ndarray, rho: float, chord: np.ndarray, Ts: float,
-                 zcap: np.ndarray | None = None) -> np.ndarray:
+                 zcap: np.ndarray | None = None, zcap_at: Any = None) -> np.ndarray:
     """The time-optimal profile's bounds on the squared speed beyond the drives' (the ``caps``
     of :func:`planner.contour.timing.time_optimal`): at a corner ``a_all r``, ``r`` the
     :func:`corner_radius` of the turn within ``rho``; on an arc, one of its tube chords per sample
     time ``Ts`` (``chord``: the longest chord of each element, 0 where it is no arc); on a move
-    whose Z changes, the XY speed that keeps Z within its axis speed (``zcap`` per element)."""
+    whose Z changes, the XY speed that keeps Z within its axis speed (``zcap`` per element) and
+    its acceleration (``zcap_at``: :class:`planner.contour.zaxis.ZCaps`, by path position)."""
     cap = np.where(path.corner > 0, a_all * corner_radius(path.corner, rho), np.inf)
     c = chord[path.element]
     cap = np.minimum(cap, np.where(c > 0, (c / Ts) ** 2, np.inf))
+    if zcap_at is not None:
+        cap = np.minimum(cap, zcap_at.at_s(path.s) ** 2)
     return cap if zcap is None else np.minimum(cap, zcap[path.element] ** 2)
 
 
@@ -96,7 +99,8 @@ class OptimalProfiles:
     alike: one profile)."""
 
     def __init__(self, model: RobotModel, st: Settings, chunk: list[int], els: list[PathElement],
-                 origin: np.ndarray, psi: float, memo: dict | None, zcap: np.ndarray | None = None) -> None:
+                 origin: np.ndarray, psi: float, memo: dict | None, zcap: np.ndarray | None = None,
+                 zcap_at: Any = None) -> None:
         self.model, self.st, self.els, self.origin, self.psi = model, st, els, origin, psi
         self.memo = {} if memo is None else memo
         self.geo = tuple((e.kind, *e.start, *e.end, *(e.centre if e.centre is not None else (0.0, 0.0)),
@@ -108,6 +112,8 @@ class OptimalProfiles:
         self.chunk = np.asarray(chunk)
         #: per element the XY speed bound of its Z (:func:`planner.contour.search.z_caps`), None: none
         self.zcap = zcap if zcap is not None and np.isfinite(zcap).any() else None
+        #: the Z axis acceleration's XY speed bound by path position (:class:`planner.contour.zaxis.ZCaps`)
+        self.zcap_at = zcap_at
 
     def __call__(self, t: Tube) -> Optimal:
         """The profile for the tube ``t``: its time at the end of each of ``t``'s segments."""
@@ -117,9 +123,9 @@ class OptimalProfiles:
         chord = np.zeros(len(els))
         np.maximum.at(chord, loc[arc], t.length[arc])
         key = (self.geo, float(origin[0]), float(origin[1]), self.psi, st.Ts, t.rho, tuple(np.round(chord, 12)),
-               None if self.zcap is None else tuple(self.zcap))
+               None if self.zcap is None else tuple(self.zcap), None if self.zcap_at is None else self.zcap_at.key)
         if key not in memo:
-            caps = partial(optimal_caps, rho=t.rho, chord=chord, Ts=st.Ts, zcap=self.zcap)
+            caps = partial(optimal_caps, rho=t.rho, chord=chord, Ts=st.Ts, zcap=self.zcap, zcap_at=self.zcap_at)
             path, w, T = time_optimal(self.model, els, origin, self.psi, self.h, caps)
             memo[key] = (path.s, T, float(np.sqrt(w.max())))
         s_grid, T, v_peak = memo[key]

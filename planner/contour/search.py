@@ -122,11 +122,12 @@ class TimingSearch:
 
     def __init__(self, model: RobotModel, st: Settings, tube_at: Callable[[float], Tube], chunk: list[int],
                  els: list[PathElement], deadline: float | None, optimal: Callable[[Tube], Optimal] | None,
-                 z_max_m_s: float | None = None) -> None:
+                 z_max_m_s: float | None = None, cell_caps: Callable[[Tube], np.ndarray] | None = None) -> None:
         self.model, self.st, self.tube_at, self.chunk, self.els = model, st, tube_at, chunk, els
         self.deadline, self.optimal = deadline, optimal
         self.feed = np.array([e.feed_m_s for e in els])
         self.zcap = z_caps(els, z_max_m_s)  # the XY speed that keeps each move's Z within the axis speed
+        self.cell_caps = cell_caps  # per tube segment: the Z axis acceleration's (planner.contour.zaxis.ZCaps)
         self.z_capped = bool(np.isfinite(self.zcap).any())
         self.name = f"line {els[0].line}"
         self.found = Found(st.Ts)
@@ -140,6 +141,12 @@ class TimingSearch:
         """The Z speed's bound on the XY speed [m/s] of each of the tube's segments (inf where
         its move keeps Z)."""
         return self.zcap[np.searchsorted(self.chunk, t.element)]
+
+    def shape_on(self, t: Tube) -> np.ndarray:
+        """:meth:`zcap_on` and, where given, the ``cell_caps``: the bound the profiles' speed
+        keeps (not a check of the samples: the caller checks what they bound)."""
+        out = self.zcap_on(t)
+        return out if self.cell_caps is None else np.minimum(out, self.cell_caps(t))
 
     def attempt(self, t: Tube, counts: np.ndarray) -> PlanResult | None:
         """One candidate: the tube planned with these sample counts per segment
@@ -186,7 +193,7 @@ class TimingSearch:
         sample counts (scales often give the same)."""
         v = v_cap * lam * mu
         if self.z_capped:  # a ramp's or helix's Z within the axis speed, whatever the scale
-            v = np.minimum(v, self.zcap_on(t))
+            v = np.minimum(v, self.shape_on(t))
         counts = profile_counts(t, v, A0_M_S2 * lam * lam, self.st.Ts, A0_M_S2 * (lam * mu) ** 2, J0_M_S3 * lam ** 3)
         key = counts.tobytes()
         if key not in tried:
@@ -283,7 +290,7 @@ class TimingSearch:
         """``counts`` raised where a cell would be crossed faster than its move's F on average:
         at least its length over F Ts samples (the profile's rounding to whole samples would
         give a cell of 2.6 samples' travel 2 samples, 30 % over F); the lead cells stay one."""
-        need = np.ceil(t.length / (np.minimum(self.feed_on(t), self.zcap_on(t)) * self.st.Ts) - 1e-9)
+        need = np.ceil(t.length / (np.minimum(self.feed_on(t), self.shape_on(t)) * self.st.Ts) - 1e-9)
         out = np.maximum(counts, need.astype(np.int64))
         out[t.lead] = counts[t.lead]
         return out
@@ -413,7 +420,8 @@ class TimingSearch:
 
 def search_timing(feed_mode: str, model: RobotModel, st: Settings, tube_at: Callable[[float], Tube], chunk: list[int],
                   els: list[PathElement], hint: Scale | None, deadline: float | None = None,
-                  optimal: Callable[[Tube], Optimal] | None = None, z_max_m_s: float | None = None) -> Found:
+                  optimal: Callable[[Tube], Optimal] | None = None, z_max_m_s: float | None = None,
+                  cell_caps: Callable[[Tube], np.ndarray] | None = None) -> Found:
     """A timing of the piece for the feed mode, in the tube ``tube_at(v)`` with cells sized for
     the profile's speed ``v`` (``program``: the programmed F times the profile's scale, so that
     a slower profile has shorter cells: the criterion pulls the robot toward each cell's
@@ -427,8 +435,9 @@ def search_timing(feed_mode: str, model: RobotModel, st: Settings, tube_at: Call
     :func:`~planner.contour.estimate.estimate_contour` counts it): candidates after it are not
     planned. ``z_max_m_s``: the Z axis speed, which bounds the XY speed along a move whose Z
     changes (:func:`z_caps`), in both feeds (the program feed's F is capped by it already:
-    :func:`planner.exchange._tabs.cap_z_speed`)."""
-    search = TimingSearch(model, st, tube_at, chunk, els, deadline, optimal, z_max_m_s)
+    :func:`planner.exchange._tabs.cap_z_speed`); ``cell_caps``: per segment of a tube a further
+    bound on the XY speed [m/s] (the Z axis acceleration's, :class:`planner.contour.zaxis.ZCaps`)."""
+    search = TimingSearch(model, st, tube_at, chunk, els, deadline, optimal, z_max_m_s, cell_caps)
     found = search.found
     if feed_mode == "program":
         got_p = search.program_feed()

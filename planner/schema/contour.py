@@ -19,8 +19,8 @@ from .limits import MAX_COORDINATE
 from .request import TIMING_FIELDS, Settings
 from .robot import RobotDescription
 
-__all__ = ["CONTOUR_FEEDS", "DEFAULT_CONTOUR_TOLERANCE_M", "MAX_CONTOUR_TOLERANCE_M", "MAX_PROGRAM_BYTES",
-           "MIN_CONTOUR_TOLERANCE_M",
+__all__ = ["CONTOUR_FEEDS", "DEFAULT_CONTOUR_TOLERANCE_M", "DEFAULT_Z_ACCEL_M_S2", "MAX_CONTOUR_TOLERANCE_M",
+           "MAX_PROGRAM_BYTES", "MIN_CONTOUR_TOLERANCE_M",
            "ContourRequest", "ContourSection", "PassSummary", "PathElement", "Program", "ProgramBlock",
            "ProgramComment", "ProgramWord"]
 
@@ -32,6 +32,9 @@ DEFAULT_CONTOUR_TOLERANCE_M = 5e-5
 MIN_CONTOUR_TOLERANCE_M = 1e-5
 #: the largest tolerance a request may give [m]
 MAX_CONTOUR_TOLERANCE_M = 0.01
+#: the Z axis acceleration when the request gives none [m/s^2] (a small router's Z: LinuxCNC's
+#: sample configurations give 0.25..1.3 m/s^2)
+DEFAULT_Z_ACCEL_M_S2 = 1.0
 #: the feeds of a contour plan
 CONTOUR_FEEDS = ("program", "fastest")
 
@@ -141,8 +144,13 @@ class ContourRequest(Strict):
     feed: Literal["program", "fastest"] = Field(default="program", description="'program': never faster than the "
                                                 "programmed F; 'fastest': as fast as the drives allow")
     cut_below_m: Finite = Field(default=0.0, description="Feed moves with Z below this cut (program frame), m")
-    z_rapid_m_s: Finite = Field(default=0.05, gt=0, le=10.0, description="Speed of Z rapids (retracts, "
-                                "approaches), m/s: their dwell time")
+    z_rapid_m_s: Finite = Field(default=0.05, gt=0, le=10.0, description="The Z axis speed, m/s: the speed of Z "
+                                "rapids (retracts, approaches: their dwell time) and the largest Z speed of a cut "
+                                "whose Z moves (a ramp, a helix, a tab's flank)")
+    z_accel_m_s2: Finite = Field(default=DEFAULT_Z_ACCEL_M_S2, gt=0, le=100.0, description="The Z axis "
+                                 "acceleration, m/s^2: the Z of a cut whose Z moves (ramps, helices, tabs: planned "
+                                 "with the XY motion) never accelerates faster, its samples' second differences "
+                                 "included; where Z would, the pass is cut slower there")
     robot: str | RobotDescription = Field(default="moving-slide",
                                           description="Built-in robot name or a full description")
     settings: dict[str, Any] = Field(default_factory=dict, description="Plan settings (Ts, N, k_r, k_u, ...; not the "
