@@ -248,6 +248,5 @@ def _chords(a: np.ndarray, b: np.ndarray, cand: np.ndarray, geo: PathGeometry, h
     frac = (np.arange(owner.size) - start) / np.repeat(m - 1, m)
     pts = a[owner] + frac[:, None] * (b - a)[owner]
     d = geo.distance(pts, cand[owner])
-    seen = np.zeros(len(a))
-    np.maximum.at(seen, owner, d)
+    seen = np.maximum.reduceat(d, np.cumsum(m) - m)  # each move's points side by side (m >= 2)
     return seen, seen + np.where(m > 1, 0.5 * h, 0.0)
