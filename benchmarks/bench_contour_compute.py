@@ -54,7 +54,7 @@ def measure(root: str, passes: int, feed: str) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("--root", action="append", help="checkouts to compare (default: this one)")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--feeds", default="program,fastest")
@@ -67,7 +67,8 @@ def main() -> None:
     roots = args.root or [str(HERE.parent)]
     print(f"load: {os.getloadavg()[0]:.1f} (1-min average) on {os.cpu_count()} cores; {args.rounds} rounds, medians")
     print("\n15 passes at the defaults (Ts 10 ms, tolerance 0.02 mm):\n")
-    print("| checkout | feed | CPU s (median) | CPU s (rounds) | vs first | peak RSS MB | cut time s | max deviation mm |")
+    print("| checkout | feed | CPU s (median) | CPU s (rounds) | vs first | peak RSS MB | cut time s "
+          "| max deviation mm |")
     print("|---|---|---|---|---|---|---|---|")
     for feed in args.feeds.split(","):
         runs: dict[str, list[dict]] = {r: [] for r in roots}
