@@ -31,10 +31,10 @@ def one(passes: int, feed: str) -> None:
     import resource
     import time
 
+    from planner.contour import plan_contour  # first: bench_contour puts its own checkout first on sys.path
+
     sys.path.insert(0, str(HERE))
     from bench_contour import ORIGIN, TOL, program  # type: ignore[import-not-found]
-
-    from planner.contour import plan_contour
 
     plan_contour({"program": program(1), "origin": ORIGIN, "tolerance_m": TOL, "feed": feed})  # kernels loaded
     c0 = time.process_time()
@@ -42,7 +42,8 @@ def one(passes: int, feed: str) -> None:
     cpu = time.process_time() - c0
     c = res.contour
     assert c is not None
-    print(json.dumps({"cpu": cpu, "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    where = str(Path(sys.modules["planner"].__file__ or "").parent.parent)
+    print(json.dumps({"cpu": cpu, "planner": where, "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
                       "cut_s": c.cut_time_s, "max_dev_m": c.max_deviation_m, "samples": len(res.time)}))
 
 
@@ -50,7 +51,9 @@ def measure(root: str, passes: int, feed: str) -> dict:
     env = dict(os.environ, PYTHONPATH=str(Path(root).resolve()), OPENBLAS_NUM_THREADS="1")
     out = subprocess.run([sys.executable, __file__, "--one", str(passes), feed], env=env, capture_output=True,
                          text=True, check=True)
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    got = json.loads(out.stdout.strip().splitlines()[-1])
+    assert Path(got["planner"]) == Path(root).resolve(), (got["planner"], root)  # the checkout measured
+    return got
 
 
 def main() -> None:

@@ -55,3 +55,59 @@ def test_estimate_counts_the_program_lines():
     short = estimate_contour({"program": gcode_long(100)})[0]
     long = estimate_contour({"program": gcode_long(20_100)})[0]
     assert long - short == pytest.approx(20_000 * 7.5e-5, rel=0.05)
+
+
+# ------------------------------------------------------------------------------------------
+# issue 35 goal 5: the estimate's counts on generated programs (tests/contour_programs.py),
+# against what the generator wrote and the tubes the planner builds (no timing here: the
+# benchmark bench_contour_estimate.py compares the estimate with the measured CPU)
+
+def _slice() -> list:
+    """A fixed-seed slice of the benchmark's programs small enough to count by building tubes."""
+    from tests.contour_programs import cases
+
+    return [(m, r) for m, r in cases(7, large=False) if m.moves <= 400 and m.passes <= 50]
+
+
+@pytest.mark.parametrize("k", range(len(_slice())))
+def test_estimate_counts_match_independent_counts(k):
+    import math
+
+    import numpy as np
+
+    from planner.contour import count_contour
+    from planner.contour.estimate import FEED_MARGIN
+    from planner.contour.passes import V0_M_S, TubeSizes, chunks, tolerance_of
+    from planner.contour.placement import CONTOUR_PSI, fit_origin
+    from planner.model import load_robot
+
+    made, raw = _slice()[k]
+    req = ContourRequest.model_validate(raw)
+    program = read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
+    c = count_contour(req, program)
+    assert c.lines == len(made.text.splitlines())
+    assert (c.passes, c.moves, c.arcs) == (made.passes, made.moves, made.arcs)
+    Ts = req.plan_settings().Ts
+    if req.feed == "program":  # the cut samples at F: the generator's length over F
+        assert c.samples == pytest.approx(made.time_at_f_s / Ts, rel=1e-6)
+    # the tube cells: the moves' pieces the planner's own tubes have, within the lead splits
+    # (at most two a piece) and the junctions (at most one a move boundary, and the two ends)
+    model = load_robot(req.robot)
+    tol = tolerance_of(req, program)
+    origin = fit_origin(program, model, tol)
+    st = req.plan_settings()
+    real_pieces, real_cells, n_pieces = 0, 0, 0
+    for b in program.passes:
+        for chunk in chunks(b.elements):
+            els = [b.elements[j] for j in chunk]
+            sizes = TubeSizes(model, st, chunk, els, origin, tol, CONTOUR_PSI, b.elements[0].start + origin,
+                              b.elements)
+            t = sizes.at_feed(np.full(len(els), FEED_MARGIN)) if req.feed == "program" else sizes(V0_M_S)
+            real_pieces += int((t.length > 0).sum())
+            real_cells += len(t.segments)
+            n_pieces += 1
+    assert n_pieces == c.pieces
+    est_pieces = c.cells - c.moves - c.pieces  # _cells: the pieces, a junction a move, one end
+    assert est_pieces <= real_pieces <= est_pieces + 2 * c.pieces
+    assert real_cells <= c.cells + 1 + 2 * c.pieces
+    assert math.isfinite(c.plans) and c.plans >= 1
