@@ -111,3 +111,27 @@ def test_estimate_counts_match_independent_counts(k):
     assert est_pieces <= real_pieces <= est_pieces + 2 * c.pieces
     assert real_cells <= c.cells + 1 + 2 * c.pieces
     assert math.isfinite(c.plans) and c.plans >= 1
+
+
+def test_refusals_and_timeouts_of_a_contour_name_contour_changes():
+    """A contour refused by its estimate or stopped at the limit is told what lowers a
+    contour's work (split the program, feed, Ts), never a corridor's (segments, tail_max_s)."""
+    from app.executors import describe_failure
+    from app.jobs import ContourJob, ContourWork, PlanJob
+    from app.workers import JobTimeout
+    from planner.contour import estimate_contour
+    from planner.schema import PlanRequest
+    from tests.contour_programs import long_pass
+
+    import numpy as np
+
+    req = ContourRequest.model_validate({"program": long_pass(np.random.default_rng(0), 200).text,
+                                         "feed": "fastest", "settings": {"Ts": 0.002}})
+    msg = ContourWork(*estimate_contour(req)).message(0.1)
+    assert "split the program" in msg and "feed 'program'" in msg and "tail_max_s" not in msg
+    out = describe_failure(JobTimeout("stopped"), ContourJob(req), 30.0)
+    assert out.error.code == "timeout" and "split the program" in out.error.message
+    assert "segments" not in out.error.message and "tail_max_s" not in out.error.message
+    plan = PlanRequest.model_validate({"segments": [{"lower": [0, 0, 0], "upper": [0, 0, 0]},
+                                                    {"lower": [0.001, 0, 0], "upper": [0.001, 0, 0]}]})
+    assert "tail_max_s" in describe_failure(JobTimeout("stopped"), PlanJob(plan), 30.0).error.message
