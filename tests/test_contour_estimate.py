@@ -116,14 +116,14 @@ def test_estimate_counts_match_independent_counts(k):
 def test_refusals_and_timeouts_of_a_contour_name_contour_changes():
     """A contour refused by its estimate or stopped at the limit is told what lowers a
     contour's work (split the program, feed, Ts), never a corridor's (segments, tail_max_s)."""
+    import numpy as np
+
     from app.executors import describe_failure
     from app.jobs import ContourJob, ContourWork, PlanJob
     from app.workers import JobTimeout
     from planner.contour import estimate_contour
     from planner.schema import PlanRequest
     from tests.contour_programs import long_pass
-
-    import numpy as np
 
     req = ContourRequest.model_validate({"program": long_pass(np.random.default_rng(0), 200).text,
                                          "feed": "fastest", "settings": {"Ts": 0.002}})
