@@ -173,6 +173,29 @@ def rapids(rng: np.random.Generator, n: int) -> Made:
     return m.done()
 
 
+def depth_passes(rng: np.random.Generator, n: int, f: float = 1200.0) -> Made:
+    """``n`` depth passes (0.5 mm apart) of one outline: a 16 x 10 mm rectangle with 2 mm
+    corner arcs and a 3 mm notch (lines and arcs; the passes share their time-optimal profiles)."""
+    m = _start(f"{n} depth passes of a notched rectangle", 0.02)
+    w, h, r = 16.0, 10.0, 2.0
+    for i in range(n):
+        m.lines.append(f"G0 X{r:.4f} Y0")
+        m.lines += [f"G1 Z{-(i + 1) * 0.5:.3f} F300", f"F{f:g}"]
+        m.passes += 1
+        m.cut(f"G1 X{w - r:.4f}", w - 2 * r, f)
+        m.cut(f"G3 X{w:.4f} Y{r:.4f} I0 J{r:.4f}", math.pi * r / 2, f, arc=True)
+        m.cut(f"G1 Y{h - r:.4f}", h - 2 * r, f)
+        m.cut(f"G3 X{w - r:.4f} Y{h:.4f} I{-r:.4f} J0", math.pi * r / 2, f, arc=True)
+        m.cut(f"G1 X{w / 2 + 3:.4f}", w / 2 - 3 - r, f)
+        m.cut(f"G2 X{w / 2 - 3:.4f} Y{h:.4f} R3", math.pi * 3, f, arc=True)
+        m.cut(f"G1 X{r:.4f}", w / 2 - 3 - r, f)
+        m.cut(f"G3 X0 Y{h - r:.4f} I0 J{-r:.4f}", math.pi * r / 2, f, arc=True)
+        m.cut(f"G1 Y{r:.4f}", h - 2 * r, f)
+        m.cut(f"G3 X{r:.4f} Y0 I{r:.4f} J0", math.pi * r / 2, f, arc=True)
+        m.lines.append("G0 Z2")
+    return m.done()
+
+
 def cases(seed: int = 0, large: bool = True) -> list[tuple[Made, dict]]:
     """The benchmark's programs (and settings): each family over its sizes, both feeds, Ts 1-10
     ms. ``large``: also the programs of 500-2000 passes and 10 000-100 000 lines (most are
@@ -214,4 +237,8 @@ def cases(seed: int = 0, large: bool = True) -> list[tuple[Made, dict]]:
     add(ramps(rng, 10), Ts=0.002)
     for n in (1_000, 20_000) + ((100_000,) if large else ()):
         add(rapids(rng, n))
+    for n in (1, 15) + ((60,) if large else ()):
+        add(depth_passes(rng, n))
+    add(depth_passes(rng, 15), "fastest")
+    add(depth_passes(rng, 3), Ts=0.002)
     return out

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..schema import DEFAULT_CONTOUR_TOLERANCE_M, PathElement, Program
 from .passes import CELL_SAMPLES, PROGRAM_MARGIN, V0_M_S, chunks, parse_contour_request, read_program, tolerance_of
+from .profiles import GRID_H_MAX, GRID_H_MIN, GRID_POINTS, GRID_POINTS_MIN
 from .tube import SAGITTA_FRACTION
 
 #: program feed's tube cells: a whole number of samples at F, this much shorter
@@ -29,40 +30,63 @@ __all__ = ["ADVICE_MIN_S", "ADVICE_WORK", "CONTOUR_CELL_PLAN_S", "CONTOUR_CELL_S
 #: :class:`planner.WorkEstimate`'s ``advice_seconds``); :func:`estimate_contour` names the bound
 ADVICE_WORK = 3.0
 ADVICE_MIN_S = 4.0
-#: The unit costs [s] below are CPU seconds fitted (least squares on the relative error) to 23
-#: generated programs (issue 33, ``benchmarks/bench_estimates.py``: 200-6 000 lines of 0.5 mm,
-#: 50-1 000 full circles of 0.1 mm, 10-400 short passes, arcs of 1.5 mm at 0.05 and 0.01 mm,
-#: Ts 2-10 ms, both feeds), then rounded up about 10 %: the estimate is the work, not a bound
-#: far above it (before, 2-16x the work: a 4 s floor and costs taken at the high end).
-#: seconds per receding-horizon step of a candidate plan (polygon cells, junctions), by feed
+#: The unit costs [s] below are CPU seconds fitted (non-negative least squares on the relative
+#: error) to 25 generated programs (issue 35 goal 5, ``tests/contour_programs.py``,
+#: ``benchmarks/bench_contour_estimate.py``: 1-100 tiny passes, single passes of 40-500 lines,
+#: tiny full circles, arcs, ramps and helices, 1 000-20 000 rapid lines, depth passes; Ts 1, 2,
+#: 5 and 10 ms; both feeds), then raised 10 %. A sample's cost grows faster than the horizon
+#: at fine sample times (:func:`sample_factor`, measured).
+#: seconds per sample of a candidate plan at Ts 10 ms (:func:`sample_factor` beyond), by feed
 #: (``fastest``'s samples at the reference speed are fewer and each carries a cell's rows)
-CONTOUR_STEP_S = {"program": 4.5e-4, "fastest": 1.1e-3}
-#: seconds a tube cell costs each candidate plan (its rows), by feed
-CONTOUR_CELL_PLAN_S = {"program": 3e-4, "fastest": 0.0}
-#: seconds a tube cell costs once a piece (built, its deviation and join): ``fastest`` adds the
-#: time-optimal profile and the search's candidates' cell rows; ``program`` the F-capped
-#: time-optimal profile and the tubes of shorter cells (issue 35)
-CONTOUR_CELL_S = {"program": 3e-4, "fastest": 3.5e-3}
-#: seconds of a piece besides its cells and samples (the search, the plan's start and settling)
-CONTOUR_PIECE_S = 0.017
-#: seconds of a move of the program (its path geometry, deviation candidates, Z)
-CONTOUR_ELEMENT_S = 1.1e-3
-#: seconds of a line of the program read (:func:`planner.exchange.read_gcode`: 30-70 us a line, a
-#: rapid with a comment the most)
-CONTOUR_LINE_S = 7.5e-5
-#: seconds of a free move between passes (a ``fastest`` plan of three segments: ~17 ms
-#: measured at Ts 10 ms), at Ts 10 ms, besides its samples
-CONTOUR_TRAVEL_S = 0.019
-#: seconds a sample of a free move costs, per sample of the horizon (its ``fastest`` search's
-#: candidates included)
-TRAVEL_STEP_S = 1.3e-4
+CONTOUR_STEP_S = {"program": 1.25e-4, "fastest": 1.3e-3}
+#: seconds a tube cell costs each candidate plan at Ts 10 ms, by feed
+CONTOUR_CELL_PLAN_S = {"program": 1.15e-4, "fastest": 0.0}
+#: seconds a tube cell costs once a piece (folded into the plans' share since issue 35)
+CONTOUR_CELL_S = {"program": 0.0, "fastest": 0.0}
+#: seconds of a piece each candidate plan at Ts 10 ms (its start and its settling: samples
+#: that grow as 1 / Ts), by feed
+CONTOUR_PIECE_S = {"program": 4.5e-3, "fastest": 0.0}
+#: seconds of a grid point of a time-optimal profile (:func:`_grid`)
+CONTOUR_GRID_S = 1.4e-4
+#: seconds of a tight turn (:attr:`ContourCounts.bends`) each candidate plan
+CONTOUR_BEND_S = 1.4e-5
+#: seconds of a move of the program (its path geometry, deviation candidates, Z): fitted 0,
+#: the cells and samples carry it
+CONTOUR_ELEMENT_S = 0.0
+#: seconds of a line of the program read (:func:`planner.exchange.read_gcode`) and walked
+CONTOUR_LINE_S = 5.1e-5
+#: seconds of a free move between passes besides its samples
+CONTOUR_TRAVEL_S = 3.8e-3
+#: seconds a sample of a free move costs at Ts 10 ms (a ``fastest`` plan of three segments,
+#: its search's candidates included; :func:`sample_factor` beyond)
+TRAVEL_STEP_S = 3.1e-3
 #: a free move's samples (:func:`travel_samples`): acceleration [m/s^2], force ramps [s], end
-#: samples; at sample times under 5 ms, moves over TRAVEL_SLOW_M [m] at TRAVEL_FINE_M_S [m/s]
+#: samples; at sample times of 1 ms and less, moves over TRAVEL_SLOW_M [m] at TRAVEL_FINE_M_S
+#: [m/s] (measured: 10 mm in 0.45 s, 20 mm in 0.95 s at Ts 1 ms; 9 mm in 0.1 s)
 TRAVEL_ACCEL_M_S2 = 3.0
 TRAVEL_RAMP_S = 0.015
 TRAVEL_END_SAMPLES = 4.0
-TRAVEL_SLOW_M = 0.008
-TRAVEL_FINE_M_S = 0.02
+TRAVEL_SLOW_M = 0.0095
+TRAVEL_FINE_M_S = 0.021
+#: :func:`sample_factor`: a sample's cost [x Ts 10 ms] at the default horizon, measured at these
+#: sample times [s] (the default horizon: 30, 51, 100 and 100 samples)
+SAMPLE_FACTOR_TS = (0.001, 0.002, 0.005, 0.01)
+SAMPLE_FACTOR = (7.5, 4.8, 1.2, 1.0)
+SAMPLE_FACTOR_N = (100, 100, 51, 30)
+
+
+def sample_factor(Ts: float, N: int) -> float:
+    """The cost of a sample of a candidate plan at ``Ts`` with the horizon ``N``, relative to
+    one at Ts 10 ms and the default 30: interpolated (in the logarithms) between the measured
+    :data:`SAMPLE_FACTOR` at :data:`SAMPLE_FACTOR_TS`, times ``N`` over the default horizon
+    there (a longer horizon, more rows a step)."""
+    lt = np.log(SAMPLE_FACTOR_TS)
+    x = float(np.log(min(max(Ts, SAMPLE_FACTOR_TS[0] / 4), 0.1)))
+    f = float(np.exp(np.interp(x, lt, np.log(SAMPLE_FACTOR))))
+    n0 = float(np.exp(np.interp(x, lt, np.log(SAMPLE_FACTOR_N))))
+    if Ts < SAMPLE_FACTOR_TS[0]:  # beyond the table: as the finest, per sample of its time
+        f *= SAMPLE_FACTOR_TS[0] / Ts
+    return f * max(N, 1) / n0
 
 
 def _cells(feed: str, elements: list[PathElement], tol: float, Ts: float) -> int:
@@ -114,6 +138,13 @@ class ContourCounts:
     travel_samples: float = 0.0
     #: the horizon of the plans [samples] (the cost of a sample grows with it)
     N: int = 30
+    #: the grid points of the pieces' time-optimal profiles (:func:`_grid`), each computed
+    #: once a tube a piece (passes of the same moves share them)
+    grid: float = 0.0
+    #: the tight turns: per arc its turns (sweep over 2 pi) times 1 mm over its radius (at
+    #: most 20): a sample on a tiny circle costs several on a line (measured: full circles of
+    #: 0.1 mm ~3x)
+    bends: float = 0.0
 
 
 def count_contour(request: Any, program: Program | None = None) -> ContourCounts:
@@ -132,7 +163,32 @@ def count_contour(request: Any, program: Program | None = None) -> ContourCounts
         cells=sum(_cells(req.feed, els, tol, st.Ts) for els in pieces),
         samples=sum(_samples(req.feed, b.elements, st.Ts) for b in program.passes),
         travels=len(moves), plans=_plans(req.feed, len(program.passes)),
-        travel_samples=sum(travel_samples(d, st.Ts) for d in moves), N=int(st.N))
+        travel_samples=sum(travel_samples(d, st.Ts) for d in moves), N=int(st.N),
+        grid=_grid(program),
+        bends=sum(abs(e.sweep_rad or 0.0) / (2 * math.pi) * min(1e-3 / max(e.radius_m or 1.0, 1e-9), 20.0)
+                  for els in pieces for e in els if e.kind == "arc"))
+
+
+def _grid(program: Program) -> float:
+    """The grid points of the time-optimal profiles of the program's pieces
+    (:class:`~planner.contour.profiles.OptimalProfiles`: spacing ``total / GRID_POINTS``
+    within ``[GRID_H_MIN, GRID_H_MAX]``, at least ``GRID_POINTS_MIN`` points), passes of the
+    same moves counted once (they share their profiles)."""
+    seen: set = set()
+    n = 0.0
+    for b in program.passes:
+        for chunk in chunks(b.elements):
+            els = [b.elements[k] for k in chunk]
+            key = tuple((e.kind, *np.round(e.start, 9), *np.round(e.end, 9), e.feed_m_s) for e in els)
+            if key in seen:
+                continue
+            seen.add(key)
+            total = sum(e.length_m for e in els)
+            if total <= 0:
+                continue
+            h = min(max(total / GRID_POINTS, GRID_H_MIN), GRID_H_MAX, total / GRID_POINTS_MIN)
+            n += total / h
+    return n
 
 
 def _travels(program: Program, tol: float) -> list[float]:
@@ -196,22 +252,25 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
     tol = tolerance_of(req, program)
     c = count_contour(req, program)
     pieces = [[b.elements[k] for k in chunk] for b in program.passes for chunk in chunks(b.elements)]
-    per_piece = [piece_estimate(req.feed, els, st.Ts, c.passes, tol) for els in pieces]
-    travel_s = c.travels * CONTOUR_TRAVEL_S + c.travel_samples * c.N * TRAVEL_STEP_S
-    read_s = c.lines * CONTOUR_LINE_S
-    check = max(ADVICE_WORK * max(per_piece, default=0.0), ADVICE_MIN_S)
-    cut_s = sum(per_piece)
-    seconds = cut_s + travel_s + read_s
+    per_piece = [piece_estimate(req.feed, els, st.Ts, c.passes, tol, st.N) for els in pieces]
     f = req.feed
-    parts = {"travel": travel_s, "cells": c.cells * (CONTOUR_CELL_S[f] + c.plans * CONTOUR_CELL_PLAN_S[f]),
-             "samples": c.samples * c.plans * CONTOUR_STEP_S[f], "lines": read_s,
-             "elements": CONTOUR_ELEMENT_S * c.moves}
+    g = sample_factor(st.Ts, c.N)
+    parts = {"travel": c.travels * CONTOUR_TRAVEL_S + c.travel_samples * g * TRAVEL_STEP_S,
+             "cells": g * c.plans * c.cells * CONTOUR_CELL_PLAN_S[f] + c.cells * CONTOUR_CELL_S[f],
+             "samples": g * c.plans * (c.samples * CONTOUR_STEP_S[f] + c.pieces * CONTOUR_PIECE_S[f] * 0.01 / st.Ts),
+             "profiles": c.grid * CONTOUR_GRID_S + c.plans * c.bends * CONTOUR_BEND_S,
+             "lines": c.lines * CONTOUR_LINE_S, "elements": CONTOUR_ELEMENT_S * c.moves}
+    travel_s, read_s = parts["travel"], parts["lines"]
+    check = max(ADVICE_WORK * max(per_piece, default=0.0), ADVICE_MIN_S)
+    seconds = sum(parts.values())
+    cut_s = seconds - travel_s - read_s
     most = max(parts, key=parts.__getitem__)
     advice = {"travel": "fewer passes: split the program (each pass is a move there, planned with the fastest "
                         "timing)",
               "cells": "a larger tolerance_m (fewer arc chords and cells), or split the program",
               "elements": "fewer, longer moves (join short moves in the CAM program), or split the program",
               "lines": "a shorter program: split it",
+              "profiles": "a larger tolerance_m or fewer, longer moves, or split the program",
               "samples": (f"a larger settings.Ts than {st.Ts:g} s (fewer samples a pass), or split the program"
                           if st.Ts < 0.01 else "split the program")}[most]
     if f == "fastest":
@@ -237,13 +296,20 @@ def _plans(feed: str, passes: int) -> float:
 
 
 def piece_estimate(feed: str, elements: list[PathElement], Ts: float, passes: int = 1,
-                    tol: float = DEFAULT_CONTOUR_TOLERANCE_M) -> float:
+                    tol: float = DEFAULT_CONTOUR_TOLERANCE_M, N: int | None = None) -> float:
     """:func:`estimate_contour`'s share of one piece (a pass, or its part between exact stops)
-    [s]: :data:`CONTOUR_PIECE_S`, its moves (:data:`CONTOUR_ELEMENT_S`), its cells
-    (:func:`_cells`) built once and planned by each candidate, its cut samples planned by each
-    candidate."""
+    [s]: its cells, cut samples, start and settling planned by each candidate, its tight turns,
+    its time-optimal profile's grid (``N``: the horizon, default the default robot's at
+    ``Ts``)."""
     plans = _plans(feed, passes)
     cells = _cells(feed, elements, tol, Ts)
-    return (CONTOUR_PIECE_S + CONTOUR_ELEMENT_S * len(elements)
-            + cells * (CONTOUR_CELL_S[feed] + plans * CONTOUR_CELL_PLAN_S[feed])
-            + _samples(feed, elements, Ts) * plans * CONTOUR_STEP_S[feed])
+    n0 = float(np.exp(np.interp(np.log(min(max(Ts, 1e-4), 0.1)), np.log(SAMPLE_FACTOR_TS), np.log(SAMPLE_FACTOR_N))))
+    g = sample_factor(Ts, int(round(n0)) if N is None else N)
+    total = sum(e.length_m for e in elements)
+    grid = total / min(max(total / GRID_POINTS, GRID_H_MIN), GRID_H_MAX, total / GRID_POINTS_MIN) if total > 0 else 0.0
+    bends = sum(abs(e.sweep_rad or 0.0) / (2 * math.pi) * min(1e-3 / max(e.radius_m or 1.0, 1e-9), 20.0)
+                for e in elements if e.kind == "arc")
+    return (g * plans * (cells * CONTOUR_CELL_PLAN_S[feed] + _samples(feed, elements, Ts) * CONTOUR_STEP_S[feed]
+                         + CONTOUR_PIECE_S[feed] * 0.01 / Ts)
+            + cells * CONTOUR_CELL_S[feed] + grid * CONTOUR_GRID_S + plans * bends * CONTOUR_BEND_S
+            + CONTOUR_ELEMENT_S * len(elements))
