@@ -52,9 +52,12 @@ def test_estimate_holds_both_ways(name):
 def test_estimate_counts_the_program_lines():
     """A program of rapids alone is read and walked: its lines are counted (a long program
     of rapids around a few cuts is not estimated as the cuts alone)."""
+    from planner.contour.estimate import CONTOUR_LINE_S
+
     short = estimate_contour({"program": gcode_long(100)})[0]
     long = estimate_contour({"program": gcode_long(20_100)})[0]
-    assert long - short == pytest.approx(20_000 * 7.5e-5, rel=0.05)
+    assert CONTOUR_LINE_S > 0
+    assert long - short == pytest.approx(20_000 * CONTOUR_LINE_S, rel=0.05)
 
 
 # ------------------------------------------------------------------------------------------
