@@ -1,6 +1,7 @@
-"""The compute time of a contour plan, estimated before it starts (issue 33): from the
-program's counts (passes, pieces, tube cells, cut samples, moves between passes), no tube
-built and no plan. :func:`estimate_contour` is what the service admits a contour job by;
+"""The compute time of a contour plan, estimated before it starts (issues 33 and 35): from the
+program's counts (:func:`count_contour`: lines, passes, pieces, tube cells, cut samples, the
+free moves between passes from their lengths, the time-optimal profiles' grid, at the sample
+time and horizon of the request), no tube built and no plan. :func:`estimate_contour` is what the service admits a contour job by;
 :func:`piece_estimate` also bounds the check of an ``infeasible`` verdict's advice
 (:func:`planner.contour.search.confirmed_infeasible`)."""
 
