@@ -1,8 +1,8 @@
 """The compute time of a contour plan, estimated before it starts (issues 33 and 35): from the
 program's counts (:func:`count_contour`: lines, passes, pieces, tube cells, cut samples, the
 free moves between passes from their lengths, the time-optimal profiles' grid, at the sample
-time and horizon of the request), no tube built and no plan. :func:`estimate_contour` is what the service admits a contour job by;
-:func:`piece_estimate` also bounds the check of an ``infeasible`` verdict's advice
+time and horizon of the request), no tube built and no plan. :func:`estimate_contour` is what
+the service admits a contour job by; :func:`piece_estimate` also bounds the check of an ``infeasible`` verdict's advice
 (:func:`planner.contour.search.confirmed_infeasible`)."""
 
 from __future__ import annotations
@@ -282,9 +282,24 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
                      f"infeasible pass's advice is checked within {check:.2g} s more")
 
 
+#: program feed: an arc is cut at most at ``sqrt(ARC_ACCEL_M_S2 r)`` (a tiny circle at F3000 is
+#: not cut at F: its samples are those of the speed the arc allows; the program feed's profile
+#: acceleration, :data:`planner.contour.search.A_PROGRAM_M_S2`)
+ARC_ACCEL_M_S2 = 2.0
+
+
 def _samples(feed: str, elements: list[PathElement], Ts: float) -> float:
-    """The cut samples of ``elements`` at the programmed feed or the reference speed."""
-    return sum(e.length_m / max(e.feed_m_s if feed == "program" else V0_M_S * 2, 1e-9) for e in elements) / Ts
+    """The cut samples of ``elements`` at the programmed feed (an arc's no faster than
+    :data:`ARC_ACCEL_M_S2` allows on it) or the reference speed."""
+    if feed != "program":
+        return sum(e.length_m for e in elements) / (V0_M_S * 2) / Ts
+    total = 0.0
+    for e in elements:
+        v = e.feed_m_s
+        if e.kind == "arc" and e.radius_m:
+            v = min(v, math.sqrt(ARC_ACCEL_M_S2 * e.radius_m))
+        total += e.length_m / max(v, 1e-9)
+    return total / Ts
 
 
 def _plans(feed: str, passes: int) -> float:
