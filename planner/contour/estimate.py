@@ -32,35 +32,41 @@ __all__ = ["ADVICE_MIN_S", "ADVICE_WORK", "CONTOUR_CELL_PLAN_S", "CONTOUR_CELL_S
 ADVICE_WORK = 3.0
 ADVICE_MIN_S = 4.0
 #: The unit costs [s] below are CPU seconds fitted (non-negative least squares on the relative
-#: error) to 25 generated programs (issue 35 goal 5, ``tests/contour_programs.py``,
+#: error) to 36 generated programs (issue 35 goal 5, ``tests/contour_programs.py`` and the
+#: staircases, waves and circles of ``benchmarks/bench_estimates.py``,
 #: ``benchmarks/bench_contour_estimate.py``: 1-100 tiny passes, single passes of 40-500 lines,
 #: tiny full circles, arcs, ramps and helices, 1 000-20 000 rapid lines, depth passes; Ts 1, 2,
 #: 5 and 10 ms; both feeds), then raised 10 %. A sample's cost grows faster than the horizon
 #: at fine sample times (:func:`sample_factor`, measured).
 #: seconds per sample of a candidate plan at Ts 10 ms (:func:`sample_factor` beyond), by feed
 #: (``fastest``'s samples at the reference speed are fewer and each carries a cell's rows)
-CONTOUR_STEP_S = {"program": 1.25e-4, "fastest": 1.3e-3}
+CONTOUR_STEP_S = {"program": 1.45e-4, "fastest": 1.15e-3}
 #: seconds a tube cell costs each candidate plan at Ts 10 ms, by feed
-CONTOUR_CELL_PLAN_S = {"program": 1.15e-4, "fastest": 0.0}
+CONTOUR_CELL_PLAN_S = {"program": 8.9e-5, "fastest": 0.0}
 #: seconds a tube cell costs once a piece (folded into the plans' share since issue 35)
 CONTOUR_CELL_S = {"program": 0.0, "fastest": 0.0}
 #: seconds of a piece each candidate plan at Ts 10 ms (its start and its settling: samples
 #: that grow as 1 / Ts), by feed
-CONTOUR_PIECE_S = {"program": 4.5e-3, "fastest": 0.0}
+CONTOUR_PIECE_S = {"program": 4.4e-3, "fastest": 0.0}
+#: seconds more a sample on an arc costs each candidate plan at Ts 10 ms, by feed (set from the
+#: staircases, waves and tiny circles of bench_estimates.py, 1.7-1.9x under the fit without it)
+CONTOUR_ARC_STEP_S = {"program": 1.45e-4, "fastest": 0.0}
+#: seconds of a corner (:attr:`ContourCounts.corners`) each candidate plan at Ts 10 ms, by feed
+CONTOUR_CORNER_S = {"program": 2.8e-4, "fastest": 3.0e-4}
 #: seconds of a grid point of a time-optimal profile (:func:`_grid`)
-CONTOUR_GRID_S = 1.4e-4
+CONTOUR_GRID_S = 1.75e-4
 #: seconds of a tight turn (:attr:`ContourCounts.bends`) each candidate plan
-CONTOUR_BEND_S = 1.4e-5
+CONTOUR_BEND_S = 4.0e-4
 #: seconds of a move of the program (its path geometry, deviation candidates, Z): fitted 0,
 #: the cells and samples carry it
 CONTOUR_ELEMENT_S = 0.0
 #: seconds of a line of the program read (:func:`planner.exchange.read_gcode`) and walked
-CONTOUR_LINE_S = 5.1e-5
+CONTOUR_LINE_S = 5.5e-5
 #: seconds of a free move between passes besides its samples
-CONTOUR_TRAVEL_S = 3.8e-3
+CONTOUR_TRAVEL_S = 3.9e-4
 #: seconds a sample of a free move costs at Ts 10 ms (a ``fastest`` plan of three segments,
 #: its search's candidates included; :func:`sample_factor` beyond)
-TRAVEL_STEP_S = 3.1e-3
+TRAVEL_STEP_S = 3.2e-3
 #: a free move's samples (:func:`travel_samples`): acceleration [m/s^2], force ramps [s], end
 #: samples; at sample times of 1 ms and less, moves over TRAVEL_SLOW_M [m] at TRAVEL_FINE_M_S
 #: [m/s] (measured: 10 mm in 0.45 s, 20 mm in 0.95 s at Ts 1 ms; 9 mm in 0.1 s)
@@ -146,6 +152,12 @@ class ContourCounts:
     #: most 20): a sample on a tiny circle costs several on a line (measured: full circles of
     #: 0.1 mm ~3x)
     bends: float = 0.0
+    #: the corners: move boundaries in a piece where the direction turns by more than
+    #: :data:`CORNER_RAD` (the robot slows into each: its samples cost more)
+    corners: int = 0
+    #: program feed: the cut samples on arcs (counted in ``samples`` too; a sample on an arc costs
+    #: more: :data:`CONTOUR_ARC_STEP_S`)
+    arc_samples: float = 0.0
 
 
 def count_contour(request: Any, program: Program | None = None) -> ContourCounts:
@@ -166,6 +178,9 @@ def count_contour(request: Any, program: Program | None = None) -> ContourCounts
         travels=len(moves), plans=_plans(req.feed, len(program.passes)),
         travel_samples=sum(travel_samples(d, st.Ts) for d in moves), N=int(st.N),
         grid=_grid(program),
+        corners=sum(_corners(els) for els in pieces),
+        arc_samples=sum(_samples(req.feed, [e for e in els if e.kind == "arc"], st.Ts) for els in pieces)
+        if req.feed == "program" else 0.0,
         bends=sum(abs(e.sweep_rad or 0.0) / (2 * math.pi) * min(1e-3 / max(e.radius_m or 1.0, 1e-9), 20.0)
                   for els in pieces for e in els if e.kind == "arc"))
 
@@ -190,6 +205,46 @@ def _grid(program: Program) -> float:
             h = min(max(total / GRID_POINTS, GRID_H_MIN), GRID_H_MAX, total / GRID_POINTS_MIN)
             n += total / h
     return n
+
+
+#: a move boundary turning by more than this [rad] is a corner (:attr:`ContourCounts.corners`)
+CORNER_RAD = 0.2
+
+
+def _tangent(e: PathElement, at_end: bool) -> tuple[float, float]:
+    """The unit direction of a move at its start or end (an arc's tangent there)."""
+    if e.kind == "arc" and e.start_angle_rad is not None and e.sweep_rad:
+        a = e.start_angle_rad + (e.sweep_rad if at_end else 0.0)
+        sgn = 1.0 if e.sweep_rad > 0 else -1.0
+        return (-sgn * math.sin(a), sgn * math.cos(a))
+    dx, dy = float(e.end[0] - e.start[0]), float(e.end[1] - e.start[1])
+    n = math.hypot(dx, dy)
+    return (dx / n, dy / n) if n > 0 else (0.0, 0.0)
+
+
+#: a move boundary where the signed curvature jumps by more than this [1/m] is a corner too
+#: (a line into an arc of less than 10 mm, a wave of arcs: the drives' forces jump there)
+CORNER_CURVATURE = 100.0
+
+
+def _curvature(e: PathElement) -> float:
+    if e.kind == "arc" and e.radius_m and e.sweep_rad:
+        return math.copysign(1.0 / e.radius_m, e.sweep_rad)
+    return 0.0
+
+
+def _corners(els: list[PathElement]) -> int:
+    """The move boundaries of a piece that turn by more than :data:`CORNER_RAD` or where the
+    curvature jumps by more than :data:`CORNER_CURVATURE`."""
+    out = 0
+    for a, b in zip(els, els[1:]):
+        ta, tb = _tangent(a, True), _tangent(b, False)
+        if ta == (0.0, 0.0) or tb == (0.0, 0.0):
+            continue
+        turn = math.atan2(ta[0] * tb[1] - ta[1] * tb[0], ta[0] * tb[0] + ta[1] * tb[1])
+        if abs(turn) > CORNER_RAD or abs(_curvature(a) - _curvature(b)) > CORNER_CURVATURE:
+            out += 1
+    return out
 
 
 def _travels(program: Program, tol: float) -> list[float]:
@@ -258,7 +313,8 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
     g = sample_factor(st.Ts, c.N)
     parts = {"travel": c.travels * CONTOUR_TRAVEL_S + c.travel_samples * g * TRAVEL_STEP_S,
              "cells": g * c.plans * c.cells * CONTOUR_CELL_PLAN_S[f] + c.cells * CONTOUR_CELL_S[f],
-             "samples": g * c.plans * (c.samples * CONTOUR_STEP_S[f] + c.pieces * CONTOUR_PIECE_S[f] * 0.01 / st.Ts),
+             "samples": g * c.plans * (c.samples * CONTOUR_STEP_S[f] + c.pieces * CONTOUR_PIECE_S[f] * 0.01 / st.Ts
+                                       + c.corners * CONTOUR_CORNER_S[f] + c.arc_samples * CONTOUR_ARC_STEP_S[f]),
              "profiles": c.grid * CONTOUR_GRID_S + c.plans * c.bends * CONTOUR_BEND_S,
              "lines": c.lines * CONTOUR_LINE_S, "elements": CONTOUR_ELEMENT_S * c.moves}
     travel_s, read_s = parts["travel"], parts["lines"]
@@ -274,6 +330,8 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
               "profiles": "a larger tolerance_m or fewer, longer moves, or split the program",
               "samples": (f"a larger settings.Ts than {st.Ts:g} s (fewer samples a pass), or split the program"
                           if st.Ts < 0.01 else "split the program")}[most]
+    if most in ("samples", "cells", "profiles") and 2 * c.arcs >= c.moves > 0:  # mostly arcs
+        advice += ", or a larger tolerance_m (fewer arc chords)"
     if f == "fastest":
         advice = "feed 'program' instead of 'fastest' (one plan a pass instead of a search), or " + advice
     return seconds, (f"{c.passes} passes in {c.pieces} pieces, {c.cells} tube cells and ~{c.samples:.0f} cut samples "
@@ -326,6 +384,8 @@ def piece_estimate(feed: str, elements: list[PathElement], Ts: float, passes: in
     bends = sum(abs(e.sweep_rad or 0.0) / (2 * math.pi) * min(1e-3 / max(e.radius_m or 1.0, 1e-9), 20.0)
                 for e in elements if e.kind == "arc")
     return (g * plans * (cells * CONTOUR_CELL_PLAN_S[feed] + _samples(feed, elements, Ts) * CONTOUR_STEP_S[feed]
-                         + CONTOUR_PIECE_S[feed] * 0.01 / Ts)
+                         + CONTOUR_PIECE_S[feed] * 0.01 / Ts + _corners(elements) * CONTOUR_CORNER_S[feed]
+                         + (_samples(feed, [e for e in elements if e.kind == "arc"], Ts) * CONTOUR_ARC_STEP_S[feed]
+                            if feed == "program" else 0.0))
             + cells * CONTOUR_CELL_S[feed] + grid * CONTOUR_GRID_S + plans * bends * CONTOUR_BEND_S
             + CONTOUR_ELEMENT_S * len(elements))
