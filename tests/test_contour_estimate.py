@@ -142,3 +142,29 @@ def test_refusals_and_timeouts_of_a_contour_name_contour_changes():
     plan = PlanRequest.model_validate({"segments": [{"lower": [0, 0, 0], "upper": [0, 0, 0]},
                                                     {"lower": [0.001, 0, 0], "upper": [0.001, 0, 0]}]})
     assert "tail_max_s" in describe_failure(JobTimeout("stopped"), PlanJob(plan), 30.0).error.message
+
+
+def test_a_pass_too_large_for_any_tube_is_refused_up_front():
+    """``program`` feed: a pass whose coarsest tube (the search's first after the cells at F)
+    has more cells than the planner allows is refused by the estimate, before any plan, with the
+    planner's own verdict (``too_large`` naming the line); the planner refuses it as well, after
+    building its tubes. A pass that fits is estimated."""
+    import numpy as np
+
+    from planner.errors import PlannerError
+    from planner.schema import MAX_SEGMENTS
+    from tests.contour_programs import circles, long_pass
+
+    rng = np.random.default_rng(0)
+    big = {"program": long_pass(rng, 3000).text}
+    with pytest.raises(PlannerError) as err:
+        estimate_contour(big)
+    assert err.value.code == "too_large" and err.value.field == "program"
+    assert "line 6" in err.value.message and str(MAX_SEGMENTS) in err.value.message
+    with pytest.raises(PlannerError) as planned:
+        plan_contour(big)
+    assert planned.value.code == "too_large"
+    with pytest.raises(PlannerError):
+        estimate_contour({"program": circles(rng, 1000, per_pass=1000).text})
+    assert estimate_contour({"program": long_pass(rng, 400).text})[0] > 0
+    assert estimate_contour({"program": circles(rng, 300, per_pass=100).text})[0] > 0

@@ -13,7 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from ..schema import DEFAULT_CONTOUR_TOLERANCE_M, PathElement, Program
+from ..errors import PlannerError
+from ..schema import DEFAULT_CONTOUR_TOLERANCE_M, MAX_SEGMENTS, PathElement, Program
 from .passes import CELL_SAMPLES, PROGRAM_MARGIN, V0_M_S, chunks, parse_contour_request, read_program, tolerance_of
 from .profiles import GRID_H_MAX, GRID_H_MIN, GRID_POINTS, GRID_POINTS_MIN
 from .tube import SAGITTA_FRACTION
@@ -288,6 +289,28 @@ def travel_samples(d: float, Ts: float) -> float:
     return t / Ts + TRAVEL_END_SAMPLES
 
 
+def _coarsest_cells(elements: list[PathElement], tol: float, Ts: float) -> int:
+    """``program`` feed: a lower bound on the cells of the coarsest tube its search plans a
+    piece in (:meth:`~planner.contour.search.TimingSearch.program_loop`'s first: cells of
+    :data:`CELL_SAMPLES` samples at the top F times :data:`PROGRAM_MARGIN`, at least 4
+    tolerances; the finer ones have more): the moves' pieces and the two ends, no junction."""
+    if not elements:
+        return 0
+    s_a = SAGITTA_FRACTION * tol
+    piece_max = max(max(e.feed_m_s for e in elements) * PROGRAM_MARGIN * Ts * CELL_SAMPLES, 4 * tol)
+    n = 2
+    for e in elements:
+        if e.length_m < 1e-9:
+            continue
+        if e.kind == "arc" and e.radius_m and e.sweep_rad is not None:
+            r = e.radius_m
+            step = 2 * math.acos(max(1 - s_a / r, -1.0)) if s_a < r else math.pi / 2
+            n += max(1, math.ceil(abs(e.sweep_rad) / min(step, piece_max / r, math.pi / 2)))
+        else:
+            n += max(1, math.ceil(e.length_m / piece_max))
+    return n
+
+
 def estimate_contour(request: Any, program: Program | None = None) -> tuple[float, str]:
     """The estimated compute time of :func:`plan_contour` [s] and the arithmetic in words,
     from the program's counts (:func:`count_contour`; no tube built, no plan): per piece (a
@@ -308,6 +331,13 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
     tol = tolerance_of(req, program)
     c = count_contour(req, program)
     pieces = [[b.elements[k] for k in chunk] for b in program.passes for chunk in chunks(b.elements)]
+    if req.feed == "program":  # a piece no tube of the search fits: refused now, as the planner would be
+        for els in pieces:
+            n = _coarsest_cells(els, tol, st.Ts)
+            if n > MAX_SEGMENTS:
+                raise PlannerError("too_large", f"line {els[0].line}: the pass needs at least {n} tube cells at a "
+                                   f"tolerance of {tol * 1e3:g} mm, more than the limit of {MAX_SEGMENTS}; split the "
+                                   "pass or give a larger tolerance_m", "program")
     per_piece = [piece_estimate(req.feed, els, st.Ts, c.passes, tol, st.N) for els in pieces]
     f = req.feed
     g = sample_factor(st.Ts, c.N)
