@@ -155,6 +155,10 @@ def describe_failure(exc: Exception, job: Job, timeout_s: float, memory_mb: int 
         if isinstance(job, ExportJob):
             return failed({"code": "timeout", "field": "format", "message": f"writing the plan as {job.format} took "
                            f"longer than the export limit of {timeout_s:g} s (RANGEPLAN_EXPORT_TIMEOUT_S)"})
+        if job.kind == "contour":  # what lowers a contour's work, not a corridor's
+            from app.failures import contour_timeout
+
+            return failed(contour_timeout(timeout_s))
         return failed(import_timeout(timeout_s) if isinstance(job, ImportJob) else timeout(timeout_s))
     if isinstance(exc, PoolBusy):
         return failed({"code": "busy", "message": f"too many plans in progress ({exc}); retry shortly"}, 503)

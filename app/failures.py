@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["degenerate", "import_timeout", "limit_memory", "out_of_memory", "timeout", "too_much_work"]
+__all__ = ["contour_timeout", "degenerate", "import_timeout", "limit_memory", "out_of_memory", "timeout",
+           "too_much_work"]
 
 
 def limit_memory(memory_mb: int | None) -> None:
@@ -34,6 +35,15 @@ def timeout(limit_s: float) -> dict[str, Any]:
     return {"code": "timeout", "field": None,
             "message": f"planning took longer than the compute limit of {limit_s:g} s and was stopped; use fewer "
                        "segments or samples, a shorter settings.tail_max_s, or a larger settings.Ts"}
+
+
+def contour_timeout(limit_s: float) -> dict[str, Any]:
+    """A contour stopped at the compute limit ``limit_s`` [s] (admitted by its estimate, which
+    it outran): what lowers a contour's work, not a corridor's."""
+    return {"code": "timeout", "field": "program",
+            "message": f"contouring took longer than the compute limit of {limit_s:g} s and was stopped; split the "
+                       "program into shorter ones, use feed 'program' instead of 'fastest', or a settings.Ts nearer "
+                       "the default 0.01 s"}
 
 
 def import_timeout(limit_s: float) -> dict[str, Any]:

@@ -52,6 +52,119 @@ def test_estimate_holds_both_ways(name):
 def test_estimate_counts_the_program_lines():
     """A program of rapids alone is read and walked: its lines are counted (a long program
     of rapids around a few cuts is not estimated as the cuts alone)."""
+    from planner.contour.estimate import CONTOUR_LINE_S
+
     short = estimate_contour({"program": gcode_long(100)})[0]
     long = estimate_contour({"program": gcode_long(20_100)})[0]
-    assert long - short == pytest.approx(20_000 * 7.5e-5, rel=0.05)
+    assert CONTOUR_LINE_S > 0
+    assert long - short == pytest.approx(20_000 * CONTOUR_LINE_S, rel=0.05)
+
+
+# ------------------------------------------------------------------------------------------
+# issue 35 goal 5: the estimate's counts on generated programs (tests/contour_programs.py),
+# against what the generator wrote and the tubes the planner builds (no timing here: the
+# benchmark bench_contour_estimate.py compares the estimate with the measured CPU)
+
+def _slice() -> list:
+    """A fixed-seed slice of the benchmark's programs small enough to count by building tubes."""
+    from tests.contour_programs import cases
+
+    return [(m, r) for m, r in cases(7, large=False) if m.moves <= 400 and m.passes <= 50]
+
+
+@pytest.mark.parametrize("k", range(len(_slice())))
+def test_estimate_counts_match_independent_counts(k):
+    import math
+
+    import numpy as np
+
+    from planner.contour import count_contour
+    from planner.contour.estimate import FEED_MARGIN
+    from planner.contour.passes import V0_M_S, TubeSizes, chunks, tolerance_of
+    from planner.contour.placement import CONTOUR_PSI, fit_origin
+    from planner.model import load_robot
+
+    made, raw = _slice()[k]
+    req = ContourRequest.model_validate(raw)
+    program = read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
+    c = count_contour(req, program)
+    assert c.lines == len(made.text.splitlines())
+    assert (c.passes, c.moves, c.arcs) == (made.passes, made.moves, made.arcs)
+    Ts = req.plan_settings().Ts
+    if req.feed == "program":  # the cut samples at F: the generator's length over F (an arc's
+        # at most at the speed it allows: more samples, never fewer)
+        if made.arcs == 0:
+            assert c.samples == pytest.approx(made.time_at_f_s / Ts, rel=1e-6)
+        else:
+            assert c.samples >= made.time_at_f_s / Ts * (1 - 1e-6)
+    # the tube cells: the moves' pieces the planner's own tubes have, within the lead splits
+    # (at most two a piece) and the junctions (at most one a move boundary, and the two ends)
+    model = load_robot(req.robot)
+    tol = tolerance_of(req, program)
+    origin = fit_origin(program, model, tol)
+    st = req.plan_settings()
+    real_pieces, real_cells, n_pieces = 0, 0, 0
+    for b in program.passes:
+        for chunk in chunks(b.elements):
+            els = [b.elements[j] for j in chunk]
+            sizes = TubeSizes(model, st, chunk, els, origin, tol, CONTOUR_PSI, b.elements[0].start + origin,
+                              b.elements)
+            t = sizes.at_feed(np.full(len(els), FEED_MARGIN)) if req.feed == "program" else sizes(V0_M_S)
+            real_pieces += int((t.length > 0).sum())
+            real_cells += len(t.segments)
+            n_pieces += 1
+    assert n_pieces == c.pieces
+    est_pieces = c.cells - c.moves - c.pieces  # _cells: the pieces, a junction a move, one end
+    assert est_pieces <= real_pieces <= est_pieces + 2 * c.pieces
+    assert real_cells <= c.cells + 1 + 2 * c.pieces
+    assert math.isfinite(c.plans) and c.plans >= 1
+
+
+def test_refusals_and_timeouts_of_a_contour_name_contour_changes():
+    """A contour refused by its estimate or stopped at the limit is told what lowers a
+    contour's work (split the program, feed, Ts), never a corridor's (segments, tail_max_s)."""
+    import numpy as np
+
+    from app.executors import describe_failure
+    from app.jobs import ContourJob, ContourWork, PlanJob
+    from app.workers import JobTimeout
+    from planner.contour import estimate_contour
+    from planner.schema import PlanRequest
+    from tests.contour_programs import long_pass
+
+    req = ContourRequest.model_validate({"program": long_pass(np.random.default_rng(0), 200).text,
+                                         "feed": "fastest", "settings": {"Ts": 0.002}})
+    msg = ContourWork(*estimate_contour(req)).message(0.1)
+    assert "split the program" in msg and "feed 'program'" in msg and "tail_max_s" not in msg
+    out = describe_failure(JobTimeout("stopped"), ContourJob(req), 30.0)
+    assert out.error.code == "timeout" and "split the program" in out.error.message
+    assert "segments" not in out.error.message and "tail_max_s" not in out.error.message
+    plan = PlanRequest.model_validate({"segments": [{"lower": [0, 0, 0], "upper": [0, 0, 0]},
+                                                    {"lower": [0.001, 0, 0], "upper": [0.001, 0, 0]}]})
+    assert "tail_max_s" in describe_failure(JobTimeout("stopped"), PlanJob(plan), 30.0).error.message
+
+
+def test_a_pass_too_large_for_any_tube_is_refused_up_front():
+    """``program`` feed: a pass whose coarsest tube (the search's first after the cells at F)
+    has more cells than the planner allows is refused by the estimate, before any plan, with the
+    planner's own verdict (``too_large`` naming the line); the planner refuses it as well, after
+    building its tubes. A pass that fits is estimated."""
+    import numpy as np
+
+    from planner.errors import PlannerError
+    from planner.schema import MAX_SEGMENTS
+    from tests.contour_programs import circles, long_pass
+
+    rng = np.random.default_rng(0)
+    big = {"program": long_pass(rng, 3000).text}
+    with pytest.raises(PlannerError) as err:
+        estimate_contour(big)
+    assert err.value.code == "too_large" and err.value.field == "program"
+    assert "line 6" in err.value.message and str(MAX_SEGMENTS) in err.value.message
+    with pytest.raises(PlannerError) as planned:
+        plan_contour(big)
+    assert planned.value.code == "too_large"
+    with pytest.raises(PlannerError):
+        estimate_contour({"program": circles(rng, 1000, per_pass=1000).text})
+    assert estimate_contour({"program": long_pass(rng, 400).text})[0] > 0
+    assert estimate_contour({"program": circles(rng, 300, per_pass=100).text})[0] > 0

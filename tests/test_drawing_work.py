@@ -184,3 +184,36 @@ def test_the_service_refuses_a_drawing_over_its_time_limit(tmp_path):
             err = r.json()["error"]
             assert err["code"] == "too_much_work" and err["field"] == "drawing", err
             assert f"{est:.3g} s" in err["message"]
+
+
+def _arc_svg(body: str) -> bytes:
+    return (f'<svg xmlns="http://www.w3.org/2000/svg" width="400mm" height="400mm" viewBox="0 0 400 400">{body}'
+            '</svg>').encode()
+
+
+def _arc_circle(x: float, y: float, r: float) -> str:
+    """A circle as a path of two arcs (flattened by the import, unlike a <circle>)."""
+    return f'<path d="M{x},{y + r} A{r},{r} 0 1,0 {x + 2 * r},{y + r} A{r},{r} 0 1,0 {x},{y + r} Z"/>'
+
+
+@pytest.mark.parametrize("transform", ["scale(10)", "matrix(10,0,0,10,4,5)", "rotate(30) scale(2) scale(5)",
+                                       "scale(10, 4)"])
+def test_svg_transforms_scale_the_chords_counted(transform):
+    """A curve scaled up by its element's and ancestors' transforms flattens into more chords
+    (issue 33 goal 2): the estimate counts them as the same curve drawn at that size, and
+    at least as many as the import makes (its own count of the shape's vertices)."""
+    def within(shape: str, transform: str = "") -> bytes:  # the same element tree each time
+        return _arc_svg(f'<g transform="{transform}"><g>{shape}</g></g>')
+
+    small, large = _arc_circle(1, 1, 3), _arc_circle(10, 10, 30)
+    scaled = estimate_import(within(small, transform), {}, format="svg").counts["vertex"]
+    plain = estimate_import(within(small), {}, format="svg").counts["vertex"]
+    big = estimate_import(within(large), {}, format="svg").counts["vertex"]
+    assert scaled > plain
+    assert abs(scaled - big) <= 2, (scaled, big)
+    made = sum(s.vertices for s in import_drawing(within(small, transform), {}, format="svg").report.shapes)
+    made_plain = sum(s.vertices for s in import_drawing(within(small), {}, format="svg").report.shapes)
+    assert made > made_plain and scaled >= made
+    # a rotation alone changes nothing
+    turned = within(small, "rotate(45)")
+    assert estimate_import(turned, {}, format="svg").counts["vertex"] == plain

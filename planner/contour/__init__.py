@@ -8,9 +8,10 @@
   to the programmed path.
 """
 
-from .estimate import estimate_contour
+from .estimate import ContourCounts, count_contour, estimate_contour
 from .passes import parse_contour_request
 from .plan import plan_contour
 from .tube import PathGeometry, Tube, tube
 
-__all__ = ["PathGeometry", "Tube", "estimate_contour", "parse_contour_request", "plan_contour", "tube"]
+__all__ = ["ContourCounts", "PathGeometry", "Tube", "count_contour", "estimate_contour", "parse_contour_request",
+           "plan_contour", "tube"]

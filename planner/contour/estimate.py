@@ -1,16 +1,22 @@
-"""The compute time of a contour plan, estimated before it starts (issue 33): from the
-program's counts (passes, pieces, tube cells, cut samples, moves between passes), no tube
-built and no plan. :func:`estimate_contour` is what the service admits a contour job by;
-:func:`piece_estimate` also bounds the check of an ``infeasible`` verdict's advice
+"""The compute time of a contour plan, estimated before it starts (issues 33 and 35): from the
+program's counts (:func:`count_contour`: lines, passes, pieces, tube cells, cut samples, the
+free moves between passes from their lengths, the time-optimal profiles' grid, at the sample
+time and horizon of the request), no tube built and no plan. :func:`estimate_contour` is what
+the service admits a contour job by; :func:`piece_estimate` also bounds the check of an ``infeasible`` verdict's advice
 (:func:`planner.contour.search.confirmed_infeasible`)."""
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
-from ..schema import DEFAULT_CONTOUR_TOLERANCE_M, PathElement, Program
+import numpy as np
+
+from ..errors import PlannerError
+from ..schema import DEFAULT_CONTOUR_TOLERANCE_M, MAX_SEGMENTS, PathElement, Program
 from .passes import CELL_SAMPLES, PROGRAM_MARGIN, V0_M_S, chunks, parse_contour_request, read_program, tolerance_of
+from .profiles import GRID_H_MAX, GRID_H_MIN, GRID_POINTS, GRID_POINTS_MIN
 from .tube import SAGITTA_FRACTION
 
 #: program feed's tube cells: a whole number of samples at F, this much shorter
@@ -18,7 +24,7 @@ from .tube import SAGITTA_FRACTION
 FEED_MARGIN = 0.01
 
 __all__ = ["ADVICE_MIN_S", "ADVICE_WORK", "CONTOUR_CELL_PLAN_S", "CONTOUR_CELL_S", "CONTOUR_PIECE_S", "CONTOUR_STEP_S",
-           "CONTOUR_TRAVEL_S", "estimate_contour", "piece_estimate"]
+           "CONTOUR_TRAVEL_S", "ContourCounts", "count_contour", "estimate_contour", "piece_estimate"]
 
 #: the checks of an infeasible verdict's advice take at most this many times the piece's
 #: estimate, and at least ADVICE_MIN_S [s] (and no more than what a ``work_limit_s`` leaves):
@@ -26,30 +32,69 @@ __all__ = ["ADVICE_MIN_S", "ADVICE_WORK", "CONTOUR_CELL_PLAN_S", "CONTOUR_CELL_S
 #: :class:`planner.WorkEstimate`'s ``advice_seconds``); :func:`estimate_contour` names the bound
 ADVICE_WORK = 3.0
 ADVICE_MIN_S = 4.0
-#: The unit costs [s] below are CPU seconds fitted (least squares on the relative error) to 23
-#: generated programs (issue 33, ``benchmarks/bench_estimates.py``: 200-6 000 lines of 0.5 mm,
-#: 50-1 000 full circles of 0.1 mm, 10-400 short passes, arcs of 1.5 mm at 0.05 and 0.01 mm,
-#: Ts 2-10 ms, both feeds), then rounded up about 10 %: the estimate is the work, not a bound
-#: far above it (before, 2-16x the work: a 4 s floor and costs taken at the high end).
-#: seconds per receding-horizon step of a candidate plan (polygon cells, junctions), by feed
+#: The unit costs [s] below are CPU seconds fitted (non-negative least squares on the relative
+#: error) to 36 generated programs (issue 35 goal 5, ``tests/contour_programs.py`` and the
+#: staircases, waves and circles of ``benchmarks/bench_estimates.py``,
+#: ``benchmarks/bench_contour_estimate.py``: 1-100 tiny passes, single passes of 40-500 lines,
+#: tiny full circles, arcs, ramps and helices, 1 000-20 000 rapid lines, depth passes; Ts 1, 2,
+#: 5 and 10 ms; both feeds), then raised 10 %. A sample's cost grows faster than the horizon
+#: at fine sample times (:func:`sample_factor`, measured).
+#: seconds per sample of a candidate plan at Ts 10 ms (:func:`sample_factor` beyond), by feed
 #: (``fastest``'s samples at the reference speed are fewer and each carries a cell's rows)
-CONTOUR_STEP_S = {"program": 4.5e-4, "fastest": 1.1e-3}
-#: seconds a tube cell costs each candidate plan (its rows), by feed
-CONTOUR_CELL_PLAN_S = {"program": 3e-4, "fastest": 0.0}
-#: seconds a tube cell costs once a piece (built, its deviation and join): ``fastest`` adds the
-#: time-optimal profile and the search's candidates' cell rows; ``program`` the F-capped
-#: time-optimal profile and the tubes of shorter cells (issue 35)
-CONTOUR_CELL_S = {"program": 3e-4, "fastest": 3.5e-3}
-#: seconds of a piece besides its cells and samples (the search, the plan's start and settling)
-CONTOUR_PIECE_S = 0.017
-#: seconds of a move of the program (its path geometry, deviation candidates, Z)
-CONTOUR_ELEMENT_S = 1.1e-3
-#: seconds of a line of the program read (:func:`planner.exchange.read_gcode`: 30-70 us a line, a
-#: rapid with a comment the most)
-CONTOUR_LINE_S = 7.5e-5
-#: seconds of a free move between passes (a ``fastest`` plan of three segments: ~17 ms
-#: measured at Ts 10 ms), at Ts 10 ms; its samples, and so its cost, grow as 1 / Ts
-CONTOUR_TRAVEL_S = 0.019
+CONTOUR_STEP_S = {"program": 1.45e-4, "fastest": 1.15e-3}
+#: seconds a tube cell costs each candidate plan at Ts 10 ms, by feed
+CONTOUR_CELL_PLAN_S = {"program": 8.9e-5, "fastest": 0.0}
+#: seconds a tube cell costs once a piece (folded into the plans' share since issue 35)
+CONTOUR_CELL_S = {"program": 0.0, "fastest": 0.0}
+#: seconds of a piece each candidate plan at Ts 10 ms (its start and its settling: samples
+#: that grow as 1 / Ts), by feed
+CONTOUR_PIECE_S = {"program": 4.4e-3, "fastest": 0.0}
+#: seconds more a sample on an arc costs each candidate plan at Ts 10 ms, by feed (set from the
+#: staircases, waves and tiny circles of bench_estimates.py, 1.7-1.9x under the fit without it)
+CONTOUR_ARC_STEP_S = {"program": 1.45e-4, "fastest": 0.0}
+#: seconds of a corner (:attr:`ContourCounts.corners`) each candidate plan at Ts 10 ms, by feed
+CONTOUR_CORNER_S = {"program": 2.8e-4, "fastest": 3.0e-4}
+#: seconds of a grid point of a time-optimal profile (:func:`_grid`)
+CONTOUR_GRID_S = 1.75e-4
+#: seconds of a tight turn (:attr:`ContourCounts.bends`) each candidate plan
+CONTOUR_BEND_S = 4.0e-4
+#: seconds of a move of the program (its path geometry, deviation candidates, Z): fitted 0,
+#: the cells and samples carry it
+CONTOUR_ELEMENT_S = 0.0
+#: seconds of a line of the program read (:func:`planner.exchange.read_gcode`) and walked
+CONTOUR_LINE_S = 5.5e-5
+#: seconds of a free move between passes besides its samples
+CONTOUR_TRAVEL_S = 3.9e-4
+#: seconds a sample of a free move costs at Ts 10 ms (a ``fastest`` plan of three segments,
+#: its search's candidates included; :func:`sample_factor` beyond)
+TRAVEL_STEP_S = 3.2e-3
+#: a free move's samples (:func:`travel_samples`): acceleration [m/s^2], force ramps [s], end
+#: samples; at sample times of 1 ms and less, moves over TRAVEL_SLOW_M [m] at TRAVEL_FINE_M_S
+#: [m/s] (measured: 10 mm in 0.45 s, 20 mm in 0.95 s at Ts 1 ms; 9 mm in 0.1 s)
+TRAVEL_ACCEL_M_S2 = 3.0
+TRAVEL_RAMP_S = 0.015
+TRAVEL_END_SAMPLES = 4.0
+TRAVEL_SLOW_M = 0.0095
+TRAVEL_FINE_M_S = 0.021
+#: :func:`sample_factor`: a sample's cost [x Ts 10 ms] at the default horizon, measured at these
+#: sample times [s] (the default horizon: 30, 51, 100 and 100 samples)
+SAMPLE_FACTOR_TS = (0.001, 0.002, 0.005, 0.01)
+SAMPLE_FACTOR = (7.5, 4.8, 1.2, 1.0)
+SAMPLE_FACTOR_N = (100, 100, 51, 30)
+
+
+def sample_factor(Ts: float, N: int) -> float:
+    """The cost of a sample of a candidate plan at ``Ts`` with the horizon ``N``, relative to
+    one at Ts 10 ms and the default 30: interpolated (in the logarithms) between the measured
+    :data:`SAMPLE_FACTOR` at :data:`SAMPLE_FACTOR_TS`, times ``N`` over the default horizon
+    there (a longer horizon, more rows a step)."""
+    lt = np.log(SAMPLE_FACTOR_TS)
+    x = float(np.log(min(max(Ts, SAMPLE_FACTOR_TS[0] / 4), 0.1)))
+    f = float(np.exp(np.interp(x, lt, np.log(SAMPLE_FACTOR))))
+    n0 = float(np.exp(np.interp(x, lt, np.log(SAMPLE_FACTOR_N))))
+    if Ts < SAMPLE_FACTOR_TS[0]:  # beyond the table: as the finest, per sample of its time
+        f *= SAMPLE_FACTOR_TS[0] / Ts
+    return f * max(N, 1) / n0
 
 
 def _cells(feed: str, elements: list[PathElement], tol: float, Ts: float) -> int:
@@ -79,59 +124,270 @@ def _cells(feed: str, elements: list[PathElement], tol: float, Ts: float) -> int
     return n + len(elements) + 1
 
 
-def estimate_contour(request: Any, program: Program | None = None) -> tuple[float, str]:
-    """The estimated compute time of :func:`plan_contour` [s] and the arithmetic in words,
-    from the program's counts (no tube built, no plan): per piece (a pass, or its parts
-    between exact stops) its tube cells (:func:`_cells`: lines, arc chords, junctions) built
-    once and planned by each candidate, and its cut samples at the programmed feed
-    (``program``; ~3 plans) or at the reference speed (``fastest``: ~17 candidate plans for
-    the first pass, ~2.5 for the next) and its moves (:func:`piece_estimate`); the free moves
-    between passes (:data:`CONTOUR_TRAVEL_S` each); the program's lines read. Not counted: the
-    check of an infeasible verdict's advice, bounded apart
-    (:func:`~planner.contour.search.confirmed_infeasible`: :data:`ADVICE_WORK` times the largest
-    piece, at least :data:`ADVICE_MIN_S`, within what ``work_limit_s`` leaves; the detail names
-    it). Measured 0.44-1.21x it on generated programs of many lines, many tiny circles, many short
-    passes and arcs (``benchmarks/bench_estimates.py``, benchmarks/README.md)."""
+@dataclass(frozen=True)
+class ContourCounts:
+    """What :func:`estimate_contour` counts of a program, before any tube is built: the
+    program's text ``lines`` (each read), its cut ``passes`` and their ``pieces`` (split at exact
+    stops), the feed ``moves`` cut and the ``arcs`` among them, the tube ``cells`` of the pieces
+    (:func:`_cells`), the cut ``samples`` (at F in ``program`` feed, at the reference speed in
+    ``fastest``), the free ``travels`` between passes and the candidate ``plans`` a piece."""
+
+    lines: int
+    passes: int
+    pieces: int
+    moves: int
+    arcs: int
+    cells: int
+    samples: float
+    travels: int
+    plans: float
+    #: the samples of the free moves between passes, each estimated from its length
+    #: (:func:`travel_samples`)
+    travel_samples: float = 0.0
+    #: the horizon of the plans [samples] (the cost of a sample grows with it)
+    N: int = 30
+    #: the grid points of the pieces' time-optimal profiles (:func:`_grid`), each computed
+    #: once a tube a piece (passes of the same moves share them)
+    grid: float = 0.0
+    #: the tight turns: per arc its turns (sweep over 2 pi) times 1 mm over its radius (at
+    #: most 20): a sample on a tiny circle costs several on a line (measured: full circles of
+    #: 0.1 mm ~3x)
+    bends: float = 0.0
+    #: the corners: move boundaries in a piece where the direction turns by more than
+    #: :data:`CORNER_RAD` (the robot slows into each: its samples cost more)
+    corners: int = 0
+    #: program feed: the cut samples on arcs (counted in ``samples`` too; a sample on an arc costs
+    #: more: :data:`CONTOUR_ARC_STEP_S`)
+    arc_samples: float = 0.0
+
+
+def count_contour(request: Any, program: Program | None = None) -> ContourCounts:
+    """The counts of :class:`ContourCounts` of a contour request (its program read unless
+    given)."""
     req = parse_contour_request(request)
     st = req.plan_settings()
     program = read_program(req, program)
     tol = tolerance_of(req, program)
-    n = len(program.passes)
     pieces = [[b.elements[k] for k in chunk] for b in program.passes for chunk in chunks(b.elements)]
-    per_piece = [piece_estimate(req.feed, els, st.Ts, n, tol) for els in pieces]
-    cells = sum(_cells(req.feed, els, tol, st.Ts) for els in pieces)
-    samples = sum(_samples(req.feed, b.elements, st.Ts) for b in program.passes)
-    travels = sum(1 for k, b in enumerate(program.blocks) if b.kind == "travel"
-                  and (k + 1 == len(program.blocks) or program.blocks[k + 1].kind != "travel"))
-    travels += 1  # a cut that starts away from the tool: one more
-    travel_s = travels * CONTOUR_TRAVEL_S * max(1.0, 0.01 / st.Ts)
-    lines = req.program.count("\n") + 1
-    read_s = lines * CONTOUR_LINE_S
-    plans = _plans(req.feed, n)
-    check = max(ADVICE_WORK * max(per_piece, default=0.0), ADVICE_MIN_S)
-    cut_s = sum(per_piece)
-    seconds = cut_s + travel_s + read_s
+    moves = _travels(program, tol)
+    return ContourCounts(
+        lines=req.program.count("\n") + (not req.program.endswith("\n")), passes=len(program.passes),
+        pieces=len(pieces),
+        moves=sum(len(els) for els in pieces), arcs=sum(e.kind == "arc" for els in pieces for e in els),
+        cells=sum(_cells(req.feed, els, tol, st.Ts) for els in pieces),
+        samples=sum(_samples(req.feed, b.elements, st.Ts) for b in program.passes),
+        travels=len(moves), plans=_plans(req.feed, len(program.passes)),
+        travel_samples=sum(travel_samples(d, st.Ts) for d in moves), N=int(st.N),
+        grid=_grid(program),
+        corners=sum(_corners(els) for els in pieces),
+        arc_samples=sum(_samples(req.feed, [e for e in els if e.kind == "arc"], st.Ts) for els in pieces)
+        if req.feed == "program" else 0.0,
+        bends=sum(abs(e.sweep_rad or 0.0) / (2 * math.pi) * min(1e-3 / max(e.radius_m or 1.0, 1e-9), 20.0)
+                  for els in pieces for e in els if e.kind == "arc"))
+
+
+def _grid(program: Program) -> float:
+    """The grid points of the time-optimal profiles of the program's pieces
+    (:class:`~planner.contour.profiles.OptimalProfiles`: spacing ``total / GRID_POINTS``
+    within ``[GRID_H_MIN, GRID_H_MAX]``, at least ``GRID_POINTS_MIN`` points), passes of the
+    same moves counted once (they share their profiles)."""
+    seen: set = set()
+    n = 0.0
+    for b in program.passes:
+        for chunk in chunks(b.elements):
+            els = [b.elements[k] for k in chunk]
+            key = tuple((e.kind, *np.round(e.start, 9), *np.round(e.end, 9), e.feed_m_s) for e in els)
+            if key in seen:
+                continue
+            seen.add(key)
+            total = sum(e.length_m for e in els)
+            if total <= 0:
+                continue
+            h = min(max(total / GRID_POINTS, GRID_H_MIN), GRID_H_MAX, total / GRID_POINTS_MIN)
+            n += total / h
+    return n
+
+
+#: a move boundary turning by more than this [rad] is a corner (:attr:`ContourCounts.corners`)
+CORNER_RAD = 0.2
+
+
+def _tangent(e: PathElement, at_end: bool) -> tuple[float, float]:
+    """The unit direction of a move at its start or end (an arc's tangent there)."""
+    if e.kind == "arc" and e.start_angle_rad is not None and e.sweep_rad:
+        a = e.start_angle_rad + (e.sweep_rad if at_end else 0.0)
+        sgn = 1.0 if e.sweep_rad > 0 else -1.0
+        return (-sgn * math.sin(a), sgn * math.cos(a))
+    dx, dy = float(e.end[0] - e.start[0]), float(e.end[1] - e.start[1])
+    n = math.hypot(dx, dy)
+    return (dx / n, dy / n) if n > 0 else (0.0, 0.0)
+
+
+#: a move boundary where the signed curvature jumps by more than this [1/m] is a corner too
+#: (a line into an arc of less than 10 mm, a wave of arcs: the drives' forces jump there)
+CORNER_CURVATURE = 100.0
+
+
+def _curvature(e: PathElement) -> float:
+    if e.kind == "arc" and e.radius_m and e.sweep_rad:
+        return math.copysign(1.0 / e.radius_m, e.sweep_rad)
+    return 0.0
+
+
+def _corners(els: list[PathElement]) -> int:
+    """The move boundaries of a piece that turn by more than :data:`CORNER_RAD` or where the
+    curvature jumps by more than :data:`CORNER_CURVATURE`."""
+    out = 0
+    for a, b in zip(els, els[1:]):
+        ta, tb = _tangent(a, True), _tangent(b, False)
+        if ta == (0.0, 0.0) or tb == (0.0, 0.0):
+            continue
+        turn = math.atan2(ta[0] * tb[1] - ta[1] * tb[0], ta[0] * tb[0] + ta[1] * tb[1])
+        if abs(turn) > CORNER_RAD or abs(_curvature(a) - _curvature(b)) > CORNER_CURVATURE:
+            out += 1
+    return out
+
+
+def _travels(program: Program, tol: float) -> list[float]:
+    """The lengths [m] of the free moves :func:`~planner.contour.plan.plan_contour` plans, in
+    the program frame (the origin moves both ends alike): a run of travel blocks from where
+    the tool is to where the last ends, and a cut pass that starts more than half the
+    tolerance away from the tool (as its walk does, without planning)."""
+    out: list[float] = []
+    pos = np.asarray(program.start, float)
+    blocks = program.blocks
+    i = 0
+    while i < len(blocks):
+        b = blocks[i]
+        if b.kind == "travel":
+            j = i
+            while j + 1 < len(blocks) and blocks[j + 1].kind == "travel":
+                j += 1
+            end = np.asarray(blocks[j].elements[-1].end, float)
+            if math.hypot(*(end - pos)) > 1e-9:
+                out.append(math.hypot(*(end - pos)))
+            pos, i = end, j + 1
+            continue
+        if b.kind == "cut" and b.elements:
+            gap = math.hypot(*(np.asarray(b.elements[0].start, float) - pos))
+            if gap > 0.5 * tol:
+                out.append(gap)
+            pos = np.asarray(b.elements[-1].end, float)
+        i += 1
+    return out
+
+
+def travel_samples(d: float, Ts: float) -> float:
+    """The samples of a free move of ``d`` [m] between passes (a ``fastest`` plan at rest at
+    both ends): its time at :data:`TRAVEL_ACCEL_M_S2` speeding up half way and slowing down
+    the other half, plus :data:`TRAVEL_RAMP_S` (the force ramps) and :data:`TRAVEL_END_SAMPLES`;
+    at sample times under 5 ms a move longer than :data:`TRAVEL_SLOW_M` at
+    :data:`TRAVEL_FINE_M_S` (measured: the plan of such a move is that slow there)."""
+    t = 2 * math.sqrt(max(d, 0.0) / TRAVEL_ACCEL_M_S2) + TRAVEL_RAMP_S
+    if Ts < 0.005 and d > TRAVEL_SLOW_M:
+        t = max(t, d / TRAVEL_FINE_M_S)
+    return t / Ts + TRAVEL_END_SAMPLES
+
+
+def _coarsest_cells(elements: list[PathElement], tol: float, Ts: float) -> int:
+    """``program`` feed: a lower bound on the cells of the coarsest tube its search plans a
+    piece in (:meth:`~planner.contour.search.TimingSearch.program_loop`'s first: cells of
+    :data:`CELL_SAMPLES` samples at the top F times :data:`PROGRAM_MARGIN`, at least 4
+    tolerances; the finer ones have more): the moves' pieces and the two ends, no junction."""
+    if not elements:
+        return 0
+    s_a = SAGITTA_FRACTION * tol
+    piece_max = max(max(e.feed_m_s for e in elements) * PROGRAM_MARGIN * Ts * CELL_SAMPLES, 4 * tol)
+    n = 2
+    for e in elements:
+        if e.length_m < 1e-9:
+            continue
+        if e.kind == "arc" and e.radius_m and e.sweep_rad is not None:
+            r = e.radius_m
+            step = 2 * math.acos(max(1 - s_a / r, -1.0)) if s_a < r else math.pi / 2
+            n += max(1, math.ceil(abs(e.sweep_rad) / min(step, piece_max / r, math.pi / 2)))
+        else:
+            n += max(1, math.ceil(e.length_m / piece_max))
+    return n
+
+
+def estimate_contour(request: Any, program: Program | None = None) -> tuple[float, str]:
+    """The estimated compute time of :func:`plan_contour` [s] and the arithmetic in words,
+    from the program's counts (:func:`count_contour`; no tube built, no plan): per piece (a
+    pass, or its parts between exact stops) its tube cells (:func:`_cells`: lines, arc chords,
+    junctions) built once and planned by each candidate, and its cut samples at the programmed
+    feed (``program``; ~3 plans) or at the reference speed (``fastest``: ~17 candidate plans
+    for the first pass, ~2.5 for the next) and its moves (:func:`piece_estimate`); the free
+    moves between passes (:data:`CONTOUR_TRAVEL_S` each); the program's lines read. Not
+    counted: the check of an infeasible verdict's advice, bounded apart
+    (:func:`~planner.contour.search.confirmed_infeasible`: :data:`ADVICE_WORK` times the largest
+    piece, at least :data:`ADVICE_MIN_S`, within what ``work_limit_s`` leaves; the detail names
+    it). The detail ends with what to change where it is too much: the part that costs most
+    and what lowers it for a contour (``benchmarks/bench_contour_estimate.py``,
+    benchmarks/README.md)."""
+    req = parse_contour_request(request)
+    st = req.plan_settings()
+    program = read_program(req, program)
+    tol = tolerance_of(req, program)
+    c = count_contour(req, program)
+    pieces = [[b.elements[k] for k in chunk] for b in program.passes for chunk in chunks(b.elements)]
+    if req.feed == "program":  # a piece no tube of the search fits: refused now, as the planner would be
+        for els in pieces:
+            n = _coarsest_cells(els, tol, st.Ts)
+            if n > MAX_SEGMENTS:
+                raise PlannerError("too_large", f"line {els[0].line}: the pass needs at least {n} tube cells at a "
+                                   f"tolerance of {tol * 1e3:g} mm, more than the limit of {MAX_SEGMENTS}; split the "
+                                   "pass or give a larger tolerance_m", "program")
+    per_piece = [piece_estimate(req.feed, els, st.Ts, c.passes, tol, st.N) for els in pieces]
     f = req.feed
-    parts = {"travel": travel_s, "cells": cells * (CONTOUR_CELL_S[f] + plans * CONTOUR_CELL_PLAN_S[f]),
-             "samples": samples * plans * CONTOUR_STEP_S[f], "lines": read_s,
-             "elements": CONTOUR_ELEMENT_S * sum(len(els) for els in pieces)}
+    g = sample_factor(st.Ts, c.N)
+    parts = {"travel": c.travels * CONTOUR_TRAVEL_S + c.travel_samples * g * TRAVEL_STEP_S,
+             "cells": g * c.plans * c.cells * CONTOUR_CELL_PLAN_S[f] + c.cells * CONTOUR_CELL_S[f],
+             "samples": g * c.plans * (c.samples * CONTOUR_STEP_S[f] + c.pieces * CONTOUR_PIECE_S[f] * 0.01 / st.Ts
+                                       + c.corners * CONTOUR_CORNER_S[f] + c.arc_samples * CONTOUR_ARC_STEP_S[f]),
+             "profiles": c.grid * CONTOUR_GRID_S + c.plans * c.bends * CONTOUR_BEND_S,
+             "lines": c.lines * CONTOUR_LINE_S, "elements": CONTOUR_ELEMENT_S * c.moves}
+    travel_s, read_s = parts["travel"], parts["lines"]
+    check = max(ADVICE_WORK * max(per_piece, default=0.0), ADVICE_MIN_S)
+    seconds = sum(parts.values())
+    cut_s = seconds - travel_s - read_s
     most = max(parts, key=parts.__getitem__)
-    advice = {"travel": "fewer passes (each is a move there, planned with the fastest timing)",
-              "cells": "a coarser tolerance_m (fewer arc chords) or fewer, longer moves",
-              "elements": "fewer, longer moves (join short moves in the CAM program)",
-              "lines": "a shorter program (split it)",
-              "samples": "a larger settings.Ts or a higher programmed feed"}[most]
-    if req.feed == "fastest":
-        advice += ", or feed 'program' instead of 'fastest' (one plan a pass instead of a search)"
-    return seconds, (f"{n} passes in {len(pieces)} pieces, {cells} tube cells and ~{samples:.0f} cut samples at "
-                     f"Ts = {st.Ts:g} s x {plans:.3g} plans: {cut_s:.3g} s; {travels} moves between them: "
-                     f"{travel_s:.3g} s; {lines} lines read: {read_s:.2g} s; most of it {most}: {advice}; an "
+    advice = {"travel": "fewer passes: split the program (each pass is a move there, planned with the fastest "
+                        "timing)",
+              "cells": "a larger tolerance_m (fewer arc chords and cells), or split the program",
+              "elements": "fewer, longer moves (join short moves in the CAM program), or split the program",
+              "lines": "a shorter program: split it",
+              "profiles": "a larger tolerance_m or fewer, longer moves, or split the program",
+              "samples": (f"a larger settings.Ts than {st.Ts:g} s (fewer samples a pass), or split the program"
+                          if st.Ts < 0.01 else "split the program")}[most]
+    if most in ("samples", "cells", "profiles") and 2 * c.arcs >= c.moves > 0:  # mostly arcs
+        advice += ", or a larger tolerance_m (fewer arc chords)"
+    if f == "fastest":
+        advice = "feed 'program' instead of 'fastest' (one plan a pass instead of a search), or " + advice
+    return seconds, (f"{c.passes} passes in {c.pieces} pieces, {c.cells} tube cells and ~{c.samples:.0f} cut samples "
+                     f"at Ts = {st.Ts:g} s x {c.plans:.3g} plans: {cut_s:.3g} s; {c.travels} moves between them: "
+                     f"{travel_s:.3g} s; {c.lines} lines read: {read_s:.2g} s; most of it {most}: {advice}; an "
                      f"infeasible pass's advice is checked within {check:.2g} s more")
 
 
+#: program feed: an arc is cut at most at ``sqrt(ARC_ACCEL_M_S2 r)`` (a tiny circle at F3000 is
+#: not cut at F: its samples are those of the speed the arc allows; the program feed's profile
+#: acceleration, :data:`planner.contour.search.A_PROGRAM_M_S2`)
+ARC_ACCEL_M_S2 = 2.0
+
+
 def _samples(feed: str, elements: list[PathElement], Ts: float) -> float:
-    """The cut samples of ``elements`` at the programmed feed or the reference speed."""
-    return sum(e.length_m / max(e.feed_m_s if feed == "program" else V0_M_S * 2, 1e-9) for e in elements) / Ts
+    """The cut samples of ``elements`` at the programmed feed (an arc's no faster than
+    :data:`ARC_ACCEL_M_S2` allows on it) or the reference speed."""
+    if feed != "program":
+        return sum(e.length_m for e in elements) / (V0_M_S * 2) / Ts
+    total = 0.0
+    for e in elements:
+        v = e.feed_m_s
+        if e.kind == "arc" and e.radius_m:
+            v = min(v, math.sqrt(ARC_ACCEL_M_S2 * e.radius_m))
+        total += e.length_m / max(v, 1e-9)
+    return total / Ts
 
 
 def _plans(feed: str, passes: int) -> float:
@@ -144,13 +400,22 @@ def _plans(feed: str, passes: int) -> float:
 
 
 def piece_estimate(feed: str, elements: list[PathElement], Ts: float, passes: int = 1,
-                    tol: float = DEFAULT_CONTOUR_TOLERANCE_M) -> float:
+                    tol: float = DEFAULT_CONTOUR_TOLERANCE_M, N: int | None = None) -> float:
     """:func:`estimate_contour`'s share of one piece (a pass, or its part between exact stops)
-    [s]: :data:`CONTOUR_PIECE_S`, its moves (:data:`CONTOUR_ELEMENT_S`), its cells
-    (:func:`_cells`) built once and planned by each candidate, its cut samples planned by each
-    candidate."""
+    [s]: its cells, cut samples, start and settling planned by each candidate, its tight turns,
+    its time-optimal profile's grid (``N``: the horizon, default the default robot's at
+    ``Ts``)."""
     plans = _plans(feed, passes)
     cells = _cells(feed, elements, tol, Ts)
-    return (CONTOUR_PIECE_S + CONTOUR_ELEMENT_S * len(elements)
-            + cells * (CONTOUR_CELL_S[feed] + plans * CONTOUR_CELL_PLAN_S[feed])
-            + _samples(feed, elements, Ts) * plans * CONTOUR_STEP_S[feed])
+    n0 = float(np.exp(np.interp(np.log(min(max(Ts, 1e-4), 0.1)), np.log(SAMPLE_FACTOR_TS), np.log(SAMPLE_FACTOR_N))))
+    g = sample_factor(Ts, int(round(n0)) if N is None else N)
+    total = sum(e.length_m for e in elements)
+    grid = total / min(max(total / GRID_POINTS, GRID_H_MIN), GRID_H_MAX, total / GRID_POINTS_MIN) if total > 0 else 0.0
+    bends = sum(abs(e.sweep_rad or 0.0) / (2 * math.pi) * min(1e-3 / max(e.radius_m or 1.0, 1e-9), 20.0)
+                for e in elements if e.kind == "arc")
+    return (g * plans * (cells * CONTOUR_CELL_PLAN_S[feed] + _samples(feed, elements, Ts) * CONTOUR_STEP_S[feed]
+                         + CONTOUR_PIECE_S[feed] * 0.01 / Ts + _corners(elements) * CONTOUR_CORNER_S[feed]
+                         + (_samples(feed, [e for e in elements if e.kind == "arc"], Ts) * CONTOUR_ARC_STEP_S[feed]
+                            if feed == "program" else 0.0))
+            + cells * CONTOUR_CELL_S[feed] + grid * CONTOUR_GRID_S + plans * bends * CONTOUR_BEND_S
+            + CONTOUR_ELEMENT_S * len(elements))

@@ -254,8 +254,10 @@ def join_parts(parts: list[Part], req: ContourRequest, st: Settings, model: Robo
                       velocity=a["velocity"], acceleration=a["acceleration"],
                       drives=Drives(length=a["length"], velocity=a["legv"], force=a["force"]),
                       corridor=CorridorSamples(lower=a["lower"], upper=a["upper"], violation_m=a["viol"],
-                                               segments=[CorridorSegment(lower=s.lower, upper=s.upper,
-                                                                         polygon=s.polygon) for s in segments]),
+                                               # the cells validated as the parts' Segments already
+                                               segments=[CorridorSegment.model_construct(
+                                                   lower=s.lower, upper=s.upper, polygon=s.polygon)
+                                                   for s in segments]),
                       metrics=Metrics(**md), timing=timing)
 
 

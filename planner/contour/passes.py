@@ -247,7 +247,52 @@ def _chords(a: np.ndarray, b: np.ndarray, cand: np.ndarray, geo: PathGeometry, h
     start = np.repeat(np.cumsum(m) - m, m)
     frac = (np.arange(owner.size) - start) / np.repeat(m - 1, m)
     pts = a[owner] + frac[:, None] * (b - a)[owner]
-    d = geo.distance(pts, cand[owner])
-    seen = np.zeros(len(a))
-    np.maximum.at(seen, owner, d)
+    d = geo.distance(pts, _nearest_only(a, b, cand, geo)[owner])
+    seen = np.maximum.reduceat(d, np.cumsum(m) - m)  # each move's points side by side (m >= 2)
     return seen, seen + np.where(m > 1, 0.5 * h, 0.0)
+
+
+def _to_segments(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance of the points ``p`` to the segments ``a b`` (any matching shapes (..., 2)) [m]."""
+    ab, ap = b - a, p - a
+    t = np.clip((ap[..., 0] * ab[..., 0] + ap[..., 1] * ab[..., 1])
+                / np.maximum(ab[..., 0] * ab[..., 0] + ab[..., 1] * ab[..., 1], 1e-300), 0.0, 1.0)
+    return np.hypot(ap[..., 0] - t * ab[..., 0], ap[..., 1] - t * ab[..., 1])
+
+
+def _nearest_only(a: np.ndarray, b: np.ndarray, cand: np.ndarray, geo: PathGeometry) -> np.ndarray:
+    """``cand`` (N, C) with the candidates that cannot be the nearest anywhere on the move
+    ``a -> b`` replaced by one that can (rows sorted: :meth:`PathGeometry.distance` measures
+    a row's repeats once). A candidate is dropped where its distance to the move (a lower
+    bound: segment to segment for a line, to the circle for an arc) exceeds, by 1e-12 m, the
+    largest distance along the move of another candidate (a bound from above: for a line the
+    larger of the ends', the distance to a segment being convex along a line; for an arc the
+    ends' mean plus half the move's length, the distance being 1-Lipschitz); the distance to
+    the union, the least of the candidates', is then the same at every point."""
+    cand = np.clip(np.asarray(cand), 0, geo.n - 1)
+    N, C = cand.shape
+    if C < 2 or N == 0:
+        return cand
+    A, B = a[:, None, :], b[:, None, :]
+    da = geo.distance(np.repeat(a, C, axis=0), cand.reshape(-1, 1)).reshape(N, C)
+    db = geo.distance(np.repeat(b, C, axis=0), cand.reshape(-1, 1)).reshape(N, C)
+    L = np.hypot(*(b - a).T)[:, None]
+    arc = geo.arc[cand]
+    upper = np.where(arc, 0.5 * (da + db + L), np.maximum(da, db))
+    p, q = geo.p0[cand], geo.p1[cand]
+
+    def cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+    ab, pq = B - A, q - p
+    crossing = (cross(ab, p - A) * cross(ab, q - A) <= 0) & (cross(pq, A - p) * cross(pq, B - p) <= 0)
+    low_line = np.where(crossing, 0.0, np.minimum(np.minimum(da, db), np.minimum(_to_segments(p, A, B),
+                                                                                  _to_segments(q, A, B))))
+    c, r = geo.c[cand], geo.r[cand]
+    rho_min = _to_segments(c, A, B)
+    rho_max = np.maximum(np.hypot(*(A - c).transpose(2, 0, 1)), np.hypot(*(B - c).transpose(2, 0, 1)))
+    low_arc = np.maximum(np.maximum(rho_min - r, r - rho_max), 0.0)
+    lower = np.where(arc, low_arc, low_line)
+    best = np.argmin(upper, axis=1)
+    drop = lower > upper[np.arange(N), best][:, None] + 1e-12
+    return np.sort(np.where(drop, cand[np.arange(N), best][:, None], cand), axis=1)

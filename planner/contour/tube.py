@@ -284,25 +284,38 @@ class PathGeometry:
 
     def distance(self, pts: np.ndarray, cand: np.ndarray) -> np.ndarray:
         """Distance of ``pts`` (M, 2) to the union of the candidate elements ``cand`` (M, C)
-        (indices clipped to the pass) [m]."""
-        cand = np.clip(cand, 0, self.n - 1)
-        P = pts[:, None, :]
-        a, b = self.p0[cand], self.p1[cand]
-        ab = b - a
-        L2 = np.maximum(np.einsum("mcj,mcj->mc", ab, ab), 1e-300)
-        t = np.clip(np.einsum("mcj,mcj->mc", P - a, ab) / L2, 0.0, 1.0)
-        d_line = _norm(P - (a + t[..., None] * ab))
-        c, r = self.c[cand], self.r[cand]
-        v = P - c
-        rad = _norm(v)
-        ang = np.arctan2(v[..., 1], v[..., 0])
-        sw = self.sweep[cand]
-        off = np.mod((ang - self.a0[cand]) * np.sign(sw), 2 * np.pi)
-        inside = (off <= np.abs(sw) + 1e-12) | (np.abs(sw) >= 2 * np.pi - 1e-12)
-        d_ends = np.minimum(_norm(P - a), _norm(P - b))
-        d_arc = np.where(inside, np.abs(rad - r), d_ends)
-        return np.where(self.arc[cand], d_arc, d_line).min(axis=1)
-
+        (indices clipped to the pass) [m]. Each point against each of its distinct candidates
+        once (a row's repeats side by side are skipped), lines and arcs each by their own rule."""
+        cand = np.clip(np.asarray(cand), 0, self.n - 1)
+        if not cand.size:
+            return np.zeros(len(pts))
+        keep = np.ones(cand.shape, bool)
+        keep[:, 1:] = cand[:, 1:] != cand[:, :-1]
+        row, col = np.nonzero(keep)  # row by row: each row's pairs contiguous, its first column kept
+        k = cand[row, col]
+        P = pts[row]
+        d = np.empty(len(k))
+        arc = self.arc[k]
+        li = np.flatnonzero(~arc)
+        if li.size:
+            p, kl = P[li], k[li]
+            a = self.p0[kl]
+            ab = self.p1[kl] - a
+            pa = p - a
+            L2 = np.maximum(ab[:, 0] * ab[:, 0] + ab[:, 1] * ab[:, 1], 1e-300)
+            t = np.clip((pa[:, 0] * ab[:, 0] + pa[:, 1] * ab[:, 1]) / L2, 0.0, 1.0)
+            d[li] = _norm(p - (a + t[:, None] * ab))
+        ai = np.flatnonzero(arc)
+        if ai.size:
+            p, ka = P[ai], k[ai]
+            v = p - self.c[ka]
+            sw = self.sweep[ka]
+            off = np.mod((np.arctan2(v[:, 1], v[:, 0]) - self.a0[ka]) * np.sign(sw), 2 * np.pi)
+            inside = (off <= np.abs(sw) + 1e-12) | (np.abs(sw) >= 2 * np.pi - 1e-12)
+            d_ends = np.minimum(_norm(p - self.p0[ka]), _norm(p - self.p1[ka]))
+            d[ai] = np.where(inside, np.abs(_norm(v) - self.r[ka]), d_ends)
+        starts = np.flatnonzero(np.r_[True, row[1:] != row[:-1]])
+        return np.minimum.reduceat(d, starts)
 
 def _to_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Distance of the points ``p`` (M, 2) to the segments ``a b`` (M, 2) each [m]."""
@@ -357,9 +370,18 @@ def path_to_cut(geo: PathGeometry, cut: np.ndarray, tol: float) -> float:
         return 0.0
     seen = 0.0
     bound = np.zeros(0)
-    for _ in range(REFINE_ROUNDS):
-        pa, da, na = measure(k, s0)
-        pb, db, nb = measure(k, s1)
+    for r in range(REFINE_ROUNDS):
+        if r == 0:  # the first pieces of an element share their ends: each point measured once
+            npt = n + 1
+            kp = np.repeat(keep, npt)
+            jp = np.arange(len(kp)) - np.repeat(np.cumsum(npt) - npt, npt)
+            p, d_, nr = measure(kp, jp * np.repeat(geo.length[keep] / n, npt))
+            ia = np.arange(len(k)) + np.repeat(np.arange(len(keep)), n)  # piece (element, j) -> its first point
+            pa, da, na = p[ia], d_[ia], nr[ia]
+            pb, db, nb = p[ia + 1], d_[ia + 1], nr[ia + 1]
+        else:
+            pa, da, na = measure(k, s0)
+            pb, db, nb = measure(k, s1)
         seen = max(seen, float(da.max()), float(db.max()))
         ell = s1 - s0
         sag = np.where(geo.arc[k], ell * ell / (8 * np.maximum(geo.r[k], 1e-300)), 0.0)

@@ -340,27 +340,29 @@ def svg_work(root: Any, nbytes: int, tol_px: float) -> ImportWork:
     flattening tolerance ``tol_px`` (user units, before the viewBox: the chord counts of
     curves, for which this is the scale that matters): its path segments with ``<use>``
     resolved, the vertices of circles, ellipses, rounded rects and path arcs (a path arc
-    taken as half a turn), one piece an element."""
+    taken as half a turn) at their radius stretched by their own and their ancestors'
+    ``transform`` (:func:`_scaled`: a scaled-up circle flattens into more chords), one piece
+    an element."""
     segments = svg_expanded_elements(root)
     vertices = pieces = curves = 0.0
     boxes: list[tuple[float, float, float, float, float]] = []
-    for el in root.iter():
+    for el, k in _scaled(root):
         tag = el.tag.rsplit("}", 1)[-1]
         if tag in ("circle", "ellipse"):
             r = max(_float(el, "r"), _float(el, "rx"), _float(el, "ry"))
-            v = _chords(r, 2 * math.pi, tol_px) + 1
+            v = _chords(r * k, 2 * math.pi, tol_px) + 1
             vertices += v
             curves += 1
             x, y = _float(el, "cx"), _float(el, "cy")
             boxes.append((x - r, y - r, x + r, y + r, float(v)))
         elif tag == "rect" and (_float(el, "rx") or _float(el, "ry")):
-            vertices += 4 * _chords(max(_float(el, "rx"), _float(el, "ry")), math.pi / 2, tol_px)
+            vertices += 4 * _chords(max(_float(el, "rx"), _float(el, "ry")) * k, math.pi / 2, tol_px)
             curves += 4
         elif tag == "path":
             for args in _ARCS.findall(el.get("d") or ""):
                 nums = _NUMBER.findall(args)
                 for i in range(0, len(nums) - 6, 7):
-                    r = max(abs(float(nums[i])), abs(float(nums[i + 1])))
+                    r = max(abs(float(nums[i])), abs(float(nums[i + 1]))) * k
                     vertices += _chords(r if math.isfinite(r) else 0.0, math.pi, tol_px)
                     curves += 1
         if tag in _SHAPES:
@@ -372,6 +374,53 @@ def svg_work(root: Any, nbytes: int, tol_px: float) -> ImportWork:
 
 
 _SHAPES = ("path", "polygon", "polyline", "line", "rect", "circle", "ellipse")
+_TRANSFORM = re.compile(r"(matrix|translate|scale|rotate|skewX|skewY)\s*\(([^)]*)\)")
+
+
+def _linear(transform: str) -> list[float]:
+    """The linear part ``[a, b, c, d]`` (x' = a x + c y, y' = b x + d y) of an SVG ``transform``
+    attribute (its functions composed left to right; translations drop out; a malformed one
+    counts as the identity)."""
+    a, b, c, d = 1.0, 0.0, 0.0, 1.0
+    for name, args in _TRANSFORM.findall(transform or ""):
+        v = [float(x) for x in _NUMBER.findall(args)]
+        if name == "matrix" and len(v) >= 4:
+            m = v[:4]
+        elif name == "scale" and v:
+            m = [v[0], 0.0, 0.0, v[1] if len(v) > 1 else v[0]]
+        elif name == "rotate" and v:
+            t = math.radians(v[0])
+            m = [math.cos(t), math.sin(t), -math.sin(t), math.cos(t)]
+        elif name == "skewX" and v:
+            m = [1.0, 0.0, math.tan(math.radians(v[0])), 1.0]
+        elif name == "skewY" and v:
+            m = [1.0, math.tan(math.radians(v[0])), 0.0, 1.0]
+        else:
+            continue
+        a, b, c, d = a * m[0] + c * m[1], b * m[0] + d * m[1], a * m[2] + c * m[3], b * m[2] + d * m[3]
+    out = [a, b, c, d]
+    return out if all(math.isfinite(x) for x in out) else [1.0, 0.0, 0.0, 1.0]
+
+
+def _scaled(root: Any) -> list[tuple[Any, float]]:
+    """Every element of the SVG tree with the largest stretch of its ``transform`` and its
+    ancestors' composed (the largest singular value of the linear part: a circle of radius r
+    scaled by k flattens as one of radius k r; rotations and translations change nothing),
+    in document order."""
+    out: list[tuple[Any, float]] = []
+    stack: list[tuple[Any, list[float]]] = [(root, [1.0, 0.0, 0.0, 1.0])]
+    while stack:
+        el, (a, b, c, d) = stack.pop()
+        t = el.get("transform")
+        if t:
+            m = _linear(t)
+            a, b, c, d = a * m[0] + c * m[1], b * m[0] + d * m[1], a * m[2] + c * m[3], b * m[2] + d * m[3]
+        # the largest singular value of [[a, c], [b, d]]
+        p, q = a * a + b * b + c * c + d * d, abs(a * d - b * c)
+        k = math.sqrt(max(0.5 * (p + math.sqrt(max(p * p - 4 * q * q, 0.0))), 0.0))
+        out.append((el, round(k, 9) if math.isfinite(k) and k > 0 else 1.0))  # a rotation: 1 exactly
+        stack.extend((child, [a, b, c, d]) for child in reversed(list(el)))
+    return out
 
 
 def _shapes(root: Any) -> float:
