@@ -9,7 +9,9 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from ..model import load_robot
 from ..schema import DEFAULT_CONTOUR_TOLERANCE_M, PathElement, Program
+from .defaults import contour_settings
 from .passes import CELL_SAMPLES, PROGRAM_MARGIN, V0_M_S, chunks, parse_contour_request, read_program, tolerance_of
 from .tube import SAGITTA_FRACTION
 
@@ -96,6 +98,7 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
     st = req.plan_settings()
     program = read_program(req, program)
     tol = tolerance_of(req, program)
+    st = contour_settings(req, st, program, tol, load_robot(req.robot))  # the Ts the plan will use
     n = len(program.passes)
     pieces = [[b.elements[k] for k in chunk] for b in program.passes for chunk in chunks(b.elements)]
     per_piece = [piece_estimate(req.feed, els, st.Ts, n, tol) for els in pieces]
