@@ -388,9 +388,9 @@ def load_program(name: str) -> tuple[str, str, object]:
     return name, (CAM / name).read_text(), "fit"
 
 
-def plan(text: str, origin, feed: str) -> tuple[object, float]:
+def plan(text: str, origin, feed: str, settings: dict | None = None) -> tuple[object, float]:
     c0 = time.process_time()
-    res = plan_contour({"program": text, "origin": origin, "feed": feed})
+    res = plan_contour({"program": text, "origin": origin, "feed": feed, "settings": settings or {}})
     return res, time.process_time() - c0
 
 
@@ -404,6 +404,9 @@ def main() -> None:
     ap.add_argument("--from-zero", action="store_true", help="forces 0 at each pass's start and end")
     ap.add_argument("--no-planner", action="store_true", help="the optima only")
     ap.add_argument("--blocks", type=int, default=3, help="time blocks per element (1: uniform steps)")
+    ap.add_argument("--compare-ts", type=float, default=None,
+                    help="also plan fastest at this typed Ts (e.g. 0.01, the default before issue 35 goal 3) "
+                    "and print it beside the defaults")
     args = ap.parse_args()
     grids = [int(g) for g in args.grids.split(",")]
     robot = load_robot(ROBOT)
@@ -426,6 +429,7 @@ def main() -> None:
     memo: dict = {}
     conv_rows: list[str] = []
     summary: list[str] = []
+    typed_rows: list[tuple[str, int, int, str]] = []  # program, first and last pass, the row
     for name in args.programs.split(","):
         label, text, origin = load_program(name)
         prog = read_gcode(text)
@@ -433,6 +437,11 @@ def main() -> None:
         if not args.no_planner:
             for feed in ("fastest", "program"):
                 res[feed] = plan(text, origin, feed)
+            if args.compare_ts:
+                res["typed"] = plan(text, origin, "fastest", {"Ts": args.compare_ts})
+            for feed, (r, cpu) in res.items():
+                print(f"{label}: {feed} at Ts {r.settings.Ts:g} s, N {r.settings.N}: cut {r.contour.cut_time_s:.3f} s, "  # type: ignore[attr-defined]
+                      f"{cpu:.1f} CPU s")
             c = res["fastest"][0].contour  # type: ignore[attr-defined]
         else:
             c = plan_contour({"program": text, "origin": origin, "feed": "program"}).contour  # type: ignore[attr-defined]
@@ -468,6 +477,14 @@ def main() -> None:
             feeds = sorted({round(e.feed_m_s * 60000) for e in els})
             fast = res["fastest"][0].contour.passes[i].time_s if res else math.nan  # type: ignore[attr-defined]
             prg = res["program"][0].contour.passes[i].time_s if res else math.nan  # type: ignore[attr-defined]
+            if "typed" in res:
+                typed = res["typed"][0].contour.passes[i].time_s  # type: ignore[attr-defined]
+                row = (f"| {typed:.3f} | {typed / third[-1].time_s:.3f}x | {fast:.3f} | "
+                       f"{fast / third[-1].time_s:.3f}x |")
+                if typed_rows and typed_rows[-1][0] == label and typed_rows[-1][3] == row:  # depth passes alike
+                    typed_rows[-1] = (label, typed_rows[-1][1], i, row)
+                else:
+                    typed_rows.append((label, i, i, row))
             tot += (fast, prg, topp, t3, t3f, L, nominal)
             row = (f"| {len(els)} | {L * 1e3:.1f} | {', '.join(map(str, feeds))} | {nominal:.3f} | {fast:.3f} | "
                    f"{prg:.3f} | {topp:.4f} | {t3:.4f} | {t3f:.4f} | {fast / t3:.3f}x | {prg / t3f:.3f}x | "
@@ -493,6 +510,12 @@ def main() -> None:
           "3rd order at F s | fastest / 3rd | program / 3rd at F |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     print("\n".join(summary))
+    if typed_rows:
+        print(f"\n### fastest at the typed Ts {args.compare_ts:g} s against the defaults (per pass, against the "
+              "3rd order)\n")
+        print("| program | pass | typed Ts s | / 3rd | defaults s | / 3rd |")
+        print("|---|---|---|---|---|---|")
+        print("\n".join(f"| {lab} | {a}{'' if a == b else f'-{b}'} {row}" for lab, a, b, row in typed_rows))
     print(f"\n### grid refinement (steps per element {grids}, doubled until two agree within 0.1 %; "
           "change: from the previous grid, %)\n")
     print("| pass | optimum | nodes | time s per grid | change % | IPOPT | max residual N | IPOPT CPU s |")

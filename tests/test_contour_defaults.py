@@ -91,7 +91,7 @@ def test_chosen_ts_keeps_a_chord_per_sample_within_the_arc_speed(name):
     ratios = []  # chord per sample / the speed the arc asks
     for b in program.passes:
         for e in b.elements:
-            if e.kind == "arc":
+            if e.kind == "arc" and e.radius_m is not None:
                 chord = 2 * math.sqrt(2 * e.radius_m * s_a - s_a * s_a)
                 ratios.append(chord / arc_speed(e, a, jerk, 0.5, "fastest"))
     assert ratios
@@ -121,6 +121,7 @@ def test_chosen_ts_cuts_faster_and_within_tolerance():
     body = {"program": bench_program(1), "origin": BENCH_ORIGIN, "feed": "fastest"}
     auto = plan_contour(body)
     typed = plan_contour({**body, "settings": {"Ts": 0.01}})
+    assert auto.contour is not None and typed.contour is not None
     assert auto.settings.Ts < 0.01
     assert auto.contour.passes[0].time_s < 0.9 * typed.contour.passes[0].time_s
     assert auto.contour.max_deviation_m <= auto.contour.tolerance_m
