@@ -21,6 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..constraints import force_rate
 from ..errors import PlannerError
 from ..model import RobotModel
 from ..orchestrator import feasible, plan_timed
@@ -72,6 +73,13 @@ OPT_CELL_SAMPLES = 1.5
 #: the time-optimal timing's scale is found to this relative resolution (its profile is near
 #: the drives' limits everywhere: the scale found is near 1, and a finer step is worth its plans)
 OPT_RESOLUTION = 1 / 256
+#: fastest, the time-optimal timing under the force-rate limit: the profile within these fractions
+#: of the drives' force box, each tried where it can beat the timings before (the scale search
+#: slows a profile as a whole, accelerations with the square of the speeds: a bang-bang switch
+#: of the whole box, which the rate-limited forces follow only in two force ramps, slowed the
+#: whole pass to the scale 0.50 on fusion360.nc's first pass, 0.381 s; within a quarter of the
+#: box its scale is 0.77 and the pass 0.315 s, the third-order optimum 0.252 s)
+OPT_FORCE_FRACTIONS = (1.0, 0.25)
 #: the samples a tube plan takes beyond the profile's time (the start point, the lead cells, the
 #: end point): the time-optimal timing is tried where its profile's time plus these beats the other
 OPT_END_SAMPLES = 4
@@ -118,10 +126,11 @@ class TimingSearch:
     profile speed ``v`` (:class:`~planner.contour.passes.TubeSizes`); ``optimal``, its
     time-optimal profile for a tube (:class:`~planner.contour.profiles.OptimalProfiles`);
     ``deadline`` (``time.process_time``): candidates after it are not planned. ``found``
-    collects where the failed candidates stopped."""
+    collects where the failed candidates stopped. ``optimal(t, fraction)``: the profile within
+    that fraction of the force box."""
 
     def __init__(self, model: RobotModel, st: Settings, tube_at: Callable[[float], Tube], chunk: list[int],
-                 els: list[PathElement], deadline: float | None, optimal: Callable[[Tube], Optimal] | None,
+                 els: list[PathElement], deadline: float | None, optimal: Callable[..., Optimal] | None,
                  z_max_m_s: float | None = None) -> None:
         self.model, self.st, self.tube_at, self.chunk, self.els = model, st, tube_at, chunk, els
         self.deadline, self.optimal = deadline, optimal
@@ -242,18 +251,22 @@ class TimingSearch:
             tried[key] = res
         return tried[key]
 
-    def optimal_search(self, h: Scale | None, beat: float | None = None) -> tuple[PlanResult, Tube, Scale] | None:
+    def optimal_search(self, h: Scale | None, beat: float | None = None,
+                       fraction: float = 1.0) -> tuple[PlanResult, Tube, Scale] | None:
         """The time-optimal profile's timing (:class:`~planner.contour.profiles.OptimalProfiles`)
         scaled in time by ``1 / lam`` (speeds ``lam``, accelerations ``lam^2``), the largest
         feasible ``lam``. ``beat``: the time of a timing found already [s]: first the one scale
         at which this one would be as fast (the profile's time over it, a few samples for the
         ends); not feasible there, none slower can win (one plan to know it); else the search
-        starts at the profile itself."""
+        starts at the profile itself. ``fraction``: the profile within that fraction of the
+        force box (:data:`OPT_FORCE_FRACTIONS`; a hint's own, its ``mu``)."""
         optimal = self.optimal
         assert optimal is not None
-        ref = optimal(self.tube_at(V0_M_S))
+        if h is not None:
+            fraction = h.mu
+        ref = optimal(self.tube_at(V0_M_S), fraction)
         t = self.tube_at(OPT_CELL_SAMPLES * ref.v_peak / CELL_SAMPLES)
-        times = optimal(t).times
+        times = optimal(t, fraction).times
         if not (np.all(np.isfinite(times)) and times[-1] > 0):  # pragma: no cover - a profile that never moves
             return None
         tried: dict[bytes, PlanResult | None] = {}
@@ -277,7 +290,7 @@ class TimingSearch:
         assert best is not None
         if beat is not None and best.time[-1] >= beat:
             return None
-        return best, t, Scale("optimal", lam)
+        return best, t, Scale("optimal", lam, fraction)
 
     def feed_counts(self, t: Tube, counts: np.ndarray) -> np.ndarray:
         """``counts`` raised where a cell would be crossed faster than its move's F on average:
@@ -395,6 +408,11 @@ class TimingSearch:
             got_p = (got[0], t) if got is not None else None
         return got_p
 
+    def fractions(self) -> tuple[float, ...]:
+        """The force fractions the time-optimal timing is tried at (:data:`OPT_FORCE_FRACTIONS`;
+        the whole box alone without a force-rate limit)."""
+        return OPT_FORCE_FRACTIONS if force_rate(self.model, self.st) is not None else OPT_FORCE_FRACTIONS[:1]
+
     def fastest(self, hint: Scale | None) -> tuple[PlanResult, Tube, Scale] | None:
         """The ``fastest`` feed's search: without a ``hint`` (or without the time-optimal
         profile) the heuristic timing, then the time-optimal one where it can beat it; with the
@@ -403,7 +421,8 @@ class TimingSearch:
         if hint is None or self.optimal is None:  # the heuristic first, then the time-optimal one if it can beat it
             best = self.heuristic(hint)
             if self.optimal is not None:
-                best = self.optimal_search(None, best[0].time[-1] if best is not None else None) or best
+                for fraction in self.fractions():  # the drives' whole box, then a share a rate limit can follow
+                    best = self.optimal_search(None, best[0].time[-1] if best is not None else None, fraction) or best
         elif hint.family == "optimal":  # the first pass's timing; the other where it finds none
             best = self.optimal_search(hint) or self.heuristic(None)
         else:
@@ -413,7 +432,7 @@ class TimingSearch:
 
 def search_timing(feed_mode: str, model: RobotModel, st: Settings, tube_at: Callable[[float], Tube], chunk: list[int],
                   els: list[PathElement], hint: Scale | None, deadline: float | None = None,
-                  optimal: Callable[[Tube], Optimal] | None = None, z_max_m_s: float | None = None) -> Found:
+                  optimal: Callable[..., Optimal] | None = None, z_max_m_s: float | None = None) -> Found:
     """A timing of the piece for the feed mode, in the tube ``tube_at(v)`` with cells sized for
     the profile's speed ``v`` (``program``: the programmed F times the profile's scale, so that
     a slower profile has shorter cells: the criterion pulls the robot toward each cell's
