@@ -4,7 +4,11 @@ the third-order optimum with the tool speed capped at each move's F, per pass an
 next to the planner's ``fastest`` and ``program`` feeds at the defaults.
 
     OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python benchmarks/bench_contour_optimum.py \
-        [--grids 10,20,40] [--programs bench,freecad_linuxcnc.ngc,fusion360.nc]
+        [--grids 10,20,40] [--programs bench,freecad_linuxcnc.ngc,fusion360.nc] [--compare-ts 0.01] [--elements]
+
+``--compare-ts``: ``fastest`` also at that typed sample time, beside the defaults (before/after
+the defaults' choice of Ts in one run); ``--elements``: per element of each distinct pass, the
+third-order optimum's time and top speed beside ``fastest``'s (where a plan loses its time).
 
 **The third-order exact-path optimum** (an independent peer of :mod:`planner.contour.timing`,
 written here from the equations of motion, not from the planner's code):
@@ -189,6 +193,8 @@ class Optimum:
     cpu_s: float
     nodes: int
     max_residual: float  #: largest equation-of-motion residual at the nodes, N (generalised)
+    element_time_s: np.ndarray | None = None  #: per element (of positive length) its time, s
+    element_speed_m_s: np.ndarray | None = None  #: per element its top path speed, m/s
 
 
 def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: np.ndarray, N: int,
@@ -355,7 +361,8 @@ def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: 
            "v": [Vv[0, e * nn:(e + 1) * nn] * 0.1 for e in range(E)],
            "a": [Av[0, e * nn:(e + 1) * nn] * 10 for e in range(E)],
            "u": [Uv[:, e * nn:(e + 1) * nn] for e in range(E)]}
-    return Optimum(float(T_e.sum()), status, cpu, Nn, resid), out
+    return Optimum(float(T_e.sum()), status, cpu, Nn, resid, T_e,
+                   np.array([float(np.max(x)) for x in out["v"]])), out
 
 
 def converged_optimum(robot: RobotModel, elements: list[PathElement], origin: np.ndarray, grids: list[int],
@@ -394,6 +401,34 @@ def plan(text: str, origin, feed: str, settings: dict | None = None) -> tuple[ob
     return res, time.process_time() - c0
 
 
+def element_table(label: str, i: int, els: list[PathElement], opt: Optimum, res, k: int) -> list[str]:
+    """Per element of pass ``i``: the optimum's time and top speed next to the plan's (its
+    samples whose ``program_line`` is the element's line in the ``k``-th cutting run; the top
+    speed sample to sample): where a plan loses its time (``--elements``)."""
+    c = res.contour
+    Ts = res.settings.Ts
+    cut = np.asarray(c.cutting, int)
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], cut, [0]))))
+    if len(edges) != 2 * len(c.passes):  # a pass cut in pieces (tabs, exact stops): no one run per pass
+        return [f"\n{label} pass {i}: {len(edges) // 2} cutting runs for {len(c.passes)} passes, no element table"]
+    a, b = edges[2 * k], edges[2 * k + 1]
+    lines = np.array([-1 if x is None else x for x in c.program_line[a:b]])
+    step = np.hypot(*np.diff(res.pose[a:b, :2], axis=0).T) / Ts
+    els = [e for e in els if e.length_m > 1e-12]
+    out = [f"\n{label} pass {i} (fastest at Ts {Ts:g} s): per element, the third-order optimum (stops where "
+           "tangent or curvature jump) against the plan\n",
+           "| element | line | kind | mm | R mm | 3rd order s | its top m/s | fastest s | its top m/s |",
+           "|---|---|---|---|---|---|---|---|---|"]
+    assert opt.element_time_s is not None and opt.element_speed_m_s is not None
+    for j, e in enumerate(els):
+        m = lines == e.line
+        top = float(step[m[:-1]].max()) if m[:-1].any() else 0.0
+        out.append(f"| {j} | {e.line} | {e.kind} | {e.length_m * 1e3:.2f} | "
+                   f"{(e.radius_m or 0.0) * 1e3:.2f} | {opt.element_time_s[j]:.4f} | {opt.element_speed_m_s[j]:.3f} | "
+                   f"{m.sum() * Ts:.4f} | {top:.3f} |")
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--grids", default="24,48,96",
@@ -407,6 +442,8 @@ def main() -> None:
     ap.add_argument("--compare-ts", type=float, default=None,
                     help="also plan fastest at this typed Ts (e.g. 0.01, the default before issue 35 goal 3) "
                     "and print it beside the defaults")
+    ap.add_argument("--elements", action="store_true",
+                    help="per element of each distinct pass: the optimum's time and top speed beside fastest's")
     args = ap.parse_args()
     grids = [int(g) for g in args.grids.split(",")]
     robot = load_robot(ROBOT)
@@ -430,6 +467,7 @@ def main() -> None:
     conv_rows: list[str] = []
     summary: list[str] = []
     typed_rows: list[tuple[str, int, int, str]] = []  # program, first and last pass, the row
+    element_rows: list[str] = []
     for name in args.programs.split(","):
         label, text, origin = load_program(name)
         prog = read_gcode(text)
@@ -461,6 +499,8 @@ def main() -> None:
                 third = converged_optimum(robot, els, org, grids, rate, False, args.from_zero, args.blocks)
                 capped = converged_optimum(robot, els, org, grids, rate, True, args.from_zero, args.blocks)
                 memo[key] = (topp, third, capped)
+                if args.elements and res:
+                    element_rows += element_table(label, i, els, third[-1], res["fastest"][0], i)
                 for lab, runs in (("3rd order", third), ("3rd order at F", capped)):
                     times = " / ".join(f"{r.time_s:.5f}" for r in runs)
                     change = " / ".join(f"{abs(r.time_s / p.time_s - 1) * 100:.3f}" for p, r in zip(runs, runs[1:]))
@@ -505,6 +545,8 @@ def main() -> None:
         summary.append(f"| {label} | {len(prog.passes)} | {L * 1e3:.0f} | {nominal:.2f} | {fast:.2f} | {cf:.1f} | "
                        f"{prg:.2f} | {cp:.1f} | {topp:.3f} | {t3:.3f} | {t3f:.3f} | {fast / t3:.3f}x | "
                        f"{prg / t3f:.3f}x |")
+    if element_rows:
+        print("\n".join(element_rows) + "\n")
     print("### per program (cutting time; compute: CPU s of the whole plan at the defaults)\n")
     print("| program | passes | mm | L / F s | fastest s | CPU s | program s | CPU s | TOPP-RA s | 3rd order s | "
           "3rd order at F s | fastest / 3rd | program / 3rd at F |")
