@@ -20,9 +20,9 @@ in every direction at the centre of the base (:func:`drive_acceleration`), ``j =
 ``ramp`` the slowest drive's rise from 0 to ``force_max``. The sample time is ``c / v`` of the
 arc where that is smallest, rounded up to a whole millisecond (a chord per sample at most the
 speed the arc asks: rounded down, a chord would need just over one sample, so two, at half the
-speed), within [:data:`TS_FLOOR_S`, the settings' default]. Measured on the three benchmark
-programs at 3, 4 and 5 ms, the rule's choice (3, 4, 3 ms) was the fastest cut of each. A
-program without arcs, or whose arcs the default reaches, keeps the default.
+speed), within [:data:`TS_FLOOR_S`, the settings' default]. Measured on the three programs of
+``bench_contour_optimum.py`` at 10, 5, 4 and 3 ms, the rule's choice (3, 4 and 3 ms) cut each
+program fastest. A program without arcs, or whose arcs the default reaches, keeps the default.
 
 **The horizon** with a chosen sample time: :data:`HORIZON_RAMPS` force ramps of the slowest
 drive, at least the constrained mode's 30 samples (the default horizon's 0.25 s at 3 ms is 84
