@@ -262,8 +262,8 @@ class TimingSearch:
         force box (:data:`OPT_FORCE_FRACTIONS`; a hint's own, its ``mu``)."""
         optimal = self.optimal
         assert optimal is not None
-        if h is not None:
-            fraction = h.mu
+        if h is not None:  # the hint's fraction where this piece may use it
+            fraction = h.mu if h.mu in self.fractions() else 1.0
         ref = optimal(self.tube_at(V0_M_S), fraction)
         t = self.tube_at(OPT_CELL_SAMPLES * ref.v_peak / CELL_SAMPLES)
         times = optimal(t, fraction).times
@@ -410,8 +410,13 @@ class TimingSearch:
 
     def fractions(self) -> tuple[float, ...]:
         """The force fractions the time-optimal timing is tried at (:data:`OPT_FORCE_FRACTIONS`;
-        the whole box alone without a force-rate limit)."""
-        return OPT_FORCE_FRACTIONS if force_rate(self.model, self.st) is not None else OPT_FORCE_FRACTIONS[:1]
+        the whole box alone without a force-rate limit, and on a piece whose Z moves: there a
+        quarter-box timing's samples passed the XY check of the Z speed while the Z between
+        them, measured along the path, ran 1.27x the axis speed in
+        tests/test_machine_program.py's tab pass)."""
+        if force_rate(self.model, self.st) is None or self.z_capped:
+            return OPT_FORCE_FRACTIONS[:1]
+        return OPT_FORCE_FRACTIONS
 
     def fastest(self, hint: Scale | None) -> tuple[PlanResult, Tube, Scale] | None:
         """The ``fastest`` feed's search: without a ``hint`` (or without the time-optimal
