@@ -428,8 +428,14 @@ class TimingSearch:
             if self.optimal is not None:
                 for fraction in self.fractions():  # the drives' whole box, then a share a rate limit can follow
                     best = self.optimal_search(None, best[0].time[-1] if best is not None else None, fraction) or best
-        elif hint.family == "optimal":  # the first pass's timing; the other where it finds none
-            best = self.optimal_search(hint) or self.heuristic(None)
+        elif hint.family == "optimal":  # the first pass's timing, then its other force fractions; else the other
+            best = self.optimal_search(hint)
+            if best is None:
+                best = self.heuristic(None)
+            else:
+                for fraction in self.fractions():
+                    if fraction != best[2].mu:
+                        best = self.optimal_search(None, best[0].time[-1], fraction) or best
         else:
             best = self.heuristic(hint) or self.optimal_search(None)
         return best
