@@ -76,9 +76,10 @@ OPT_RESOLUTION = 1 / 256
 #: fastest, the time-optimal timing under the force-rate limit: the profile within these fractions
 #: of the drives' force box, each tried where it can beat the timings before (the scale search
 #: slows a profile as a whole, accelerations with the square of the speeds: a bang-bang switch
-#: of the whole box, which the rate-limited forces follow only in two force ramps, slowed the
-#: whole pass to the scale 0.50 on fusion360.nc's first pass, 0.381 s; within a quarter of the
-#: box its scale is 0.77 and the pass 0.315 s, the third-order optimum 0.252 s)
+#: of the whole box, which the rate-limited forces follow only in two force ramps, held
+#: fusion360.nc's passes to the scales 0.45-0.50; within a quarter of the box its second pass
+#: takes 0.186 s instead of 0.231 s, the third-order optimum 0.195 s). Not on a piece whose Z
+#: moves (:meth:`TimingSearch.fractions`)
 OPT_FORCE_FRACTIONS = (1.0, 0.25)
 #: the samples a tube plan takes beyond the profile's time (the start point, the lead cells, the
 #: end point): the time-optimal timing is tried where its profile's time plus these beats the other
