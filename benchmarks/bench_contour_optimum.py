@@ -30,7 +30,9 @@ written here from the equations of motion, not from the planner's code):
   ``benchmarks/bench_optimality.py`` at random states before solving);
 * the limits: ``|f_k| <= force_max``, the leg speeds ``|J_l q' v| <= speed_max`` at every
   node, the drive-force rate ``|f_{k+1} - f_k| <= rate h_e`` (rate = force_max / 50 ms, the
-  default ``force_rate_n_s``), and for the capped peer ``v <= F`` of the element's move;
+  default ``force_rate_n_s``), and for the capped peer ``v <= F`` of the element's move; on a
+  move whose Z changes (a ramp, a helix) ``v <= z_max L / |dZ|``, the Z axis speed ``z_max``
+  0.05 m/s (the request's default ``z_rapid_m_s``, which the planner holds in both feeds);
 * junctions: the forces are continuous everywhere (a rate limit allows no jump), so is the
   velocity; where the tangent jumps (a corner) the path must stop; where the curvature jumps
   (a line into an arc, even tangentially) it must stop as well: the generalised acceleration
@@ -87,6 +89,9 @@ from planner.schema.limits import DEFAULT_FORCE_RISE_S
 
 CAM = Path(__file__).resolve().parent.parent / "tests" / "data" / "cam"
 ROBOT = "moving-slide"
+#: the Z axis speed [m/s] (``ContourRequest.z_rapid_m_s``' default): a move whose Z changes runs
+#: in XY at most ``z_max L / |dZ|`` in the planner (``planner.contour.search.z_caps``) and here
+Z_MAX_M_S = 0.05
 
 
 # ------------------------------------------------------------------ the dynamics, CasADi
@@ -199,6 +204,7 @@ class Optimum:
 
 def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: np.ndarray, N: int,
                         rate: np.ndarray | None, feed_cap: bool = False, from_zero: bool = False,
+                        z_max: float | None = None,
                         guess: dict | None = None, verbose: bool = False, B: int = 3) -> tuple[Optimum, dict]:
     """The minimum time of one pass (module docstring) with ``N`` time steps per element.
     ``rate``: the force-rate limit per drive [N/s] (None: none); ``feed_cap``: ``v <= F``.
@@ -222,6 +228,9 @@ def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: 
     SG = np.array([math.copysign(1.0, e.sweep_rad) if e.kind == "arc" else 1.0 for e in els], float)  # type: ignore[arg-type]
     L = np.array([e.length_m for e in els])
     Fe = np.array([e.feed_m_s for e in els])
+    # the Z axis speed's bound on the XY speed of a move whose Z changes (as the planner's z_caps)
+    dZ = np.array([abs(e.z_end_m - e.z_start_m) for e in els])
+    Zc = np.where((dZ > 0) & (z_max is not None), (z_max or 0.0) * L / np.maximum(dZ, 1e-300), np.inf)
 
     inv = casadi_inverse_dynamics(robot)
     # one node: residual of the equations of motion (3, scaled by force_max) and leg speeds (n)
@@ -272,6 +281,8 @@ def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: 
     if feed_cap:
         cap = np.repeat(Fe, nn) / 0.1
         opti.subject_to(V <= cap.reshape(1, -1))
+    for e in np.flatnonzero(np.isfinite(Zc)):  # a ramp's Z within the axis speed
+        opti.subject_to(V[0, e * nn:(e + 1) * nn] <= Zc[e] / 0.1)
     # within an element: a linear in time, s and v integrated exactly
     i0 = np.concatenate([np.arange(e * nn, e * nn + N) for e in range(E)])
     i1 = i0 + 1
@@ -309,6 +320,8 @@ def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: 
     Tg = np.asarray(guess["T"]) if guess else np.maximum(2.5 * np.sqrt(L / 5.0), 0.01)
     if feed_cap and not guess:
         Tg = np.maximum(Tg, 1.9 * L / Fe)  # the minimum-jerk guess's top speed 1.875 L / T within F
+    if not guess:
+        Tg = np.maximum(Tg, 1.9 * L / Zc)  # and within the Z axis' bound
     if guess and guess.get("N") is not None:  # the previous solution's block durations
         Db = np.asarray(guess["D"]).reshape(E, B)
     else:
@@ -367,14 +380,14 @@ def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: 
 
 def converged_optimum(robot: RobotModel, elements: list[PathElement], origin: np.ndarray, grids: list[int],
                       rate: np.ndarray | None, feed_cap: bool, from_zero: bool = False, blocks: int = 3,
-                      tol: float = 1e-3, finest: int = 192) -> list[Optimum]:
+                      tol: float = 1e-3, finest: int = 192, z_max: float | None = None) -> list[Optimum]:
     """The optimum at each grid (coarse to fine, each started from the previous), then on
     doubled grids until the last two agree within ``tol`` (relative) or ``finest`` is passed."""
     out, guess = [], None
     grids = list(grids)
     k = 0
     while k < len(grids):
-        opt, guess = third_order_optimum(robot, elements, origin, grids[k], rate, feed_cap, from_zero, guess,
+        opt, guess = third_order_optimum(robot, elements, origin, grids[k], rate, feed_cap, from_zero, z_max, guess,
                                          B=blocks)
         out.append(opt)
         k += 1
@@ -496,8 +509,10 @@ def main() -> None:
                           round(e.feed_m_s, 9)) for e in els), tuple(np.round(org, 9)))
             if key not in memo:
                 topp = topp_time(els, org, leg_speed=True)
-                third = converged_optimum(robot, els, org, grids, rate, False, args.from_zero, args.blocks)
-                capped = converged_optimum(robot, els, org, grids, rate, True, args.from_zero, args.blocks)
+                third = converged_optimum(robot, els, org, grids, rate, False, args.from_zero, args.blocks,
+                                          z_max=Z_MAX_M_S)
+                capped = converged_optimum(robot, els, org, grids, rate, True, args.from_zero, args.blocks,
+                                           z_max=Z_MAX_M_S)
                 memo[key] = (topp, third, capped)
                 if args.elements and res:
                     element_rows += element_table(label, i, els, third[-1], res["fastest"][0], i)
