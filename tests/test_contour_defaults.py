@@ -101,9 +101,9 @@ def test_chosen_ts_keeps_a_chord_per_sample_within_the_arc_speed(name):
 
 
 def test_defaults_left_alone_where_given_or_not_needed():
-    """Typed Ts or N are kept; a program of lines (no chord bound) and the program feed whose
-    F one chord per 10 ms already reaches (the benchmark part at F1200: 29 mm/s > 20 mm/s) keep
-    the settings' 10 ms and horizon."""
+    """Typed Ts or N are kept; a program of lines (no chord bound) and the ``program`` feed
+    (whose F one chord per 10 ms reaches on the benchmark part: 29 mm/s > 20 mm/s) keep the
+    settings' 10 ms and horizon."""
     text = bench_program(1)
     for body in ({"program": text, "feed": "fastest", "settings": {"Ts": 0.01}},
                  {"program": text, "feed": "fastest", "settings": {"N": 40}},

@@ -109,20 +109,18 @@ class OptimalProfiles:
         #: per element the XY speed bound of its Z (:func:`planner.contour.search.z_caps`), None: none
         self.zcap = zcap if zcap is not None and np.isfinite(zcap).any() else None
 
-    def __call__(self, t: Tube, force_fraction: float = 1.0) -> Optimal:
-        """The profile for the tube ``t``: its time at the end of each of ``t``'s segments;
-        ``force_fraction``: within that fraction of the force box
-        (:func:`~planner.contour.timing.time_optimal`)."""
+    def __call__(self, t: Tube) -> Optimal:
+        """The profile for the tube ``t``: its time at the end of each of ``t``'s segments."""
         els, origin, st, memo = self.els, self.origin, self.st, self.memo
         loc = np.searchsorted(self.chunk, t.element)
         arc = np.isfinite(t.radius) & (t.length > 0)
         chord = np.zeros(len(els))
         np.maximum.at(chord, loc[arc], t.length[arc])
         key = (self.geo, float(origin[0]), float(origin[1]), self.psi, st.Ts, t.rho, tuple(np.round(chord, 12)),
-               None if self.zcap is None else tuple(self.zcap), force_fraction)
+               None if self.zcap is None else tuple(self.zcap))
         if key not in memo:
             caps = partial(optimal_caps, rho=t.rho, chord=chord, Ts=st.Ts, zcap=self.zcap)
-            path, w, T = time_optimal(self.model, els, origin, self.psi, self.h, caps, force_fraction)
+            path, w, T = time_optimal(self.model, els, origin, self.psi, self.h, caps)
             memo[key] = (path.s, T, float(np.sqrt(w.max())))
         s_grid, T, v_peak = memo[key]
         # the path length at the end of every segment: its element's start plus its share of the

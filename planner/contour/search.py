@@ -21,7 +21,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..constraints import force_rate
 from ..errors import PlannerError
 from ..model import RobotModel
 from ..orchestrator import feasible, plan_timed
@@ -73,14 +72,6 @@ OPT_CELL_SAMPLES = 1.5
 #: the time-optimal timing's scale is found to this relative resolution (its profile is near
 #: the drives' limits everywhere: the scale found is near 1, and a finer step is worth its plans)
 OPT_RESOLUTION = 1 / 256
-#: fastest, the time-optimal timing under the force-rate limit: the profile within these fractions
-#: of the drives' force box, each tried where it can beat the timings before (the scale search
-#: slows a profile as a whole, accelerations with the square of the speeds: a bang-bang switch
-#: of the whole box, which the rate-limited forces follow only in two force ramps, held
-#: fusion360.nc's passes to the scales 0.45-0.50; within a quarter of the box its second pass
-#: takes 0.186 s instead of 0.231 s, the third-order optimum 0.195 s). Not on a piece whose Z
-#: moves (:meth:`TimingSearch.fractions`)
-OPT_FORCE_FRACTIONS = (1.0, 0.25)
 #: the samples a tube plan takes beyond the profile's time (the start point, the lead cells, the
 #: end point): the time-optimal timing is tried where its profile's time plus these beats the other
 OPT_END_SAMPLES = 4
@@ -127,11 +118,10 @@ class TimingSearch:
     profile speed ``v`` (:class:`~planner.contour.passes.TubeSizes`); ``optimal``, its
     time-optimal profile for a tube (:class:`~planner.contour.profiles.OptimalProfiles`);
     ``deadline`` (``time.process_time``): candidates after it are not planned. ``found``
-    collects where the failed candidates stopped. ``optimal(t, fraction)``: the profile within
-    that fraction of the force box."""
+    collects where the failed candidates stopped."""
 
     def __init__(self, model: RobotModel, st: Settings, tube_at: Callable[[float], Tube], chunk: list[int],
-                 els: list[PathElement], deadline: float | None, optimal: Callable[..., Optimal] | None,
+                 els: list[PathElement], deadline: float | None, optimal: Callable[[Tube], Optimal] | None,
                  z_max_m_s: float | None = None) -> None:
         self.model, self.st, self.tube_at, self.chunk, self.els = model, st, tube_at, chunk, els
         self.deadline, self.optimal = deadline, optimal
@@ -252,22 +242,18 @@ class TimingSearch:
             tried[key] = res
         return tried[key]
 
-    def optimal_search(self, h: Scale | None, beat: float | None = None,
-                       fraction: float = 1.0) -> tuple[PlanResult, Tube, Scale] | None:
+    def optimal_search(self, h: Scale | None, beat: float | None = None) -> tuple[PlanResult, Tube, Scale] | None:
         """The time-optimal profile's timing (:class:`~planner.contour.profiles.OptimalProfiles`)
         scaled in time by ``1 / lam`` (speeds ``lam``, accelerations ``lam^2``), the largest
         feasible ``lam``. ``beat``: the time of a timing found already [s]: first the one scale
         at which this one would be as fast (the profile's time over it, a few samples for the
         ends); not feasible there, none slower can win (one plan to know it); else the search
-        starts at the profile itself. ``fraction``: the profile within that fraction of the
-        force box (:data:`OPT_FORCE_FRACTIONS`; a hint's own, its ``mu``)."""
+        starts at the profile itself."""
         optimal = self.optimal
         assert optimal is not None
-        if h is not None:  # the hint's fraction where this piece may use it
-            fraction = h.mu if h.mu in self.fractions() else 1.0
-        ref = optimal(self.tube_at(V0_M_S), fraction)
+        ref = optimal(self.tube_at(V0_M_S))
         t = self.tube_at(OPT_CELL_SAMPLES * ref.v_peak / CELL_SAMPLES)
-        times = optimal(t, fraction).times
+        times = optimal(t).times
         if not (np.all(np.isfinite(times)) and times[-1] > 0):  # pragma: no cover - a profile that never moves
             return None
         tried: dict[bytes, PlanResult | None] = {}
@@ -291,7 +277,7 @@ class TimingSearch:
         assert best is not None
         if beat is not None and best.time[-1] >= beat:
             return None
-        return best, t, Scale("optimal", lam, fraction)
+        return best, t, Scale("optimal", lam)
 
     def feed_counts(self, t: Tube, counts: np.ndarray) -> np.ndarray:
         """``counts`` raised where a cell would be crossed faster than its move's F on average:
@@ -409,16 +395,6 @@ class TimingSearch:
             got_p = (got[0], t) if got is not None else None
         return got_p
 
-    def fractions(self) -> tuple[float, ...]:
-        """The force fractions the time-optimal timing is tried at (:data:`OPT_FORCE_FRACTIONS`;
-        the whole box alone without a force-rate limit, and on a piece whose Z moves: there a
-        quarter-box timing's samples passed the XY check of the Z speed while the Z between
-        them, measured along the path, ran 1.27x the axis speed in
-        tests/test_machine_program.py's tab pass)."""
-        if force_rate(self.model, self.st) is None or self.z_capped:
-            return OPT_FORCE_FRACTIONS[:1]
-        return OPT_FORCE_FRACTIONS
-
     def fastest(self, hint: Scale | None) -> tuple[PlanResult, Tube, Scale] | None:
         """The ``fastest`` feed's search: without a ``hint`` (or without the time-optimal
         profile) the heuristic timing, then the time-optimal one where it can beat it; with the
@@ -427,16 +403,9 @@ class TimingSearch:
         if hint is None or self.optimal is None:  # the heuristic first, then the time-optimal one if it can beat it
             best = self.heuristic(hint)
             if self.optimal is not None:
-                for fraction in self.fractions():  # the drives' whole box, then a share a rate limit can follow
-                    best = self.optimal_search(None, best[0].time[-1] if best is not None else None, fraction) or best
-        elif hint.family == "optimal":  # the first pass's timing, then its other force fractions; else the other
-            best = self.optimal_search(hint)
-            if best is None:
-                best = self.heuristic(None)
-            else:
-                for fraction in self.fractions():
-                    if fraction != best[2].mu:
-                        best = self.optimal_search(None, best[0].time[-1], fraction) or best
+                best = self.optimal_search(None, best[0].time[-1] if best is not None else None) or best
+        elif hint.family == "optimal":  # the first pass's timing; the other where it finds none
+            best = self.optimal_search(hint) or self.heuristic(None)
         else:
             best = self.heuristic(hint) or self.optimal_search(None)
         return best
@@ -444,7 +413,7 @@ class TimingSearch:
 
 def search_timing(feed_mode: str, model: RobotModel, st: Settings, tube_at: Callable[[float], Tube], chunk: list[int],
                   els: list[PathElement], hint: Scale | None, deadline: float | None = None,
-                  optimal: Callable[..., Optimal] | None = None, z_max_m_s: float | None = None) -> Found:
+                  optimal: Callable[[Tube], Optimal] | None = None, z_max_m_s: float | None = None) -> Found:
     """A timing of the piece for the feed mode, in the tube ``tube_at(v)`` with cells sized for
     the profile's speed ``v`` (``program``: the programmed F times the profile's scale, so that
     a slower profile has shorter cells: the criterion pulls the robot toward each cell's

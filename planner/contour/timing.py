@@ -197,17 +197,13 @@ def profile_time(s: np.ndarray, w: np.ndarray) -> np.ndarray:
 
 
 def time_optimal(model: RobotModel, elements: list[PathElement], origin: np.ndarray, psi: float, h: float,
-                 cap_of: Callable[[PathSamples, np.ndarray], np.ndarray] | None = None, force_fraction: float = 1.0
+                 cap_of: Callable[[PathSamples, np.ndarray], np.ndarray] | None = None
                  ) -> tuple[PathSamples, np.ndarray, np.ndarray]:
     """The time-optimal profile of a pass: its grid (:func:`path_samples`), ``w`` and the time at
     every grid point. ``cap_of(path, a_all) -> (N,)``: further bounds on ``w`` (the tube's, the
-    corners'), given the acceleration the drives allow in every direction (:func:`constraint_rows`).
-    ``force_fraction``: the profile within this fraction of the force box (the facets' offsets
-    times it; the corner bounds' ``a_all`` as it is): a bang-bang profile whose switches a
-    force-rate-limited robot can follow."""
+    corners'), given the acceleration the drives allow in every direction (:func:`constraint_rows`)."""
     path = path_samples(elements, origin, psi, h)
     A, B, R, w_leg, a_all = constraint_rows(model, path)
-    R = R * force_fraction
     cap = w_leg if cap_of is None else np.minimum(w_leg, cap_of(path, a_all))
     w = speed_profile(path.s, A, B, R, cap)
     return path, w, profile_time(path.s, w)
