@@ -4,7 +4,11 @@ the third-order optimum with the tool speed capped at each move's F, per pass an
 next to the planner's ``fastest`` and ``program`` feeds at the defaults.
 
     OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python benchmarks/bench_contour_optimum.py \
-        [--grids 10,20,40] [--programs bench,freecad_linuxcnc.ngc,fusion360.nc]
+        [--grids 10,20,40] [--programs bench,freecad_linuxcnc.ngc,fusion360.nc] [--compare-ts 0.01] [--elements]
+
+``--compare-ts``: ``fastest`` also at that typed sample time, beside the defaults (before/after
+the defaults' choice of Ts in one run); ``--elements``: per element of each distinct pass, the
+third-order optimum's time and top speed beside ``fastest``'s (where a plan loses its time).
 
 **The third-order exact-path optimum** (an independent peer of :mod:`planner.contour.timing`,
 written here from the equations of motion, not from the planner's code):
@@ -26,7 +30,9 @@ written here from the equations of motion, not from the planner's code):
   ``benchmarks/bench_optimality.py`` at random states before solving);
 * the limits: ``|f_k| <= force_max``, the leg speeds ``|J_l q' v| <= speed_max`` at every
   node, the drive-force rate ``|f_{k+1} - f_k| <= rate h_e`` (rate = force_max / 50 ms, the
-  default ``force_rate_n_s``), and for the capped peer ``v <= F`` of the element's move;
+  default ``force_rate_n_s``), and for the capped peer ``v <= F`` of the element's move; on a
+  move whose Z changes (a ramp, a helix) ``v <= z_max L / |dZ|``, the Z axis speed ``z_max``
+  0.05 m/s (the request's default ``z_rapid_m_s``, which the planner holds in both feeds);
 * junctions: the forces are continuous everywhere (a rate limit allows no jump), so is the
   velocity; where the tangent jumps (a corner) the path must stop; where the curvature jumps
   (a line into an arc, even tangentially) it must stop as well: the generalised acceleration
@@ -83,6 +89,9 @@ from planner.schema.limits import DEFAULT_FORCE_RISE_S
 
 CAM = Path(__file__).resolve().parent.parent / "tests" / "data" / "cam"
 ROBOT = "moving-slide"
+#: the Z axis speed [m/s] (``ContourRequest.z_rapid_m_s``' default): a move whose Z changes runs
+#: in XY at most ``z_max L / |dZ|`` in the planner (``planner.contour.search.z_caps``) and here
+Z_MAX_M_S = 0.05
 
 
 # ------------------------------------------------------------------ the dynamics, CasADi
@@ -189,10 +198,13 @@ class Optimum:
     cpu_s: float
     nodes: int
     max_residual: float  #: largest equation-of-motion residual at the nodes, N (generalised)
+    element_time_s: np.ndarray | None = None  #: per element (of positive length) its time, s
+    element_speed_m_s: np.ndarray | None = None  #: per element its top path speed, m/s
 
 
 def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: np.ndarray, N: int,
                         rate: np.ndarray | None, feed_cap: bool = False, from_zero: bool = False,
+                        z_max: float | None = None,
                         guess: dict | None = None, verbose: bool = False, B: int = 3) -> tuple[Optimum, dict]:
     """The minimum time of one pass (module docstring) with ``N`` time steps per element.
     ``rate``: the force-rate limit per drive [N/s] (None: none); ``feed_cap``: ``v <= F``.
@@ -216,6 +228,9 @@ def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: 
     SG = np.array([math.copysign(1.0, e.sweep_rad) if e.kind == "arc" else 1.0 for e in els], float)  # type: ignore[arg-type]
     L = np.array([e.length_m for e in els])
     Fe = np.array([e.feed_m_s for e in els])
+    # the Z axis speed's bound on the XY speed of a move whose Z changes (as the planner's z_caps)
+    dZ = np.array([abs(e.z_end_m - e.z_start_m) for e in els])
+    Zc = np.where((dZ > 0) & (z_max is not None), (z_max or 0.0) * L / np.maximum(dZ, 1e-300), np.inf)
 
     inv = casadi_inverse_dynamics(robot)
     # one node: residual of the equations of motion (3, scaled by force_max) and leg speeds (n)
@@ -266,6 +281,8 @@ def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: 
     if feed_cap:
         cap = np.repeat(Fe, nn) / 0.1
         opti.subject_to(V <= cap.reshape(1, -1))
+    for e in np.flatnonzero(np.isfinite(Zc)):  # a ramp's Z within the axis speed
+        opti.subject_to(V[0, e * nn:(e + 1) * nn] <= Zc[e] / 0.1)
     # within an element: a linear in time, s and v integrated exactly
     i0 = np.concatenate([np.arange(e * nn, e * nn + N) for e in range(E)])
     i1 = i0 + 1
@@ -303,6 +320,8 @@ def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: 
     Tg = np.asarray(guess["T"]) if guess else np.maximum(2.5 * np.sqrt(L / 5.0), 0.01)
     if feed_cap and not guess:
         Tg = np.maximum(Tg, 1.9 * L / Fe)  # the minimum-jerk guess's top speed 1.875 L / T within F
+    if not guess:
+        Tg = np.maximum(Tg, 1.9 * L / Zc)  # and within the Z axis' bound
     if guess and guess.get("N") is not None:  # the previous solution's block durations
         Db = np.asarray(guess["D"]).reshape(E, B)
     else:
@@ -355,19 +374,20 @@ def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: 
            "v": [Vv[0, e * nn:(e + 1) * nn] * 0.1 for e in range(E)],
            "a": [Av[0, e * nn:(e + 1) * nn] * 10 for e in range(E)],
            "u": [Uv[:, e * nn:(e + 1) * nn] for e in range(E)]}
-    return Optimum(float(T_e.sum()), status, cpu, Nn, resid), out
+    return Optimum(float(T_e.sum()), status, cpu, Nn, resid, T_e,
+                   np.array([float(np.max(x)) for x in out["v"]])), out
 
 
 def converged_optimum(robot: RobotModel, elements: list[PathElement], origin: np.ndarray, grids: list[int],
                       rate: np.ndarray | None, feed_cap: bool, from_zero: bool = False, blocks: int = 3,
-                      tol: float = 1e-3, finest: int = 192) -> list[Optimum]:
+                      tol: float = 1e-3, finest: int = 192, z_max: float | None = None) -> list[Optimum]:
     """The optimum at each grid (coarse to fine, each started from the previous), then on
     doubled grids until the last two agree within ``tol`` (relative) or ``finest`` is passed."""
     out, guess = [], None
     grids = list(grids)
     k = 0
     while k < len(grids):
-        opt, guess = third_order_optimum(robot, elements, origin, grids[k], rate, feed_cap, from_zero, guess,
+        opt, guess = third_order_optimum(robot, elements, origin, grids[k], rate, feed_cap, from_zero, z_max, guess,
                                          B=blocks)
         out.append(opt)
         k += 1
@@ -388,10 +408,38 @@ def load_program(name: str) -> tuple[str, str, object]:
     return name, (CAM / name).read_text(), "fit"
 
 
-def plan(text: str, origin, feed: str) -> tuple[object, float]:
+def plan(text: str, origin, feed: str, settings: dict | None = None) -> tuple[object, float]:
     c0 = time.process_time()
-    res = plan_contour({"program": text, "origin": origin, "feed": feed})
+    res = plan_contour({"program": text, "origin": origin, "feed": feed, "settings": settings or {}})
     return res, time.process_time() - c0
+
+
+def element_table(label: str, i: int, els: list[PathElement], opt: Optimum, res, k: int) -> list[str]:
+    """Per element of pass ``i``: the optimum's time and top speed next to the plan's (its
+    samples whose ``program_line`` is the element's line in the ``k``-th cutting run; the top
+    speed sample to sample): where a plan loses its time (``--elements``)."""
+    c = res.contour
+    Ts = res.settings.Ts
+    cut = np.asarray(c.cutting, int)
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], cut, [0]))))
+    if len(edges) != 2 * len(c.passes):  # a pass cut in pieces (tabs, exact stops): no one run per pass
+        return [f"\n{label} pass {i}: {len(edges) // 2} cutting runs for {len(c.passes)} passes, no element table"]
+    a, b = edges[2 * k], edges[2 * k + 1]
+    lines = np.array([-1 if x is None else x for x in c.program_line[a:b]])
+    step = np.hypot(*np.diff(res.pose[a:b, :2], axis=0).T) / Ts
+    els = [e for e in els if e.length_m > 1e-12]
+    out = [f"\n{label} pass {i} (fastest at Ts {Ts:g} s): per element, the third-order optimum (stops where "
+           "tangent or curvature jump) against the plan\n",
+           "| element | line | kind | mm | R mm | 3rd order s | its top m/s | fastest s | its top m/s |",
+           "|---|---|---|---|---|---|---|---|---|"]
+    assert opt.element_time_s is not None and opt.element_speed_m_s is not None
+    for j, e in enumerate(els):
+        m = lines == e.line
+        top = float(step[m[:-1]].max()) if m[:-1].any() else 0.0
+        out.append(f"| {j} | {e.line} | {e.kind} | {e.length_m * 1e3:.2f} | "
+                   f"{(e.radius_m or 0.0) * 1e3:.2f} | {opt.element_time_s[j]:.4f} | {opt.element_speed_m_s[j]:.3f} | "
+                   f"{m.sum() * Ts:.4f} | {top:.3f} |")
+    return out
 
 
 def main() -> None:
@@ -404,6 +452,11 @@ def main() -> None:
     ap.add_argument("--from-zero", action="store_true", help="forces 0 at each pass's start and end")
     ap.add_argument("--no-planner", action="store_true", help="the optima only")
     ap.add_argument("--blocks", type=int, default=3, help="time blocks per element (1: uniform steps)")
+    ap.add_argument("--compare-ts", type=float, default=None,
+                    help="also plan fastest at this typed Ts (e.g. 0.01, the default before issue 35 goal 3) "
+                    "and print it beside the defaults")
+    ap.add_argument("--elements", action="store_true",
+                    help="per element of each distinct pass: the optimum's time and top speed beside fastest's")
     args = ap.parse_args()
     grids = [int(g) for g in args.grids.split(",")]
     robot = load_robot(ROBOT)
@@ -426,6 +479,8 @@ def main() -> None:
     memo: dict = {}
     conv_rows: list[str] = []
     summary: list[str] = []
+    typed_rows: list[tuple[str, int, int, str]] = []  # program, first and last pass, the row
+    element_rows: list[str] = []
     for name in args.programs.split(","):
         label, text, origin = load_program(name)
         prog = read_gcode(text)
@@ -433,6 +488,11 @@ def main() -> None:
         if not args.no_planner:
             for feed in ("fastest", "program"):
                 res[feed] = plan(text, origin, feed)
+            if args.compare_ts:
+                res["typed"] = plan(text, origin, "fastest", {"Ts": args.compare_ts})
+            for feed, (r, cpu) in res.items():
+                print(f"{label}: {feed} at Ts {r.settings.Ts:g} s, N {r.settings.N}: cut {r.contour.cut_time_s:.3f} s, "  # type: ignore[attr-defined]
+                      f"{cpu:.1f} CPU s")
             c = res["fastest"][0].contour  # type: ignore[attr-defined]
         else:
             c = plan_contour({"program": text, "origin": origin, "feed": "program"}).contour  # type: ignore[attr-defined]
@@ -449,9 +509,13 @@ def main() -> None:
                           round(e.feed_m_s, 9)) for e in els), tuple(np.round(org, 9)))
             if key not in memo:
                 topp = topp_time(els, org, leg_speed=True)
-                third = converged_optimum(robot, els, org, grids, rate, False, args.from_zero, args.blocks)
-                capped = converged_optimum(robot, els, org, grids, rate, True, args.from_zero, args.blocks)
+                third = converged_optimum(robot, els, org, grids, rate, False, args.from_zero, args.blocks,
+                                          z_max=Z_MAX_M_S)
+                capped = converged_optimum(robot, els, org, grids, rate, True, args.from_zero, args.blocks,
+                                           z_max=Z_MAX_M_S)
                 memo[key] = (topp, third, capped)
+                if args.elements and res:
+                    element_rows += element_table(label, i, els, third[-1], res["fastest"][0], i)
                 for lab, runs in (("3rd order", third), ("3rd order at F", capped)):
                     times = " / ".join(f"{r.time_s:.5f}" for r in runs)
                     change = " / ".join(f"{abs(r.time_s / p.time_s - 1) * 100:.3f}" for p, r in zip(runs, runs[1:]))
@@ -468,6 +532,14 @@ def main() -> None:
             feeds = sorted({round(e.feed_m_s * 60000) for e in els})
             fast = res["fastest"][0].contour.passes[i].time_s if res else math.nan  # type: ignore[attr-defined]
             prg = res["program"][0].contour.passes[i].time_s if res else math.nan  # type: ignore[attr-defined]
+            if "typed" in res:
+                typed = res["typed"][0].contour.passes[i].time_s  # type: ignore[attr-defined]
+                row = (f"| {typed:.3f} | {typed / third[-1].time_s:.3f}x | {fast:.3f} | "
+                       f"{fast / third[-1].time_s:.3f}x |")
+                if typed_rows and typed_rows[-1][0] == label and typed_rows[-1][3] == row:  # depth passes alike
+                    typed_rows[-1] = (label, typed_rows[-1][1], i, row)
+                else:
+                    typed_rows.append((label, i, i, row))
             tot += (fast, prg, topp, t3, t3f, L, nominal)
             row = (f"| {len(els)} | {L * 1e3:.1f} | {', '.join(map(str, feeds))} | {nominal:.3f} | {fast:.3f} | "
                    f"{prg:.3f} | {topp:.4f} | {t3:.4f} | {t3f:.4f} | {fast / t3:.3f}x | {prg / t3f:.3f}x | "
@@ -488,11 +560,19 @@ def main() -> None:
         summary.append(f"| {label} | {len(prog.passes)} | {L * 1e3:.0f} | {nominal:.2f} | {fast:.2f} | {cf:.1f} | "
                        f"{prg:.2f} | {cp:.1f} | {topp:.3f} | {t3:.3f} | {t3f:.3f} | {fast / t3:.3f}x | "
                        f"{prg / t3f:.3f}x |")
+    if element_rows:
+        print("\n".join(element_rows) + "\n")
     print("### per program (cutting time; compute: CPU s of the whole plan at the defaults)\n")
     print("| program | passes | mm | L / F s | fastest s | CPU s | program s | CPU s | TOPP-RA s | 3rd order s | "
           "3rd order at F s | fastest / 3rd | program / 3rd at F |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     print("\n".join(summary))
+    if typed_rows:
+        print(f"\n### fastest at the typed Ts {args.compare_ts:g} s against the defaults (per pass, against the "
+              "3rd order)\n")
+        print("| program | pass | typed Ts s | / 3rd | defaults s | / 3rd |")
+        print("|---|---|---|---|---|---|")
+        print("\n".join(f"| {lab} | {a}{'' if a == b else f'-{b}'} {row}" for lab, a, b, row in typed_rows))
     print(f"\n### grid refinement (steps per element {grids}, doubled until two agree within 0.1 %; "
           "change: from the previous grid, %)\n")
     print("| pass | optimum | nodes | time s per grid | change % | IPOPT | max residual N | IPOPT CPU s |")

@@ -14,7 +14,9 @@ from typing import Any
 import numpy as np
 
 from ..errors import PlannerError
+from ..model import load_robot
 from ..schema import DEFAULT_CONTOUR_TOLERANCE_M, MAX_SEGMENTS, PathElement, Program
+from .defaults import contour_settings
 from .passes import CELL_SAMPLES, PROGRAM_MARGIN, V0_M_S, chunks, parse_contour_request, read_program, tolerance_of
 from .profiles import GRID_H_MAX, GRID_H_MIN, GRID_POINTS, GRID_POINTS_MIN
 from .tube import SAGITTA_FRACTION
@@ -168,6 +170,7 @@ def count_contour(request: Any, program: Program | None = None) -> ContourCounts
     st = req.plan_settings()
     program = read_program(req, program)
     tol = tolerance_of(req, program)
+    st = contour_settings(req, st, program, tol, load_robot(req.robot))  # the Ts the plan will use
     pieces = [[b.elements[k] for k in chunk] for b in program.passes for chunk in chunks(b.elements)]
     moves = _travels(program, tol)
     return ContourCounts(
@@ -329,6 +332,7 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
     st = req.plan_settings()
     program = read_program(req, program)
     tol = tolerance_of(req, program)
+    st = contour_settings(req, st, program, tol, load_robot(req.robot))  # the Ts and N the plan will use
     c = count_contour(req, program)
     pieces = [[b.elements[k] for k in chunk] for b in program.passes for chunk in chunks(b.elements)]
     if req.feed == "program":  # a piece no tube of the search fits: refused now, as the planner would be

@@ -46,6 +46,7 @@ from .._jit import numpy_only
 from ..errors import PlannerError
 from ..model import RobotModel, load_robot
 from ..schema import ContourRequest, PassSummary, PathElement, PlanResult, Program, ProgramBlock, Settings
+from .defaults import contour_settings
 from .estimate import (
     CONTOUR_CELL_PLAN_S,
     CONTOUR_CELL_S,
@@ -116,6 +117,7 @@ def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0
         raise PlannerError("invalid_input", f"the program's G64 P gives a tolerance of {tol * 1e3:g} mm, outside "
                            "0.01..10 mm; give tolerance_m", "tolerance_m")
     model = load_robot(req.robot)
+    st = contour_settings(req, st, program, tol, model)  # Ts and N for the program's arcs unless given
     if req.origin == "fit":
         origin = fit_origin(program, model, tol)
     else:

@@ -1,0 +1,134 @@
+"""The contour's sample time and horizon chosen from the program (issue 35 goal 3), for the
+``fastest`` feed where the request gives neither ``settings.Ts`` nor ``settings.N`` (the
+``program`` feed keeps the settings' default: :func:`contour_settings`).
+
+**Why the sample time.** A tube cell holds at least one sample, and on an arc a cell is one
+chord of sagitta ``s_a = 0.18 tol`` (:data:`~planner.contour.tube.SAGITTA_FRACTION`): the tool
+moves at most one chord ``c = 2 sqrt(2 R s_a - s_a^2)`` per sample time, so on an arc of radius
+``R`` the speed is at most ``c / Ts``. At the plan's default 10 ms that is 29 mm/s on a 3 mm arc
+at 0.02 mm, where the drives allow about 0.1 m/s: measured on the benchmark part
+(``benchmarks/bench_contour_optimum.py``), ``fastest`` spent 0.18 s on each 3 mm corner arc
+against the exact path's third-order optimum's 0.08 s, 1.55x the optimum per pass, while it
+was as fast or faster on the lines.
+
+**The rule** (:func:`contour_ts`): per arc the speed it asks, ``v = min(sqrt(a R), (j
+R^2)^(1/3), j^(1/3) (L / 2)^(2/3), v_leg)`` (``fastest``: the drives' turn speed on the circle;
+the speed at which the force that turns the tool about the circle, ``m v^2 / R``, rotates with
+it, ``v / R``, no faster than the force-rate limit lets it change, ``m v^3 / R^2 <= m j``; the
+speed a start from rest reaches in half the arc's length ``L`` at that jerk; the legs' top
+speed; :func:`arc_speed` in ``program`` feed also at most the move's F), ``a`` the acceleration the drives give the tool
+in every direction at the centre of the base (:func:`drive_acceleration`), ``j = a / ramp``,
+``ramp`` the slowest drive's rise from 0 to ``force_max``. The sample time is ``c / v`` of the
+arc where that is smallest, rounded up to a whole millisecond (a chord per sample at most the
+speed the arc asks: rounded down, a chord would need just over one sample, so two, at half the
+speed), within [:data:`TS_FLOOR_S`, the settings' default]. Measured on the three programs of
+``bench_contour_optimum.py`` at 10, 5, 4 and 3 ms, the rule's choice (3, 4 and 3 ms) cut each
+program fastest. A program without arcs, or whose arcs the default reaches, keeps the default.
+
+**The horizon** with a chosen sample time: :data:`HORIZON_RAMPS` force ramps of the slowest
+drive, at least the constrained mode's 30 samples (the default horizon's 0.25 s at 3 ms is 84
+samples: the same cut, measured, for 40 % more compute).
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+
+from ..model import RobotModel
+from ..schema import DEFAULT_FORCE_RISE_S, MODE_DEFAULTS, ContourRequest, PathElement, Program, Settings
+from .timing import PathSamples, constraint_rows
+from .tube import SAGITTA_FRACTION
+
+__all__ = ["HORIZON_RAMPS", "TS_FLOOR_S", "TS_STEP_S", "arc_speed", "contour_settings", "contour_ts",
+           "drive_acceleration"]
+
+#: the finest sample time chosen [s]: at 2 ms the benchmark pass took longer than at 3 ms
+#: (1.154 s against 0.822 s, the search's scales) for 2.6x the compute
+TS_FLOOR_S = 0.003
+#: the sample time is chosen in whole steps of this [s]
+TS_STEP_S = 0.001
+#: the horizon with a chosen sample time: this many force ramps of the slowest drive
+HORIZON_RAMPS = 3.0
+
+
+@lru_cache(maxsize=16)
+def _acceleration(model: RobotModel) -> float:
+    centre = np.asarray(model.base, float).mean(axis=0)
+    q = np.array([[centre[0], centre[1], 0.0], [centre[0] + 1e-4, centre[1], 0.0]])
+    dq = np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    path = PathSamples(np.array([0.0, 1e-4]), q, dq, np.zeros((2, 3)), np.zeros(2, np.int64), np.zeros(2))
+    return float(constraint_rows(model, path)[4].min())
+
+
+def drive_acceleration(model: RobotModel) -> float:
+    """The acceleration the drives give the tool in every direction of the plane from rest at
+    the centre of the base pivots, psi 0 [m/s^2] (:func:`planner.contour.timing.constraint_rows`;
+    16.1 m/s^2 for the moving-slide, 16.07-16.11 over the benchmark part)."""
+    return _acceleration(model)
+
+
+def arc_speed(e: PathElement, a: float, jerk: float | None, v_leg: float, feed: str) -> float:
+    """The speed an arc asks [m/s] (module docstring): ``min(sqrt(a R), (j R^2)^(1/3),
+    j^(1/3) (L/2)^(2/3), v_leg)``, and at most F in ``program`` feed."""
+    assert e.radius_m is not None
+    R = e.radius_m
+    v = min(math.sqrt(a * R), v_leg)
+    if jerk is not None:
+        v = min(v, (jerk * R * R) ** (1 / 3), jerk ** (1 / 3) * (e.length_m / 2) ** (2 / 3))
+    if feed == "program":
+        v = min(v, e.feed_m_s)
+    return v
+
+
+def contour_ts(program: Program, tol: float, feed: str, model: RobotModel, st: Settings) -> float:
+    """The sample time [s] for the program's arcs (module docstring), at most ``st.Ts``."""
+    a = drive_acceleration(model)
+    ramp = _ramp(model, st)
+    jerk = None if ramp is None else a / ramp  # "off": no jerk bound
+    v_leg = float(np.min(model.speed_max))
+    s_a = SAGITTA_FRACTION * tol
+    need = st.Ts
+    for b in program.passes:
+        for e in b.elements:
+            if e.kind != "arc" or not e.radius_m or e.length_m <= 1e-12:
+                continue
+            R = e.radius_m
+            chord = 2 * math.sqrt(max(2 * R * s_a - s_a * s_a, 0.0)) if s_a < R else 2 * R
+            v = arc_speed(e, a, jerk, v_leg, feed)
+            if v > 0:
+                need = min(need, chord / v)
+    if need >= st.Ts:
+        return st.Ts
+    return min(st.Ts, max(TS_FLOOR_S, math.ceil(need / TS_STEP_S - 1e-9) * TS_STEP_S))
+
+
+def contour_settings(req: ContourRequest, st: Settings, program: Program, tol: float, model: RobotModel) -> Settings:
+    """``st`` with the sample time and horizon chosen for the program (module docstring) where
+    the feed is ``fastest`` and the request gives neither ``settings.Ts`` nor ``settings.N``;
+    else ``st`` as given (the ``program`` feed: at 5 ms freecad's passes were 0.2-0.9 % faster
+    for 1.4x the compute, and a program of small circles cost 1.6x its work estimate)."""
+    if req.feed != "fastest" or req.settings.get("Ts") is not None or req.settings.get("N") is not None:
+        return st  # program feed: 10 ms measured as fast within 1 % (freecad at 5 ms) for 1.4x the compute
+    Ts = contour_ts(program, tol, req.feed, model, st)
+    if Ts >= st.Ts:
+        return st
+    out = Settings.model_validate({**req.settings, "Ts": Ts})  # the defaults as if Ts were typed
+    ramp = _ramp(model, st)
+    if ramp is None:  # no force-rate limit: the mode's default horizon at that Ts
+        return out
+    low = int(MODE_DEFAULTS["constrained"]["N"])
+    return out.model_copy(update={"N": max(low, min(out.N, math.ceil(HORIZON_RAMPS * ramp / Ts - 1e-9)))})
+
+
+def _ramp(model: RobotModel, st: Settings) -> float | None:
+    """The slowest drive's rise from 0 to ``force_max`` under the force-rate limit [s]; None:
+    no limit."""
+    rate = st.force_rate_n_s
+    if isinstance(rate, str):
+        return None
+    fmax = np.asarray(model.force_max, float)
+    r = fmax / DEFAULT_FORCE_RISE_S if rate is None else np.broadcast_to(np.asarray(rate, float), fmax.shape)
+    return float(np.max(fmax / r))
