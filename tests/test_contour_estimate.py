@@ -79,6 +79,7 @@ def test_estimate_counts_match_independent_counts(k):
     import numpy as np
 
     from planner.contour import count_contour
+    from planner.contour.defaults import contour_settings
     from planner.contour.estimate import FEED_MARGIN
     from planner.contour.passes import V0_M_S, TubeSizes, chunks, tolerance_of
     from planner.contour.placement import CONTOUR_PSI, fit_origin
@@ -90,7 +91,10 @@ def test_estimate_counts_match_independent_counts(k):
     c = count_contour(req, program)
     assert c.lines == len(made.text.splitlines())
     assert (c.passes, c.moves, c.arcs) == (made.passes, made.moves, made.arcs)
-    Ts = req.plan_settings().Ts
+    model = load_robot(req.robot)
+    tol = tolerance_of(req, program)
+    st = contour_settings(req, req.plan_settings(), program, tol, model)  # the Ts and N the plan uses
+    Ts = st.Ts
     if req.feed == "program":  # the cut samples at F: the generator's length over F (an arc's
         # at most at the speed it allows: more samples, never fewer)
         if made.arcs == 0:
@@ -99,10 +103,7 @@ def test_estimate_counts_match_independent_counts(k):
             assert c.samples >= made.time_at_f_s / Ts * (1 - 1e-6)
     # the tube cells: the moves' pieces the planner's own tubes have, within the lead splits
     # (at most two a piece) and the junctions (at most one a move boundary, and the two ends)
-    model = load_robot(req.robot)
-    tol = tolerance_of(req, program)
     origin = fit_origin(program, model, tol)
-    st = req.plan_settings()
     real_pieces, real_cells, n_pieces = 0, 0, 0
     for b in program.passes:
         for chunk in chunks(b.elements):
