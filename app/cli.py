@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import os
 
-from planner._config import single_threaded_blas
-
-single_threaded_blas()  # before numpy loads
+# small dense matrices: single-threaded BLAS is much faster (must be set before numpy loads)
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
 import contextlib  # noqa: E402

@@ -11,9 +11,10 @@ bound to a non-loopback address without a token unless ``allow_unauthenticated``
 
 from __future__ import annotations
 
-from planner._config import single_threaded_blas
+import os
 
-single_threaded_blas()  # before numpy loads
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
 import sys  # noqa: E402
 

@@ -36,9 +36,8 @@ from __future__ import annotations
 
 import os
 
-from planner._config import single_threaded_blas
-
-single_threaded_blas()  # before numpy loads
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
 import queue  # noqa: E402
 import socket  # noqa: E402

@@ -1,8 +1,6 @@
 """The planner's configuration from the environment (issue 34 goal 5): the only module of
-``planner/`` that reads ``os.environ``, once per process (:func:`config`), into an
-immutable :class:`PlannerConfig`; and the one place that sets the BLAS thread counts before
-numpy loads (:func:`single_threaded_blas`, called first by the CLI, the server and the
-planning workers). Standard library only (``import planner`` stays light).
+``planner/`` that reads ``os.environ``, once per process (:func:`config`), into a frozen
+:class:`PlannerConfig`. Standard library only (``import planner`` stays light).
 
 The planner follows four variables, all about where its compiled kernels are kept
 (:mod:`planner._jit`): numba's ``NUMBA_CACHE_DIR``, ``RANGEPLAN_KERNEL_CACHE``, the XDG
@@ -15,25 +13,25 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import NamedTuple
 
-__all__ = ["BLAS_THREAD_VARS", "ENV_VARS", "PlannerConfig", "config", "read_config", "single_threaded_blas"]
+__all__ = ["ENV_VARS", "PlannerConfig", "config", "read_config"]
 
 #: the environment variables the planner reads (each a field of :class:`PlannerConfig`)
 ENV_VARS = ("NUMBA_CACHE_DIR", "RANGEPLAN_KERNEL_CACHE", "XDG_CACHE_HOME", "HOME")
 
 
-class PlannerConfig(NamedTuple):
+@dataclass(frozen=True)
+class PlannerConfig:
     """Where the planner keeps its compiled kernels (:func:`planner._jit.chosen_kernel_cache`).
 
     ``numba_cache_dir``: ``NUMBA_CACHE_DIR`` (kernels in ``<it>/rangeplan-<key>``);
     ``kernel_cache``: ``RANGEPLAN_KERNEL_CACHE`` (kernels in ``<it>/<key>``); ``cache_home``:
     ``XDG_CACHE_HOME``, else ``<home>/.cache`` (kernels in ``<it>/rangeplan/kernels/<key>``,
     the default); ``home``: ``HOME``, else the user's home from the password database (the
-    private cache, ``<home>/.cache/rangeplan/kernels/<key>``). An empty variable is unset.
-    Immutable (a named tuple: ``dataclasses`` would cost ``rangeplan --help`` ~8 ms of imports)."""
+    private cache, ``<home>/.cache/rangeplan/kernels/<key>``). An empty variable is unset."""
 
     numba_cache_dir: Path | None
     kernel_cache: Path | None
@@ -57,15 +55,3 @@ def read_config(environ: Mapping[str, str]) -> PlannerConfig:
 def config() -> PlannerConfig:
     """This process's configuration: the environment read once, on first use."""
     return read_config(os.environ)
-
-
-#: the thread counts of the BLAS libraries numpy may load
-BLAS_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
-
-
-def single_threaded_blas() -> None:
-    """One BLAS thread unless the environment says otherwise: the planner's matrices are small
-    and dense, where a single thread is much faster. Must run before numpy loads (the CLI,
-    the server and the planning workers call it first)."""
-    for var in BLAS_THREAD_VARS:
-        os.environ.setdefault(var, "1")
