@@ -1,53 +1,46 @@
-"""``njit`` for the planner's kernels: numba's, through its public API only (issue 34 goal 5),
-with the on-disk cache in one place per machine keyed by the content of *all* the kernel
-sources (issue 24), loaded only from a place no one else can change (issue 30).
+"""``njit`` for the planner's kernels: numba's, with the on-disk cache keyed by the content of
+*all* the kernel sources and kept in one place per machine (issue 24), loaded only from a
+place no one else can change (issue 30).
 
-numba keys a cached kernel by its own source file only: a kernel compiled with its callees
-from other files inlined stays "valid" when only a callee's file changes. So the planner's
-kernels are cached (``cache=True``) in a directory of their own, named by the hash of all the
-kernel modules' sources (:data:`KERNEL_SOURCES`) and numba's version (:func:`kernel_key`),
-which numba is given the public way: ``numba.config.CACHE_DIR`` (the value of numba's
-``NUMBA_CACHE_DIR``) while the planner's kernels are declared, restored after (numba fixes a
-kernel's cache directory when it is declared; other numba users of the process keep theirs).
-The place (:func:`chosen_kernel_cache`, from :mod:`planner._config`):
+numba (>= 0.61) keys a cached kernel by the content of its own source file only: a kernel
+compiled with its callees from other files inlined stays "valid" when only a callee's file
+changes, and the cache lives beside the sources, so every new venv, clone or worktree
+compiles again (a minute or more). Here the cache of every kernel is keyed by the hash of
+all the kernel modules' sources (:data:`KERNEL_SOURCES`) and numba's version, and the
+environment chooses its place (:func:`chosen_kernel_cache`):
 
 1. ``$NUMBA_CACHE_DIR/rangeplan-<key>`` when ``NUMBA_CACHE_DIR`` is set (the container's
    copy of its kernel seed, ``app/kernel_cache.py``), else
 2. ``$RANGEPLAN_KERNEL_CACHE/<key>``, else ``$XDG_CACHE_HOME/rangeplan/kernels/<key>``
-   (``~/.cache/rangeplan/kernels/<key>``, made mode 0700).
-
-Inside it numba keeps each kernel module's index and object files in a directory named
-after the module's directory and a hash of its absolute path (numba's ``NUMBA_CACHE_DIR``
-layout): another checkout or installation of the same source at another path compiles once
-for itself.
+   (``~/.cache/rangeplan/kernels/<key>``).
 
 numba's index files are pickles: whoever can write the cache runs code as whoever plans next.
 So the chosen place is used (:func:`kernel_cache`) only when it, its parents up to the
 variable's directory and everything in it belong to this user or root and no one else can
-write them (:mod:`planner._private`; everything in a directory of this user that no one else
-may enter, mode 0700, counts as such whatever its own mode bits), and this user can write it.
-A trusted cache this user cannot write (the container's root-owned seed, read by another uid)
-that holds kernels is copied into the private cache and loaded from there. Otherwise the
-kernels go to the private cache (``~/.cache/rangeplan/kernels/<key>``, made mode 0700, or
-when that is the rejected one or unusable a temporary directory of this process) and one line
-on stderr names the rejected directory and why. numba's own places (beside the sources,
-``~/.cache/numba``) are never used for the planner's kernels.
+write them (:mod:`planner._private`), and either this user can write it or it holds
+kernels already (a read-only cache, such as the container's root-owned seed, is loaded
+from; kernels it lacks compile for this process only). Otherwise the kernels go to a private
+cache (``~/.cache/rangeplan/kernels/<key>``, made mode 0700, or when that is the rejected one
+or unusable a temporary directory of this process) and one line on stderr names the
+rejected directory and why. numba's own places (beside the sources, ``~/.cache/numba``)
+are never used.
 
-So a process loads the kernels another process compiled from the same source at the same
-place, and any change of a kernel file recompiles every kernel. numba checks the CPU (and
-its features) per entry, as for any cached function.
+So a fresh install of the same source on a machine that compiled it once loads the kernels
+instead of compiling them, and any change of a kernel file recompiles every kernel. numba
+still checks the CPU (and its features) per entry, as for its own cache.
 """
 
 from __future__ import annotations
 
 import atexit
+import errno
 import hashlib
 import os
 import shutil
-import stat
 import sys
 import tempfile
-from collections.abc import Iterator, Mapping
+import uuid
+from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from contextvars import ContextVar
 from dataclasses import dataclass
@@ -56,12 +49,16 @@ from pathlib import Path
 from typing import Any
 
 import numba
+from numba.core import caching
 
-from ._config import PlannerConfig, config, read_config
 from ._private import distrust, distrust_tree, make_dirs
 
 __all__ = ["njit", "KERNEL_SOURCES", "KernelCache", "chosen_kernel_cache", "kernel_cache", "kernel_cache_dir",
-           "kernel_key", "numpy_only", "kernels_off"]
+           "kernel_key", "STRICT_REFRESH", "numpy_only", "kernels_off", "save_error"]
+
+#: numba's own order: refresh the whole target context before loading a cached kernel
+#: (``RANGEPLAN_KERNEL_REFRESH=1``; measured by ``benchmarks/bench_start.py``)
+STRICT_REFRESH = os.environ.get("RANGEPLAN_KERNEL_REFRESH", "") == "1"
 
 _ROOT = Path(__file__).resolve().parent
 #: the kernel modules (relative to ``planner/``) whose content keys the cache
@@ -71,19 +68,14 @@ KERNEL_SOURCES = ("model/kernels.py", "horizon/kernels.py", "corridor/kernels.py
                   "orchestrator/kernels.py")
 
 
-def _numba_config() -> Any:
-    """``numba.config``: numba's settings, public (its documented way to set them in code), but
-    filled from the environment at run time, so untyped."""
-    return numba.config  # pyright: ignore[reportPrivateImportUsage]
-
-
 @lru_cache(maxsize=1)
 def kernel_key() -> str:
     """sha256 of numba's and llvmlite's versions, a non-default ``NUMBA_OPT`` (numba's own cache
     ignores it) and every kernel source (hex, 64 digits)."""
     import llvmlite
+    from numba.core import config
 
-    opt = int(getattr(_numba_config(), "OPT", 3))
+    opt = int(getattr(config, "OPT", 3))
     h = hashlib.sha256(f"numba {numba.__version__} llvmlite {llvmlite.__version__}{'' if opt == 3 else f' opt {opt}'}\n"
                        .encode())
     for rel in KERNEL_SOURCES:
@@ -91,38 +83,43 @@ def kernel_key() -> str:
     return h.hexdigest()
 
 
-def chosen_kernel_cache(cfg: PlannerConfig | Mapping[str, str] | None = None) -> tuple[Path, Path]:
-    """The kernel cache directory the configuration chooses (not created, not checked) and the
-    directory of the variable that chose it (checked from the cache up to there); ``cfg``: this
-    process's configuration (None), another one, or the variables of another environment."""
-    cfg = config() if cfg is None else cfg if isinstance(cfg, PlannerConfig) else read_config(cfg)
+def chosen_kernel_cache(environ: dict | None = None) -> tuple[Path, Path]:
+    """The kernel cache directory the environment chooses (not created, not checked) and the
+    directory of the variable that chose it (checked from the cache up to there)."""
+    env = os.environ if environ is None else environ
     tag = kernel_key()[:16]
-    if cfg.numba_cache_dir is not None:
-        return cfg.numba_cache_dir / f"rangeplan-{tag}", cfg.numba_cache_dir
-    if cfg.kernel_cache is not None:
-        return cfg.kernel_cache / tag, cfg.kernel_cache
-    return cfg.cache_home / "rangeplan" / "kernels" / tag, cfg.cache_home
+    if env.get("NUMBA_CACHE_DIR"):
+        root = Path(env["NUMBA_CACHE_DIR"])
+        return root / f"rangeplan-{tag}", root
+    if env.get("RANGEPLAN_KERNEL_CACHE"):
+        root = Path(env["RANGEPLAN_KERNEL_CACHE"])
+        return root / tag, root
+    root = Path(env.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"))
+    return root / "rangeplan" / "kernels" / tag, root
 
 
 @dataclass(frozen=True)
 class KernelCache:
     """Where this process loads the planner's kernels from and saves them to: ``path``;
-    ``temporary``: a private directory of this process, removed at its exit; ``copied_from``:
-    the trusted read-only cache whose kernels were copied there (None: none); ``note``: the
-    line that said why the chosen directory is not used (None: it is, or its copy)."""
+    ``writable``: kernels compiled now are saved there (False: a read-only cache holding
+    kernels, loaded from; the ones it lacks compile for this process only); ``temporary``: a
+    private directory of this process, removed at its exit; ``note``: the line that said why
+    the chosen directory is not used (None: it is)."""
 
     path: Path
+    writable: bool = True
     temporary: bool = False
-    copied_from: Path | None = None
     note: str | None = None
 
     @property
     def lasting(self) -> bool:
         """Whether kernels compiled now are there for later processes."""
-        return not self.temporary
+        return self.writable and not self.temporary
 
     def later(self) -> str:
         """What becomes of the kernels compiled now (for the progress line)."""
+        if not self.writable:
+            return f"for this process only: {self.path} cannot be written"
         if self.temporary:
             return f"for this process only: in the temporary cache {self.path}"
         return f"once for this version on this machine, later runs load them from {self.path}"
@@ -132,77 +129,42 @@ def _holds_kernels(d: Path) -> bool:
     return next(d.glob("*/*.nbi"), None) is not None
 
 
-def _closed(d: Path) -> bool:
-    """Whether ``d`` is a real directory of this user that no one else may enter (mode 0700)."""
-    try:
-        st = os.lstat(d)
-    except OSError:
-        return False
-    return stat.S_ISDIR(st.st_mode) and st.st_uid == os.geteuid() and not stat.S_IMODE(st.st_mode) & 0o077
-
-
-def _distrust_contents(d: Path) -> str | None:
-    """Why something in ``d`` could have been changed by someone else (None: nothing could).
-    In a closed directory (:func:`_closed`) nothing could: numba writes its files with the
-    umask's modes, which may grant the group write access to files no one else can reach."""
-    return None if _closed(d) else distrust_tree(d)
-
-
-def _copy_kernels(src: Path, dst: Path) -> None:
-    """Copy the kernel files of the trusted cache ``src`` into ``dst`` (not through symlinks)."""
-    for path in src.rglob("*"):
-        if path.is_file() and not path.is_symlink() and path.suffix in (".nbi", ".nbc"):
-            target = dst / path.relative_to(src)
-            make_dirs(target.parent, 0o700)
-            if not os.path.lexists(target):
-                shutil.copyfile(path, target, follow_symlinks=False)
-
-
-def _private_cache(rejected: Path, seed: Path | None = None) -> KernelCache:
+def _private_cache(rejected: Path) -> KernelCache:
     """``~/.cache/rangeplan/kernels/<key>`` (new directories mode 0700) unless that is the
-    rejected one or fails the check, else a new temporary directory (removed at exit); the
-    kernels of ``seed`` (a trusted cache this user cannot write) copied into it."""
-    home = config().home / ".cache"
+    rejected one or fails the check, else a new temporary directory (removed at exit)."""
+    home = Path(os.path.expanduser("~")) / ".cache"
     d = home / "rangeplan" / "kernels" / kernel_key()[:16]
-    cache = None
     if d != rejected:
         with suppress(OSError):
             make_dirs(d, 0o700)
-        if distrust(d, home) is None and _distrust_contents(d) is None and os.access(d, os.W_OK):
-            cache = KernelCache(d)
-    if cache is None:
-        t = Path(tempfile.mkdtemp(prefix=f"rangeplan-kernels-{kernel_key()[:16]}-"))
-        atexit.register(shutil.rmtree, t, True)
-        cache = KernelCache(t, temporary=True)
-    if seed is not None:
-        _copy_kernels(seed, cache.path)
-        cache = KernelCache(cache.path, cache.temporary, copied_from=seed)
-    return cache
+        if distrust(d, home) is None and distrust_tree(d) is None and os.access(d, os.W_OK):
+            return KernelCache(d)
+    t = Path(tempfile.mkdtemp(prefix=f"rangeplan-kernels-{kernel_key()[:16]}-"))
+    atexit.register(shutil.rmtree, t, True)
+    return KernelCache(t, temporary=True)
 
 
 @lru_cache(maxsize=1)
 def kernel_cache() -> KernelCache:
     """This process's kernel cache (see the module docstring; resolved once, on first use, the
     chosen directory created if missing)."""
-    cfg = config()
-    chosen, root = chosen_kernel_cache(cfg)
-    default = cfg.numba_cache_dir is None and cfg.kernel_cache is None
+    chosen, root = chosen_kernel_cache()
     why = None
     try:
-        make_dirs(chosen, 0o700) if default and not os.path.lexists(chosen) else make_dirs(chosen)
+        make_dirs(chosen)
     except OSError as exc:
         why = f"{chosen} cannot be created ({exc.strerror})"
-    why = why or distrust(chosen, root) or _distrust_contents(chosen)
+    why = why or distrust(chosen, root) or distrust_tree(chosen)
     if why is None:
         if os.access(chosen, os.W_OK):
             return KernelCache(chosen)
         if _holds_kernels(chosen):
-            return _private_cache(chosen, seed=chosen)
+            return KernelCache(chosen, writable=False)
         why = f"{chosen} is not writable and holds no kernels"
     private = _private_cache(chosen)
     note = f"rangeplan: kernels not loaded from {chosen}: {why}; using private cache {private.path}"
     print(note, file=sys.stderr, flush=True)
-    return KernelCache(private.path, private.temporary, note=note)
+    return KernelCache(private.path, private.writable, private.temporary, note)
 
 
 def kernel_cache_dir() -> Path:
@@ -210,29 +172,119 @@ def kernel_cache_dir() -> Path:
     return kernel_cache().path
 
 
-@contextmanager
-def _numba_cache_dir(path: Path) -> Iterator[None]:
-    """numba's cache directory (``numba.config.CACHE_DIR``, the value of ``NUMBA_CACHE_DIR``) is
-    ``path`` within the block, and what it was after."""
-    cfg = _numba_config()
-    before = cfg.CACHE_DIR
-    cfg.CACHE_DIR = str(path)
-    try:
-        yield
-    finally:
-        cfg.CACHE_DIR = before
+_save_error: list[OSError] = []  # the first error saving a compiled kernel in this process
+
+
+def save_error() -> OSError | None:
+    """The first error saving a compiled kernel in this process (None: none)."""
+    return _save_error[0] if _save_error else None
+
+
+def _save_failed(exc: OSError) -> None:
+    """Note a kernel that could not be saved; the first time, one line on stderr (not for a
+    read-only cache: the progress line said the kernels compile for this process only)."""
+    if not _save_error:
+        _save_error.append(exc)
+        if kernel_cache().writable:
+            print(f"rangeplan: compiled kernels cannot be saved in {kernel_cache().path} ({exc.strerror or exc}): "
+                  "they compile for this process only", file=sys.stderr, flush=True)
+
+
+class _KernelLocator(caching._SourceFileBackedLocatorMixin, caching._CacheLocator):
+    """The planner's kernels: cache in :func:`kernel_cache`, stamped by :func:`kernel_key`."""
+
+    def __init__(self, py_func: Any, py_file: str) -> None:
+        self._py_file = py_file
+        self._lineno = py_func.__code__.co_firstlineno
+        rel = Path(py_file).resolve().relative_to(_ROOT)
+        self._cache_path = str(kernel_cache().path / rel.parent)
+
+    def get_cache_path(self) -> str:
+        return self._cache_path
+
+    def get_source_stamp(self) -> str:
+        return kernel_key()
+
+    def ensure_cache_path(self) -> None:
+        """Make this kernel's directory before a save (numba's test write left out: a read-only
+        cache is loaded from); a read-only cache raises ``PermissionError`` (the save is skipped)."""
+        if not kernel_cache().writable:
+            raise PermissionError(errno.EACCES, "the kernel cache is read-only", self._cache_path)
+        make_dirs(Path(self._cache_path))
+
+    @classmethod
+    def from_function(cls, py_func: Any, py_file: str) -> Any:
+        try:
+            Path(py_file).resolve().relative_to(_ROOT)
+        except ValueError:
+            return None
+        return cls(py_func, py_file)
+
+
+class _KernelCacheFile(caching.IndexDataCacheFile):
+    """numba's index and data files, written mode 0644 whatever the umask, never through a symlink."""
+
+    @contextmanager
+    def _open_for_write(self, filepath: str) -> Iterator[Any]:
+        tmp = f"{filepath}.tmp.{uuid.uuid4().hex[:16]}"
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o644)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                yield f
+            os.replace(tmp, filepath)
+        except BaseException:
+            with suppress(OSError):
+                os.unlink(tmp)
+            raise
+
+
+class _KernelCacheImpl(caching.CompileResultCacheImpl):
+    _locator_classes = [_KernelLocator]
+
+
+class _KernelCache(caching.FunctionCache):
+    _impl_class = _KernelCacheImpl
+
+    def __init__(self, py_func: Any) -> None:
+        super().__init__(py_func)
+        self._cache_file.__class__ = _KernelCacheFile
+
+    def save_overload(self, sig: Any, data: Any) -> None:
+        """numba's save; a kernel that cannot be saved (read-only cache, full disk) stays
+        compiled in this process (:func:`_save_failed`)."""
+        try:
+            super().save_overload(sig, data)
+        except OSError as exc:
+            _save_failed(exc)
+
+    def load_overload(self, sig: Any, target_context: Any) -> Any:
+        """numba's load of a cached kernel without its ``target_context.refresh()``: that imports
+        and installs every typing and lowering registry of numba (~0.4 CPU s, the largest part
+        of a warm plan's start, issue 24) which only compiling needs; a cached kernel is object
+        code linked against numba's runtime (NRT), which is all this sets up first. A
+        kernel that is not in the cache compiles, and numba's compiler refreshes the context
+        itself first (``CompilerBase.__init__``)."""
+        if not STRICT_REFRESH:
+            from numba.core.runtime.nrt import rtsys
+
+            rtsys.initialize(target_context)  # numba's runtime (NRT): what refresh() sets up first
+            try:
+                with self._guard_against_spurious_io_errors():
+                    return self._load_overload(sig, target_context)
+            except Exception:  # e.g. a symbol only a registry provides: load it the way numba does
+                pass
+        return super().load_overload(sig, target_context)
 
 
 def njit(*args: Any, **options: Any) -> Any:
-    """``numba.njit`` (same arguments); with ``cache=True`` the kernel is cached in
-    :func:`kernel_cache_dir` (numba's ``NUMBA_CACHE_DIR`` while it is declared)."""
+    """``numba.njit`` (same arguments); with ``cache=True`` the cache described above."""
     cache = options.pop("cache", False)
 
     def wrap(func: Any) -> Any:
-        if not cache:
-            return numba.njit(**options)(func)
-        with _numba_cache_dir(kernel_cache_dir()):
-            return numba.njit(cache=True, **options)(func)
+        dispatcher: Any = numba.njit(**options)(func)
+        if cache:
+            dispatcher._cache = _KernelCache(dispatcher.py_func)
+        return dispatcher
 
     if args and callable(args[0]) and len(args) == 1:
         return wrap(args[0])

@@ -30,8 +30,7 @@ from planner.orchestrator.background import LOCK, MARKER, kernels_ready
 ROOT = Path(__file__).resolve().parent.parent
 TABLE1_PATH = ROOT / "app" / "static" / "examples" / "table1.json"
 TABLE1 = json.loads(TABLE1_PATH.read_text())
-#: the kernel the background compile compiles (numba's layout: ``orchestrator_<hash>/kernels.<name>-...``)
-LEFT_OUT = ("orchestrator_", "kernels.simulate_constrained-")
+LEFT_OUT = "orchestrator/kernels.simulate_constrained-"  # the kernel the background compile compiles
 
 
 def _pids(cache: Path) -> set[int]:
@@ -69,7 +68,7 @@ def partial_cache(tmp_path):
     root = tmp_path / "kernels"
     cache = root / full.name
     shutil.copytree(full, cache, ignore=shutil.ignore_patterns(MARKER, LOCK, "compile.log"))
-    left = [p for p in cache.rglob("*") if p.parent.name.startswith(LEFT_OUT[0]) and p.name.startswith(LEFT_OUT[1])]
+    left = [p for p in cache.rglob("*") if str(p.relative_to(cache)).startswith(LEFT_OUT)]
     assert left, "the machine's cache lacks simulate_constrained"
     for p in left:
         p.unlink()

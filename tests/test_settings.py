@@ -24,7 +24,7 @@ def test_manual_table_is_the_settings_object():
     rows = [r for r in m.group(1).splitlines() if r.startswith("| `")]
     assert [r.split("`")[1] for r in rows] == [env_name(k) for k in Settings.model_fields]
     assert {env_name(k) for k in Settings.model_fields if not env_name(k).startswith("RANGEPLAN_")} == {
-        "XDG_DATA_HOME", "XDG_CACHE_HOME", "NUMBA_CACHE_DIR", "MALLOC_TRIM_THRESHOLD_"}
+        "XDG_DATA_HOME", "NUMBA_CACHE_DIR", "MALLOC_TRIM_THRESHOLD_"}
 
 
 def test_values_come_from_the_environment(monkeypatch):
@@ -101,27 +101,3 @@ def test_only_the_settings_module_reads_the_environment():
             for u in _environment_uses(p)]
     assert {u for u in uses if u[1] != "setdefault"} == _NOT_CONFIGURATION
     assert {u[0] for u in uses if u[1] == "setdefault"} == {"app/cli.py", "app/server.py", "app/workers.py"}
-
-
-def test_the_planner_reads_the_environment_only_in_its_config():
-    """planner/ reads the environment in planner/_config.py alone (the planner cannot import
-    app/settings.py)."""
-    uses = [u for p in sorted((ROOT / "planner").rglob("*.py")) if p.name != "_config.py"
-            for u in _environment_uses(p)]
-    assert uses == []
-    assert _environment_uses(ROOT / "planner" / "_config.py")  # the one reader (a test of the test)
-
-
-def test_the_planners_variables_are_settings_of_the_same_meaning():
-    """Every variable the planner reads but HOME is a field of the settings object (the table
-    users read), and both read the same values from one environment."""
-    from planner._config import ENV_VARS, read_config
-
-    assert set(ENV_VARS) - {"HOME"} <= {env_name(k) for k in Settings.model_fields}
-    env = {"NUMBA_CACHE_DIR": "/n", "RANGEPLAN_KERNEL_CACHE": "/k", "XDG_CACHE_HOME": "/x", "HOME": "/h"}
-    s, c = settings(env), read_config(env)
-    assert (s.numba_cache_dir, s.kernel_cache, s.xdg_cache_home) == (c.numba_cache_dir, c.kernel_cache,
-                                                                     c.cache_home) == (Path("/n"), Path("/k"),
-                                                                                       Path("/x"))
-    assert read_config({"HOME": "/h"}).cache_home == Path("/h/.cache")  # XDG's default
-    assert read_config({"RANGEPLAN_KERNEL_CACHE": ""}).kernel_cache is None  # empty: unset, as in settings
