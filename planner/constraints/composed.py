@@ -38,7 +38,7 @@ class Constraints(NamedTuple):
            st: Settings) -> Constraints:
         """The constraints of a plan (``st``: the force-rate limit and the sample time)."""
         return cls(DriveForceConstraint(model), CorridorConstraint(seq, segments), EndApproachConstraint(seq, segments),
-                   ArrivalConstraint(seq, segments), LegSpeedConstraint(model),
+                   ArrivalConstraint(seq, segments, st.Ts), LegSpeedConstraint(model),
                    DriveForceRateConstraint(model, force_rate(model, st), st.Ts), LegStrokeConstraint(model))
 
     @property
