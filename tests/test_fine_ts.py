@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import copy
 import math
+import re
 
 import numpy as np
 import pytest
@@ -207,9 +208,11 @@ def test_fastest_estimate_depends_on_the_robot():
 # ---------------------------------------------------------------- a refusal names a remedy that plans (goal 2)
 
 
-def test_refusal_names_fastest_when_more_time_does_not_help():
-    """At Ts 2 ms with N = 30 (S = 30), 2x-16x the time do not plan this corridor, but
-    ``fastest`` does: the error names it, and the advice plans (confirmed independently)."""
+def test_refusal_at_a_short_horizon_names_a_remedy_that_plans():
+    """At Ts 2 ms with N = 30 (S = 30) this corridor is refused; 2x-16x the time did not plan
+    it (then ``fastest`` did) until the arrival speed followed Ts, and now 8x the time does:
+    either way the error names a remedy, never "too narrow", and the remedy plans (confirmed
+    independently)."""
     from planner import PlannerError
 
     from .certify_support import confirm_error
@@ -218,6 +221,6 @@ def test_refusal_names_fastest_when_more_time_does_not_help():
     with pytest.raises(PlannerError) as exc:
         plan(req)
     msg = exc.value.message
-    assert exc.value.code == "infeasible" and "settings.fastest plans it" in msg, msg
+    assert exc.value.code == "infeasible" and re.search(r"(x the time|settings\.fastest|settings\.N = \d+) plans", msg), msg
     assert "too narrow" not in msg
     assert confirm_error(req, exc.value.code, msg, exc.value.field) is None
