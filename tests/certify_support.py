@@ -805,7 +805,9 @@ def confirm_error(request: dict, code: str, message: str, field_name: str | None
                 plan(fixed)
             except PlannerError as exc:
                 return f"the advised {factor}x the time still fails: {exc.code}: {exc}"
-        elif "more time" in message and not re.search(r"do(es)? not help", message):
+        # "more time was not tried (... within the work limit)": no advice, the bounded search's
+        # own account (a server's compute limit leaves it no budget)
+        elif "more time" in message and not re.search(r"do(es)? not help|more time was not tried", message):
             return f"advice of more time that was not checked: {message}"
     return None
 
