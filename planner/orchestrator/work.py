@@ -70,7 +70,8 @@ from ..schema import (
 )
 from .timing import centre_path_length, method_of, moving_segments
 
-__all__ = ["FASTEST_A_M_S2", "FASTEST_BISECTION", "FASTEST_RAMPS", "FASTEST_SLOW_S", "FASTEST_V_SHARE", "MORE_TIME",
+__all__ = ["FASTEST_A_M_S2", "FASTEST_BISECTION", "FASTEST_HORIZON_COST", "FASTEST_RAMPS", "FASTEST_SLOW_S",
+           "FASTEST_V_SHARE", "MORE_TIME",
            "WorkEstimate", "robot_motion",
            "check_work", "estimate_work", "fastest_count", "fastest_steps", "slack_allowance", "slack_costs"]
 
@@ -93,6 +94,12 @@ FASTEST_V_SHARE = 0.5
 FASTEST_RAMPS = 1.4
 #: ``fastest``: the time a segment takes [s] with such a short horizon (measured 1.2-2.5 s)
 FASTEST_SLOW_S = 3.0
+#: ``fastest``: the search's steps cost this much more per sample of horizon beyond the
+#: default 30 (``1 + FASTEST_HORIZON_COST (N - 30) / 70``): its candidates run at the drives'
+#: limits, where a step's active set grows with the horizon (Table I, CPU per simulated step of
+#: the search: 0.22 / 0.65 / 1.27 ms at N 30 / 51 / 100, against 0.09 / 0.14 / 0.25 ms a plain
+#: step; the search's steps are overcounted ~3x, so Table I at Ts 2 ms took 1.6x its estimate)
+FASTEST_HORIZON_COST = 0.3
 #: ``fastest``: the mean share of a per-segment bisection candidate's steps it plans (half of
 #: them feasible, to the end; half abandoned at ~a quarter: Table I at Ts 2 ms, 0.15-0.2 s
 #: against 0.8 s)
@@ -189,9 +196,14 @@ def _samples_per_segment(req: PlanRequest, n: int) -> int:
 
 
 def _longest_step(centres: np.ndarray) -> float:
-    """The longest move between two consecutive centres [m] (psi at 5 cm a radian)."""
+    """The longest move between two consecutive centres [m] (psi at 5 cm a radian); a corridor
+    of one segment between a start and an end point (``[point, box, point]``) moves from the
+    start to the end within that segment (issue 31: the box's centre is half way, and the
+    search found 1.6-5x the count estimated from it)."""
     if len(centres) < 2:
         return 0.0
+    if len(centres) == 3:
+        centres = centres[[0, 2]]
     d = np.diff(centres, axis=0)
     return float(np.max(np.hypot(d[:, 0], d[:, 1]) + 0.05 * np.abs(d[:, 2])))
 
@@ -357,6 +369,8 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
                       "fastest timing found is ~10-25x slower and takes as many more candidates), a larger "
                       "settings.Ts, or " + advice)
     step_s = _step_cost(st.mode, st.backend, st.solver, st.N, _substeps(req))
+    if st.fastest:
+        step_s *= 1.0 + FASTEST_HORIZON_COST * max(0, st.N - 30) / 70
     loop_s = steps * step_s
     metrics_s = steps * (c["sample"] + (c["sample_polygon"] if polygons else 0.0))
     segment_s = (c["segmentation"] if req.layout is not None else 0.0) + cells * c["cell"] + obstacles * c["obstacle"]
