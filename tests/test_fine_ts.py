@@ -221,6 +221,51 @@ def test_refusal_at_a_short_horizon_names_a_remedy_that_plans():
     with pytest.raises(PlannerError) as exc:
         plan(req)
     msg = exc.value.message
-    assert exc.value.code == "infeasible" and re.search(r"(x the time|settings\.fastest|settings\.N = \d+) plans", msg), msg
+    remedy = re.search(r"(x the time|settings\.fastest|settings\.N = \d+) plans", msg)
+    assert exc.value.code == "infeasible" and remedy, msg
     assert "too narrow" not in msg
     assert confirm_error(req, exc.value.code, msg, exc.value.field) is None
+
+
+# ---------------------------------------------------------------- plans at fine Ts without the Python path (goal 6)
+
+
+def test_arrival_speed_follows_the_sample_time():
+    """The arrival rows' speed bound is 0.1 mm/s at Ts 10 ms and above (as before), 1 um a
+    sample below (the corridor margin), at most the default settling speed."""
+    from planner.constraints.corridor import (
+        ARRIVAL_SPEED_M_S,
+        ARRIVAL_SPEED_MAX_M_S,
+        ARRIVAL_STEP_M,
+        ArrivalConstraint,
+        arrival_speed,
+    )
+
+    assert arrival_speed(0.01) == ARRIVAL_SPEED_M_S and arrival_speed(0.05) == ARRIVAL_SPEED_M_S
+    for Ts in (0.005, 0.002, 0.001):
+        assert math.isclose(arrival_speed(Ts) * Ts, ARRIVAL_STEP_M, rel_tol=1e-12)
+    assert arrival_speed(1e-4) == ARRIVAL_SPEED_MAX_M_S
+    speeds = [arrival_speed(Ts) for Ts in (0.001, 0.002, 0.005, 0.01)]
+    assert speeds == sorted(speeds, reverse=True)
+    # the constraint a plan builds at that Ts (x and y; the psi rate as before)
+    req = parse_request({"segments": short_corridor(0, 1), "settings": {"Ts": 0.002}})
+    segs = list(req.segments or [])
+    arrival = ArrivalConstraint(range_sequence(segs, req.settings, 4), segs, 0.002)
+    assert arrival.limit[0] == arrival.limit[1] == arrival_speed(0.002)
+    assert arrival.start_index < range_sequence(segs, req.settings, 4).K
+
+
+# short corridors at Ts 2 and 1 ms whose last steps before the end point were done on the Python
+# path (DAQP and its slack problem, ~1 s a step: up to 8.7x / 24x the work estimate) or refused
+# ("no solution ... even with the corridor softened") with the arrival speed at 0.1 mm/s
+@pytest.mark.parametrize("Ts, seed, case", [(0.002, 0, 1), (0.002, 0, 7), (0.001, 0, 2), (0.001, 0, 4),
+                                            (0.001, 1, 1)])
+def test_short_corridors_at_fine_ts_plan_without_the_python_path(Ts, seed, case):
+    req = {"segments": short_corridor(seed, case), "settings": {"Ts": Ts}}
+    res = plan(req)
+    verdict = check_plan(req, res)
+    assert verdict.ok, verdict.problems
+    m = res.metrics
+    assert m.qp_fallbacks == 0 and m.infeasible_steps == 0 and m.contained and m.settled
+    # it arrives at rest: settled at the end of the range sequence, no settling tail needed
+    assert m.steps == 3 * res.settings.samples_per_segment
