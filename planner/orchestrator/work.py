@@ -22,7 +22,9 @@ the validated request alone (no robot model, no segmentation, no simulation):
   :data:`FASTEST_RAMPS` force ramps, where the search ends at ~10-25x the counts); the uniform
   phase's doubling and bisection at up to ``2 S``, and the per-segment bisections, each of
   ``log2(S) + 1`` candidates planned from the segment to the end (issue 33: Table I at Ts 2 ms
-  ran 121 candidates, ~1 200 samples a segment, 46 CPU s against 1.2 s estimated);
+  ran 121 candidates, ~1 200 samples a segment, 46 CPU s against 1.2 s estimated); the move
+  at most the legs' speed limit, a ``[point, box, point]`` corridor's from start to end, and its
+  steps dearer with the horizon beyond 30 samples (:data:`FASTEST_HORIZON_COST`, issue 31);
 * the advice an error may carry, checked before it is given (issue 20), bounded by its own
   parameters and estimated apart (``advice_seconds``): a layout without a path is segmented
   again with smaller cells, a narrower psi range and less clearance (at most
