@@ -6,12 +6,14 @@ Usage:  OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_fine_ts.py [--s
 Prints three tables (CPU seconds of this process, so that other load matters less):
 1. the issue's short [point, box, point] corridors (3-30 mm boxes, start and end at opposite
    corners; 8 a seed) at Ts 2 ms (``--seeds``) and 1 ms (``--fine-seeds``) with the default
-   settings: cases, planned, refused, checker problems (tests/certify_support.py), the largest
-   measured CPU / work estimate, and the total time;
+   settings: cases, planned, refused, checker problems (tests/certify_support.py), the steps
+   done on the Python path (DAQP fallbacks), the least and the largest measured CPU / work
+   estimate, and the total time;
 2. Table I at Ts 10, 5, 2 and 1 ms with the defaults: N, samples a segment, duration, drive
    energy, the checker's verdict, CPU;
 3. Table I with ``fastest`` for four robots (Moving Slide, leg friction 500 and 2000 N s/m, a
-   150 kg platform): the plant's RK4 steps a sample, duration found, candidates, CPU,
+   150 kg platform), and for the Moving Slide at the ``--fastest-ts`` sample times (5 and 2
+   ms): the plant's RK4 steps a sample, duration found, candidates, CPU,
    estimate and their ratio, and the largest distance of a sample from RK4 with 16 steps a
    sample of the plan's own forces;
 4. with ``--users N``: N cases of the generator of where users go
@@ -50,8 +52,8 @@ SLIDE = json.loads((ROOT / "planner" / "data" / "moving-slide.json").read_text()
 
 
 def short_table(Ts: float, seeds: int) -> str:
-    n = planned = problems = 0
-    worst = 0.0
+    n = planned = problems = fallbacks = 0
+    worst, least = 0.0, float("inf")
     t_all = time.process_time()
     for seed in range(seeds):
         for case in range(8):
@@ -63,11 +65,13 @@ def short_table(Ts: float, seeds: int) -> str:
                 res = plan(req)
             except PlannerError:
                 continue
-            worst = max(worst, (time.process_time() - t0) / est)
+            ratio = (time.process_time() - t0) / est
+            worst, least = max(worst, ratio), min(least, ratio)
             planned += 1
+            fallbacks += res.metrics.qp_fallbacks or 0
             problems += 0 if check_plan(req, res).ok else 1
-    return (f"| {Ts * 1e3:g} ms | {n} | {planned} | {n - planned} | {problems} | {worst:.2f} | "
-            f"{time.process_time() - t_all:.1f} s |")
+    return (f"| {Ts * 1e3:g} ms | {n} | {planned} | {n - planned} | {problems} | {fallbacks} | "
+            f"{least:.2f} - {worst:.2f} | {time.process_time() - t_all:.1f} s |")
 
 
 def table1_row(Ts: float) -> str:
@@ -90,17 +94,17 @@ def deviation(res, robot, Ts: float) -> float:
                for k in range(len(X) - 1))
 
 
-def fastest_row(name: str, robot) -> str:
+def fastest_row(name: str, robot, Ts: float = 0.01) -> str:
     req = copy.deepcopy(TABLE1)
     req["robot"] = robot
-    req["settings"] = {"fastest": True}
+    req["settings"] = {"fastest": True} if Ts == 0.01 else {"fastest": True, "Ts": Ts}
     est = estimate_work(req).seconds
     t0 = time.process_time()
     res = plan(req)
     cpu = time.process_time() - t0
     ok = check_plan(req, res).ok
     return (f"| {name} | {res.settings.plant_substeps} | {res.metrics.duration_s:.2f} s | {res.timing.evaluations} | "
-            f"{cpu:.2f} s | {est:.2f} s | {cpu / est:.2f} | {deviation(res, robot, 0.01) * 1e6:.4f} um | "
+            f"{cpu:.2f} s | {est:.2f} s | {cpu / est:.2f} | {deviation(res, robot, Ts) * 1e6:.4f} um | "
             f"{'certified' if ok else 'PROBLEM'} |")
 
 
@@ -131,10 +135,13 @@ def main() -> None:
     ap.add_argument("--fine-seeds", type=int, default=1, help="seeds of 8 short corridors at Ts 1 ms")
     ap.add_argument("--users", type=int, default=0, help="cases of the where-users-go generator")
     ap.add_argument("--users-seed", type=int, default=31)
+    ap.add_argument("--fastest-ts", type=float, nargs="*", default=[0.005, 0.002],
+                    help="sample times of further Table I fastest rows (Moving Slide)")
     args = ap.parse_args()
     plan(copy.deepcopy(TABLE1))  # kernels loaded
-    print("| Ts | cases | planned | refused | checker problems | largest CPU / estimate | CPU |")
-    print("|---|---|---|---|---|---|---|")
+    print("| Ts | cases | planned | refused | checker problems | DAQP fallback steps | "
+          "CPU / estimate (least - largest) | CPU |")
+    print("|---|---|---|---|---|---|---|---|")
     print(short_table(0.002, args.seeds))
     if args.fine_seeds:
         print(short_table(0.001, args.fine_seeds))
@@ -158,6 +165,8 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|")
     for name, robot in robots:
         print(fastest_row(name, robot))
+    for Ts in args.fastest_ts:
+        print(fastest_row(f"Moving Slide, Ts {Ts * 1e3:g} ms", "moving-slide", Ts))
     if args.users:
         print()
         print("| cases | outcomes | checker problems | largest CPU / estimate | over 1.5x | CPU |")

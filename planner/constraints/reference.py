@@ -17,7 +17,7 @@ from ..model.plant import rk4_sample
 from ..schema import Settings
 from .composed import Constraints
 from .qp import DenseQP, QPSolution
-from .rows import RELAX_M, ROW_UNIT_M, Rows, StepContext
+from .rows import RELAX_M, ROW_UNIT_M, RowKind, Rows, StepContext
 
 __all__ = ["ReferenceAssembly", "ReferenceQP"]
 
@@ -104,9 +104,10 @@ class ReferenceAssembly:
         self.constraints.stroke.first_sample(qp.rows, J0, kinematics.leg_lengths(self.model, y1)[0], y1)
         self._form(qp)
 
-    def relax(self, qp: ReferenceQP) -> None:
-        """The hard rows widened by ``RELAX_M`` (:meth:`Rows.widen`), and the QP at them."""
-        qp.rows.widen(RELAX_M / ROW_UNIT_M)
+    def relax(self, qp: ReferenceQP, only: RowKind | None = None) -> None:
+        """The hard rows (``only``: of that kind) widened by ``RELAX_M`` (:meth:`Rows.widen`),
+        and the QP at them."""
+        qp.rows.widen(RELAX_M / ROW_UNIT_M, only)
         self._form(qp)
 
     def _form(self, qp: ReferenceQP) -> None:

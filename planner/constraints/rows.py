@@ -134,14 +134,17 @@ class Rows:
         Sel[r, self.col[r, k]] = self.val[r, k]
         return Sel
 
-    def widen(self, relax: float) -> None:
+    def widen(self, relax: float, only: RowKind | None = None) -> None:
         """Every hard row that is not an equality widened by ``relax`` on both sides (row
         units; ``relax * ROW_UNIT_M`` of force_max for the force-rate rows, which are in the
         scaled moves), in place: the relaxation of an infeasible step (the compiled twin is in
-        ``step_kernels.constrained_step``, where the equalities are eliminated)."""
+        ``step_kernels.constrained_step``, where the equalities are eliminated). ``only``:
+        the rows of that kind alone."""
         nh = self.n_hard
         r = np.where(self.kinds[:nh] == RowKind.RATE, relax * ROW_UNIT_M, relax)
         r[self.lower[:nh] >= self.upper[:nh]] = 0.0
+        if only is not None:
+            r[self.kinds[:nh] != only] = 0.0
         self.lower[:nh] -= r
         self.upper[:nh] += r
 

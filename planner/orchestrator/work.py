@@ -22,7 +22,9 @@ the validated request alone (no robot model, no segmentation, no simulation):
   :data:`FASTEST_RAMPS` force ramps, where the search ends at ~10-25x the counts); the uniform
   phase's doubling and bisection at up to ``2 S``, and the per-segment bisections, each of
   ``log2(S) + 1`` candidates planned from the segment to the end (issue 33: Table I at Ts 2 ms
-  ran 121 candidates, ~1 200 samples a segment, 46 CPU s against 1.2 s estimated);
+  ran 121 candidates, ~1 200 samples a segment, 46 CPU s against 1.2 s estimated); the move
+  at most the legs' speed limit, a ``[point, box, point]`` corridor's from start to end, and its
+  steps dearer with the horizon beyond 30 samples (:data:`FASTEST_HORIZON_COST`, issue 31);
 * the advice an error may carry, checked before it is given (issue 20), bounded by its own
   parameters and estimated apart (``advice_seconds``): a layout without a path is segmented
   again with smaller cells, a narrower psi range and less clearance (at most
@@ -70,7 +72,8 @@ from ..schema import (
 )
 from .timing import centre_path_length, method_of, moving_segments
 
-__all__ = ["FASTEST_A_M_S2", "FASTEST_BISECTION", "FASTEST_RAMPS", "FASTEST_SLOW_S", "FASTEST_V_SHARE", "MORE_TIME",
+__all__ = ["FASTEST_A_M_S2", "FASTEST_BISECTION", "FASTEST_HORIZON_COST", "FASTEST_RAMPS", "FASTEST_SLOW_S",
+           "FASTEST_V_SHARE", "MORE_TIME",
            "WorkEstimate", "robot_motion",
            "check_work", "estimate_work", "fastest_count", "fastest_steps", "slack_allowance", "slack_costs"]
 
@@ -94,6 +97,12 @@ FASTEST_V_SHARE = 0.5
 FASTEST_RAMPS = 1.4
 #: ``fastest``: the time a segment takes [s] with such a short horizon (measured 1.2-2.5 s)
 FASTEST_SLOW_S = 3.0
+#: ``fastest``: the search's steps cost this much more per sample of horizon beyond the
+#: default 30 (``1 + FASTEST_HORIZON_COST (N - 30) / 70``): its candidates run at the drives'
+#: limits, where a step's active set grows with the horizon (Table I, CPU per simulated step of
+#: the search: 0.22 / 0.65 / 1.27 ms at N 30 / 51 / 100, against 0.09 / 0.14 / 0.25 ms a plain
+#: step; the search's steps are overcounted ~3x, so Table I at Ts 2 ms took 1.6x its estimate)
+FASTEST_HORIZON_COST = 0.3
 #: ``fastest``: the mean share of a per-segment bisection candidate's steps it plans (half of
 #: them feasible, to the end; half abandoned at ~a quarter: Table I at Ts 2 ms, 0.15-0.2 s
 #: against 0.8 s)
@@ -190,9 +199,14 @@ def _samples_per_segment(req: PlanRequest, n: int) -> int:
 
 
 def _longest_step(centres: np.ndarray) -> float:
-    """The longest move between two consecutive centres [m] (psi at 5 cm a radian)."""
+    """The longest move between two consecutive centres [m] (psi at 5 cm a radian); a corridor
+    of one segment between a start and an end point (``[point, box, point]``) moves from the
+    start to the end within that segment (issue 31: the box's centre is half way, and the
+    search found 1.6-5x the count estimated from it)."""
     if len(centres) < 2:
         return 0.0
+    if len(centres) == 3:
+        centres = centres[[0, 2]]
     d = np.diff(centres, axis=0)
     return float(np.max(np.hypot(d[:, 0], d[:, 1]) + 0.05 * np.abs(d[:, 2])))
 
@@ -236,12 +250,13 @@ def _substeps(req: PlanRequest) -> int:
 def _motion(desc: Any) -> tuple[float, float]:
     """``(a, v)`` of a robot description: the acceleration of its whole mass under the sum of
     its drives' force limits [m/s^2] and the speed at which the sum of its leg frictions takes
-    that force [m/s] (inf without friction)."""
+    that force [m/s] (inf without friction), at most the slowest leg's speed limit (a leg along
+    the move moves as fast as the tool; issue 31: with 0.028 m/s legs the search took 2.4x)."""
     legs = desc.leg_list()
     force = sum(g.force_max for g in legs)
     mass = desc.platform.mass + sum(g.cylinder.mass + g.rod.mass for g in legs)
     friction = sum(g.friction for g in legs)
-    return force / mass, (force / friction if friction > 0 else math.inf)
+    return force / mass, min(force / friction if friction > 0 else math.inf, min(g.speed_max for g in legs))
 
 
 @lru_cache(maxsize=16)
@@ -360,6 +375,8 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
                       "fastest timing found is ~10-25x slower and takes as many more candidates), a larger "
                       "settings.Ts, or " + advice)
     step_s = _step_cost(st.mode, st.backend, st.solver, st.N, _substeps(req))
+    if st.fastest:
+        step_s *= 1.0 + FASTEST_HORIZON_COST * max(0, st.N - 30) / 70
     loop_s = steps * step_s
     metrics_s = steps * (c["sample"] + (c["sample_polygon"] if polygons else 0.0))
     segment_s = (c["segmentation"] if req.layout is not None else 0.0) + cells * c["cell"] + obstacles * c["obstacle"]
