@@ -17,7 +17,16 @@ from ..errors import PlannerError
 from ..model import load_robot
 from ..schema import DEFAULT_CONTOUR_TOLERANCE_M, MAX_SEGMENTS, PathElement, Program
 from .defaults import contour_settings
-from .passes import CELL_SAMPLES, PROGRAM_MARGIN, V0_M_S, chunks, parse_contour_request, read_program, tolerance_of
+from .passes import (
+    CELL_SAMPLES,
+    PROGRAM_MARGIN,
+    V0_M_S,
+    chunks,
+    parse_contour_request,
+    read_program,
+    tolerance_of,
+    travel_run_end,
+)
 from .profiles import GRID_H_MAX, GRID_H_MIN, GRID_POINTS, GRID_POINTS_MIN
 from .tube import SAGITTA_FRACTION
 
@@ -263,9 +272,7 @@ def _travels(program: Program, tol: float) -> list[float]:
     while i < len(blocks):
         b = blocks[i]
         if b.kind == "travel":
-            j = i
-            while j + 1 < len(blocks) and blocks[j + 1].kind == "travel":
-                j += 1
+            j = travel_run_end(blocks, i)
             end = np.asarray(blocks[j].elements[-1].end, float)
             if math.hypot(*(end - pos)) > 1e-9:
                 out.append(math.hypot(*(end - pos)))

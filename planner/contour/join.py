@@ -38,6 +38,7 @@ from ..schema import (
 )
 from .passes import RAPID_MARGIN_M
 from .search import Scale
+from .zaxis import programmed_z
 
 #: with the force-rate limit a free move's horizon spans at least this many of the drives' force
 #: ramps (force_max over the rate: 0.05 s by default) unless settings.N is given: a shorter one
@@ -147,29 +148,13 @@ def dwell_z(part: Part, block: ProgramBlock, z: float) -> None:
     part.dwell = [None] + [block.reason] * (K - 1)
 
 
-def cut_z(part: Part, elements: list[PathElement], origin: np.ndarray) -> None:
+def cut_z(part: Part, elements: list[PathElement], origin: np.ndarray) -> np.ndarray:
     """Fill the Z and source line of a cut part: per sample the Z of its element where the
-    sample projects onto it (program frame)."""
-    pose = part.result.pose[:, :2] - origin
-    elem = part.elem
-    z = np.zeros(len(pose))
-    for e_index in np.unique(elem):
-        e = elements[int(e_index)]
-        mask = elem == e_index
-        p = pose[mask]
-        if e.kind == "arc" and e.centre is not None and e.sweep_rad and e.start_angle_rad is not None:
-            c = np.asarray(e.centre, float)
-            ang = np.arctan2(p[:, 1] - c[1], p[:, 0] - c[0])
-            rel = ((ang - e.start_angle_rad) * np.sign(e.sweep_rad)) % (2 * math.pi)
-            sweep = abs(e.sweep_rad)
-            # beyond the arc's end: the nearer end
-            f = np.where(rel <= sweep, rel / sweep, np.where(rel - sweep < 2 * math.pi - rel, 1.0, 0.0))
-        else:
-            a, d = np.asarray(e.start, float), np.asarray(e.end, float) - np.asarray(e.start, float)
-            f = np.clip((p - a) @ d / max(float(d @ d), 1e-24), 0.0, 1.0)
-        z[mask] = e.z_start_m + f * (e.z_end_m - e.z_start_m)
-    part.z = z
+    sample projects onto it (program frame; :func:`planner.contour.zaxis.programmed_z`). Returns
+    each sample's XY distance from that point [m]."""
+    part.z, d = programmed_z(part.result.pose[:, :2], part.elem, elements, origin)
     part.source = part.line.copy()
+    return d
 
 
 def _rest_result(pose: np.ndarray) -> PlanResult:

@@ -71,7 +71,7 @@ from .placement import CONTOUR_PSI, check_reach, check_reachable, fit_origin, pr
 from .profiles import OptimalProfiles
 from .search import Scale, confirmed_infeasible, largest_feasible, search_timing, z_caps
 from .tube import PathGeometry, path_to_cut
-from .zaxis import ZCaps, ZPlan, accel_dwell, plan_z, programmed_z
+from .zaxis import ZCaps, ZPlan, accel_dwell, plan_z
 
 # the names this module had before issue 34 split it (the estimate's constants, the search's
 # scale finder) stay importable from it
@@ -323,9 +323,8 @@ def plan_piece_z(part: Part, elements: list[PathElement], origin: np.ndarray, to
     """Fill the Z and source line of a cut part: the programmed Z where each sample projects
     onto its move, planned within the Z axis speed and acceleration and the 3-D tolerance
     (:func:`planner.contour.zaxis.plan_z`); the plan (``ok``: it holds)."""
-    cut_z(part, elements, origin)
-    zp, d = programmed_z(part.result.pose[:, :2], part.elem, elements, origin)
-    got = plan_z(zp, np.sqrt(np.maximum(tol * tol - d * d, 0.0)), Ts, req.z_rapid_m_s, req.z_accel_m_s2)
+    d = cut_z(part, elements, origin)
+    got = plan_z(part.z, np.sqrt(np.maximum(tol * tol - d * d, 0.0)), Ts, req.z_rapid_m_s, req.z_accel_m_s2)
     part.z = got.z
     return got
 

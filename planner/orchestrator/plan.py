@@ -327,6 +327,20 @@ def _other_advice(exc: PlannerError, req: PlanRequest, model: RobotModel, st: Se
     count where the request gave fewer, else twice, at most 50); each within ``budget_s`` (its
     estimate, from ``estimate_s`` of the request, must fit). Unchanged if none plans."""
     tried: list[str] = []
+
+    def plans(sub: Settings) -> bool:
+        """Whether ``sub`` plans the corridor and settles (checked); the time it took is taken
+        from ``budget_s``."""
+        nonlocal budget_s
+        t_try = time.perf_counter()
+        try:
+            return bool(_run(req.name, model, sub, segments, None, abandon=True)[0].metrics.settled)
+        except PlannerError:
+            return False
+        finally:
+            if budget_s is not None:
+                budget_s -= time.perf_counter() - t_try
+
     # a remedy found: the time factors did not help, but the corridor is not too narrow
     head = exc.message.replace(": the corridor is too narrow there for the robot's drive limits", "")
     default_N = default_horizon(st.Ts, req.robot_description, st.force_rate_n_s)
@@ -334,17 +348,10 @@ def _other_advice(exc: PlannerError, req: PlanRequest, model: RobotModel, st: Se
     if N > st.N:
         cost = estimate_s * N / st.N
         if budget_s is None or cost <= budget_s:
-            t_try = time.perf_counter()
-            sub = st.model_copy(update={"N": N, "require_settled": True})
-            try:
-                if _run(req.name, model, sub, segments, None, abandon=True)[0].metrics.settled:
-                    return PlannerError("infeasible", f"{head}; settings.N = {N} plans (a longer horizon at "
-                                        "the same timing, checked)", "settings.N")
-            except PlannerError:
-                pass
+            if plans(st.model_copy(update={"N": N, "require_settled": True})):
+                return PlannerError("infeasible", f"{head}; settings.N = {N} plans (a longer horizon at "
+                                    "the same timing, checked)", "settings.N")
             tried.append(f"settings.N = {N}")
-            if budget_s is not None:
-                budget_s -= time.perf_counter() - t_try
     needed = _time_needed(model, st, segments)
     ratio = max(1.0, needed[0] / _moving_time(st, segments)) if needed is not None else 1.0
     factor = next((f for f in MORE_TIME if f >= 2.0 * ratio), None)
@@ -354,17 +361,10 @@ def _other_advice(exc: PlannerError, req: PlanRequest, model: RobotModel, st: Se
         N_far = min(MAX_HORIZON, st.N * factor)
         cost = estimate_s * factor * N_far / st.N
         if N_far > st.N and cost <= (budget_s if budget_s is not None else COMBINED_ADVICE_S):
-            t_try = time.perf_counter()
-            sub = sub.model_copy(update={"N": N_far})
-            try:
-                if _run(req.name, model, sub, segments, None, abandon=True)[0].metrics.settled:
-                    return PlannerError("infeasible", f"{head}; settings.N = {N_far} with {factor}x the time ({how}) "
-                                        "plans (checked)", "settings.N")
-            except PlannerError:
-                pass
+            if plans(sub.model_copy(update={"N": N_far})):
+                return PlannerError("infeasible", f"{head}; settings.N = {N_far} with {factor}x the time ({how}) "
+                                    "plans (checked)", "settings.N")
             tried.append(f"settings.N = {N_far} with {factor}x the time")
-            if budget_s is not None:
-                budget_s -= time.perf_counter() - t_try
     if not st.fastest:
         fast = req.model_copy(update={"settings": Settings.model_validate(
             {**req.settings.model_dump(mode="json", exclude_unset=True, exclude={*TIMING_FIELDS}), "fastest": True})})
@@ -385,14 +385,10 @@ def _other_advice(exc: PlannerError, req: PlanRequest, model: RobotModel, st: Se
     if steps > st.plant_substeps and auto > 1:  # (a robot whose stiffness one step a sample suits: no)
         cost = estimate_s * steps / st.plant_substeps
         if budget_s is None or cost <= budget_s:
-            sub = st.model_copy(update={"plant_substeps": steps, "require_settled": True})
-            try:
-                if _run(req.name, model, sub, segments, None, abandon=True)[0].metrics.settled:
-                    return PlannerError("infeasible", f"{head}; settings.plant_substeps = {steps} plans (a finer "
-                                        "integration of the robot at the same timing, checked)",
-                                        "settings.plant_substeps")
-            except PlannerError:
-                pass
+            if plans(st.model_copy(update={"plant_substeps": steps, "require_settled": True})):
+                return PlannerError("infeasible", f"{head}; settings.plant_substeps = {steps} plans (a finer "
+                                    "integration of the robot at the same timing, checked)",
+                                    "settings.plant_substeps")
             tried.append(f"settings.plant_substeps = {steps}")
     if tried:
         return PlannerError("infeasible", f"{exc.message}; {' and '.join(tried)} do not plan either (checked)",
