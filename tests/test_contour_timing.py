@@ -153,7 +153,11 @@ def test_profile_time_of_a_constant_acceleration():
 def test_fastest_pass_is_near_the_exact_path_optimum():
     """A pass of lines and arcs planned ``fastest`` with the exact-path optimum's limits (drive
     forces and leg speeds, no force-rate limit) at Ts = 1 ms takes at most 2 % longer than that
-    optimum (rest at the corners), and its drive forces stay within the limits."""
+    optimum (rest at the corners) plus 10 samples to settle in the end point's stop box, and its
+    drive forces stay within the limits. (The settling: since the arrival rows' speed bound
+    follows Ts, 1 um a sample, issue 31, the robot enters the stop box at up to 1 mm/s instead
+    of 0.1 and settles 7 samples later on this pass, 0.157 s against 0.150 s; the cut itself is
+    the same sample for sample.)"""
     prog = PATH.replace("G1 X3", "G1 X3\nG1 Y0\nG1 X0")
     model = load_robot("moving-slide")
     els = read_gcode(prog).passes[0].elements
@@ -162,7 +166,7 @@ def test_fastest_pass_is_near_the_exact_path_optimum():
                         "settings": {"Ts": 0.001, "force_rate_n_s": "off"}})
     assert res.contour is not None
     t = res.contour.passes[0].time_s
-    assert t <= 1.02 * T[-1], (t, T[-1])
+    assert t <= 1.02 * T[-1] + 10 * 0.001, (t, T[-1])
     assert res.metrics.max_force_ratio <= 1 + 1e-6
     assert res.contour.max_deviation_m <= 2e-5
 

@@ -27,6 +27,7 @@ from .passes import (
     tolerance_of,
     travel_run_end,
 )
+from .placement import check_reach
 from .profiles import GRID_H_MAX, GRID_H_MIN, GRID_POINTS, GRID_POINTS_MIN
 from .tube import SAGITTA_FRACTION
 
@@ -338,6 +339,8 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
     req = parse_contour_request(request)
     st = req.plan_settings()
     program = read_program(req, program)
+    if req.origin != "fit":  # a move beyond the workspace is refused naming its line, before any count
+        check_reach(program, np.array(req.origin, float))
     tol = tolerance_of(req, program)
     st = contour_settings(req, st, program, tol, load_robot(req.robot))  # the Ts and N the plan will use
     c = count_contour(req, program)
