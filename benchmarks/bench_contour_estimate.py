@@ -83,6 +83,7 @@ def main() -> None:
     args = ap.parse_args()
     from bench_contour import ORIGIN, TOL, program  # type: ignore[import-not-found]
 
+    from planner import PlannerError
     from planner.contour import estimate_contour, plan_contour
     from planner.exchange import read_gcode
     from planner.schema import ContourRequest
@@ -98,7 +99,12 @@ def main() -> None:
             continue
         r = ContourRequest.model_validate(req)
         program_ = read_gcode(r.program, cut_below=r.cut_below_m, z_rapid_m_s=r.z_rapid_m_s)
-        est = estimate_contour(r, program_)[0]
+        try:
+            est = estimate_contour(r, program_)[0]
+        except PlannerError as exc:  # refused before any work (a pass no tube fits: too_large)
+            print(f"| {made.name} | {req['feed']} | - | {made.text.count(chr(10))} | {made.passes} | {made.moves} | "
+                  f"- | - | - | refused | {exc.code} up front |", flush=True)
+            continue
         del program_
         Ts = (req.get("settings") or {}).get("Ts", 0.01)
         head = (f"| {made.name} | {req['feed']} | {Ts * 1e3:g} | {made.text.count(chr(10))} | {made.passes} | "
