@@ -232,8 +232,9 @@ class Settings(Strict):
         f"{DEFAULT_FORCE_RISE_S:g} s; 'off': no limit")
     tool_speed_max_m_s: Finite | None = Field(
         None, ge=MIN_SPEED, le=100, description="Constrained mode: largest speed of the tool point, |(x_dot, y_dot)| "
-        "in m/s (at least the smallest speed_m_s), held at every sample (by a 16-sided polygon inside the circle of that radius: the plan's speed stays "
-        "within 2 % below the limit in the worst direction); null (default): no limit")
+        "in m/s (at least the smallest speed_m_s), held at every sample (by a 16-sided polygon inside the circle of "
+        "that radius: the plan's speed stays within 2 % below the limit in the worst direction); null (default): no "
+        "limit")
     fastest: StrictBool = Field(False, description="Constrained mode: the shortest timing (samples_per_segment) whose "
                           "plan keeps the corridor and the drive force, stroke and speed limits")
 
