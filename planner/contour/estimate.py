@@ -30,6 +30,7 @@ from .passes import (
 from .placement import check_reach
 from .profiles import GRID_H_MAX, GRID_H_MIN, GRID_POINTS, GRID_POINTS_MIN
 from .tube import SAGITTA_FRACTION
+from .zaxis import Z_TRIES
 
 #: program feed's tube cells: a whole number of samples at F, this much shorter
 #: (:data:`planner.contour.search.FEED_MARGIN`, which imports this module)
@@ -360,7 +361,12 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
              "samples": g * c.plans * (c.samples * CONTOUR_STEP_S[f] + c.pieces * CONTOUR_PIECE_S[f] * 0.01 / st.Ts
                                        + c.corners * CONTOUR_CORNER_S[f] + c.arc_samples * CONTOUR_ARC_STEP_S[f]),
              "profiles": c.grid * CONTOUR_GRID_S + c.plans * c.bends * CONTOUR_BEND_S,
-             "lines": c.lines * CONTOUR_LINE_S, "elements": CONTOUR_ELEMENT_S * c.moves}
+             "lines": c.lines * CONTOUR_LINE_S, "elements": CONTOUR_ELEMENT_S * c.moves,
+             # a piece with a slope is planned again where its Z misses (at most Z_TRIES plans in
+             # all; measured: a ramp and helix pass 7 times); fastest's first miss goes on as a program
+             # feed, and costs twice that (measured on 10 ramp and helix passes: 2.05x without it)
+             "z": Z_SLOPE_PLANS[f] * sum(p for p, els in zip(per_piece, pieces, strict=True)
+                                         if any(abs(e.z_end_m - e.z_start_m) > 1e-12 for e in els))}
     travel_s, read_s = parts["travel"], parts["lines"]
     check = max(ADVICE_WORK * max(per_piece, default=0.0), ADVICE_MIN_S)
     seconds = sum(parts.values())
@@ -371,6 +377,8 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
               "cells": "a larger tolerance_m (fewer arc chords and cells), or split the program",
               "elements": "fewer, longer moves (join short moves in the CAM program), or split the program",
               "lines": "a shorter program: split it",
+              "z": f"a larger z_accel_m_s2 or fewer ramps and helices (a piece with a slope is planned up to "
+                   f"{Z_TRIES} times for its Z), or split the program",
               "profiles": "a larger tolerance_m or fewer, longer moves, or split the program",
               "samples": (f"a larger settings.Ts than {st.Ts:g} s (fewer samples a pass), or split the program"
                           if st.Ts < 0.01 else "split the program")}[most]
@@ -383,6 +391,10 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
                      f"{travel_s:.3g} s; {c.lines} lines read: {read_s:.2g} s; most of it {most}: {advice}; an "
                      f"infeasible pass's advice is checked within {check:.2g} s more")
 
+
+#: the plans of a piece with a slope beyond its first, in units of the piece's estimate
+#: (:data:`~planner.contour.zaxis.Z_TRIES`; ``benchmarks/bench_contour_estimate.py --only ramp``)
+Z_SLOPE_PLANS = {"program": float(Z_TRIES - 1), "fastest": 2.0 * (Z_TRIES - 1)}
 
 #: program feed: an arc is cut at most at ``sqrt(ARC_ACCEL_M_S2 r)`` (a tiny circle at F3000 is
 #: not cut at F: its samples are those of the speed the arc allows; the program feed's profile

@@ -71,7 +71,7 @@ from .placement import CONTOUR_PSI, check_reach, check_reachable, fit_origin, pr
 from .profiles import OptimalProfiles
 from .search import Scale, confirmed_infeasible, largest_feasible, search_timing, z_caps
 from .tube import PathGeometry, path_to_cut
-from .zaxis import ZCaps, ZPlan, accel_dwell, plan_z
+from .zaxis import Z_TRIES, ZCaps, ZPlan, accel_dwell, plan_z
 
 # the names this module had before issue 34 split it (the estimate's constants, the search's
 # scale finder) stay importable from it
@@ -308,10 +308,9 @@ def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[i
                        "or tolerance_m", "z_accel_m_s2")
 
 
-#: a piece whose Z cannot follow is planned again at most this many times, each time the moves
-#: Z missed on (and their neighbours) capped at this share of the speed their samples ran, and
-#: their XY speed's rise along a slope at this share of the one before
-Z_TRIES = 8
+#: each time a piece is planned again (at most :data:`~planner.contour.zaxis.Z_TRIES` times) the
+#: moves Z missed on (and their neighbours) are capped at this share of the speed their samples
+#: ran, and their XY speed's rise along a slope at this share of the one before
 Z_SLOWER = 0.7
 #: fastest, planned again as a program feed: each move's F the speed its first timing ran it at
 #: times this (the moves Z missed on lower)

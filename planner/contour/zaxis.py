@@ -35,7 +35,7 @@ import numpy as np
 
 from ..schema import PathElement
 
-__all__ = ["Z_SLACK", "ZCaps", "ZPlan", "accel_dwell", "plan_z", "programmed_z", "slopes"]
+__all__ = ["Z_SLACK", "Z_TRIES", "ZCaps", "ZPlan", "accel_dwell", "plan_z", "programmed_z", "slopes"]
 
 #: a sample whose Z misses its budget by more than this share of ``a_max Ts^2`` fails (the LP's
 #: own feasibility tolerance is 1e-7 of that unit)
@@ -129,6 +129,11 @@ class ZCaps:
         for sj in self.s_j:
             cap = np.minimum(cap, self._at(loc, np.clip(sj, s0, s1)))
         return cap
+
+
+#: a piece whose Z cannot follow is planned at most this many times in all
+#: (:func:`planner.contour.plan.plan_cut`; the work estimate counts them for a piece with a slope)
+Z_TRIES = 8
 
 
 def programmed_z(pose: np.ndarray, elem: np.ndarray, elements: list[PathElement],
