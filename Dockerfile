@@ -24,7 +24,8 @@ COPY container/requirements.lock /tmp/requirements.lock
 # and type stubs shipped in the wheels, viser's client sources (the built client stays),
 # dask's collections (dask.dataframe needs pandas, which is not installed; batches use only
 # distributed's executor) and pygments (rich's syntax highlighting; the batch progress bar
-# does not use it); the symbol tables of the packages' compiled
+# does not use it) and numba's CUDA target (3 MB; imported only for target="cuda", which the
+# planner never uses); the symbol tables of the packages' compiled
 # modules stripped (57 MB; binutils only in this stage, skipped if the Debian mirror cannot be
 # reached; not the vendored *.libs, which patchelf has rewritten), then every compiled
 # dependency imported once so that a broken library fails the build, not the service
@@ -35,7 +36,7 @@ RUN python -m venv --without-pip /opt/venv \
     && find . -depth -type d \( -name tests -o -name test \) -exec rm -rf {} + \
     && find . -type f \( -name "*.c" -o -name "*.cpp" -o -name "*.h" -o -name "*.hpp" -o -name "*.pyx" \
        -o -name "*.pxd" -o -name "*.pyi" \) -delete \
-    && rm -rf viser/client/src dask/dataframe dask/array dask/bag pygments && cd / \
+    && rm -rf viser/client/src dask/dataframe dask/array dask/bag pygments numba/cuda && cd / \
     && rm /tmp/requirements.lock \
     && if command -v strip >/dev/null || { apt-get update -qq && DEBIAN_FRONTEND=noninteractive \
           apt-get install -y -qq --no-install-recommends binutils >/dev/null; }; then \
