@@ -231,6 +231,10 @@ def cmd_contour(args) -> int:
         request["origin"] = "fit" if args.origin.strip().lower() == "fit" else parse_pair(args.origin, "--origin")
     if args.tolerance is not None:
         request["tolerance_m"] = args.tolerance
+    if args.z_rapid is not None:
+        request["z_rapid_m_s"] = args.z_rapid
+    if args.z_accel is not None:
+        request["z_accel_m_s2"] = args.z_accel
     from app.jobs import ContourJob
 
     try:
@@ -465,6 +469,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                     help="'program': never faster than F (default); 'fastest': as fast as the drives allow")
     pc.add_argument("--cut-below", type=float, default=0.0, metavar="Z",
                     help="feed moves with Z below this cut, m in the program frame (default 0)")
+    pc.add_argument("--z-rapid", type=float, metavar="M_S", help="z_rapid_m_s: the Z axis speed, m/s (default 0.05)")
+    pc.add_argument("--z-accel", type=float, metavar="M_S2",
+                    help="z_accel_m_s2: the Z axis acceleration, m/s^2 (default 1)")
     pc.add_argument("--settings", metavar="JSON", help='plan settings as JSON, e.g. \'{"Ts": 0.005}\'')
     pc.add_argument("--forces", action="store_true", help="joints format: add the drive forces (N)")
     pc.add_argument("--compact", action="store_true", help="JSON without indentation")

@@ -291,3 +291,29 @@ def test_progress_line_on_a_terminal_is_one_line_rewritten():
             assert f"~{left:.0f} s left" in shown[1] and text.endswith("\n")
         else:  # 0.56 s < PROGRESS_AFTER_S: nothing
             assert PROGRESS_AFTER_S > 0.56 and text == ""
+
+
+def test_contour_z_axis_flags_bound_the_z_of_the_plan(tmp_path):
+    """``--z-rapid`` and ``--z-accel`` are the request's ``z_rapid_m_s`` and ``z_accel_m_s2``:
+    the plan's Z (``contour.z_m``, differenced at Ts, at rest before and after) keeps within the
+    flags' speed and acceleration and reaches most of the acceleration (a bound that holds, not
+    crawling); slower flags give a longer plan than the defaults; a value out of range exits 2
+    naming the field."""
+    prog = tmp_path / "plunge.ngc"
+    prog.write_text("G21 G90\nG0 Z2\nG0 X5 Y5\nG1 Z-1 F300\nG1 X15 F600\nG0 Z2\nM2\n")
+    out = {}
+    for name, flags in (("slow", ["--z-rapid", "0.02", "--z-accel", "0.25"]), ("default", [])):
+        path = tmp_path / f"{name}.json"
+        r = run("contour", str(prog), "--origin", "fit", "--progress", "never", "-o", str(path), *flags)
+        assert r.returncode == 0, r.stderr
+        out[name] = json.loads(path.read_text())
+    slow = out["slow"]
+    ts = slow["settings"]["Ts"]
+    z = np.asarray(slow["contour"]["z_m"], dtype=float)
+    vz = np.abs(np.diff(z)) / ts
+    az = np.abs(np.diff(np.r_[z[0], z, z[-1]], 2)) / ts ** 2
+    assert vz.max() <= 0.02 * (1 + 1e-6), vz.max()
+    assert 0.3 * 0.25 <= az.max() <= 0.25 * (1 + 1e-6), az.max()
+    assert len(slow["time"]) > len(out["default"]["time"])
+    r = run("contour", str(prog), "--z-accel", "0", "-o", str(tmp_path / "bad.json"))
+    assert r.returncode == 2 and "z_accel_m_s2" in r.stderr, r.stderr
