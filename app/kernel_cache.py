@@ -1,8 +1,8 @@
 """The compiled kernels of a read-only installation (the container image, issue 15).
 
 The planner caches its compiled kernels in ``NUMBA_CACHE_DIR/rangeplan-<key>`` when that is set
-(:mod:`planner._jit`; the key: the kernel sources' content); a read-only cache is loaded from,
-but kernels compiled later cannot be saved there. An image built with ``NUMBA_CPU_NAME=generic``
+(:mod:`planner._jit`; the key: the kernel sources' content; the tree holds no absolute path, so
+it can be copied); a read-only one is copied into the user's private cache first. An image built with ``NUMBA_CPU_NAME=generic``
 (code for any x86-64, so the cache is not tied to the build machine's CPU) compiles the
 kernels at build time into a read-only seed (``RANGEPLAN_KERNEL_SEED``); at start
 :func:`seed_kernel_cache` copies it into ``NUMBA_CACHE_DIR`` (e.g. on a tmpfs ``/tmp``)

@@ -178,7 +178,7 @@ class _Progress(event.Listener):
             self.thread.join()
             elapsed = time.perf_counter() - (self.t0 or time.perf_counter())
             n = len(self.done & self.pending) if self.pending else len(self.done)
-            kept = _jit.kernel_cache().lasting and _jit.save_error() is None
+            kept = _jit.kernel_cache().lasting
             self._write(f"compiled {n} kernels in {elapsed:.0f} s "
                         f"({'cached for the next runs' if kept else 'for this process only'})", final=True)
 
