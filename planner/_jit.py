@@ -73,7 +73,7 @@ from ._config import PlannerConfig, config, read_config
 from ._private import distrust, distrust_tree, make_dirs
 
 __all__ = ["njit", "KERNEL_SOURCES", "SOURCE_MTIME", "KernelCache", "chosen_kernel_cache", "kernel_cache",
-           "kernel_cache_dir", "kernel_key", "source_copy", "numpy_only", "kernels_off"]
+           "kernel_cache_dir", "kernel_key", "source_copy", "cached", "numpy_only", "kernels_off"]
 
 _ROOT = Path(__file__).resolve().parent
 #: the kernel modules (relative to ``planner/``) whose content keys the cache
@@ -272,6 +272,19 @@ def source_copy(py_file: str | Path) -> Path:
         raise TypeError(f"planner._jit.njit(cache=True) in {py_file}: not a module of planner._jit.KERNEL_SOURCES "
                         "(the cache key); add it there")
     return kernel_cache_dir() / "planner" / rel
+
+
+def cached(dispatcher: Any) -> bool:
+    """Whether this process's kernel cache holds numba's index of the kernel ``dispatcher`` (one
+    declared here with ``cache=True``): the file numba names ``<module>.<qualname>-<first
+    line>.py<XY><abiflags>.nbi`` beside the copy of its module (numba's documented layout). The
+    directory is keyed by the content of every kernel source and numba's version, so an index
+    there is one of this source: a kernel that has one loads, one that has none compiles."""
+    func = dispatcher.py_func
+    copy = Path(func.__code__.co_filename)
+    name = (f"{copy.stem}.{func.__qualname__.replace('<', '').replace('>', '')}-{func.__code__.co_firstlineno}"
+            f".py{sys.version_info[0]}{sys.version_info[1]}{getattr(sys, 'abiflags', '')}.nbi")
+    return (copy.parent / "__pycache__" / name).is_file()
 
 
 def _code_in(code: types.CodeType, filename: str) -> types.CodeType:

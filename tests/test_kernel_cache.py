@@ -32,17 +32,22 @@ ROOT = Path(__file__).resolve().parent.parent
 PROBE = """
 import json, sys
 import numpy as np
+from planner import _jit
 from planner.model import kernels as k
 d = k.smallest_singular_values
+jitted = hasattr(d, "py_func")  # not with NUMBA_DISABLE_JIT=1
+before = _jit.cached(d) if jitted else None
 d(np.eye(3)[None])
-s = d.stats
-print(json.dumps({"hits": sum(s.cache_hits.values()), "misses": sum(s.cache_misses.values()),
-                  "module": k.__file__, "code": d.py_func.__code__.co_filename, "cache_path": s.cache_path}))
+s = d.stats if jitted else None
+print(json.dumps({"hits": s and sum(s.cache_hits.values()), "misses": s and sum(s.cache_misses.values()),
+                  "module": k.__file__, "code": (d.py_func if jitted else d).__code__.co_filename,
+                  "cache_path": s and s.cache_path, "cached_before": before,
+                  "cached_after": _jit.cached(d) if jitted else None}))
 """
 
 
-def _probe(checkout: Path, cache_root: Path) -> dict:
-    env = {"RANGEPLAN_KERNEL_CACHE": str(cache_root), "HOME": str(cache_root.parent), "PATH": "/usr/bin:/bin",
+def _probe(checkout: Path, cache_root: Path, **extra: str) -> dict:
+    env = {**extra, "RANGEPLAN_KERNEL_CACHE": str(cache_root), "HOME": str(cache_root.parent), "PATH": "/usr/bin:/bin",
            "PYTHONPATH": str(checkout), "PYTHONDONTWRITEBYTECODE": "1", "OPENBLAS_NUM_THREADS": "1"}
     out = subprocess.run([sys.executable, "-c", PROBE], env=env, cwd=checkout, capture_output=True, text=True,
                          timeout=600)
@@ -60,11 +65,13 @@ def test_another_checkout_and_a_moved_cache_load_what_one_compiled(tmp_path):
     cache = tmp_path / "kernels"
     first = _probe(ROOT, cache)
     assert (first["hits"], first["misses"]) == (0, 1)  # a new cache: compiled
+    assert (first["cached_before"], first["cached_after"]) == (False, True)
     copy = cache / _jit.kernel_key()[:16] / "planner" / "model" / "kernels.py"
     assert first["code"] == str(copy) and first["cache_path"] == str(copy.parent / "__pycache__")
     second = _probe(other, cache)
     assert second["module"] == str(other / "planner" / "model" / "kernels.py")  # the other checkout's module
     assert (second["hits"], second["misses"]) == (1, 0), second  # loaded, not compiled
+    assert second["cached_before"] is True
     assert second["code"] == first["code"]
     moved = tmp_path / "elsewhere" / "kernels"
     moved.parent.mkdir()
@@ -116,6 +123,30 @@ def test_each_kernel_names_a_faithful_copy_of_its_module():
         first = d.py_func.__code__.co_firstlineno
         assert linecache.getline(str(copy), first) == original.read_text().splitlines(True)[first - 1], name
         assert inspect.getsource(d.py_func).lstrip().startswith(("@njit", "def "))
+
+
+def test_cached_is_numbas_own_reading_of_its_index():
+    """:func:`planner._jit.cached` (the index file exists) agrees with numba's own reading of the
+    index (private, read by this test only) for every kernel after a warm-up, which compiled
+    nearly all of them (not the few no plan calls)."""
+    from planner.orchestrator.background import kernels_ready
+
+    if not kernels_ready():
+        import planner
+        planner.warm_up()
+    kernels = {n: d for n, d in compiling.kernel_dispatchers().items() if not compiling._inlined(d)}
+    assert len(kernels) >= 40
+    for name, d in kernels.items():
+        assert _jit.cached(d) is bool(d._cache._cache_file._load_index()), name
+    assert sum(_jit.cached(d) for d in kernels.values()) >= len(kernels) - 3
+
+
+def test_without_the_jit_the_kernels_are_the_checkouts_functions(tmp_path):
+    """``NUMBA_DISABLE_JIT=1`` (debugging a kernel in Python): the functions run as they are,
+    their tracebacks naming the checkout's file."""
+    got = _probe(ROOT, tmp_path / "kernels", NUMBA_DISABLE_JIT="1")
+    assert got["code"] == got["module"] == str(ROOT / "planner" / "model" / "kernels.py")
+    assert got["hits"] is None and got["cached_before"] is None  # a Python function, no dispatcher
 
 
 def test_a_kernel_outside_the_keyed_modules_is_refused():
