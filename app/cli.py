@@ -13,15 +13,14 @@ planner, nothing written after the command has ended (an output file is replaced
 
 from __future__ import annotations
 
-import os
+from planner._config import single_threaded_blas
 
-# small dense matrices: single-threaded BLAS is much faster (must be set before numpy loads)
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+single_threaded_blas()  # before numpy loads
 
 import argparse  # noqa: E402
 import contextlib  # noqa: E402
 import json  # noqa: E402
+import os  # noqa: E402
 import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import TYPE_CHECKING  # noqa: E402

@@ -1,13 +1,14 @@
 """The compiled kernels of a read-only installation (the container image, issue 15).
 
 The planner caches its compiled kernels in ``NUMBA_CACHE_DIR/rangeplan-<key>`` when that is set
-(:mod:`planner._jit`; the key: the kernel sources' content); a read-only cache is loaded from,
-but kernels compiled later cannot be saved there. An image built with ``NUMBA_CPU_NAME=generic``
-(code for any x86-64, so the cache is not tied to the build machine's CPU) compiles the
-kernels at build time into a read-only seed (``RANGEPLAN_KERNEL_SEED``); at start
-:func:`seed_kernel_cache` copies it into ``NUMBA_CACHE_DIR`` (e.g. on a tmpfs ``/tmp``)
-before the planner is imported, so a container started ``--read-only`` under any user
-loads the kernels in a second instead of compiling them for minutes. The copy's directories
+(:mod:`planner._jit`; the key: the kernel sources' content; the tree holds no absolute path, so
+it can be copied); a read-only one is copied into the user's private cache first. An image
+built with ``NUMBA_CPU_NAME=generic`` (code for any x86-64, so the cache is not tied to the
+build machine's CPU) compiles the kernels at build time into a read-only seed
+(``RANGEPLAN_KERNEL_SEED``); at start :func:`seed_kernel_cache` copies it into
+``NUMBA_CACHE_DIR`` (e.g. on a tmpfs ``/tmp``) before the planner is imported, so a container
+started ``--read-only`` under any user loads the kernels in a second instead of compiling them
+for minutes. The copy's directories
 are made mode 0755 whatever the umask: the planner loads kernels only from a directory no one
 but its owner (or root) can write (:mod:`planner._private`).
 """

@@ -11,10 +11,9 @@ bound to a non-loopback address without a token unless ``allow_unauthenticated``
 
 from __future__ import annotations
 
-import os
+from planner._config import single_threaded_blas
 
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+single_threaded_blas()  # before numpy loads
 
 import sys  # noqa: E402
 

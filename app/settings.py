@@ -1,14 +1,18 @@
 """The service's one settings object: every ``RANGEPLAN_*`` environment variable (and the
-two variables of other programs the service follows, ``XDG_DATA_HOME`` and numba's
-``NUMBA_CACHE_DIR``), its CLI flag where there is one, its default and its meaning, in one
-table (:class:`Settings`).
+variables of other programs the service follows: ``XDG_DATA_HOME``, ``XDG_CACHE_HOME``,
+numba's ``NUMBA_CACHE_DIR``, glibc's ``MALLOC_TRIM_THRESHOLD_``), its CLI flag where there is
+one, its default and its meaning, in one table (:class:`Settings`).
 
 Read with :func:`settings` (the environment at the time of the call, or a given mapping; a
 value that does not parse is a :class:`SettingsError` naming the variable and the cause,
 never a silent default). This module is the only one of ``app/`` that reads the environment
-for configuration (a test checks it); the typed client's token is :func:`client_token`. The
-README's configuration table is :func:`settings_table` (a test keeps them equal;
-``python -m app.settings`` prints it). No web framework, planner or editor import.
+for configuration (a test checks it). The planner's own variables (where its compiled
+kernels are kept: ``RANGEPLAN_KERNEL_CACHE``, ``NUMBA_CACHE_DIR``, ``XDG_CACHE_HOME``) are
+read by ``planner/_config.py``, as the planner cannot import ``app/``: their fields here are
+their documentation, and a test keeps both readings equal. The typed client's token is
+:func:`client_token`. The manual's configuration table is :func:`settings_table` (a test
+keeps them equal; ``python -m app.settings`` prints it). No web framework, planner or editor
+import.
 """
 
 from __future__ import annotations
@@ -118,10 +122,17 @@ class Settings(BaseModel):
     dask_malloc: str = _f("relax", "glibc malloc tuning of Dask workers (relax | keep)")
     # -- kernels
     kernel_seed: Path | None = _f(None, "Compiled-kernel cache copied into NUMBA_CACHE_DIR before the planner loads")
+    kernel_cache: Path | None = _f(None, "Directory of the planner's compiled-kernel caches (one per kernel source "
+                                   "version, <dir>/<key>, shared by every checkout and install of that source; read "
+                                   "by the planner itself, planner/_config.py)",
+                                   default_text="$XDG_CACHE_HOME/rangeplan/kernels or ~/.cache/rangeplan/kernels")
     # -- other programs' variables the service follows (named as they are, no prefix)
     numba_cache_dir: Path | None = _f(None, "numba's compiled-kernel cache directory (numba's own variable; the "
                                       "kernel seed is copied there)", validation_alias="NUMBA_CACHE_DIR",
                                       default_text="unset (the planner picks its cache)")
+    xdg_cache_home: Path | None = _f(None, "Base directory of user caches (the XDG variable); the kernel cache "
+                                     "defaults to its rangeplan/kernels/", validation_alias="XDG_CACHE_HOME",
+                                     default_text="~/.cache")
     xdg_data_home: Path | None = _f(None, "Base directory of user data (the XDG variable); the store defaults to "
                                     "its rangeplan/", validation_alias="XDG_DATA_HOME",
                                     default_text="~/.local/share")

@@ -34,11 +34,11 @@ imported the planner and loaded (or compiled) the kernels by planning tiny corri
 
 from __future__ import annotations
 
-import os
+from planner._config import single_threaded_blas
 
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+single_threaded_blas()  # before numpy loads
 
+import os  # noqa: E402
 import queue  # noqa: E402
 import socket  # noqa: E402
 import subprocess  # noqa: E402
@@ -188,7 +188,7 @@ class _Worker:
       server that imported the planner and loaded its kernels (:mod:`app.worker_template`):
       ready in milliseconds; the first one waits for the fork server's own warm-up. Its
       workers see the environment the server had when the fork server started (its first
-      pool), not a later ``os.environ`` change (one fork server per server process);
+      pool), not a later change of the environment (one fork server per server process);
     * ``"exec"``: ``python -m app.workers FD MEMORY_MB PARENT_PID PDEATHSIG``, a fresh
       interpreter that never re-imports the server's ``__main__`` and loads the planner
       itself (1-3 s), over a socket pair.

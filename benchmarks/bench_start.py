@@ -4,7 +4,7 @@
     python benchmarks/bench_start.py --profile-compile      # each kernel's compile time
     python benchmarks/bench_start.py --workers [--rounds 5]  # the service's workers, by start method
     python benchmarks/bench_start.py --breakdown [--refresh] # where a warm plan's time goes
-    python benchmarks/bench_start.py --load-order --rounds 7 # kernels loaded with/without numba's refresh
+    python benchmarks/bench_start.py --load-order            # gone (issue 34): numba always refreshes now
     python benchmarks/bench_start.py --make-run              # make run on a fresh clone to the first answer
 
 Every figure is one child process (``OPENBLAS_NUM_THREADS=1``), timed by wall clock and by
@@ -370,8 +370,7 @@ def breakdown(rounds: int, refresh: bool) -> None:
     for _ in range(rounds):
         out = subprocess.run([PY, "-c", BREAKDOWN_CODE, str(TABLE1)] + (["--refresh"] if refresh else []), cwd=ROOT,
                              capture_output=True, text=True, check=True,
-                             env={**os.environ, "OPENBLAS_NUM_THREADS": "1",
-                                  "RANGEPLAN_KERNEL_REFRESH": "1" if refresh else "0"})
+                             env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
         runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
     start = [timed([PY, "-c", "pass"], ROOT) for _ in range(rounds)]
     print("\n| step | wall [s] | CPU [s] |\n|---|---:|---:|")
@@ -384,35 +383,6 @@ def breakdown(rounds: int, refresh: bool) -> None:
     print("\nkernels loaded from the cache by the first plan, CPU s: " + ", ".join(
         f"{n} {statistics.median(r['loaded'].get(n, 0.0) for r in runs):.3f}"
         for n in names))
-    print(f"# load average after: {load()}")
-
-
-LOAD_ORDER_CODE = r"""
-import json, sys, time, planner, planner.orchestrator.plan
-from numba.core.registry import cpu_target
-cpu_target.target_context
-req = json.load(open(sys.argv[1]))
-t = time.process_time()
-planner.plan(req)
-print(time.process_time() - t)
-"""
-
-
-def load_order(rounds: int) -> None:
-    """CPU seconds of the first Table I plan of a new process (the planner imported: loading
-    its kernels, dispatching, planning), loading the kernels in numba's own order (the whole
-    target context refreshed first) and in planner._jit's (no refresh), alternating."""
-    print(f"# load average before: {load()}")
-    res: dict[str, list[float]] = {"numba's order (refresh)": [], "planner._jit (no refresh)": []}
-    for _ in range(rounds):
-        for label, flag in zip(res, ("1", "0")):
-            out = subprocess.run([PY, "-c", LOAD_ORDER_CODE, str(TABLE1)], cwd=ROOT, capture_output=True, text=True,
-                                 check=True, env={**os.environ, "OPENBLAS_NUM_THREADS": "1",
-                                                  "RANGEPLAN_KERNEL_REFRESH": flag})
-            res[label].append(float(out.stdout.strip().splitlines()[-1]))
-    print("\n| loading | first plan CPU [s], median | min | max |\n|---|---:|---:|---:|")
-    for label, v in res.items():
-        print(f"| {label} | {statistics.median(v):.3f} | {min(v):.3f} | {max(v):.3f} |")
     print(f"# load average after: {load()}")
 
 
@@ -449,9 +419,9 @@ def main() -> None:
     if args.breakdown:
         breakdown(args.rounds, args.refresh)
         return
-    if args.load_order:
-        load_order(args.rounds)
-        return
+    if args.load_order:  # planner._jit no longer skips numba's refresh (public API only, issue 34)
+        sys.exit("--load-order is gone: planner._jit loads kernels through numba's public API, which refreshes "
+                 "numba's target context first (compare revisions with --base instead)")
     print(f"# {os.cpu_count()} CPUs; load average before: {load()}")
     t_start = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmpdir:

@@ -30,7 +30,8 @@ from planner.orchestrator.background import LOCK, MARKER, kernels_ready
 ROOT = Path(__file__).resolve().parent.parent
 TABLE1_PATH = ROOT / "app" / "static" / "examples" / "table1.json"
 TABLE1 = json.loads(TABLE1_PATH.read_text())
-LEFT_OUT = "orchestrator/kernels.simulate_constrained-"  # the kernel the background compile compiles
+#: the kernel the background compile compiles (numba keeps it beside the copy of its module)
+LEFT_OUT = "planner/orchestrator/__pycache__/kernels.simulate_constrained-"
 
 
 def _pids(cache: Path) -> set[int]:

@@ -24,25 +24,26 @@ NOBODY = 65534
 KERNEL = "kernels.smallest_singular_values-"  # a small kernel of planner/model/kernels.py
 
 #: run the small kernel in a new interpreter; print its cache hits and misses and the cache used
-#: (``DROP``: as uid/gid 65534, after importing as root what the interpreter's 0700 home hides;
-#: the kernel's cache is then made anew, as a process of that uid would)
+#: (``DROP``: as uid/gid 65534, after importing as root what the interpreter's 0700 home hides,
+#: numba's compiler included; the planner's kernels, whose cache is resolved when they are
+#: declared, are imported after)
 PROBE = """
 import json, os, sys
 import numpy as np
+import numba
 from planner import _jit
+if os.environ.get("DROP"):
+    import planner.schema  # pydantic (what the kernels module imports besides numpy)
+    numba.njit(lambda x: x + 1)(1)  # numba loads its compiler's modules (the stdlib's included) as root
+    os.setgroups([]); os.setgid(65534); os.setuid(65534)
 from planner.model import kernels as k
 d = k.smallest_singular_values
-if os.environ.get("DROP"):
-    os.setgroups([]); os.setgid(65534); os.setuid(65534)
-    if hasattr(_jit, "kernel_cache"):
-        _jit.kernel_cache.cache_clear()
-    d._cache = _jit._KernelCache(d.py_func)
 d(np.eye(3)[None])
 s = d.stats
-cache = _jit.kernel_cache() if hasattr(_jit, "kernel_cache") else None
+cache = _jit.kernel_cache()
 print(json.dumps({"hits": sum(s.cache_hits.values()), "misses": sum(s.cache_misses.values()),
-                  "path": str(cache.path) if cache else None, "writable": cache.writable if cache else None,
-                  "later": cache.later() if cache else None}))
+                  "path": str(cache.path), "copied_from": str(cache.copied_from), "later": cache.later(),
+                  "numba_cache_dir": numba.config.CACHE_DIR}))
 """
 
 
@@ -55,16 +56,27 @@ def _probe(env: dict) -> tuple[dict, str]:
     return json.loads(out.stdout.strip().splitlines()[-1]), out.stderr
 
 
+def _kernel_files(cache: Path) -> list[Path]:
+    """The small kernel's index and object files in the kernel cache ``cache`` (numba's own
+    layout beside the copy of its module: ``planner/model/__pycache__/kernels.<name>-<line>.py311
+    [.n.nbc|.nbi]``)."""
+    return list(cache.glob("planner/model/__pycache__/" + KERNEL + "*"))
+
+
 def _plant(cache: Path) -> None:
-    """Copy this machine's compiled small kernel into ``cache/model``."""
+    """Copy this machine's compiled small kernel (not the module copy: the probe writes it) into
+    the kernel cache ``cache``."""
     if not kernels_ready():
         import planner
         planner.warm_up()
-    files = list((_jit.kernel_cache_dir() / "model").glob(KERNEL + "*"))
+    files = _kernel_files(_jit.kernel_cache_dir())
     assert files, "the machine's cache lacks the kernel"
-    (cache / "model").mkdir(parents=True, mode=0o755)
     for f in files:
-        shutil.copy2(f, cache / "model" / f.name)
+        target = cache / f.relative_to(_jit.kernel_cache_dir())
+        target.parent.mkdir(parents=True, mode=0o755, exist_ok=True)
+        shutil.copy2(f, target)
+    for d in (cache, *(p for p in cache.rglob("*") if p.is_dir())):
+        os.chmod(d, 0o755)
 
 
 def test_the_rule(tmp_path):
@@ -112,27 +124,51 @@ def test_a_cache_others_can_write_is_not_loaded(tmp_path):
     assert lines == [f"rangeplan: kernels not loaded from {shared / _jit.kernel_key()[:16]}: {shared} is writable "
                      f"by others (mode 0777); using private cache {private}"], err
     assert os.stat(private).st_mode & 0o777 == 0o700
-    assert (private / "model").is_dir()  # saved there for the next run
+    assert _kernel_files(private)  # saved there for the next run
+    assert got["numba_cache_dir"] == ""  # numba's own setting is left as it was
     os.chmod(shared, 0o755)
 
 
 @pytest.mark.skipif(os.geteuid() != 0, reason="needs root to run a process as another uid")
 def test_a_read_only_seed_of_root_is_loaded_by_another_uid():
     """The container's case: a root-owned cache (mode 0755) holding the kernels is loaded, not
-    compiled, by a process of another uid, which cannot write it."""
+    compiled, by a process of another uid, which cannot write it: its kernels are copied into
+    that user's private cache (numba loads only from a directory it can write)."""
     top = Path(tempfile.mkdtemp(prefix="rangeplan-seed-"))  # in /tmp: uid 65534 can reach it
     try:
         os.chmod(top, 0o755)
         cache = top / f"rangeplan-{_jit.kernel_key()[:16]}"
         _plant(cache)
-        os.chmod(cache, 0o755)
-        got, err = _probe({"NUMBA_CACHE_DIR": str(top), "HOME": str(top), "DROP": "1"})
+        home = top / "home"
+        home.mkdir(mode=0o755)
+        os.chown(home, NOBODY, NOBODY)
+        got, err = _probe({"NUMBA_CACHE_DIR": str(top), "HOME": str(home), "DROP": "1"})
         assert (got["hits"], got["misses"]) == (1, 0), (got, err)
-        assert got["path"] == str(cache) and got["writable"] is False
-        assert got["later"] == f"for this process only: {cache} cannot be written"
+        private = home / ".cache" / "rangeplan" / "kernels" / _jit.kernel_key()[:16]
+        assert got["path"] == str(private) and got["copied_from"] == str(cache), got
         assert "kernels not loaded" not in err
+        assert {f.name for f in _kernel_files(cache)} == {f.name for f in _kernel_files(private)}
     finally:
         shutil.rmtree(top)
+
+
+def test_a_closed_directory_of_ours_is_trusted_whatever_the_umask(tmp_path):
+    """numba writes its files with the umask's modes: with a umask that lets the group write,
+    the kernels of a cache directory only this user may enter (mode 0700) still load (no one
+    else can reach them), while the same files in an open directory are refused."""
+    home = tmp_path / "home"
+    home.mkdir()
+    cache = tmp_path / "kernels"
+    _plant(cache / _jit.kernel_key()[:16])
+    for f in (cache / _jit.kernel_key()[:16]).rglob("*"):
+        os.chmod(f, 0o775 if f.is_dir() else 0o664)
+    env = {"RANGEPLAN_KERNEL_CACHE": str(cache), "HOME": str(home)}
+    got, err = _probe(env)
+    assert got["path"] != str(cache / _jit.kernel_key()[:16]) and "is writable by others (mode 0" in err, (got, err)
+    os.chmod(cache / _jit.kernel_key()[:16], 0o700)
+    got, err = _probe(env)
+    assert (got["hits"], got["misses"]) == (1, 0) and got["path"] == str(cache / _jit.kernel_key()[:16]), (got, err)
+    assert "kernels not loaded" not in err
 
 
 #: makes the background compile's warm-up fail as on a full disk (sitecustomize of its interpreter)

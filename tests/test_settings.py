@@ -24,7 +24,7 @@ def test_manual_table_is_the_settings_object():
     rows = [r for r in m.group(1).splitlines() if r.startswith("| `")]
     assert [r.split("`")[1] for r in rows] == [env_name(k) for k in Settings.model_fields]
     assert {env_name(k) for k in Settings.model_fields if not env_name(k).startswith("RANGEPLAN_")} == {
-        "XDG_DATA_HOME", "NUMBA_CACHE_DIR", "MALLOC_TRIM_THRESHOLD_"}
+        "XDG_DATA_HOME", "XDG_CACHE_HOME", "NUMBA_CACHE_DIR", "MALLOC_TRIM_THRESHOLD_"}
 
 
 def test_values_come_from_the_environment(monkeypatch):
@@ -95,9 +95,8 @@ def _environment_uses(path: Path) -> list[tuple[str, str]]:
 
 def test_only_the_settings_module_reads_the_environment():
     """Configuration is read in one place: no module of app/ but app/settings.py reads an
-    environment variable or hands the environment on, apart from the listed process state;
-    the only other use is ``setdefault`` (the BLAS thread counts cli, server and workers set)."""
+    environment variable or hands the environment on, apart from the listed process state
+    (the BLAS thread counts cli, server and workers set: ``planner._config.single_threaded_blas``)."""
     uses = [u for p in sorted((ROOT / "app").rglob("*.py")) if p.name != "settings.py"
             for u in _environment_uses(p)]
-    assert {u for u in uses if u[1] != "setdefault"} == _NOT_CONFIGURATION
-    assert {u[0] for u in uses if u[1] == "setdefault"} == {"app/cli.py", "app/server.py", "app/workers.py"}
+    assert set(uses) == _NOT_CONFIGURATION

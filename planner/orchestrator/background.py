@@ -38,7 +38,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from .._jit import kernel_cache, kernel_cache_dir, kernel_key, save_error
+from .._jit import kernel_cache, kernel_cache_dir, kernel_key
 
 __all__ = ["BackgroundCompile", "FAILED", "LOCK", "LOG", "MARKER", "compile_in_background", "earlier_failure",
            "kernels_ready", "mark_compiled", "running_compile", "while_compiling"]
@@ -70,9 +70,9 @@ _NOFOLLOW = os.O_NOFOLLOW | os.O_CLOEXEC
 
 
 def mark_compiled() -> None:
-    """Write the done-marker (after a full warm-up whose kernels were all saved; nothing when
-    the cache is not writable)."""
-    if not kernel_cache().lasting or save_error() is not None:
+    """Write the done-marker (after a full warm-up, whose kernels numba saved or raised; nothing
+    when the cache is temporary)."""
+    if not kernel_cache().lasting:
         return
     try:
         fd = os.open(kernel_cache_dir() / MARKER, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | _NOFOLLOW, 0o644)
@@ -311,10 +311,7 @@ def _background_main(fd: int, warm_up: Callable[[], float]) -> None:
     print(f"background compile (pid {os.getpid()}) started {time.strftime('%Y-%m-%d %H:%M:%S')}", flush=True)
     try:
         with compile_progress(sys.stdout, interval=10.0):
-            seconds = warm_up()
-        unsaved = save_error()
-        if unsaved is not None:
-            raise unsaved
+            seconds = warm_up()  # a kernel numba cannot save (a full disk) raises its OSError
     except Exception as exc:
         cause = f"{type(exc).__name__}: {exc}"
         _record_failure(kernel_cache_dir(), cause)

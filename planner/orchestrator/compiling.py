@@ -25,7 +25,7 @@ from contextlib import contextmanager
 from typing import Any, TextIO
 
 from numba.core import event
-from numba.core.registry import CPUDispatcher
+from numba.extending import is_jitted
 
 from .. import _jit
 from ..constraints import registry as _registry
@@ -68,16 +68,16 @@ def kernel_dispatchers() -> dict[str, Any]:
     for name in KERNEL_MODULES:
         module = importlib.import_module(name)
         for attr, value in vars(module).items():
-            if isinstance(value, CPUDispatcher) and value.__module__ == name:
+            if is_jitted(value) and value.__module__ == name:
                 found[f"{name.rsplit('.', 1)[-1]}.{attr}"] = value
     return found
 
 
 def _cached(dispatcher: Any) -> bool | None:
     """Whether numba's on-disk cache holds compiled code of this kernel's current source
-    (None: cannot tell). Reads numba's cache index (a private but long-stable interface)."""
+    (None: cannot tell): :func:`planner._jit.cached` (its index file, numba's layout)."""
     try:
-        return bool(dispatcher._cache._cache_file._load_index())
+        return _jit.cached(dispatcher)
     except Exception:
         return None
 
@@ -178,7 +178,7 @@ class _Progress(event.Listener):
             self.thread.join()
             elapsed = time.perf_counter() - (self.t0 or time.perf_counter())
             n = len(self.done & self.pending) if self.pending else len(self.done)
-            kept = _jit.kernel_cache().lasting and _jit.save_error() is None
+            kept = _jit.kernel_cache().lasting
             self._write(f"compiled {n} kernels in {elapsed:.0f} s "
                         f"({'cached for the next runs' if kept else 'for this process only'})", final=True)
 
