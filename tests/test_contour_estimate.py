@@ -169,3 +169,45 @@ def test_a_pass_too_large_for_any_tube_is_refused_up_front():
         estimate_contour({"program": circles(rng, 1000, per_pass=1000).text})
     assert estimate_contour({"program": long_pass(rng, 400).text})[0] > 0
     assert estimate_contour({"program": circles(rng, 300, per_pass=100).text})[0] > 0
+
+
+def test_one_walk_for_the_estimate_and_the_placement():
+    """The estimate's free moves and the placement's travel boxes come from one walk of the
+    program (:func:`planner.contour.passes.walk_program`): two rapids in a row are one move
+    from where the tool is to where the second ends (a rapid to where the tool is joins the
+    next); each free move is a box the placement checks; each step starts where the one before
+    ended (a cut within half the tolerance of it)."""
+    import math
+
+    import numpy as np
+
+    from planner.contour.estimate import _travels
+    from planner.contour.passes import walk_program
+    from planner.contour.placement import _program_shapes
+
+    text = ("G21 G90\nG0 Z2\nG0 X1 Y1\nG0 X2 Y2\nG1 Z-0.5 F300\nG1 X3 F600\nG0 Z2\nG0 X3\nG0 X5\n"
+            "G1 Z-0.5 F300\nG1 X6 F600\nG0 Z2\nM2\n")
+    program = read_gcode(text)
+    tol = 5e-5
+    steps = list(walk_program(program, tol))
+    assert [s.kind for s in steps] == ["travel", "cut", "travel", "cut"]
+    assert steps[0].start == pytest.approx([0, 0]) and steps[0].end == pytest.approx([0.002, 0.002])
+    assert steps[2].start == pytest.approx([0.003, 0.002]) and steps[2].end == pytest.approx([0.005, 0.002])
+    for a, b in zip(steps, steps[1:]):
+        assert math.hypot(*(b.start - a.end)) <= (0.5 * tol if b.kind == "cut" else 1e-12)
+    assert _travels(program, tol) == pytest.approx([math.hypot(0.002, 0.002), 0.002])
+    shapes = _program_shapes(program, tol)
+    boxes = [g for _, g in shapes if g.geom_type == "Polygon"]
+    assert len(boxes) == 2  # one a travel run
+    for box, s in zip(boxes, [steps[0], steps[2]]):
+        x0, y0, x1, y1 = box.bounds
+        lo, hi = np.minimum(s.start, s.end), np.maximum(s.start, s.end)
+        assert (x0, y0) == pytest.approx(lo - 0.002) and (x1, y1) == pytest.approx(hi + 0.002)
+    # the same walk on a generated program: every free move the estimate counts is a box
+    from tests.contour_programs import tiny_passes
+
+    p2 = read_gcode(tiny_passes(np.random.default_rng(3), 12).text)
+    moves = _travels(p2, tol)
+    free = [s for s in walk_program(p2, tol) if s.kind != "cut"]
+    assert len(moves) == sum(math.hypot(*(s.end - s.start)) > 1e-9 for s in free)
+    assert len([g for _, g in _program_shapes(p2, tol) if g.geom_type == "Polygon"]) >= len(moves) >= 12

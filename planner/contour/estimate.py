@@ -25,7 +25,7 @@ from .passes import (
     parse_contour_request,
     read_program,
     tolerance_of,
-    travel_run_end,
+    walk_program,
 )
 from .placement import check_reach
 from .profiles import GRID_H_MAX, GRID_H_MIN, GRID_POINTS, GRID_POINTS_MIN
@@ -264,28 +264,13 @@ def _corners(els: list[PathElement]) -> int:
 
 def _travels(program: Program, tol: float) -> list[float]:
     """The lengths [m] of the free moves :func:`~planner.contour.plan.plan_contour` plans, in
-    the program frame (the origin moves both ends alike): a run of travel blocks from where
-    the tool is to where the last ends, and a cut pass that starts more than half the
-    tolerance away from the tool (as its walk does, without planning)."""
+    the program frame (the origin moves both ends alike; :func:`~planner.contour.passes.walk_program`):
+    the runs of travel blocks that move the tool and the approaches to cut passes."""
     out: list[float] = []
-    pos = np.asarray(program.start, float)
-    blocks = program.blocks
-    i = 0
-    while i < len(blocks):
-        b = blocks[i]
-        if b.kind == "travel":
-            j = travel_run_end(blocks, i)
-            end = np.asarray(blocks[j].elements[-1].end, float)
-            if math.hypot(*(end - pos)) > 1e-9:
-                out.append(math.hypot(*(end - pos)))
-            pos, i = end, j + 1
-            continue
-        if b.kind == "cut" and b.elements:
-            gap = math.hypot(*(np.asarray(b.elements[0].start, float) - pos))
-            if gap > 0.5 * tol:
-                out.append(gap)
-            pos = np.asarray(b.elements[-1].end, float)
-        i += 1
+    for step in walk_program(program, tol):
+        d = math.hypot(*(step.end - step.start))
+        if step.kind != "cut" and d > 1e-9:
+            out.append(d)
     return out
 
 
