@@ -45,7 +45,10 @@ __all__ = ["ADVICE_MIN_S", "ADVICE_WORK", "CONTOUR_CELL_PLAN_S", "CONTOUR_CELL_S
 #: :class:`planner.WorkEstimate`'s ``advice_seconds``); :func:`estimate_contour` names the bound
 ADVICE_WORK = 3.0
 ADVICE_MIN_S = 4.0
-#: The unit costs [s] below are CPU seconds fitted (non-negative least squares on the relative
+#: All the estimate's constants are in this module (refit or re-check them after a change of the
+#: planner's costs: ``benchmarks/bench_contour_estimate.py --json rows.jsonl`` measures,
+#: ``benchmarks/refit_contour_estimate.py rows.jsonl`` re-estimates the rows with the constants as
+#: they are). The unit costs [s] below are CPU seconds fitted (non-negative least squares on the relative
 #: error) to 36 generated programs (issue 35 goal 5, ``tests/contour_programs.py`` and the
 #: staircases, waves and circles of ``benchmarks/bench_estimates.py``,
 #: ``benchmarks/bench_contour_estimate.py``: 1-100 tiny passes, single passes of 40-500 lines,
@@ -437,7 +440,9 @@ def _samples(feed: str, elements: list[PathElement], Ts: float) -> float:
 #: early) and bisects it (~8 plans near the edge of feasibility, each 4-6x a comfortable plan of
 #: its samples): measured at Ts 2 ms on one pass of 10, 20 and 50 full circles of r 0.1 mm at
 #: F1200, 6.1, 27 and more than 130 CPU s (16 plans, 62 049 samples planned for a pass of 3 253);
-#: the cost grows with the square of the circles in the pass (the edge is the worst circle's)
+#: the cost grows with the square of the circles in the pass (the edge is the worst circle's).
+#: At 1 ms 8 such circles: 30.7 CPU s (2.1x the estimate without this term); at 5 ms 20 circles
+#: plan twice (1.0 CPU s), at 10 ms four times (within the estimate's plans)
 TIGHT_TURN2_S = (0.25, 0.05, 0.0, 0.0)
 
 
