@@ -4,7 +4,7 @@ all at the top of the module) or of the planner's costs, the rows that
 ``benchmarks/bench_contour_estimate.py --json rows.jsonl`` wrote (the program's index in
 :func:`tests.contour_programs.cases`, its seed, the measured CPU) are estimated again with the
 current code and their CPU / estimate printed with the least, median and largest by feed and
-by sample time.
+by sample time (a program measured in several files: its last measurement).
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/refit_contour_estimate.py rows.jsonl [more.jsonl]
 
@@ -33,7 +33,15 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("rows", nargs="+", help="JSON lines of bench_contour_estimate.py --json")
     args = ap.parse_args()
-    rows = [json.loads(line) for f in args.rows for line in Path(f).read_text().splitlines() if line.strip()]
+    by_case: dict[tuple, dict] = {}  # a program measured in several files: the last measurement
+    for f in args.rows:
+        for line in Path(f).read_text().splitlines():
+            if line.strip():
+                r = json.loads(line)
+                key = (r["seed"], r["large"], r["index"])
+                if r["cpu"] is not None or key not in by_case or by_case[key]["cpu"] is None:
+                    by_case[key] = r
+    rows = list(by_case.values())
     made: dict[tuple[int, bool], list] = {}
     print("| program | feed | Ts ms | est s (then) | est s (now) | CPU s | CPU/est | outcome |")
     print("|---|---|---|---|---|---|---|---|")

@@ -39,7 +39,7 @@ CASES = {
 
 @pytest.mark.serial  # compares CPU seconds with the estimate
 @pytest.mark.parametrize("name", list(CASES))
-def test_estimate_holds_both_ways(name):
+def test_estimate_holds_both_ways(name, _warm):
     req = ContourRequest.model_validate(CASES[name])
     t0 = time.process_time()
     program = read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
