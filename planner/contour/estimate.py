@@ -67,7 +67,7 @@ CONTOUR_CELL_S = {"program": 0.0, "fastest": 0.0}
 CONTOUR_PIECE_S = {"program": 4.4e-3, "fastest": 0.0}
 #: seconds more a sample on an arc costs each candidate plan at Ts 10 ms, by feed (set from the
 #: staircases, waves and tiny circles of bench_estimates.py, 1.7-1.9x under the fit without it)
-CONTOUR_ARC_STEP_S = {"program": 1.45e-4, "fastest": 0.0}
+CONTOUR_ARC_STEP_S = {"program": 2.2e-4, "fastest": 0.0}
 #: seconds of a corner (:attr:`ContourCounts.corners`) each candidate plan at Ts 10 ms, by feed
 CONTOUR_CORNER_S = {"program": 2.8e-4, "fastest": 3.0e-4}
 #: seconds of a grid point of a time-optimal profile (:func:`_grid`)
@@ -98,7 +98,7 @@ TRAVEL_FINE_M_S = 0.021
 #: 7.5 and 4.8 at 1 and 2 ms made ``program`` 0.33-0.69x at 1 ms and ``fastest`` 0.12-0.32x at
 #: 1 ms, 0.27-0.61x at 2 ms; ``program`` at 2 ms 5.2 (one depth pass measured 1.31-1.43x at 4.8)
 SAMPLE_FACTOR_TS = (0.001, 0.002, 0.005, 0.01)
-SAMPLE_FACTOR = {"program": (4.5, 5.2, 1.2, 1.0), "fastest": (3.0, 2.4, 1.3, 1.0)}
+SAMPLE_FACTOR = {"program": (4.5, 5.2, 1.2, 1.0), "fastest": (3.0, 2.4, 1.5, 1.0)}
 SAMPLE_FACTOR_N = (100, 100, 51, 30)
 
 
