@@ -66,7 +66,8 @@ CONTOUR_CELL_S = {"program": 0.0, "fastest": 0.0}
 #: that grow as 1 / Ts), by feed
 CONTOUR_PIECE_S = {"program": 4.4e-3, "fastest": 0.0}
 #: seconds more a sample on an arc costs each candidate plan at Ts 10 ms, by feed (set from the
-#: staircases, waves and tiny circles of bench_estimates.py, 1.7-1.9x under the fit without it)
+#: staircases, waves and tiny circles of bench_estimates.py, 1.7-1.9x under the fit without it;
+#: program 1.45e-4 -> 2.2e-4 on 2026-11-28: 6 half circles in a pass measured 1.46x twice)
 CONTOUR_ARC_STEP_S = {"program": 2.2e-4, "fastest": 0.0}
 #: seconds of a corner (:attr:`ContourCounts.corners`) each candidate plan at Ts 10 ms, by feed
 CONTOUR_CORNER_S = {"program": 2.8e-4, "fastest": 3.0e-4}
