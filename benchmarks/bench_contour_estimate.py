@@ -4,17 +4,25 @@ arcs, Z ramps and helices, long programs of rapids; 1 to 2000 passes, up to 100 
 1-10 ms, feeds ``program`` and ``fastest``).
 
     OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python benchmarks/bench_contour_estimate.py \
-        [--limit 30] [--skip-over 40] [--small] [--only WORDS]
+        [--limit 30] [--skip-over 40] [--work-cap 1200] [--small] [--only WORDS] [--shard K/N] \
+        [--json rows.jsonl]
 
 One row a program: its lines, passes, moves, the estimate [s]
 (:func:`planner.contour.estimate_contour`, after the program is read, as the service's worker
 does), the measured CPU seconds of the work the estimate stands for (reading the program,
-estimating it and planning it, ``time.process_time`` of a forked child: the machine may be
-loaded, wall time is not the figure), their ratio (goal <= 1.5, and not far below 1: an
+estimating it and planning it, ``time.process_time`` of a child forked after the kernels and the
+Z axis's LP are loaded: once-a-process costs, which a service worker pays on its first request;
+the machine may be loaded, wall time is not the figure), their ratio (goal <= 1.5, and not far below 1: an
 estimate too high refuses programs that would finish), and whether ``--limit`` admits it. A
 program estimated over ``--skip-over`` seconds is not planned (``-``); a child still running
 after ``3 x estimate + 10`` CPU seconds is stopped (``stopped``: the estimate is far too
-low). The last lines: the ratios' range and median over the programs planned.
+low). ``--work-cap``: the programs are run while the sum of their estimates stays under it
+(the rest ``not run (work cap)``: the run fits ~20 min of CPU); ``--shard K/N``: every N-th
+program from the K-th (two shards side by side on two cores); ``--json``: a line per program
+(its index in :func:`tests.contour_programs.cases`, feed, Ts, estimate, CPU, outcome) for
+``benchmarks/refit_contour_estimate.py``, which recomputes the ratios with the estimate's current
+constants without planning again. The last lines: the ratios' least, median and largest over the
+programs planned, by feed and by sample time.
 """
 
 from __future__ import annotations
@@ -25,6 +33,7 @@ for _v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import argparse  # noqa: E402
+import json  # noqa: E402
 import math  # noqa: E402
 import multiprocessing as mp  # noqa: E402
 import statistics  # noqa: E402
@@ -33,6 +42,8 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np  # noqa: E402
 
 from tests.contour_programs import cases  # noqa: E402
 
@@ -80,22 +91,41 @@ def main() -> None:
     ap.add_argument("--small", action="store_true", help="without the programs of 500+ passes and 10 000+ lines")
     ap.add_argument("--only", default="", help="only programs whose name contains this")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--work-cap", type=float, default=1200.0, help="the sum of the estimates run at most [s]")
+    ap.add_argument("--shard", default="0/1", help="K/N: every N-th program from the K-th")
+    ap.add_argument("--json", default="", help="append a JSON line per program to this file")
     args = ap.parse_args()
+    shard_k, shard_n = (int(x) for x in args.shard.split("/"))
     from bench_contour import ORIGIN, TOL, program  # type: ignore[import-not-found]
 
     from planner import PlannerError
     from planner.contour import estimate_contour, plan_contour
     from planner.exchange import read_gcode
     from planner.schema import ContourRequest
+    from tests.contour_programs import ramps
 
-    for feed in ("program", "fastest"):  # the kernels loaded (the forked children inherit them)
+    for feed in ("program", "fastest"):  # the kernels loaded (the forked children inherit them), and the
+        # Z axis's LP (scipy.optimize: ~0.5 CPU s, once a process; the 1-ramp program measured 1.54x without it)
         plan_contour({"program": program(1), "origin": ORIGIN, "tolerance_m": TOL, "feed": feed})
+        plan_contour({"program": ramps(np.random.default_rng(0), 1).text, "feed": feed})
     print(f"load: {os.getloadavg()[0]:.1f} (1-min average) on {os.cpu_count()} cores; limit {args.limit:g} s")
     print(f"| program | feed | Ts ms | lines | passes | moves | est s | CPU s | CPU/est | {args.limit:g} s | outcome |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     ratios: list[float] = []
-    for made, req in cases(args.seed, large=not args.small):
+    rows: list[tuple[str, float, float]] = []  # feed, Ts, CPU / estimate
+    spent = 0.0
+
+    def record(index: int, req: dict, est: float | None, cpu: float | None, out: str) -> None:
+        if args.json:
+            with open(args.json, "a") as fh:
+                fh.write(json.dumps({"seed": args.seed, "large": not args.small, "index": index, "feed": req["feed"],
+                                     "Ts": (req.get("settings") or {}).get("Ts", 0.01), "est": est, "cpu": cpu,
+                                     "outcome": out}) + "\n")
+
+    for index, (made, req) in enumerate(cases(args.seed, large=not args.small)):
         if args.only and args.only not in made.name:
+            continue
+        if index % shard_n != shard_k:
             continue
         r = ContourRequest.model_validate(req)
         program_ = read_gcode(r.program, cut_below=r.cut_below_m, z_rapid_m_s=r.z_rapid_m_s)
@@ -104,24 +134,43 @@ def main() -> None:
         except PlannerError as exc:  # refused before any work (a pass no tube fits: too_large)
             print(f"| {made.name} | {req['feed']} | - | {made.text.count(chr(10))} | {made.passes} | {made.moves} | "
                   f"- | - | - | refused | {exc.code} up front |", flush=True)
+            record(index, req, None, None, f"{exc.code} up front")
             continue
         del program_
         Ts = (req.get("settings") or {}).get("Ts", 0.01)
         head = (f"| {made.name} | {req['feed']} | {Ts * 1e3:g} | {made.text.count(chr(10))} | {made.passes} | "
                 f"{made.moves} | {est:.3g} |")
         admitted = "admitted" if est <= args.limit else "refused"
-        if est > args.skip_over:
-            print(f"{head} - | - | {admitted} | not run |", flush=True)
+        if est > args.skip_over or spent + est > args.work_cap:
+            why = "not run" if est > args.skip_over else "not run (work cap)"
+            print(f"{head} - | - | {admitted} | {why} |", flush=True)
+            record(index, req, est, None, why)
             continue
+        spent += est
         cpu, out = measure(req, est)
         if cpu is None:
             print(f"{head} > {3 * est + 10:.3g} | - | {admitted} | {out} |", flush=True)
+            record(index, req, est, None, out)
             continue
         ratios.append(cpu / est)
+        rows.append((req["feed"], Ts, cpu / est))
+        record(index, req, est, cpu, out)
         print(f"{head} {cpu:.3g} | {cpu / est:.2f} | {admitted} | {out} |", flush=True)
-    if ratios:
-        print(f"\nCPU / estimate over {len(ratios)} programs planned: {min(ratios):.2f}-{max(ratios):.2f}, median "
-              f"{statistics.median(ratios):.2f}; over 1.5: {sum(x > 1.5 for x in ratios)}")
+    summary(rows)
+
+
+def summary(rows: list[tuple[str, float, float]]) -> None:
+    """The ratios' least, median and largest: over all programs planned, by feed, by Ts."""
+    if not rows:
+        return
+    groups: dict[str, list[float]] = {"all": [r for _, _, r in rows]}
+    for feed, Ts, r in rows:
+        groups.setdefault(f"feed {feed}", []).append(r)
+        groups.setdefault(f"Ts {Ts * 1e3:g} ms", []).append(r)
+    print("\n| programs | planned | least | median | largest | over 1.5 |\n|---|---|---|---|---|---|")
+    for name, rs in groups.items():
+        print(f"| {name} | {len(rs)} | {min(rs):.2f} | {statistics.median(rs):.2f} | {max(rs):.2f} | "
+              f"{sum(x > 1.5 for x in rs)} |")
 
 
 if __name__ == "__main__":

@@ -241,4 +241,19 @@ def cases(seed: int = 0, large: bool = True) -> list[tuple[Made, dict]]:
         add(depth_passes(rng, n))
     add(depth_passes(rng, 15), "fastest")
     add(depth_passes(rng, 3), Ts=0.002)
+    sweep(rng, add)
     return out
+
+
+def sweep(rng: np.random.Generator, add) -> None:
+    """Small programs of every family at each sample time of the goal (1, 2, 5, 10 ms) in both
+    feeds: where a sample's cost and the search's plans change with Ts (kept small: at Ts 1 ms
+    a sample costs ~5x one at 10 ms)."""
+    for Ts in (0.001, 0.002, 0.005, 0.01):
+        for feed in ("program", "fastest"):
+            add(tiny_passes(rng, 4), feed, Ts=Ts)
+            add(long_pass(rng, 60), feed, Ts=Ts)
+            add(circles(rng, 8, per_pass=8), feed, Ts=Ts)
+            add(arcs(rng, 6, per_pass=6), feed, Ts=Ts)
+            add(ramps(rng, 2), feed, Ts=Ts)
+            add(depth_passes(rng, 1), feed, Ts=Ts)

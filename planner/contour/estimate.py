@@ -25,7 +25,7 @@ from .passes import (
     parse_contour_request,
     read_program,
     tolerance_of,
-    travel_run_end,
+    walk_program,
 )
 from .placement import check_reach
 from .profiles import GRID_H_MAX, GRID_H_MIN, GRID_POINTS, GRID_POINTS_MIN
@@ -45,7 +45,10 @@ __all__ = ["ADVICE_MIN_S", "ADVICE_WORK", "CONTOUR_CELL_PLAN_S", "CONTOUR_CELL_S
 #: :class:`planner.WorkEstimate`'s ``advice_seconds``); :func:`estimate_contour` names the bound
 ADVICE_WORK = 3.0
 ADVICE_MIN_S = 4.0
-#: The unit costs [s] below are CPU seconds fitted (non-negative least squares on the relative
+#: All the estimate's constants are in this module (refit or re-check them after a change of the
+#: planner's costs: ``benchmarks/bench_contour_estimate.py --json rows.jsonl`` measures,
+#: ``benchmarks/refit_contour_estimate.py rows.jsonl`` re-estimates the rows with the constants as
+#: they are). The unit costs [s] below are CPU seconds fitted (non-negative least squares on the relative
 #: error) to 36 generated programs (issue 35 goal 5, ``tests/contour_programs.py`` and the
 #: staircases, waves and circles of ``benchmarks/bench_estimates.py``,
 #: ``benchmarks/bench_contour_estimate.py``: 1-100 tiny passes, single passes of 40-500 lines,
@@ -63,8 +66,9 @@ CONTOUR_CELL_S = {"program": 0.0, "fastest": 0.0}
 #: that grow as 1 / Ts), by feed
 CONTOUR_PIECE_S = {"program": 4.4e-3, "fastest": 0.0}
 #: seconds more a sample on an arc costs each candidate plan at Ts 10 ms, by feed (set from the
-#: staircases, waves and tiny circles of bench_estimates.py, 1.7-1.9x under the fit without it)
-CONTOUR_ARC_STEP_S = {"program": 1.45e-4, "fastest": 0.0}
+#: staircases, waves and tiny circles of bench_estimates.py, 1.7-1.9x under the fit without it;
+#: program 1.45e-4 -> 2.2e-4 on 2026-11-28: 6 half circles in a pass measured 1.46x twice)
+CONTOUR_ARC_STEP_S = {"program": 2.2e-4, "fastest": 0.0}
 #: seconds of a corner (:attr:`ContourCounts.corners`) each candidate plan at Ts 10 ms, by feed
 CONTOUR_CORNER_S = {"program": 2.8e-4, "fastest": 3.0e-4}
 #: seconds of a grid point of a time-optimal profile (:func:`_grid`)
@@ -90,20 +94,23 @@ TRAVEL_END_SAMPLES = 4.0
 TRAVEL_SLOW_M = 0.0095
 TRAVEL_FINE_M_S = 0.021
 #: :func:`sample_factor`: a sample's cost [x Ts 10 ms] at the default horizon, measured at these
-#: sample times [s] (the default horizon: 30, 51, 100 and 100 samples)
+#: sample times [s] (the default horizon: 30, 51, 100 and 100 samples), by feed. Refitted on
+#: the Ts sweep of ``benchmarks/bench_contour_estimate.py`` (2026-11-28): the factors of
+#: 7.5 and 4.8 at 1 and 2 ms made ``program`` 0.33-0.69x at 1 ms and ``fastest`` 0.12-0.32x at
+#: 1 ms, 0.27-0.61x at 2 ms; ``program`` at 2 ms 5.2 (one depth pass measured 1.31-1.43x at 4.8)
 SAMPLE_FACTOR_TS = (0.001, 0.002, 0.005, 0.01)
-SAMPLE_FACTOR = (7.5, 4.8, 1.2, 1.0)
+SAMPLE_FACTOR = {"program": (4.5, 5.2, 1.2, 1.0), "fastest": (3.0, 2.4, 1.5, 1.0)}
 SAMPLE_FACTOR_N = (100, 100, 51, 30)
 
 
-def sample_factor(Ts: float, N: int) -> float:
+def sample_factor(Ts: float, N: int, feed: str = "program") -> float:
     """The cost of a sample of a candidate plan at ``Ts`` with the horizon ``N``, relative to
     one at Ts 10 ms and the default 30: interpolated (in the logarithms) between the measured
-    :data:`SAMPLE_FACTOR` at :data:`SAMPLE_FACTOR_TS`, times ``N`` over the default horizon
-    there (a longer horizon, more rows a step)."""
+    :data:`SAMPLE_FACTOR` of the feed at :data:`SAMPLE_FACTOR_TS`, times ``N`` over the default
+    horizon there (a longer horizon, more rows a step)."""
     lt = np.log(SAMPLE_FACTOR_TS)
     x = float(np.log(min(max(Ts, SAMPLE_FACTOR_TS[0] / 4), 0.1)))
-    f = float(np.exp(np.interp(x, lt, np.log(SAMPLE_FACTOR))))
+    f = float(np.exp(np.interp(x, lt, np.log(SAMPLE_FACTOR[feed]))))
     n0 = float(np.exp(np.interp(x, lt, np.log(SAMPLE_FACTOR_N))))
     if Ts < SAMPLE_FACTOR_TS[0]:  # beyond the table: as the finest, per sample of its time
         f *= SAMPLE_FACTOR_TS[0] / Ts
@@ -264,28 +271,13 @@ def _corners(els: list[PathElement]) -> int:
 
 def _travels(program: Program, tol: float) -> list[float]:
     """The lengths [m] of the free moves :func:`~planner.contour.plan.plan_contour` plans, in
-    the program frame (the origin moves both ends alike): a run of travel blocks from where
-    the tool is to where the last ends, and a cut pass that starts more than half the
-    tolerance away from the tool (as its walk does, without planning)."""
+    the program frame (the origin moves both ends alike; :func:`~planner.contour.passes.walk_program`):
+    the runs of travel blocks that move the tool and the approaches to cut passes."""
     out: list[float] = []
-    pos = np.asarray(program.start, float)
-    blocks = program.blocks
-    i = 0
-    while i < len(blocks):
-        b = blocks[i]
-        if b.kind == "travel":
-            j = travel_run_end(blocks, i)
-            end = np.asarray(blocks[j].elements[-1].end, float)
-            if math.hypot(*(end - pos)) > 1e-9:
-                out.append(math.hypot(*(end - pos)))
-            pos, i = end, j + 1
-            continue
-        if b.kind == "cut" and b.elements:
-            gap = math.hypot(*(np.asarray(b.elements[0].start, float) - pos))
-            if gap > 0.5 * tol:
-                out.append(gap)
-            pos = np.asarray(b.elements[-1].end, float)
-        i += 1
+    for step in walk_program(program, tol):
+        d = math.hypot(*(step.end - step.start))
+        if step.kind != "cut" and d > 1e-9:
+            out.append(d)
     return out
 
 
@@ -355,18 +347,19 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
                                    "pass or give a larger tolerance_m", "program")
     per_piece = [piece_estimate(req.feed, els, st.Ts, c.passes, tol, st.N) for els in pieces]
     f = req.feed
-    g = sample_factor(st.Ts, c.N)
-    parts = {"travel": c.travels * CONTOUR_TRAVEL_S + c.travel_samples * g * TRAVEL_STEP_S,
+    g = sample_factor(st.Ts, c.N, req.feed)
+    parts = {"travel": c.travels * CONTOUR_TRAVEL_S  # a free move is a fastest plan, whatever the feed
+             + c.travel_samples * sample_factor(st.Ts, c.N, "fastest") * TRAVEL_STEP_S,
              "cells": g * c.plans * c.cells * CONTOUR_CELL_PLAN_S[f] + c.cells * CONTOUR_CELL_S[f],
              "samples": g * c.plans * (c.samples * CONTOUR_STEP_S[f] + c.pieces * CONTOUR_PIECE_S[f] * 0.01 / st.Ts
                                        + c.corners * CONTOUR_CORNER_S[f] + c.arc_samples * CONTOUR_ARC_STEP_S[f]),
              "profiles": c.grid * CONTOUR_GRID_S + c.plans * c.bends * CONTOUR_BEND_S,
              "lines": c.lines * CONTOUR_LINE_S, "elements": CONTOUR_ELEMENT_S * c.moves,
+             "search": sum(tight_cost(tight_turns(f, els), st.Ts) for els in pieces),
              # a piece with a slope is planned again where its Z misses (at most Z_TRIES plans in
              # all; measured: a ramp and helix pass 7 times); fastest's first miss goes on as a program
              # feed, and costs twice that (measured on 10 ramp and helix passes: 2.05x without it)
-             "z": Z_SLOPE_PLANS[f] * sum(p for p, els in zip(per_piece, pieces, strict=True)
-                                         if any(abs(e.z_end_m - e.z_start_m) > 1e-12 for e in els))}
+             "z": sum(z_replans(f, els, p) for p, els in zip(per_piece, pieces, strict=True))}
     travel_s, read_s = parts["travel"], parts["lines"]
     check = max(ADVICE_WORK * max(per_piece, default=0.0), ADVICE_MIN_S)
     seconds = sum(parts.values())
@@ -377,9 +370,13 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
               "cells": "a larger tolerance_m (fewer arc chords and cells), or split the program",
               "elements": "fewer, longer moves (join short moves in the CAM program), or split the program",
               "lines": "a shorter program: split it",
-              "z": f"a larger z_accel_m_s2 or fewer ramps and helices (a piece with a slope is planned up to "
-                   f"{Z_TRIES} times for its Z), or split the program",
+              "z": (f"a larger z_accel_m_s2 or fewer ramps and helices (a piece with a slope is planned up to "
+                    f"{Z_TRIES} times for its Z{', each a search as a program feed' if f == 'fastest' else ''}), "
+                    "or split the program"),
               "profiles": "a larger tolerance_m or fewer, longer moves, or split the program",
+              "search": (f"settings.Ts 0.005 s or more instead of {st.Ts:g} s (at a fine Ts the feed's scale is "
+                         f"searched on arcs of {_tight_radius_mm(pieces):.2g} mm of radius and less: ~16 plans), "
+                         "or fewer such arcs a pass (split the pass)"),
               "samples": (f"a larger settings.Ts than {st.Ts:g} s (fewer samples a pass), or split the program"
                           if st.Ts < 0.01 else "split the program")}[most]
     if most in ("samples", "cells", "profiles") and 2 * c.arcs >= c.moves > 0:  # mostly arcs
@@ -394,7 +391,30 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
 
 #: the plans of a piece with a slope beyond its first, in units of the piece's estimate
 #: (:data:`~planner.contour.zaxis.Z_TRIES`; ``benchmarks/bench_contour_estimate.py --only ramp``)
-Z_SLOPE_PLANS = {"program": float(Z_TRIES - 1), "fastest": 2.0 * (Z_TRIES - 1)}
+#: A re-plan runs 0.7x slower where Z missed (more samples): ``program`` counts each 1.15 plans
+#: (ramp-and-helix passes at Ts 10 ms measured 1.22-1.40x with 1.0, on a loaded machine)
+Z_SLOPE_PLANS = {"program": 1.15 * (Z_TRIES - 1), "fastest": 2.0 * (Z_TRIES - 1)}
+#: ``fastest``: seconds of the re-plans of a piece with a slope at least, per
+#: :data:`Z_FASTEST_LENGTH_M` of its length (at least one such length). Its first miss re-plans it
+#: as a program feed at the speeds it ran, each next miss 0.7x slower where Z missed, each re-plan
+#: a scale search: measured (``bench_contour_estimate.py``, 2026-11-28) on ramp-and-helix passes of
+#: 14.3 mm, 2 passes at Ts 10 ms: 41.7 CPU s, 323 plans (20.9 s a pass; 8.4x the estimate of the
+#: pieces' plans counted 2x); 10 passes at 10 ms 3.0 s a pass, 2 at 5 ms 4.1 s a pass
+Z_FASTEST_PIECE_S = 16.0
+Z_FASTEST_LENGTH_M = 0.015
+
+
+def z_replans(feed: str, els: list[PathElement], piece_s: float) -> float:
+    """The seconds of the Z re-plans of a piece (its estimate ``piece_s`` [s]): 0 without a
+    slope; :data:`Z_SLOPE_PLANS` times ``piece_s``, and in ``fastest`` at least
+    :data:`Z_FASTEST_PIECE_S` per :data:`Z_FASTEST_LENGTH_M` of the piece."""
+    if not any(abs(e.z_end_m - e.z_start_m) > 1e-12 for e in els):
+        return 0.0
+    out = Z_SLOPE_PLANS[feed] * piece_s
+    if feed == "fastest":
+        length = sum(e.length_m for e in els)
+        out = max(out, Z_FASTEST_PIECE_S * max(length / Z_FASTEST_LENGTH_M, 1.0))
+    return out
 
 #: program feed: an arc is cut at most at ``sqrt(ARC_ACCEL_M_S2 r)`` (a tiny circle at F3000 is
 #: not cut at F: its samples are those of the speed the arc allows; the program feed's profile
@@ -416,6 +436,43 @@ def _samples(feed: str, elements: list[PathElement], Ts: float) -> float:
     return total / Ts
 
 
+#: program feed: seconds of a piece's tight turns squared (:func:`tight_turns`), by the sample
+#: times of :data:`SAMPLE_FACTOR_TS` (interpolated in their logarithm; 0 at 5 ms and above).
+#: On tiny arcs at fine Ts the plan at the F-capped profile's scale 1 is infeasible: the search
+#: (:func:`planner.contour.search.largest_feasible`) steps its scale down (~7 plans that fail
+#: early) and bisects it (~8 plans near the edge of feasibility, each 4-6x a comfortable plan of
+#: its samples): measured at Ts 2 ms on one pass of 10, 20 and 50 full circles of r 0.1 mm at
+#: F1200, 6.1, 27 and more than 130 CPU s (16 plans, 62 049 samples planned for a pass of 3 253);
+#: the cost grows with the square of the circles in the pass (the edge is the worst circle's).
+#: At 1 ms 8 such circles: 30.7 CPU s (2.1x the estimate without this term); at 5 ms 20 circles
+#: plan twice (1.0 CPU s), at 10 ms four times (within the estimate's plans)
+TIGHT_TURN2_S = (0.25, 0.05, 0.0, 0.0)
+
+
+def tight_turns(feed: str, elements: list[PathElement]) -> float:
+    """The turns (sweep over 2 pi) of the arcs of a piece that ``program`` feed cannot cut at
+    their F (:func:`_samples`: ``sqrt(ARC_ACCEL_M_S2 r) < F``); 0 in ``fastest``."""
+    if feed != "program":
+        return 0.0
+    return sum(abs(e.sweep_rad or 0.0) / (2 * math.pi) for e in elements
+               if e.kind == "arc" and e.radius_m and math.sqrt(ARC_ACCEL_M_S2 * e.radius_m) < e.feed_m_s)
+
+
+def _tight_radius_mm(pieces: list[list[PathElement]]) -> float:
+    """The largest radius of the tight arcs (:func:`tight_turns`) [mm]."""
+    return 1e3 * max((e.radius_m or 0.0 for els in pieces for e in els if tight_turns("program", [e]) > 0),
+                     default=0.0)
+
+
+def tight_cost(turns: float, Ts: float) -> float:
+    """The seconds the scale search costs a piece of ``turns`` tight turns at ``Ts``
+    (:data:`TIGHT_TURN2_S`)."""
+    if turns <= 0:
+        return 0.0
+    x = float(np.log(min(max(Ts, SAMPLE_FACTOR_TS[0]), SAMPLE_FACTOR_TS[-1])))
+    return float(np.interp(x, np.log(SAMPLE_FACTOR_TS), TIGHT_TURN2_S)) * turns * turns
+
+
 def _plans(feed: str, passes: int) -> float:
     """Candidate plans per pass: ~3 (``program``: the F-capped time-optimal profile in cells at
     F, then shorter cells on the moves and more samples where the samples ran faster than F,
@@ -434,7 +491,7 @@ def piece_estimate(feed: str, elements: list[PathElement], Ts: float, passes: in
     plans = _plans(feed, passes)
     cells = _cells(feed, elements, tol, Ts)
     n0 = float(np.exp(np.interp(np.log(min(max(Ts, 1e-4), 0.1)), np.log(SAMPLE_FACTOR_TS), np.log(SAMPLE_FACTOR_N))))
-    g = sample_factor(Ts, int(round(n0)) if N is None else N)
+    g = sample_factor(Ts, int(round(n0)) if N is None else N, feed)
     total = sum(e.length_m for e in elements)
     grid = total / min(max(total / GRID_POINTS, GRID_H_MIN), GRID_H_MAX, total / GRID_POINTS_MIN) if total > 0 else 0.0
     bends = sum(abs(e.sweep_rad or 0.0) / (2 * math.pi) * min(1e-3 / max(e.radius_m or 1.0, 1e-9), 20.0)
@@ -444,4 +501,4 @@ def piece_estimate(feed: str, elements: list[PathElement], Ts: float, passes: in
                          + (_samples(feed, [e for e in elements if e.kind == "arc"], Ts) * CONTOUR_ARC_STEP_S[feed]
                             if feed == "program" else 0.0))
             + cells * CONTOUR_CELL_S[feed] + grid * CONTOUR_GRID_S + plans * bends * CONTOUR_BEND_S
-            + CONTOUR_ELEMENT_S * len(elements))
+            + CONTOUR_ELEMENT_S * len(elements) + tight_cost(tight_turns(feed, elements), Ts))

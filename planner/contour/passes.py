@@ -4,7 +4,8 @@
 - :func:`parse_contour_request`, :func:`read_program`, :func:`tolerance_of`: the request, its
   G-code program read into blocks (travels, cut passes, dwells), and the tolerance it plans to;
 - :func:`chunks`: a pass's elements in pieces the robot plans rest to rest (split at G61 exact
-  stops); :func:`travel_run_end`: consecutive travel blocks as one move;
+  stops); :func:`travel_run_end`: consecutive travel blocks as one move; :func:`walk_program`:
+  the program's free moves and cut passes in the order the planner moves through them;
 - :class:`TubeSizes`, :func:`piece_tube`: a piece's tube corridor (:func:`planner.contour.tube.tube`)
   with cells sized for a speed, starting where the robot is, its reach checked;
 - :func:`segment_of`, :func:`counts_of`: which tube cell each sample of a plan is in;
@@ -15,8 +16,8 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Iterator, Sequence
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 
@@ -31,6 +32,7 @@ from ..schema import (
     PathElement,
     PlanResult,
     Program,
+    ProgramBlock,
     Segment,
     Settings,
     planner_error,
@@ -95,6 +97,46 @@ def travel_run_end(blocks: Sequence[Any], i: int) -> int:
     while j + 1 < len(blocks) and blocks[j + 1].kind == "travel":
         j += 1
     return j
+
+
+class WalkStep(NamedTuple):
+    """One step of :func:`walk_program`, in the program frame [m]: a ``travel`` (a run of
+    travel blocks as one free move, from where the tool is to where the last ends; of length
+    0 where it is there already), an ``approach`` (the free move to a cut pass that starts more
+    than half the tolerance away from the tool) or a ``cut`` pass (``block``, from its first
+    move's start to its last move's end); ``line``: the source line of its first block."""
+
+    kind: Literal["travel", "approach", "cut"]
+    line: int
+    start: np.ndarray
+    end: np.ndarray
+    block: ProgramBlock | None = None
+
+
+def walk_program(program: Program, tol: float) -> Iterator[WalkStep]:
+    """The program's free moves and cut passes in the order
+    :func:`~planner.contour.plan.plan_contour` moves through them, from where the program
+    starts (dwells leave the tool where it is): what the work estimate counts
+    (:mod:`planner.contour.estimate`) and the placement checks for reach
+    (:mod:`planner.contour.placement`), one walk for both."""
+    pos = np.asarray(program.start, float)
+    blocks = program.blocks
+    i = 0
+    while i < len(blocks):
+        b = blocks[i]
+        if b.kind == "travel":
+            j = travel_run_end(blocks, i)
+            end = np.asarray(blocks[j].elements[-1].end, float)
+            yield WalkStep("travel", b.line, pos, end)
+            pos, i = end, j + 1
+            continue
+        if b.kind == "cut" and b.elements:
+            start = np.asarray(b.elements[0].start, float)
+            if math.hypot(*(start - pos)) > 0.5 * tol:
+                yield WalkStep("approach", b.line, pos, start)
+            pos = np.asarray(b.elements[-1].end, float)
+            yield WalkStep("cut", b.line, start, pos, b)
+        i += 1
 
 
 def chunks(elements: list[PathElement]) -> list[list[int]]:

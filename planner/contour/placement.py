@@ -17,7 +17,7 @@ from ..errors import PlannerError
 from ..model import RobotModel
 from ..model.placement import fit_shape, reach_extent, reachable_mask, reachable_points
 from ..schema import MAX_COORDINATE, Program
-from .passes import RAPID_MARGIN_M, travel_run_end
+from .passes import RAPID_MARGIN_M, walk_program
 
 __all__ = ["CONTOUR_PSI", "FIT_MARGIN_M", "check_reach", "check_reachable", "fit_origin", "proposal"]
 
@@ -69,25 +69,14 @@ def _program_shapes(program: Program, tol: float) -> list[tuple[int, Any]]:
 
     out: list[tuple[int, Any]] = []
     pos = np.asarray(program.start, float)
-    blocks = program.blocks
-    i = 0
-    while i < len(blocks):
-        b = blocks[i]
-        if b.kind == "travel":
-            j = travel_run_end(blocks, i)
-            target = np.asarray(blocks[j].elements[-1].end, float)
-            out.append((b.line, _travel_box(pos, target)))
-            pos, i = target, j + 1
+    for step in walk_program(program, tol):  # the walk the estimate counts too
+        if step.block is None:  # a travel run, or the approach to a pass away from the tool
+            out.append((step.line, _travel_box(step.start, step.end)))
             continue
-        if b.kind == "cut":
-            if np.hypot(*(np.asarray(b.elements[0].start) - pos)) > 0.5 * tol:
-                out.append((b.line, _travel_box(pos, np.asarray(b.elements[0].start, float))))
-            for el in b.elements:
-                n = max(2, math.ceil(el.length_m / 1e-3) + 1)
-                pts = el.point_at(np.linspace(0.0, el.length_m, n))
-                out.append((el.line, shapely.LineString(pts) if el.length_m > 0 else shapely.Point(pts[0])))
-            pos = np.asarray(b.elements[-1].end, float)
-        i += 1
+        for el in step.block.elements:
+            n = max(2, math.ceil(el.length_m / 1e-3) + 1)
+            pts = el.point_at(np.linspace(0.0, el.length_m, n))
+            out.append((el.line, shapely.LineString(pts) if el.length_m > 0 else shapely.Point(pts[0])))
     if not out:
         out.append((1, shapely.Point(pos)))
     return out
