@@ -103,6 +103,7 @@ def capped_peer(robot, els, origin, rate, cache: Path | None) -> dict:
         if k == len(grids) and abs(runs[-1].time_s / runs[-2].time_s - 1) > 1e-3 and 2 * grids[-1] <= 192:
             grids.append(2 * grids[-1])
     last = runs[-1]
+    assert guess is not None
     got = {"time": last.time_s, "status": [r.status for r in runs], "times": [r.time_s for r in runs],
            "el_time": last.element_time_s, "el_speed": last.element_speed_m_s,
            "lines": [e.line for e in els if e.length_m > 1e-12], "t": guess["t"], "v": guess["v"]}
@@ -128,9 +129,9 @@ def element_rows(label: str, i: int, els, peer: dict, res, k: int, tol: float) -
     start = np.asarray(els[0].start, float) + origin
     end = np.asarray(els[-1].end, float) + origin
     moved = np.flatnonzero(np.hypot(*(xy - start).T) > tol)
-    arrived = np.flatnonzero(np.hypot(*(xy - end).T) <= 1e-6)
+    away = np.flatnonzero(np.hypot(*(xy - end).T) > 1e-6)  # a closed pass starts at its end: the last time away
     head = int(moved[0]) if len(moved) else 0
-    tail = (b - a) - int(arrived[0]) - 1 if len(arrived) else 0
+    tail = (b - a) - int(away[-1]) - 2 if len(away) else 0
     out = [f"\n{label} pass {i}: {b - a} samples of {Ts * 1e3:g} ms = {(b - a) * Ts:.3f} s against the peer's "
            f"{peer['time']:.4f} s; {head} samples before the tool leaves its start by the tolerance, {tail} after it "
            "is within 1 um of the end\n",
@@ -212,7 +213,8 @@ def main() -> None:
             else:
                 rows.append(f"| {label} | {i} {row}")
                 prev = (i, row)
-            key = pass_key(els, org)
+            key = repr([(e.kind, *np.round(e.start, 9), *np.round(e.end, 9), round(e.sweep_rad or 0.0, 9),
+                         round(e.feed_m_s, 9), round(e.z_end_m - e.z_start_m, 9)) for e in els])  # depth passes alike
             if res is not None and key not in done:
                 done.add(key)
                 detail += element_rows(label, i, els, peer, res, i, tol)
