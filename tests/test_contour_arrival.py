@@ -19,13 +19,7 @@ import numpy as np
 import pytest
 
 from planner.contour import plan_contour
-from planner.contour.profiles import (
-    ARRIVAL_BRAKE_SAMPLES,
-    ARRIVAL_CRUISE_SAMPLES,
-    arrival_run,
-    catch_up_cells,
-    with_arrival,
-)
+from planner.contour.profiles import ARRIVAL_BRAKE_SAMPLES, ARRIVAL_CRUISE_SAMPLES, arrival_run, with_arrival
 
 CAM = Path(__file__).resolve().parent / "data" / "cam"
 #: "never faster than F": the finite-difference speed of the tool point over F, at most 1 plus
@@ -71,23 +65,6 @@ def test_arrival_adds_one_sample_to_each_of_the_last_cells():
     assert got.sum() == counts.sum() + 2
     assert list(got - counts) == [0, 0, 0, 0, 0, 1, 1, 0, 0]
     assert with_arrival(t, counts, 0) is counts  # type: ignore[arg-type]
-
-
-def test_a_catch_up_gets_a_sample_before_it_where_that_is_cheaper():
-    """A run faster than F after a start or junction: the cell before it (the lead cells
-    skipped) gets a sample where its move's samples times the excess exceed one sample; a
-    short move's small excess is left to shorter cells (one sample more would cost more)."""
-    over = np.concatenate(([0.0], np.full(5, 0.9), np.full(4, 1.05), np.full(40, 0.99)))
-    counts = np.ones(len(over), np.int64)
-    lead = np.zeros(len(over), bool)
-    lead[0] = True
-    move = np.zeros(len(over), np.int64)
-    got = catch_up_cells(over, counts, move, lead)
-    assert np.flatnonzero(got).tolist() == [5]
-    short = np.concatenate(([0.0], np.full(5, 0.9), np.full(4, 1.05), np.full(5, 0.99)))  # 15 samples x 0.05
-    assert not catch_up_cells(short, np.ones(len(short), np.int64), np.zeros(len(short), np.int64),
-                              np.arange(len(short)) == 0).any()
-    assert not catch_up_cells(np.full(20, 0.99), counts[:20], move[:20], lead[:20]).any()
 
 
 def _feed_by_line(text: str) -> dict[int, float]:

@@ -9,9 +9,7 @@ timings :mod:`planner.contour.search` scales.
   of a time scale of it;
 - :func:`arrival_run`, :func:`with_arrival`: the ``program`` feed's arrival at a piece's end
   (issue 35 goal 2): the controller trails its cells' centres while it cruises and catches up
-  before the end, faster than F; a sample more in each of the last cells lets it arrive at F;
-  :func:`catch_up_cells`: the same after a start or a junction it slowed at more than its
-  cells, a sample more before the catch-up where that costs less than shorter cells.
+  before the end, faster than F; a sample more in each of the last cells lets it arrive at F.
 """
 
 from __future__ import annotations
@@ -216,29 +214,4 @@ def with_arrival(t: Tube, counts: np.ndarray, extra: int) -> np.ndarray:
     out = counts.copy()
     cells = np.flatnonzero((t.length > 0) & ~t.lead)
     out[cells[-extra:]] += 1
-    return out
-
-
-#: program feed: at most this many samples added before each catch-up after a slowdown
-CATCH_UP_MAX = 2
-
-
-def catch_up_cells(over: np.ndarray, counts: np.ndarray, move: np.ndarray, lead: np.ndarray) -> np.ndarray:
-    """Per segment of a plan, True on the cell just before each run of consecutive segments
-    faster than F (``over``, ``counts`` and ``move`` as :func:`arrival_run`) where a sample more
-    there costs less than shortening every cell of the run's move by its excess: the
-    controller, slowed more than its cells at a start or a junction, catching up after it."""
-    out = np.zeros(len(over), bool)
-    fast = over > 1.0
-    starts = np.flatnonzero(fast & ~np.concatenate(([False], fast[:-1])))
-    for k in starts:
-        j = k
-        while j < len(over) and fast[j]:
-            j += 1
-        cost = counts[move == move[k]].sum() * (over[k:j].max() - 1.0)
-        prev = k - 1
-        while prev >= 0 and (lead[prev] or counts[prev] <= 0):
-            prev -= 1
-        if prev >= 0 and cost > 1.0:
-            out[prev] = True
     return out

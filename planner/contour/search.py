@@ -28,16 +28,7 @@ from ..schema import MAX_CONTOUR_TOLERANCE_M, MAX_TOTAL_STEPS, MIN_TS, ContourRe
 from .estimate import ADVICE_MIN_S, ADVICE_WORK, piece_estimate
 from .estimate import FEED_MARGIN as FEED_CELL_MARGIN
 from .passes import CELL_SAMPLES, PROGRAM_MARGIN, V0_M_S, TubeSizes, segment_of
-from .profiles import (
-    ARRIVAL_MAX,
-    CATCH_UP_MAX,
-    Optimal,
-    arrival_run,
-    catch_up_cells,
-    optimal_counts,
-    profile_counts,
-    with_arrival,
-)
+from .profiles import ARRIVAL_MAX, Optimal, arrival_run, optimal_counts, profile_counts, with_arrival
 from .tube import Tube
 
 __all__ = ["SCALE_MAX", "SCALE_MIN", "SCALE_RESOLUTION", "Found", "Scale", "TimingSearch", "confirmed_infeasible",
@@ -339,9 +330,8 @@ class TimingSearch:
         # the margins a pass of the same moves found (depth passes: one plan each after the first)
         memo, geo = getattr(optimal, "memo", None), getattr(optimal, "geo", None)
         key = ("feed margin", geo, self.st.Ts)
-        margin, arrive, extra = memo.get(key, (np.full(len(self.els), FEED_MARGIN), 0, [])) \
-            if memo is not None and geo else (np.full(len(self.els), FEED_MARGIN), 0, [])
-        extra = list(extra)  # the catch-up samples: the path length at the end of their cells [m]
+        margin, arrive = memo.get(key, (np.full(len(self.els), FEED_MARGIN), 0)) if memo is not None and geo else \
+            (np.full(len(self.els), FEED_MARGIN), 0)
         t: Tube | None = None
         counts = np.zeros(0, np.int64)
         for _ in range(FEED_MARGIN_TRIES):
@@ -356,16 +346,13 @@ class TimingSearch:
             if not (np.all(np.isfinite(times)) and times[-1] > 0):  # pragma: no cover - a profile that never moves
                 return None
             counts = with_arrival(cur, self.feed_counts(cur, optimal_counts(cur, times, self.st.Ts)), arrive)
-            ends = np.cumsum(cur.length)
-            for at in extra:  # the catch-up samples, by the path length where they were added
-                counts[min(int(np.searchsorted(ends, at - 1e-12)), len(counts) - 1)] += 1
             res = self.attempt(cur, counts)
             if res is None:
                 break
             over_seg = overspeed_of(res, counts, np.minimum(self.feed_on(cur), self.zcap_on(cur)))
             if over_seg.max() <= 1.0:
                 if memo is not None and geo:
-                    memo[key] = (margin, arrive, extra)
+                    memo[key] = (margin, arrive)
                 return res, cur
             # the catch-up before the end, where it is the only excess: a sample more there, not
             # shorter cells on the whole move (where there are others, shorter cells first)
@@ -375,13 +362,6 @@ class TimingSearch:
             if bumped:
                 arrive += 1
                 over_seg = np.where(tail, 0.0, over_seg)
-            else:  # the catch-ups after a start or junction: a sample more before each, where cheaper
-                before = np.flatnonzero(catch_up_cells(over_seg, counts, loc, cur.lead))
-                fresh = [float(ends[k]) for k in before if sum(abs(a - ends[k]) < 1e-9 for a in extra) < CATCH_UP_MAX]
-                if fresh:
-                    extra += fresh
-                    bumped = True
-                    over_seg = np.where(over_seg <= FEED_SPIKE, 0.0, over_seg)
             # a move whose cells run a little faster than F throughout: shorter cells (at least one
             # more); a spike (the robot speeding up into a faster move ahead of its first cell):
             # more samples in those cells only (below)
