@@ -131,7 +131,7 @@ def element_rows(label: str, i: int, els, peer: dict, res, k: int, tol: float) -
     moved = np.flatnonzero(np.hypot(*(xy - start).T) > tol)
     away = np.flatnonzero(np.hypot(*(xy - end).T) > 1e-6)  # a closed pass starts at its end: the last time away
     head = int(moved[0]) if len(moved) else 0
-    tail = (b - a) - int(away[-1]) - 2 if len(away) else 0
+    tail = max((b - a) - int(away[-1]) - 2, 0) if len(away) else 0  # the samples after the arrival's
     out = [f"\n{label} pass {i}: {b - a} samples of {Ts * 1e3:g} ms = {(b - a) * Ts:.3f} s against the peer's "
            f"{peer['time']:.4f} s; {head} samples before the tool leaves its start by the tolerance, {tail} after it "
            "is within 1 um of the end\n",
