@@ -6,7 +6,10 @@ timings :mod:`planner.contour.search` scales.
 - :class:`OptimalProfiles`, :func:`optimal_counts`: the exact path's time-optimal profile under
   the drive forces and leg speeds (:func:`planner.contour.timing.time_optimal`), bounded at the
   corners and on the arcs by what the tube allows, as times at the cells' ends, and the counts
-  of a time scale of it.
+  of a time scale of it;
+- :func:`arrival_run`, :func:`with_arrival`: the ``program`` feed's arrival at a piece's end
+  (issue 35 goal 2): the controller trails its cells' centres while it cruises and catches up
+  before the end, faster than F; a sample more in each of the last cells lets it arrive at F.
 """
 
 from __future__ import annotations
@@ -164,3 +167,51 @@ def optimal_counts(t: Tube, times: np.ndarray, step: float) -> np.ndarray:
     counts = np.maximum(counts, 1)
     counts[t.lead] = 1
     return counts
+
+
+#: program feed: at most this many samples added before a piece's end (:func:`with_arrival`)
+ARRIVAL_MAX = 3
+#: program feed: a run of segments faster than F ending at most this many samples before the
+#: piece's last sample is the arrival's catch-up (:func:`arrival_run`); the controller brakes
+#: from F to rest in 5-8 samples at Ts 10 ms (measured on the CAM samples)
+ARRIVAL_BRAKE_SAMPLES = 10
+#: ... and starting at least this many samples into the last move (:func:`arrival_run`)
+ARRIVAL_CRUISE_SAMPLES = 20
+
+
+def arrival_run(over: np.ndarray, counts: np.ndarray, move: np.ndarray) -> np.ndarray:
+    """Per segment of a plan (``over``: its largest speed over F, :func:`planner.contour.search.overspeed_of`;
+    ``counts``: its samples; ``move``: its move), True on the run of consecutive segments faster
+    than F that ends within :data:`ARRIVAL_BRAKE_SAMPLES` samples of the piece's end, inside the
+    last move and at least :data:`ARRIVAL_CRUISE_SAMPLES` samples after that move's first: the
+    controller, which trails its cells' centres while it cruises, catching up with them before
+    it stops. All False where there is no such run (a run that starts near a junction is the
+    catch-up after the junction's slowdown, which a sample more at the end does not remove)."""
+    out = np.zeros(len(over), bool)
+    k = len(over) - 1
+    tail = 0
+    while k >= 0 and over[k] <= 1.0:
+        tail += int(counts[k])
+        k -= 1
+    if k < 0 or tail > ARRIVAL_BRAKE_SAMPLES:
+        return out
+    last = move[k]
+    while k >= 0 and over[k] > 1.0 and move[k] == last:
+        out[k] = True
+        k -= 1
+    before = int(counts[(move == last) & ~out & (np.arange(len(over)) <= k)].sum())
+    if (k >= 0 and over[k] > 1.0) or before < ARRIVAL_CRUISE_SAMPLES:
+        out[:] = False
+    return out
+
+
+def with_arrival(t: Tube, counts: np.ndarray, extra: int) -> np.ndarray:
+    """``counts`` with a sample more in each of the last ``extra`` cells of positive length
+    before the end's lead cell: time for the controller to catch up with its cells before it
+    stops, at F rather than faster (:func:`arrival_run`)."""
+    if extra <= 0:
+        return counts
+    out = counts.copy()
+    cells = np.flatnonzero((t.length > 0) & ~t.lead)
+    out[cells[-extra:]] += 1
+    return out

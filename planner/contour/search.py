@@ -28,7 +28,7 @@ from ..schema import MAX_CONTOUR_TOLERANCE_M, MAX_TOTAL_STEPS, MIN_TS, ContourRe
 from .estimate import ADVICE_MIN_S, ADVICE_WORK, piece_estimate
 from .estimate import FEED_MARGIN as FEED_CELL_MARGIN
 from .passes import CELL_SAMPLES, PROGRAM_MARGIN, V0_M_S, TubeSizes, segment_of
-from .profiles import Optimal, optimal_counts, profile_counts
+from .profiles import ARRIVAL_MAX, Optimal, arrival_run, optimal_counts, profile_counts, with_arrival
 from .tube import Tube
 
 __all__ = ["SCALE_MAX", "SCALE_MIN", "SCALE_RESOLUTION", "Found", "Scale", "TimingSearch", "confirmed_infeasible",
@@ -330,8 +330,8 @@ class TimingSearch:
         # the margins a pass of the same moves found (depth passes: one plan each after the first)
         memo, geo = getattr(optimal, "memo", None), getattr(optimal, "geo", None)
         key = ("feed margin", geo, self.st.Ts)
-        margin = memo.get(key, np.full(len(self.els), FEED_MARGIN)) if memo is not None and geo else \
-            np.full(len(self.els), FEED_MARGIN)
+        margin, arrive = memo.get(key, (np.full(len(self.els), FEED_MARGIN), 0)) if memo is not None and geo else \
+            (np.full(len(self.els), FEED_MARGIN), 0)
         t: Tube | None = None
         counts = np.zeros(0, np.int64)
         for _ in range(FEED_MARGIN_TRIES):
@@ -345,15 +345,23 @@ class TimingSearch:
             times = optimal(cur).times
             if not (np.all(np.isfinite(times)) and times[-1] > 0):  # pragma: no cover - a profile that never moves
                 return None
-            counts = self.feed_counts(cur, optimal_counts(cur, times, self.st.Ts))
+            counts = with_arrival(cur, self.feed_counts(cur, optimal_counts(cur, times, self.st.Ts)), arrive)
             res = self.attempt(cur, counts)
             if res is None:
                 break
             over_seg = overspeed_of(res, counts, np.minimum(self.feed_on(cur), self.zcap_on(cur)))
             if over_seg.max() <= 1.0:
                 if memo is not None and geo:
-                    memo[key] = margin
+                    memo[key] = (margin, arrive)
                 return res, cur
+            # the catch-up before the end, where it is the only excess: a sample more there, not
+            # shorter cells on the whole move (where there are others, shorter cells first)
+            loc = np.searchsorted(self.chunk, cur.element)
+            tail = arrival_run(over_seg, counts, loc)
+            bumped = bool(tail.any()) and arrive < ARRIVAL_MAX and not (over_seg[~tail] > 1.0).any()
+            if bumped:
+                arrive += 1
+                over_seg = np.where(tail, 0.0, over_seg)
             # a move whose cells run a little faster than F throughout: shorter cells (at least one
             # more); a spike (the robot speeding up into a faster move ahead of its first cell):
             # more samples in those cells only (below)
@@ -361,6 +369,8 @@ class TimingSearch:
             over = np.zeros(len(self.els))  # per move, its cells' largest excess short of a spike
             np.maximum.at(over, loc, np.where(over_seg <= FEED_SPIKE, over_seg, 0.0))
             if not (over > 1.0).any():
+                if bumped:
+                    continue
                 break
             cells = np.bincount(loc[cur.length > 0], minlength=len(self.els)).clip(1)
             raised = np.maximum((1 + margin) * over * (1 + FEED_MARGIN_STEP), (1 + margin) * (cells + 1) / cells)
@@ -376,7 +386,7 @@ class TimingSearch:
         tried: dict[bytes, PlanResult | None] = {}
 
         def run(lam: float) -> PlanResult | None:
-            counts = self.feed_counts(t, optimal_counts(t, times, lam * self.st.Ts))
+            counts = with_arrival(t, self.feed_counts(t, optimal_counts(t, times, lam * self.st.Ts)), arrive)
             key = counts.tobytes()
             if key not in tried:
                 tried[key] = self.within_feed(t, counts, feed_of)

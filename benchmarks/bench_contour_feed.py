@@ -1,0 +1,237 @@
+"""The ``program`` feed against the exact path's third-order optimum capped at F (issue 35
+goal 2: cutting time <= 1.02x it on every pass, no sample faster than F): per pass, one or
+more checkouts side by side, and where the time goes.
+
+    OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python benchmarks/bench_contour_feed.py \
+        [--root /tmp/base --root .] [--programs bench,freecad_linuxcnc.ngc,fusion360.nc] [--elements]
+
+The peer is ``bench_contour_optimum``'s (``third_order_optimum`` with ``feed_cap``: the same
+robot, drive forces, leg speeds, the default force-rate limit and the Z axis speed; grids 24,
+48, 96 steps per element, doubled until two agree within 0.1 %), solved once per distinct pass
+and kept in ``--cache`` (by the pass's geometry, feeds and origin; ``--no-cache`` solves again).
+
+Each ``--root`` is planned in a fresh process with ``PYTHONPATH`` on it (``feed`` ``program``
+at the defaults, after one untimed plan that loads the kernels): per pass ``time_s`` and the
+largest tool speed over F while cutting, and the CPU seconds of the whole plan. The table gives
+each root's time over the peer's per pass.
+
+``--elements`` (the last root, in this process): per distinct pass and per program line, the
+peer's time and top speed beside the plan's (the samples cutting that line: their count times
+Ts, and their top speed from finite differences of the tool point), and the pass's samples
+before its first move starts and after it reaches its end within the tolerance (the start and
+the settle).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import pickle
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+HERE = Path(__file__).resolve().parent
+
+import numpy as np  # noqa: E402
+
+GRIDS = [24, 48, 96]
+
+
+def _paths(root: str | None = None) -> None:
+    if root is not None:
+        sys.path.insert(0, str(Path(root).resolve()))
+    sys.path.insert(1 if root is not None else 0, str(HERE))
+
+
+def one(name: str) -> None:
+    """Plan the program ``name`` in feed ``program`` in this process; print JSON per pass."""
+    from planner.contour import plan_contour
+
+    _paths()
+    import bench_contour  # type: ignore[import-not-found]
+    from bench_contour_optimum import load_program  # type: ignore[import-not-found]
+
+    plan_contour({"program": bench_contour.program(1), "origin": bench_contour.ORIGIN})  # the kernels loaded
+    _, text, origin = load_program(name)
+    c0 = time.process_time()
+    res = plan_contour({"program": text, "origin": origin, "feed": "program"})
+    cpu = time.process_time() - c0
+    c = res.contour
+    assert c is not None
+    where = str(Path(sys.modules["planner"].__file__ or "").parent.parent)
+    print(json.dumps({"planner": where, "cpu": cpu, "times": [p.time_s for p in c.passes],
+                      "ratio": [p.max_feed_ratio for p in c.passes], "Ts": res.settings.Ts,
+                      "origin": list(c.origin), "tol": c.tolerance_m}))
+
+
+def run_root(root: str, name: str) -> dict:
+    env = dict(os.environ, PYTHONPATH=str(Path(root).resolve()), OPENBLAS_NUM_THREADS="1")
+    out = subprocess.run([sys.executable, __file__, "--one", name], env=env, capture_output=True, text=True)
+    if out.returncode != 0:
+        raise SystemExit(f"{root}: {out.stderr[-2000:]}")
+    got = json.loads(out.stdout.strip().splitlines()[-1])
+    assert Path(got["planner"]) == Path(root).resolve(), (got["planner"], root)
+    return got
+
+
+def pass_key(els, origin) -> str:
+    key = (tuple((e.kind, *np.round(e.start, 9), *np.round(e.end, 9), round(e.sweep_rad or 0.0, 9),
+                  round(e.feed_m_s, 9), round(e.z_start_m, 9), round(e.z_end_m, 9)) for e in els),
+           tuple(np.round(origin, 9)), GRIDS)
+    return hashlib.sha256(repr(key).encode()).hexdigest()[:20]
+
+
+def capped_peer(robot, els, origin, rate, cache: Path | None) -> dict:
+    """The F-capped third-order optimum of one pass, converged (as ``converged_optimum``), with
+    its per-element times, top speeds and speed profiles; cached by the pass."""
+    from bench_contour_optimum import Z_MAX_M_S, third_order_optimum  # type: ignore[import-not-found]
+
+    path = cache / f"{pass_key(els, origin)}.pkl" if cache is not None else None
+    if path is not None and path.exists():
+        return pickle.loads(path.read_bytes())
+    grids, runs, guess = list(GRIDS), [], None
+    k = 0
+    while k < len(grids):
+        opt, guess = third_order_optimum(robot, els, origin, grids[k], rate, True, False, Z_MAX_M_S, guess)
+        runs.append(opt)
+        k += 1
+        if k == len(grids) and abs(runs[-1].time_s / runs[-2].time_s - 1) > 1e-3 and 2 * grids[-1] <= 192:
+            grids.append(2 * grids[-1])
+    last = runs[-1]
+    assert guess is not None
+    got = {"time": last.time_s, "status": [r.status for r in runs], "times": [r.time_s for r in runs],
+           "el_time": last.element_time_s, "el_speed": last.element_speed_m_s,
+           "lines": [e.line for e in els if e.length_m > 1e-12], "t": guess["t"], "v": guess["v"]}
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(pickle.dumps(got))
+    return got
+
+
+def element_rows(label: str, i: int, els, peer: dict, res, k: int, tol: float) -> list[str]:
+    """Where pass ``i`` (the ``k``-th cutting run) loses its time against the peer (``--elements``)."""
+    c = res.contour
+    Ts = res.settings.Ts
+    cut = np.asarray(c.cutting, int)
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], cut, [0]))))
+    if len(edges) != 2 * len(c.passes):
+        return [f"\n{label} pass {i}: {len(edges) // 2} cutting runs for {len(c.passes)} passes, no table"]
+    a, b = edges[2 * k], edges[2 * k + 1]
+    lines = np.array([-1 if x is None else x for x in c.program_line[a:b]])
+    xy = res.pose[a:b, :2]
+    step = np.hypot(*np.diff(xy, axis=0).T) / Ts
+    origin = np.asarray(c.origin, float)
+    start = np.asarray(els[0].start, float) + origin
+    end = np.asarray(els[-1].end, float) + origin
+    moved = np.flatnonzero(np.hypot(*(xy - start).T) > tol)
+    away = np.flatnonzero(np.hypot(*(xy - end).T) > 1e-6)  # a closed pass starts at its end: the last time away
+    head = int(moved[0]) if len(moved) else 0
+    tail = max((b - a) - int(away[-1]) - 2, 0) if len(away) else 0  # the samples after the arrival's
+    out = [f"\n{label} pass {i}: {b - a} samples of {Ts * 1e3:g} ms = {(b - a) * Ts:.3f} s against the peer's "
+           f"{peer['time']:.4f} s; {head} samples before the tool leaves its start by the tolerance, {tail} after it "
+           "is within 1 um of the end\n",
+           "| line | kind | mm | F mm/min | peer s | peer top mm/min | plan s | plan top mm/min | plan - peer s |",
+           "|---|---|---|---|---|---|---|---|---|"]
+    els = [e for e in els if e.length_m > 1e-12]
+    seen: list[int] = []
+    for e in els:
+        if e.line in seen:
+            continue
+        seen.append(e.line)
+        js = [j for j, x in enumerate(els) if x.line == e.line]
+        m = lines == e.line
+        top = float(step[m[:-1]].max()) if m[:-1].any() else 0.0
+        pt = float(sum(peer["el_time"][j] for j in js))
+        ps = float(max(peer["el_speed"][j] for j in js))
+        L = sum(els[j].length_m for j in js)
+        out.append(f"| {e.line} | {'+'.join(els[j].kind for j in js)} | {L * 1e3:.2f} | {e.feed_m_s * 6e4:.0f} | "
+                   f"{pt:.4f} | {ps * 6e4:.1f} | {m.sum() * Ts:.3f} | {top * 6e4:.1f} | {m.sum() * Ts - pt:+.3f} |")
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
+    ap.add_argument("--one", default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--root", action="append", default=None, help="a checkout to plan with (repeatable; default .)")
+    ap.add_argument("--programs", default="bench,freecad_linuxcnc.ngc,fusion360.nc")
+    ap.add_argument("--elements", action="store_true", help="per line of each distinct pass: the plan against the peer")
+    ap.add_argument("--cache", default=str(Path.home() / ".cache" / "rangeplan" / "bench_contour_feed"))
+    ap.add_argument("--no-cache", action="store_true")
+    args = ap.parse_args()
+    if args.one is not None:
+        one(args.one)
+        return
+    roots = args.root or [str(HERE.parent)]
+    _paths(roots[-1])
+    from bench_contour_optimum import ROBOT, load_program  # type: ignore[import-not-found]
+
+    from planner.exchange import read_gcode
+    from planner.model import load_robot
+    from planner.schema.limits import DEFAULT_FORCE_RISE_S
+
+    robot = load_robot(ROBOT)
+    rate = np.asarray(robot.force_max, float) / DEFAULT_FORCE_RISE_S
+    cache = None if args.no_cache else Path(args.cache)
+    print(f"load: {os.getloadavg()[0]:.1f} (1-min average) on {os.cpu_count()} cores; roots: {', '.join(roots)}\n")
+    head = " | ".join(f"{Path(r).resolve().name} s | / peer" for r in roots)
+    summary: list[str] = []
+    rows: list[str] = ["| program | pass | mm | F mm/min | L / F s | 3rd order at F s | " + head + " |",
+                       "|---|---|---|---|---|---|" + "---|---|" * len(roots)]
+    detail: list[str] = []
+    for name in args.programs.split(","):
+        label, text, origin = load_program(name)
+        got = [run_root(r, name) for r in roots]
+        prog = read_gcode(text)
+        org, tol = np.asarray(got[-1]["origin"], float), float(got[-1]["tol"])
+        res = None
+        if args.elements:
+            from planner.contour import plan_contour
+
+            res = plan_contour({"program": text, "origin": origin, "feed": "program"})
+        tot_peer = 0.0
+        tot = np.zeros(len(roots))
+        done: set[str] = set()
+        prev = None
+        for i, b in enumerate(prog.passes):
+            els = b.elements
+            peer = capped_peer(robot, els, org, rate, cache)
+            tot_peer += peer["time"]
+            times = np.array([g["times"][i] for g in got])
+            tot += times
+            L = sum(e.length_m for e in els)
+            nominal = sum(e.length_m / e.feed_m_s for e in els)
+            feeds = ", ".join(map(str, sorted({round(e.feed_m_s * 6e4) for e in els})))
+            cols = " | ".join(f"{t:.3f} | {t / peer['time']:.3f}x" for t in times)
+            row = f"| {L * 1e3:.1f} | {feeds} | {nominal:.3f} | {peer['time']:.4f} | {cols} |"
+            if prev is not None and prev[1] == row:
+                rows[-1] = f"| {label} | {prev[0]}-{i} {row}"
+            else:
+                rows.append(f"| {label} | {i} {row}")
+                prev = (i, row)
+            key = repr([(e.kind, *np.round(e.start, 9), *np.round(e.end, 9), round(e.sweep_rad or 0.0, 9),
+                         round(e.feed_m_s, 9), round(e.z_end_m - e.z_start_m, 9)) for e in els])  # depth passes alike
+            if res is not None and key not in done:
+                done.add(key)
+                detail += element_rows(label, i, els, peer, res, i, tol)
+        cols = " | ".join(f"{t:.3f} | {t / tot_peer:.3f}x" for t in tot)
+        rows.append(f"| {label} | all | | | | {tot_peer:.4f} | {cols} |")
+        summary.append(f"| {label} | " + " | ".join(
+            f"{g['cpu']:.1f} | {max(r for r in g['ratio'] if r is not None):.4f} | {g['Ts'] * 1e3:g}" for g in got)
+            + " |")
+    print("### program feed per pass against the third-order optimum capped at F\n")
+    print("\n".join(rows))
+    print("\n### compute (CPU s of the whole plan), largest tool speed over F while cutting, Ts ms\n")
+    print("| program | " + " | ".join(f"{Path(r).resolve().name} CPU s | max speed / F | Ts" for r in roots) + " |")
+    print("|---|" + "---|---|---|" * len(roots))
+    print("\n".join(summary))
+    if detail:
+        print("\n".join(detail))
+
+
+if __name__ == "__main__":
+    main()
