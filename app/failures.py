@@ -24,10 +24,10 @@ def limit_memory(memory_mb: int | None) -> None:
         resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
 
 
-def too_much_work(estimate: Any, limit_s: float) -> dict[str, Any]:
-    """A request whose work estimate (:class:`planner.WorkEstimate`) exceeds the compute
-    limit ``limit_s`` [s]: refused before planning."""
-    return {"code": "too_much_work", "message": estimate.message(limit_s), "field": estimate.field}
+def too_much_work(estimate: Any, limit_s: float, time_limit_s: float | None = None) -> dict[str, Any]:
+    """A request whose work estimate (:class:`planner.WorkEstimate`) exceeds the work ``limit_s``
+    [s] admitted under the compute limit ``time_limit_s`` [s]: refused before planning."""
+    return {"code": "too_much_work", "message": estimate.message(limit_s, time_limit_s), "field": estimate.field}
 
 
 def timeout(limit_s: float) -> dict[str, Any]:

@@ -30,3 +30,13 @@ class PlannerError(ValueError):
 
 def invalid(field: str, message: str) -> PlannerError:
     return PlannerError("invalid_input", message, field)
+
+
+def over_the_limit(limit_s: float, time_limit_s: float | None = None) -> str:
+    """The one wording of the work a server admits, for a ``too_much_work`` refusal: ``limit_s``
+    [s] of estimated work, admitted under the time limit ``time_limit_s`` [s] where that is
+    larger (the estimate's margin: a run may take that much longer than its estimate)."""
+    if time_limit_s is not None and time_limit_s > limit_s:
+        return (f"the {limit_s:.3g} s of estimated work this server admits under its time limit of {time_limit_s:g} s "
+                f"(a run may take up to {time_limit_s / limit_s:.2g}x its estimate)")
+    return f"the {limit_s:.3g} s of work this server admits"

@@ -46,7 +46,18 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from app import storage_io
 from app.errors import error_response, errors_doc
 from app.job_progress import time_left
-from app.jobs import ContourJob, Done, ErrorDetail, Job, Outcome, PlanJob, check_estimate, crashed, estimate
+from app.jobs import (
+    ContourJob,
+    Done,
+    ErrorDetail,
+    Job,
+    Outcome,
+    PlanJob,
+    admitted_s,
+    check_estimate,
+    crashed,
+    estimate,
+)
 from app.observability import observe_job
 from app.routers.deps import outcome_response, store, submit
 from app.storage import Store, new_id
@@ -167,12 +178,12 @@ async def run_as_job(request: Request, job: ContourJob | PlanJob, fmt: str) -> R
     app = request.app
     limits = job_limits(app)
     pref = parse_prefer(request.headers.getlist("prefer"))
-    threshold = min(pref.wait_s if pref.wait_s is not None else limits.async_after_s, limits.sync_limit_s)
+    threshold = min(pref.wait_s if pref.wait_s is not None else limits.async_after_s, admitted_s(limits.sync_limit_s))
     est_s: float | None = None
     if isinstance(job, PlanJob):  # estimated here, before it is queued (as the service does)
         est = await asyncio.get_running_loop().run_in_executor(None, estimate, job)
         est_s = est.seconds if est is not None else None
-        if est_s is not None and est_s > limits.job_timeout_s:  # over every limit: refused now, naming the job's
+        if est_s is not None and est_s > admitted_s(limits.job_timeout_s):  # over every limit: refused now
             refused = check_estimate(job, limits.job_timeout_s)
             if refused is not None:
                 return outcome_response(refused, fmt)

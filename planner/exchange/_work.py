@@ -28,7 +28,7 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
-from ..errors import PlannerError
+from ..errors import PlannerError, over_the_limit
 from ._budget import MAX_BLOCK_DEPTH, entity_ref, spline_points, svg_expanded_elements
 from ._flatten import MAX_CHORD_ANGLE
 
@@ -75,10 +75,11 @@ class ImportWork:
     field: str = "drawing"  #: the option or input that contributes most
     advice: str = "simplify the drawing"  #: what to change
 
-    def message(self, limit_s: float) -> str:
-        """Why a server with the time limit ``limit_s`` [s] refuses this drawing."""
-        return (f"this drawing needs an estimated {self.seconds:.3g} s to import ({self.detail}), more than this "
-                f"server's limit of {limit_s:g} s; {self.advice}")
+    def message(self, limit_s: float, time_limit_s: float | None = None) -> str:
+        """Why a server admitting ``limit_s`` [s] of estimated work refuses this drawing
+        (:func:`planner.errors.over_the_limit`)."""
+        return (f"this drawing needs an estimated {self.seconds:.3g} s to import ({self.detail}), more than "
+                f"{over_the_limit(limit_s, time_limit_s)}; {self.advice}")
 
 
 _ADVICE = {

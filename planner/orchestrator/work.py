@@ -57,7 +57,7 @@ from typing import Any
 import numpy as np
 
 from ..corridor import cell_size_rule, remedy_cells
-from ..errors import PlannerError
+from ..errors import PlannerError, over_the_limit
 from ..schema import (
     DEFAULT_FORCE_RISE_S,
     MAX_SAMPLES_PER_SEGMENT,
@@ -124,12 +124,13 @@ class WorkEstimate:
     #: what to change, where the request's own options decide it (None: the general advice)
     advice: str | None = None
 
-    def message(self, limit_s: float) -> str:
-        """Why a server with the time limit ``limit_s`` [s] rejects this request."""
+    def message(self, limit_s: float, time_limit_s: float | None = None) -> str:
+        """Why a server that admits work estimated up to ``limit_s`` [s] rejects this request;
+        ``time_limit_s``: its time limit, when the admitted work is less (the estimate's margin)."""
         advice = self.advice or ("make it smaller: fewer segments or samples per segment, a larger settings.Ts, a "
                                  "shorter horizon settings.N, or the paper mode")
-        return (f"this request needs an estimated {self.seconds:.3g} s of planning ({self.detail}), more than this "
-                f"server's limit of {limit_s:g} s; {advice}")
+        return (f"this request needs an estimated {self.seconds:.3g} s of planning ({self.detail}), more than "
+                f"{over_the_limit(limit_s, time_limit_s)}; {advice}")
 
 
 def _step_cost(mode: str, backend: str, solver: str, N: int, substeps: int) -> float:
