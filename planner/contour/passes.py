@@ -15,7 +15,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from typing import Any
 
 import numpy as np
@@ -97,16 +97,16 @@ def travel_run_end(blocks: Sequence[Any], i: int) -> int:
     return j
 
 
-def chunks(elements: list[PathElement]) -> list[list[int]]:
+def chunks(elements: list[PathElement], split_after: Collection[int] = ()) -> list[list[int]]:
     """The element indices of a pass in pieces the robot plans rest to rest: split after each
-    exact-stop move (G61)."""
+    exact-stop move (G61) and after the moves ``split_after`` (``fastest``: where Z's slope
+    changes too sharply to pass, :func:`planner.contour.search.slope_stops`)."""
     out: list[list[int]] = [[]]
     for k, e in enumerate(elements):
         out[-1].append(k)
-        if e.exact_stop and k < len(elements) - 1:
+        if k < len(elements) - 1 and (e.exact_stop or k in split_after):
             out.append([])
     return out
-
 
 
 class TubeSizes:
