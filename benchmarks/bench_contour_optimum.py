@@ -4,11 +4,16 @@ the third-order optimum with the tool speed capped at each move's F, per pass an
 next to the planner's ``fastest`` and ``program`` feeds at the defaults.
 
     OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python benchmarks/bench_contour_optimum.py \
-        [--grids 10,20,40] [--programs bench,freecad_linuxcnc.ngc,fusion360.nc] [--compare-ts 0.01] [--elements]
+        [--grids 10,20,40] [--programs bench,freecad_linuxcnc.ngc,fusion360.nc] [--compare-ts 0.01] [--elements] \
+        [--fastest-only]
 
 ``--compare-ts``: ``fastest`` also at that typed sample time, beside the defaults (before/after
 the defaults' choice of Ts in one run); ``--elements``: per element of each distinct pass, the
-third-order optimum's time and top speed beside ``fastest``'s (where a plan loses its time).
+third-order optimum's time and top speed beside ``fastest``'s (where a plan loses its time);
+``--fastest-only``: no ``program`` feed and no optimum at F. Both third-order ratios are
+printed: against the peer under the Z axis's speed and acceleration (``3rd order``, the fair
+one) and against the earlier peer under its speed only (``3rd order, Z speed only``; the same
+where a pass keeps its Z).
 
 **The third-order exact-path optimum** (an independent peer of :mod:`planner.contour.timing`,
 written here from the equations of motion, not from the planner's code):
@@ -62,8 +67,9 @@ bracket the optimum.
 **The second-order optimum**: TOPP-RA on the same exact path, drive forces and leg speeds, no
 force-rate limit (``bench_contour.topp_time``: stops only at corners).
 
-**The planner**: ``planner.contour.plan_contour`` at the defaults (Ts 10 ms, the default
-force-rate limit), ``feed`` ``fastest`` and ``program``; per pass ``contour.passes[i].time_s``,
+**The planner**: ``planner.contour.plan_contour`` at the defaults (``fastest``: Ts and N chosen
+from the program's arcs, ``planner.contour.defaults``; ``program``: Ts 10 ms; the default
+force-rate limit and Z axis), ``feed`` ``fastest`` and ``program``; per pass ``contour.passes[i].time_s``,
 per program ``cut_time_s``; compute: CPU seconds of the whole plan (after one untimed plan that
 loads the compiled kernels).
 
@@ -519,6 +525,7 @@ def main() -> None:
             c = res["fastest"][0].contour  # type: ignore[attr-defined]
         else:
             c = plan_contour({"program": text, "origin": origin, "feed": "program"}).contour  # type: ignore[attr-defined]
+        assert c is not None
         org = np.asarray(c.origin, float)
         print(f"### {label}: {len(prog.passes)} passes, origin {[float(x) for x in np.round(org, 5)]} m\n")
         print("| pass | elements | mm | F mm/min | L / F s | fastest s | program s | TOPP-RA s (2nd order) | "
@@ -574,8 +581,8 @@ def main() -> None:
                     typed_rows.append((label, i, i, row))
             tot += (fast, prg, topp, t3, t3f, L, nominal, t3z)
             row = (f"| {len(els)} | {L * 1e3:.1f} | {', '.join(map(str, feeds))} | {nominal:.3f} | {fast:.3f} | "
-                   f"{prg:.3f} | {topp:.4f} | {t3:.4f} | {t3z:.4f} | {t3f:.4f} | {fast / t3:.3f}x | {fast / t3z:.3f}x | "
-                   f"{prg / t3f:.3f}x | {fast / topp:.3f}x |")
+                   f"{prg:.3f} | {topp:.4f} | {t3:.4f} | {t3z:.4f} | {t3f:.4f} | {fast / t3:.3f}x | "
+                   f"{fast / t3z:.3f}x | {prg / t3f:.3f}x | {fast / topp:.3f}x |")
             rows.append((i, row))
         k = 0
         while k < len(rows):  # passes alike in a row: one line
@@ -588,7 +595,8 @@ def main() -> None:
         cf = res["fastest"][1] if res else math.nan
         cp = res["program"][1] if "program" in res else math.nan
         print(f"| all | | {L * 1e3:.1f} | | {nominal:.3f} | {fast:.3f} | {prg:.3f} | {topp:.4f} | {t3:.4f} | "
-              f"{t3z:.4f} | {t3f:.4f} | {fast / t3:.3f}x | {fast / t3z:.3f}x | {prg / t3f:.3f}x | {fast / topp:.3f}x |\n")
+              f"{t3z:.4f} | {t3f:.4f} | {fast / t3:.3f}x | {fast / t3z:.3f}x | {prg / t3f:.3f}x | "
+              f"{fast / topp:.3f}x |\n")
         summary.append(f"| {label} | {len(prog.passes)} | {L * 1e3:.0f} | {nominal:.2f} | {fast:.2f} | {cf:.1f} | "
                        f"{prg:.2f} | {cp:.1f} | {topp:.3f} | {t3:.3f} | {t3z:.3f} | {t3f:.3f} | {fast / t3:.3f}x | "
                        f"{fast / t3z:.3f}x | {prg / t3f:.3f}x |")
