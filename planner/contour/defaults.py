@@ -111,7 +111,8 @@ def contour_ts(program: Program, tol: float, feed: str, model: RobotModel, st: S
                 need = min(need, chord / v)
     if need >= st.Ts:
         return st.Ts
-    return min(st.Ts, max(TS_FLOOR_S, math.ceil(need / TS_STEP_S - 1e-9) * TS_STEP_S))
+    steps = math.ceil(need / TS_STEP_S - 1e-9)
+    return min(st.Ts, max(TS_FLOOR_S, round(steps * TS_STEP_S, 9)))  # 0.00325, not 0.0032500000000000003
 
 
 def contour_settings(req: ContourRequest, st: Settings, program: Program, tol: float, model: RobotModel) -> Settings:
