@@ -537,12 +537,14 @@ def slope_stops(feed: str, els: list[PathElement], tol: float, a_max: float) -> 
 
 
 def piece_key(els: list[PathElement]) -> tuple:
-    """A piece's shape (its moves' kinds, XY ends, sweeps and Z slopes, to 1 nm): the ``fastest``
-    scale a piece found is the next search's start (its ``hint``) only for a piece of the same
-    shape (depth passes): a ramp's scale, or a pass of other moves', is no guess for another
-    (measured on fusion360: the middle of its first pass 0.252 s from the ramp's scale, 0.186 s
-    searched afresh)."""
-    return tuple((e.kind, *np.round(np.asarray(e.start, float), 9), *np.round(np.asarray(e.end, float), 9),
+    """A piece's shape (its moves' kinds, XY ends from the piece's start, sweeps and Z slopes, to
+    1 nm: the same shape anywhere in the plane): the ``fastest`` scale a piece found is the next
+    search's start (its ``hint``) only for a piece of the same shape (depth passes, repeated
+    features): a ramp's scale, or a pass of other moves', is no guess for another (measured on
+    fusion360: the middle of its first pass 0.252 s from the ramp's scale, 0.186 s searched
+    afresh; its second pass 0.261 s from the first's, 0.195 s)."""
+    o = np.asarray(els[0].start, float)
+    return tuple((e.kind, *np.round(np.asarray(e.start, float) - o, 9), *np.round(np.asarray(e.end, float) - o, 9),
                   round(e.sweep_rad or 0.0, 9), round((e.z_end_m - e.z_start_m) / e.length_m, 9) if e.length_m > 0
                   else 0.0) for e in els)
 
