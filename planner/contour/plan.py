@@ -147,7 +147,8 @@ class _Walk:
         self.z = 0.0
         self.parts: list[Part] = []
         self.summaries: list[PassSummary] = []
-        self.hints: dict[tuple, Scale] = {}  # fastest: the timing of the piece before of the same geometry
+        self.hints: dict[tuple, Scale] = {}  # fastest: the timing of the piece before of the same shape
+        self.hint: Scale | None = None  # fastest: the timing of the level piece before (search.piece_hint)
         self.memo: dict = {}  # fastest: the time-optimal profiles of the passes (alike passes share one)
         self.progress: Callable[[int, int], None] | None = None  # (cut passes done, cut passes)
 
@@ -207,11 +208,13 @@ class _Walk:
         first = len(self.parts)
         geo = PathGeometry(b.elements, origin)
         for chunk in chunks(b.elements, slope_stops(req.feed, b.elements, tol, req.z_accel_m_s2)):
-            key = piece_key([b.elements[k] for k in chunk])
+            key, level = piece_key([b.elements[k] for k in chunk])
             part = plan_cut(req, model, st, chunk, origin, tol, CONTOUR_PSI, self.pos, geo, b.elements,
-                            self.hints.get(key), len(self.program.passes), self.memo, self.limit_at)
+                            self.hints.get(key, self.hint if level else None), len(self.program.passes), self.memo,
+                            self.limit_at)
             if part.scale is not None:
                 self.hints[key] = part.scale
+                self.hint = part.scale if level else self.hint
             self.parts.append(part)
             self.pos = part.result.pose[-1, :2].copy()
         self.summaries.append(_pass_summary(len(self.summaries), b, self.parts[first:], geo, tol))
