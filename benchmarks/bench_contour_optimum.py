@@ -4,11 +4,16 @@ the third-order optimum with the tool speed capped at each move's F, per pass an
 next to the planner's ``fastest`` and ``program`` feeds at the defaults.
 
     OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python benchmarks/bench_contour_optimum.py \
-        [--grids 10,20,40] [--programs bench,freecad_linuxcnc.ngc,fusion360.nc] [--compare-ts 0.01] [--elements]
+        [--grids 10,20,40] [--programs bench,freecad_linuxcnc.ngc,fusion360.nc] [--compare-ts 0.01] [--elements] \
+        [--fastest-only]
 
 ``--compare-ts``: ``fastest`` also at that typed sample time, beside the defaults (before/after
 the defaults' choice of Ts in one run); ``--elements``: per element of each distinct pass, the
-third-order optimum's time and top speed beside ``fastest``'s (where a plan loses its time).
+third-order optimum's time and top speed beside ``fastest``'s (where a plan loses its time);
+``--fastest-only``: no ``program`` feed and no optimum at F. Both third-order ratios are
+printed: against the peer under the Z axis's speed and acceleration (``3rd order``, the fair
+one) and against the earlier peer under its speed only (``3rd order, Z speed only``; the same
+where a pass keeps its Z).
 
 **The third-order exact-path optimum** (an independent peer of :mod:`planner.contour.timing`,
 written here from the equations of motion, not from the planner's code):
@@ -30,15 +35,21 @@ written here from the equations of motion, not from the planner's code):
   ``benchmarks/bench_optimality.py`` at random states before solving);
 * the limits: ``|f_k| <= force_max``, the leg speeds ``|J_l q' v| <= speed_max`` at every
   node, the drive-force rate ``|f_{k+1} - f_k| <= rate h_e`` (rate = force_max / 50 ms, the
-  default ``force_rate_n_s``), and for the capped peer ``v <= F`` of the element's move; on a
-  move whose Z changes (a ramp, a helix) ``v <= z_max L / |dZ|``, the Z axis speed ``z_max``
-  0.05 m/s (the request's default ``z_rapid_m_s``, which the planner holds in both feeds);
+  default ``force_rate_n_s``), and for the capped peer ``v <= F`` of the element's move;
+* the Z axis: where a pass moves Z (a ramp, a helix; a vertical arc as ``read_gcode`` reads
+  it, a line with Z linear along it) the exact path is the 3-D path, ``Z(s) = Z_0 + g s`` along
+  each move of slope ``g = dZ / L``, so ``Z_dot = g v`` and ``Z_dd = g a``: ``|g| v <= z_max``
+  (the Z axis speed, the request's ``z_rapid_m_s``, 0.05 m/s by default) and ``|g a| <= z_acc``
+  at every node (``a`` is linear between them: the nodes bound it; the Z axis acceleration,
+  ``z_accel_m_s2``, 1 m/s^2 by default), the limits the planner holds in both feeds
+  (``planner.contour.zaxis``); ``--z-speed-only``: the earlier peer, the Z speed alone;
 * junctions: the forces are continuous everywhere (a rate limit allows no jump), so is the
   velocity; where the tangent jumps (a corner) the path must stop; where the curvature jumps
   (a line into an arc, even tangentially) it must stop as well: the generalised acceleration
   ``y_dd = q' a + q'' v^2`` is continuous with the forces, and its normal part ``q'' v^2``
-  jumps unless ``v = 0``. Only where tangent and curvature both continue (collinear lines,
-  arcs of one circle) does the tool pass through;
+  jumps unless ``v = 0``; where Z's slope changes (a ramp's start and end) with a Z acceleration
+  limit: Z's velocity ``g v`` is continuous, so ``v = 0`` there. Only where tangent, curvature
+  and slope all continue (collinear lines, arcs of one circle) does the tool pass through;
 * the pass starts and ends at rest, with a zero generalised acceleration (it holds its pose
   before and after: the forces are a preload in the null space of ``J_l^T``, free); with
   ``--from-zero`` the forces start and end at 0 instead;
@@ -56,8 +67,9 @@ bracket the optimum.
 **The second-order optimum**: TOPP-RA on the same exact path, drive forces and leg speeds, no
 force-rate limit (``bench_contour.topp_time``: stops only at corners).
 
-**The planner**: ``planner.contour.plan_contour`` at the defaults (Ts 10 ms, the default
-force-rate limit), ``feed`` ``fastest`` and ``program``; per pass ``contour.passes[i].time_s``,
+**The planner**: ``planner.contour.plan_contour`` at the defaults (``fastest``: Ts and N chosen
+from the program's arcs, ``planner.contour.defaults``; ``program``: Ts 10 ms; the default
+force-rate limit and Z axis), ``feed`` ``fastest`` and ``program``; per pass ``contour.passes[i].time_s``,
 per program ``cut_time_s``; compute: CPU seconds of the whole plan (after one untimed plan that
 loads the compiled kernels).
 
@@ -84,14 +96,16 @@ from planner.contour import plan_contour
 from planner.exchange import read_gcode
 from planner.model import RobotModel, load_robot
 from planner.model.dynamics import generalised_forces
-from planner.schema import PathElement
+from planner.schema import ContourRequest, PathElement
 from planner.schema.limits import DEFAULT_FORCE_RISE_S
 
 CAM = Path(__file__).resolve().parent.parent / "tests" / "data" / "cam"
 ROBOT = "moving-slide"
-#: the Z axis speed [m/s] (``ContourRequest.z_rapid_m_s``' default): a move whose Z changes runs
-#: in XY at most ``z_max L / |dZ|`` in the planner (``planner.contour.search.z_caps``) and here
-Z_MAX_M_S = 0.05
+#: the Z axis speed [m/s] and acceleration [m/s^2] (``ContourRequest``'s defaults ``z_rapid_m_s``,
+#: ``z_accel_m_s2``): a move of slope ``g = dZ / L`` runs at most ``z_max / |g|`` in XY and speeds
+#: up at most at ``z_acc / |g|`` in the planner (``planner.contour.zaxis``) and here
+Z_MAX_M_S = float(ContourRequest.model_fields["z_rapid_m_s"].default)
+Z_ACC_M_S2 = float(ContourRequest.model_fields["z_accel_m_s2"].default)
 
 
 # ------------------------------------------------------------------ the dynamics, CasADi
@@ -183,12 +197,18 @@ def _curvature(e: PathElement) -> float:
     return math.copysign(1.0 / e.radius_m, e.sweep_rad)
 
 
-def smooth_junction(a: PathElement, b: PathElement) -> bool:
+def _slope(e: PathElement) -> float:
+    return (e.z_end_m - e.z_start_m) / e.length_m if e.length_m > 0 else 0.0
+
+
+def smooth_junction(a: PathElement, b: PathElement, z_slope: bool = True) -> bool:
     """True where the tool may pass ``a``'s end into ``b`` without stopping: tangent and
-    (signed) curvature continuous (module docstring)."""
+    (signed) curvature continuous, and (``z_slope``: with a Z acceleration limit) Z's slope
+    (module docstring)."""
     t = float(_tangent(a, True) @ _tangent(b, False))
     ka, kb = _curvature(a), _curvature(b)
-    return t > 1 - 1e-9 and abs(ka - kb) <= 1e-6 * max(abs(ka), abs(kb), 1.0)
+    same_slope = not z_slope or abs(_slope(a) - _slope(b)) <= 1e-9
+    return t > 1 - 1e-9 and abs(ka - kb) <= 1e-6 * max(abs(ka), abs(kb), 1.0) and same_slope
 
 
 @dataclass
@@ -204,10 +224,11 @@ class Optimum:
 
 def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: np.ndarray, N: int,
                         rate: np.ndarray | None, feed_cap: bool = False, from_zero: bool = False,
-                        z_max: float | None = None,
+                        z_max: float | None = None, z_acc: float | None = None,
                         guess: dict | None = None, verbose: bool = False, B: int = 3) -> tuple[Optimum, dict]:
     """The minimum time of one pass (module docstring) with ``N`` time steps per element.
-    ``rate``: the force-rate limit per drive [N/s] (None: none); ``feed_cap``: ``v <= F``.
+    ``rate``: the force-rate limit per drive [N/s] (None: none); ``feed_cap``: ``v <= F``;
+    ``z_max``, ``z_acc``: the Z axis speed and acceleration (None: none).
     ``guess``: a previous solution (per element times) to start from. Returns the optimum and
     the per-element times (a guess for a finer grid)."""
     import casadi as ca
@@ -231,6 +252,8 @@ def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: 
     # the Z axis speed's bound on the XY speed of a move whose Z changes (as the planner's z_caps)
     dZ = np.array([abs(e.z_end_m - e.z_start_m) for e in els])
     Zc = np.where((dZ > 0) & (z_max is not None), (z_max or 0.0) * L / np.maximum(dZ, 1e-300), np.inf)
+    # and the Z axis acceleration's on the path acceleration: |g a| <= z_acc
+    Za = np.where((dZ > 0) & (z_acc is not None), (z_acc or 0.0) * L / np.maximum(dZ, 1e-300), np.inf)
 
     inv = casadi_inverse_dynamics(robot)
     # one node: residual of the equations of motion (3, scaled by force_max) and leg speeds (n)
@@ -283,6 +306,8 @@ def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: 
         opti.subject_to(V <= cap.reshape(1, -1))
     for e in np.flatnonzero(np.isfinite(Zc)):  # a ramp's Z within the axis speed
         opti.subject_to(V[0, e * nn:(e + 1) * nn] <= Zc[e] / 0.1)
+    for e in np.flatnonzero(np.isfinite(Za)):  # and its acceleration (a is linear between the nodes)
+        opti.subject_to(opti.bounded(-Za[e] / 10.0, A[0, e * nn:(e + 1) * nn], Za[e] / 10.0))
     # within an element: a linear in time, s and v integrated exactly
     i0 = np.concatenate([np.arange(e * nn, e * nn + N) for e in range(E)])
     i1 = i0 + 1
@@ -303,7 +328,7 @@ def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: 
     # junctions: forces and speed continuous; a stop where tangent or curvature jumps
     for e in range(E - 1):
         opti.subject_to(U[:, last[e]] == U[:, first[e + 1]])
-        if smooth_junction(els[e], els[e + 1]):
+        if smooth_junction(els[e], els[e + 1], z_acc is not None):
             opti.subject_to(V[0, last[e]] == V[0, first[e + 1]])
         else:
             opti.subject_to(V[0, last[e]] == 0)
@@ -322,6 +347,7 @@ def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: 
         Tg = np.maximum(Tg, 1.9 * L / Fe)  # the minimum-jerk guess's top speed 1.875 L / T within F
     if not guess:
         Tg = np.maximum(Tg, 1.9 * L / Zc)  # and within the Z axis' bound
+        Tg = np.maximum(Tg, np.sqrt(5.8 * L / Za))  # the minimum-jerk guess's top acceleration 5.77 L / T^2
     if guess and guess.get("N") is not None:  # the previous solution's block durations
         Db = np.asarray(guess["D"]).reshape(E, B)
     else:
@@ -380,15 +406,16 @@ def third_order_optimum(robot: RobotModel, elements: list[PathElement], origin: 
 
 def converged_optimum(robot: RobotModel, elements: list[PathElement], origin: np.ndarray, grids: list[int],
                       rate: np.ndarray | None, feed_cap: bool, from_zero: bool = False, blocks: int = 3,
-                      tol: float = 1e-3, finest: int = 192, z_max: float | None = None) -> list[Optimum]:
+                      tol: float = 1e-3, finest: int = 192, z_max: float | None = None,
+                      z_acc: float | None = None) -> list[Optimum]:
     """The optimum at each grid (coarse to fine, each started from the previous), then on
     doubled grids until the last two agree within ``tol`` (relative) or ``finest`` is passed."""
     out, guess = [], None
     grids = list(grids)
     k = 0
     while k < len(grids):
-        opt, guess = third_order_optimum(robot, elements, origin, grids[k], rate, feed_cap, from_zero, z_max, guess,
-                                         B=blocks)
+        opt, guess = third_order_optimum(robot, elements, origin, grids[k], rate, feed_cap, from_zero, z_max, z_acc,
+                                         guess, B=blocks)
         out.append(opt)
         k += 1
         if (k == len(grids) and len(out) > 1 and abs(out[-1].time_s / out[-2].time_s - 1) > tol
@@ -457,6 +484,8 @@ def main() -> None:
                     "and print it beside the defaults")
     ap.add_argument("--elements", action="store_true",
                     help="per element of each distinct pass: the optimum's time and top speed beside fastest's")
+    ap.add_argument("--fastest-only", action="store_true",
+                    help="fastest and its optima only (no program feed, no optimum at F)")
     args = ap.parse_args()
     grids = [int(g) for g in args.grids.split(",")]
     robot = load_robot(ROBOT)
@@ -486,7 +515,7 @@ def main() -> None:
         prog = read_gcode(text)
         res = {}
         if not args.no_planner:
-            for feed in ("fastest", "program"):
+            for feed in ("fastest",) if args.fastest_only else ("fastest", "program"):
                 res[feed] = plan(text, origin, feed)
             if args.compare_ts:
                 res["typed"] = plan(text, origin, "fastest", {"Ts": args.compare_ts})
@@ -496,12 +525,14 @@ def main() -> None:
             c = res["fastest"][0].contour  # type: ignore[attr-defined]
         else:
             c = plan_contour({"program": text, "origin": origin, "feed": "program"}).contour  # type: ignore[attr-defined]
+        assert c is not None
         org = np.asarray(c.origin, float)
         print(f"### {label}: {len(prog.passes)} passes, origin {[float(x) for x in np.round(org, 5)]} m\n")
         print("| pass | elements | mm | F mm/min | L / F s | fastest s | program s | TOPP-RA s (2nd order) | "
-              "3rd order s | 3rd order at F s | fastest / 3rd | program / 3rd at F | fastest / TOPP-RA |")
-        print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-        tot = np.zeros(7)
+              "3rd order s | 3rd order, Z speed only s | 3rd order at F s | fastest / 3rd | fastest / 3rd, Z speed "
+              "only | program / 3rd at F | fastest / TOPP-RA |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+        tot = np.zeros(8)
         rows: list[tuple[int, str]] = []
         for i, b in enumerate(prog.passes):
             els = b.elements
@@ -510,28 +541,36 @@ def main() -> None:
             if key not in memo:
                 topp = topp_time(els, org, leg_speed=True)
                 third = converged_optimum(robot, els, org, grids, rate, False, args.from_zero, args.blocks,
-                                          z_max=Z_MAX_M_S)
-                capped = converged_optimum(robot, els, org, grids, rate, True, args.from_zero, args.blocks,
-                                           z_max=Z_MAX_M_S)
-                memo[key] = (topp, third, capped)
+                                          z_max=Z_MAX_M_S, z_acc=Z_ACC_M_S2)
+                # the earlier peer (the Z speed alone) where the pass moves Z; else the same problem
+                moves_z = any(e.z_end_m != e.z_start_m and e.length_m > 1e-12 for e in els)
+                zspeed = converged_optimum(robot, els, org, grids, rate, False, args.from_zero, args.blocks,
+                                           z_max=Z_MAX_M_S) if moves_z else third
+                capped = third if args.fastest_only else converged_optimum(
+                    robot, els, org, grids, rate, True, args.from_zero, args.blocks, z_max=Z_MAX_M_S, z_acc=Z_ACC_M_S2)
+                memo[key] = (topp, third, capped, zspeed)
                 if args.elements and res:
                     element_rows += element_table(label, i, els, third[-1], res["fastest"][0], i)
-                for lab, runs in (("3rd order", third), ("3rd order at F", capped)):
+                for lab, runs in (("3rd order", third), ("3rd order, Z speed only", zspeed),
+                                  ("3rd order at F", capped)):
+                    if (lab != "3rd order" and runs is third):
+                        continue
                     times = " / ".join(f"{r.time_s:.5f}" for r in runs)
                     change = " / ".join(f"{abs(r.time_s / p.time_s - 1) * 100:.3f}" for p, r in zip(runs, runs[1:]))
                     conv_rows.append(f"| {label} pass {i} | {lab} | {', '.join(str(r.nodes) for r in runs)} | "
                                      f"{times} | {change} | {', '.join(r.status for r in runs)} | "
                                      f"{runs[-1].max_residual:.1e} | {sum(r.cpu_s for r in runs):.1f} |")
-            topp, third, capped = memo[key]
-            t3, t3f = third[-1].time_s, capped[-1].time_s
+            topp, third, capped, zspeed = memo[key]
+            t3, t3f, t3z = third[-1].time_s, capped[-1].time_s, zspeed[-1].time_s
             L = sum(e.length_m for e in els)
             nominal = sum(e.length_m / e.feed_m_s for e in els)
             # the optima's order: each adds a limit to the one before
-            assert topp <= t3 * (1 + 1e-3) and t3 <= t3f * (1 + 1e-3) and nominal <= t3f * (1 + 1e-3), \
-                (topp, t3, t3f, nominal)
+            # (TOPP-RA knows no Z limit: the Z speed-only peer bounds it; the Z acceleration adds to that)
+            assert topp <= t3z * (1 + 1e-3) and t3z <= t3 * (1 + 1e-3), (topp, t3z, t3)
+            assert args.fastest_only or (t3 <= t3f * (1 + 1e-3) and nominal <= t3f * (1 + 1e-3)), (t3, t3f, nominal)
             feeds = sorted({round(e.feed_m_s * 60000) for e in els})
             fast = res["fastest"][0].contour.passes[i].time_s if res else math.nan  # type: ignore[attr-defined]
-            prg = res["program"][0].contour.passes[i].time_s if res else math.nan  # type: ignore[attr-defined]
+            prg = res["program"][0].contour.passes[i].time_s if "program" in res else math.nan  # type: ignore[attr-defined]
             if "typed" in res:
                 typed = res["typed"][0].contour.passes[i].time_s  # type: ignore[attr-defined]
                 row = (f"| {typed:.3f} | {typed / third[-1].time_s:.3f}x | {fast:.3f} | "
@@ -540,10 +579,10 @@ def main() -> None:
                     typed_rows[-1] = (label, typed_rows[-1][1], i, row)
                 else:
                     typed_rows.append((label, i, i, row))
-            tot += (fast, prg, topp, t3, t3f, L, nominal)
+            tot += (fast, prg, topp, t3, t3f, L, nominal, t3z)
             row = (f"| {len(els)} | {L * 1e3:.1f} | {', '.join(map(str, feeds))} | {nominal:.3f} | {fast:.3f} | "
-                   f"{prg:.3f} | {topp:.4f} | {t3:.4f} | {t3f:.4f} | {fast / t3:.3f}x | {prg / t3f:.3f}x | "
-                   f"{fast / topp:.3f}x |")
+                   f"{prg:.3f} | {topp:.4f} | {t3:.4f} | {t3z:.4f} | {t3f:.4f} | {fast / t3:.3f}x | "
+                   f"{fast / t3z:.3f}x | {prg / t3f:.3f}x | {fast / topp:.3f}x |")
             rows.append((i, row))
         k = 0
         while k < len(rows):  # passes alike in a row: one line
@@ -552,20 +591,22 @@ def main() -> None:
                 j += 1
             print(f"| {rows[k][0]}{'' if j == k else f'-{rows[j][0]}'} {rows[k][1]}")
             k = j + 1
-        fast, prg, topp, t3, t3f, L, nominal = tot
+        fast, prg, topp, t3, t3f, L, nominal, t3z = tot
         cf = res["fastest"][1] if res else math.nan
-        cp = res["program"][1] if res else math.nan
+        cp = res["program"][1] if "program" in res else math.nan
         print(f"| all | | {L * 1e3:.1f} | | {nominal:.3f} | {fast:.3f} | {prg:.3f} | {topp:.4f} | {t3:.4f} | "
-              f"{t3f:.4f} | {fast / t3:.3f}x | {prg / t3f:.3f}x | {fast / topp:.3f}x |\n")
+              f"{t3z:.4f} | {t3f:.4f} | {fast / t3:.3f}x | {fast / t3z:.3f}x | {prg / t3f:.3f}x | "
+              f"{fast / topp:.3f}x |\n")
         summary.append(f"| {label} | {len(prog.passes)} | {L * 1e3:.0f} | {nominal:.2f} | {fast:.2f} | {cf:.1f} | "
-                       f"{prg:.2f} | {cp:.1f} | {topp:.3f} | {t3:.3f} | {t3f:.3f} | {fast / t3:.3f}x | "
-                       f"{prg / t3f:.3f}x |")
+                       f"{prg:.2f} | {cp:.1f} | {topp:.3f} | {t3:.3f} | {t3z:.3f} | {t3f:.3f} | {fast / t3:.3f}x | "
+                       f"{fast / t3z:.3f}x | {prg / t3f:.3f}x |")
     if element_rows:
         print("\n".join(element_rows) + "\n")
     print("### per program (cutting time; compute: CPU s of the whole plan at the defaults)\n")
     print("| program | passes | mm | L / F s | fastest s | CPU s | program s | CPU s | TOPP-RA s | 3rd order s | "
-          "3rd order at F s | fastest / 3rd | program / 3rd at F |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "3rd order, Z speed only s | 3rd order at F s | fastest / 3rd | fastest / 3rd, Z speed only | "
+          "program / 3rd at F |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     print("\n".join(summary))
     if typed_rows:
         print(f"\n### fastest at the typed Ts {args.compare_ts:g} s against the defaults (per pass, against the "

@@ -19,11 +19,19 @@ speed a start from rest reaches in half the arc's length ``L`` at that jerk; the
 speed; :func:`arc_speed` in ``program`` feed also at most the move's F), ``a`` the acceleration the drives give the tool
 in every direction at the centre of the base (:func:`drive_acceleration`), ``j = a / ramp``,
 ``ramp`` the slowest drive's rise from 0 to ``force_max``. The sample time is ``c / v`` of the
-arc where that is smallest, rounded up to a whole millisecond (a chord per sample at most the
-speed the arc asks: rounded down, a chord would need just over one sample, so two, at half the
-speed), within [:data:`TS_FLOOR_S`, the settings' default]. Measured on the three programs of
+arc where that is smallest, rounded up to a whole :data:`TS_STEP_S` (a chord per sample at most
+the speed the arc asks: rounded down, a chord would need just over one sample, so two, at half
+the speed), within [:data:`TS_FLOOR_S`, the settings' default]. Measured on the three programs of
 ``bench_contour_optimum.py`` at 10, 5, 4 and 3 ms, the rule's choice (3, 4 and 3 ms) cut each
-program fastest. A program without arcs, or whose arcs the default reaches, keeps the default.
+program fastest. The step, 0.25 ms (issue 35, was 1 ms): freecad's 1.5 mm circle asks 3.65 ms,
+which a whole millisecond rounded to 4 ms (0.292 s, 1.016x the third-order optimum), 3.75 ms cuts
+it in 0.270 s (0.94x); measured ``fastest`` cut time against the step (the CAM samples of
+``tests/data/cam``, their need in brackets): freecad (3.65) 4 / 3.75 / 3.7 / 3.5 ms 0.644 /
+0.608 / 0.599 / 0.627 s, estlcam (3.26) 4 / 3.5 / 3.3 / 3 ms 0.616 / 0.595 / 0.614 / 0.714 s,
+dxf2gcode (3.10) 4 / 3.5 / 3.25 / 3.2 / 3 ms 0.264 / 0.249 / 0.257 / 0.259 / 0.330 s, pcb_gcode
+(3.89) 4 / 3.9 ms 0.416 / 0.429 s: at a 0.25 ms step none is slower than at 1 ms (together 1.875
+against 1.940 s), at 0.1 ms pcb_gcode is (1.901 s together), at 0.5 ms freecad stays at 4 ms.
+A program without arcs, or whose arcs the default reaches, keeps the default.
 
 **The horizon** with a chosen sample time: :data:`HORIZON_RAMPS` force ramps of the slowest
 drive, at least the constrained mode's 30 samples (the default horizon's 0.25 s at 3 ms is 84
@@ -48,8 +56,9 @@ __all__ = ["HORIZON_RAMPS", "TS_FLOOR_S", "TS_STEP_S", "arc_speed", "contour_set
 #: the finest sample time chosen [s]: at 2 ms the benchmark pass took longer than at 3 ms
 #: (1.154 s against 0.822 s, the search's scales) for 2.6x the compute
 TS_FLOOR_S = 0.003
-#: the sample time is chosen in whole steps of this [s]
-TS_STEP_S = 0.001
+#: the sample time is chosen in whole steps of this [s] (module docstring: 1 ms left freecad's circle
+#: 1.016x the optimum at 4 ms where it asks 3.65 ms)
+TS_STEP_S = 0.00025
 #: the horizon with a chosen sample time: this many force ramps of the slowest drive
 HORIZON_RAMPS = 3.0
 
@@ -102,7 +111,8 @@ def contour_ts(program: Program, tol: float, feed: str, model: RobotModel, st: S
                 need = min(need, chord / v)
     if need >= st.Ts:
         return st.Ts
-    return min(st.Ts, max(TS_FLOOR_S, math.ceil(need / TS_STEP_S - 1e-9) * TS_STEP_S))
+    steps = math.ceil(need / TS_STEP_S - 1e-9)
+    return min(st.Ts, max(TS_FLOOR_S, round(steps * TS_STEP_S, 9)))  # 0.00325, not 0.0032500000000000003
 
 
 def contour_settings(req: ContourRequest, st: Settings, program: Program, tol: float, model: RobotModel) -> Settings:

@@ -16,7 +16,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Collection, Iterator, Sequence
 from typing import Any, Literal, NamedTuple
 
 import numpy as np
@@ -139,16 +139,16 @@ def walk_program(program: Program, tol: float) -> Iterator[WalkStep]:
         i += 1
 
 
-def chunks(elements: list[PathElement]) -> list[list[int]]:
+def chunks(elements: list[PathElement], split_after: Collection[int] = ()) -> list[list[int]]:
     """The element indices of a pass in pieces the robot plans rest to rest: split after each
-    exact-stop move (G61)."""
+    exact-stop move (G61) and after the moves ``split_after`` (``fastest``: where Z's slope
+    changes too sharply to pass, :func:`planner.contour.search.slope_stops`)."""
     out: list[list[int]] = [[]]
     for k, e in enumerate(elements):
         out[-1].append(k)
-        if e.exact_stop and k < len(elements) - 1:
+        if k < len(elements) - 1 and (e.exact_stop or k in split_after):
             out.append([])
     return out
-
 
 
 class TubeSizes:

@@ -69,9 +69,9 @@ from .passes import (
 )
 from .placement import CONTOUR_PSI, check_reach, check_reachable, fit_origin, proposal
 from .profiles import OptimalProfiles
-from .search import Scale, confirmed_infeasible, largest_feasible, search_timing, z_caps
+from .search import Scale, confirmed_infeasible, largest_feasible, piece_key, search_timing, slope_stops, z_caps
 from .tube import PathGeometry, path_to_cut
-from .zaxis import Z_TRIES, ZCaps, ZPlan, accel_dwell, plan_z
+from .zaxis import Z_EASE, Z_TRIES, ZCaps, ZPlan, accel_dwell, plan_z
 
 # the names this module had before issue 34 split it (the estimate's constants, the search's
 # scale finder) stay importable from it
@@ -147,7 +147,8 @@ class _Walk:
         self.z = 0.0
         self.parts: list[Part] = []
         self.summaries: list[PassSummary] = []
-        self.hint: Scale | None = None  # fastest: the timing of the cut before
+        self.hints: dict[tuple, Scale] = {}  # fastest: the timing of the piece before of the same shape
+        self.hint: Scale | None = None  # fastest: the timing of the level piece before (search.piece_hint)
         self.memo: dict = {}  # fastest: the time-optimal profiles of the passes (alike passes share one)
         self.progress: Callable[[int, int], None] | None = None  # (cut passes done, cut passes)
 
@@ -206,10 +207,14 @@ class _Walk:
             self.pos = part.result.pose[-1, :2].copy()
         first = len(self.parts)
         geo = PathGeometry(b.elements, origin)
-        for chunk in chunks(b.elements):
-            part = plan_cut(req, model, st, chunk, origin, tol, CONTOUR_PSI, self.pos, geo, b.elements, self.hint,
-                            len(self.program.passes), self.memo, self.limit_at)
-            self.hint = part.scale if part.scale is not None else self.hint
+        for chunk in chunks(b.elements, slope_stops(req.feed, b.elements, tol, req.z_accel_m_s2)):
+            key, level = piece_key([b.elements[k] for k in chunk])
+            part = plan_cut(req, model, st, chunk, origin, tol, CONTOUR_PSI, self.pos, geo, b.elements,
+                            self.hints.get(key, self.hint if level else None), len(self.program.passes), self.memo,
+                            self.limit_at)
+            if part.scale is not None:
+                self.hints[key] = part.scale
+                self.hint = part.scale if level else self.hint
             self.parts.append(part)
             self.pos = part.result.pose[-1, :2].copy()
         self.summaries.append(_pass_summary(len(self.summaries), b, self.parts[first:], geo, tol))
@@ -267,10 +272,11 @@ def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[i
     els0 = [elements[k] for k in chunk]
     st = st.model_copy(update={"settle_speed_m_s": min(st.settle_speed_m_s, 1e-4)})
     # the Z axis acceleration's XY speed bounds (issue 32, goal 3), shaping the profiles; where the Z
-    # planned misses, the piece again as a program feed whose F is lower on the moves Z missed on (the
-    # program feed keeps every sample under its move's F, and sizes its cells by it)
+    # planned misses, fastest once more with a gentler XY acceleration there (zaxis.Z_EASE), then the piece
+    # again as a program feed whose F is lower on the moves Z missed on (the program feed keeps every
+    # sample under its move's F, and sizes its cells by it)
     slow, gentle = np.full(len(chunk), np.inf), np.ones(len(chunk))
-    feed, els, top0 = req.feed, els0, None
+    feed, els, top0, eased = req.feed, els0, None, False
     for _ in range(Z_TRIES):
         zc = ZCaps(els0, chunk, tol, req.z_rapid_m_s, req.z_accel_m_s2, slow, gentle)
         found = search_timing(feed, model, st, TubeSizes(model, st, chunk, els, origin, tol, psi, pos, elements),
@@ -285,6 +291,13 @@ def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[i
         zp = plan_piece_z(part, elements, origin, tol, st.Ts, req)
         if zp.ok:
             return part
+        if feed == "fastest" and not eased:  # once: fastest again, gentler along the slopes Z missed on
+            eased = True
+            for k in np.unique(part.elem[zp.miss > 0]):
+                j = chunk.index(int(k))
+                for jj in [jj for jj in range(max(j - 1, 0), min(j + 2, len(chunk))) if zc.g[jj] != 0.0] or [j]:
+                    gentle[jj] *= Z_EASE
+            continue
         speed = np.hypot(*part.result.velocity[:, :2].T)
         top = np.array([float(speed[part.elem == k].max(initial=0.0)) for k in chunk])
         switch = feed != "program"  # fastest's first miss: the bounds as a program feed first (cells by F)
