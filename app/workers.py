@@ -525,6 +525,10 @@ class PlanPool(Admission):
         :meth:`run`'s). At most one job per worker is sent at once; the others wait here, and
         :meth:`Future.cancel` withdraws a job that has not been sent yet."""
         with self._lock:
+            if self._closed:  # as run() answers then, without starting threads again
+                refused: Future = Future()
+                refused.set_exception(PoolBusy("the server is shutting down"))
+                return refused
             if self._threads is None:
                 self._threads = ThreadPoolExecutor(self.n, thread_name_prefix="rangeplan-pool-submit")
             threads = self._threads
