@@ -23,7 +23,7 @@ from __future__ import annotations
 import os
 
 from app.executors import InProcessExecutor
-from app.workers import WORKER_NICE, PlanPool
+from app.workers import PlanPool
 
 from .base import Engine
 from .config import SCHEDULER_ENV
@@ -43,15 +43,16 @@ class InlineEngine(Engine):
 
 
 class LocalEngine(Engine):
-    """``workers`` local planning processes (``nice``: their CPU priority below this process, at
-    least the interactive pool's :data:`~app.workers.WORKER_NICE`; ``memory_mb``: each item's
-    address-space cap [MiB], None: none)."""
+    """``workers`` local planning processes (``nice``: their CPU priority below this process;
+    the command's own by default, the service's batch pool below its interactive one, which
+    runs :data:`~app.workers.WORKER_NICE` below it; ``memory_mb``: each item's address-space
+    cap [MiB], None: none)."""
 
     name = "local"
 
     def __init__(self, workers: int | None = None, nice: int = 0, memory_mb: int | None = None):
         self.workers = max(1, int(workers or os.cpu_count() or 1))
-        self.nice = max(int(nice), WORKER_NICE)
+        self.nice = int(nice)
         self.item_memory_mb = memory_mb
         # no limit of the pool's own (the items have theirs) and no cap on the worker (its items'
         # planning processes have theirs); the runner keeps at most 2 x slots chunks in flight
