@@ -193,8 +193,9 @@ def plan_chunk(requests: list | tuple, fmt: str = "json", timeout_s: float | Non
 @dataclass(frozen=True)
 class BatchChunkJob:
     """A chunk of a batch's items as one typed job (:class:`app.jobs.ChunkJob`): what the batch
-    runner submits to an executor (:meth:`app.executors.JobExecutor.submit`; fewer round trips
-    than one job per item: a ~5 ms plan against ~0.7 ms per job sent). Its :meth:`run` is
+    runner submits to an executor (:meth:`app.executors.JobExecutor.submit`; one round trip to
+    a pool's worker or a Dask scheduler for several ~5 ms plans, as :mod:`app.batch.runner` sizes
+    the chunks). Its :meth:`run` is
     :func:`plan_chunk`: each item the service's typed job under its own bounds (``timeout_s``:
     its work estimate and time limit, ``memory_mb``: its memory cap), in a planning process of
     the process the chunk runs in, killed at the item's limit; ``stage``: the run's staging
