@@ -356,11 +356,14 @@ class Admission:
         raise NotImplementedError
 
     def _admit(self) -> None:
-        """One more job in flight (:class:`PoolBusy` when full or shutting down)."""
+        """One more job in flight (:class:`PoolBusy` when full or shutting down). The capacity
+        is read before the lock is taken: a cluster's asks its scheduler, on the client's event
+        loop, whose thread releases finished jobs (:meth:`_release`) under the same lock."""
+        capacity = self.capacity
         with self._lock:
             if self._closed:
                 raise PoolBusy("the server is shutting down")
-            if self._inflight >= self.capacity:
+            if self._inflight >= capacity:
                 raise PoolBusy(f"{self._inflight} jobs in progress")
             self._inflight += 1
             self.jobs_run += 1

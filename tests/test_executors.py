@@ -6,6 +6,7 @@ can be withdrawn, a closed pool refuses. (On Dask: tests/test_batch_cluster.py.)
 from __future__ import annotations
 
 import json
+import threading
 from concurrent.futures import CancelledError
 
 import pytest
@@ -67,3 +68,27 @@ def test_pool_submit_cuts_a_job_at_its_limit_and_withdraws_one_not_sent():
         p.close(cancel=True)
     with pytest.raises(PoolBusy, match="shutting down"):
         p.submit(SleepJob(0.01)).result(10)
+
+
+def test_admission_reads_the_capacity_outside_its_lock():
+    """A cluster's capacity asks its scheduler on the client's event loop, whose thread also
+    releases finished jobs (DaskExecutor.submit's callback) under the admission's lock: reading
+    the capacity under that lock deadlocked a batch on Dask (found by benchmarks/bench_batch_trees.py)."""
+    from app.workers import Admission
+
+    class Cluster(Admission):
+        def __init__(self):
+            self._lock, self._inflight, self._closed, self.jobs_run = threading.Lock(), 1, False, 0
+            self.released_meanwhile = False
+
+        @property
+        def capacity(self):
+            loop = threading.Thread(target=self._release)  # a job finishing while the capacity is asked
+            loop.start()
+            loop.join(5)
+            self.released_meanwhile = not loop.is_alive()
+            return 4
+
+    c = Cluster()
+    c._admit()
+    assert c.released_meanwhile and c._inflight == 1 and c.jobs_run == 1

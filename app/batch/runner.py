@@ -181,7 +181,7 @@ class Runner:
         return max(1, min(self.max_chunk, n))
 
     def _fill(self, take: Callable[[int], list[Item]], remaining: Callable[[], int] | None) -> None:
-        if self._suspects:  # after a broken pool: one item at a time, alone, until all are cleared
+        if self._suspects:  # after a lost chunk: one item at a time, alone, until all are cleared
             if not self._inflight:
                 item = self._suspects.popleft()
                 self._submit([item])
