@@ -32,8 +32,10 @@ filesystem that supports SQLite's locks).
 from __future__ import annotations
 
 import asyncio
+import math
 import sys
 import threading
+import time
 from concurrent.futures import Future
 from typing import Any
 
@@ -150,15 +152,22 @@ class DaskExecutor(Admission):
         self._inflight = 0
         self._closed = False
         self._executor: Any = None  # Client.get_executor(), made by the first submit()
+        self._n, self._n_at = 1, -math.inf  # the worker threads, when last asked (n)
         self.jobs_run = 0  #: jobs handed to the cluster
 
     @property
     def n(self) -> int:
-        """The cluster's worker threads now (it grows and shrinks)."""
-        try:
-            return slots(self.client)
-        except Exception:
-            return 1
+        """The cluster's worker threads (it grows and shrinks): asked of the scheduler at most
+        once a second (every job's admission reads it; each question is a round trip to the
+        scheduler, which a batch's chunks would otherwise pay one by one)."""
+        now = time.monotonic()
+        if now - self._n_at > 1.0:
+            try:
+                self._n = slots(self.client)
+            except Exception:
+                self._n = 1
+            self._n_at = now
+        return self._n
 
     @property
     def capacity(self) -> int:
