@@ -32,8 +32,11 @@ filesystem that supports SQLite's locks).
 from __future__ import annotations
 
 import asyncio
+import math
 import sys
 import threading
+import time
+from concurrent.futures import Future
 from typing import Any
 
 from distributed import Client
@@ -41,7 +44,7 @@ from distributed.diagnostics.plugin import WorkerPlugin
 
 from app.executors import run_bounded, warm_worker
 from app.jobs import Job, Outcome
-from app.workers import Admission, WorkerCrashed
+from app.workers import Admission, JobKilledWorkers, WorkerCrashed
 
 __all__ = ["DaskExecutor", "WarmUp", "MALLOC_ENV", "STATE", "connect", "lost_worker", "relax_malloc_trim"]
 
@@ -148,15 +151,23 @@ class DaskExecutor(Admission):
         self._lock = threading.Lock()
         self._inflight = 0
         self._closed = False
+        self._executor: Any = None  # Client.get_executor(), made by the first submit()
+        self._n, self._n_at = 1, -math.inf  # the worker threads, when last asked (n)
         self.jobs_run = 0  #: jobs handed to the cluster
 
     @property
     def n(self) -> int:
-        """The cluster's worker threads now (it grows and shrinks)."""
-        try:
-            return slots(self.client)
-        except Exception:
-            return 1
+        """The cluster's worker threads (it grows and shrinks): asked of the scheduler at most
+        once a second (every job's admission reads it; each question is a round trip to the
+        scheduler, which a batch's chunks would otherwise pay one by one)."""
+        now = time.monotonic()
+        if now - self._n_at > 1.0:
+            try:
+                self._n = slots(self.client)
+            except Exception:
+                self._n = 1
+            self._n_at = now
+        return self._n
 
     @property
     def capacity(self) -> int:
@@ -169,9 +180,46 @@ class DaskExecutor(Admission):
             try:
                 return fut.result()
             except Exception as exc:
-                if lost_worker(exc) or isinstance(exc, OSError):
-                    raise WorkerCrashed(f"the Dask worker was lost ({type(exc).__name__}: {exc})") from None
-                raise
+                raise _crashed(exc) from None
+
+    def submit(self, job: Job, timeout_s: float | None = None) -> Future:
+        """:meth:`run` without blocking: one task, its outcome in a ``concurrent.futures.Future``
+        (``Client.get_executor()``'s, which :meth:`Future.cancel` withdraws from the scheduler);
+        a lost worker is :class:`~app.workers.WorkerCrashed` as in :meth:`run`."""
+        limit = self.timeout_s if timeout_s is None else float(timeout_s)
+        self._admit()
+        try:
+            with self._lock:
+                if self._executor is None:
+                    self._executor = self.client.get_executor(pure=False)
+                executor = self._executor
+            task = executor.submit(run_bounded, job, limit, self.memory_mb or None)
+        except BaseException:
+            self._release()
+            raise
+        out: Future = Future()
+
+        def settle(done: Future) -> None:
+            self._release()
+            if done.cancelled():
+                out.cancel()
+                out.set_running_or_notify_cancel()
+                return
+            if not out.set_running_or_notify_cancel():
+                return
+            exc = done.exception()
+            if exc is None:
+                out.set_result(done.result())
+            else:
+                out.set_exception(_crashed(exc))
+
+        def withdraw(mine: Future) -> None:
+            if mine.cancelled():
+                task.cancel()
+
+        task.add_done_callback(settle)
+        out.add_done_callback(withdraw)
+        return out
 
     def stats(self) -> dict[str, Any]:
         return {"mode": self.mode, "workers": self.n, "in_flight": self._inflight, "timeout_s": self.timeout_s,
@@ -189,7 +237,23 @@ class DaskExecutor(Admission):
     def renew(self) -> None:
         """Nothing to renew: each Dask worker loads its own kernels (:class:`WarmUp`)."""
 
-    def close(self) -> None:
+    def close(self, cancel: bool = False) -> None:
+        """Close the connection (``cancel``: the tasks sent are withdrawn first)."""
         with self._lock:
             self._closed = True
-        self.client.close()
+            executor, self._executor = self._executor, None
+        try:
+            if executor is not None:
+                executor.shutdown(wait=not cancel)
+        finally:
+            self.client.close()
+
+
+def _crashed(exc: BaseException) -> BaseException:
+    """A Dask task's exception as :meth:`DaskExecutor.run` raises it: a lost worker or a dropped
+    task is :class:`~app.workers.WorkerCrashed` (:class:`~app.workers.JobKilledWorkers` when the
+    scheduler gave up after the task killed several workers), anything else as it is."""
+    if not (lost_worker(exc) or isinstance(exc, OSError)):
+        return exc
+    kind = JobKilledWorkers if type(exc).__name__ == "KilledWorker" else WorkerCrashed
+    return kind(f"the Dask worker was lost ({type(exc).__name__}: {exc})")

@@ -11,8 +11,9 @@ plans) submits typed jobs to:
 * :class:`app.cluster.DaskExecutor`: a Dask cluster (``RANGEPLAN_EXECUTOR=dask``,
   ``RANGEPLAN_DASK_SCHEDULER``); each job runs :func:`run_bounded` on a worker.
 
-Batches run their items through the same :func:`run_bounded` on their engines (inline, a local
-process pool, the same Dask cluster: :mod:`app.batch.executors`).
+Batches submit their items to the same executors (:meth:`JobExecutor.submit`): a chunk of
+items is one typed job (:class:`app.jobs.ChunkJob`, :class:`app.batch.engine.BatchChunkJob`)
+that runs each item through :func:`run_bounded` where the chunk runs (:mod:`app.batch.executors`).
 
 A job (:data:`app.jobs.Job`) never has its time limit enforced inside the thread that runs
 it (an exception injected into a running thread can land anywhere, in numba's cache loader
@@ -40,10 +41,12 @@ import os
 import socket
 import sys
 import threading
+from concurrent.futures import Future
 from typing import Any, Protocol, runtime_checkable
 
 from app.failures import import_timeout, out_of_memory, timeout
 from app.jobs import (
+    ChunkJob,
     ContourJob,
     EditorJob,
     ExportJob,
@@ -70,7 +73,10 @@ class JobExecutor(Protocol):
     (:func:`app.jobs.run_job`), or raises :class:`~app.workers.JobTimeout` (the job passed
     ``timeout_s``, default :attr:`timeout_s`; 0: none), :class:`~app.workers.PoolBusy` (more
     than :attr:`capacity` jobs at once) or :class:`~app.workers.WorkerCrashed` (the process
-    running it died); :class:`app.service.JobService` maps these once (:func:`describe_failure`).
+    running it died; :class:`~app.workers.JobKilledWorkers`: it died wherever the job was
+    retried); :class:`app.service.JobService` maps these once (:func:`describe_failure`).
+    :meth:`submit` is :meth:`run` without blocking (the batches' dispatcher keeps several jobs
+    in flight): a ``concurrent.futures.Future`` of the outcome, or of one of those exceptions.
     The work estimate is the caller's."""
 
     mode: str
@@ -81,6 +87,8 @@ class JobExecutor(Protocol):
     def capacity(self) -> int: ...
 
     def run(self, job: Job, timeout_s: float | None = None) -> Outcome: ...
+
+    def submit(self, job: Job, timeout_s: float | None = None) -> Future: ...
 
     def stats(self) -> dict[str, Any]: ...
 
@@ -110,6 +118,16 @@ class InProcessExecutor:
     def run(self, job: Job, timeout_s: float | None = None) -> Outcome:
         self.jobs_run += 1
         return run_job(job, self.memory_mb or None)
+
+    def submit(self, job: Job, timeout_s: float | None = None) -> Future:
+        """Runs the job now, in the calling thread; returns its finished future."""
+        fut: Future = Future()
+        fut.set_running_or_notify_cancel()
+        try:
+            fut.set_result(self.run(job, timeout_s))
+        except Exception as exc:  # (run_job raises none for a job's fault)
+            fut.set_exception(exc)
+        return fut
 
     def stats(self) -> dict[str, Any]:
         return {}
@@ -170,11 +188,10 @@ def describe_failure(exc: Exception, job: Job, timeout_s: float, memory_mb: int 
 # ---------------------------------------------------------------------------------------
 # a process that runs jobs for others (a batch's local worker, a Dask worker)
 
-#: set in a worker by :func:`warm_worker` (``local``); Dask workers are recognised by
-#: ``distributed.get_worker()``; anything else is the calling process (``inline``).
-#: ``memory_mb``: this process's memory cap (:func:`warm_worker`), named by a memory error;
-#: ``jobs``: jobs run here through :func:`run_bounded` (count)
-WORKER: dict[str, Any] = {"name": "inline", "memory_mb": None}
+#: ``name``: where this process runs jobs for others, set by :func:`warm_worker` (a Dask worker
+#: is also recognised by ``distributed.get_worker()``; anything else is ``inline``; a batch's
+#: chunk names its engine itself); ``jobs``: jobs run here through :func:`run_bounded` (count)
+WORKER: dict[str, Any] = {"name": "inline"}
 #: whether this process has loaded the compiled kernels (:func:`_load_kernels`)
 _KERNELS = {"loaded": False}
 _KERNELS_LOCK = threading.Lock()
@@ -209,34 +226,12 @@ def where() -> dict[str, Any]:
     return {"engine": WORKER["name"], "worker": f"{host}:{pid}", "host": host, "pid": pid}
 
 
-def warm_worker(engine: str = "local", nice: int = 0, memory_mb: int | None = None,
-                parent: int | None = None) -> float:
-    """Load the compiled kernels (``planner.warm_up``) and mark this process as ``engine``;
-    ``nice`` > 0 lowers its CPU priority (the service's batch workers yield to interactive
-    plans); ``memory_mb`` caps the address space of the planning processes its items run in
-    (:func:`child_pool`), as the API's planning workers (an item that needs more
-    fails with ``too_much_memory`` and the worker plans the next). Runs once per worker
-    process, never per item. ``parent``: the pid of the process that started this one (a
-    local pool's worker ends when it does: :mod:`app.lifeline`). Returns the seconds taken."""
-    import signal
-
-    if parent is not None:
-        from app.lifeline import exit_with_parent
-
-        exit_with_parent(parent)
+def warm_worker(engine: str = "dask") -> float:
+    """Load the compiled kernels (``planner.warm_up``) and mark this process as ``engine``
+    (:func:`where`): a Dask worker's start (:class:`app.cluster.WarmUp`), once per worker
+    process, never per item. Returns the seconds taken."""
     WORKER["name"] = engine
-    if threading.current_thread() is threading.main_thread() and engine == "local":
-        # Ctrl-C reaches the whole process group: the parent decides what stops
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-    if nice > 0:
-        try:
-            os.nice(nice)
-        except OSError:
-            pass
-    seconds = _load_kernels()
-    if memory_mb:
-        WORKER["memory_mb"] = int(memory_mb)
-    return seconds
+    return _load_kernels()
 
 
 # ---------------------------------------------------------------------------------------
@@ -293,7 +288,10 @@ def run_bounded(job: Job, timeout_s: float | None = None, memory_mb: int | None 
     exceeds ``timeout_s`` (``too_much_work``), else run in a planning process of
     :func:`child_pool` that is killed at ``timeout_s`` (``timeout``; the next job gets a new
     process) and capped at ``memory_mb`` MiB (``too_much_memory``). With neither bound the job
-    runs in the calling thread. Never raises for the input's fault, a limit or a dead process."""
+    runs in the calling thread, and so does a :class:`~app.jobs.ChunkJob` (each of its items is
+    bounded on its own, here). Never raises for the input's fault, a limit or a dead process."""
+    if isinstance(job, ChunkJob):
+        return run_job(job)
     with _CHILD_LOCK:
         WORKER["jobs"] = WORKER.get("jobs", 0) + 1
     refused = check_estimate(job, timeout_s)

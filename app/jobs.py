@@ -10,7 +10,10 @@ Jobs (:data:`Job`) are frozen dataclasses, picklable to a worker process:
 * :class:`ExportJob` a stored plan in an output format, written to a spool file the server
   streams (the server process never parses the stored plan; JSON, the stored form, is
   copied as it is: :func:`spool_plan_json`, which the server runs itself on its read threads);
-* :class:`SleepJob` (tests of the time limit).
+* :class:`SleepJob` (tests of the time limit);
+* a :class:`ChunkJob`: a job made of jobs that runs them itself, each under its own bounds (a
+  batch's chunk, :class:`app.batch.engine.BatchChunkJob`: defined above the executors, whose
+  :func:`app.executors.run_bounded` it calls per item; this module knows only its protocol).
 
 A new kind (e.g. a contour job around ``planner.plan_contour``) is a dataclass here, a
 branch of :func:`_execute`, and, if it can be estimated, one in :func:`estimate`.
@@ -30,7 +33,7 @@ import dataclasses
 import os
 import time
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Protocol, runtime_checkable
 
 from pydantic import BaseModel, Field
 
@@ -40,8 +43,8 @@ from app.result_json import dumps
 from planner.errors import over_the_limit
 from planner.schema import ContourRequest, ImportOptions, PlanRequest, PlanResult, SegmentationResult
 
-__all__ = ["ContourJob", "ContourWork", "Done", "EditorJob", "EditorPlan", "ErrorDetail", "ExportJob", "Failed",
-           "ImportJob", "Job", "Outcome", "PlanJob", "SegmentJob", "SleepJob", "admitted_s", "bounded",
+__all__ = ["ChunkJob", "ContourJob", "ContourWork", "Done", "EditorJob", "EditorPlan", "ErrorDetail", "ExportJob",
+           "Failed", "ImportJob", "Job", "Outcome", "PlanJob", "SegmentJob", "SleepJob", "admitted_s", "bounded",
            "ESTIMATE_MARGIN", "check_estimate", "clean_spool", "crashed", "estimate", "failed", "run_job",
            "segmentation_module", "spool_dir", "spool_plan_json"]
 
@@ -161,7 +164,24 @@ class SleepJob:
     kind: ClassVar[str] = "sleep"
 
 
-Job = PlanJob | SegmentJob | ImportJob | EditorJob | ExportJob | ContourJob | SleepJob
+@runtime_checkable
+class ChunkJob(Protocol):
+    """A job made of jobs, which runs them itself (:func:`run_job` calls :meth:`run`): a batch's
+    chunk of items, :class:`app.batch.engine.BatchChunkJob`, each item the service's typed job
+    under its own work estimate, time limit and memory cap (:func:`app.executors.run_bounded`:
+    a planning process of the process the chunk runs in, killed at the item's limit). So an
+    executor runs a chunk with no limit of its own (its items have theirs), wherever it runs:
+    this process (:class:`app.executors.InProcessExecutor`), a pool's worker
+    (:class:`app.workers.PlanPool`) or a Dask worker (:class:`app.cluster.DaskExecutor`).
+    :meth:`run` never raises for an item's fault: each item has its own outcome in the
+    :class:`Done` it answers."""
+
+    kind: ClassVar[str]
+
+    def run(self) -> Done: ...
+
+
+Job = PlanJob | SegmentJob | ImportJob | EditorJob | ExportJob | ContourJob | SleepJob | ChunkJob
 
 
 # ---------------------------------------------------------------------------------------
@@ -284,6 +304,8 @@ def _execute(job: Job) -> Done:
     if isinstance(job, SleepJob):
         time.sleep(float(job.seconds))
         return Done(b"{}")
+    if isinstance(job, ChunkJob):
+        return job.run()
     raise ValueError(f"unknown job {type(job).__name__}")
 
 

@@ -46,6 +46,7 @@ import sys  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Iterator  # noqa: E402
+from concurrent.futures import Future, ThreadPoolExecutor  # noqa: E402
 from contextlib import contextmanager  # noqa: E402
 from multiprocessing.connection import Connection  # noqa: E402
 from typing import Any  # noqa: E402
@@ -67,6 +68,11 @@ class WorkerCrashed(Exception):
     """The worker process died while running the job."""
 
 
+class JobKilledWorkers(WorkerCrashed):
+    """The job was run again after its process died, and died there too, until the executor
+    gave up on it (a Dask scheduler's ``KilledWorker``): the job itself is the likely cause."""
+
+
 class WorkerOutOfMemory(WorkerCrashed):
     """The worker process was ended by a failed allocation (an abort, as Rust code such as
     the JSON encoder does, or the kernel's OOM killer) while it had a memory limit."""
@@ -77,10 +83,12 @@ class WorkerOutOfMemory(WorkerCrashed):
 DEFAULT_MEMORY_MB = 2048
 
 
-def _worker_main(conn, memory_mb: int | None = None, parent: int | None = None, pdeathsig: bool = False) -> None:
-    """A worker started as a fresh interpreter (``start="exec"``). It ignores Ctrl-C, which
-    reaches the whole process group: its parent decides what stops (a batch worker's planning
-    process killed by the terminal's SIGINT would report its item as a dead worker's)."""
+def _worker_main(conn, memory_mb: int | None = None, parent: int | None = None, pdeathsig: bool = False,
+                 nice: int = WORKER_NICE) -> None:
+    """A worker started as a fresh interpreter (``start="exec"``), ``nice`` below its parent. It
+    ignores Ctrl-C, which reaches the whole process group: its parent decides what stops (a
+    batch worker's planning process killed by the terminal's SIGINT would report its item as a
+    dead worker's)."""
     import signal
 
     if parent is not None:  # end with the server, even a kill -9 of it (app.lifeline)
@@ -89,13 +97,13 @@ def _worker_main(conn, memory_mb: int | None = None, parent: int | None = None, 
         exit_with_parent(parent, thread_bound=pdeathsig)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        os.nice(WORKER_NICE)
+        os.nice(nice)
     except OSError:
         pass
     _serve(conn, memory_mb, load_planner())
 
 
-def _forked_worker(conn, memory_mb: int | None = None) -> None:
+def _forked_worker(conn, memory_mb: int | None = None, nice: int = WORKER_NICE) -> None:
     """A worker forked by multiprocessing's fork server (``start="forkserver"``), which has
     already loaded the planner (:mod:`app.worker_template`): ready at once. It ends with the
     fork server (the kernel's parent-death signal and the watch thread of
@@ -107,6 +115,11 @@ def _forked_worker(conn, memory_mb: int | None = None) -> None:
     # itself (a fork server started with other preloads), its parent is the fork server
     template = worker_template.PID if worker_template.PID != os.getpid() else os.getppid()
     exit_with_parent(template, thread_bound=True)  # the fork server forks from its only thread
+    if nice > WORKER_NICE:  # the template already runs WORKER_NICE below the server
+        try:
+            os.nice(nice - WORKER_NICE)
+        except OSError:
+            pass
     _serve(conn, memory_mb, worker_template.STATUS)
 
 
@@ -194,7 +207,7 @@ class _Worker:
       itself (1-3 s), over a socket pair.
     """
 
-    def __init__(self, memory_mb: int | None = None, start: str = "exec"):
+    def __init__(self, memory_mb: int | None = None, start: str = "exec", nice: int = WORKER_NICE):
         self.started = threading.Event()  #: the worker reported (ready or failed)
         self.ready = False
         self.failure: str | None = None
@@ -209,7 +222,7 @@ class _Worker:
             ctx = multiprocessing.get_context("forkserver")
             ctx.set_forkserver_preload(["app.worker_template"])  # before the fork server starts
             self.conn, child = ctx.Pipe(duplex=True)
-            self.process = ctx.Process(target=_forked_worker, args=(child, memory_mb), daemon=True,
+            self.process = ctx.Process(target=_forked_worker, args=(child, memory_mb, nice), daemon=True,
                                        name="rangeplan-worker")
             threading.Thread(target=self._start_forked, args=(child,), name="rangeplan-worker-start",
                              daemon=True).start()
@@ -220,7 +233,8 @@ class _Worker:
             # parent-death signal is tied to it; app.lifeline)
             bound = int(threading.current_thread() is threading.main_thread())
             self.process = _Exec(subprocess.Popen([sys.executable, "-m", "app.workers", str(child_sock.fileno()),
-                                                   str(int(memory_mb or 0)), str(os.getpid()), str(bound)],
+                                                   str(int(memory_mb or 0)), str(os.getpid()), str(bound),
+                                                   str(int(nice))],
                                                   pass_fds=(child_sock.fileno(),), stdin=subprocess.DEVNULL,
                                                   close_fds=True))
         finally:
@@ -341,21 +355,32 @@ class Admission:
     def capacity(self) -> int:
         raise NotImplementedError
 
-    @contextmanager
-    def _admitted(self) -> Iterator[None]:
-        """One job in flight while the block runs (:class:`PoolBusy` when full or shutting down)."""
+    def _admit(self) -> None:
+        """One more job in flight (:class:`PoolBusy` when full or shutting down). The capacity
+        is read before the lock is taken: a cluster's asks its scheduler, on the client's event
+        loop, whose thread releases finished jobs (:meth:`_release`) under the same lock."""
+        capacity = self.capacity
         with self._lock:
             if self._closed:
                 raise PoolBusy("the server is shutting down")
-            if self._inflight >= self.capacity:
+            if self._inflight >= capacity:
                 raise PoolBusy(f"{self._inflight} jobs in progress")
             self._inflight += 1
             self.jobs_run += 1
+
+    def _release(self, *_: Any) -> None:
+        """One job fewer in flight (also a future's done callback)."""
+        with self._lock:
+            self._inflight -= 1
+
+    @contextmanager
+    def _admitted(self) -> Iterator[None]:
+        """One job in flight while the block runs."""
+        self._admit()
         try:
             yield
         finally:
-            with self._lock:
-                self._inflight -= 1
+            self._release()
 
 
 class PlanPool(Admission):
@@ -364,10 +389,13 @@ class PlanPool(Admission):
     estimate, what is accepted); at most ``max_queue`` jobs wait for a worker (more:
     :class:`PoolBusy`); ``memory_mb`` is each worker's address-space limit [MiB] (0: none);
     ``start`` how a worker process starts (:data:`START_METHODS`; default :func:`default_start`):
-    forked from a process that has loaded the planner, or a fresh interpreter."""
+    forked from a process that has loaded the planner, or a fresh interpreter; ``nice``: the
+    workers' CPU priority below this process (default :data:`WORKER_NICE`; a batch's pool
+    runs lower, yielding to the interactive one)."""
 
     def __init__(self, workers: int | None = None, timeout_s: float = 30.0, max_queue: int = 64,
-                 mode: str = "process", memory_mb: int | None = DEFAULT_MEMORY_MB, start: str | None = None):
+                 mode: str = "process", memory_mb: int | None = DEFAULT_MEMORY_MB, start: str | None = None,
+                 nice: int = WORKER_NICE):
         if mode not in ("process", "thread"):
             raise ValueError("mode must be 'process' or 'thread'")
         self.start = start or default_start()
@@ -378,6 +406,8 @@ class PlanPool(Admission):
         self.timeout_s = float(timeout_s)
         self.max_queue = int(max_queue)
         self.memory_mb = int(memory_mb or 0)
+        self.nice = int(nice)
+        self._threads: ThreadPoolExecutor | None = None  # the callers of submit()
         self._thread_ready: bool | None = None  # thread mode: warm-up done (True) / failed (False)
         self._lock = threading.Lock()
         self._inflight = 0
@@ -390,7 +420,7 @@ class PlanPool(Admission):
         self._renew_lock = threading.Lock()
         if mode == "process":
             for _ in range(self.n):
-                w = _Worker(self.memory_mb, self.start)
+                w = _Worker(self.memory_mb, self.start, self.nice)
                 self._workers.append(w)
                 self._idle.put(w)
         else:
@@ -486,28 +516,53 @@ class PlanPool(Admission):
                 stop = getattr(forkserver._forkserver, "_stop", None)  # CPython's own (its tests use it)
                 if stop is not None:
                     stop()
-            new = [_Worker(self.memory_mb, self.start) for _ in range(self.n)]
+            new = [_Worker(self.memory_mb, self.start, self.nice) for _ in range(self.n)]
             with self._lock:
                 self._workers = new
                 self.renewed += 1
             for w in new:
                 self._idle.put(w)
 
+    def submit(self, job: Job, timeout_s: float | None = None) -> Future:
+        """:meth:`run` without blocking: a future of the outcome (its exception one of
+        :meth:`run`'s). At most one job per worker is sent at once; the others wait here, and
+        :meth:`Future.cancel` withdraws a job that has not been sent yet."""
+        with self._lock:
+            if self._closed:  # as run() answers then, without starting threads again
+                refused: Future = Future()
+                refused.set_exception(PoolBusy("the server is shutting down"))
+                return refused
+            if self._threads is None:
+                self._threads = ThreadPoolExecutor(self.n, thread_name_prefix="rangeplan-pool-submit")
+            threads = self._threads
+        return threads.submit(self.run, job, timeout_s)
+
     def _replace(self, old: _Worker) -> _Worker:
-        new = _Worker(self.memory_mb, self.start)
+        if self._closed:  # closing: the dead one stays dead
+            return old
+        new = _Worker(self.memory_mb, self.start, self.nice)
         with self._lock:
             self.replaced += 1
             self._workers = [new if w is old else w for w in self._workers]
         return new
 
-    def close(self) -> None:
+    def close(self, cancel: bool = False) -> None:
+        """Stop the workers: each after its job (``cancel``: at once, their jobs are lost, the
+        jobs not sent yet cancelled)."""
         with self._lock:
             self._closed = True
             workers, self._workers = self._workers, []
+            threads, self._threads = self._threads, None
+        if threads is not None:
+            threads.shutdown(wait=False, cancel_futures=True)
         for w in workers:
-            w.stop()
+            if cancel:
+                w.kill()
+            else:
+                w.stop()
 
 
 if __name__ == "__main__":
     _worker_main(Connection(int(sys.argv[1])), int(sys.argv[2]) if len(sys.argv) > 2 else None,
-                 int(sys.argv[3]) if len(sys.argv) > 3 else None, len(sys.argv) > 4 and sys.argv[4] == "1")
+                 int(sys.argv[3]) if len(sys.argv) > 3 else None, len(sys.argv) > 4 and sys.argv[4] == "1",
+                 int(sys.argv[5]) if len(sys.argv) > 5 else WORKER_NICE)

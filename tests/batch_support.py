@@ -9,8 +9,9 @@ import json
 import os
 import subprocess
 import sys
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -115,3 +116,30 @@ def jobs_run_here() -> int:
     from app.executors import WORKER
 
     return int(WORKER.get("jobs", 0))
+
+
+@dataclass(frozen=True)
+class SleepChunk:
+    """A chunk of :class:`app.jobs.SleepJob` s (an :class:`app.jobs.ChunkJob`, as a batch's chunk):
+    each run through :func:`app.executors.run_bounded` with ``limit_s`` where the chunk runs.
+    Answers this process's pid and, per sleep, whether it finished, its error, the seconds it
+    took and this process's planning processes afterwards."""
+
+    seconds: tuple[float, ...]
+    limit_s: float
+    kind: ClassVar[str] = "sleep-chunk"
+
+    def run(self):
+        import time
+
+        from app.executors import run_bounded
+        from app.jobs import Done, SleepJob
+
+        runs = []
+        for s in self.seconds:
+            t0 = time.perf_counter()
+            out = run_bounded(SleepJob(s), self.limit_s)
+            err = getattr(out, "error", None)
+            runs.append({"ok": out.ok, "code": err.code if err else None, "message": err.message if err else None,
+                         "took_s": time.perf_counter() - t0, "children": planning_children()})
+        return Done(b"", summary={"pid": os.getpid(), "runs": runs})

@@ -5,6 +5,7 @@ in item order, CSV summary, cancel, restart, a separate low-priority pool)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -12,8 +13,7 @@ import subprocess
 import sys
 import threading
 import time
-from concurrent.futures import Executor, Future
-from concurrent.futures.process import BrokenProcessPool
+from concurrent.futures import Future
 from pathlib import Path
 
 import pytest
@@ -23,8 +23,9 @@ from app.batch.config import FORMAT_NAMES
 from app.batch.engine import FORMATS, plan_item
 from app.batch.executors import Engine
 from app.batch.runner import Item, Runner
+from app.executors import InProcessExecutor
 from app.storage import Store
-from app.workers import WORKER_NICE
+from app.workers import WORKER_NICE, WorkerCrashed
 from planner import plan
 from tests.batch_support import (
     BAD_RANGE,
@@ -108,82 +109,77 @@ def test_plan_item_stops_at_the_compute_limit(monkeypatch):
 
 @pytest.mark.slow
 def test_a_sleep_job_is_cut_at_its_limit_and_the_local_worker_plans_the_next():
-    """On a local pool: the job runs in a child of the pool's worker, which is killed at the
-    limit; the worker itself (same pid) lives on and plans the next item."""
+    """On a local pool (the service's PlanPool): a chunk's job runs in a child of the pool's
+    worker, which is killed at the job's limit; the worker itself (same pid) lives on and runs
+    the chunk's next job, and then a batch chunk's items."""
+    from app.batch.engine import BatchChunkJob, chunk_outcomes
     from app.batch.executors import LocalEngine
-    from app.executors import run_bounded
-    from app.jobs import SleepJob
-    from tests.batch_support import planning_children, worker_pid
+    from tests.batch_support import SleepChunk
 
     engine = LocalEngine(1)
     try:
-        ex = engine.executor
-        pid = ex.submit(worker_pid).result(300)
-        assert ex.submit(run_bounded, SleepJob(0.05), 30.0).result(300).ok  # its planning process started
-        child = ex.submit(planning_children).result(60)
-        assert child and pid not in child
         t0 = time.perf_counter()
-        out = ex.submit(run_bounded, SleepJob(120.0), 1.0).result(300)
+        probe = engine.executor.submit(SleepChunk((0.05, 120.0, 0.05), 1.0), 0.0).result(300)
         took = time.perf_counter() - t0
-        assert not out.ok and out.error.code == "timeout" and "1 s" in out.error.message, out
-        assert 1.0 <= took < 20.0, took
-        assert ex.submit(worker_pid).result(60) == pid  # the same worker
-        assert not set(ex.submit(planning_children).result(60)) & set(child)  # a new planning process
-        res = ex.submit(plan_item, TABLE1, "json", 60.0).result(300)
-        assert res["status"] == "ok" and res["pid"] == pid
+        pid, (first, cut, after) = probe.summary["pid"], probe.summary["runs"]
+        assert pid in engine.pids() and pid != os.getpid()
+        assert first["ok"] and first["children"] and pid not in first["children"]  # its planning process
+        assert not cut["ok"] and cut["code"] == "timeout" and "1 s" in cut["message"], cut
+        assert 1.0 <= cut["took_s"] < 20.0 and took < 60.0, (cut, took)
+        assert after["ok"] and not set(after["children"]) & set(first["children"])  # a new planning process
+        job = BatchChunkJob((json.dumps(TABLE1),), "json", 60.0, None, None, "local")
+        res, = chunk_outcomes(engine.executor.submit(job, 0.0).result(300))
+        assert res["status"] == "ok" and res["pid"] == pid and res["engine"] == "local"
         assert json.loads(bytes(res["payload"]))["metrics"]["duration_s"] == plan(TABLE1).metrics.duration_s
     finally:
         engine.close(cancel=True)
 
 
-class _InlineEngine(Engine):
-    """Runs each task in this process at submit; ``hook(fn, args)`` decides its outcome."""
+class _HookExecutor(InProcessExecutor):
+    """Runs each submitted chunk in this process at submit; ``hook(job)`` decides its outcome
+    (raising :class:`WorkerCrashed` as a pool whose worker died under the chunk does)."""
 
+    def __init__(self, hook):
+        super().__init__(0.0)
+        self.hook = hook
+        self.crashes = 0
+
+    def submit(self, job, timeout_s=None):
+        f: Future = Future()
+        try:
+            f.set_result(self.hook(job))
+        except WorkerCrashed as exc:
+            self.crashes += 1
+            f.set_exception(exc)
+        return f
+
+
+class _InlineEngine(Engine):
     name = "local"
 
     def __init__(self, hook):
-        class Ex(Executor):
-            def submit(self, fn, /, *args, **kwargs):
-                f: Future = Future()
-                try:
-                    f.set_result(hook(fn, args))
-                except BrokenProcessPool as exc:
-                    f.set_exception(exc)
-                return f
-        self._ex = Ex()
-        self.restarts = 0
-
-    @property
-    def executor(self):
-        return self._ex
+        self.hooked = _HookExecutor(hook)
+        super().__init__(self.hooked)
 
     @property
     def slots(self):
         return 2
 
-    def is_lost_worker(self, exc):
-        return isinstance(exc, BrokenProcessPool)
-
-    def restart(self):
-        self.restarts += 1
-
 
 class _PoisonEngine(_InlineEngine):
-    """Runs tasks inline; a task holding the poison request 'crashes its worker' (raises
-    BrokenProcessPool like a process pool whose worker died), and so does every other task
-    in flight with it, as a real broken pool does."""
+    """Runs chunks inline; a chunk holding the poison request 'crashes its worker' (its future
+    raises WorkerCrashed like a local pool's whose worker died under it)."""
 
     name = "poison"
 
     def __init__(self):
         self.submitted: list[list] = []
 
-        def hook(fn, args):
-            requests = args[0]
-            self.submitted.append(list(requests))
-            if any(r == "POISON" for r in requests):
-                raise BrokenProcessPool("a worker died")
-            return fn(*args)
+        def hook(job):
+            self.submitted.append(list(job.requests))
+            if any(r == "POISON" for r in job.requests):
+                raise WorkerCrashed("a worker died")
+            return job.run()
         super().__init__(hook)
 
 
@@ -201,7 +197,9 @@ def test_runner_finds_the_item_that_kills_its_worker_and_charges_no_other():
         if i != 2:
             assert oc["status"] == "ok", oc
             assert oc["attempts"] <= 2  # charged at most the one shared crash
-    assert engine.restarts == 3
+    assert engine.hooked.crashes == 3
+    # after the first crash the poison ran alone each time
+    assert [r for r in engine.submitted if "POISON" in r][1:] == [["POISON"], ["POISON"]]
 
 
 # ---------------------------------------------------------------------------------------
@@ -276,10 +274,10 @@ def test_a_worker_that_dies_while_writing_leaves_no_result_behind(tmp_path):
     study = write_jsonl(tmp_path / "s.jsonl", reqs)
     cut: list[str] = []
 
-    def hook(fn, args):
-        requests, stage = args[0], args[3]
+    def hook(job):
+        requests, stage = job.requests, job.stage
         before = set(os.listdir(stage))
-        packed = fn(*args)
+        packed = job.run()
         if victim in (r.strip() for r in requests) and not cut:
             for name in sorted(set(os.listdir(stage)) - before):
                 path = Path(stage, name)
@@ -288,12 +286,12 @@ def test_a_worker_that_dies_while_writing_leaves_no_result_behind(tmp_path):
             # at the moment of the crash every result in OUTDIR is whole
             for f in (tmp_path / "out").glob("*.json"):
                 assert json.loads(f.read_bytes())["metrics"]["steps"] > 0
-            raise BrokenProcessPool("a worker died while writing its results")
+            raise WorkerCrashed("a worker died while writing its results")
         return packed
 
     engine = _InlineEngine(hook)
     res = run_batch([str(study)], tmp_path / "out", engine=engine, progress="none")
-    assert cut and engine.restarts == 1 and res["lost_workers"] == 1
+    assert cut and engine.hooked.crashes == 1 and res["lost_workers"] == 1
     assert res["ok"] == 6 and res["worker_written"] == 6 and res["all_ok"]
     rows = read_summary(tmp_path / "out")
     assert any(r["attempts"] == "2" for r in rows)
@@ -312,11 +310,11 @@ def test_workers_without_the_output_directory_send_their_results_back(tmp_path):
     study = write_jsonl(tmp_path / "s.jsonl", reqs)
     calls = [0]
 
-    def hook(fn, args):
+    def hook(job):
         calls[0] += 1
         if calls[0] % 2 == 0:
-            args = (*args[:3], args[3] + "-not-on-this-host")
-        return fn(*args)
+            job = dataclasses.replace(job, stage=job.stage + "-not-on-this-host")
+        return job.run()
 
     res = run_batch([str(study)], tmp_path / "out", engine=_InlineEngine(hook), progress="none")
     assert res["ok"] == 8 and calls[0] >= 2 and 0 < res["worker_written"] < 8
@@ -667,15 +665,17 @@ def test_local_workers_have_the_api_workers_memory_cap():
     """A batch worker capped at 700 MiB (~0.5 GiB is the interpreter with the planner) given
     the largest corridor the schema accepts (~0.8 GiB) answers the API's too_much_memory, and
     plans the next item."""
+    from app.batch.engine import BatchChunkJob, chunk_outcomes
     from app.batch.executors import LocalEngine
     from tests.test_api import long_corridor
 
     engine = LocalEngine(1, memory_mb=700)
     try:
-        out = engine.executor.submit(plan_item, long_corridor(), "none", 120.0).result(300)
+        job = BatchChunkJob((long_corridor(), TABLE1), "none", 120.0, engine.item_memory_mb, None, engine.name)
+        out, nxt = chunk_outcomes(engine.executor.submit(job, 0.0).result(300))
         assert out["status"] == "error" and out["error"]["code"] == "too_much_memory", out["error"]
         assert "700 MiB" in out["error"]["message"] and "RANGEPLAN_WORKER_MEMORY_MB" in out["error"]["message"]
-        assert engine.executor.submit(plan_item, TABLE1, "none", 120.0).result(300)["status"] == "ok"
+        assert nxt["status"] == "ok" and nxt["pid"] == out["pid"]  # the chunk's worker lives on
     finally:
         engine.close(cancel=True)
 

@@ -4,6 +4,7 @@ import csv
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -230,6 +231,42 @@ def test_while_the_kernels_compile_plan_and_contour_jobs_move_to_the_reference(m
 
 
 CAM = __import__("pathlib").Path(__file__).resolve().parent / "data" / "cam"
+
+
+def test_plan_and_contour_submit_the_apis_typed_job_to_the_in_process_executor(tmp_path, monkeypatch):
+    """``rangeplan plan`` and ``rangeplan contour`` run one typed job each (a PlanJob, a
+    ContourJob) on the in-process executor, with no time limit of their own (the command is the
+    user's to stop), and write exactly the bytes the job answered (one serializer per format)."""
+    from app.cli import run as cli_run
+    from app.executors import InProcessExecutor
+    from app.jobs import ContourJob, PlanJob
+
+    ran = []
+    real = InProcessExecutor.run
+
+    def recording(self, job, timeout_s=None):
+        out = real(self, job, timeout_s)
+        ran.append((job, out))
+        return out
+
+    monkeypatch.setattr(InProcessExecutor, "run", recording)
+    for fmt in ("json", "csv"):
+        out = tmp_path / f"plan.{fmt}"
+        assert cli_run(["plan", str(TABLE1), "--compile", "-o", str(out)]) == 0
+        job, done = ran[-1]
+        assert isinstance(job, PlanJob) and job.format == fmt and done.ok
+        assert job.work_limit_s is None  # no limit: the in-process executor cannot stop a job
+        if fmt == "csv":
+            assert out.read_bytes() == done.payload
+        else:  # indented unless --compact: the same document
+            assert json.loads(out.read_bytes()) == json.loads(done.payload)
+    part = Path(__file__).resolve().parents[1] / "app" / "static" / "examples" / "contour-part.ngc"
+    out = tmp_path / "part.ngc"
+    assert cli_run(["contour", str(part), "--origin=-0.013,-0.0075", "--compile", "--progress", "never",
+                    "-o", str(out)]) == 0
+    job, done = ran[-1]
+    assert isinstance(job, ContourJob) and job.format == "gcode" and done.ok and out.read_bytes() == done.payload
+    assert len(ran) == 3
 
 
 def test_contour_progress_on_stderr(tmp_path):

@@ -1,8 +1,11 @@
 """The batch engine's one function: plan one request wherever it runs and return a compact,
-picklable outcome (plain types and the result's bytes in the requested format).
+picklable outcome (plain types and the result's bytes in the requested format); and the typed
+job a batch submits to an executor, :class:`BatchChunkJob` (a chunk of items).
 
-:func:`plan_item` is what every engine runs: the calling process (``inline``), a local
-process pool (``local``) or a Dask worker (``dask``). It validates the request (a plan request, or a
+:func:`plan_item` is what every engine runs, inside a :class:`BatchChunkJob` submitted to the
+service's executors (:class:`app.executors.JobExecutor`): the calling process (``inline``), a
+local pool of planning processes (``local``, :class:`app.workers.PlanPool`) or a Dask worker
+(``dask``, :class:`app.cluster.DaskExecutor`). It validates the request (a plan request, or a
 contour request: a G-code program, :func:`request_kind`) and runs it as the service's typed job
 (:class:`app.jobs.PlanJob` or :class:`app.jobs.ContourJob`) through
 :func:`app.executors.run_bounded` (the same work estimate, time limit and error mapping as the
@@ -15,27 +18,28 @@ limit and outcome) and, where the worker sees the caller's output directory, wri
 result there itself so that only a summary travels back (the task-attempt files of an output
 committer: written under a temporary name, renamed into place by the caller).
 
-Workers import this module once and load the compiled kernels once
-(:func:`warm_worker`: a process pool's initializer, or the Dask worker plugin in
-:mod:`app.batch.cluster`); nothing is imported or compiled per item.
+Workers load the compiled kernels once (a pool's worker when it starts, a Dask worker by the
+plugin of :mod:`app.cluster`) and import this module with their first chunk; nothing is
+imported or compiled per item.
 """
 
 from __future__ import annotations
 
 import os
 import time
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, ClassVar
 
 import orjson
 
-from app.executors import WORKER, run_bounded, warm_worker, where
+from app.executors import run_bounded, where
 from app.formats import OUTPUT_FORMATS
-from app.jobs import ContourJob, Failed, PlanJob, failed
+from app.jobs import ContourJob, Done, Failed, PlanJob, failed
 from planner import PlannerError
 from planner.schema import ContourRequest, PlanRequest, error_details
 
-__all__ = ["FORMATS", "STAGING_PREFIX", "plan_item", "request_kind", "plan_chunk", "unpack_chunk", "warm_worker",
-           "where"]
+__all__ = ["BatchChunkJob", "FORMATS", "STAGING_PREFIX", "chunk_outcomes", "plan_chunk", "plan_item", "request_kind",
+           "unpack_chunk", "where"]
 
 #: output formats: file extension and the function writing a result's bytes (``none``: the
 #: summary only, no result file; what a million-corridor study keeps, see docs/batch-scale.md)
@@ -75,7 +79,8 @@ def _job(request: str | bytes | dict | PlanRequest | ContourRequest, fmt: str) -
 
 
 def plan_item(request: str | bytes | dict | PlanRequest | ContourRequest, fmt: str = "json",
-              timeout_s: float | None = None) -> dict[str, Any]:
+              timeout_s: float | None = None, memory_mb: int | None = None,
+              engine: str | None = None) -> dict[str, Any]:
     """Plan one request (JSON text, a dict, a :class:`PlanRequest` or, for a G-code program, a
     :class:`ContourRequest`: :func:`request_kind`) and return ``{"status": "ok" | "error",
     "kind": "plan" | "contour", "name", "payload": bytes | None, "summary": {...} | None,
@@ -84,7 +89,8 @@ def plan_item(request: str | bytes | dict | PlanRequest | ContourRequest, fmt: s
     its ``contour`` section). ``timeout_s`` bounds the planning time (code ``timeout``), and,
     as for ``POST /v1/plan`` and ``POST /v1/contour``, a request whose work estimate exceeds it
     is not planned (code ``too_much_work``; a contour item's is estimated once its program is
-    read)."""
+    read); ``memory_mb`` caps the planning process the item then runs in (``too_much_memory``).
+    ``engine`` names where it ran (``local``, ``inline``) unless it ran on a Dask worker."""
     from pydantic import ValidationError
 
     t0 = time.perf_counter()
@@ -96,7 +102,7 @@ def plan_item(request: str | bytes | dict | PlanRequest | ContourRequest, fmt: s
         out["kind"] = request_kind(request)
         job = _job(request, fmt)
         out["name"] = job.request.name
-        outcome = run_bounded(job, timeout_s, WORKER["memory_mb"])
+        outcome = run_bounded(job, timeout_s, memory_mb)
     except PlannerError as exc:
         outcome = failed(exc.to_dict())
     except ValidationError as exc:
@@ -110,6 +116,8 @@ def plan_item(request: str | bytes | dict | PlanRequest | ContourRequest, fmt: s
         out.update(status="ok", payload=outcome.payload, summary=outcome.summary)
     out["wall_ms"] = (time.perf_counter() - t0) * 1e3
     out.update(where())
+    if engine and out["engine"] != "dask":
+        out["engine"] = engine
     return out
 
 
@@ -151,8 +159,8 @@ def _stage_write(stage: str, payload: bytes) -> str | None:
     return name
 
 
-def plan_chunk(requests: list, fmt: str = "json", timeout_s: float | None = None,
-               stage: str | None = None) -> dict[str, Any]:
+def plan_chunk(requests: list | tuple, fmt: str = "json", timeout_s: float | None = None,
+               stage: str | None = None, memory_mb: int | None = None, engine: str | None = None) -> dict[str, Any]:
     """:func:`plan_item` for each request, in order (one task for several small plans),
     packed for the trip back: ``{"outcomes": [...], "blob": bytes}``.
 
@@ -168,7 +176,7 @@ def plan_chunk(requests: list, fmt: str = "json", timeout_s: float | None = None
     outcomes = []
     parts = []
     for r in requests:
-        oc = plan_item(r, fmt, timeout_s)
+        oc = plan_item(r, fmt, timeout_s, memory_mb, engine)
         payload = oc.pop("payload")
         oc["size"] = None
         if payload is not None:
@@ -180,6 +188,37 @@ def plan_chunk(requests: list, fmt: str = "json", timeout_s: float | None = None
                 parts.append(payload)
         outcomes.append(oc)
     return {"outcomes": outcomes, "blob": b"".join(parts)}
+
+
+@dataclass(frozen=True)
+class BatchChunkJob:
+    """A chunk of a batch's items as one typed job (:class:`app.jobs.ChunkJob`): what the batch
+    runner submits to an executor (:meth:`app.executors.JobExecutor.submit`; one round trip to
+    a pool's worker or a Dask scheduler for several ~5 ms plans, as :mod:`app.batch.runner` sizes
+    the chunks). Its :meth:`run` is
+    :func:`plan_chunk`: each item the service's typed job under its own bounds (``timeout_s``:
+    its work estimate and time limit, ``memory_mb``: its memory cap), in a planning process of
+    the process the chunk runs in, killed at the item's limit; ``stage``: the run's staging
+    directory; ``engine``: the name each outcome reports. The :class:`~app.jobs.Done` it
+    answers: ``summary["outcomes"]`` (:func:`plan_chunk`'s, one per item, in order) and
+    ``payload``, the results not written to ``stage`` back to back (:func:`unpack_chunk`)."""
+
+    requests: tuple
+    format: str = "json"
+    timeout_s: float | None = None
+    memory_mb: int | None = None
+    stage: str | None = None
+    engine: str | None = None
+    kind: ClassVar[str] = "batch"
+
+    def run(self) -> Done:
+        packed = plan_chunk(self.requests, self.format, self.timeout_s, self.stage, self.memory_mb, self.engine)
+        return Done(packed["blob"], summary={"outcomes": packed["outcomes"]})
+
+
+def chunk_outcomes(done: Done) -> list[dict[str, Any]]:
+    """The item outcomes of a :class:`BatchChunkJob`'s :class:`~app.jobs.Done` (:func:`unpack_chunk`)."""
+    return unpack_chunk({"outcomes": (done.summary or {})["outcomes"], "blob": done.payload or b""})
 
 
 def unpack_chunk(packed: dict[str, Any]) -> list[dict[str, Any]]:

@@ -1,16 +1,18 @@
-"""Where a batch runs: one ``concurrent.futures.Executor`` interface over three engines.
+"""Where a batch runs: the service's executors (:class:`app.executors.JobExecutor`), to which
+the runner submits chunks of items as typed jobs (:class:`app.batch.engine.BatchChunkJob`).
 
-* :class:`InlineEngine`: the calling process, one item after another (the 1-process
-  baseline of ``benchmarks/bench_batch.py``; no parallelism).
-* :class:`LocalEngine`: a local process pool (``ProcessPoolExecutor``, ``spawn``: a fresh
-  interpreter per worker, safe beside the server's threads); each worker loads the compiled
-  kernels once in its initializer. A worker that dies breaks a ``ProcessPoolExecutor``;
-  :meth:`LocalEngine.restart` starts a new pool and the runner resubmits what was in flight.
-* :class:`app.batch.cluster.DaskEngine`: a Dask distributed cluster through
-  ``Client.get_executor()`` (imported only when a scheduler address is given).
+* :class:`InlineEngine`: :class:`app.executors.InProcessExecutor`, the calling process, one
+  item after another (the 1-process baseline of ``benchmarks/bench_batch.py``).
+* :class:`LocalEngine`: a local pool of planning processes, :class:`app.workers.PlanPool`
+  (fresh interpreters, ``start="exec"``: independent of the interactive pool's fork server,
+  which is renewed after a background compile); each loads the compiled kernels once when
+  it starts. A worker that dies is replaced by the pool; the runner runs the items of its
+  chunk again, one at a time.
+* :class:`app.batch.cluster.DaskEngine`: :class:`app.cluster.DaskExecutor`, a Dask cluster
+  (imported only when a scheduler address is given).
 
-:class:`app.batch.base.Engine` is what the runner needs of each. Items run the service's jobs
-under the service's bounds wherever they run (:func:`app.executors.run_bounded`).
+:class:`app.batch.base.Engine` is what the runner needs of each. Every item runs as the
+service's typed job under the service's bounds wherever it runs (:func:`app.executors.run_bounded`).
 
 :func:`open_engine` picks one: a scheduler address (argument or ``RANGEPLAN_DASK_SCHEDULER``)
 means Dask, else a local pool of ``workers`` (default: the CPU count).
@@ -18,12 +20,10 @@ means Dask, else a local pool of ``workers`` (default: the CPU count).
 
 from __future__ import annotations
 
-import multiprocessing
 import os
-from concurrent.futures import Executor, Future, ProcessPoolExecutor
-from concurrent.futures.process import BrokenProcessPool
 
-from app.executors import warm_worker
+from app.executors import InProcessExecutor
+from app.workers import PlanPool
 
 from .base import Engine
 from .config import SCHEDULER_ENV
@@ -31,96 +31,58 @@ from .config import SCHEDULER_ENV
 __all__ = ["Engine", "InlineEngine", "LocalEngine", "open_engine", "SCHEDULER_ENV"]
 
 
-class _InlineExecutor(Executor):
-    """Runs each call at submit, in the calling thread."""
-
-    def submit(self, fn, /, *args, **kwargs):  # type: ignore[override]
-        fut: Future = Future()
-        fut.set_running_or_notify_cancel()
-        try:
-            fut.set_result(fn(*args, **kwargs))
-        except BaseException as exc:  # noqa: B036  (a Future carries any exception)
-            if isinstance(exc, KeyboardInterrupt):
-                raise
-            fut.set_exception(exc)
-        return fut
-
-
 class InlineEngine(Engine):
     name = "inline"
 
-    def __init__(self):
-        self._executor = _InlineExecutor()
-
-    @property
-    def executor(self) -> Executor:
-        return self._executor
+    def __init__(self, memory_mb: int | None = None):
+        super().__init__(InProcessExecutor(timeout_s=0.0))
+        self.item_memory_mb = memory_mb
 
     def describe(self) -> str:
         return "inline: this process, one item at a time"
 
 
 class LocalEngine(Engine):
-    """``workers`` local processes (``nice``: their CPU priority offset, > 0 yields to the
-    interactive planning pool; ``memory_mb``: each one's address-space cap [MiB], None: none)."""
+    """``workers`` local planning processes (``nice``: their CPU priority below this process;
+    the command's own by default, the service's batch pool below its interactive one, which
+    runs :data:`~app.workers.WORKER_NICE` below it; ``memory_mb``: each item's address-space
+    cap [MiB], None: none)."""
 
     name = "local"
 
     def __init__(self, workers: int | None = None, nice: int = 0, memory_mb: int | None = None):
         self.workers = max(1, int(workers or os.cpu_count() or 1))
-        self.nice = nice
-        self.memory_mb = memory_mb
-        self._pool = self._start()
-
-    def _start(self) -> ProcessPoolExecutor:
-        return ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=warm_worker, initargs=("local", self.nice, self.memory_mb, os.getpid()))
-
-    @property
-    def executor(self) -> Executor:
-        return self._pool
+        self.nice = int(nice)
+        self.item_memory_mb = memory_mb
+        # no limit of the pool's own (the items have theirs) and no cap on the worker (its items'
+        # planning processes have theirs); the runner keeps at most 2 x slots chunks in flight
+        self.pool = PlanPool(self.workers, timeout_s=0.0, max_queue=2 * self.workers, memory_mb=0, start="exec",
+                             nice=self.nice)
+        super().__init__(self.pool)
 
     @property
     def slots(self) -> int:
         return self.workers
 
-    def is_lost_worker(self, exc: BaseException) -> bool:
-        return isinstance(exc, BrokenProcessPool)
-
-    def restart(self) -> None:
-        self._shutdown(self._pool, cancel=True)
-        self._pool = self._start()
-
     def pids(self) -> list[int]:
-        """The worker processes' ids (started lazily: empty before the first task)."""
-        return [p.pid for p in (self._pool._processes or {}).values() if p.pid is not None]
-
-    @staticmethod
-    def _shutdown(pool: ProcessPoolExecutor, cancel: bool) -> None:
-        procs = list((pool._processes or {}).values())
-        pool.shutdown(wait=not cancel, cancel_futures=cancel)
-        if cancel:
-            for p in procs:  # running tasks are not stopped by shutdown(): stop their processes
-                if p.is_alive():
-                    p.kill()
-            for p in procs:
-                p.join(5)
+        """The worker processes' ids (started with the engine; None while one starts)."""
+        return [p for p in (w.pid for w in self.pool._workers) if p is not None]
 
     def describe(self) -> str:
         return f"local: {self.workers} worker process{'es' if self.workers > 1 else ''}"
 
     def close(self, cancel: bool = False) -> None:
-        self._shutdown(self._pool, cancel)
+        self.pool.close(cancel=cancel)
 
 
 def open_engine(workers: int | None = None, scheduler: str | None = None, *, nice: int = 0,
                 inline: bool = False, connect_timeout_s: float = 10.0, memory_mb: int | None = None) -> Engine:
     """The engine for these settings: ``inline``; a Dask cluster at ``scheduler`` (or
     ``$RANGEPLAN_DASK_SCHEDULER``; its workers have the cluster's own memory limits); else a
-    local pool of ``workers``, each capped at ``memory_mb`` MiB. Raises ``OSError`` when the
-    scheduler cannot be reached within ``connect_timeout_s``."""
+    local pool of ``workers``, each item capped at ``memory_mb`` MiB. Raises ``OSError`` when
+    the scheduler cannot be reached within ``connect_timeout_s``."""
     if inline:
-        return InlineEngine()
+        return InlineEngine(memory_mb)
     if not scheduler:
         from app.settings import settings
 

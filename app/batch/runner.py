@@ -1,6 +1,7 @@
-"""The dispatcher: feeds items to an engine's executor, a bounded number at a time, and
-reports each item's outcome as it finishes (``concurrent.futures.wait``, the same for a
-process pool and a Dask cluster).
+"""The dispatcher: submits items in chunks (:class:`app.batch.engine.BatchChunkJob`) to an
+engine's executor, the service's :class:`app.executors.JobExecutor` (``submit``), a bounded
+number at a time, and reports each item's outcome as its chunk finishes
+(``concurrent.futures.wait``, the same for this process, a local pool and a Dask cluster).
 
 * **Bounded**: at most ``2 x slots`` tasks are in flight (each worker has one task queued
   behind the running one), so memory and the scheduler's queue stay small however large
@@ -10,11 +11,12 @@ process pool and a Dask cluster).
   and its worker ~1-2 ms (docs/batch-scale.md), a Table I plan ~5 ms. Never more
   than ``remaining / (2 x slots)`` items per task, so the last tasks still spread over the
   workers. Every item keeps its own outcome and time limit.
-* **No item lost**: a worker that dies takes its tasks with it. Dask's scheduler retries
-  them itself (and names the task that kept killing workers: ``KilledWorker``); a broken
-  local process pool is restarted and every item that was in flight runs again, one at a
-  time until each has passed or failed alone (so an item that kills its worker is found
-  and reported after ``max_attempts``, and the others are not charged for it).
+* **No item lost**: a worker that dies takes its chunk with it (the executor's
+  :class:`~app.workers.WorkerCrashed`). Dask's scheduler retries it itself (and gives up on
+  the task that kept killing workers: :class:`~app.workers.JobKilledWorkers`); a local pool
+  replaces its worker, and the items of the lost chunk run again, one at a time until each
+  has passed or failed alone (so an item that kills its worker is found and reported after
+  ``max_attempts``, and the others are not charged for it).
 """
 
 from __future__ import annotations
@@ -28,7 +30,10 @@ from concurrent.futures import FIRST_COMPLETED, CancelledError, Future, wait
 from dataclasses import dataclass, field
 from typing import Any
 
-from .engine import plan_chunk, unpack_chunk
+from app.jobs import Failed
+from app.workers import JobKilledWorkers, WorkerCrashed
+
+from .engine import BatchChunkJob, chunk_outcomes
 from .executors import Engine
 
 __all__ = ["Item", "Runner", "failed_outcome"]
@@ -67,8 +72,9 @@ class Runner:
     """Runs items on ``engine`` and calls ``on_done(item, outcome)`` for each (in the
     thread that calls :meth:`run`). ``outcome`` is :func:`app.batch.engine.plan_item`'s
     dict plus ``attempts``; ``status`` is ``ok``, ``error`` (the request's fault: a planner
-    error code), ``failed`` (it kept losing its worker) or ``cancelled``. With ``stage`` (a
-    staging directory, see :func:`app.batch.engine.plan_chunk`), a worker that sees it writes
+    error code), ``failed`` (it kept losing its worker) or ``cancelled``. ``timeout_s`` is each
+    item's time limit (and work estimate); the engine's ``item_memory_mb`` its memory cap. With
+    ``stage`` (a staging directory, see :func:`app.batch.engine.plan_chunk`), a worker that sees it writes
     each result there and the outcome has ``staged`` (the file's name in ``stage``) and
     ``bytes`` instead of ``payload``; ``on_done`` moves the file into place. A staged file
     whose outcome never arrives (its worker died, its item was cancelled) is never reported:
@@ -160,7 +166,7 @@ class Runner:
         if now - self._slots_at > 1.0:  # a cluster grows and shrinks: ask at most once a second
             try:
                 self._slots = max(1, self.engine.slots)
-            except Exception:
+            except Exception:  # a cluster that went away: the slots it had
                 pass
             self._slots_at = now
         return self._slots
@@ -175,7 +181,7 @@ class Runner:
         return max(1, min(self.max_chunk, n))
 
     def _fill(self, take: Callable[[int], list[Item]], remaining: Callable[[], int] | None) -> None:
-        if self._suspects:  # after a broken pool: one item at a time, alone, until all are cleared
+        if self._suspects:  # after a lost chunk: one item at a time, alone, until all are cleared
             if not self._inflight:
                 item = self._suspects.popleft()
                 self._submit([item])
@@ -203,19 +209,23 @@ class Runner:
     def _submit(self, items: list[Item]) -> None:
         for it in items:
             it.attempts += 1
-        fut = self.engine.executor.submit(plan_chunk, [it.request for it in items], self.fmt, self.timeout_s,
-                                          self.stage)
+        job = BatchChunkJob(tuple(it.request for it in items), self.fmt, self.timeout_s, self.engine.item_memory_mb,
+                            self.stage, self.engine.name)
+        fut = self.engine.executor.submit(job, 0.0)  # no limit on the chunk: each item has its own
         self.stats.submitted_tasks += 1
         self._inflight[fut] = items
 
     def _collect(self, fut: Future) -> None:
         items = self._inflight.pop(fut)
         try:
-            outs = unpack_chunk(fut.result())
+            done = fut.result()
+            if isinstance(done, Failed):  # the chunk's own code failed (a bug): every item says so
+                raise RuntimeError(done.error.message)
+            outs = chunk_outcomes(done)
         except BaseException as exc:  # noqa: B036  (whatever a task raised: its items are reported)
             if isinstance(exc, KeyboardInterrupt):
                 raise
-            if self.engine.is_lost_worker(exc) or isinstance(exc, CancelledError):
+            if isinstance(exc, (WorkerCrashed, CancelledError)):
                 self._lost(items, exc)
             else:
                 for it in items:
@@ -239,25 +249,19 @@ class Runner:
 
     def _lost(self, items: list[Item], exc: BaseException) -> None:
         self.stats.lost_workers += 1
-        if self.engine.attributes_failures:
-            from_killed = type(exc).__name__ == "KilledWorker"
-            for it in reversed(items):
+        lost = [it for it in items if id(it) not in self._dropped]
+        self._dropped.difference_update(id(it) for it in items)
+        if self.engine.attributes_failures:  # the scheduler retried the chunk itself
+            from_killed = isinstance(exc, JobKilledWorkers)
+            for it in reversed(lost):
                 if (from_killed and len(items) == 1) or it.attempts >= self.max_attempts:
                     self._give_up(it, exc)  # the scheduler already retried it on several workers
                 else:
                     self.stats.resubmitted_items += 1
                     self._suspects.appendleft(it) if from_killed else self._pending.appendleft(it)
             return
-        # a broken process pool: every task in flight is lost with it
-        lost = list(items)
-        for f, its in list(self._inflight.items()):
-            f.cancel()
-            lost.extend(its)
-        self._inflight.clear()
-        self.engine.restart()
-        lost = [it for it in lost if id(it) not in self._dropped]
-        self._dropped.clear()
-        # each is charged this attempt; from now on they run alone, so a further break is theirs
+        # the chunk's process died (the pool has replaced it; the other chunks run on): each item
+        # is charged this attempt; from now on they run alone, so a further death is theirs
         for it in sorted(lost, key=lambda i: i.index, reverse=True):
             if it.attempts >= self.max_attempts:
                 self._give_up(it, exc)
