@@ -74,8 +74,8 @@ class Settings(BaseModel):
                                                         "the server process (no parallelism, no stopping; for "
                                                         "measurements), or the Dask cluster at "
                                                         "RANGEPLAN_DASK_SCHEDULER (dask)")
-    plan_timeout_s: float = _f(30.0, "Compute limit of one plan, import or batch item [s]; work estimated above it is "
-                               "refused before it starts", cli="batch --timeout (default there: none)", gt=0)
+    plan_timeout_s: float = _f(30.0, "Compute limit of one plan, import or batch item [s]; work estimated above 1/1.5 "
+                               "of it is refused before it starts (a run may take up to 1.5x its estimate)", cli="batch --timeout (default there: none)", gt=0)
     export_timeout_s: float = _f(120.0, "Time limit of writing a stored plan in an export format (GET /v1/plans/{id}?"
                                  "format=) [s]; at least RANGEPLAN_PLAN_TIMEOUT_S", gt=0)
     worker_memory_mb: int = _f(2048, "Address-space limit of each planning process [MiB] (0: none)", ge=0)
@@ -86,7 +86,7 @@ class Settings(BaseModel):
                               "as a job (GET /v1/jobs/{id}); a request's Prefer: respond-async asks for a job at any "
                               "estimate, Prefer: wait=N sets N for that request", gt=0)
     job_timeout_s: float = _f(600.0, "Compute limit of a contour, and of a plan run as a job [s]; work estimated above "
-                              "it is refused before it starts; at least RANGEPLAN_PLAN_TIMEOUT_S", gt=0)
+                              "1/1.5 of it is refused before it starts; at least RANGEPLAN_PLAN_TIMEOUT_S", gt=0)
     max_jobs: int = _f(100, "Jobs kept (the oldest finished are dropped; with this many unfinished the API answers "
                        "503 busy)", ge=1)
     job_max_age_s: float = _f(86400.0, "Seconds a finished job is kept", gt=0)
