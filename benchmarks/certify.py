@@ -145,9 +145,9 @@ def _remedies(job: tuple[dict, str, float]) -> tuple[dict, str, dict[str, str], 
     return case, message, out, time.process_time() - t0
 
 
-def refusals(path: Path, workers: int, limit: float, minutes: float) -> None:
+def refusals(path: Path, workers: int, limit: float, minutes: float, log_path: Path | None = None) -> None:
     """The ``--refusals`` survey (module docstring): prints a table of the remedies' outcomes
-    and the needless refusals."""
+    and the needless refusals; ``log_path``: each case's remedies as they come (JSON lines)."""
     jobs = []
     for line in path.open():
         rec = json.loads(line)
@@ -157,11 +157,15 @@ def refusals(path: Path, workers: int, limit: float, minutes: float) -> None:
     deadline = t0 + 60 * minutes
     counts: dict[str, collections.Counter] = {r: collections.Counter() for r in REMEDIES}
     needless, wrong, done, cpu = [], [], 0, 0.0
+    log = log_path.open("w") if log_path is not None else None
     with ProcessPoolExecutor(workers, initializer=_init) as pool:
         for case, message, out, sec in pool.map(_remedies, jobs, chunksize=1):
             if time.perf_counter() > deadline:
                 break
             done += 1
+            if log is not None:
+                log.write(json.dumps({"remedies": out, "cpu": sec, "message": message, "case": case}) + "\n")
+                log.flush()
             cpu += sec
             for r, v in out.items():
                 counts[r][v] += 1
@@ -195,12 +199,13 @@ def main() -> None:
     ap.add_argument("--problems", type=Path, default=None, help="write the problem cases here (JSON lines)")
     ap.add_argument("--users", action="store_true", help="the cases of where users go (module docstring)")
     ap.add_argument("--limit", type=float, default=30.0, help="with --users: the compute limit [s]")
-    ap.add_argument("--ratios", type=Path, default=None, help="write every case's outcome and ratio here (JSON lines)")
+    ap.add_argument("--ratios", type=Path, default=None, help="write every case's outcome and ratio here (JSON lines; "
+                    "with --refusals: each case's remedies)")
     ap.add_argument("--refusals", type=Path, default=None,
                     help="a --ratios file: try the remedies on its infeasible cases (module docstring)")
     args = ap.parse_args()
     if args.refusals is not None:
-        refusals(args.refusals, args.workers, args.limit, args.minutes)
+        refusals(args.refusals, args.workers, args.limit, args.minutes, args.ratios)
         return
     users_limit = args.limit if args.users else None
     t0 = time.perf_counter()
