@@ -36,7 +36,7 @@ import collections  # noqa: E402
 import json  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
-from concurrent.futures import ProcessPoolExecutor  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor, as_completed  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -158,10 +158,13 @@ def refusals(path: Path, workers: int, limit: float, minutes: float, log_path: P
     counts: dict[str, collections.Counter] = {r: collections.Counter() for r in REMEDIES}
     needless, wrong, done, cpu = [], [], 0, 0.0
     log = log_path.open("w") if log_path is not None else None
-    with ProcessPoolExecutor(workers, initializer=_init) as pool:
-        for case, message, out, sec in pool.map(_remedies, jobs, chunksize=1):
-            if time.perf_counter() > deadline:
-                break
+    # (as they complete: one slow case does not hold the others back; at the deadline the table
+    # is printed and the cases still running are left to end with the process)
+    pool = ProcessPoolExecutor(workers, initializer=_init)
+    futures = [pool.submit(_remedies, job) for job in jobs]
+    try:
+        for future in as_completed(futures, timeout=max(1.0, deadline - time.perf_counter())):
+            case, message, out, sec = future.result()
             done += 1
             if log is not None:
                 log.write(json.dumps({"remedies": out, "cpu": sec, "message": message, "case": case}) + "\n")
@@ -173,7 +176,9 @@ def refusals(path: Path, workers: int, limit: float, minutes: float, log_path: P
                 needless.append((case, message, out))
             if out["advice"] not in ("ok", "none"):
                 wrong.append((case, message, out))
-        pool.shutdown(cancel_futures=True)
+    except TimeoutError:
+        pass
+    pool.shutdown(wait=False, cancel_futures=True)
     print(f"\n{done} of {len(jobs)} refused cases tried in {(time.perf_counter() - t0) / 60:.1f} min "
           f"({cpu:.0f} CPU s; plans over {limit:g} s estimated not tried: too_much_work)\n")
     outcomes = sorted({v for c in counts.values() for v in c})
@@ -188,6 +193,7 @@ def refusals(path: Path, workers: int, limit: float, minutes: float, log_path: P
             f"{case['robot']['name']} {case['robot']['platform']['mass']:.3g} kg "
             f"{case['robot']['legs']['friction']:g} N s/m")
         print(f"  {robot}, {len(case['segments'])} segments {st}: {out}\n    {message[:400]}")
+    sys.stdout.flush()
 
 
 def main() -> None:
