@@ -17,6 +17,11 @@ advice, uncertified plans) and the largest measured / estimated time.
 ``fastest`` on every corridor shape, force rates 20 N/s to off; psi ranges), the constrained
 mode only, each case ``numpy.random.default_rng([seed, i])``, under a server's compute limit
 (``--limit``, 30 s: a request estimated over it is refused up front, ``too_much_work``).
+
+``--refusals RATIOS``: the infeasible cases of a run's ``--ratios`` file, each refused request
+tried with :data:`tests.certify_support.REMEDIES` (the advice's setting, twice the horizon,
+``fastest``, 8 plant sub-steps; :func:`tests.certify_support.try_remedies`): a refusal is
+needless where one of them plans (certified) and the advice does not name one that plans.
 """
 
 from __future__ import annotations
@@ -31,7 +36,7 @@ import collections  # noqa: E402
 import json  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
-from concurrent.futures import ProcessPoolExecutor  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor, as_completed  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,7 +44,7 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from tests.certify_support import certify_case, draw_case, user_case  # noqa: E402
+from tests.certify_support import REMEDIES, certify_case, draw_case, try_remedies, user_case  # noqa: E402
 
 #: the machine's speed now against the reference machine of the work estimate: Table I's CPU
 #: time measured in each worker every CALIBRATE cases over its time on the quiet reference
@@ -123,6 +128,74 @@ def _retime(case: dict, mode: str, rec: dict) -> None:
     rec["seconds"] = min(again)
 
 
+def _remedies(job: tuple[dict, str, float]) -> tuple[dict, str, dict[str, str], float]:
+    from planner import PlannerError, plan
+
+    case, message, limit = job
+    t0 = time.process_time()
+    try:
+        if len(message) >= 300:  # cut in the log (runs before the log kept whole messages): refused again
+            try:
+                plan({**case, "settings": {**case.get("settings", {}), "mode": "constrained"}}, work_limit_s=limit)
+            except PlannerError as exc:
+                message = str(exc)
+        out = try_remedies(case, message, limit)
+    except Exception as exc:  # a crash is a finding
+        out = {r: f"crash {exc!r}"[:80] for r in REMEDIES}
+    return case, message, out, time.process_time() - t0
+
+
+def refusals(path: Path, workers: int, limit: float, minutes: float, log_path: Path | None = None) -> None:
+    """The ``--refusals`` survey (module docstring): prints a table of the remedies' outcomes
+    and the needless refusals; ``log_path``: each case's remedies as they come (JSON lines)."""
+    jobs = []
+    for line in path.open():
+        rec = json.loads(line)
+        if rec.get("outcome") == "infeasible" and rec.get("mode", "constrained") == "constrained":
+            jobs.append((rec["case"], rec.get("message") or "", limit))
+    t0 = time.perf_counter()
+    deadline = t0 + 60 * minutes
+    counts: dict[str, collections.Counter] = {r: collections.Counter() for r in REMEDIES}
+    needless, wrong, done, cpu = [], [], 0, 0.0
+    log = log_path.open("w") if log_path is not None else None
+    # (as they complete: one slow case does not hold the others back; at the deadline the table
+    # is printed and the cases still running are left to end with the process)
+    pool = ProcessPoolExecutor(workers, initializer=_init)
+    futures = [pool.submit(_remedies, job) for job in jobs]
+    try:
+        for future in as_completed(futures, timeout=max(1.0, deadline - time.perf_counter())):
+            case, message, out, sec = future.result()
+            done += 1
+            if log is not None:
+                log.write(json.dumps({"remedies": out, "cpu": sec, "message": message, "case": case}) + "\n")
+                log.flush()
+            cpu += sec
+            for r, v in out.items():
+                counts[r][v] += 1
+            if out["advice"] != "ok" and any(v == "ok" for v in out.values()):
+                needless.append((case, message, out))
+            if out["advice"] not in ("ok", "none"):
+                wrong.append((case, message, out))
+    except TimeoutError:
+        pass
+    pool.shutdown(wait=False, cancel_futures=True)
+    print(f"\n{done} of {len(jobs)} refused cases tried in {(time.perf_counter() - t0) / 60:.1f} min "
+          f"({cpu:.0f} CPU s; plans over {limit:g} s estimated not tried: too_much_work)\n")
+    outcomes = sorted({v for c in counts.values() for v in c})
+    print("| remedy | " + " | ".join(outcomes) + " |\n|---|" + "---|" * len(outcomes))
+    for r in REMEDIES:
+        print(f"| {r} | " + " | ".join(str(counts[r][v]) for v in outcomes) + " |")
+    print(f"\nneedless refusals (a remedy plans, the advice names none that does): {len(needless)}; "
+          f"advice that does not plan: {len(wrong)}")
+    for case, message, out in needless + wrong:
+        st = json.dumps(case.get("settings", {}))
+        robot = case["robot"] if isinstance(case["robot"], str) else (
+            f"{case['robot']['name']} {case['robot']['platform']['mass']:.3g} kg "
+            f"{case['robot']['legs']['friction']:g} N s/m")
+        print(f"  {robot}, {len(case['segments'])} segments {st}: {out}\n    {message[:400]}")
+    sys.stdout.flush()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", type=int, default=10_000)
@@ -132,8 +205,14 @@ def main() -> None:
     ap.add_argument("--problems", type=Path, default=None, help="write the problem cases here (JSON lines)")
     ap.add_argument("--users", action="store_true", help="the cases of where users go (module docstring)")
     ap.add_argument("--limit", type=float, default=30.0, help="with --users: the compute limit [s]")
-    ap.add_argument("--ratios", type=Path, default=None, help="write every case's outcome and ratio here (JSON lines)")
+    ap.add_argument("--ratios", type=Path, default=None, help="write every case's outcome and ratio here (JSON lines; "
+                    "with --refusals: each case's remedies)")
+    ap.add_argument("--refusals", type=Path, default=None,
+                    help="a --ratios file: try the remedies on its infeasible cases (module docstring)")
     args = ap.parse_args()
+    if args.refusals is not None:
+        refusals(args.refusals, args.workers, args.limit, args.minutes, args.ratios)
+        return
     users_limit = args.limit if args.users else None
     t0 = time.perf_counter()
     counts: dict[str, collections.Counter] = {"constrained": collections.Counter(), "paper": collections.Counter()}
@@ -154,7 +233,7 @@ def main() -> None:
                 counts[mode][rec["outcome"]] += 1
                 if log is not None:
                     log.write(json.dumps({"mode": mode, **{k: v for k, v in rec.items() if k != "message"},
-                                          "message": (rec.get("message") or "")[:300], "case": case}) + "\n")
+                                          "message": rec.get("message") or "", "case": case}) + "\n")
                     log.flush()
                 if rec.get("problem"):
                     problems.append((mode, rec["outcome"], rec["problem"], case))

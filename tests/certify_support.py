@@ -768,8 +768,9 @@ def confirm_error(request: dict, code: str, message: str, field_name: str | None
         if not np.any(apart > -2.1e-6):  # the planner's gaps allow for its 1 um margins
             return f"segments {m.group(1)} and {m.group(2)} overlap, yet the error says they do not touch"
         return None
-    if code == "infeasible" and re.search(r"settings\.N = \d+ with \d+x the time|settings\.plant_substeps = \d+ plans",
-                                          message):  # (issue 31) the remedy applied as the message names it
+    if code == "infeasible" and re.search(r"settings\.N = \d+ with \d+x the time \([^()]*\) plans|"
+                                          r"settings\.plant_substeps = \d+ plans", message):
+        # (issue 31) the remedy applied as the message names it (not a list of those that "do not plan either")
         from tests.advice_support import apply_advice
 
         fixed = apply_advice(request, message)
@@ -972,3 +973,51 @@ def user_case(rng: np.random.Generator, Ts_choices: tuple[float, ...] = (0.001, 
     elif rate >= 2:
         st["force_rate_n_s"] = float(10 ** rng.uniform(np.log10(20.0), np.log10(3000.0)))
     return {"robot": robot, "segments": segs, "settings": st}
+
+
+#: the remedies :func:`try_remedies` tries on a refused plan (issue 31 goal 1: is a refusal
+#: needless, a setting plans that the advice does not name?)
+REMEDIES = ("advice", "N x2", "fastest", "plant_substeps 8")
+
+
+def try_remedies(case: dict, message: str, limit_s: float = 30.0) -> dict[str, str]:
+    """Each of :data:`REMEDIES` applied to the refused request ``case`` (constrained mode):
+    ``"ok"`` (planned, and the plan passes :func:`check_plan`), ``"uncertified"`` (planned, the
+    checker disagrees), the error code it fails with, ``"too_much_work"`` (estimated over
+    ``limit_s``, not planned, as a server with that limit), or ``"none"`` (the message names no
+    setting: ``advice`` only). ``advice`` is the message's first remedy
+    (:func:`tests.advice_support.apply_advice`); ``N x2`` twice the horizon the request planned
+    with (at most MAX_HORIZON); ``fastest`` the request's timing replaced by ``settings.fastest``;
+    ``plant_substeps 8`` eight RK4 steps a sample."""
+    from planner import PlannerError, estimate_work, plan
+    from planner.schema import MAX_HORIZON
+    from tests.advice_support import apply_advice
+
+    req = _with(case, mode="constrained")
+    out: dict[str, str] = {}
+    for name in REMEDIES:
+        fixed: dict | None
+        if name == "advice":
+            fixed = apply_advice(req, message)
+        elif name == "N x2":
+            fixed = _with(req, N=min(2 * int(plan_settings(req)["N"]), MAX_HORIZON))
+        elif name == "fastest":
+            fixed = copy.deepcopy(req)
+            for k in ("speed_m_s", "total_time_s", "samples_per_segment", "segment_samples"):
+                fixed["settings"].pop(k, None)
+            fixed["settings"]["fastest"] = True
+        else:
+            fixed = _with(req, plant_substeps=8)
+        if fixed is None:
+            out[name] = "none"
+            continue
+        try:
+            if estimate_work(fixed).seconds > limit_s:
+                out[name] = "too_much_work"
+                continue
+            result = plan(fixed, work_limit_s=limit_s)
+        except PlannerError as exc:
+            out[name] = exc.code
+            continue
+        out[name] = "ok" if check_plan(fixed, result, _segments_of(fixed, result)).ok else "uncertified"
+    return out

@@ -22,6 +22,7 @@ from tests.certify_support import (
     box_leg_range,
     certify_case,
     check_plan,
+    confirm_error,
     draw_cases,
     grid_path_exists,
     robot_of,
@@ -431,3 +432,22 @@ def test_an_end_at_a_corner_reached_from_beyond_it_plans_without_relaxed_steps(b
     assert res.metrics.qp_relaxed_steps == 0 and res.metrics.contained and res.metrics.settled
     v = check_plan(req, res, req["segments"])
     assert v.ok, v.problems
+
+
+def test_the_checker_reads_a_list_of_remedies_that_do_not_plan_as_no_advice_to_apply():
+    """A refusal whose bounded search lists the settings it checked ("settings.N = 100 and
+    settings.N = 200 with 8x the time and settings.plant_substeps = 10 do not plan either") names
+    no remedy: the checker confirms it rather than reporting "advice that names no setting to
+    apply" (9 such false problems in 75 cases where users go, seed 31); a clause that says a
+    setting plans is still applied and planned."""
+    message = ("at t = 0.054 s (segment 1) the robot cannot keep the corridor within its drive limits (the "
+               "corridor would be left by 244 um); set require_settled to false to get the plan with its violations "
+               "reported; 4x, 8x, 16x, 32x the time do not help either (checked; more time exceeds the limits on "
+               "samples); settings.N = 100 and settings.N = 200 with 8x the time and settings.plant_substeps = 10 do "
+               "not plan either (checked)")
+    assert confirm_error(TABLE1, "infeasible", message, "settings") is None
+    # the same words with a remedy that plans: applied (N 30 at 1/8 of the samples does not plan Table I)
+    wrong = message.replace("do not plan either (checked)", "do not plan either (checked); settings.N = 30 with 2x "
+                            "the time (settings.samples_per_segment = 2) plans (checked)")
+    found = confirm_error(TABLE1, "infeasible", wrong, "settings")
+    assert found is not None and "still fails" in found, found

@@ -217,17 +217,19 @@ def _files_naming(pattern: str) -> set[str]:
 def test_a_new_row_constraint_touches_three_files():
     """The tool-speed limit, added through the registry: its row class and numpy rows
     (motion.py), its typed tuple and kernels (kernels.py) and its registry entry are the only
-    places in the code that name it; its request field is read by its row class and the work
-    estimate of ``fastest`` and the result's ``within_limits`` verdict (and its description) only. No other
+    places in the code that name it; its request field is read by its row class, the work
+    estimate of ``fastest``, the refusal's time bound and the result's ``within_limits`` verdict
+    (and its description) only. No other
     list of the row constraints exists: every module but the registry and the composed
     constraints (named accessors of the ones the controller reads) names at most three of them."""
     assert _files_naming(r"\b(ToolSpeedConstraint|ToolSpeedArgs|tool_speed_count|tool_speed_fill)\b") == {
         "planner/constraints/motion.py", "planner/constraints/kernels.py", "planner/constraints/registry.py"}
     # the user's option: its field, the row class that reads it, and the ``fastest`` work estimate
-    # (the speed of its estimated move), the result's verdict on it
+    # (the speed of its estimated move), the result's verdict on it, the refusal's lower bound on
+    # the time from start to end (plan._time_needed, issue 31 goal 2)
     assert _files_naming(r"\btool_speed_max_m_s\b") == {
         "planner/schema/request.py", "planner/constraints/motion.py", "planner/orchestrator/work.py",
-        "planner/orchestrator/result.py", "planner/schema/result.py"}
+        "planner/orchestrator/result.py", "planner/schema/result.py", "planner/orchestrator/plan.py"}
     names = {s.row_class.__name__ for s in SECTIONS}
     for p in _planner_files():
         rel = p.relative_to(ROOT).as_posix()

@@ -140,3 +140,44 @@ def test_stiff_legs_with_one_plant_step_are_advised_the_steps_that_plan():
     fixed = apply_advice(req, err.message)
     assert fixed is not None and fixed["settings"]["plant_substeps"] == int(m.group(1)) > 1
     _plans_checked(fixed)
+
+
+def test_a_total_time_under_the_tool_speed_limit_is_refused_naming_it_and_the_time_advised_plans():
+    """Table I with a tool-speed limit of 0.05 m/s and total_time_s 1 (issue 31 goal 2): the
+    tool covers at least the 145.6 mm straight line from the start to the end at 0.05 m/s
+    (2.9 s, the leg-speed and drive-force bounds are ~0.3 s): the message names
+    settings.tool_speed_max_m_s and that time (from rest to rest at the drives' 40 m/s^2), and
+    the total time it advises is above it and plans, certified, its tool speed within the limit."""
+    v = 0.05
+    req = {**copy.deepcopy(TABLE1), "settings": {"total_time_s": 1.0, "tool_speed_max_m_s": v}}
+    err = _refusal(req)
+    assert err.code == "infeasible"
+    m = re.search(r"impossible as asked: with (.+?), the robot needs at least ([0-9.]+) s from the start to the end, "
+                  r"its timing gives ([0-9.]+) s", err.message)
+    assert m, err.message
+    assert "settings.tool_speed_max_m_s" in m.group(1)
+    d = float(np.hypot(*(np.subtract(TABLE1["segments"][-1]["lower"][:2], TABLE1["segments"][0]["lower"][:2]))))
+    acc = 4 * SLIDE["legs"]["force_max"] / SLIDE["platform"]["mass"]  # the 4 drives on the platform alone
+    need = float(m.group(2))
+    assert need == pytest.approx(d / v + v / acc, rel=2e-3)  # (printed to 3 figures)
+    assert need > float(m.group(3))
+    fixed = apply_advice(req, err.message)
+    assert fixed is not None and fixed["settings"]["total_time_s"] >= need, err.message
+    res = plan(fixed)
+    assert check_plan(fixed, res, fixed["segments"]).ok
+    assert res.timing.moving_time_s is not None and res.timing.moving_time_s >= need
+    assert float(np.hypot(res.velocity[:, 0], res.velocity[:, 1]).max()) <= v * (1 + 1e-9)
+    assert res.metrics.within_limits
+
+
+def test_the_tool_speed_bound_is_below_the_fastest_plan_at_that_limit():
+    """The tool-speed bound is a lower bound: Table I's fastest plan under a limit of 0.1 m/s
+    takes at least that time (less one sample: the moving time counts whole samples)."""
+    req = {**copy.deepcopy(TABLE1), "settings": {"fastest": True, "tool_speed_max_m_s": 0.1}}
+    res = plan(req)
+    pr = parse_request(req)
+    assert pr.segments is not None
+    bound = _time_needed(load_robot("moving-slide"), pr.settings, pr.segments)
+    assert bound is not None and "tool_speed_max_m_s" in bound[1]
+    assert res.timing.moving_time_s is not None
+    assert res.timing.moving_time_s + TABLE1_TS >= bound[0], (res.timing.moving_time_s, bound)

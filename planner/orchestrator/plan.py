@@ -165,7 +165,9 @@ def _time_needed(model: RobotModel, st: Settings, segments: Sequence[Segment]) -
     keeps its angle, the platform alone (without the legs' masses and friction, which only slow
     it) pushed by all drives together at their ``force_max`` and, with a force-rate limit,
     changing that push at most at the sum of the drives' rates, from rest to rest along the
-    straight line. None if the corridor does not start and end at a point."""
+    straight line; and the tool at most at ``settings.tool_speed_max_m_s`` along that line (from
+    rest to rest at the drives' acceleration where the platform keeps its angle). None if the
+    corridor does not start and end at a point."""
     first, last = segments[0], segments[-1]
     if not (np.array_equal(first.lower, first.upper) and np.array_equal(last.lower, last.upper)):
         return None
@@ -193,6 +195,20 @@ def _time_needed(model: RobotModel, st: Settings, segments: Sequence[Segment]) -
         if j is not None and t > 1.001 * _rest_to_rest_s(d, force / model.platform_mass, None):
             words += f", their force rates at most {j * model.platform_mass:g} N/s together (settings.force_rate_n_s)"
         out.append((t, words + ")"))
+    v = st.tool_speed_max_m_s
+    d = float(np.hypot(*(b[:2] - a[:2])))
+    if v is not None and d > 0.0:
+        # the tool covers at least the straight line from the start to the end at most at v; where
+        # the platform keeps its angle, from rest to rest pushed by all drives at their force
+        # limits (the platform alone): 2 sqrt(d / a) below v, d / v + v / a where it reaches v
+        t = d / v
+        words = (f"the tool-speed limit of {v:g} m/s (settings.tool_speed_max_m_s) over the {d * 1e3:.4g} mm "
+                 "from the start to the end")
+        if all(float(s.lower[2]) == float(s.upper[2]) == float(a[2]) for s in segments):
+            acc = float(np.sum(model.force_max)) / model.platform_mass
+            t = _rest_to_rest_s(d, acc, None) if d <= v * v / acc else d / v + v / acc
+            words += f", from rest to rest (the drive forces' {acc:.4g} m/s^2 on the platform alone)"
+        out.append((t, words))
     return max(out)
 
 
