@@ -75,7 +75,8 @@ class Settings(BaseModel):
                                                         "measurements), or the Dask cluster at "
                                                         "RANGEPLAN_DASK_SCHEDULER (dask)")
     plan_timeout_s: float = _f(30.0, "Compute limit of one plan, import or batch item [s]; work estimated above 1/1.5 "
-                               "of it is refused before it starts (a run may take up to 1.5x its estimate)", cli="batch --timeout (default there: none)", gt=0)
+                               "of it is refused before it starts (a run may take up to 1.5x its estimate)",
+                               cli="batch --timeout (default there: none)", gt=0)
     export_timeout_s: float = _f(120.0, "Time limit of writing a stored plan in an export format (GET /v1/plans/{id}?"
                                  "format=) [s]; at least RANGEPLAN_PLAN_TIMEOUT_S", gt=0)
     worker_memory_mb: int = _f(2048, "Address-space limit of each planning process [MiB] (0: none)", ge=0)
