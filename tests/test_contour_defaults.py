@@ -147,6 +147,18 @@ TINY = "G21 G90 G17\nG64 P0.02\nG0 X0 Y0 Z2\nG1 Z-1 F300\n" + "".join(
     f"G1 X{0.1 * k:.1f} F1200\n" for k in range(1, 101)) + "G1 Y10\nG1 X0\nG1 Y0\nG0 Z2\nM2\n"
 
 
+def _bench_estimates():
+    """benchmarks/bench_estimates.py's program generators (benchmarks/ is no package: by path)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "bench_estimates", Path(__file__).resolve().parent.parent / "benchmarks" / "bench_estimates.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def _counted(program, tol):
     """(length, F) of the moves that start or end a pass or turn a corner, at least
     FEED_MOVE_MIN_TOL tolerances long (independently of feed_ts: turns from the moves' ends)."""
@@ -202,6 +214,16 @@ def test_program_feed_ts_ignores_moves_within_the_tolerance_scale():
     settings are kept in the ``program`` feed too."""
     st, program, tol = settings_of({"program": TINY, "feed": "program"})
     assert 0.1e-3 < FEED_MOVE_MIN_TOL * tol and min(L / (F * 0.01) for L, F in _counted(program, tol)) >= 50 - 1e-6
+    assert st.Ts == 0.01
+    # tiny arcs the drives turn slower than their F keep the default, though their rows' 4.5 mm
+    # lines at F3000 have 9 samples at 10 ms (the feed's search near the edge of feasibility)
+    circles = {"program": _bench_estimates().gcode_circles(60), "feed": "program"}
+    st, program, tol = settings_of(circles)
+    model = load_robot(parse_contour_request(circles).robot)
+    a, jerk = drive_acceleration(model), drive_acceleration(model) / DEFAULT_FORCE_RISE_S
+    arcs = [e for b in program.passes for e in b.elements if e.kind == "arc"]
+    assert arcs and all(arc_speed(e, a, jerk, float(np.min(model.speed_max)), "program") < e.feed_m_s for e in arcs)
+    assert min(L / (F * 0.01) for L, F in _counted(program, tol)) < FEED_MOVE_SAMPLES
     assert st.Ts == 0.01
     for typed in ({"Ts": 0.01}, {"N": 40}):
         st, _, _ = settings_of({"program": FUSION, "feed": "program", "settings": typed})

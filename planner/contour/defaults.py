@@ -43,7 +43,12 @@ by more than :data:`FEED_CORNER_RAD`) gets at least :data:`FEED_MOVE_SAMPLES` sa
 the sample time ``L / (F n)`` of the shortest such move, rounded down to a whole
 :data:`TS_STEP_S`, within [:data:`TS_FLOOR_S`, the settings' default]. Moves shorter than
 :data:`FEED_MOVE_MIN_TOL` tolerances do not count (a CAM program's tiny segments are cut
-within the tolerance anyway, not at their own F). Measured on fusion360 (``benchmarks/README.md``):
+within the tolerance anyway, not at their own F). A program with an arc that asks less than
+its F (:func:`arc_speed`: the drives' turn or the force-rate limit bound it) keeps the default:
+``benchmarks/bench_estimates.py``'s 60 circles of 0.1 mm at F3000 (4.5 mm lines between rows)
+cut in 5.73 s at 4.5 ms against 7.86 s at 10 ms, but for 2.2-3.7x the CPU and 7.8x under its
+work estimate (at 5 ms 23 CPU s, 11x over: the feed's scale search near the edge of
+feasibility on tiny arcs). Measured on fusion360 (``benchmarks/README.md``):
 at 10 / 6 / 5 / 4 ms (N 30) its passes took 1.43 + 0.54 / 1.362 + 0.492 / 1.35 + 0.49 / 1.356 +
 0.488 s; freecad's moves (62-160 samples at 10 ms) were not faster at 5 or 7.5 ms (7.2 + 5.83
 against 7.215 + 6.05 and 7.305 + 5.85 s), and at 20 samples the benchmark part's 4 mm lines at
@@ -144,13 +149,19 @@ def _turn(a: PathElement, b: PathElement) -> float:
     return abs(math.atan2(t0[0] * t1[1] - t0[1] * t1[0], float(t0 @ t1)))
 
 
-def feed_ts(program: Program, tol: float, st: Settings) -> float:
+def feed_ts(program: Program, tol: float, model: RobotModel, st: Settings) -> float:
     """The ``program`` feed's sample time [s] (module docstring): :data:`FEED_MOVE_SAMPLES`
     samples at F on the shortest move that starts or ends a pass or turns a corner, at most
-    ``st.Ts``."""
+    ``st.Ts``; ``st.Ts`` where an arc asks less than its F (:func:`arc_speed`)."""
+    a = drive_acceleration(model)
+    ramp = _ramp(model, st)
+    jerk = None if ramp is None else a / ramp
+    v_leg = float(np.min(model.speed_max))
     need = st.Ts
     for b in program.passes:
         els = [e for e in b.elements if e.length_m > 1e-12]
+        if any(e.kind == "arc" and e.radius_m and arc_speed(e, a, jerk, v_leg, "program") < e.feed_m_s for e in els):
+            return st.Ts  # tiny arcs: the feed's search near the edge of feasibility (module docstring)
         for k, e in enumerate(els):
             if e.length_m < FEED_MOVE_MIN_TOL * tol or e.feed_m_s <= 0:
                 continue
@@ -171,7 +182,7 @@ def contour_settings(req: ContourRequest, st: Settings, program: Program, tol: f
     else ``st`` as given."""
     if req.settings.get("Ts") is not None or req.settings.get("N") is not None:
         return st
-    Ts = contour_ts(program, tol, req.feed, model, st) if req.feed == "fastest" else feed_ts(program, tol, st)
+    Ts = contour_ts(program, tol, req.feed, model, st) if req.feed == "fastest" else feed_ts(program, tol, model, st)
     if Ts >= st.Ts:
         return st
     out = Settings.model_validate({**req.settings, "Ts": Ts})  # the defaults as if Ts were typed
