@@ -79,25 +79,32 @@ def run_root(root: str, name: str) -> dict:
     return got
 
 
-def pass_key(els, origin) -> str:
-    key = (tuple((e.kind, *np.round(e.start, 9), *np.round(e.end, 9), round(e.sweep_rad or 0.0, 9),
-                  round(e.feed_m_s, 9), round(e.z_start_m, 9), round(e.z_end_m, 9)) for e in els),
-           tuple(np.round(origin, 9)), GRIDS)
+def pass_key(els, origin, z_acc: float) -> str:
+    """The cache key of a pass's peer: its moves, feeds, Z, origin and grids, and the Z axis
+    acceleration where the pass moves Z (elsewhere it bounds nothing: the same optimum)."""
+    key: tuple = (tuple((e.kind, *np.round(e.start, 9), *np.round(e.end, 9), round(e.sweep_rad or 0.0, 9),
+                         round(e.feed_m_s, 9), round(e.z_start_m, 9), round(e.z_end_m, 9)) for e in els),
+                  tuple(np.round(origin, 9)), GRIDS)
+    if any(e.z_end_m != e.z_start_m and e.length_m > 1e-12 for e in els):
+        key += (("z_acc", z_acc),)
     return hashlib.sha256(repr(key).encode()).hexdigest()[:20]
 
 
 def capped_peer(robot, els, origin, rate, cache: Path | None) -> dict:
     """The F-capped third-order optimum of one pass, converged (as ``converged_optimum``), with
-    its per-element times, top speeds and speed profiles; cached by the pass."""
-    from bench_contour_optimum import Z_MAX_M_S, third_order_optimum  # type: ignore[import-not-found]
+    its per-element times, top speeds and speed profiles; cached by the pass. The Z axis's speed
+    and acceleration as the planner holds them (``bench_contour_optimum``'s fair peer; before
+    2026-11-28 10:00 this peer held the Z speed alone: fusion360's ramps)."""
+    from bench_contour_optimum import Z_ACC_M_S2, Z_MAX_M_S, third_order_optimum  # type: ignore[import-not-found]
 
-    path = cache / f"{pass_key(els, origin)}.pkl" if cache is not None else None
+    path = cache / f"{pass_key(els, origin, Z_ACC_M_S2)}.pkl" if cache is not None else None
     if path is not None and path.exists():
         return pickle.loads(path.read_bytes())
     grids, runs, guess = list(GRIDS), [], None
     k = 0
     while k < len(grids):
-        opt, guess = third_order_optimum(robot, els, origin, grids[k], rate, True, False, Z_MAX_M_S, guess)
+        opt, guess = third_order_optimum(robot, els, origin, grids[k], rate, True, False, z_max=Z_MAX_M_S,
+                                         z_acc=Z_ACC_M_S2, guess=guess)
         runs.append(opt)
         k += 1
         if k == len(grids) and abs(runs[-1].time_s / runs[-2].time_s - 1) > 1e-3 and 2 * grids[-1] <= 192:

@@ -10,13 +10,24 @@ optimum is measured by benchmarks/bench_contour_optimum.py, not here)."""
 from __future__ import annotations
 
 import math
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.optimize import linprog
 
 from planner.contour import plan_contour
-from planner.contour.defaults import TS_FLOOR_S, TS_STEP_S, arc_speed, contour_settings, drive_acceleration
+from planner.contour.defaults import (
+    FEED_CORNER_RAD,
+    FEED_MOVE_MIN_TOL,
+    FEED_MOVE_SAMPLES,
+    TS_FLOOR_S,
+    TS_STEP_S,
+    arc_speed,
+    contour_settings,
+    drive_acceleration,
+)
 from planner.contour.estimate import estimate_contour
 from planner.contour.passes import parse_contour_request, read_program, tolerance_of
 from planner.contour.tube import SAGITTA_FRACTION
@@ -127,3 +138,120 @@ def test_chosen_ts_cuts_faster_and_within_tolerance():
     assert auto.contour.max_deviation_m <= auto.contour.tolerance_m
     assert auto.metrics.within_limits
     assert f"Ts = {auto.settings.Ts:g} s" in estimate_contour(body)[1]
+
+
+FUSION = (Path(__file__).parent / "data" / "cam" / "fusion360.nc").read_text()
+#: a square of 10 mm sides cut at F1200 whose first side is a polyline of 0.1 mm moves (5 tolerances
+#: each at G64 P0.02: under FEED_MOVE_MIN_TOL, they choose nothing); at 10 ms 50 samples a side
+TINY = "G21 G90 G17\nG64 P0.02\nG0 X0 Y0 Z2\nG1 Z-1 F300\n" + "".join(
+    f"G1 X{0.1 * k:.1f} F1200\n" for k in range(1, 101)) + "G1 Y10\nG1 X0\nG1 Y0\nG0 Z2\nM2\n"
+
+
+def _bench_estimates():
+    """benchmarks/bench_estimates.py's program generators (benchmarks/ is no package: by path)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "bench_estimates", Path(__file__).resolve().parent.parent / "benchmarks" / "bench_estimates.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _counted(program, tol):
+    """(length, F) of the moves that start or end a pass or turn a corner, at least
+    FEED_MOVE_MIN_TOL tolerances long (independently of feed_ts: turns from the moves' ends)."""
+    out = []
+    for b in program.passes:
+        els = [e for e in b.elements if e.length_m > 1e-12]
+        for k, e in enumerate(els):
+            if e.length_m < FEED_MOVE_MIN_TOL * tol:
+                continue
+            turns = [math.pi if k == 0 else _turn_of(els[k - 1], e),
+                     math.pi if k == len(els) - 1 else _turn_of(e, els[k + 1])]
+            if max(turns) > FEED_CORNER_RAD:
+                out.append((e.length_m, e.feed_m_s))
+    return out
+
+
+def _direction(e, at_end: bool) -> np.ndarray:
+    """A move's direction of travel at its start or end, from a point 1e-7 of its length away."""
+    if e.kind == "line":
+        d = np.subtract(e.end, e.start)
+    else:
+        a = e.start_angle_rad + (e.sweep_rad if at_end else 0.0)
+        b = a + (-1e-7 if at_end else 1e-7) * e.sweep_rad
+        p, q = (np.array([math.cos(x), math.sin(x)]) for x in (a, b))
+        d = (p - q) if at_end else (q - p)
+    return d / np.hypot(*d)
+
+
+def _turn_of(a, b) -> float:
+    return math.acos(float(np.clip(_direction(a, True) @ _direction(b, False), -1.0, 1.0)))
+
+
+def test_program_feed_ts_gives_short_moves_their_samples():
+    """fusion360's 2 mm lines at F1000 (12 samples at 10 ms): the ``program`` feed's chosen Ts
+    gives every move that starts, ends or turns at least FEED_MOVE_SAMPLES samples at its F, and
+    a step coarser would not; the horizon is the force ramps' (at least 30), as for ``fastest``;
+    the work estimate counts that Ts."""
+    body = {"program": FUSION, "origin": "fit", "feed": "program"}
+    st, program, tol = settings_of(body)
+    moves = _counted(program, tol)
+    assert moves and st.Ts < 0.01
+    samples = [L / (F * st.Ts) for L, F in moves]
+    assert min(samples) >= FEED_MOVE_SAMPLES - 1e-6 or st.Ts == TS_FLOOR_S
+    coarser = st.Ts + TS_STEP_S
+    assert min(L / (F * coarser) for L, F in moves) < FEED_MOVE_SAMPLES
+    assert st.N == max(30, math.ceil(3 * DEFAULT_FORCE_RISE_S / st.Ts - 1e-9))
+    assert f"Ts = {st.Ts:g} s" in estimate_contour(body)[1]
+
+
+def test_program_feed_ts_ignores_moves_within_the_tolerance_scale():
+    """Moves shorter than FEED_MOVE_MIN_TOL tolerances (a polyline's 0.1 mm pieces) do not choose
+    the sample time: the square's 10 mm sides (50 samples at F1200 and 10 ms) keep 10 ms; typed
+    settings are kept in the ``program`` feed too."""
+    st, program, tol = settings_of({"program": TINY, "feed": "program"})
+    assert 0.1e-3 < FEED_MOVE_MIN_TOL * tol and min(L / (F * 0.01) for L, F in _counted(program, tol)) >= 50 - 1e-6
+    assert st.Ts == 0.01
+    # tiny arcs the drives turn slower than their F keep the default, though their rows' 4.5 mm
+    # lines at F3000 have 9 samples at 10 ms (the feed's search near the edge of feasibility)
+    circles = {"program": _bench_estimates().gcode_circles(60), "feed": "program"}
+    st, program, tol = settings_of(circles)
+    model = load_robot(parse_contour_request(circles).robot)
+    a, jerk = drive_acceleration(model), drive_acceleration(model) / DEFAULT_FORCE_RISE_S
+    arcs = [e for b in program.passes for e in b.elements if e.kind == "arc"]
+    assert arcs and all(arc_speed(e, a, jerk, float(np.min(model.speed_max)), "program") < e.feed_m_s for e in arcs)
+    assert min(L / (F * 0.01) for L, F in _counted(program, tol)) < FEED_MOVE_SAMPLES
+    assert st.Ts == 0.01
+    for typed in ({"Ts": 0.01}, {"N": 40}):
+        st, _, _ = settings_of({"program": FUSION, "feed": "program", "settings": typed})
+        req = parse_contour_request({"program": FUSION, "feed": "program", "settings": typed})
+        assert st.Ts == req.plan_settings().Ts and st.N == req.plan_settings().N
+
+
+@pytest.mark.slow
+def test_program_feed_chosen_ts_cuts_faster_and_never_over_F():
+    """fusion360 in the ``program`` feed at the chosen Ts against the 10 ms it replaces: faster
+    (measured 1.97 -> 1.85 s, benchmarks/README.md), and no sample nor straight move between
+    samples faster than its move's F (finite differences of the sampled tool point)."""
+    body = {"program": FUSION, "origin": "fit", "feed": "program"}
+    auto = plan_contour(body)
+    typed = plan_contour({**body, "settings": {"Ts": 0.01}})
+    assert auto.contour is not None and typed.contour is not None
+    assert auto.settings.Ts < 0.01
+    assert auto.contour.cut_time_s < 0.97 * typed.contour.cut_time_s
+    c = auto.contour
+    feed: dict[int, float] = {}
+    f = 0.0
+    for n, line in enumerate(FUSION.splitlines(), start=1):
+        m = re.search(r"F\s*([-+0-9.]+)", line.split("(")[0].upper())
+        f = float(m.group(1)) * 1e-3 / 60 if m else f
+        feed[n] = f
+    cut = np.asarray(c.cutting)
+    F = np.array([feed[x] if x is not None else np.inf for x in c.program_line])
+    speed = np.hypot(*np.diff(auto.pose[:, :2], axis=0).T) / np.diff(auto.time)
+    both = cut[:-1] & cut[1:]
+    assert (speed[both] / np.minimum(F[:-1], F[1:])[both]).max() <= 1 + 1e-6
+    assert c.max_deviation_m <= c.tolerance_m

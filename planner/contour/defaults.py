@@ -1,6 +1,7 @@
-"""The contour's sample time and horizon chosen from the program (issue 35 goal 3), for the
-``fastest`` feed where the request gives neither ``settings.Ts`` nor ``settings.N`` (the
-``program`` feed keeps the settings' default: :func:`contour_settings`).
+"""The contour's sample time and horizon chosen from the program (issue 35 goal 3) where the
+request gives neither ``settings.Ts`` nor ``settings.N`` (:func:`contour_settings`): for the
+``fastest`` feed from its arcs (:func:`contour_ts`), for the ``program`` feed from its short
+moves at their F (:func:`feed_ts`).
 
 **Why the sample time.** A tube cell holds at least one sample, and on an arc a cell is one
 chord of sagitta ``s_a = 0.18 tol`` (:data:`~planner.contour.tube.SAGITTA_FRACTION`): the tool
@@ -33,6 +34,26 @@ dxf2gcode (3.10) 4 / 3.5 / 3.25 / 3.2 / 3 ms 0.264 / 0.249 / 0.257 / 0.259 / 0.3
 against 1.940 s), at 0.1 ms pcb_gcode is (1.901 s together), at 0.5 ms freecad stays at 4 ms.
 A program without arcs, or whose arcs the default reaches, keeps the default.
 
+**The program feed's sample time** (:func:`feed_ts`, issue 35 goal 2). The controller needs
+6-15 samples to reach F from rest or after a corner and 5-8 to stop (measured on the CAM
+samples at 10 ms), whatever the sample time: on a move of a dozen samples at F that is most of
+it (fusion360's 2 mm lines at F1000, 12 samples: 1.15-1.20x the F-capped third-order optimum
+per pass). A move that starts or ends a pass or meets a neighbour at a corner (its tangent turns
+by more than :data:`FEED_CORNER_RAD`) gets at least :data:`FEED_MOVE_SAMPLES` samples at its F:
+the sample time ``L / (F n)`` of the shortest such move, rounded down to a whole
+:data:`TS_STEP_S`, within [:data:`TS_FLOOR_S`, the settings' default]. Moves shorter than
+:data:`FEED_MOVE_MIN_TOL` tolerances do not count (a CAM program's tiny segments are cut
+within the tolerance anyway, not at their own F). A program with an arc that asks less than
+its F (:func:`arc_speed`: the drives' turn or the force-rate limit bound it) keeps the default:
+``benchmarks/bench_estimates.py``'s 60 circles of 0.1 mm at F3000 (4.5 mm lines between rows)
+cut in 5.73 s at 4.5 ms against 7.86 s at 10 ms, but for 2.2-3.7x the CPU and 7.8x under its
+work estimate (at 5 ms 23 CPU s, 11x over: the feed's scale search near the edge of
+feasibility on tiny arcs). Measured on fusion360 (``benchmarks/README.md``):
+at 10 / 6 / 5 / 4 ms (N 30) its passes took 1.43 + 0.54 / 1.362 + 0.492 / 1.35 + 0.49 / 1.356 +
+0.488 s; freecad's moves (62-160 samples at 10 ms) were not faster at 5 or 7.5 ms (7.2 + 5.83
+against 7.215 + 6.05 and 7.305 + 5.85 s), and at 20 samples the benchmark part's 4 mm lines at
+F1200 keep 10 ms (its compute unchanged).
+
 **The horizon** with a chosen sample time: :data:`HORIZON_RAMPS` force ramps of the slowest
 drive, at least the constrained mode's 30 samples (the default horizon's 0.25 s at 3 ms is 84
 samples: the same cut, measured, for 40 % more compute).
@@ -47,11 +68,11 @@ import numpy as np
 
 from ..model import RobotModel
 from ..schema import DEFAULT_FORCE_RISE_S, MODE_DEFAULTS, ContourRequest, PathElement, Program, Settings
-from .timing import PathSamples, constraint_rows
+from .timing import PathSamples, constraint_rows, tangent
 from .tube import SAGITTA_FRACTION
 
-__all__ = ["HORIZON_RAMPS", "TS_FLOOR_S", "TS_STEP_S", "arc_speed", "contour_settings", "contour_ts",
-           "drive_acceleration"]
+__all__ = ["FEED_CORNER_RAD", "FEED_MOVE_MIN_TOL", "FEED_MOVE_SAMPLES", "HORIZON_RAMPS", "TS_FLOOR_S", "TS_STEP_S",
+           "arc_speed", "contour_settings", "contour_ts", "drive_acceleration", "feed_ts"]
 
 #: the finest sample time chosen [s]: at 2 ms the benchmark pass took longer than at 3 ms
 #: (1.154 s against 0.822 s, the search's scales) for 2.6x the compute
@@ -61,6 +82,13 @@ TS_FLOOR_S = 0.003
 TS_STEP_S = 0.00025
 #: the horizon with a chosen sample time: this many force ramps of the slowest drive
 HORIZON_RAMPS = 3.0
+#: program feed: a move that starts or ends a pass or turns a corner gets at least this many
+#: samples at its F (:func:`feed_ts`; module docstring)
+FEED_MOVE_SAMPLES = 20
+#: program feed: a tangent jump larger than this between two moves is a corner [rad]
+FEED_CORNER_RAD = math.radians(10.0)
+#: program feed: moves shorter than this many tolerances do not choose the sample time
+FEED_MOVE_MIN_TOL = 20.0
 
 
 @lru_cache(maxsize=16)
@@ -115,14 +143,46 @@ def contour_ts(program: Program, tol: float, feed: str, model: RobotModel, st: S
     return min(st.Ts, max(TS_FLOOR_S, round(steps * TS_STEP_S, 9)))  # 0.00325, not 0.0032500000000000003
 
 
+def _turn(a: PathElement, b: PathElement) -> float:
+    """The tangent's jump from the end of ``a`` to the start of ``b`` [rad]."""
+    t0, t1 = tangent(a, True), tangent(b, False)
+    return abs(math.atan2(t0[0] * t1[1] - t0[1] * t1[0], float(t0 @ t1)))
+
+
+def feed_ts(program: Program, tol: float, model: RobotModel, st: Settings) -> float:
+    """The ``program`` feed's sample time [s] (module docstring): :data:`FEED_MOVE_SAMPLES`
+    samples at F on the shortest move that starts or ends a pass or turns a corner, at most
+    ``st.Ts``; ``st.Ts`` where an arc asks less than its F (:func:`arc_speed`)."""
+    a = drive_acceleration(model)
+    ramp = _ramp(model, st)
+    jerk = None if ramp is None else a / ramp
+    v_leg = float(np.min(model.speed_max))
+    need = st.Ts
+    for b in program.passes:
+        els = [e for e in b.elements if e.length_m > 1e-12]
+        if any(e.kind == "arc" and e.radius_m and arc_speed(e, a, jerk, v_leg, "program") < e.feed_m_s for e in els):
+            return st.Ts  # tiny arcs: the feed's search near the edge of feasibility (module docstring)
+        for k, e in enumerate(els):
+            if e.length_m < FEED_MOVE_MIN_TOL * tol or e.feed_m_s <= 0:
+                continue
+            ends = k == 0 or k == len(els) - 1
+            if ends or _turn(els[k - 1], e) > FEED_CORNER_RAD or _turn(e, els[k + 1]) > FEED_CORNER_RAD:
+                need = min(need, e.length_m / (e.feed_m_s * FEED_MOVE_SAMPLES))
+    if need >= st.Ts:
+        return st.Ts
+    steps = math.floor(need / TS_STEP_S + 1e-9)
+    return min(st.Ts, max(TS_FLOOR_S, round(steps * TS_STEP_S, 9)))
+
+
 def contour_settings(req: ContourRequest, st: Settings, program: Program, tol: float, model: RobotModel) -> Settings:
     """``st`` with the sample time and horizon chosen for the program (module docstring) where
-    the feed is ``fastest`` and the request gives neither ``settings.Ts`` nor ``settings.N``;
-    else ``st`` as given (the ``program`` feed: at 5 ms freecad's passes were 0.2-0.9 % faster
-    for 1.4x the compute, and a program of small circles cost 1.6x its work estimate)."""
-    if req.feed != "fastest" or req.settings.get("Ts") is not None or req.settings.get("N") is not None:
-        return st  # program feed: 10 ms measured as fast within 1 % (freecad at 5 ms) for 1.4x the compute
-    Ts = contour_ts(program, tol, req.feed, model, st)
+    the request gives neither ``settings.Ts`` nor ``settings.N``: ``fastest`` from its arcs
+    (:func:`contour_ts`), ``program`` from its short moves at F (:func:`feed_ts`; elsewhere it
+    keeps the default: at 5 ms freecad's passes were no faster for 1.4-2.2x the compute);
+    else ``st`` as given."""
+    if req.settings.get("Ts") is not None or req.settings.get("N") is not None:
+        return st
+    Ts = contour_ts(program, tol, req.feed, model, st) if req.feed == "fastest" else feed_ts(program, tol, model, st)
     if Ts >= st.Ts:
         return st
     out = Settings.model_validate({**req.settings, "Ts": Ts})  # the defaults as if Ts were typed

@@ -36,7 +36,7 @@ from ..model import RobotModel
 from ..model.dynamics import generalised_forces
 from ..schema import PathElement
 
-__all__ = ["PathSamples", "constraint_rows", "path_samples", "profile_time", "speed_profile", "time_optimal"]
+__all__ = ["PathSamples", "constraint_rows", "path_samples", "profile_time", "speed_profile", "tangent", "time_optimal"]
 
 
 class PathSamples:
@@ -51,13 +51,17 @@ class PathSamples:
         self.corner = corner
 
 
-def _tangent(e: PathElement, at_end: bool) -> np.ndarray:
+def tangent(e: PathElement, at_end: bool) -> np.ndarray:
+    """The unit tangent of a move at its start or end (``at_end``), in its direction of travel."""
     if e.kind == "line":
         d = np.asarray(e.end, float) - np.asarray(e.start, float)
         return d / max(float(np.hypot(*d)), 1e-300)
     assert e.start_angle_rad is not None and e.sweep_rad is not None
     a = e.start_angle_rad + (e.sweep_rad if at_end else 0.0)
     return math.copysign(1.0, e.sweep_rad) * np.array([-math.sin(a), math.cos(a)])
+
+
+_tangent = tangent  # the name other modules imported before it was public
 
 
 def path_samples(elements: list[PathElement], origin: np.ndarray, psi: float, h: float) -> PathSamples:
@@ -95,7 +99,7 @@ def path_samples(elements: list[PathElement], origin: np.ndarray, psi: float, h:
     k = 0
     for i in range(len(els) - 1):
         k += len(S[i])
-        t0, t1 = _tangent(els[i], True), _tangent(els[i + 1], False)
+        t0, t1 = tangent(els[i], True), tangent(els[i + 1], False)
         ang = abs(math.atan2(t0[0] * t1[1] - t0[1] * t1[0], float(t0 @ t1)))
         if ang > 1e-9:
             corner[k - 1] = corner[k] = ang
