@@ -69,8 +69,8 @@ def test_kill_9_of_the_server_leaves_no_child_alive(tmp_path):
         children = [p.pid for p in psutil.Process(server.pid).children(recursive=True)]
         cmdlines = " | ".join(" ".join(psutil.Process(p).cmdline()) for p in children)
         # the planning workers are forks of multiprocessing's fork server (app.worker_template),
-        # the batch workers spawned processes of multiprocessing
-        assert "forkserver" in cmdlines and "spawn_main" in cmdlines, cmdlines
+        # the batch workers fresh interpreters of the batch engine's PlanPool (start="exec")
+        assert "forkserver" in cmdlines and "-m app.workers" in cmdlines, cmdlines
         fork_servers = [p for p in psutil.Process(server.pid).children() if "forkserver" in " ".join(p.cmdline())]
         assert len(fork_servers) == 1 and len(fork_servers[0].children()) == 1, cmdlines  # RANGEPLAN_WORKERS=1
         assert "resource_tracker" in cmdlines, cmdlines
