@@ -4,10 +4,11 @@ arcs, Z ramps and helices, long programs of rapids; 1 to 2000 passes, up to 100 
 1-10 ms, feeds ``program`` and ``fastest``).
 
     OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python benchmarks/bench_contour_estimate.py \
-        [--limit 30] [--skip-over 40] [--work-cap 1200] [--small] [--only WORDS] [--shard K/N] \
+        [--limit 30] [--skip-over 40] [--work-cap 1200] [--small] [--only WORDS] [--feed F] [--shard K/N] \
         [--json rows.jsonl]
 
-One row a program: its lines, passes, moves, the estimate [s]
+One row a program: its sample time (the request's, or the one the planner chose for it: ``fastest``
+without a ``settings.Ts``), its lines, passes, moves, the estimate [s]
 (:func:`planner.contour.estimate_contour`, after the program is read, as the service's worker
 does), the measured CPU seconds of the work the estimate stands for (reading the program,
 estimating it and planning it, ``time.process_time`` of a child forked after the kernels and the
@@ -36,6 +37,7 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
 import multiprocessing as mp  # noqa: E402
+import re  # noqa: E402
 import statistics  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
@@ -90,6 +92,7 @@ def main() -> None:
     ap.add_argument("--skip-over", type=float, default=40.0)
     ap.add_argument("--small", action="store_true", help="without the programs of 500+ passes and 10 000+ lines")
     ap.add_argument("--only", default="", help="only programs whose name contains this")
+    ap.add_argument("--feed", default="", choices=("", "program", "fastest"), help="only programs of this feed")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--work-cap", type=float, default=1200.0, help="the sum of the estimates run at most [s]")
     ap.add_argument("--shard", default="0/1", help="K/N: every N-th program from the K-th")
@@ -115,46 +118,51 @@ def main() -> None:
     rows: list[tuple[str, float, float]] = []  # feed, Ts, CPU / estimate
     spent = 0.0
 
-    def record(index: int, req: dict, est: float | None, cpu: float | None, out: str) -> None:
+    def record(index: int, req: dict, est: float | None, cpu: float | None, out: str,
+               Ts_used: float | None = None) -> None:
         if args.json:
             with open(args.json, "a") as fh:
                 fh.write(json.dumps({"seed": args.seed, "large": not args.small, "index": index, "feed": req["feed"],
-                                     "Ts": (req.get("settings") or {}).get("Ts", 0.01), "est": est, "cpu": cpu,
-                                     "outcome": out}) + "\n")
+                                     "Ts": (req.get("settings") or {}).get("Ts", 0.01), "Ts_used": Ts_used,
+                                     "est": est, "cpu": cpu, "outcome": out}) + "\n")
 
     for index, (made, req) in enumerate(cases(args.seed, large=not args.small)):
         if args.only and args.only not in made.name:
+            continue
+        if args.feed and req["feed"] != args.feed:
             continue
         if index % shard_n != shard_k:
             continue
         r = ContourRequest.model_validate(req)
         program_ = read_gcode(r.program, cut_below=r.cut_below_m, z_rapid_m_s=r.z_rapid_m_s)
         try:
-            est = estimate_contour(r, program_)[0]
+            est, detail = estimate_contour(r, program_)
         except PlannerError as exc:  # refused before any work (a pass no tube fits: too_large)
             print(f"| {made.name} | {req['feed']} | - | {made.text.count(chr(10))} | {made.passes} | {made.moves} | "
                   f"- | - | - | refused | {exc.code} up front |", flush=True)
             record(index, req, None, None, f"{exc.code} up front")
             continue
         del program_
-        Ts = (req.get("settings") or {}).get("Ts", 0.01)
+        # the sample time planned: the request's, or the one the planner chose (fastest's defaults)
+        used = re.search(r"at Ts = ([0-9.e-]+) s", detail)
+        Ts = float(used.group(1)) if used else (req.get("settings") or {}).get("Ts", 0.01)
         head = (f"| {made.name} | {req['feed']} | {Ts * 1e3:g} | {made.text.count(chr(10))} | {made.passes} | "
                 f"{made.moves} | {est:.3g} |")
         admitted = "admitted" if est <= args.limit else "refused"
         if est > args.skip_over or spent + est > args.work_cap:
             why = "not run" if est > args.skip_over else "not run (work cap)"
             print(f"{head} - | - | {admitted} | {why} |", flush=True)
-            record(index, req, est, None, why)
+            record(index, req, est, None, why, Ts)
             continue
         spent += est
         cpu, out = measure(req, est)
         if cpu is None:
             print(f"{head} > {3 * est + 10:.3g} | - | {admitted} | {out} |", flush=True)
-            record(index, req, est, None, out)
+            record(index, req, est, None, out, Ts)
             continue
         ratios.append(cpu / est)
         rows.append((req["feed"], Ts, cpu / est))
-        record(index, req, est, cpu, out)
+        record(index, req, est, cpu, out, Ts)
         print(f"{head} {cpu:.3g} | {cpu / est:.2f} | {admitted} | {out} |", flush=True)
     summary(rows)
 
