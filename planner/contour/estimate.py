@@ -126,9 +126,10 @@ TIGHT_TURN2_S = (0.25, 0.05, 0.0, 0.0)
 #: change of branch fastopt) refitted on main 2026-11-28 (benchmarks/README.md, "The contour
 #: estimate refitted after the fastest ramp change"): 2 ramp-and-helix passes measured 20 CPU s at
 #: 1 ms (0.24x with 14 plans: the fine Ts's Z misses less), 28 s at 2 ms, 8.6 s at 5 ms; 10 passes
-#: at the chosen 4 ms 31.2 s (1.28x with 14)
-Z_SLOPE_PLANS = {"program": (1.15 * (Z_TRIES - 1), 1.15 * (Z_TRIES - 1), 4.0, 1.15 * (Z_TRIES - 1)),
-                 "fastest": (2.5, 14.0, 16.0, 16.0)}
+#: at the chosen 4 ms 31.2 s (1.28x with 14). ``program`` at a finer Ts misses less too: 2 passes
+#: measured 29.5 CPU s at 1 ms (0.28x with 8.05 plans), 12.5 s at 2 ms (0.21x), 2.87-3.04 s at
+#: 5 ms (0.40x); at 10 ms 1.04-1.20x
+Z_SLOPE_PLANS = {"program": (1.5, 1.0, 4.0, 1.15 * (Z_TRIES - 1)), "fastest": (2.5, 14.0, 16.0, 16.0)}
 #: ``fastest``: seconds of the re-plans of a piece with a slope at least, per
 #: :data:`Z_FASTEST_LENGTH_M` of its length (at least one such length), by the sample times of
 #: :data:`SAMPLE_FACTOR_TS` (interpolated in their logarithm; 0 at 5 ms and finer). At a coarse Ts
