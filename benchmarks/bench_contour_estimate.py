@@ -23,7 +23,7 @@ program from the K-th (two shards side by side on two cores); ``--json``: a line
 (its index in :func:`tests.contour_programs.cases`, feed, Ts, estimate, CPU, outcome) for
 ``benchmarks/refit_contour_estimate.py``, which recomputes the ratios with the estimate's current
 constants without planning again. The last lines: the ratios' least, median and largest over the
-programs planned, by feed and by sample time.
+programs planned, by feed, by sample time and by both.
 """
 
 from __future__ import annotations
@@ -168,13 +168,16 @@ def main() -> None:
 
 
 def summary(rows: list[tuple[str, float, float]]) -> None:
-    """The ratios' least, median and largest: over all programs planned, by feed, by Ts."""
+    """The ratios' least, median and largest: over all programs planned, by feed, by Ts, by
+    feed and Ts."""
     if not rows:
         return
     groups: dict[str, list[float]] = {"all": [r for _, _, r in rows]}
     for feed, Ts, r in rows:
         groups.setdefault(f"feed {feed}", []).append(r)
         groups.setdefault(f"Ts {Ts * 1e3:g} ms", []).append(r)
+    for feed, Ts, r in sorted(rows, key=lambda x: (x[0], -x[1])):  # by feed and sample time
+        groups.setdefault(f"{feed}, Ts {Ts * 1e3:g} ms", []).append(r)
     print("\n| programs | planned | least | median | largest | over 1.5 |\n|---|---|---|---|---|---|")
     for name, rs in groups.items():
         print(f"| {name} | {len(rs)} | {min(rs):.2f} | {statistics.median(rs):.2f} | {max(rs):.2f} | "
