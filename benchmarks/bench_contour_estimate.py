@@ -5,7 +5,7 @@ arcs, Z ramps and helices, long programs of rapids; 1 to 2000 passes, up to 100 
 
     OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python benchmarks/bench_contour_estimate.py \
         [--limit 30] [--skip-over 40] [--work-cap 1200] [--small] [--only WORDS] [--feed F] [--shard K/N] \
-        [--json rows.jsonl]
+        [--json rows.jsonl] [--cam]
 
 One row a program: its sample time (the request's, or the one the planner chose for it: ``fastest``
 without a ``settings.Ts``), its lines, passes, moves, the estimate [s]
@@ -14,7 +14,8 @@ does), the measured CPU seconds of the work the estimate stands for (reading the
 estimating it and planning it, ``time.process_time`` of a child forked after the kernels and the
 Z axis's LP are loaded: once-a-process costs, which a service worker pays on its first request;
 the machine may be loaded, wall time is not the figure), their ratio (goal <= 1.5, and not far below 1: an
-estimate too high refuses programs that would finish), and whether ``--limit`` admits it. A
+estimate too high refuses programs that would finish), and whether ``--limit`` admits it (as the
+service does: estimate x ``app.jobs.ESTIMATE_MARGIN`` <= the limit). A
 program estimated over ``--skip-over`` seconds is not planned (``-``); a child still running
 after ``3 x estimate + 10`` CPU seconds is stopped (``stopped``: the estimate is far too
 low). ``--work-cap``: the programs are run while the sum of their estimates stays under it
@@ -22,8 +23,10 @@ low). ``--work-cap``: the programs are run while the sum of their estimates stay
 program from the K-th (two shards side by side on two cores); ``--json``: a line per program
 (its index in :func:`tests.contour_programs.cases`, feed, Ts, estimate, CPU, outcome) for
 ``benchmarks/refit_contour_estimate.py``, which recomputes the ratios with the estimate's current
-constants without planning again. The last lines: the ratios' least, median and largest over the
-programs planned, by feed, by sample time and by both.
+constants without planning again. ``--cam``: the CAM programs of ``tests/data/cam``
+(real ramps and helices) in both feeds at their defaults instead of the generated ones. The last
+lines: the ratios' least, median and largest over the programs planned, by feed, by sample time
+and by both.
 """
 
 from __future__ import annotations
@@ -97,10 +100,14 @@ def main() -> None:
     ap.add_argument("--work-cap", type=float, default=1200.0, help="the sum of the estimates run at most [s]")
     ap.add_argument("--shard", default="0/1", help="K/N: every N-th program from the K-th")
     ap.add_argument("--json", default="", help="append a JSON line per program to this file")
+    ap.add_argument("--cam", action="store_true",
+                    help="the CAM programs of tests/data/cam (origin 'fit') in both feeds at their defaults instead "
+                         "(no JSON rows)")
     args = ap.parse_args()
     shard_k, shard_n = (int(x) for x in args.shard.split("/"))
     from bench_contour import ORIGIN, TOL, program  # type: ignore[import-not-found]
 
+    from app.jobs import ESTIMATE_MARGIN as margin  # a job is admitted if estimate x margin <= its limit
     from planner import PlannerError
     from planner.contour import estimate_contour, plan_contour
     from planner.exchange import read_gcode
@@ -112,6 +119,11 @@ def main() -> None:
         plan_contour({"program": program(1), "origin": ORIGIN, "tolerance_m": TOL, "feed": feed})
         plan_contour({"program": ramps(np.random.default_rng(0), 1).text, "feed": feed})
     print(f"load: {os.getloadavg()[0]:.1f} (1-min average) on {os.cpu_count()} cores; limit {args.limit:g} s")
+    if args.cam:
+        print(f"| program | feed | Ts ms | est s | CPU s | CPU/est | {args.limit:g} s | outcome |")
+        print("|---|---|---|---|---|---|---|---|")
+        cam(args.limit)
+        return
     print(f"| program | feed | Ts ms | lines | passes | moves | est s | CPU s | CPU/est | {args.limit:g} s | outcome |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     ratios: list[float] = []
@@ -148,7 +160,7 @@ def main() -> None:
         Ts = float(used.group(1)) if used else (req.get("settings") or {}).get("Ts", 0.01)
         head = (f"| {made.name} | {req['feed']} | {Ts * 1e3:g} | {made.text.count(chr(10))} | {made.passes} | "
                 f"{made.moves} | {est:.3g} |")
-        admitted = "admitted" if est <= args.limit else "refused"
+        admitted = "admitted" if est * margin <= args.limit else "refused"
         if est > args.skip_over or spent + est > args.work_cap:
             why = "not run" if est > args.skip_over else "not run (work cap)"
             print(f"{head} - | - | {admitted} | {why} |", flush=True)
@@ -164,6 +176,30 @@ def main() -> None:
         rows.append((req["feed"], Ts, cpu / est))
         record(index, req, est, cpu, out, Ts)
         print(f"{head} {cpu:.3g} | {cpu / est:.2f} | {admitted} | {out} |", flush=True)
+    summary(rows)
+
+
+def cam(limit: float) -> None:
+    """The CAM programs of tests/data/cam in both feeds at their defaults (origin ``fit``):
+    real ramps and helices beside the generated ones."""
+    from app.jobs import ESTIMATE_MARGIN as margin
+    from planner.contour import estimate_contour
+
+    rows: list[tuple[str, float, float]] = []
+    for path in sorted((Path(__file__).resolve().parents[1] / "tests" / "data" / "cam").iterdir()):
+        for feed in ("program", "fastest"):
+            req = {"program": path.read_text(), "feed": feed, "origin": "fit"}
+            est, detail = estimate_contour(req)
+            used = re.search(r"at Ts = ([0-9.e-]+) s", detail)
+            Ts = float(used.group(1)) if used else 0.01
+            cpu, out = measure(req, est)
+            admitted = "admitted" if est * margin <= limit else "refused"
+            if cpu is None:
+                print(f"| {path.name} | {feed} | {Ts * 1e3:g} | {est:.3g} | - | - | {admitted} | {out} |", flush=True)
+                continue
+            rows.append((feed, Ts, cpu / est))
+            print(f"| {path.name} | {feed} | {Ts * 1e3:g} | {est:.3g} | {cpu:.3g} | {cpu / est:.2f} | {admitted} | "
+                  f"{out} |", flush=True)
     summary(rows)
 
 
