@@ -4,16 +4,18 @@ arcs, Z ramps and helices, long programs of rapids; 1 to 2000 passes, up to 100 
 1-10 ms, feeds ``program`` and ``fastest``).
 
     OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python benchmarks/bench_contour_estimate.py \
-        [--limit 30] [--skip-over 40] [--work-cap 1200] [--small] [--only WORDS] [--shard K/N] \
-        [--json rows.jsonl]
+        [--limit 30] [--skip-over 40] [--work-cap 1200] [--small] [--only WORDS] [--feed F] [--shard K/N] \
+        [--json rows.jsonl] [--cam]
 
-One row a program: its lines, passes, moves, the estimate [s]
+One row a program: its sample time (the request's, or the one the planner chose for it: ``fastest``
+without a ``settings.Ts``), its lines, passes, moves, the estimate [s]
 (:func:`planner.contour.estimate_contour`, after the program is read, as the service's worker
 does), the measured CPU seconds of the work the estimate stands for (reading the program,
 estimating it and planning it, ``time.process_time`` of a child forked after the kernels and the
 Z axis's LP are loaded: once-a-process costs, which a service worker pays on its first request;
 the machine may be loaded, wall time is not the figure), their ratio (goal <= 1.5, and not far below 1: an
-estimate too high refuses programs that would finish), and whether ``--limit`` admits it. A
+estimate too high refuses programs that would finish), and whether ``--limit`` admits it (as the
+service does: estimate x ``app.jobs.ESTIMATE_MARGIN`` <= the limit). A
 program estimated over ``--skip-over`` seconds is not planned (``-``); a child still running
 after ``3 x estimate + 10`` CPU seconds is stopped (``stopped``: the estimate is far too
 low). ``--work-cap``: the programs are run while the sum of their estimates stays under it
@@ -21,8 +23,10 @@ low). ``--work-cap``: the programs are run while the sum of their estimates stay
 program from the K-th (two shards side by side on two cores); ``--json``: a line per program
 (its index in :func:`tests.contour_programs.cases`, feed, Ts, estimate, CPU, outcome) for
 ``benchmarks/refit_contour_estimate.py``, which recomputes the ratios with the estimate's current
-constants without planning again. The last lines: the ratios' least, median and largest over the
-programs planned, by feed and by sample time.
+constants without planning again. ``--cam``: the CAM programs of ``tests/data/cam``
+(real ramps and helices) in both feeds at their defaults instead of the generated ones. The last
+lines: the ratios' least, median and largest over the programs planned, by feed, by sample time
+and by both.
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
 import multiprocessing as mp  # noqa: E402
+import re  # noqa: E402
 import statistics  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
@@ -90,14 +95,19 @@ def main() -> None:
     ap.add_argument("--skip-over", type=float, default=40.0)
     ap.add_argument("--small", action="store_true", help="without the programs of 500+ passes and 10 000+ lines")
     ap.add_argument("--only", default="", help="only programs whose name contains this")
+    ap.add_argument("--feed", default="", choices=("", "program", "fastest"), help="only programs of this feed")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--work-cap", type=float, default=1200.0, help="the sum of the estimates run at most [s]")
     ap.add_argument("--shard", default="0/1", help="K/N: every N-th program from the K-th")
     ap.add_argument("--json", default="", help="append a JSON line per program to this file")
+    ap.add_argument("--cam", action="store_true",
+                    help="the CAM programs of tests/data/cam (origin 'fit') in both feeds at their defaults instead "
+                         "(no JSON rows)")
     args = ap.parse_args()
     shard_k, shard_n = (int(x) for x in args.shard.split("/"))
     from bench_contour import ORIGIN, TOL, program  # type: ignore[import-not-found]
 
+    from app.jobs import ESTIMATE_MARGIN as margin  # a job is admitted if estimate x margin <= its limit
     from planner import PlannerError
     from planner.contour import estimate_contour, plan_contour
     from planner.exchange import read_gcode
@@ -109,64 +119,101 @@ def main() -> None:
         plan_contour({"program": program(1), "origin": ORIGIN, "tolerance_m": TOL, "feed": feed})
         plan_contour({"program": ramps(np.random.default_rng(0), 1).text, "feed": feed})
     print(f"load: {os.getloadavg()[0]:.1f} (1-min average) on {os.cpu_count()} cores; limit {args.limit:g} s")
+    if args.cam:
+        print(f"| program | feed | Ts ms | est s | CPU s | CPU/est | {args.limit:g} s | outcome |")
+        print("|---|---|---|---|---|---|---|---|")
+        cam(args.limit)
+        return
     print(f"| program | feed | Ts ms | lines | passes | moves | est s | CPU s | CPU/est | {args.limit:g} s | outcome |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     ratios: list[float] = []
     rows: list[tuple[str, float, float]] = []  # feed, Ts, CPU / estimate
     spent = 0.0
 
-    def record(index: int, req: dict, est: float | None, cpu: float | None, out: str) -> None:
+    def record(index: int, req: dict, est: float | None, cpu: float | None, out: str,
+               Ts_used: float | None = None) -> None:
         if args.json:
             with open(args.json, "a") as fh:
                 fh.write(json.dumps({"seed": args.seed, "large": not args.small, "index": index, "feed": req["feed"],
-                                     "Ts": (req.get("settings") or {}).get("Ts", 0.01), "est": est, "cpu": cpu,
-                                     "outcome": out}) + "\n")
+                                     "Ts": (req.get("settings") or {}).get("Ts", 0.01), "Ts_used": Ts_used,
+                                     "est": est, "cpu": cpu, "outcome": out}) + "\n")
 
     for index, (made, req) in enumerate(cases(args.seed, large=not args.small)):
         if args.only and args.only not in made.name:
+            continue
+        if args.feed and req["feed"] != args.feed:
             continue
         if index % shard_n != shard_k:
             continue
         r = ContourRequest.model_validate(req)
         program_ = read_gcode(r.program, cut_below=r.cut_below_m, z_rapid_m_s=r.z_rapid_m_s)
         try:
-            est = estimate_contour(r, program_)[0]
+            est, detail = estimate_contour(r, program_)
         except PlannerError as exc:  # refused before any work (a pass no tube fits: too_large)
             print(f"| {made.name} | {req['feed']} | - | {made.text.count(chr(10))} | {made.passes} | {made.moves} | "
                   f"- | - | - | refused | {exc.code} up front |", flush=True)
             record(index, req, None, None, f"{exc.code} up front")
             continue
         del program_
-        Ts = (req.get("settings") or {}).get("Ts", 0.01)
+        # the sample time planned: the request's, or the one the planner chose (fastest's defaults)
+        used = re.search(r"at Ts = ([0-9.e-]+) s", detail)
+        Ts = float(used.group(1)) if used else (req.get("settings") or {}).get("Ts", 0.01)
         head = (f"| {made.name} | {req['feed']} | {Ts * 1e3:g} | {made.text.count(chr(10))} | {made.passes} | "
                 f"{made.moves} | {est:.3g} |")
-        admitted = "admitted" if est <= args.limit else "refused"
+        admitted = "admitted" if est * margin <= args.limit else "refused"
         if est > args.skip_over or spent + est > args.work_cap:
             why = "not run" if est > args.skip_over else "not run (work cap)"
             print(f"{head} - | - | {admitted} | {why} |", flush=True)
-            record(index, req, est, None, why)
+            record(index, req, est, None, why, Ts)
             continue
         spent += est
         cpu, out = measure(req, est)
         if cpu is None:
             print(f"{head} > {3 * est + 10:.3g} | - | {admitted} | {out} |", flush=True)
-            record(index, req, est, None, out)
+            record(index, req, est, None, out, Ts)
             continue
         ratios.append(cpu / est)
         rows.append((req["feed"], Ts, cpu / est))
-        record(index, req, est, cpu, out)
+        record(index, req, est, cpu, out, Ts)
         print(f"{head} {cpu:.3g} | {cpu / est:.2f} | {admitted} | {out} |", flush=True)
     summary(rows)
 
 
+def cam(limit: float) -> None:
+    """The CAM programs of tests/data/cam in both feeds at their defaults (origin ``fit``):
+    real ramps and helices beside the generated ones."""
+    from app.jobs import ESTIMATE_MARGIN as margin
+    from planner.contour import estimate_contour
+
+    rows: list[tuple[str, float, float]] = []
+    for path in sorted((Path(__file__).resolve().parents[1] / "tests" / "data" / "cam").iterdir()):
+        for feed in ("program", "fastest"):
+            req = {"program": path.read_text(), "feed": feed, "origin": "fit"}
+            est, detail = estimate_contour(req)
+            used = re.search(r"at Ts = ([0-9.e-]+) s", detail)
+            Ts = float(used.group(1)) if used else 0.01
+            cpu, out = measure(req, est)
+            admitted = "admitted" if est * margin <= limit else "refused"
+            if cpu is None:
+                print(f"| {path.name} | {feed} | {Ts * 1e3:g} | {est:.3g} | - | - | {admitted} | {out} |", flush=True)
+                continue
+            rows.append((feed, Ts, cpu / est))
+            print(f"| {path.name} | {feed} | {Ts * 1e3:g} | {est:.3g} | {cpu:.3g} | {cpu / est:.2f} | {admitted} | "
+                  f"{out} |", flush=True)
+    summary(rows)
+
+
 def summary(rows: list[tuple[str, float, float]]) -> None:
-    """The ratios' least, median and largest: over all programs planned, by feed, by Ts."""
+    """The ratios' least, median and largest: over all programs planned, by feed, by Ts, by
+    feed and Ts."""
     if not rows:
         return
     groups: dict[str, list[float]] = {"all": [r for _, _, r in rows]}
     for feed, Ts, r in rows:
         groups.setdefault(f"feed {feed}", []).append(r)
         groups.setdefault(f"Ts {Ts * 1e3:g} ms", []).append(r)
+    for feed, Ts, r in sorted(rows, key=lambda x: (x[0], -x[1])):  # by feed and sample time
+        groups.setdefault(f"{feed}, Ts {Ts * 1e3:g} ms", []).append(r)
     print("\n| programs | planned | least | median | largest | over 1.5 |\n|---|---|---|---|---|---|")
     for name, rs in groups.items():
         print(f"| {name} | {len(rs)} | {min(rs):.2f} | {statistics.median(rs):.2f} | {max(rs):.2f} | "

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -52,12 +53,14 @@ def main() -> None:
             made[key] = cases(r["seed"], large=r["large"])
         program, req = made[key][r["index"]]
         try:
-            est = estimate_contour(req)[0]
+            est, detail = estimate_contour(req)
         except PlannerError as exc:
             print(f"| {program.name} | {r['feed']} | {r['Ts'] * 1e3:g} | {r['est']} | refused ({exc.code}) | "
                   f"{r['cpu']} | - | {r['outcome']} |")
             continue
         then = "-" if r["est"] is None else f"{r['est']:.3g}"
+        used = re.search(r"at Ts = ([0-9.e-]+) s", detail)  # the sample time planned (fastest chooses its own)
+        r["Ts"] = float(used.group(1)) if used else r["Ts"]
         if r["cpu"] is None:
             print(f"| {program.name} | {r['feed']} | {r['Ts'] * 1e3:g} | {then} | {est:.3g} | - | - | {r['outcome']} |")
             continue

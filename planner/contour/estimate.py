@@ -102,6 +102,44 @@ SAMPLE_FACTOR_TS = (0.001, 0.002, 0.005, 0.01)
 SAMPLE_FACTOR = {"program": (4.5, 5.2, 1.2, 1.0), "fastest": (3.0, 2.4, 1.5, 1.0)}
 SAMPLE_FACTOR_N = (100, 100, 51, 30)
 
+#: program feed: an arc is cut at most at ``sqrt(ARC_ACCEL_M_S2 r)`` (a tiny circle at F3000 is
+#: not cut at F: its samples are those of the speed the arc allows; the program feed's profile
+#: acceleration, :data:`planner.contour.search.A_PROGRAM_M_S2`)
+ARC_ACCEL_M_S2 = 2.0
+#: program feed: seconds of a piece's tight turns squared (:func:`tight_turns`), by the sample
+#: times of :data:`SAMPLE_FACTOR_TS` (interpolated in their logarithm; 0 at 5 ms and above).
+#: On tiny arcs at fine Ts the plan at the F-capped profile's scale 1 is infeasible: the search
+#: (:func:`planner.contour.search.largest_feasible`) steps its scale down (~7 plans that fail
+#: early) and bisects it (~8 plans near the edge of feasibility, each 4-6x a comfortable plan of
+#: its samples): measured at Ts 2 ms on one pass of 10, 20 and 50 full circles of r 0.1 mm at
+#: F1200, 6.1, 27 and more than 130 CPU s (16 plans, 62 049 samples planned for a pass of 3 253);
+#: the cost grows with the square of the circles in the pass (the edge is the worst circle's).
+#: At 1 ms 8 such circles: 30.7 CPU s (2.1x the estimate without this term); at 5 ms 20 circles
+#: plan twice (1.0 CPU s), at 10 ms four times (within the estimate's plans)
+TIGHT_TURN2_S = (0.25, 0.05, 0.0, 0.0)
+#: the plans of a piece with a slope beyond its first, in units of the piece's estimate
+#: (:data:`~planner.contour.zaxis.Z_TRIES`; ``benchmarks/bench_contour_estimate.py --only ramp``),
+#: by the sample times of :data:`SAMPLE_FACTOR_TS` (interpolated in their logarithm). A re-plan
+#: runs 0.7x slower where Z missed (more samples): ``program`` counts each 1.15 plans (ramp-and-helix
+#: passes at Ts 10 ms measured 1.22-1.40x with 1.0, on a loaded machine). ``fastest`` (a miss is
+#: searched once more as fastest, gentler along the slope, then as a program feed: since the ramp
+#: change of branch fastopt) refitted on main 2026-11-28 (benchmarks/README.md, "The contour
+#: estimate refitted after the fastest ramp change"): 2 ramp-and-helix passes measured 20 CPU s at
+#: 1 ms (0.24x with 14 plans: the fine Ts's Z misses less), 28 s at 2 ms, 8.6 s at 5 ms; 10 passes
+#: at the chosen 4 ms 31.2 s (1.28x with 14). ``program`` at a finer Ts misses less too: 2 passes
+#: measured 29.5 CPU s at 1 ms (0.28x with 8.05 plans), 12.5 s at 2 ms (0.21x), 2.87-3.04 s at
+#: 5 ms (0.40x); at 10 ms 1.04-1.20x
+Z_SLOPE_PLANS = {"program": (1.5, 1.0, 4.0, 1.15 * (Z_TRIES - 1)), "fastest": (2.5, 14.0, 16.0, 16.0)}
+#: ``fastest``: seconds of the re-plans of a piece with a slope at least, per
+#: :data:`Z_FASTEST_LENGTH_M` of its length (at least one such length), by the sample times of
+#: :data:`SAMPLE_FACTOR_TS` (interpolated in their logarithm; 0 at 5 ms and finer). At a coarse Ts
+#: Z misses the ramps again and again, each re-plan a scale search: 2 ramp-and-helix passes of
+#: 14.3 mm at Ts 10 ms measured 41.7 CPU s before the fastopt ramp change, 39.1 s on main after it
+#: (and ending ``too_large``: 7.9x the pieces' plans); at 5 ms 8.6 s, at the chosen 4 ms 3.1 s a
+#: pass (within :data:`Z_SLOPE_PLANS`: this floor at 16 s made them 0.19-0.26x)
+Z_FASTEST_PIECE_S = (0.0, 0.0, 0.0, 16.0)
+Z_FASTEST_LENGTH_M = 0.015
+
 
 def sample_factor(Ts: float, N: int, feed: str = "program") -> float:
     """The cost of a sample of a candidate plan at ``Ts`` with the horizon ``N``, relative to
@@ -359,7 +397,7 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
              # a piece with a slope is planned again where its Z misses (at most Z_TRIES plans in
              # all; measured: a ramp and helix pass 7 times); fastest's first miss goes on as a program
              # feed, and costs twice that (measured on 10 ramp and helix passes: 2.05x without it)
-             "z": sum(z_replans(f, els, p) for p, els in zip(per_piece, pieces, strict=True))}
+             "z": sum(z_replans(f, els, p, st.Ts) for p, els in zip(per_piece, pieces, strict=True))}
     travel_s, read_s = parts["travel"], parts["lines"]
     check = max(ADVICE_WORK * max(per_piece, default=0.0), ADVICE_MIN_S)
     seconds = sum(parts.values())
@@ -389,37 +427,27 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
                      f"infeasible pass's advice is checked within {check:.2g} s more")
 
 
-#: the plans of a piece with a slope beyond its first, in units of the piece's estimate
-#: (:data:`~planner.contour.zaxis.Z_TRIES`; ``benchmarks/bench_contour_estimate.py --only ramp``)
-#: A re-plan runs 0.7x slower where Z missed (more samples): ``program`` counts each 1.15 plans
-#: (ramp-and-helix passes at Ts 10 ms measured 1.22-1.40x with 1.0, on a loaded machine)
-Z_SLOPE_PLANS = {"program": 1.15 * (Z_TRIES - 1), "fastest": 2.0 * (Z_TRIES - 1)}
-#: ``fastest``: seconds of the re-plans of a piece with a slope at least, per
-#: :data:`Z_FASTEST_LENGTH_M` of its length (at least one such length). Its first miss re-plans it
-#: as a program feed at the speeds it ran, each next miss 0.7x slower where Z missed, each re-plan
-#: a scale search: measured (``bench_contour_estimate.py``, 2026-11-28) on ramp-and-helix passes of
-#: 14.3 mm, 2 passes at Ts 10 ms: 41.7 CPU s, 323 plans (20.9 s a pass; 8.4x the estimate of the
-#: pieces' plans counted 2x); 10 passes at 10 ms 3.0 s a pass, 2 at 5 ms 4.1 s a pass
-Z_FASTEST_PIECE_S = 16.0
-Z_FASTEST_LENGTH_M = 0.015
 
 
-def z_replans(feed: str, els: list[PathElement], piece_s: float) -> float:
-    """The seconds of the Z re-plans of a piece (its estimate ``piece_s`` [s]): 0 without a
-    slope; :data:`Z_SLOPE_PLANS` times ``piece_s``, and in ``fastest`` at least
-    :data:`Z_FASTEST_PIECE_S` per :data:`Z_FASTEST_LENGTH_M` of the piece."""
+def by_ts(table: tuple[float, ...], Ts: float) -> float:
+    """A constant given at the sample times of :data:`SAMPLE_FACTOR_TS`, at ``Ts`` (interpolated
+    in their logarithm, the ends held beyond)."""
+    x = float(np.log(min(max(Ts, SAMPLE_FACTOR_TS[0]), SAMPLE_FACTOR_TS[-1])))
+    return float(np.interp(x, np.log(SAMPLE_FACTOR_TS), table))
+
+
+def z_replans(feed: str, els: list[PathElement], piece_s: float, Ts: float) -> float:
+    """The seconds of the Z re-plans of a piece (its estimate ``piece_s`` [s]) at the sample
+    time ``Ts``: 0 without a slope; :data:`Z_SLOPE_PLANS` times ``piece_s``, and in ``fastest``
+    at least :data:`Z_FASTEST_PIECE_S` per :data:`Z_FASTEST_LENGTH_M` of the piece."""
     if not any(abs(e.z_end_m - e.z_start_m) > 1e-12 for e in els):
         return 0.0
-    out = Z_SLOPE_PLANS[feed] * piece_s
-    if feed == "fastest":
+    out = by_ts(Z_SLOPE_PLANS[feed], Ts) * piece_s
+    floor = by_ts(Z_FASTEST_PIECE_S, Ts) if feed == "fastest" else 0.0
+    if floor > 0:
         length = sum(e.length_m for e in els)
-        out = max(out, Z_FASTEST_PIECE_S * max(length / Z_FASTEST_LENGTH_M, 1.0))
+        out = max(out, floor * max(length / Z_FASTEST_LENGTH_M, 1.0))
     return out
-
-#: program feed: an arc is cut at most at ``sqrt(ARC_ACCEL_M_S2 r)`` (a tiny circle at F3000 is
-#: not cut at F: its samples are those of the speed the arc allows; the program feed's profile
-#: acceleration, :data:`planner.contour.search.A_PROGRAM_M_S2`)
-ARC_ACCEL_M_S2 = 2.0
 
 
 def _samples(feed: str, elements: list[PathElement], Ts: float) -> float:
@@ -436,17 +464,6 @@ def _samples(feed: str, elements: list[PathElement], Ts: float) -> float:
     return total / Ts
 
 
-#: program feed: seconds of a piece's tight turns squared (:func:`tight_turns`), by the sample
-#: times of :data:`SAMPLE_FACTOR_TS` (interpolated in their logarithm; 0 at 5 ms and above).
-#: On tiny arcs at fine Ts the plan at the F-capped profile's scale 1 is infeasible: the search
-#: (:func:`planner.contour.search.largest_feasible`) steps its scale down (~7 plans that fail
-#: early) and bisects it (~8 plans near the edge of feasibility, each 4-6x a comfortable plan of
-#: its samples): measured at Ts 2 ms on one pass of 10, 20 and 50 full circles of r 0.1 mm at
-#: F1200, 6.1, 27 and more than 130 CPU s (16 plans, 62 049 samples planned for a pass of 3 253);
-#: the cost grows with the square of the circles in the pass (the edge is the worst circle's).
-#: At 1 ms 8 such circles: 30.7 CPU s (2.1x the estimate without this term); at 5 ms 20 circles
-#: plan twice (1.0 CPU s), at 10 ms four times (within the estimate's plans)
-TIGHT_TURN2_S = (0.25, 0.05, 0.0, 0.0)
 
 
 def tight_turns(feed: str, elements: list[PathElement]) -> float:
@@ -469,8 +486,7 @@ def tight_cost(turns: float, Ts: float) -> float:
     (:data:`TIGHT_TURN2_S`)."""
     if turns <= 0:
         return 0.0
-    x = float(np.log(min(max(Ts, SAMPLE_FACTOR_TS[0]), SAMPLE_FACTOR_TS[-1])))
-    return float(np.interp(x, np.log(SAMPLE_FACTOR_TS), TIGHT_TURN2_S)) * turns * turns
+    return by_ts(TIGHT_TURN2_S, Ts) * turns * turns
 
 
 def _plans(feed: str, passes: int) -> float:
