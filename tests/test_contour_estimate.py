@@ -261,7 +261,7 @@ def test_tiny_arcs_at_a_fine_ts_cost_their_scale_search():
     arcs cut at F, nothing; the refusal names what to change."""
     import numpy as np
 
-    from planner.contour.estimate import tight_cost, tight_turns
+    from planner.contour.estimate import search_cost, tight_cost, tight_turns
     from tests.contour_programs import circles
 
     def est(n: int, Ts: float, r_mm: float = 0.1) -> tuple[float, str]:
@@ -278,6 +278,11 @@ def test_tiny_arcs_at_a_fine_ts_cost_their_scale_search():
     assert est(20, 0.002)[0] >= 27.0 / 1.5
     assert est(50, 0.002)[0] >= 130.0 / 1.5
     assert est(20, 0.005)[0] < 27.0 / 4  # measured 1.0 s at 5 ms
+    # far over their speed (F3000, 3.5x): at 5 ms one pass of 10 and 30 took 3.2 and 31 CPU s
+    fast = read_gcode(circles(np.random.default_rng(0), 10, per_pass=10, f=3000.0).text).passes[0].elements
+    assert tight_turns("program", fast, 2.0) == pytest.approx(10.0) and tight_turns("program", els, 2.0) == 0.0
+    assert search_cost("program", fast, 0.005) >= 3.2 / 1.5 and search_cost("program", els, 0.005) == 0.0
+    assert search_cost("program", fast, 0.01) == 0.0
     wide = read_gcode(circles(np.random.default_rng(0), 20, r_mm=0.5, per_pass=20).text)
     assert tight_turns("program", wide.passes[0].elements) == 0.0  # sqrt(2 * 0.5e-3) > 20 mm/s
     words = est(50, 0.002)[1]

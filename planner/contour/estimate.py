@@ -32,9 +32,10 @@ from .profiles import GRID_H_MAX, GRID_H_MIN, GRID_POINTS, GRID_POINTS_MIN
 from .tube import SAGITTA_FRACTION
 from .zaxis import Z_TRIES
 
-#: program feed's tube cells: a whole number of samples at F, this much shorter
-#: (:data:`planner.contour.search.FEED_MARGIN`, which imports this module)
-FEED_MARGIN = 0.01
+#: program feed's tube cells: a whole number of samples at F, this much shorter, as first tried
+#: (the one definition: :mod:`planner.contour.search` imports it; 1 % before issue 35 goal 2,
+#: 0.5 % measured as fast or faster: benchmarks/README.md, branch feedcap2)
+FEED_MARGIN = 0.005
 
 __all__ = ["ADVICE_MIN_S", "ADVICE_WORK", "CONTOUR_CELL_PLAN_S", "CONTOUR_CELL_S", "CONTOUR_PIECE_S", "CONTOUR_STEP_S",
            "CONTOUR_TRAVEL_S", "ContourCounts", "count_contour", "estimate_contour", "piece_estimate"]
@@ -115,8 +116,15 @@ ARC_ACCEL_M_S2 = 2.0
 #: F1200, 6.1, 27 and more than 130 CPU s (16 plans, 62 049 samples planned for a pass of 3 253);
 #: the cost grows with the square of the circles in the pass (the edge is the worst circle's).
 #: At 1 ms 8 such circles: 30.7 CPU s (2.1x the estimate without this term); at 5 ms 20 circles
-#: plan twice (1.0 CPU s), at 10 ms four times (within the estimate's plans)
+#: at F1200 plan twice (1.0 CPU s), but at F3000 (``benchmarks/bench_estimates.py``'s circles,
+#: 3.5x the arc's speed) one pass of 10, 20, 30 took 3.3, 16.2, 30.9 CPU s (0.029-0.039 s a turn
+#: squared; 8-29x the estimate without this term), at 7.5 and 10 ms 10 of them 0.13 s
 TIGHT_TURN2_S = (0.25, 0.05, 0.0, 0.0)
+#: the same for the arcs whose F is over :data:`TIGHT_FAR` times the speed they are cut at, added
+#: to :data:`TIGHT_TURN2_S` (at 5 ms those circles at F3000 cost 0.029-0.039 s a turn squared,
+#: those at F1200 nothing)
+TIGHT_FAR_TURN2_S = (0.0, 0.0, 0.04, 0.0)
+TIGHT_FAR = 2.0
 #: the plans of a piece with a slope beyond its first, in units of the piece's estimate
 #: (:data:`~planner.contour.zaxis.Z_TRIES`; ``benchmarks/bench_contour_estimate.py --only ramp``),
 #: by the sample times of :data:`SAMPLE_FACTOR_TS` (interpolated in their logarithm). A re-plan
@@ -393,7 +401,7 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
                                        + c.corners * CONTOUR_CORNER_S[f] + c.arc_samples * CONTOUR_ARC_STEP_S[f]),
              "profiles": c.grid * CONTOUR_GRID_S + c.plans * c.bends * CONTOUR_BEND_S,
              "lines": c.lines * CONTOUR_LINE_S, "elements": CONTOUR_ELEMENT_S * c.moves,
-             "search": sum(tight_cost(tight_turns(f, els), st.Ts) for els in pieces),
+             "search": sum(search_cost(f, els, st.Ts) for els in pieces),
              # a piece with a slope is planned again where its Z misses (at most Z_TRIES plans in
              # all; measured: a ramp and helix pass 7 times); fastest's first miss goes on as a program
              # feed, and costs twice that (measured on 10 ramp and helix passes: 2.05x without it)
@@ -466,13 +474,20 @@ def _samples(feed: str, elements: list[PathElement], Ts: float) -> float:
 
 
 
-def tight_turns(feed: str, elements: list[PathElement]) -> float:
+def tight_turns(feed: str, elements: list[PathElement], far: float = 1.0) -> float:
     """The turns (sweep over 2 pi) of the arcs of a piece that ``program`` feed cannot cut at
-    their F (:func:`_samples`: ``sqrt(ARC_ACCEL_M_S2 r) < F``); 0 in ``fastest``."""
+    their F (:func:`_samples`: ``far sqrt(ARC_ACCEL_M_S2 r) < F``); 0 in ``fastest``."""
     if feed != "program":
         return 0.0
     return sum(abs(e.sweep_rad or 0.0) / (2 * math.pi) for e in elements
-               if e.kind == "arc" and e.radius_m and math.sqrt(ARC_ACCEL_M_S2 * e.radius_m) < e.feed_m_s)
+               if e.kind == "arc" and e.radius_m and far * math.sqrt(ARC_ACCEL_M_S2 * e.radius_m) < e.feed_m_s)
+
+
+def search_cost(feed: str, elements: list[PathElement], Ts: float) -> float:
+    """The seconds of a piece's scale search on its tight arcs at ``Ts`` (:func:`tight_cost`
+    of its :func:`tight_turns`, and :data:`TIGHT_FAR_TURN2_S` of those far over their speed)."""
+    far = tight_turns(feed, elements, TIGHT_FAR)
+    return tight_cost(tight_turns(feed, elements), Ts) + (by_ts(TIGHT_FAR_TURN2_S, Ts) * far * far if far else 0.0)
 
 
 def _tight_radius_mm(pieces: list[list[PathElement]]) -> float:
@@ -517,4 +532,4 @@ def piece_estimate(feed: str, elements: list[PathElement], Ts: float, passes: in
                          + (_samples(feed, [e for e in elements if e.kind == "arc"], Ts) * CONTOUR_ARC_STEP_S[feed]
                             if feed == "program" else 0.0))
             + cells * CONTOUR_CELL_S[feed] + grid * CONTOUR_GRID_S + plans * bends * CONTOUR_BEND_S
-            + CONTOUR_ELEMENT_S * len(elements) + tight_cost(tight_turns(feed, elements), Ts))
+            + CONTOUR_ELEMENT_S * len(elements) + search_cost(feed, elements, Ts))

@@ -25,7 +25,7 @@ from ..errors import PlannerError
 from ..model import RobotModel
 from ..orchestrator import feasible, plan_timed
 from ..schema import MAX_CONTOUR_TOLERANCE_M, MAX_TOTAL_STEPS, MIN_TS, ContourRequest, PathElement, PlanResult, Settings
-from .estimate import ADVICE_MIN_S, ADVICE_WORK, piece_estimate
+from .estimate import ADVICE_MIN_S, ADVICE_WORK, FEED_MARGIN, piece_estimate
 from .passes import CELL_SAMPLES, PROGRAM_MARGIN, V0_M_S, TubeSizes, segment_of
 from .profiles import ARRIVAL_MAX, Optimal, arrival_run, optimal_counts, profile_counts, with_arrival
 from .tube import Tube
@@ -52,9 +52,8 @@ PROGRAM_TRIES = 8
 #: samples for the segments faster than F, each raising their count by their excess and this
 PROGRAM_FIXES = 3
 #: program feed, the time-optimal timing's tube (:meth:`TimingSearch.program_optimal`): its
-#: cells' first margin under a sample's travel at F, the tubes tried, and the margin's step
-#: beyond the excess measured
-FEED_MARGIN = 0.005  # 1 % before issue 35 goal 2 (feedcap2): 0.5 % measured as fast or faster (benchmarks/README.md)
+#: the tubes tried, and the margin's step beyond the excess measured (the cells' first margin
+#: under a sample's travel at F: :data:`planner.contour.estimate.FEED_MARGIN`)
 FEED_MARGIN_TRIES = 5
 FEED_MARGIN_STEP = 0.005
 #: program feed: a segment's excess over F beyond this is a spike (more samples in its cells),
