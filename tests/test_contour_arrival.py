@@ -11,7 +11,6 @@ from finite differences of the sampled tool point) while its last circle runs at
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -20,6 +19,7 @@ import pytest
 
 from planner.contour import plan_contour
 from planner.contour.profiles import ARRIVAL_BRAKE_SAMPLES, ARRIVAL_CRUISE_SAMPLES, arrival_run, with_arrival
+from tests.test_contour_feed import feed_by_line
 
 CAM = Path(__file__).resolve().parent / "data" / "cam"
 #: "never faster than F": the finite-difference speed of the tool point over F, at most 1 plus
@@ -67,16 +67,6 @@ def test_arrival_adds_one_sample_to_each_of_the_last_cells():
     assert with_arrival(t, counts, 0) is counts  # type: ignore[arg-type]
 
 
-def _feed_by_line(text: str) -> dict[int, float]:
-    f, out = 0.0, {}
-    for n, line in enumerate(text.splitlines(), start=1):
-        m = re.search(r"F\s*([-+0-9.]+)", line.split("(")[0].upper())
-        if m:
-            f = float(m.group(1)) * 1e-3 / 60
-        out[n] = f
-    return out
-
-
 @pytest.fixture(scope="module")
 def freecad():
     text = (CAM / "freecad_linuxcnc.ngc").read_text()
@@ -86,7 +76,7 @@ def freecad():
 def test_never_faster_than_F_from_the_sampled_tool_point(freecad):
     text, res = freecad
     c = res.contour
-    feed = _feed_by_line(text)
+    feed = feed_by_line(text)
     cut = np.asarray(c.cutting)
     F = np.array([feed[x] if x is not None else np.inf for x in c.program_line])
     speed = np.hypot(*np.diff(res.pose[:, :2], axis=0).T) / np.diff(res.time)  # finite differences
@@ -105,7 +95,7 @@ def test_the_last_circle_runs_at_F(freecad):
     c = res.contour
     lines = text.splitlines()
     last = max(n for n, x in enumerate(lines, start=1) if x.startswith("G2 "))
-    F = _feed_by_line(text)[last]
+    F = feed_by_line(text)[last]
     on = np.array([x == last for x in c.program_line])
     speed = np.hypot(*np.diff(res.pose[:, :2], axis=0).T) / np.diff(res.time)
     assert np.median(speed[on[:-1] & on[1:]]) >= 0.95 * F

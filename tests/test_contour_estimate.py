@@ -37,15 +37,20 @@ CASES = {
 }
 
 
-@pytest.mark.serial  # compares CPU seconds with the estimate
-@pytest.mark.parametrize("name", list(CASES))
-def test_estimate_holds_both_ways(name, _warm):
-    req = ContourRequest.model_validate(CASES[name])
+def _cpu_and_estimate(req: ContourRequest) -> tuple[float, float]:
+    """CPU seconds of reading, estimating and planning ``req``, and its estimate [s]."""
     t0 = time.process_time()
     program = read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
     est = estimate_contour(req, program)[0]
     plan_contour(req, program=program)
-    cpu = time.process_time() - t0
+    return time.process_time() - t0, est
+
+
+@pytest.mark.serial  # compares CPU seconds with the estimate
+@pytest.mark.parametrize("name", list(CASES))
+def test_estimate_holds_both_ways(name, _warm):
+    req = ContourRequest.model_validate(CASES[name])
+    cpu, est = _cpu_and_estimate(req)
     assert est / 3 <= cpu <= 1.5 * est, (name, cpu, est)
 
 
@@ -246,11 +251,7 @@ def _warm():
 @pytest.mark.parametrize("name", list(_sweep_slice()))
 def test_estimate_holds_on_the_ts_sweep(name, _warm):
     req = ContourRequest.model_validate(_sweep_slice()[name])
-    t0 = time.process_time()
-    program = read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
-    est = estimate_contour(req, program)[0]
-    plan_contour(req, program=program)
-    cpu = time.process_time() - t0
+    cpu, est = _cpu_and_estimate(req)
     assert est / 4 <= cpu <= 1.5 * est, (name, cpu, est)
 
 
@@ -302,9 +303,5 @@ def test_fastest_ramps_at_the_chosen_ts_are_not_overestimated(passes, _warm):
     from tests.contour_programs import ramps
 
     req = ContourRequest.model_validate({"program": ramps(np.random.default_rng(0), passes).text, "feed": "fastest"})
-    t0 = time.process_time()
-    program = read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
-    est = estimate_contour(req, program)[0]
-    plan_contour(req, program=program)
-    cpu = time.process_time() - t0
+    cpu, est = _cpu_and_estimate(req)
     assert est / 2 <= cpu <= 1.5 * est, (passes, cpu, est)

@@ -85,16 +85,23 @@ def test_the_time_bound_is_below_every_plan_the_planner_finds():
 TABLE1_TS = 0.01
 
 
-def test_too_little_total_time_is_refused_with_the_limit_the_amount_and_a_time_that_plans():
-    """The issue's total_time_s 0.05 on Table I: the message says which limit makes it
-    impossible and how much time that limit needs; the total time advised is above that bound
-    and plans (checked by the independent checker)."""
-    req = {**copy.deepcopy(TABLE1), "settings": {"total_time_s": 0.05}}
+def _impossible_as_asked(req: dict):
+    """The refusal of ``req`` (``infeasible``) and its "impossible as asked" sentence (the limit,
+    the time it needs, the time the timing gives)."""
     err = _refusal(req)
     assert err.code == "infeasible"
     m = re.search(r"impossible as asked: with (.+?), the robot needs at least ([0-9.]+) s from the start to the end, "
                   r"its timing gives ([0-9.]+) s", err.message)
     assert m, err.message
+    return err, m
+
+
+def test_too_little_total_time_is_refused_with_the_limit_the_amount_and_a_time_that_plans():
+    """The issue's total_time_s 0.05 on Table I: the message says which limit makes it
+    impossible and how much time that limit needs; the total time advised is above that bound
+    and plans (checked by the independent checker)."""
+    req = {**copy.deepcopy(TABLE1), "settings": {"total_time_s": 0.05}}
+    err, m = _impossible_as_asked(req)
     assert "speed limit" in m.group(1)
     need, given = float(m.group(2)), float(m.group(3))
     assert need > given
@@ -150,11 +157,7 @@ def test_a_total_time_under_the_tool_speed_limit_is_refused_naming_it_and_the_ti
     the total time it advises is above it and plans, certified, its tool speed within the limit."""
     v = 0.05
     req = {**copy.deepcopy(TABLE1), "settings": {"total_time_s": 1.0, "tool_speed_max_m_s": v}}
-    err = _refusal(req)
-    assert err.code == "infeasible"
-    m = re.search(r"impossible as asked: with (.+?), the robot needs at least ([0-9.]+) s from the start to the end, "
-                  r"its timing gives ([0-9.]+) s", err.message)
-    assert m, err.message
+    err, m = _impossible_as_asked(req)
     assert "settings.tool_speed_max_m_s" in m.group(1)
     d = float(np.hypot(*(np.subtract(TABLE1["segments"][-1]["lower"][:2], TABLE1["segments"][0]["lower"][:2]))))
     acc = 4 * SLIDE["legs"]["force_max"] / SLIDE["platform"]["mass"]  # the 4 drives on the platform alone
