@@ -97,7 +97,11 @@ def _start_server(tmpdir: Path, timeout_s: float, workers: int, token: str | Non
     port = _free_port()
     env = {k: v for k, v in os.environ.items() if not k.startswith("RANGEPLAN_")}
     env.update({"RANGEPLAN_DATA_DIR": str(tmpdir / "data"), "RANGEPLAN_WORKERS": str(workers),
-                "RANGEPLAN_PLAN_TIMEOUT_S": str(timeout_s), "RANGEPLAN_ACCESS_LOG": "1", "PYTHONPATH": str(ROOT)})
+                "RANGEPLAN_PLAN_TIMEOUT_S": str(timeout_s), "RANGEPLAN_ACCESS_LOG": "1", "PYTHONPATH": str(ROOT),
+                # jobs (202) under the same limit: with the default 600 s two fuzzed long jobs held both
+                # workers while a synchronous plan waited past the client's 10 s read timeout (seen
+                # once the admission margin made estimates of 2-3 s jobs under a 3 s limit)
+                "RANGEPLAN_JOB_TIMEOUT_S": str(timeout_s)})
     if token:
         env["RANGEPLAN_API_TOKEN"] = token
     log = open(tmpdir / "server.log", "w+")
