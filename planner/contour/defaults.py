@@ -68,7 +68,7 @@ import numpy as np
 
 from ..model import RobotModel
 from ..schema import DEFAULT_FORCE_RISE_S, MODE_DEFAULTS, ContourRequest, PathElement, Program, Settings
-from .timing import PathSamples, constraint_rows, tangent
+from .timing import PathSamples, constraint_rows, turn
 from .tube import SAGITTA_FRACTION
 
 __all__ = ["FEED_CORNER_RAD", "FEED_MOVE_MIN_TOL", "FEED_MOVE_SAMPLES", "HORIZON_RAMPS", "TS_FLOOR_S", "TS_STEP_S",
@@ -143,12 +143,6 @@ def contour_ts(program: Program, tol: float, feed: str, model: RobotModel, st: S
     return min(st.Ts, max(TS_FLOOR_S, round(steps * TS_STEP_S, 9)))  # 0.00325, not 0.0032500000000000003
 
 
-def _turn(a: PathElement, b: PathElement) -> float:
-    """The tangent's jump from the end of ``a`` to the start of ``b`` [rad]."""
-    t0, t1 = tangent(a, True), tangent(b, False)
-    return abs(math.atan2(t0[0] * t1[1] - t0[1] * t1[0], float(t0 @ t1)))
-
-
 def feed_ts(program: Program, tol: float, model: RobotModel, st: Settings) -> float:
     """The ``program`` feed's sample time [s] (module docstring): :data:`FEED_MOVE_SAMPLES`
     samples at F on the shortest move that starts or ends a pass or turns a corner, at most
@@ -166,7 +160,7 @@ def feed_ts(program: Program, tol: float, model: RobotModel, st: Settings) -> fl
             if e.length_m < FEED_MOVE_MIN_TOL * tol or e.feed_m_s <= 0:
                 continue
             ends = k == 0 or k == len(els) - 1
-            if ends or _turn(els[k - 1], e) > FEED_CORNER_RAD or _turn(e, els[k + 1]) > FEED_CORNER_RAD:
+            if ends or turn(els[k - 1], e) > FEED_CORNER_RAD or turn(e, els[k + 1]) > FEED_CORNER_RAD:
                 need = min(need, e.length_m / (e.feed_m_s * FEED_MOVE_SAMPLES))
     if need >= st.Ts:
         return st.Ts

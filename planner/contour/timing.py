@@ -36,7 +36,8 @@ from ..model import RobotModel
 from ..model.dynamics import generalised_forces
 from ..schema import PathElement
 
-__all__ = ["PathSamples", "constraint_rows", "path_samples", "profile_time", "speed_profile", "tangent", "time_optimal"]
+__all__ = ["PathSamples", "constraint_rows", "path_samples", "profile_time", "speed_profile", "tangent", "time_optimal",
+           "turn"]
 
 
 class PathSamples:
@@ -61,7 +62,10 @@ def tangent(e: PathElement, at_end: bool) -> np.ndarray:
     return math.copysign(1.0, e.sweep_rad) * np.array([-math.sin(a), math.cos(a)])
 
 
-_tangent = tangent  # the name other modules imported before it was public
+def turn(a: PathElement, b: PathElement) -> float:
+    """The tangent's jump from the end of ``a`` to the start of ``b`` [rad]."""
+    t0, t1 = tangent(a, True), tangent(b, False)
+    return abs(math.atan2(t0[0] * t1[1] - t0[1] * t1[0], float(t0 @ t1)))
 
 
 def path_samples(elements: list[PathElement], origin: np.ndarray, psi: float, h: float) -> PathSamples:
@@ -99,8 +103,7 @@ def path_samples(elements: list[PathElement], origin: np.ndarray, psi: float, h:
     k = 0
     for i in range(len(els) - 1):
         k += len(S[i])
-        t0, t1 = tangent(els[i], True), tangent(els[i + 1], False)
-        ang = abs(math.atan2(t0[0] * t1[1] - t0[1] * t1[0], float(t0 @ t1)))
+        ang = turn(els[i], els[i + 1])
         if ang > 1e-9:
             corner[k - 1] = corner[k] = ang
     elem = np.concatenate(E)
