@@ -28,13 +28,19 @@ from ..schema import PathElement, PlanResult
 from .passes import counts_of, segment_of
 from .tube import Tube
 
-__all__ = ["Progress", "move_of", "move_speeds", "progress"]
+__all__ = ["Progress", "move_of", "move_speeds", "moves_at", "progress"]
 
 
 def move_of(result: PlanResult, t: Tube) -> np.ndarray:
     """Per sample of a piece's plan ``result`` in its tube ``t`` the index (in the pass) of
     the move whose cell holds it (K,), non-decreasing."""
-    return np.asarray(t.element)[segment_of(counts_of(result, len(t.segments)), len(result.time))]
+    return moves_at(t, counts_of(result, len(t.segments)), len(result.time))
+
+
+def moves_at(t: Tube, counts: np.ndarray, K: int) -> np.ndarray:
+    """:func:`move_of` of the first ``K`` samples of a timing (``counts`` per tube segment),
+    planned or not (where a candidate stopped)."""
+    return np.asarray(t.element)[segment_of(np.asarray(counts), K)]
 
 
 class Progress(NamedTuple):
