@@ -176,3 +176,62 @@ def test_program_feed_never_faster_than_the_move_s_f_on_a_retraced_path():
     assert np.all(speed <= f[move] * (1 + 1e-6)), float((speed / f[move]).max())
     for j in (0, 1):
         assert chord[(move[:-1] == j) & (move[1:] == j)].max() >= 0.9 * f[j]
+
+
+def _line(a, b, z0=0.0, z1=0.0):
+    from planner.schema import PathElement
+
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    return PathElement(kind="line", line=1, start=a.tolist(), end=b.tolist(), length_m=float(np.hypot(*(b - a))),
+                       z_start_m=z0, z_end_m=z1, feed_m_s=0.01)
+
+
+def test_a_helix_s_last_samples_get_its_end_s_z_and_first_its_start_s():
+    """A full circle (its end its start) going down 0.3 mm: samples all the way round, the
+    first a hair behind the start, the last on it: Z from the first to the last follows the
+    angle travelled (the start's Z at the start, the end's at the end, never the start's
+    again), and each sample's XY distance from its point is its distance from the circle (the
+    first's from the start). Before, the last sample was given the start's Z (0.3 mm off)."""
+    from planner.contour.zaxis import programmed_z
+    from planner.exchange import read_gcode
+
+    prog = read_gcode("G21 G90 G17\nG0 X1 Y5\nG1 Z-0.5 F300\nG2 X1 Y5 Z-0.8 I1 J0 F450\nG0 Z2\nM2\n")
+    els = prog.passes[0].elements
+    (e,) = els
+    c, r = np.asarray(e.centre), float(e.radius_m)
+    a = math.pi - np.linspace(-1e-4, 2 * math.pi, 60)  # clockwise from (1, 5), the first 1e-4 rad before it
+    off = np.resize([0.0, 2e-6, -2e-6], len(a))
+    pose = c + (r + off)[:, None] * np.column_stack((np.cos(a), np.sin(a)))
+    z, d = programmed_z(pose, np.zeros(len(a), np.int64), els, np.zeros(2))
+    travelled = np.clip((math.pi - a) / (2 * math.pi), 0.0, 1.0)
+    assert z == pytest.approx(-0.5e-3 - 0.3e-3 * travelled, abs=1e-12)
+    assert z[-1] == pytest.approx(-0.8e-3) and z[0] == pytest.approx(-0.5e-3)
+    assert d[1:] == pytest.approx(np.abs(off[1:]), abs=1e-12)
+    assert d[0] == pytest.approx(float(np.hypot(*(pose[0] - np.asarray(e.start)))), abs=1e-12)  # behind: the start
+
+
+def test_a_move_passed_between_two_samples_has_the_speed_the_path_ran_at():
+    """Three moves (1 mm, 0.01 mm, 1 mm) run at 20 mm/s sampled every 10 ms: no sample on the
+    short one; its speed (and each move's) from the samples' progress is the speed run, never 0
+    (as an F, 0 takes a hundred thousand samples); a move retraced (back along the first) is
+    told apart from the first by the progress, not by where its samples are."""
+    from planner.contour.path import move_speeds, progress
+
+    els = [_line([0, 0], [1e-3, 0]), _line([1e-3, 0], [1.01e-3, 0]), _line([1.01e-3, 0], [0.01e-3, 0])]
+    v, Ts = 0.02, 0.01
+    s = 0.1e-3 + v * Ts * np.arange(10)  # path length of each sample: 0.1, 0.3, ..., 1.9 mm
+    ends = np.cumsum([e.length_m for e in els])
+    elem = np.minimum(np.searchsorted(ends, s, side="right"), 2)
+    assert 1 not in elem  # the short move has no sample
+    pose = np.array([els[k].point_at(np.array([x - (ends[k] - els[k].length_m)]))[0] for k, x in zip(elem, s)])
+    got = progress(pose, elem, els, np.zeros(2))
+    assert got.s == pytest.approx(s, abs=1e-12) and np.all(np.diff(got.s) >= 0)
+    speeds = move_speeds(Ts * np.arange(len(s)), np.full(len(s), v), elem, got.s, [0, 1, 2], els)
+    assert speeds == pytest.approx([v, v, v], rel=1e-9)
+    slow = np.where(elem == 2, v / 2, v)  # the return run at half the speed: its own, not the first's
+    s2 = np.concatenate(([0.0], np.cumsum(slow[:-1] * Ts)))
+    elem2 = np.minimum(np.searchsorted(ends, s2, side="right"), 2)
+    pose2 = np.array([els[k].point_at(np.array([x - (ends[k] - els[k].length_m)]))[0] for k, x in zip(elem2, s2)])
+    sp = move_speeds(Ts * np.arange(len(s2)), np.where(elem2 == 2, v / 2, v), elem2,
+                     progress(pose2, elem2, els, np.zeros(2)).s, [0, 2], els)
+    assert sp[0] == pytest.approx(v) and sp[1] <= v / 2 * (1 + 1e-9)
