@@ -198,6 +198,7 @@ def test_a_helix_s_last_samples_get_its_end_s_z_and_first_its_start_s():
     prog = read_gcode("G21 G90 G17\nG0 X1 Y5\nG1 Z-0.5 F300\nG2 X1 Y5 Z-0.8 I1 J0 F450\nG0 Z2\nM2\n")
     els = prog.passes[0].elements
     (e,) = els
+    assert e.centre is not None and e.radius_m is not None
     c, r = np.asarray(e.centre), float(e.radius_m)
     a = math.pi - np.linspace(-1e-4, 2 * math.pi, 60)  # clockwise from (1, 5), the first 1e-4 rad before it
     off = np.resize([0.0, 2e-6, -2e-6], len(a))
