@@ -3,7 +3,12 @@ goal 2: cutting time <= 1.02x it on every pass, no sample faster than F): per pa
 more checkouts side by side, and where the time goes.
 
     OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python benchmarks/bench_contour_feed.py \
-        [--root /tmp/base --root .] [--programs bench,freecad_linuxcnc.ngc,fusion360.nc] [--elements]
+        [--root /tmp/base --root .] [--programs bench,freecad_linuxcnc.ngc,fusion360.nc] [--elements] \
+        [--feed fastest]
+
+``--feed fastest``: the ``fastest`` feed instead, against the same third-order optimum without
+the F cap (``bench_contour_optimum``'s fair peer, cached the same way): its before/after per pass
+in one run.
 
 The peer is ``bench_contour_optimum``'s (``third_order_optimum`` with ``feed_cap``: the same
 robot, drive forces, leg speeds, the default force-rate limit and the Z axis speed; grids 24,
@@ -48,8 +53,8 @@ def _paths(root: str | None = None) -> None:
     sys.path.insert(1 if root is not None else 0, str(HERE))
 
 
-def one(name: str) -> None:
-    """Plan the program ``name`` in feed ``program`` in this process; print JSON per pass."""
+def one(name: str, feed: str = "program") -> None:
+    """Plan the program ``name`` in ``feed`` in this process; print JSON per pass."""
     from planner.contour import plan_contour
 
     _paths()
@@ -59,7 +64,7 @@ def one(name: str) -> None:
     plan_contour({"program": bench_contour.program(1), "origin": bench_contour.ORIGIN})  # the kernels loaded
     _, text, origin = load_program(name)
     c0 = time.process_time()
-    res = plan_contour({"program": text, "origin": origin, "feed": "program"})
+    res = plan_contour({"program": text, "origin": origin, "feed": feed})
     cpu = time.process_time() - c0
     c = res.contour
     assert c is not None
@@ -69,9 +74,10 @@ def one(name: str) -> None:
                       "origin": list(c.origin), "tol": c.tolerance_m}))
 
 
-def run_root(root: str, name: str) -> dict:
+def run_root(root: str, name: str, feed: str = "program") -> dict:
     env = dict(os.environ, PYTHONPATH=str(Path(root).resolve()), OPENBLAS_NUM_THREADS="1")
-    out = subprocess.run([sys.executable, __file__, "--one", name], env=env, capture_output=True, text=True)
+    out = subprocess.run([sys.executable, __file__, "--one", name, "--feed", feed], env=env, capture_output=True,
+                         text=True)
     if out.returncode != 0:
         raise SystemExit(f"{root}: {out.stderr[-2000:]}")
     got = json.loads(out.stdout.strip().splitlines()[-1])
@@ -90,20 +96,22 @@ def pass_key(els, origin, z_acc: float) -> str:
     return hashlib.sha256(repr(key).encode()).hexdigest()[:20]
 
 
-def capped_peer(robot, els, origin, rate, cache: Path | None) -> dict:
+def capped_peer(robot, els, origin, rate, cache: Path | None, capped: bool = True) -> dict:
     """The F-capped third-order optimum of one pass, converged (as ``converged_optimum``), with
     its per-element times, top speeds and speed profiles; cached by the pass. The Z axis's speed
     and acceleration as the planner holds them (``bench_contour_optimum``'s fair peer; before
-    2026-11-28 10:00 this peer held the Z speed alone: fusion360's ramps)."""
+    2026-11-28 10:00 this peer held the Z speed alone: fusion360's ramps). ``capped`` False: the
+    same optimum without F (``fastest``'s peer, ``--feed fastest``)."""
     from bench_contour_optimum import Z_ACC_M_S2, Z_MAX_M_S, third_order_optimum  # type: ignore[import-not-found]
 
-    path = cache / f"{pass_key(els, origin, Z_ACC_M_S2)}.pkl" if cache is not None else None
+    key = pass_key(els, origin, Z_ACC_M_S2) + ("" if capped else "-uncapped")
+    path = cache / f"{key}.pkl" if cache is not None else None
     if path is not None and path.exists():
         return pickle.loads(path.read_bytes())
     grids, runs, guess = list(GRIDS), [], None
     k = 0
     while k < len(grids):
-        opt, guess = third_order_optimum(robot, els, origin, grids[k], rate, True, False, z_max=Z_MAX_M_S,
+        opt, guess = third_order_optimum(robot, els, origin, grids[k], rate, capped, False, z_max=Z_MAX_M_S,
                                          z_acc=Z_ACC_M_S2, guess=guess)
         runs.append(opt)
         k += 1
@@ -169,9 +177,11 @@ def main() -> None:
     ap.add_argument("--elements", action="store_true", help="per line of each distinct pass: the plan against the peer")
     ap.add_argument("--cache", default=str(Path.home() / ".cache" / "rangeplan" / "bench_contour_feed"))
     ap.add_argument("--no-cache", action="store_true")
+    ap.add_argument("--feed", default="program", choices=("program", "fastest"),
+                    help="the feed planned; fastest: against the same optimum without F")
     args = ap.parse_args()
     if args.one is not None:
-        one(args.one)
+        one(args.one, args.feed)
         return
     roots = args.root or [str(HERE.parent)]
     _paths(roots[-1])
@@ -187,26 +197,27 @@ def main() -> None:
     print(f"load: {os.getloadavg()[0]:.1f} (1-min average) on {os.cpu_count()} cores; roots: {', '.join(roots)}\n")
     head = " | ".join(f"{Path(r).resolve().name} s | / peer" for r in roots)
     summary: list[str] = []
-    rows: list[str] = ["| program | pass | mm | F mm/min | L / F s | 3rd order at F s | " + head + " |",
+    peer_col = "3rd order at F s" if args.feed == "program" else "3rd order s"
+    rows: list[str] = [f"| program | pass | mm | F mm/min | L / F s | {peer_col} | " + head + " |",
                        "|---|---|---|---|---|---|" + "---|---|" * len(roots)]
     detail: list[str] = []
     for name in args.programs.split(","):
         label, text, origin = load_program(name)
-        got = [run_root(r, name) for r in roots]
+        got = [run_root(r, name, args.feed) for r in roots]
         prog = read_gcode(text)
         org, tol = np.asarray(got[-1]["origin"], float), float(got[-1]["tol"])
         res = None
         if args.elements:
             from planner.contour import plan_contour
 
-            res = plan_contour({"program": text, "origin": origin, "feed": "program"})
+            res = plan_contour({"program": text, "origin": origin, "feed": args.feed})
         tot_peer = 0.0
         tot = np.zeros(len(roots))
         done: set[str] = set()
         prev = None
         for i, b in enumerate(prog.passes):
             els = b.elements
-            peer = capped_peer(robot, els, org, rate, cache)
+            peer = capped_peer(robot, els, org, rate, cache, args.feed == "program")
             tot_peer += peer["time"]
             times = np.array([g["times"][i] for g in got])
             tot += times
@@ -230,7 +241,8 @@ def main() -> None:
         summary.append(f"| {label} | " + " | ".join(
             f"{g['cpu']:.1f} | {max(r for r in g['ratio'] if r is not None):.4f} | {g['Ts'] * 1e3:g}" for g in got)
             + " |")
-    print("### program feed per pass against the third-order optimum capped at F\n")
+    print(f"### {args.feed} feed per pass against the third-order optimum"
+          f"{' capped at F' if args.feed == 'program' else ' (no F)'}\n")
     print("\n".join(rows))
     print("\n### compute (CPU s of the whole plan), largest tool speed over F while cutting, Ts ms\n")
     print("| program | " + " | ".join(f"{Path(r).resolve().name} CPU s | max speed / F | Ts" for r in roots) + " |")

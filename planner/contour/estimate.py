@@ -127,25 +127,22 @@ TIGHT_FAR_TURN2_S = (0.0, 0.0, 0.04, 0.0)
 TIGHT_FAR = 2.0
 #: the plans of a piece with a slope beyond its first, in units of the piece's estimate
 #: (:data:`~planner.contour.zaxis.Z_TRIES`; ``benchmarks/bench_contour_estimate.py --only ramp``),
-#: by the sample times of :data:`SAMPLE_FACTOR_TS` (interpolated in their logarithm). A re-plan
-#: runs 0.7x slower where Z missed (more samples): ``program`` counts each 1.15 plans (ramp-and-helix
-#: passes at Ts 10 ms measured 1.22-1.40x with 1.0, on a loaded machine). ``fastest`` (a miss is
-#: searched once more as fastest, gentler along the slope, then as a program feed: since the ramp
-#: change of branch fastopt) refitted on main 2026-11-28 (benchmarks/README.md, "The contour
-#: estimate refitted after the fastest ramp change"): 2 ramp-and-helix passes measured 20 CPU s at
-#: 1 ms (0.24x with 14 plans: the fine Ts's Z misses less), 28 s at 2 ms, 8.6 s at 5 ms; 10 passes
-#: at the chosen 4 ms 31.2 s (1.28x with 14). ``program`` at a finer Ts misses less too: 2 passes
-#: measured 29.5 CPU s at 1 ms (0.28x with 8.05 plans), 12.5 s at 2 ms (0.21x), 2.87-3.04 s at
-#: 5 ms (0.40x); at 10 ms 1.04-1.20x
-Z_SLOPE_PLANS = {"program": (1.5, 1.0, 4.0, 1.15 * (Z_TRIES - 1)), "fastest": (2.5, 14.0, 16.0, 16.0)}
+#: by the sample times of :data:`SAMPLE_FACTOR_TS` (interpolated in their logarithm). Refitted
+#: after the retrace fix (branch rampfix, benchmarks/README.md "A retraced line and a full
+#: circle's seam"): most Z misses of the ramp-and-helix passes were the planner's own (the helix's
+#: last samples given its start's Z, a ramp's return line skipped), each re-plan a search. Measured
+#: since, the pieces' own estimate without this term: ``program`` 0.95-1.05x at 10 ms and already
+#: over at 1-2 ms (0.53-0.70x): no re-plans counted there, 0.3 at 5 ms (2 passes 1.12 CPU s against
+#: 1.02 without it; fusion360.nc at its 6 ms 1.23x without, 1.12x with); ``fastest`` still misses at fine sample times
+#: (2 passes: 19.9 CPU s at 1 ms, 5.46 at 2 ms, 1.37 at 5 ms against 10.7 / 4.41 / 0.92 without
+#: this term), none at 10 ms (0.29 s) nor at the chosen 4 ms (10 passes 3.31 s against 3.56)
+Z_SLOPE_PLANS = {"program": (0.0, 0.0, 0.3, 0.0), "fastest": (1.8, 0.5, 0.7, 0.0)}
 #: ``fastest``: seconds of the re-plans of a piece with a slope at least, per
 #: :data:`Z_FASTEST_LENGTH_M` of its length (at least one such length), by the sample times of
-#: :data:`SAMPLE_FACTOR_TS` (interpolated in their logarithm; 0 at 5 ms and finer). At a coarse Ts
-#: Z misses the ramps again and again, each re-plan a scale search: 2 ramp-and-helix passes of
-#: 14.3 mm at Ts 10 ms measured 41.7 CPU s before the fastopt ramp change, 39.1 s on main after it
-#: (and ending ``too_large``: 7.9x the pieces' plans); at 5 ms 8.6 s, at the chosen 4 ms 3.1 s a
-#: pass (within :data:`Z_SLOPE_PLANS`: this floor at 16 s made them 0.19-0.26x)
-Z_FASTEST_PIECE_S = (0.0, 0.0, 0.0, 16.0)
+#: :data:`SAMPLE_FACTOR_TS` (interpolated in their logarithm). It was 16 s at 10 ms, fitted to 2
+#: ramp-and-helix passes that ended ``too_large`` after 39-42 CPU s (a full circle's seam and a
+#: retraced line, fixed by branch rampfix: 0.29 CPU s now): none left
+Z_FASTEST_PIECE_S = (0.0, 0.0, 0.0, 0.0)
 Z_FASTEST_LENGTH_M = 0.015
 
 

@@ -59,14 +59,13 @@ from .join import Part, contour_section, cut_z, dwell_z, join_parts, plan_dwell,
 from .passes import (
     TubeSizes,
     chunks,
-    counts_of,
     measure_deviation,
     parse_contour_request,
     read_program,
-    segment_of,
     tolerance_of,
     travel_run_end,
 )
+from .path import move_of, move_speeds, progress
 from .placement import CONTOUR_PSI, check_reach, check_reachable, fit_origin, proposal
 from .profiles import OptimalProfiles
 from .search import Scale, confirmed_infeasible, largest_feasible, piece_key, search_timing, slope_stops, z_caps
@@ -298,8 +297,11 @@ def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[i
                 for jj in [jj for jj in range(max(j - 1, 0), min(j + 2, len(chunk))) if zc.g[jj] != 0.0] or [j]:
                     gentle[jj] *= Z_EASE
             continue
-        speed = np.hypot(*part.result.velocity[:, :2].T)
-        top = np.array([float(speed[part.elem == k].max(initial=0.0)) for k in chunk])
+        # per move the top speed it ran at, by the samples' progress along the path (a move passed
+        # between two samples has one too: never 0, which as an F takes a hundred thousand samples)
+        res = part.result
+        top = move_speeds(res.time, np.hypot(*res.velocity[:, :2].T), part.elem,
+                          progress(res.pose, part.elem, elements, origin).s, chunk, elements)
         switch = feed != "program"  # fastest's first miss: the bounds as a program feed first (cells by F)
         if top0 is None:  # fastest: the speeds its first timing ran each move at stand for F
             top0 = top
@@ -346,8 +348,7 @@ def _cut_part(found: Any, geo: PathGeometry, tol: float) -> Part:
     result, t = found.result, found.tube
     assert t is not None
     K = len(result.time)
-    seg = segment_of(counts_of(result, len(t.segments)), K)
-    elem = t.element[seg]
+    elem = move_of(result, t)
     cutting = np.ones(K, bool)
     line = geo.line[elem].astype(np.int64)
     dev = measure_deviation(result.pose[:, :2], elem, geo, tol)

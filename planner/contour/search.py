@@ -27,6 +27,7 @@ from ..orchestrator import feasible, plan_timed
 from ..schema import MAX_CONTOUR_TOLERANCE_M, MAX_TOTAL_STEPS, MIN_TS, ContourRequest, PathElement, PlanResult, Settings
 from .estimate import ADVICE_MIN_S, ADVICE_WORK, FEED_MARGIN, piece_estimate
 from .passes import CELL_SAMPLES, PROGRAM_MARGIN, V0_M_S, TubeSizes, segment_of
+from .path import moves_at
 from .profiles import ARRIVAL_MAX, Optimal, arrival_run, optimal_counts, profile_counts, with_arrival
 from .tube import Tube
 from .zaxis import blend_speed, slopes
@@ -111,8 +112,7 @@ class Found:
         except (IndexError, ValueError):
             return
         k = int(round(ts / self.Ts))
-        seg = segment_of(counts, k + 1)[-1] if k > 0 else 0
-        self.stop_line = els_line(int(t.element[min(int(seg), len(t.element) - 1)]))
+        self.stop_line = els_line(int(moves_at(t, counts, k + 1)[-1] if k > 0 else t.element[0]))
 
 
 class TimingSearch:

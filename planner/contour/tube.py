@@ -207,9 +207,14 @@ def tube(elements: list[PathElement], origin: np.ndarray, tol: float, psi: float
             # the two pieces' cells without a junction between them: their convex hull is the
             # triangle of the pieces grown by rho, within the bend (pieces of one arc: the arc
             # passes through the vertex and stays outside the triangle) or the bend plus the
-            # chords' sagitta (elsewhere) plus rho of the path
+            # chords' sagitta (elsewhere) plus rho of the path. And the other way (issue 32): the two
+            # cells overlap up to rho / cos(ang / 2) from the vertex; beyond the corner's circle (a
+            # sharp turn, a reversal: the whole retraced piece) samples may pass from the one cell
+            # to the other far from the vertex, and the cut skip it, so a junction holds one there
             same_arc = e == prev_e and r < math.inf
-            if abs(ang) > 1e-9 and _bend(prev_p0, p0, p1) + (0.0 if same_arc else s_a) + rho > TUBE_FRACTION * tol:
+            overlap = rho / max(math.cos(0.5 * ang), 1e-12)
+            if abs(ang) > 1e-9 and (_bend(prev_p0, p0, p1) + (0.0 if same_arc else s_a) + rho > TUBE_FRACTION * tol
+                                    or overlap > CORNER_FRACTION * tol):
                 junction = _clip(_clip(prev, cell), p0 + CORNER_FRACTION * tol * _RING)
                 if len(junction) < 3:  # pragma: no cover - the disk about the vertex is in both
                     raise AssertionError("empty junction")

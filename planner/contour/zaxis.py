@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from ..schema import PathElement
+from .path import progress
 
 __all__ = ["Z_EASE", "Z_SLACK", "Z_TRIES", "ZCaps", "ZPlan", "accel_dwell", "blend_speed", "plan_z", "programmed_z",
            "slopes"]
@@ -153,28 +154,13 @@ Z_TRIES = 8
 def programmed_z(pose: np.ndarray, elem: np.ndarray, elements: list[PathElement],
                  origin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per sample (``pose`` (K, 2) robot frame, ``elem`` the index of its move in ``elements``)
-    the programmed Z where it projects onto its move and its XY distance from that point [m]."""
-    p_all = np.asarray(pose, float)[:, :2] - origin
-    z = np.zeros(len(p_all))
-    d = np.zeros(len(p_all))
-    for e_index in np.unique(elem):
-        e = elements[int(e_index)]
-        mask = elem == e_index
-        p = p_all[mask]
-        if e.kind == "arc" and e.centre is not None and e.sweep_rad and e.start_angle_rad is not None:
-            c = np.asarray(e.centre, float)
-            ang = np.arctan2(p[:, 1] - c[1], p[:, 0] - c[0])
-            rel = ((ang - e.start_angle_rad) * np.sign(e.sweep_rad)) % (2 * math.pi)
-            sweep = abs(e.sweep_rad)
-            f = np.where(rel <= sweep, rel / sweep, np.where(rel - sweep < 2 * math.pi - rel, 1.0, 0.0))
-            q = e.point_at(f * e.length_m)
-        else:
-            a, v = np.asarray(e.start, float), np.asarray(e.end, float) - np.asarray(e.start, float)
-            f = np.clip((p - a) @ v / max(float(v @ v), 1e-24), 0.0, 1.0)
-            q = a + f[:, None] * v
-        z[mask] = e.z_start_m + f * (e.z_end_m - e.z_start_m)
-        d[mask] = np.hypot(*(p - q).T)
-    return z, d
+    the programmed Z where it projects onto its move and its XY distance from that point [m]
+    (:func:`planner.contour.path.progress`: on a full circle's seam, its start or its end by
+    the samples' order)."""
+    got = progress(pose, elem, elements, origin)
+    z0 = np.array([e.z_start_m for e in elements])[elem]
+    z1 = np.array([e.z_end_m for e in elements])[elem]
+    return z0 + got.share * (z1 - z0), got.distance
 
 
 class ZPlan:
