@@ -430,6 +430,7 @@ class PlanPool(Admission):
         self.sync_waiting = 0  #: synchronous callers waiting for a worker now (they go first)
         self.background_running = 0  #: background jobs on a worker now
         self.background_waiting = 0  #: background jobs waiting for a worker now
+        self._renewing = False  # renew() waits for the running background jobs: no new one starts
         self._workers: list[_Worker] = []
         self._closed = False
         self.replaced = 0
@@ -472,7 +473,7 @@ class PlanPool(Admission):
             if background:
                 self.background_waiting += 1
                 try:
-                    while not self._free or self.sync_waiting:
+                    while not self._free or self.sync_waiting or self._renewing:
                         self._free_cond.wait()
                 finally:
                     self.background_waiting -= 1
@@ -553,14 +554,25 @@ class PlanPool(Admission):
     def renew(self) -> None:
         """Replace every worker by a new one (after the background compile of the kernels: the
         new ones load the compiled kernels, issue 24). Waits for each worker's running job;
-        jobs that come meanwhile wait for a new worker. With ``start="forkserver"`` the fork
+        jobs that come meanwhile wait for a new worker. It first waits for the running
+        background jobs without holding a worker (none starts meanwhile), so that synchronous
+        requests are served until then, and then takes each worker as it is free (a synchronous
+        request waits at most for the synchronous work under way). With ``start="forkserver"`` the fork
         server (:mod:`app.worker_template`, which loaded the planner before the kernels were
         compiled) is stopped and started again. Thread mode: nothing to do (the next plans
         load the compiled kernels in this process)."""
         if self.mode != "process":
             return
         with self._renew_lock:
-            old = [self._take(False, refuse=False) for _ in range(self.n)]  # each free, in turn
+            with self._free_cond:
+                self._renewing = True
+                while self.background_running:
+                    self._free_cond.wait()
+            try:
+                old = [self._take(False, refuse=False) for _ in range(self.n)]  # each free, in turn
+            finally:
+                with self._free_cond:
+                    self._renewing = False
             for w in old:
                 w.stop()
             if self.start == "forkserver":

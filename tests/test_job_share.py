@@ -172,3 +172,39 @@ def test_a_synchronous_request_is_refused_only_when_jobs_hold_every_worker():
         sync.join(60)
     finally:
         pool.close()
+
+
+def test_renewing_the_workers_waits_for_a_job_without_holding_a_worker():
+    """renew() (after the background compile) waits for a running job before it takes any
+    worker: a synchronous plan meanwhile is served by the free worker and ends before the
+    job; no job starts while renew waits; afterwards every worker is new and plans."""
+    pool = PlanPool(2, timeout_s=60, start="exec")
+    try:
+        wait_for(lambda: pool.readiness()["workers_ready"] == 2, what="the workers")
+        busy = PlanJob(PlanRequest.model_validate(with_settings(load_example("table1"), fastest=True, Ts=0.005)))
+        short = PlanJob(PlanRequest.model_validate(load_example("table1")))
+        before = {w.pid for w in pool._workers}
+        finished: list[str] = []
+
+        def run(name: str, job: PlanJob, background: bool) -> None:
+            assert pool.run(job, background=background).ok
+            finished.append(name)
+
+        job = threading.Thread(target=run, args=("job", busy, True))
+        job.start()
+        wait_for(lambda: pool.stats()["background_running"] == 1, what="the job")
+        renew = threading.Thread(target=pool.renew)
+        renew.start()
+        time.sleep(0.2)
+        second = threading.Thread(target=run, args=("second job", short, True))
+        second.start()
+        run("sync", short, False)
+        assert finished == ["sync"], "the synchronous plan waited for the job (renew held the free worker)"
+        assert pool.stats()["background_waiting"] == 1  # no job starts while renew waits
+        for t in (job, renew, second):
+            t.join(60)
+        assert finished == ["sync", "job", "second job"] and pool.renewed == 1
+        assert not before & {w.pid for w in pool._workers}
+        assert pool.run(short).ok
+    finally:
+        pool.close()
