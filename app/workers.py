@@ -325,11 +325,19 @@ class _Worker:
         except (OSError, ValueError):
             pass
 
+    def _close_conn(self) -> None:
+        """Close the pipe once: :meth:`stop` (the pool closing) and :meth:`kill` (the job's
+        thread after its worker died) may both come; a second ``close`` would close the fd
+        number again, by then maybe another file's (it failed with EBADF in a test's teardown)."""
+        with self._lock:
+            if not self.conn.closed:
+                self.conn.close()
+
     def kill(self) -> None:
         try:
             self._end_process()
         finally:
-            self.conn.close()
+            self._close_conn()
 
     def stop(self) -> None:
         try:
@@ -338,7 +346,7 @@ class _Worker:
             pass
         if self.exit_status(2) is None:
             self._end_process()
-        self.conn.close()
+        self._close_conn()
 
 
 #: exit statuses of a worker ended by a failed allocation: SIGABRT (Rust's allocation error

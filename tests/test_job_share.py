@@ -198,6 +198,7 @@ def test_renewing_the_workers_waits_for_a_job_without_holding_a_worker():
         time.sleep(0.2)
         second = threading.Thread(target=run, args=("second job", short, True))
         second.start()
+        wait_for(lambda: pool.stats()["background_waiting"] == 1, what="the second job to wait")
         run("sync", short, False)
         assert finished == ["sync"], "the synchronous plan waited for the job (renew held the free worker)"
         assert pool.stats()["background_waiting"] == 1  # no job starts while renew waits
