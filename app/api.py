@@ -86,22 +86,27 @@ class _ServiceHolder:
 def create_app(store: Store | None = None, *, workers: int | None = None, timeout_s: float | None = None,
                max_body_bytes: int | None = None, max_queue: int | None = None, executor: str | None = None,
                editor_port: int | None = None, access: AccessPolicy | None = None, pool: PlanPool | None = None,
-               memory_mb: int | None = None, service: JobService | None = None) -> FastAPI:
+               memory_mb: int | None = None, service: JobService | None = None,
+               job_workers: int | None = None) -> FastAPI:
     """The FastAPI app. ``store`` defaults to the SQLite file in :func:`default_data_dir`;
     ``access`` to :meth:`AccessPolicy.from_env`; other arguments to :class:`app.settings.Settings`
     (the ``RANGEPLAN_*`` environment). ``service`` (or ``pool``): a job service shared with
-    the editor (the caller closes it); by default the app starts and closes its own."""
+    the editor (the caller closes it); by default the app starts and closes its own;
+    ``job_workers``: the jobs' share of its workers (``RANGEPLAN_JOB_WORKERS``)."""
     cfg = read_settings()
     store = store if store is not None else Store(default_data_dir())
     clean_spool(spool_dir(store.path))  # export files of responses that never finished
-    shared = service or (JobService(pool, export_timeout_s=cfg.export_timeout_s) if pool is not None else None)
+    job_workers = job_workers or cfg.job_workers
+    shared = service or (JobService(pool, export_timeout_s=cfg.export_timeout_s, job_workers=job_workers)
+                         if pool is not None else None)
     timeout_s = timeout_s or cfg.plan_timeout_s
     memory_mb = memory_mb if memory_mb is not None else cfg.worker_memory_mb
 
     def make() -> JobService:
         queue = max_queue if max_queue is not None else cfg.max_queue
         return JobService.start(workers or cfg.workers, timeout_s, queue, mode=executor or cfg.executor,
-                                memory_mb=memory_mb, export_timeout_s=cfg.export_timeout_s, start=cfg.worker_start)
+                                memory_mb=memory_mb, export_timeout_s=cfg.export_timeout_s, start=cfg.worker_start,
+                                job_workers=job_workers)
 
     holder: _ServiceHolder
 

@@ -173,10 +173,13 @@ class DaskExecutor(Admission):
     def capacity(self) -> int:
         return self.n + self.max_queue
 
-    def run(self, job: Job, timeout_s: float | None = None) -> Outcome:
+    def run(self, job: Job, timeout_s: float | None = None, background: bool = False) -> Outcome:
+        """One task (``background``: at a lower priority than the synchronous requests' tasks,
+        which the scheduler starts first)."""
         limit = self.timeout_s if timeout_s is None else float(timeout_s)
         with self._admitted():
-            fut = self.client.submit(run_bounded, job, limit, self.memory_mb or None, pure=False)
+            fut = self.client.submit(run_bounded, job, limit, self.memory_mb or None, pure=False,
+                                     priority=-1 if background else 0)
             try:
                 return fut.result()
             except Exception as exc:

@@ -61,7 +61,7 @@ from app.jobs import (
     failed,
     run_job,
 )
-from app.workers import JobTimeout, PlanPool, PoolBusy, WorkerCrashed, WorkerOutOfMemory
+from app.workers import JobsHoldEveryWorker, JobTimeout, PlanPool, PoolBusy, WorkerCrashed, WorkerOutOfMemory
 
 __all__ = ["InProcessExecutor", "JobExecutor", "WORKER", "child_pool", "close_child_pool", "describe_failure",
            "on_reference", "run_bounded", "warm_worker", "where"]
@@ -77,6 +77,9 @@ class JobExecutor(Protocol):
     retried); :class:`app.service.JobService` maps these once (:func:`describe_failure`).
     :meth:`submit` is :meth:`run` without blocking (the batches' dispatcher keeps several jobs
     in flight): a ``concurrent.futures.Future`` of the outcome, or of one of those exceptions.
+    ``background``: a job that may run up to the job limit (a contour, a plan answered 202),
+    which yields free workers to synchronous requests (:class:`app.workers.PlanPool`; a lower
+    priority on Dask; :class:`app.service.JobService` bounds how many run at once).
     The work estimate is the caller's."""
 
     mode: str
@@ -86,7 +89,7 @@ class JobExecutor(Protocol):
     @property
     def capacity(self) -> int: ...
 
-    def run(self, job: Job, timeout_s: float | None = None) -> Outcome: ...
+    def run(self, job: Job, timeout_s: float | None = None, background: bool = False) -> Outcome: ...
 
     def submit(self, job: Job, timeout_s: float | None = None) -> Future: ...
 
@@ -115,7 +118,7 @@ class InProcessExecutor:
     def capacity(self) -> int:
         return 0
 
-    def run(self, job: Job, timeout_s: float | None = None) -> Outcome:
+    def run(self, job: Job, timeout_s: float | None = None, background: bool = False) -> Outcome:
         self.jobs_run += 1
         return run_job(job, self.memory_mb or None)
 
@@ -178,6 +181,9 @@ def describe_failure(exc: Exception, job: Job, timeout_s: float, memory_mb: int 
 
             return failed(contour_timeout(timeout_s))
         return failed(import_timeout(timeout_s) if isinstance(job, ImportJob) else timeout(timeout_s))
+    if isinstance(exc, JobsHoldEveryWorker):
+        return failed({"code": "busy", "message": f"{exc}; retry shortly, or keep a worker for synchronous "
+                       "requests (RANGEPLAN_JOB_WORKERS below RANGEPLAN_WORKERS)"}, 503)
     if isinstance(exc, PoolBusy):
         return failed({"code": "busy", "message": f"too many plans in progress ({exc}); retry shortly"}, 503)
     if isinstance(exc, WorkerCrashed):

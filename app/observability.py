@@ -142,6 +142,16 @@ class _StateCollector(Collector):
             workers.add_metric(["configured"], ready["workers"])
             workers.add_metric(["ready"], ready["workers_ready"])
             restarts.add_metric(["plan"], int(stats.get("replaced_workers", 0)))
+        job_workers = GaugeMetricFamily("rangeplan_job_workers", "Workers that jobs (contours, plans answered 202) may "
+                                        "hold at once: RANGEPLAN_JOB_WORKERS (count)")
+        jobs = GaugeMetricFamily("rangeplan_jobs_in_flight", "Jobs on their share of the workers, by state: running "
+                                 "(holding a slot of the share) or queued (waiting for one) (count)", labels=["state"])
+        service = getattr(self.app.state, "service", None)
+        if service is not None and hasattr(service, "jobs"):
+            share = service.jobs()
+            job_workers.add_metric([], share["workers"])
+            jobs.add_metric(["running"], share["running"])
+            jobs.add_metric(["queued"], share["queued"])
         waiting = GaugeMetricFamily("rangeplan_http_requests_waiting", "Requests waiting for their turn of the event "
                                     "loop (app/admission.py; RANGEPLAN_ADMISSION_QUEUE bounds them) (count)")
         admission = getattr(self.app.state, "admission", None)
@@ -157,7 +167,7 @@ class _StateCollector(Collector):
                 items.add_metric([status], counts["items"].get(status, 0))
             for state in ("queued", "running", "done", "cancelled"):
                 states.add_metric([state], counts["batches"].get(state, 0))
-        yield from (in_flight, queue, workers, restarts, waiting, items, states)
+        yield from (in_flight, queue, workers, restarts, job_workers, jobs, waiting, items, states)
 
 
 class Metrics:

@@ -87,7 +87,11 @@ def serve(host: str = "127.0.0.1", port: int = 8000, editor_port: int = 8080, ed
     # one job service for the API and the editor: the same workers, estimate, limits, errors
     service = JobService.start(cfg.workers, cfg.plan_timeout_s, cfg.max_queue, mode=cfg.executor,
                                memory_mb=cfg.worker_memory_mb, export_timeout_s=cfg.export_timeout_s,
-                               start=cfg.worker_start, reference_while_compiling=True)
+                               start=cfg.worker_start, reference_while_compiling=True, job_workers=cfg.job_workers)
+    _log(f"workers: {service.workers} ({cfg.executor}); jobs may hold {min(service.job_workers, service.workers)} of "
+         "them at once (RANGEPLAN_JOB_WORKERS), "
+         + ("the others are kept for synchronous requests" if service.job_workers < service.workers else
+            "so a synchronous request that finds every worker on a job is answered 503 busy"))
     if service.kernels is not None and (running := service.kernels.running()) is not None:
         _log(f"kernels: {running.note()}" if running.failed is not None else
              f"kernels: not compiled yet: compiling them in the background, {running.ready_in()} (pid {running.pid}, "

@@ -12,7 +12,15 @@ batches submit typed jobs (:data:`app.jobs.Job`) and get a typed outcome
    thread (:class:`app.executors.InProcessExecutor`, no time limit);
 3. **map errors once**: the pool's exceptions become :class:`app.jobs.Failed` with the HTTP
    status they answer (``timeout`` and ``too_much_memory`` 422, ``busy`` 503, a dead worker
-   500), as the worker maps the planner's.
+   500), as the worker maps the planner's;
+4. **keep synchronous requests apart from jobs** (issue 33): a *job* (``background=True``: a
+   contour, or a plan answered 202, up to the job limit ``RANGEPLAN_JOB_TIMEOUT_S``) runs on
+   a share of the workers, at most :attr:`JobService.job_workers` at once
+   (``RANGEPLAN_JOB_WORKERS``, default one fewer than the workers); more jobs wait their turn
+   here, holding no worker and no thread of the synchronous requests. A synchronous request
+   never waits behind a job: on a local pool it takes a free worker before any waiting job
+   (:class:`app.workers.PlanPool`), and with jobs on every worker (a share of all of them) it
+   is answered ``busy`` (503) at once.
 
 Batch items on a local process pool or a Dask cluster run :func:`app.executors.run_bounded`,
 the same estimate, limit and mapping, in a planning process of the process that runs them
@@ -99,7 +107,7 @@ class JobService:
     it from an event loop on a thread pool sized to the executor's capacity."""
 
     def __init__(self, pool: JobExecutor | None = None, *, timeout_s: float = 30.0, memory_mb: int | None = None,
-                 export_timeout_s: float | None = None, compiling: Any = None):
+                 export_timeout_s: float | None = None, compiling: Any = None, job_workers: int | None = None):
         #: where jobs run (named ``pool`` since the local pool was the only one)
         self.pool: JobExecutor = pool if pool is not None else InProcessExecutor(timeout_s, memory_mb)
         self.inline = pool is None
@@ -115,12 +123,22 @@ class JobService:
         self.export_timeout_s = max(self.timeout_s, export_timeout_s or 0.0)
         self._threads: ThreadPoolExecutor | None = None
         self._threads_lock = threading.Lock()
+        #: jobs (``background``) that may run at once: the jobs' share of the workers
+        self.job_workers = max(1, int(job_workers)) if job_workers else max(1, self.workers - 1)
+        self._job_threads: ThreadPoolExecutor | None = None  # one per job slot: the share itself
+        self.jobs_queued = 0  #: jobs waiting for a slot of the share
+        self.jobs_running = 0  #: jobs holding a slot (on a worker, or taking the next free one)
+
+    @property
+    def workers(self) -> int:
+        """The executor's workers (a local pool's processes, a cluster's threads; 1 inline)."""
+        return max(1, int(getattr(self.pool, "n", 1) or 1))
 
     @classmethod
     def start(cls, workers: int, timeout_s: float, max_queue: int, mode: str = "process",
               memory_mb: int | None = None, export_timeout_s: float | None = None,
               start: str | None = None, reference_while_compiling: bool = False,
-              scheduler: str | None = None) -> JobService:
+              scheduler: str | None = None, job_workers: int | None = None) -> JobService:
         """A service with a new executor of its own (:meth:`close` ends it): ``mode``
         ``"process"`` or ``"thread"`` (a :class:`PlanPool` of ``workers``; ``start``: how its
         worker processes start, :data:`app.workers.START_METHODS`) or ``"dask"`` (the cluster at
@@ -129,7 +147,8 @@ class JobService:
         kernels are not compiled, compile them in the background
         (:func:`planner.orchestrator.background.while_compiling`) and plan on the numpy
         reference meanwhile (the workers start at once, on the reference; not on Dask, whose
-        workers load or compile their own)."""
+        workers load or compile their own). ``job_workers``: the jobs' share (default one fewer than
+        the workers)."""
         if mode == "dask":
             from app.cluster import DaskExecutor
             from app.settings import settings
@@ -138,24 +157,27 @@ class JobService:
             if not address:
                 raise ValueError("RANGEPLAN_EXECUTOR=dask needs the scheduler's address in RANGEPLAN_DASK_SCHEDULER "
                                  "(tcp://host:8786)")
-            return cls(DaskExecutor(address, timeout_s, max_queue, memory_mb), export_timeout_s=export_timeout_s)
+            return cls(DaskExecutor(address, timeout_s, max_queue, memory_mb), export_timeout_s=export_timeout_s,
+                       job_workers=job_workers)
         compiling = None
         if reference_while_compiling:
             from planner.orchestrator.background import while_compiling
 
             compiling = while_compiling("compiled", None)
         return cls(PlanPool(workers, timeout_s, max_queue, mode=mode, memory_mb=memory_mb, start=start),
-                   export_timeout_s=export_timeout_s, compiling=compiling)
+                   export_timeout_s=export_timeout_s, compiling=compiling, job_workers=job_workers)
 
     def _kernels_compiled(self) -> None:
         threading.Thread(target=self.pool.renew, name="rangeplan-pool-renew", daemon=True).start()
 
-    def run(self, job: Job, limit_s: float | None = None) -> Outcome:
+    def run(self, job: Job, limit_s: float | None = None, background: bool = False) -> Outcome:
         """Estimate, bound, run ``job`` on a worker; never raises for the input's fault, a
         limit, a full queue or a dead worker: those are :class:`Failed`. While the kernels
         compile in the background a planning job runs on the numpy reference
         (:func:`app.executors.on_reference`, the rule the CLI applies too). ``limit_s``: the
-        time limit of this job instead of the service's (an HTTP job's, ``RANGEPLAN_JOB_TIMEOUT_S``)."""
+        time limit of this job instead of the service's (an HTTP job's, ``RANGEPLAN_JOB_TIMEOUT_S``);
+        ``background``: a job, which yields free workers to synchronous requests (its share is
+        bounded by :meth:`arun`)."""
         running = self.kernels.running() if self.kernels is not None else None
         if running is not None:
             job = on_reference(job)
@@ -174,7 +196,7 @@ class JobService:
         limit = self.export_timeout_s if isinstance(job, ExportJob) else timeout_s
         job = bounded(job, limit)
         try:
-            return self.pool.run(job, limit)
+            return self.pool.run(job, limit, background=True) if background else self.pool.run(job, limit)
         except (JobTimeout, PoolBusy, WorkerCrashed) as exc:
             return describe_failure(exc, job, limit, self.memory_mb)
 
@@ -199,11 +221,35 @@ class JobService:
         except threading.BrokenBarrierError:  # a thread that did not start in 30 s: it starts later
             pass
 
-    async def arun(self, job: Job, limit_s: float | None = None) -> Outcome:
-        """:meth:`run` from an event loop (on a thread: the pool blocks)."""
+    async def arun(self, job: Job, limit_s: float | None = None, background: bool = False) -> Outcome:
+        """:meth:`run` from an event loop (on a thread: the pool blocks). ``background``: a job,
+        on one of :attr:`job_workers` threads of its own (the jobs' share; more wait for one
+        without holding a worker or a thread of the synchronous requests)."""
+        loop = asyncio.get_running_loop()
+        if background:
+            with self._threads_lock:
+                if self._job_threads is None:
+                    self._job_threads = ThreadPoolExecutor(self.job_workers, thread_name_prefix="rangeplan-job")
+                threads = self._job_threads
+                self.jobs_queued += 1
+            return await loop.run_in_executor(threads, self._run_job, job, limit_s)
         if self._threads is None:
             self.start_threads()
-        return await asyncio.get_running_loop().run_in_executor(self._threads, self.run, job, limit_s)
+        return await loop.run_in_executor(self._threads, self.run, job, limit_s)
+
+    def _run_job(self, job: Job, limit_s: float | None) -> Outcome:
+        with self._threads_lock:
+            self.jobs_queued -= 1
+            self.jobs_running += 1
+        try:
+            return self.run(job, limit_s, background=True)
+        finally:
+            with self._threads_lock:
+                self.jobs_running -= 1
+
+    def jobs(self) -> dict[str, int]:
+        """The jobs' share: ``{"workers", "running", "queued"}`` (/ready, /metrics)."""
+        return {"workers": self.job_workers, "running": self.jobs_running, "queued": self.jobs_queued}
 
     def stats(self) -> dict[str, Any]:
         return self.pool.stats()
@@ -228,5 +274,9 @@ class JobService:
         if self._threads is not None:
             self._threads.shutdown(wait=False, cancel_futures=True)
             self._threads = None
+        with self._threads_lock:
+            jobs, self._job_threads = self._job_threads, None
+        if jobs is not None:
+            jobs.shutdown(wait=False, cancel_futures=True)
         if pool:
             self.pool.close()

@@ -88,6 +88,12 @@ class Settings(BaseModel):
                               "estimate, Prefer: wait=N sets N for that request", gt=0)
     job_timeout_s: float = _f(600.0, "Compute limit of a contour, and of a plan run as a job [s]; work estimated above "
                               "1/1.5 of it is refused before it starts; at least RANGEPLAN_PLAN_TIMEOUT_S", gt=0)
+    job_workers: int | None = _f(None, "Planning workers that jobs (contours, and plans answered 202 Accepted) may "
+                                 "hold at once; the others are kept for synchronous requests (plans, imports, "
+                                 "the editor), which a free worker serves before any waiting job. More jobs wait "
+                                 "their turn (state queued). At RANGEPLAN_WORKERS or more, jobs may hold every "
+                                 "worker, and a synchronous request that finds them all on jobs is answered 503 busy "
+                                 "at once", default_text="RANGEPLAN_WORKERS - 1 (at least 1)", ge=1)
     max_jobs: int = _f(100, "Jobs kept (the oldest finished are dropped; with this many unfinished the API answers "
                        "503 busy)", ge=1)
     job_max_age_s: float = _f(86400.0, "Seconds a finished job is kept", gt=0)

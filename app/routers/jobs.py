@@ -14,10 +14,14 @@ work is short, and ``202 Accepted`` with a job (``Location: /v1/jobs/{id}``) whe
   becomes a job then, rather than a timeout.
 
 A job runs under ``RANGEPLAN_JOB_TIMEOUT_S`` (600 s; a contour always does, as it may become
-one). ``GET /v1/jobs/{id}`` says ``state`` (queued | running | done | failed), ``progress``
-``{done, total, unit}`` (a contour's cut passes, written by the worker after each pass), the
-work estimate, ``eta_s`` and, once done, ``result``: the stored plan's URL (``/v1/plans/{id}``,
-any ``?format=``), or ``error`` (the error the synchronous call would have answered).
+one), on the jobs' share of the workers (``RANGEPLAN_JOB_WORKERS``: at most that many at once,
+the others wait ``queued``; :class:`app.service.JobService`), so that synchronous requests
+always find a worker; a synchronous contour waits for its turn there too, and becomes a job
+when it is still waiting or running at the synchronous limit. ``GET /v1/jobs/{id}`` says
+``state`` (queued | running | done | failed), ``progress`` ``{done, total, unit}`` (a
+contour's cut passes, written by the worker after each pass), the work estimate, ``eta_s``
+and, once done, ``result``: the stored plan's URL (``/v1/plans/{id}``, any ``?format=``), or
+``error`` (the error the synchronous call would have answered).
 
 Progress crosses the process boundary through the SQLite store the worker already opens to
 store its plan (:func:`app.job_progress.job_progress`): the same for a local planning process, the
@@ -232,7 +236,7 @@ async def _run(app: FastAPI, job: ContourJob | PlanJob, fmt: str, limit_s: float
     """Run ``job`` on the app's job service under the job limit; end its row with the outcome."""
     t0 = time.perf_counter()
     try:
-        outcome = await app.state.ensure_service().arun(job, limit_s)
+        outcome = await app.state.ensure_service().arun(job, limit_s, background=True)  # on the jobs' share
     except Exception as exc:  # the service closing under it (the server stopping): the job failed
         outcome = crashed(exc)
     observe_job(app, job, time.perf_counter() - t0, outcome)

@@ -33,6 +33,10 @@ class ReadyModel(BaseModel):
                          "slower; their work estimate and limit at its costs)")
     pool: dict[str, Any] = Field(description="Planning pool: mode, workers, jobs in flight, time limit (s), memory "
                                  "limit per worker (MiB), workers replaced")
+    jobs: dict[str, int] = Field(default_factory=dict, description="The jobs' share of the workers (contours and "
+                                 "plans answered 202): workers (how many jobs may run at once, "
+                                 "RANGEPLAN_JOB_WORKERS), running (jobs holding one), queued (jobs waiting for one); "
+                                 "the other workers are kept for synchronous requests")
     editor_port: int | None = Field(description="TCP port of the browser editor, if it runs")
 
 
@@ -52,6 +56,6 @@ async def ready(request: Request):
     state = svc.readiness()
     body = {"status": "ready" if state["ready"] else "failed" if state["failures"] else "starting", "version": VERSION,
             "workers_ready": state["workers_ready"], "workers": state["workers"], "failures": state["failures"],
-            "kernels": state.get("kernels", "compiled"), "pool": svc.stats(),
+            "kernels": state.get("kernels", "compiled"), "pool": svc.stats(), "jobs": svc.jobs(),
             "editor_port": request.app.state.editor_port}
     return JSONResponse(body, status_code=200 if state["ready"] else 503)
