@@ -215,3 +215,37 @@ def with_arrival(t: Tube, counts: np.ndarray, extra: int) -> np.ndarray:
     cells = np.flatnonzero((t.length > 0) & ~t.lead)
     out[cells[-extra:]] += 1
     return out
+
+
+#: program feed: rounds of a sample more in each run of segments faster than F
+#: (:func:`run_samples`) before the moves' cells are shortened instead
+RUN_FIXES = 3
+
+
+def run_samples(over: np.ndarray, counts: np.ndarray, lead: np.ndarray) -> np.ndarray:
+    """The samples to add per segment of a plan (``over``: each segment's largest speed over F,
+    :func:`planner.contour.search.overspeed_of`; ``counts``: its samples; ``lead``: the lead
+    cells, never raised) for its runs of consecutive segments faster than F: the controller
+    trails its cells after a start or a corner's slowdown and runs ahead of them before a
+    corner or the end, and catches up faster than F over a run of cells. A run's excess
+    travel, ``sum(counts (over - 1))`` samples' travel at F, rounded up, is added one sample
+    each to its fastest segments: time for the catch-up at F, where shortening every cell of
+    the move (the cells' margin) costs a sample every few cells on the whole move."""
+    add = np.zeros(len(counts), np.int64)
+    bad = (over > 1.0) & ~lead
+    k = 0
+    n = len(over)
+    while k < n:
+        if not bad[k]:
+            k += 1
+            continue
+        j = k
+        while j < n and bad[j]:
+            j += 1
+        idx = np.arange(k, j)
+        need = max(1, math.ceil(float(np.sum(counts[idx] * (over[idx] - 1.0))) - 1e-9))
+        order = idx[np.argsort(-over[idx], kind="stable")]
+        for q in range(need):
+            add[order[q % len(order)]] += 1
+        k = j
+    return add

@@ -28,7 +28,16 @@ from ..schema import MAX_CONTOUR_TOLERANCE_M, MAX_TOTAL_STEPS, MIN_TS, ContourRe
 from .estimate import ADVICE_MIN_S, ADVICE_WORK, FEED_MARGIN, piece_estimate
 from .passes import CELL_SAMPLES, PROGRAM_MARGIN, V0_M_S, TubeSizes, segment_of
 from .path import moves_at
-from .profiles import ARRIVAL_MAX, Optimal, arrival_run, optimal_counts, profile_counts, with_arrival
+from .profiles import (
+    ARRIVAL_MAX,
+    RUN_FIXES,
+    Optimal,
+    arrival_run,
+    optimal_counts,
+    profile_counts,
+    run_samples,
+    with_arrival,
+)
 from .tube import Tube
 from .zaxis import blend_speed, slopes
 
@@ -135,6 +144,7 @@ class TimingSearch:
         self.name = f"line {els[0].line}"
         self.found = Found(st.Ts)
         self.lines = dict(zip(chunk, (e.line for e in els)))
+        self.run_counts = np.zeros(0, np.int64)  #: the counts :meth:`within_runs` found
 
     def feed_on(self, t: Tube) -> np.ndarray:
         """The programmed F [m/s] of the move each of the tube's segments belongs to."""
@@ -320,6 +330,23 @@ class TimingSearch:
             counts[bad] = np.maximum(np.ceil(counts[bad] * over[bad] * (1 + PROGRAM_FIX_MARGIN)), counts[bad] + 1)
         return None
 
+    def within_runs(self, t: Tube, counts: np.ndarray, over: np.ndarray) -> PlanResult | None:
+        """``counts`` (whose plan ran faster than F by ``over`` per segment) with samples added
+        to its runs faster than F (:func:`~planner.contour.profiles.run_samples`), planned
+        again, at most :data:`~planner.contour.profiles.RUN_FIXES` times; the plan where none
+        is faster than F, else None."""
+        feed_of = np.minimum(self.feed_on(t), self.zcap_on(t))
+        for _ in range(RUN_FIXES):
+            counts = counts + run_samples(over, counts, t.lead)
+            res = self.attempt(t, counts)
+            if res is None:
+                return None
+            over = overspeed_of(res, counts, feed_of)
+            if over.max() <= 1.0:
+                self.run_counts = counts
+                return res
+        return None
+
     def program_optimal(self) -> tuple[PlanResult, Tube] | None:
         """The ``program`` feed's timing: the exact path's time-optimal profile with each move's
         speed capped at its own F (``optimal``, built capped: :func:`~planner.contour.plan.plan_cut`),
@@ -336,8 +363,8 @@ class TimingSearch:
         # the margins a pass of the same moves found (depth passes: one plan each after the first)
         memo, geo = getattr(optimal, "memo", None), getattr(optimal, "geo", None)
         key = ("feed margin", geo, self.st.Ts)
-        margin, arrive = memo.get(key, (np.full(len(self.els), FEED_MARGIN), 0)) if memo is not None and geo else \
-            (np.full(len(self.els), FEED_MARGIN), 0)
+        margin, arrive, known = memo.get(key, (np.full(len(self.els), FEED_MARGIN), 0, None)) \
+            if memo is not None and geo else (np.full(len(self.els), FEED_MARGIN), 0, None)
         t: Tube | None = None
         counts = np.zeros(0, np.int64)
         for _ in range(FEED_MARGIN_TRIES):
@@ -352,14 +379,21 @@ class TimingSearch:
             if not (np.all(np.isfinite(times)) and times[-1] > 0):  # pragma: no cover - a profile that never moves
                 return None
             counts = with_arrival(cur, self.feed_counts(cur, optimal_counts(cur, times, self.st.Ts)), arrive)
+            if known is not None and len(known) == len(counts):  # a pass of the same moves' run samples
+                counts, known = known, None
             res = self.attempt(cur, counts)
             if res is None:
                 break
             over_seg = overspeed_of(res, counts, np.minimum(self.feed_on(cur), self.zcap_on(cur)))
             if over_seg.max() <= 1.0:
                 if memo is not None and geo:
-                    memo[key] = (margin, arrive)
+                    memo[key] = (margin, arrive, counts)
                 return res, cur
+            got = self.within_runs(cur, counts, over_seg)  # the catch-ups: a sample more in each run
+            if got is not None:
+                if memo is not None and geo:
+                    memo[key] = (margin, arrive, self.run_counts)
+                return got, cur
             # the catch-up before the end, where it is the only excess: a sample more there, not
             # shorter cells on the whole move (where there are others, shorter cells first)
             loc = np.searchsorted(self.chunk, cur.element)
