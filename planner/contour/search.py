@@ -66,6 +66,13 @@ PROGRAM_FIXES = 3
 #: under a sample's travel at F: :data:`planner.contour.estimate.FEED_MARGIN`)
 FEED_MARGIN_TRIES = 5
 FEED_MARGIN_STEP = 0.005
+#: program feed, the time-optimal timing (:meth:`TimingSearch.program_optimal`): its candidates
+#: are planned with the tool-speed rows (``settings.tool_speed_max_m_s``) at the piece's top F
+#: times this (the rows' 16-gon lies inside the circle: 0.981 of the limit in the worst
+#: direction), so the controller's catch-ups after a start or a corner run at F instead of over
+#: it; where that is infeasible, without them (module constants below)
+FEED_SPEED_ROOM = 1.015
+FEED_ROWS_ARC_SHARE = 0.5
 #: program feed: a segment's excess over F beyond this is a spike (more samples in its cells),
 #: not a move's cells too long (shorter cells on the whole move)
 FEED_SPIKE = 1.03
@@ -145,6 +152,7 @@ class TimingSearch:
         self.found = Found(st.Ts)
         self.lines = dict(zip(chunk, (e.line for e in els)))
         self.run_counts = np.zeros(0, np.int64)  #: the counts :meth:`within_runs` found
+        self.plan_st = st  #: the settings the candidates are planned with (:meth:`program_optimal`'s speed rows)
 
     def feed_on(self, t: Tube) -> np.ndarray:
         """The programmed F [m/s] of the move each of the tube's segments belongs to."""
@@ -169,7 +177,7 @@ class TimingSearch:
             return None
         check_counts(counts, self.els[0].line)
         try:
-            res = plan_timed(self.name, self.model, self.st, t.segments, counts.tolist())
+            res = plan_timed(self.name, self.model, self.plan_st, t.segments, counts.tolist())
         except PlannerError as err:
             if err.code not in ("infeasible", "not_settled"):
                 raise
@@ -363,8 +371,15 @@ class TimingSearch:
         # the margins a pass of the same moves found (depth passes: one plan each after the first)
         memo, geo = getattr(optimal, "memo", None), getattr(optimal, "geo", None)
         key = ("feed margin", geo, self.st.Ts)
-        margin, arrive, known = memo.get(key, (np.full(len(self.els), FEED_MARGIN), 0, None)) \
-            if memo is not None and geo else (np.full(len(self.els), FEED_MARGIN), 0, None)
+        margin, arrive, known, rows = memo.get(key, (np.full(len(self.els), FEED_MARGIN), 0, None, True)) \
+            if memo is not None and geo else (np.full(len(self.els), FEED_MARGIN), 0, None, True)
+        # the tool-speed rows at the piece's top F (a little over it: the rows' polygon lies inside
+        # the circle), unless the request sets its own: the controller's catch-ups then run at F
+        arcs = sum(e.length_m for e in self.els if e.kind == "arc")
+        rows = rows and self.st.tool_speed_max_m_s is None and arcs < FEED_ROWS_ARC_SHARE * sum(
+            e.length_m for e in self.els)
+        speed_st = self.st.model_copy(update={"tool_speed_max_m_s": float(self.feed.max()) * FEED_SPEED_ROOM})
+        self.plan_st = speed_st if rows else self.st
         t: Tube | None = None
         counts = np.zeros(0, np.int64)
         for _ in range(FEED_MARGIN_TRIES):
@@ -382,17 +397,20 @@ class TimingSearch:
             if known is not None and len(known) == len(counts):  # a pass of the same moves' run samples
                 counts, known = known, None
             res = self.attempt(cur, counts)
+            if res is None and self.plan_st is speed_st:  # infeasible under the speed rows: without them
+                self.plan_st, rows = self.st, False
+                res = self.attempt(cur, counts)
             if res is None:
                 break
             over_seg = overspeed_of(res, counts, np.minimum(self.feed_on(cur), self.zcap_on(cur)))
             if over_seg.max() <= 1.0:
                 if memo is not None and geo:
-                    memo[key] = (margin, arrive, counts)
+                    memo[key] = (margin, arrive, counts, rows)
                 return res, cur
             got = self.within_runs(cur, counts, over_seg)  # the catch-ups: a sample more in each run
             if got is not None:
                 if memo is not None and geo:
-                    memo[key] = (margin, arrive, self.run_counts)
+                    memo[key] = (margin, arrive, self.run_counts, rows)
                 return got, cur
             # the catch-up before the end, where it is the only excess: a sample more there, not
             # shorter cells on the whole move (where there are others, shorter cells first)
