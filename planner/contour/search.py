@@ -314,7 +314,12 @@ class TimingSearch:
         """``counts`` raised where a cell would be crossed faster than its move's F on average:
         at least its length over F Ts samples (the profile's rounding to whole samples would
         give a cell of 2.6 samples' travel 2 samples, 30 % over F); the lead cells stay one."""
-        need = np.ceil(t.length / (np.minimum(self.feed_on(t), self.shape_on(t)) * self.st.Ts) - 1e-9)
+        seconds = getattr(self.cell_caps, "seconds", None)
+        if seconds is None:
+            need = np.ceil(t.length / (np.minimum(self.feed_on(t), self.shape_on(t)) * self.st.Ts) - 1e-9)
+        else:  # the Z axis acceleration's bound rises away from a slope change: its time across the cell
+            at = t.length / np.minimum(self.feed_on(t), self.zcap_on(t))
+            need = np.ceil(np.maximum(at, seconds(t)) / self.st.Ts - 1e-9)
         out = np.maximum(counts, need.astype(np.int64))
         out[t.lead] = counts[t.lead]
         return out
