@@ -53,13 +53,13 @@ def test_sample_split_pieces_are_whole_samples_at_one_speed(n, samples):
 
 
 def _line(length: float, feed: float) -> PathElement:
-    return PathElement(kind="line", start=(0.0, 0.0), end=(length, 0.0), length_m=length, line=1, feed_m_s=feed,
-                       z_start_m=0.0, z_end_m=0.0)
+    return PathElement(kind="line", start=np.zeros(2), end=np.array([length, 0.0]), length_m=length, line=1,
+                       feed_m_s=feed, z_start_m=0.0, z_end_m=0.0)
 
 
 def _arc(r: float, sweep: float, feed: float) -> PathElement:
-    return PathElement(kind="arc", start=(r, 0.0), end=(r * math.cos(sweep), r * math.sin(sweep)),
-                       centre=(0.0, 0.0), radius_m=r, start_angle_rad=0.0, sweep_rad=sweep,
+    return PathElement(kind="arc", start=np.array([r, 0.0]), end=np.array([r * math.cos(sweep), r * math.sin(sweep)]),
+                       centre=np.zeros(2), radius_m=r, start_angle_rad=0.0, sweep_rad=sweep,
                        length_m=r * abs(sweep), line=1, feed_m_s=feed, z_start_m=0.0, z_end_m=0.0)
 
 
@@ -84,9 +84,10 @@ def test_arc_cells_at_F_keep_the_chords_sagitta():
     t = tube([e], np.zeros(2), tol, 0.0, unit, np.array([unit]))
     pts = [np.asarray(s.polygon, float) for s in t.segments if s.polygon is not None]
     assert pts
+    r = 1e-3
     chords = t.length[t.length > 0]
-    half = np.arcsin(np.clip(chords / (2 * e.radius_m), 0.0, 1.0))
-    sagitta = e.radius_m * (1 - np.cos(half))
+    half = np.arcsin(np.clip(chords / (2 * r), 0.0, 1.0))
+    sagitta = r * (1 - np.cos(half))
     assert sagitta.max() <= SAGITTA_FRACTION * tol * (1 + 1e-9)
 
 
@@ -112,10 +113,10 @@ def test_a_cell_at_a_slope_change_is_crossed_at_the_rising_bound():
     change and rises as ``sqrt(v_j^2 + 2 a d)`` along the ramp (``a = z_acc / |g|``), at once on
     the level line; the time across a ramp cell ending at the change is
     ``(sqrt(v_j^2 + 2 a L) - v_j) / a``, far less than ``L / v_j`` (the lowest bound)."""
-    ramp = PathElement(kind="line", start=(0.0, 0.0), end=(2e-3, 0.0), length_m=2e-3, line=1, feed_m_s=0.0167,
-                       z_start_m=1e-3, z_end_m=-1e-3)
-    level = PathElement(kind="line", start=(2e-3, 0.0), end=(1e-2, 0.0), length_m=8e-3, line=2, feed_m_s=0.0167,
-                        z_start_m=-1e-3, z_end_m=-1e-3)
+    ramp = PathElement(kind="line", start=np.zeros(2), end=np.array([2e-3, 0.0]), length_m=2e-3, line=1,
+                       feed_m_s=0.0167, z_start_m=1e-3, z_end_m=-1e-3)
+    level = PathElement(kind="line", start=np.array([2e-3, 0.0]), end=np.array([1e-2, 0.0]), length_m=8e-3, line=2,
+                        feed_m_s=0.0167, z_start_m=-1e-3, z_end_m=-1e-3)
     z = ZCaps([ramp, level], [0, 1], 2e-5, 0.05, 1.0)
     cell = 1e-4
     # the cells: the ramp's last, the level line's first and one further on
