@@ -33,6 +33,7 @@ from .profiles import (
     RUN_FIXES,
     Optimal,
     arrival_run,
+    near_reversal,
     optimal_counts,
     profile_counts,
     run_samples,
@@ -349,8 +350,12 @@ class TimingSearch:
         again, at most :data:`~planner.contour.profiles.RUN_FIXES` times; the plan where none
         is faster than F, else None."""
         feed_of = np.minimum(self.feed_on(t), self.zcap_on(t))
+        avoid = near_reversal(t.turn)
         for _ in range(RUN_FIXES):
-            counts = counts + run_samples(over, counts, t.lead)
+            add = run_samples(over, counts, t.lead, avoid)
+            if not add.any():  # the excess is near a reversal only: the cells' margin instead
+                return None
+            counts = counts + add
             res = self.attempt(t, counts)
             if res is None:
                 return None
