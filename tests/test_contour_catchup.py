@@ -168,3 +168,21 @@ def test_cam_samples_near_their_length_over_F(cam):
     for n in ramps:
         taken = int((at == n).sum()) * res.settings.Ts
         assert taken <= 1.35 * 2e-3 / feed[n], (n, taken)
+
+
+def test_no_catch_up_samples_next_to_a_reversal():
+    """A run faster than F within a few segments of a turn back (over 150 degrees: a retraced
+    line) gets no samples (the move's cells are shortened instead); a run clear of it does."""
+    from planner.contour.profiles import REVERSAL_NEAR, near_reversal
+
+    n = 40
+    turn = np.zeros(n)
+    turn[10] = math.radians(170.0)  # the reversal's junction
+    turn[30] = math.radians(90.0)  # a corner: no reversal
+    avoid = near_reversal(turn)
+    assert avoid[10 - REVERSAL_NEAR:10 + REVERSAL_NEAR + 1].all() and avoid.sum() == 2 * REVERSAL_NEAR + 1
+    over = np.full(n, 0.99)
+    over[12:15] = 1.05  # after the reversal
+    over[31:34] = 1.05  # after the corner
+    add = run_samples(over, np.full(n, 2), np.zeros(n, bool), avoid)
+    assert add[12:15].sum() == 0 and add[31:34].sum() == 1
