@@ -184,14 +184,16 @@ class TubeSizes:
             step = np.array([e.feed_m_s for e in self.els]) * self.st.Ts
             piece_max = step * np.ceil(4 * self.tol / step - 1e-9).clip(1.0) / (1 + margin)
             self.feed_tubes[key] = piece_tube(self.model, self.chunk, self.els, self.origin, self.tol, self.psi,
-                                              self.pos, self.elements, piece_max)
+                                              self.pos, self.elements, piece_max, step / (1 + margin))
         return self.feed_tubes[key]
 
 
 def piece_tube(model: RobotModel, chunk: list[int], els: list[PathElement], origin: np.ndarray, tol: float,
-               psi: float, pos: np.ndarray, elements: list[PathElement], piece_max: float | np.ndarray) -> Tube:
-    """The tube of a piece, starting where the robot is, its reach checked."""
-    t = tube(els, origin, tol, psi, piece_max)
+               psi: float, pos: np.ndarray, elements: list[PathElement], piece_max: float | np.ndarray,
+               unit: np.ndarray | None = None) -> Tube:
+    """The tube of a piece, starting where the robot is, its reach checked (``unit``: per move
+    its cells of whole samples' travel, :func:`planner.contour.tube.sample_split`)."""
+    t = tube(els, origin, tol, psi, piece_max, unit)
     t.element = np.asarray(chunk)[t.element]
     # the first point: where the robot is (within half the tolerance of the path's start, a few
     # um after a move there); the first two cells (the lead cell, held one sample, and the next)

@@ -215,3 +215,60 @@ def with_arrival(t: Tube, counts: np.ndarray, extra: int) -> np.ndarray:
     cells = np.flatnonzero((t.length > 0) & ~t.lead)
     out[cells[-extra:]] += 1
     return out
+
+
+#: program feed: rounds of a sample more in each run of segments faster than F
+#: (:func:`run_samples`) before the moves' cells are shortened instead
+RUN_FIXES = 3
+
+
+#: program feed: a run faster than F within this many segments of a junction that turns the
+#: path back by more than :data:`REVERSAL_RAD` gets no samples (:func:`run_samples`)
+REVERSAL_NEAR = 4
+REVERSAL_RAD = math.radians(150.0)
+
+
+def near_reversal(turn: np.ndarray) -> np.ndarray:
+    """Per segment of a tube (``turn``: its junctions' turn angles) whether it lies within
+    :data:`REVERSAL_NEAR` segments of a reversal (a turn over :data:`REVERSAL_RAD`: a line
+    retraced, a tab's flank): samples added there slow the robot's turn-back, which then
+    crawls back along the line it came on (``tests/test_contour_retrace.py`` follows the
+    path and lost it)."""
+    out = np.zeros(len(turn), bool)
+    for j in np.flatnonzero(turn > REVERSAL_RAD):
+        out[max(j - REVERSAL_NEAR, 0):j + REVERSAL_NEAR + 1] = True
+    return out
+
+
+def run_samples(over: np.ndarray, counts: np.ndarray, lead: np.ndarray,
+                avoid: np.ndarray | None = None) -> np.ndarray:
+    """The samples to add per segment of a plan (``over``: each segment's largest speed over F,
+    :func:`planner.contour.search.overspeed_of`; ``counts``: its samples; ``lead``: the lead
+    cells, never raised) for its runs of consecutive segments faster than F: the controller
+    trails its cells after a start or a corner's slowdown and runs ahead of them before a
+    corner or the end, and catches up faster than F over a run of cells. A run's excess
+    travel, ``sum(counts (over - 1))`` samples' travel at F, rounded up, is added one sample
+    each to its fastest segments: time for the catch-up at F, where shortening every cell of
+    the move (the cells' margin) costs a sample every few cells on the whole move. A run with a
+    segment in ``avoid`` (:func:`near_reversal`) gets none."""
+    add = np.zeros(len(counts), np.int64)
+    bad = (over > 1.0) & ~lead
+    k = 0
+    n = len(over)
+    while k < n:
+        if not bad[k]:
+            k += 1
+            continue
+        j = k
+        while j < n and bad[j]:
+            j += 1
+        idx = np.arange(k, j)
+        if avoid is not None and avoid[idx].any():
+            k = j
+            continue
+        need = max(1, math.ceil(float(np.sum(counts[idx] * (over[idx] - 1.0))) - 1e-9))
+        order = idx[np.argsort(-over[idx], kind="stable")]
+        for q in range(need):
+            add[order[q % len(order)]] += 1
+        k = j
+    return add

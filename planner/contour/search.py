@@ -28,7 +28,17 @@ from ..schema import MAX_CONTOUR_TOLERANCE_M, MAX_TOTAL_STEPS, MIN_TS, ContourRe
 from .estimate import ADVICE_MIN_S, ADVICE_WORK, FEED_MARGIN, piece_estimate
 from .passes import CELL_SAMPLES, PROGRAM_MARGIN, V0_M_S, TubeSizes, segment_of
 from .path import moves_at
-from .profiles import ARRIVAL_MAX, Optimal, arrival_run, optimal_counts, profile_counts, with_arrival
+from .profiles import (
+    ARRIVAL_MAX,
+    RUN_FIXES,
+    Optimal,
+    arrival_run,
+    near_reversal,
+    optimal_counts,
+    profile_counts,
+    run_samples,
+    with_arrival,
+)
 from .tube import Tube
 from .zaxis import blend_speed, slopes
 
@@ -57,6 +67,13 @@ PROGRAM_FIXES = 3
 #: under a sample's travel at F: :data:`planner.contour.estimate.FEED_MARGIN`)
 FEED_MARGIN_TRIES = 5
 FEED_MARGIN_STEP = 0.005
+#: program feed, the time-optimal timing (:meth:`TimingSearch.program_optimal`): its candidates
+#: are planned with the tool-speed rows (``settings.tool_speed_max_m_s``) at the piece's top F
+#: times this (the rows' 16-gon lies inside the circle: 0.981 of the limit in the worst
+#: direction), so the controller's catch-ups after a start or a corner run at F instead of over
+#: it; where that is infeasible, without them (module constants below)
+FEED_SPEED_ROOM = 1.015
+FEED_ROWS_ARC_SHARE = 0.5
 #: program feed: a segment's excess over F beyond this is a spike (more samples in its cells),
 #: not a move's cells too long (shorter cells on the whole move)
 FEED_SPIKE = 1.03
@@ -135,6 +152,8 @@ class TimingSearch:
         self.name = f"line {els[0].line}"
         self.found = Found(st.Ts)
         self.lines = dict(zip(chunk, (e.line for e in els)))
+        self.run_counts = np.zeros(0, np.int64)  #: the counts :meth:`within_runs` found
+        self.plan_st = st  #: the settings the candidates are planned with (:meth:`program_optimal`'s speed rows)
 
     def feed_on(self, t: Tube) -> np.ndarray:
         """The programmed F [m/s] of the move each of the tube's segments belongs to."""
@@ -159,7 +178,7 @@ class TimingSearch:
             return None
         check_counts(counts, self.els[0].line)
         try:
-            res = plan_timed(self.name, self.model, self.st, t.segments, counts.tolist())
+            res = plan_timed(self.name, self.model, self.plan_st, t.segments, counts.tolist())
         except PlannerError as err:
             if err.code not in ("infeasible", "not_settled"):
                 raise
@@ -296,7 +315,12 @@ class TimingSearch:
         """``counts`` raised where a cell would be crossed faster than its move's F on average:
         at least its length over F Ts samples (the profile's rounding to whole samples would
         give a cell of 2.6 samples' travel 2 samples, 30 % over F); the lead cells stay one."""
-        need = np.ceil(t.length / (np.minimum(self.feed_on(t), self.shape_on(t)) * self.st.Ts) - 1e-9)
+        seconds = getattr(self.cell_caps, "seconds", None)
+        if seconds is None:
+            need = np.ceil(t.length / (np.minimum(self.feed_on(t), self.shape_on(t)) * self.st.Ts) - 1e-9)
+        else:  # the Z axis acceleration's bound rises away from a slope change: its time across the cell
+            at = t.length / np.minimum(self.feed_on(t), self.zcap_on(t))
+            need = np.ceil(np.maximum(at, seconds(t)) / self.st.Ts - 1e-9)
         out = np.maximum(counts, need.astype(np.int64))
         out[t.lead] = counts[t.lead]
         return out
@@ -320,6 +344,27 @@ class TimingSearch:
             counts[bad] = np.maximum(np.ceil(counts[bad] * over[bad] * (1 + PROGRAM_FIX_MARGIN)), counts[bad] + 1)
         return None
 
+    def within_runs(self, t: Tube, counts: np.ndarray, over: np.ndarray) -> PlanResult | None:
+        """``counts`` (whose plan ran faster than F by ``over`` per segment) with samples added
+        to its runs faster than F (:func:`~planner.contour.profiles.run_samples`), planned
+        again, at most :data:`~planner.contour.profiles.RUN_FIXES` times; the plan where none
+        is faster than F, else None."""
+        feed_of = np.minimum(self.feed_on(t), self.zcap_on(t))
+        avoid = near_reversal(t.turn)
+        for _ in range(RUN_FIXES):
+            add = run_samples(over, counts, t.lead, avoid)
+            if not add.any():  # the excess is near a reversal only: the cells' margin instead
+                return None
+            counts = counts + add
+            res = self.attempt(t, counts)
+            if res is None:
+                return None
+            over = overspeed_of(res, counts, feed_of)
+            if over.max() <= 1.0:
+                self.run_counts = counts
+                return res
+        return None
+
     def program_optimal(self) -> tuple[PlanResult, Tube] | None:
         """The ``program`` feed's timing: the exact path's time-optimal profile with each move's
         speed capped at its own F (``optimal``, built capped: :func:`~planner.contour.plan.plan_cut`),
@@ -336,8 +381,15 @@ class TimingSearch:
         # the margins a pass of the same moves found (depth passes: one plan each after the first)
         memo, geo = getattr(optimal, "memo", None), getattr(optimal, "geo", None)
         key = ("feed margin", geo, self.st.Ts)
-        margin, arrive = memo.get(key, (np.full(len(self.els), FEED_MARGIN), 0)) if memo is not None and geo else \
-            (np.full(len(self.els), FEED_MARGIN), 0)
+        margin, arrive, known, rows = memo.get(key, (np.full(len(self.els), FEED_MARGIN), 0, None, True)) \
+            if memo is not None and geo else (np.full(len(self.els), FEED_MARGIN), 0, None, True)
+        # the tool-speed rows at the piece's top F (a little over it: the rows' polygon lies inside
+        # the circle), unless the request sets its own: the controller's catch-ups then run at F
+        arcs = sum(e.length_m for e in self.els if e.kind == "arc")
+        rows = rows and self.st.tool_speed_max_m_s is None and arcs < FEED_ROWS_ARC_SHARE * sum(
+            e.length_m for e in self.els)
+        speed_st = self.st.model_copy(update={"tool_speed_max_m_s": float(self.feed.max()) * FEED_SPEED_ROOM})
+        self.plan_st = speed_st if rows else self.st
         t: Tube | None = None
         counts = np.zeros(0, np.int64)
         for _ in range(FEED_MARGIN_TRIES):
@@ -352,14 +404,24 @@ class TimingSearch:
             if not (np.all(np.isfinite(times)) and times[-1] > 0):  # pragma: no cover - a profile that never moves
                 return None
             counts = with_arrival(cur, self.feed_counts(cur, optimal_counts(cur, times, self.st.Ts)), arrive)
+            if known is not None and len(known) == len(counts):  # a pass of the same moves' run samples
+                counts, known = known, None
             res = self.attempt(cur, counts)
+            if res is None and self.plan_st is speed_st:  # infeasible under the speed rows: without them
+                self.plan_st, rows = self.st, False
+                res = self.attempt(cur, counts)
             if res is None:
                 break
             over_seg = overspeed_of(res, counts, np.minimum(self.feed_on(cur), self.zcap_on(cur)))
             if over_seg.max() <= 1.0:
                 if memo is not None and geo:
-                    memo[key] = (margin, arrive)
+                    memo[key] = (margin, arrive, counts, rows)
                 return res, cur
+            got = self.within_runs(cur, counts, over_seg)  # the catch-ups: a sample more in each run
+            if got is not None:
+                if memo is not None and geo:
+                    memo[key] = (margin, arrive, self.run_counts, rows)
+                return got, cur
             # the catch-up before the end, where it is the only excess: a sample more there, not
             # shorter cells on the whole move (where there are others, shorter cells first)
             loc = np.searchsorted(self.chunk, cur.element)
