@@ -93,6 +93,7 @@ def _run(job: tuple[int, int, float | None]) -> tuple[dict, dict]:
         return case, {"constrained": {"outcome": "crash", "problem": repr(exc)}, "paper": {"outcome": "skipped"}}
     for mode, rec in out.items():
         rec["speed"] = _SPEED.get(mode, 1.0)
+        rec["index"] = i  # the case is user_case(default_rng([seed, i])) or draw_case(seed, i): --only i
         _retime(case, mode, rec)
     return case, out
 
@@ -158,8 +159,8 @@ def refusals(path: Path, workers: int, limit: float, minutes: float, log_path: P
     counts: dict[str, collections.Counter] = {r: collections.Counter() for r in REMEDIES}
     needless, wrong, done, cpu = [], [], 0, 0.0
     log = log_path.open("w") if log_path is not None else None
-    # (as they complete: one slow case does not hold the others back; at the deadline the table
-    # is printed and the cases still running are left to end with the process)
+    # (as they complete: one slow case does not hold the others back; at the deadline the cases
+    # still running are stopped and the table printed)
     pool = ProcessPoolExecutor(workers, initializer=_init)
     futures = [pool.submit(_remedies, job) for job in jobs]
     try:
@@ -178,7 +179,7 @@ def refusals(path: Path, workers: int, limit: float, minutes: float, log_path: P
                 wrong.append((case, message, out))
     except TimeoutError:
         pass
-    pool.shutdown(wait=False, cancel_futures=True)
+    _stop(pool, futures)
     print(f"\n{done} of {len(jobs)} refused cases tried in {(time.perf_counter() - t0) / 60:.1f} min "
           f"({cpu:.0f} CPU s; plans over {limit:g} s estimated not tried: too_much_work)\n")
     outcomes = sorted({v for c in counts.values() for v in c})
@@ -196,12 +197,30 @@ def refusals(path: Path, workers: int, limit: float, minutes: float, log_path: P
     sys.stdout.flush()
 
 
+def _stop(pool: ProcessPoolExecutor, futures: list) -> int:
+    """Cancel the cases not started and terminate the workers still planning one (this run's
+    own processes): the run ends at its deadline, not when its slowest case does. Returns how
+    many cases were still running."""
+    running = sum(1 for f in futures if f.running())
+    procs = list((getattr(pool, "_processes", None) or {}).values())  # the pool's own workers (shutdown forgets them)
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in procs:
+        if proc.is_alive():
+            proc.terminate()
+    for proc in procs:
+        proc.join(5)
+    return running
+
+
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--cases", type=int, default=10_000)
     ap.add_argument("--seed", type=int, default=20)
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--minutes", type=float, default=30.0, help="stop taking new cases after this long")
+    ap.add_argument("--minutes", type=float, default=30.0,
+                    help="stop after this long [min] (the cases still running then are stopped)")
+    ap.add_argument("--only", type=str, default=None,
+                    help="only these case indices (comma-separated: a run's cases again, e.g. those over 1.5x)")
     ap.add_argument("--problems", type=Path, default=None, help="write the problem cases here (JSON lines)")
     ap.add_argument("--users", action="store_true", help="the cases of where users go (module docstring)")
     ap.add_argument("--limit", type=float, default=30.0, help="with --users: the compute limit [s]")
@@ -223,11 +242,15 @@ def main() -> None:
     err_ratios: dict[str, list[float]] = collections.defaultdict(list)
     deadline = t0 + 60 * args.minutes
     log = args.ratios.open("w") if args.ratios else None
-    with ProcessPoolExecutor(args.workers, initializer=_init) as pool:
-        for case, out in pool.map(_run, [(args.seed, i, users_limit) for i in range(args.cases)],
-                                  chunksize=1 if args.users else 4):
-            if time.perf_counter() > deadline:
-                break
+    # as they complete, up to the deadline: the in-order map waited on one slow case past
+    # --minutes (two runs of 15-18 min overran with a case still running); the cases still
+    # running at the deadline are stopped (their workers terminated) and counted apart
+    pool = ProcessPoolExecutor(args.workers, initializer=_init)
+    indices = [int(i) for i in args.only.split(",")] if args.only else range(args.cases)
+    futures = [pool.submit(_run, (args.seed, i, users_limit)) for i in indices]
+    try:
+        for future in as_completed(futures, timeout=max(1.0, deadline - time.perf_counter())):
+            case, out = future.result()
             done += 1
             for mode, rec in out.items():
                 counts[mode][rec["outcome"]] += 1
@@ -253,12 +276,15 @@ def main() -> None:
                     err_ratios[f"{mode} {rec['outcome']}"].append(sec / rec["speed"] / est)
             if done % 500 == 0:
                 print(f"  {done} cases, {time.perf_counter() - t0:.0f} s, {len(problems)} problems", flush=True)
-        pool.shutdown(cancel_futures=True)
+    except TimeoutError:
+        pass
+    running = _stop(pool, futures)
     if log is not None:
         log.close()
     wall = time.perf_counter() - t0
     codes = sorted(set(counts["constrained"]) | set(counts["paper"]))
-    print(f"\n{done} cases certified in {wall / 60:.1f} min on {args.workers} workers (seed {args.seed})\n")
+    print(f"\n{done} cases certified in {wall / 60:.1f} min on {args.workers} workers (seed {args.seed}; "
+          f"{running} still running at the deadline, stopped)\n")
     print("| outcome | constrained (default) | paper |\n|---|---|---|")
     for c in codes:
         print(f"| {c} | {counts['constrained'][c]} | {counts['paper'][c]} |")

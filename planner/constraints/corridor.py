@@ -22,7 +22,8 @@ Margins: the constraints hold for the linear prediction, the plant is the nonlin
 the one-step mismatch left after the refinement (:mod:`planner.constraints.controller`) is
 below 1e-9 m on Table I, far inside the 1 micrometre margin, which therefore keeps the
 actual samples inside. The rows of the samples after the first are :data:`RECOURSE_M` /
-:data:`RECOURSE_RAD` tighter still (where the range is wide enough): the model is
+:data:`RECOURSE_RAD` tighter still at Ts 10 ms (less at finer sample times, :func:`recourse`;
+where the range is wide enough): the model is
 re-linearised every step, so a sample predicted two or more steps ahead moves by up to
 ~1e-7 m when it becomes the next step's first sample, and a plan that used a range to its
 edge there (a vertex of its rows: on arrival, the stop box with the arrival speed) would
@@ -67,8 +68,8 @@ from . import kernels as ck
 from .rows import RowBlock, RowConstraint, RowKind, StepContext
 
 __all__ = ["ARRIVAL_RATE_RAD_S", "ARRIVAL_SPEED_MAX_M_S", "ARRIVAL_SPEED_M_S", "ARRIVAL_STEP_M", "END_TOL_M",
-           "END_TOL_RAD", "MARGIN_M", "MARGIN_RAD", "RECOURSE_M", "RECOURSE_RAD",
-           "ArrivalConstraint", "CorridorConstraint", "EndApproachConstraint", "arrival_speed"]
+           "END_TOL_RAD", "MARGIN_M", "MARGIN_RAD", "RECOURSE_M", "RECOURSE_MIN", "RECOURSE_RAD", "RECOURSE_TS",
+           "ArrivalConstraint", "CorridorConstraint", "EndApproachConstraint", "arrival_speed", "recourse"]
 
 #: corridor margin [m]: constraints use each range shrunk by this on every side
 MARGIN_M = 1e-6
@@ -80,8 +81,14 @@ END_TOL_M = 3e-6
 END_TOL_RAD = 3e-6
 #: the rows of the horizon's samples after the first are this much tighter [m] ...
 RECOURSE_M = 2e-7
-#: ... and [rad]
+#: ... and [rad], at the sample time :data:`RECOURSE_TS` and above; less at finer sample times
+#: (:func:`recourse`)
 RECOURSE_RAD = 2e-7
+#: the sample time [s] the recourse was sized at (Table I with the Moving Slide)
+RECOURSE_TS = 0.01
+#: the least recourse [m, rad] at fine sample times: the one-step mismatch the refinement leaves
+#: (``controller.REFINE_TOL_M``)
+RECOURSE_MIN = 1e-8
 #: largest speed of the tool point (per axis) once the range is the end point [m/s] ...
 ARRIVAL_SPEED_M_S = 1e-4
 #: ... or at fine sample times this distance a sample [m] (the corridor margin), at most
@@ -95,6 +102,25 @@ ARRIVAL_STEP_M = 1e-6
 ARRIVAL_SPEED_MAX_M_S = 1e-3
 #: largest angular speed there [rad/s]
 ARRIVAL_RATE_RAD_S = 1e-3
+
+
+def recourse(Ts: float | None) -> tuple[float, float]:
+    """How much tighter the rows of the horizon's samples after the first are ([m], [rad]) at
+    the sample time ``Ts`` [s] (None: :data:`RECOURSE_TS`): the prediction error they leave room
+    for, the change of a sample's prediction when the model is re-linearised one step later, is
+    a sample's frozen linearisation ``~ a v Ts^3 / L`` (the drives' acceleration ``a``, the speed
+    ``v``, the geometry's length ``L``): :data:`RECOURSE_M` at :data:`RECOURSE_TS` scaled by
+    ``(Ts / RECOURSE_TS)^3``, at least :data:`RECOURSE_MIN`, at most the constant. Issue 31: at
+    Ts 1 ms the plant left the 2- and 3-step predictions by at most 1.4e-10 / 6.6e-10 m (6 legs,
+    49 kg, N 100; Table I at 10 ms 1.2e-7 / 6.1e-7 m), yet the rows of the later samples were
+    2e-7 m tighter: a robot at rest at the edge of the first sample's rows cannot move 2e-7 m in
+    one sample with its force rising at the rate limit, so 276 of the 600 steps (every step from
+    the end point's approach on, at rest too) were infeasible by 3-5e-7 m and solved relaxed,
+    at 15.6x the work estimate."""
+    if Ts is None or Ts >= RECOURSE_TS:
+        return RECOURSE_M, RECOURSE_RAD
+    scale = (Ts / RECOURSE_TS) ** 3
+    return max(RECOURSE_M * scale, RECOURSE_MIN), max(RECOURSE_RAD * scale, RECOURSE_MIN)
 
 
 #: half-planes of recently seen cell polygons, by their vertices' bytes: the candidate timings of
@@ -123,20 +149,23 @@ class CorridorConstraint(RowConstraint):
     the pose sets (see the module docstring). Compiled twin: ``kernels.corridor_fill``.
 
     ``lo``/``hi`` (K, 3): the shrunk box per sample 1..K [m, m, rad], for the horizon's first
-    sample; ``lo_deep``/``hi_deep`` the same shrunk by :data:`RECOURSE_M` / :data:`RECOURSE_RAD`
-    more (at most to the centre), for the later samples; ``hp[s]``: ``(A (h, 2), b (h,))`` or
-    ``None``, half-planes replacing the x/y box rows of sequence index ``s`` [m] (``b``
-    lowered by :data:`RECOURSE_M` for the later samples)."""
+    sample; ``lo_deep``/``hi_deep`` the same shrunk by the recourse (:func:`recourse` at the
+    sample time ``Ts``: :data:`RECOURSE_M` / :data:`RECOURSE_RAD` at 10 ms) more (at most to the
+    centre), for the later samples; ``hp[s]``: ``(A (h, 2), b (h,))`` or ``None``, half-planes
+    replacing the x/y box rows of sequence index ``s`` [m] (``b`` lowered by the recourse for
+    the later samples)."""
 
     kind = RowKind.CORRIDOR
 
     @classmethod
     def of(cls, model: RobotModel, seq: RangeSequence, segments: Sequence[Segment] | None,
            st: Settings) -> CorridorConstraint:
-        return cls(seq, segments)
+        return cls(seq, segments, st.Ts)
 
-    def __init__(self, seq: RangeSequence, segments: Sequence[Segment] | None):
+    def __init__(self, seq: RangeSequence, segments: Sequence[Segment] | None, Ts: float | None = None):
         K = seq.K
+        #: the later samples' rows this much tighter [m], [rad] (:func:`recourse`)
+        self.recourse_m, self.recourse_rad = recourse(Ts)
         lo, hi = seq.lower.copy(), seq.upper.copy()
         w = hi - lo
         marg = np.array([MARGIN_M, MARGIN_M, MARGIN_RAD])
@@ -174,7 +203,7 @@ class CorridorConstraint(RowConstraint):
                                 self.stop[j] = True
                                 key = (h, p.tobytes())  # the same for every sample at the end point
                                 if key not in cuts:
-                                    cuts[key] = _stop_in_cell(segments[h], p, blo, bhi, approach)
+                                    cuts[key] = _stop_in_cell(segments[h], p, blo, bhi, approach, self.recourse_m)
                                 cut = cuts[key]
                                 if cut is not None:  # the box cut to the exact cell
                                     A, b, lo[j, :2], hi[j, :2] = cut
@@ -199,7 +228,7 @@ class CorridorConstraint(RowConstraint):
                         V = seq.lower[j, :2] + (np.asarray(poly, float) - seg.lower[:2]) * (w[j, :2] / sw)
                         A, b = _halfplanes(V)
                         self.hp[j] = (A, b - MARGIN_M)
-        extra = np.minimum(np.array([RECOURSE_M, RECOURSE_M, RECOURSE_RAD]), 0.5 * (hi - lo))
+        extra = np.minimum(np.array([self.recourse_m, self.recourse_m, self.recourse_rad]), 0.5 * (hi - lo))
         lo_deep, hi_deep = lo + extra, hi - extra
         if segments is not None:
             # a range spreading out of a point (the start) keeps that point inside its rows: shrunk
@@ -257,7 +286,7 @@ class CorridorConstraint(RowConstraint):
             cols.append(6 * j + np.tile(np.arange(2), (len(b), 1)))
             vals.append(A)
             lower.append(np.full(len(b), -np.inf))
-            upper.append(b - (RECOURSE_M if j > 0 else 0.0))
+            upper.append(b - (self.recourse_m if j > 0 else 0.0))
         return RowBlock(np.vstack(cols), np.vstack(vals), np.concatenate(lower), np.concatenate(upper), self.kind)
 
     def _halfplanes(self, s: int) -> tuple[np.ndarray, np.ndarray]:
@@ -268,11 +297,11 @@ class CorridorConstraint(RowConstraint):
     @property
     def kernel_args(self) -> ck.CorridorArgs:
         return ck.CorridorArgs(self.lo, self.hi, self.lo_deep, self.hi_deep, self.has_hp, self.hp_ptr, self.hp_A,
-                               self.hp_b, float(RECOURSE_M))
+                               self.hp_b, float(self.recourse_m))
 
 
 def _stop_in_cell(cell: Segment, p: np.ndarray, blo: np.ndarray, bhi: np.ndarray,
-                  approach: tuple[np.ndarray, float] | None
+                  approach: tuple[np.ndarray, float] | None, room: float = RECOURSE_M
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """The stop box about the end point ``p`` (x, y), ``p +- END_TOL_M`` within the cell's box
     shrunk by the margin ``[blo, bhi]``, cut to the cell's exact polygon shrunk by the margin
@@ -285,7 +314,7 @@ def _stop_in_cell(cell: Segment, p: np.ndarray, blo: np.ndarray, bhi: np.ndarray
     box's bounding box, and that box. Where the cut leaves no room for the later samples'
     recourse, the box about ``p`` is doubled (up to 16 times; the robot then stops within
     that of the end point, still short of it along ``d``). None where the box is inside every
-    half-plane, or none leaves room."""
+    half-plane, or none leaves room. ``room``: the later samples' recourse [m]."""
     eye = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
 
     def corners(r: float) -> np.ndarray:
@@ -293,7 +322,7 @@ def _stop_in_cell(cell: Segment, p: np.ndarray, blo: np.ndarray, bhi: np.ndarray
         return np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
 
     def roomy(P: np.ndarray) -> bool:  # room for the later samples' recourse
-        return len(P) >= 3 and bool(np.all(P.max(axis=0) - P.min(axis=0) > 2 * RECOURSE_M))
+        return len(P) >= 3 and bool(np.all(P.max(axis=0) - P.min(axis=0) > 2 * room))
 
     box = corners(END_TOL_M)
     out = None
@@ -303,20 +332,20 @@ def _stop_in_cell(cell: Segment, p: np.ndarray, blo: np.ndarray, bhi: np.ndarray
         b = b - MARGIN_M
         if not np.all(box @ A.T <= b[None, :]):
             cut = clip_halfplanes(box, A, b)
-            if len(cut) >= 3 and np.all(cut.max(axis=0) - cut.min(axis=0) > 2 * RECOURSE_M):
+            if len(cut) >= 3 and np.all(cut.max(axis=0) - cut.min(axis=0) > 2 * room):
                 clo, chi = cut.min(axis=0), cut.max(axis=0)
                 out = np.vstack((A, eye)), np.concatenate((b, chi, -clo)), clo, chi
                 region = cut
     else:
         A, b = np.zeros((0, 2)), np.zeros(0)
-    if approach is None or roomy(clip_halfplanes(region, approach[0][None, :], np.array([approach[1] - RECOURSE_M]))):
+    if approach is None or roomy(clip_halfplanes(region, approach[0][None, :], np.array([approach[1] - room]))):
         return out
     # the no-overshoot half-plane leaves no room in the box: cut to it too, the box doubled
     A, b = np.vstack((A, approach[0][None, :])), np.concatenate((b, [approach[1]]))
     r = END_TOL_M
     for _ in range(5):
         box = corners(r)
-        if roomy(clip_halfplanes(box, A, b - RECOURSE_M)):
+        if roomy(clip_halfplanes(box, A, b - room)):
             cut = clip_halfplanes(box, A, b)
             clo, chi = cut.min(axis=0), cut.max(axis=0)
             return np.vstack((A, eye)), np.concatenate((b, chi, -clo)), clo, chi
@@ -325,8 +354,8 @@ def _stop_in_cell(cell: Segment, p: np.ndarray, blo: np.ndarray, bhi: np.ndarray
 
 
 class EndApproachConstraint(RowConstraint):
-    """No overshoot: ``d . (x, y)_j <= d . end`` [m] (:data:`RECOURSE_M` less after the horizon's
-    first sample) with ``d`` the approach direction
+    """No overshoot: ``d . (x, y)_j <= d . end`` [m] (the recourse, :func:`recourse`, less after
+    the horizon's first sample) with ``d`` the approach direction
     (:func:`~planner.corridor.geometry.approach_direction`), for the samples from sequence
     index :attr:`start_index` on (the sample before the last segment before the end point).
     Only for corridors that end in a point. Compiled twin: ``kernels.approach_fill``."""
@@ -336,9 +365,11 @@ class EndApproachConstraint(RowConstraint):
     @classmethod
     def of(cls, model: RobotModel, seq: RangeSequence, segments: Sequence[Segment] | None,
            st: Settings) -> EndApproachConstraint:
-        return cls(seq, segments)
+        return cls(seq, segments, st.Ts)
 
-    def __init__(self, seq: RangeSequence, segments: Sequence[Segment] | None):
+    def __init__(self, seq: RangeSequence, segments: Sequence[Segment] | None, Ts: float | None = None):
+        #: the later samples' row this much tighter [m] (:func:`recourse`)
+        self.recourse_m = recourse(Ts)[0]
         #: approach direction (2,) and bound [m], or None (no rows)
         self.half_plane: tuple[np.ndarray, float] | None = None
         #: first sequence index with the row
@@ -355,7 +386,7 @@ class EndApproachConstraint(RowConstraint):
         sel = np.zeros(0, int) if self.half_plane is None else np.nonzero(step.idx >= self.start_index)[0]
         d, b = self._half_plane()
         return RowBlock(6 * sel[:, None] + np.arange(2), np.tile(d, (sel.size, 1)), np.full(sel.size, -np.inf),
-                        b - np.where(sel > 0, RECOURSE_M, 0.0), self.kind)
+                        b - np.where(sel > 0, self.recourse_m, 0.0), self.kind)
 
     def _half_plane(self) -> tuple[np.ndarray, float]:
         return self.half_plane if self.half_plane is not None else (np.zeros(2), 0.0)
@@ -364,7 +395,7 @@ class EndApproachConstraint(RowConstraint):
     def kernel_args(self) -> ck.ApproachArgs:
         d, b = self._half_plane()
         return ck.ApproachArgs(self.half_plane is not None, np.ascontiguousarray(d, dtype=float), float(b),
-                               int(self.start_index), float(RECOURSE_M))
+                               int(self.start_index), float(self.recourse_m))
 
 
 def arrival_speed(Ts: float | None) -> float:

@@ -72,10 +72,12 @@ from ..schema import (
 )
 from .timing import centre_path_length, method_of, moving_segments
 
-__all__ = ["FASTEST_A_M_S2", "FASTEST_BISECTION", "FASTEST_HORIZON_COST", "FASTEST_RAMPS", "FASTEST_SLOW_S",
-           "FASTEST_V_SHARE", "MORE_TIME",
+__all__ = ["FASTEST_A_M_S2", "FASTEST_BISECTION", "FASTEST_FRICTION_COST", "FASTEST_HORIZON_COST", "FASTEST_RAMPS",
+           "FASTEST_SLOW_S", "FASTEST_V_SHARE", "MORE_TIME", "RATE_FRICTION_V_M_S", "RATE_RAMPS_MAX",
+           "RATE_STEP_S",
            "WorkEstimate", "robot_motion",
-           "check_work", "estimate_work", "fastest_count", "fastest_steps", "slack_allowance", "slack_costs"]
+           "check_work", "estimate_work", "fastest_count", "fastest_steps", "rate_step_cost", "slack_allowance",
+           "slack_costs"]
 
 #: the time factors the advice of an infeasible constrained plan tries, in this order (each
 #: planned until its first infeasible step; the first that plans is advised), as far as the
@@ -103,6 +105,33 @@ FASTEST_SLOW_S = 3.0
 #: the search: 0.22 / 0.65 / 1.27 ms at N 30 / 51 / 100, against 0.09 / 0.14 / 0.25 ms a plain
 #: step; the search's steps are overcounted ~3x, so Table I at Ts 2 ms took 1.6x its estimate)
 FASTEST_HORIZON_COST = 0.3
+#: ``fastest``: its steps cost up to this much more where the legs' friction sets the estimated
+#: move's speed (the drives' force over the friction below the legs' speed limit; whole at
+#: :data:`RATE_FRICTION_V_M_S`, in proportion to the friction above it): the candidates then
+#: run at the friction's limit, where every change of speed is a change of force, and the search
+#: plans about the steps :func:`fastest_steps` counts (elsewhere ~1.4-3.4x fewer, which covers
+#: the dearer steps). Measured per simulated step against the estimate's, issue 31: Table I with
+#: a leg friction of 2000 N s/m 1.8x (the plan 1.28-1.42x its estimate), certification seed 31
+#: case 78 (5 legs, 2000 N s/m, 251 N/s, N 100) 2.5x (the plan 1.68-1.82x); 500 N s/m 2.6x with
+#: 3x fewer steps than counted
+FASTEST_FRICTION_COST = 2.0
+#: a constrained step's cost grows with the force-rate limit's ramps over the horizon
+#: (``x = force_max / force_rate / (N Ts)``, at most :data:`RATE_RAMPS_MAX`): ``RATE_STEP_S x^2``
+#: a leg and a sample of the horizon [s]. Where a ramp is longer than the horizon the rate rows
+#: bind over all of it and each step takes more active-set changes: certification seed 31 case
+#: 181 (3 legs, N 100, 2000 N s/m) 1.9 / 4.9 / 7.9 / 11.2 changes a leg and step at 0.5 / 1.5 /
+#: 2.1 / 2.7 ramps (300 / 100 / 70 / 56 N/s), its steps 193 / 213 / 280 / 399 / 583 us (off, ...):
+#: 2.2x the estimate's at 56 N/s; case 67 (3 legs, 500 N s/m, 37 N/s, 4.1 ramps) 17.8 changes,
+#: 1.4x. Scaled by ``(v_f /`` :data:`RATE_FRICTION_V_M_S` ``)^-0.3`` (at most 1), ``v_f`` the speed at
+#: which the legs' friction takes the drives' whole force: with less friction a speed is held
+#: without force and the rate rows bind less (measured per leg, sample and ramp^2: 1.6e-7 s at
+#: 2000 N s/m, 1.05e-7 at 500, 6.3e-8 at 50, 1.8-2.5e-8 at 5; the rule gives 1.6 / 1.05 / 0.53 /
+#: 0.27e-7)
+RATE_STEP_S = 1.6e-7
+#: the friction speed [m/s] at which :data:`RATE_STEP_S` holds whole (legs of 150 N at 2000 N s/m)
+RATE_FRICTION_V_M_S = 0.075
+#: the ramps over the horizon beyond which :data:`RATE_STEP_S` grows no more (the measured range)
+RATE_RAMPS_MAX = 4.0
 #: ``fastest``: the mean share of a per-segment bisection candidate's steps it plans (half of
 #: them feasible, to the end; half abandoned at ~a quarter: Table I at Ts 2 ms, 0.15-0.2 s
 #: against 0.8 s)
@@ -279,6 +308,41 @@ def robot_motion(req: PlanRequest) -> tuple[float, float]:
     return FASTEST_A_M_S2 * a / a_ref, min(FASTEST_V_SHARE * v, limit if limit is not None else math.inf)
 
 
+def _legs_and_friction(desc: Any) -> tuple[int, bool, float]:
+    """The leg count of a robot description, whether its legs' friction, not their speed
+    limit, bounds the speed of a move (:func:`_motion`), and the speed at which the friction
+    takes the drives' whole force [m/s] (inf without friction)."""
+    legs = desc.leg_list()
+    force = sum(g.force_max for g in legs)
+    friction = sum(g.friction for g in legs)
+    v_f = force / friction if friction > 0 else math.inf
+    return len(legs), v_f < min(g.speed_max for g in legs), v_f
+
+
+@lru_cache(maxsize=16)
+def _builtin_legs(name: str) -> tuple[int, bool, float]:
+    from ..schema import builtin_description
+
+    return _legs_and_friction(builtin_description(name))
+
+
+def _robot_legs(req: PlanRequest) -> tuple[int, bool, float]:
+    return _builtin_legs(req.robot) if isinstance(req.robot, str) else _legs_and_friction(req.robot)
+
+
+def rate_step_cost(req: PlanRequest) -> float:
+    """The seconds a constrained step costs more under the request's force-rate limit
+    (:data:`RATE_STEP_S`; 0 without a limit or in the paper mode)."""
+    st = req.settings
+    ramp = _ramp_s(req)
+    if st.mode != "constrained" or ramp is None:
+        return 0.0
+    x = min(ramp / (st.N * st.Ts), RATE_RAMPS_MAX)
+    n_legs, _, v_f = _robot_legs(req)
+    share = min(1.0, (v_f / RATE_FRICTION_V_M_S) ** -0.3) if math.isfinite(v_f) else 0.0
+    return RATE_STEP_S * share * x * x * n_legs * st.N
+
+
 def fastest_count(step_m: float, Ts: float, N: int, ramp_s: float | None,
                   motion: tuple[float, float] = (FASTEST_A_M_S2, math.inf)) -> int:
     """The uniform samples per segment the ``fastest`` search is estimated to end at: a move
@@ -376,8 +440,15 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
                       "fastest timing found is ~10-25x slower and takes as many more candidates), a larger "
                       "settings.Ts, or " + advice)
     step_s = _step_cost(st.mode, st.backend, st.solver, st.N, _substeps(req))
+    rate_s = 0.0
     if st.fastest:
         step_s *= 1.0 + FASTEST_HORIZON_COST * max(0, st.N - 30) / 70
+        n_legs, friction_bound, v_f = _robot_legs(req)
+        if friction_bound:  # in proportion to the friction, whole at RATE_FRICTION_V_M_S
+            step_s *= 1.0 + (FASTEST_FRICTION_COST - 1.0) * min(1.0, RATE_FRICTION_V_M_S / v_f)
+    else:  # (the fastest search's steps have their own costs above, fitted with the rate limit on)
+        rate_s = rate_step_cost(req)
+        step_s += rate_s
     loop_s = steps * step_s
     metrics_s = steps * (c["sample"] + (c["sample_polygon"] if polygons else 0.0))
     segment_s = (c["segmentation"] if req.layout is not None else 0.0) + cells * c["cell"] + obstacles * c["obstacle"]
@@ -403,6 +474,7 @@ def estimate_work(request: Any, segments: Sequence[Any] | None = None) -> WorkEs
     detail = (f"{n} {what} x {S} samples + settling (at most {st.tail_max_s:g} s) = {steps_one} steps"
               f"{search if plans > 1 else ''}, "
               f"~{step_s * 1e6:.0f} us per step in {st.mode} mode at N = {st.N}"
+              f"{f' ({rate_s * 1e6:.0f} us of it for the force-rate limit)' if rate_s >= 0.1 * step_s else ''}"
               f"{'' if st.backend == 'compiled' else f' ({st.backend} backend, {st.solver} solver)'}, "
               f"{metrics_s:.2g} s of corridor metrics")
     if segment_s > 0.01:
