@@ -460,7 +460,8 @@ class TimingSearch:
             got = self.within_runs(cur, counts, over_seg)  # the catch-ups: a sample more in each run
             if got is not None:
                 if memo is not None and geo:
-                    memo[key] = (margin, arrive, self.run_counts, rows, self.plan_st.tool_speed_max_m_s if rows else None)
+                    memo[key] = (margin, arrive, self.run_counts, rows,
+                                 self.plan_st.tool_speed_max_m_s if rows else None)
                 return got, cur
             # the catch-up before the end, where it is the only excess: a sample more there, not
             # shorter cells on the whole move (where there are others, shorter cells first)
