@@ -52,7 +52,11 @@ feasibility on tiny arcs). Measured on fusion360 (``benchmarks/README.md``):
 at 10 / 6 / 5 / 4 ms (N 30) its passes took 1.43 + 0.54 / 1.362 + 0.492 / 1.35 + 0.49 / 1.356 +
 0.488 s; freecad's moves (62-160 samples at 10 ms) were not faster at 5 or 7.5 ms (7.2 + 5.83
 against 7.215 + 6.05 and 7.305 + 5.85 s), and at 20 samples the benchmark part's 4 mm lines at
-F1200 keep 10 ms (its compute unchanged).
+F1200 keep 10 ms (its compute unchanged). 19 samples (issue 35 goal 2, branch feedcap4): with
+the rows lowered by a small excess (:mod:`planner.contour.search`) fusion360 at 6 / 6.25 ms cut
+1.230 + 0.480 / 1.231 + 0.475 s (its third-order optimum at F 1.2298 + 0.4705 s); at 6 ms its
+2 mm lines take 21 cells (20.1 samples' travel at F / 1.005), at 6.25 ms 20. The benchmark part
+(4 mm at F1200: 10.5 ms) and freecad keep 10 ms.
 
 **The horizon** with a chosen sample time: :data:`HORIZON_RAMPS` force ramps of the slowest
 drive, at least the constrained mode's 30 samples (the default horizon's 0.25 s at 3 ms is 84
@@ -83,8 +87,10 @@ TS_STEP_S = 0.00025
 #: the horizon with a chosen sample time: this many force ramps of the slowest drive
 HORIZON_RAMPS = 3.0
 #: program feed: a move that starts or ends a pass or turns a corner gets at least this many
-#: samples at its F (:func:`feed_ts`; module docstring)
-FEED_MOVE_SAMPLES = 20
+#: samples at its F (:func:`feed_ts`; module docstring: 20 chose 6 ms for fusion360, whose 2 mm
+#: lines then take 21 cells of one sample, 20.1 samples' travel at F / 1.005: 19 chooses 6.25 ms,
+#: 20 cells each)
+FEED_MOVE_SAMPLES = 19
 #: program feed: a tangent jump larger than this between two moves is a corner [rad]
 FEED_CORNER_RAD = math.radians(10.0)
 #: program feed: moves shorter than this many tolerances do not choose the sample time
