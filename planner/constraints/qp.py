@@ -276,14 +276,15 @@ class DenseQP:
         z0 = np.zeros(nz) if start is None else np.clip(start, -self.zmax, self.zmax)
         r0 = self.A @ z0
         both = np.isfinite(self.upper) & np.isfinite(self.lower)
+        hi, lo = np.where(both, self.upper, 0.0), np.where(both, self.lower, 0.0)  # no inf - inf
         # a row of zero width (a fixed psi: the same hyperplane on both sides) is held whole: at
         # the optimum both its sides bind where its kind's slack is nil
-        whole = both & (self.upper - self.lower <= SCREEN_TOL)
-        width = np.where(both, self.upper - self.lower, np.inf)
+        whole = both & (hi - lo <= SCREEN_TOL)
+        width = np.where(both, hi - lo, np.inf)
 
         def near(r: np.ndarray) -> np.ndarray:
             """The one-sided rows (as ``As``) within SCREEN_NEAR of their row's width at ``r``."""
-            up = np.where(both, r >= 0.5 * (self.upper + self.lower), np.isfinite(self.upper))
+            up = np.where(both, r >= 0.5 * (hi + lo), np.isfinite(self.upper))
             near_u = ~both | (self.upper - r <= SCREEN_NEAR * width)
             near_l = ~both | (r - self.lower <= SCREEN_NEAR * width)
             return np.concatenate(((up & near_u) | whole, (~up & near_l) | whole))[keep]
