@@ -71,7 +71,7 @@ from .corridor import MARGIN_M, MARGIN_RAD
 from .qp import SLACK_ITER_LIMIT, DenseQP, QPSolution
 from .reference import ReferenceAssembly
 from .rows import RELAX_M, ROW_UNIT_M, RowKind
-from .stagewise import SOLVED, shifted
+from .stagewise import INFEASIBLE, SOLVED, shifted
 
 __all__ = ["CONTAIN_TOL_M", "CONTAIN_TOL_RAD", "REFINE_MAX", "REFINE_TOL_M", "REFINE_TOL_RAD", "Assembly",
            "ConstrainedController", "ControllerStats", "LoopRecord", "Memory"]
@@ -271,13 +271,19 @@ class ConstrainedController:
             if self.abandon:
                 raise self.infeasible_error(f"at t = {k * self.st.Ts:.3f} s the step's QP is infeasible")
             stats.fallbacks += 1
+            # the compiled step proved the QP infeasible with its rows widened by RELAX_M at the
+            # guessed move's offset (no refinement), which is the QP built below: DAQP is not
+            # asked the same question twice (issue 31: 2 of a fallback's 3 hard solves)
+            proved = out.status == INFEASIBLE and out.relaxed and out.refinements == 0
+        else:
+            proved = False
         qp = asm.build(k, x, Ad, Bd, self.y_nom, self.u_prev, self.guess())
         start = self.warm_start()
-        sol = asm.solve(qp, start)
+        sol = QPSolution(np.zeros(0), INFEASIBLE, 0) if proved else asm.solve(qp, start)
         iterations = sol.iterations
         if not sol.ok:  # as the compiled step: once more with the rows widened by RELAX_M
             asm.relax(qp)
-            sol = asm.solve(qp, start)
+            sol = QPSolution(np.zeros(0), INFEASIBLE, 0) if proved else asm.solve(qp, start)
             iterations += sol.iterations
             if not sol.ok:
                 # the speed rows (leg speeds, arrival) by RELAX_M more: what the slack problem
@@ -411,7 +417,8 @@ class ConstrainedController:
                 f"{stats.first_infeasible_s:.3f} s and stops at t = {k * self.st.Ts:.3f} s (segment "
                 f"{int(self.seq.segment[min(k, self.seq.K - 1)])}; "
                 f"{_slack_words(stats.failures < stats.infeasible, stats.slack_max_m, stats.speed_slack_max_m_s)})")
-        sol = dense.solve_slack(arrival, None if self.st.require_settled else int(min(left, SLACK_ITER_LIMIT)))
+        sol = dense.solve_slack(arrival, None if self.st.require_settled else int(min(left, SLACK_ITER_LIMIT)),
+                                self.warm_start())
         stats.slack_iterations += sol.iterations
         zs = sol.z
         if not sol.ok:  # even the slack problem failed: go on with the previous plan's moves

@@ -9,6 +9,14 @@ the step is solved again with the corridor, stroke and speed rows softened by th
 variables (corridor m, stroke m, leg speed m/s; :meth:`DenseQP.solve_slack`) with a large
 quadratic + linear penalty; forces stay hard. What the controller does with the slack is
 described in :mod:`planner.constraints.controller`.
+
+Cost (issue 31 goal 6). DAQP works on the least-distance form of a QP: its setup forms
+``A R^-1`` (``H = R'R``) in plain loops, 8.4 of the 9.6 ms of a call at N 49 x 5 legs, and
+checks every row it holds at each iteration. On the compiled backend's Python path
+(:class:`DenseQP` with :attr:`DenseQP.Rinv`) the factor is formed once a step and the rows
+``A R^-1`` once for the rows of a step (BLAS ``trmm``), and DAQP is handed the least-distance
+form (identity Hessian: its setup only scales the rows); the slack problem is screened
+(:meth:`DenseQP.solve_slack`). The numpy reference hands DAQP every QP as it is.
 """
 
 from __future__ import annotations
@@ -17,9 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ARRIVAL_SLACK_WEIGHT", "DAQP_SETTINGS", "RETRY_FLAGS", "RETRY_SETTINGS", "SLACK_ITER_LIMIT", "SLACK_RHO1",
-           "SLACK_RHO2", "DenseQP",
-           "QPSolution", "solve_qp"]
+__all__ = ["ARRIVAL_SLACK_WEIGHT", "DAQP_SETTINGS", "RETRY_FLAGS", "RETRY_SETTINGS", "SCREEN_FIRST", "SCREEN_NEAR",
+           "SCREEN_ROUNDS", "SCREEN_TOL", "SLACK_ITER_LIMIT", "SLACK_RHO1", "SLACK_RHO2", "DenseQP", "QPSolution",
+           "factor", "rows_ldp", "solve_qp"]
 
 #: DAQP's tolerances (rows in row units: 1e-9 of a millimetre) and iteration limit
 DAQP_SETTINGS = {"primal_tol": 1e-9, "dual_tol": 1e-12, "iter_limit": 2000}
@@ -34,6 +42,20 @@ RETRY_FLAGS = (-2, -5, -6)
 #: 1e-7 row units, 1e-10 m, solved them in a sixth of the iterations, a larger cycle tolerance
 #: in 4x; proximal regularisation, ``eps_prox``, cycled too)
 RETRY_SETTINGS: tuple[dict, ...] = ({"primal_tol": 1e-7}, {"cycle_tol": 1000})
+#: the slack problem's screened solves (:meth:`DenseQP.solve_slack`): rounds before every row
+#: is held, and the violation [row units] of a row left out that makes it join (DAQP's primal
+#: tolerance)
+SCREEN_ROUNDS = 4
+SCREEN_TOL = 1e-9
+#: a side of a two-sided row is held from the start where the start is within this fraction
+#: of the row's width from it, or beyond it (issue 31, users case 38: 257 of 2095 one-sided
+#: rows at 0.25, one round, the same 194 iterations as with every row, at 0.4 of the time)
+SCREEN_NEAR = 0.25
+#: the DAQP settings of a screened slack problem's first solve: patience with the iterations
+#: that do not lower the criterion (DAQP's default gives up after 10; its iterates are the
+#: same until then). The rows of zero width, held whole, made the default give up and the
+#: retries start again from nothing (issue 31: 146-173 iterations lost, a solve or two a step)
+SCREEN_FIRST: dict = {"cycle_tol": 1000}
 #: penalty weights of the slack variables (relative to the scaled criterion, which is O(1))
 SLACK_RHO2 = 1e8
 SLACK_RHO1 = 1e6
@@ -84,6 +106,49 @@ def solve_qp(H: np.ndarray, f: np.ndarray, A: np.ndarray, upper: np.ndarray, low
     return QPSolution(x, int(flag), int(info["iterations"]))
 
 
+def factor(H: np.ndarray) -> np.ndarray:
+    """``R^-1`` of the Cholesky factor ``H = R'R`` (upper triangular): what
+    :class:`DenseQP` needs to hand DAQP its QP in the least-distance form."""
+    import scipy.linalg
+
+    R = np.linalg.cholesky(H).T
+    return scipy.linalg.solve_triangular(R, np.eye(len(R)))
+
+
+def rows_ldp(A: np.ndarray, Rinv: np.ndarray) -> np.ndarray:
+    """``A R^-1`` (``R^-1`` upper triangular: BLAS ``trmm``)."""
+    from scipy.linalg.blas import get_blas_funcs
+
+    (trmm,) = get_blas_funcs(("trmm",), (Rinv, A))
+    return trmm(1.0, Rinv, A, side=1)
+
+
+def _solve_ldp(Rinv: np.ndarray, f: np.ndarray, M: np.ndarray, upper: np.ndarray, lower: np.ndarray,
+               sense: np.ndarray, start: np.ndarray | None = None, iter_limit: int | None = None,
+               retry: dict | None = None) -> QPSolution:
+    """``min 0.5 x'Hx + f'x`` s.t. ``lower <= (x, A x) <= upper`` (every variable bounded,
+    then the rows of ``A``) handed to DAQP as the least-distance problem it solves
+    internally: ``v = R x + c`` with ``H = R'R``, ``c = R^-T f``, so the criterion is
+    ``|v|^2 / 2`` (a constant apart) and the rows ``(R^-1; A R^-1) v`` shifted by their value at
+    ``c``. ``M = A R^-1`` is formed by the caller (BLAS, from a factor kept for the step);
+    DAQP's own setup forms it in plain loops, 3-8x the time of the whole solve (issue 31: a
+    step's fallback at N 49 x 5 legs spent 8.4 of its 9.6 ms a DAQP call there)."""
+    c = Rinv.T @ f
+    G = np.vstack((Rinv, M))
+    shift = G @ c
+    big = np.abs(upper) >= 1e29  # DAQP's 'no bound' stays one
+    up = np.where(big, upper, upper + shift)
+    big = np.abs(lower) >= 1e29
+    lo = np.where(big, lower, lower + shift)
+    v0 = None
+    if start is not None:  # the warm start in v: R x + c
+        import scipy.linalg
+
+        v0 = scipy.linalg.solve_triangular(Rinv, start) + c
+    sol = solve_qp(np.eye(len(f)), np.zeros(len(f)), G, up, lo, sense, v0, iter_limit, retry)
+    return QPSolution(Rinv @ (sol.z - c), sol.flag, sol.iterations)
+
+
 @dataclass(slots=True, eq=False)
 class DenseQP:
     """The step's QP in the scaled moves ``z = u / force_max``, every row formed::
@@ -101,6 +166,13 @@ class DenseQP:
     kinds: np.ndarray  #: (nrow,) :class:`~planner.constraints.rows.RowKind`
     n_hard: int
     zmax: np.ndarray  #: (nz,) bounds of the scaled moves, ``|z| <= zmax`` (the drive forces)
+    #: ``R^-1`` of ``H = R'R`` (:func:`factor`), or None: with it DAQP gets the least-distance
+    #: form with the rows formed here by BLAS (:func:`_solve_ldp`; the compiled backend's
+    #: Python path), without it the QP as it is (the numpy reference)
+    Rinv: np.ndarray | None = None
+    #: ``A R^-1`` with :attr:`Rinv` (every row; :func:`rows_ldp`), kept by the caller for the
+    #: solves of a step with the same rows
+    M: np.ndarray | None = None
 
     def solve_hard(self, start: np.ndarray | None = None) -> QPSolution:
         """The hard QP with every hard row given to DAQP (the numpy reference's solve)."""
@@ -109,7 +181,16 @@ class DenseQP:
         bl = np.concatenate((-self.zmax, self.lower[:nh]))
         sense = np.zeros(len(bu), dtype=np.int32)
         sense[bu - bl <= 0] = EQUALITY
+        if self.Rinv is not None:
+            return _solve_ldp(self.Rinv, self.f, self._ldp_rows()[:nh], bu, bl, sense, start)
         return solve_qp(self.H, self.f, self.A[:nh], bu, bl, sense, start)
+
+    def _ldp_rows(self) -> np.ndarray:
+        """``A R^-1`` (formed once)."""
+        if self.M is None:
+            assert self.Rinv is not None
+            self.M = rows_ldp(self.A, self.Rinv)
+        return self.M
 
     def violation(self, z: np.ndarray) -> float:
         """Largest violation of the hard rows at ``z`` [row units] (0 if none)."""
@@ -117,13 +198,24 @@ class DenseQP:
         r = self.A[:nh] @ z
         return float(np.maximum(np.maximum(self.lower[:nh] - r, r - self.upper[:nh]), 0.0).max(initial=0.0))
 
-    def solve_slack(self, arrival: np.ndarray | None = None, iter_limit: int | None = None) -> QPSolution:
+    def solve_slack(self, arrival: np.ndarray | None = None, iter_limit: int | None = None,
+                    start: np.ndarray | None = None) -> QPSolution:
         """Every row (corridor, speed and stroke) softened by four slacks ``s >= 0`` (row
         units: corridor m and rad, stroke m, leg speed m/s by :class:`RowKind`; the rows where
         ``arrival`` (a mask) is true, the arrival speed, m/s), penalised by
         ``SLACK_RHO2 |w s|^2 / 2 + SLACK_RHO1 w . s`` with ``w = (1, 1, 1,``
         :data:`ARRIVAL_SLACK_WEIGHT` ``)``; forces and force rates stay hard. The solution is
-        ``(z, s)``. ``iter_limit``: DAQP's iteration limit (default :data:`SLACK_ITER_LIMIT`)."""
+        ``(z, s)``. ``iter_limit``: DAQP's iteration limit (default :data:`SLACK_ITER_LIMIT`).
+
+        With :attr:`Rinv` (the compiled backend's Python path) the problem is screened: a
+        two-sided row enters with the side nearer to ``start`` (scaled moves; the previous
+        plan's, zero without), and only where ``start`` is within :data:`SCREEN_NEAR` of its
+        width from that side (a row of zero width: both sides). DAQP checks every row it holds
+        at every iteration (2095 one-sided rows at N 49 x 5 legs, 194 iterations). The rows the
+        solution violates join and it is solved again (:data:`SCREEN_ROUNDS`, then every row):
+        a convex problem's optimum on a subset of its rows that meets every row is its optimum.
+        The first solve is patient with iterations that do not lower the criterion
+        (:data:`SCREEN_FIRST`)."""
         nz, kinds = len(self.f), self.kinds
         ns = 4
         w = np.array([1.0, 1.0, 1.0, ARRIVAL_SLACK_WEIGHT])
@@ -138,7 +230,16 @@ class DenseQP:
             slot[arrival] = 3
         S[np.nonzero(soft)[0], slot[soft]] = 1.0
         # two one-sided rows per two-sided row: A z - s <= bu ; bl <= A z + s
-        As = np.vstack((np.hstack((self.A, -S)), np.hstack((self.A, S))))
+        Rinv = None
+        Sz = S
+        if self.Rinv is not None:  # least-distance form: Hs = Rs'Rs, Rs = diag(R, sqrt(rho2) w)
+            Rinv = np.zeros((nz + ns, nz + ns))
+            Rinv[:nz, :nz] = self.Rinv
+            Rinv[nz:, nz:] = np.diag(1.0 / (w * np.sqrt(SLACK_RHO2)))
+            M, S = self._ldp_rows(), S @ Rinv[nz:, nz:]
+        else:
+            M = self.A
+        As = np.vstack((np.hstack((M, -S)), np.hstack((M, S))))
         bu = np.concatenate((self.upper, np.full(len(kinds), np.inf)))
         bl = np.concatenate((np.full(len(kinds), -np.inf), self.lower))
         keep = np.isfinite(bu) | np.isfinite(bl)
@@ -147,12 +248,62 @@ class DenseQP:
         lb = np.concatenate((-self.zmax, np.zeros(ns), bl))
         sense = np.zeros(len(ub), dtype=np.int32)
         limit = SLACK_ITER_LIMIT if iter_limit is None else iter_limit
-        sol = solve_qp(Hs, fs, As, ub, lb, sense, iter_limit=limit)
-        for retry in RETRY_SETTINGS:
-            if sol.flag not in RETRY_FLAGS or sol.iterations >= limit:
+        nb = nz + ns
+
+        def run(held: np.ndarray | None, iterations: int) -> QPSolution:
+            """The slack problem with the one-sided rows ``held`` (a mask; None: every row),
+            solved again after a numerical failure with each of RETRY_SETTINGS."""
+            if held is None:
+                A_, u_, l_, s_ = As, ub, lb, sense
+            else:
+                sel = np.concatenate((np.ones(nb, bool), held))
+                A_, u_, l_, s_ = As[held], ub[sel], lb[sel], sense[sel]
+            sol = QPSolution(np.zeros(nb), -1, 0)
+            for retry in ((None if Rinv is None else SCREEN_FIRST), *RETRY_SETTINGS):
+                if sol.iterations and (sol.flag not in RETRY_FLAGS or sol.iterations >= iterations):
+                    break
+                # the slack problem always has a solution (the previous forces meet the hard rows):
+                # DAQP cycled or lost its factorisation, a numerical failure; solved again
+                left = iterations - sol.iterations
+                again = (_solve_ldp(Rinv, fs, A_, u_, l_, s_, iter_limit=left, retry=retry) if Rinv is not None
+                         else solve_qp(Hs, fs, A_, u_, l_, s_, iter_limit=left, retry=retry))
+                sol = QPSolution(again.z, again.flag, sol.iterations + again.iterations)
+            return sol
+
+        if Rinv is None:
+            return run(None, limit)
+        # the side of each two-sided row nearer to the start: (upper copies, lower copies) as As
+        z0 = np.zeros(nz) if start is None else np.clip(start, -self.zmax, self.zmax)
+        r0 = self.A @ z0
+        both = np.isfinite(self.upper) & np.isfinite(self.lower)
+        hi, lo = np.where(both, self.upper, 0.0), np.where(both, self.lower, 0.0)  # no inf - inf
+        # a row of zero width (a fixed psi: the same hyperplane on both sides) is held whole: at
+        # the optimum both its sides bind where its kind's slack is nil
+        whole = both & (hi - lo <= SCREEN_TOL)
+        width = np.where(both, hi - lo, np.inf)
+
+        def near(r: np.ndarray) -> np.ndarray:
+            """The one-sided rows (as ``As``) within SCREEN_NEAR of their row's width at ``r``."""
+            up = np.where(both, r >= 0.5 * (hi + lo), np.isfinite(self.upper))
+            near_u = ~both | (self.upper - r <= SCREEN_NEAR * width)
+            near_l = ~both | (r - self.lower <= SCREEN_NEAR * width)
+            return np.concatenate(((up & near_u) | whole, (~up & near_l) | whole))[keep]
+
+        held = near(r0)
+        used = 0
+        for _ in range(SCREEN_ROUNDS):
+            sol = run(held, limit - used)
+            used += sol.iterations
+            if used >= limit:
+                return QPSolution(sol.z, sol.flag if sol.ok else -1, used)
+            if not sol.ok:  # a numerical failure on the rows held: every row
                 break
-            # the slack problem always has a solution (the previous forces meet the hard rows):
-            # DAQP cycled or lost its factorisation, a numerical failure; solved again
-            again = solve_qp(Hs, fs, As, ub, lb, sense, iter_limit=limit - sol.iterations, retry=retry)
-            sol = QPSolution(again.z, again.flag, sol.iterations + again.iterations)
-        return sol
+            z, sl = sol.z[:nz], sol.z[nz:]
+            Az, Ss = self.A @ z, Sz @ sl  # the rows' values, each copy with its kind's slack
+            r = np.concatenate((Az - Ss, Az + Ss))[keep]
+            out = ~held & ((r > bu + SCREEN_TOL) | (r < bl - SCREEN_TOL))
+            if not out.any():
+                return sol
+            held |= out | near(Az)  # and the sides near the solution: fewer rounds
+        sol = run(None, limit - used)
+        return QPSolution(sol.z, sol.flag, used + sol.iterations)

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import dense_kernels as ck
-from .qp import DenseQP, QPSolution
+from .qp import DenseQP, QPSolution, factor, rows_ldp
 from .rows import Rows
 
 __all__ = ["FullQP", "StepQP"]
@@ -39,6 +39,12 @@ class FullQP:
     f: np.ndarray  #: (N m,) linear term, scaled
     lower: np.ndarray  #: (nrow,) row bounds minus ``Sel free``
     upper: np.ndarray
+    #: ``R^-1`` of ``H = R'R`` (:func:`~planner.constraints.qp.factor`), formed on the first
+    #: DAQP solve and kept for the step's others (the relaxed solves, the refinements, the
+    #: slack problem): DAQP gets the least-distance form (:class:`DenseQP`)
+    Rinv: np.ndarray | None = None
+    #: the last rows formed (``A``) and ``A R^-1``: a relaxed solve changes only the bounds
+    rows_ldp: tuple[np.ndarray, np.ndarray] | None = None
 
     @classmethod
     def form(cls, Ad: np.ndarray, Bd: np.ndarray, umax: np.ndarray, du: np.ndarray, x: np.ndarray, d: np.ndarray,
@@ -70,7 +76,12 @@ class FullQP:
         moves' bounds ``|z| <= zmax``."""
         A = np.empty((rows.n_rows, self.Gx.shape[1]))
         ck.constraint_matrix(rows.col, rows.val, self.Gx, A)
-        return DenseQP(self.H, self.f, A, self.lower, self.upper, rows.kinds, rows.n_hard, zmax)
+        if self.Rinv is None:
+            self.Rinv = factor(self.H)
+        if self.rows_ldp is None or not np.array_equal(self.rows_ldp[0], A):
+            self.rows_ldp = (A, rows_ldp(A, self.Rinv))
+        return DenseQP(self.H, self.f, A, self.lower, self.upper, rows.kinds, rows.n_hard, zmax, self.Rinv,
+                       self.rows_ldp[1])
 
     def solve(self, rows: Rows, zmax: np.ndarray, start: np.ndarray | None) -> QPSolution:
         """The hard QP, every hard row given to DAQP, from the warm start ``start``; the
