@@ -226,10 +226,13 @@ def test_a_new_row_constraint_touches_three_files():
         "planner/constraints/motion.py", "planner/constraints/kernels.py", "planner/constraints/registry.py"}
     # the user's option: its field, the row class that reads it, and the ``fastest`` work estimate
     # (the speed of its estimated move), the result's verdict on it, the refusal's lower bound on
-    # the time from start to end (plan._time_needed, issue 31 goal 2)
+    # the time from start to end (plan._time_needed, issue 31 goal 2); and, as a user of the option
+    # (it sets it on its pieces' requests, never reads the rows), the program feed's search
+    # (contour/search.py: the catch-ups' rows at 1.015 F, issue 35 goal 2)
     assert _files_naming(r"\btool_speed_max_m_s\b") == {
         "planner/schema/request.py", "planner/constraints/motion.py", "planner/orchestrator/work.py",
-        "planner/orchestrator/result.py", "planner/schema/result.py", "planner/orchestrator/plan.py"}
+        "planner/orchestrator/result.py", "planner/schema/result.py", "planner/orchestrator/plan.py",
+        "planner/contour/search.py"}
     names = {s.row_class.__name__ for s in SECTIONS}
     for p in _planner_files():
         rel = p.relative_to(ROOT).as_posix()

@@ -49,6 +49,36 @@ def test_plan_z_holds_the_axis_limits_and_says_where_the_tolerance_cannot_hold(v
         assert np.all(np.abs(where - len(zp) // 2) < 40), where
 
 
+def _joined_second_differences(first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """Two pieces' Z joined as the contour's join does (the second piece's first sample is the
+    first piece's last, and dropped), at rest before and after: its second differences [m]."""
+    z = np.r_[first, second[1:]]
+    return np.abs(np.diff(np.r_[z[0], z, z[-1]], 2))
+
+
+def test_z_accelerates_within_the_axis_across_two_pieces():
+    """A ramp piece whose last sample rests 3.6 um from the level piece's programmed Z, still
+    moving down where the level piece's Z is above (the two project onto different moves at the
+    slope change, as in a generated ramp, tab and helix at Ts 3.5 ms, `fastest`):
+    the level piece planned from the ramp's last two samples (``before``) keeps the joined Z's
+    second differences within ``a Ts^2``; planned on its own from rest at its programmed Z, the
+    join accelerates beyond the axis (the defect this guards against)."""
+    ts, a, v, tol = 0.0035, 0.5, 0.05, 5e-5
+    n = 40
+    ramp = np.linspace(-1.0e-3, -1.4964e-3, n)
+    level = np.full(n, -1.4928e-3)
+    first = plan_z(ramp, np.full(n, tol), ts, v, a)
+    assert first.ok
+    level_from = level.copy()
+    level_from[0] = first.z[-1]
+    joined = plan_z(level_from, np.full(n, tol), ts, v, a, before=float(first.z[-2]))
+    assert joined.ok
+    assert _joined_second_differences(first.z, joined.z).max() <= a * ts * ts * (1 + 1e-6)
+    apart = plan_z(level_from, np.full(n, tol), ts, v, a)  # from rest at the shared sample only
+    assert _joined_second_differences(first.z, apart.z).max() > a * ts * ts * 1.05
+    assert np.abs(joined.z - level).max() <= tol
+
+
 def test_plan_z_keeps_a_level_z():
     zp = np.full(50, -0.001)
     got = plan_z(zp, np.full(50, 1e-5), 0.01, 0.05, 1.0)

@@ -210,7 +210,7 @@ class _Walk:
             key, level = piece_key([b.elements[k] for k in chunk])
             part = plan_cut(req, model, st, chunk, origin, tol, CONTOUR_PSI, self.pos, geo, b.elements,
                             self.hints.get(key, self.hint if level else None), len(self.program.passes), self.memo,
-                            self.limit_at)
+                            self.limit_at, self.parts[-1].z[-2:] if len(self.parts) > first else None)
             if part.scale is not None:
                 self.hints[key] = part.scale
                 self.hint = part.scale if level else self.hint
@@ -262,8 +262,9 @@ def speed_caps(feed: str, els: list[PathElement], z_max_m_s: float | None) -> np
 def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int], origin: np.ndarray, tol: float,
              psi: float, pos: np.ndarray, geo: PathGeometry, elements: list[PathElement],
              hint: Scale | None = None, passes: int = 1, memo: dict | None = None,
-             limit_at: float | None = None) -> Part:
-    """One piece of a pass planned rest to rest, its Z planned with it (:func:`plan_piece_z`).
+             limit_at: float | None = None, z_first: np.ndarray | None = None) -> Part:
+    """One piece of a pass planned rest to rest, its Z planned with it (:func:`plan_piece_z`;
+    ``z_first``: the Z of the piece before, its last samples).
     ``hint``: the ``fastest`` scale found for the piece before (where its search starts; the
     search's result is bracketed the same way from any start). No timing found: the
     ``infeasible`` error with its advice checked (:func:`confirmed_infeasible`, its checks
@@ -287,7 +288,7 @@ def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[i
             raise confirmed_infeasible(req, model, st, chunk, els, origin, tol, psi, pos, elements, found, hint,
                                        passes, limit_at)
         part = _cut_part(found, geo, tol)
-        zp = plan_piece_z(part, elements, origin, tol, st.Ts, req)
+        zp = plan_piece_z(part, elements, origin, tol, st.Ts, req, z_first)
         if zp.ok:
             return part
         if feed == "fastest" and not eased:  # once: fastest again, gentler along the slopes Z missed on
@@ -333,12 +334,21 @@ Z_ROOM = 1.1
 
 
 def plan_piece_z(part: Part, elements: list[PathElement], origin: np.ndarray, tol: float, Ts: float,
-                 req: ContourRequest) -> ZPlan:
+                 req: ContourRequest, z_first: np.ndarray | None = None) -> ZPlan:
     """Fill the Z and source line of a cut part: the programmed Z where each sample projects
     onto its move, planned within the Z axis speed and acceleration and the 3-D tolerance
-    (:func:`planner.contour.zaxis.plan_z`); the plan (``ok``: it holds)."""
+    (:func:`planner.contour.zaxis.plan_z`); the plan (``ok``: it holds). ``z_first``: the last
+    samples' Z of the piece before [m]; its last sample is this piece's first (the join keeps one
+    of the two), so the plan starts there and its first acceleration is taken with the sample
+    before it: Z's acceleration holds across the two pieces. (At a slope change the two pieces'
+    end and start project onto different moves, micrometres of Z apart; planned apart, each from
+    rest, the joined Z accelerated at up to twice the axis's limit.)"""
     d = cut_z(part, elements, origin)
-    got = plan_z(part.z, np.sqrt(np.maximum(tol * tol - d * d, 0.0)), Ts, req.z_rapid_m_s, req.z_accel_m_s2)
+    budget = np.sqrt(np.maximum(tol * tol - d * d, 0.0))
+    before = None
+    if z_first is not None and len(part.z):
+        part.z[0], before = z_first[-1], (z_first[-2] if len(z_first) > 1 else z_first[-1])
+    got = plan_z(part.z, budget, Ts, req.z_rapid_m_s, req.z_accel_m_s2, before)
     part.z = got.z
     return got
 

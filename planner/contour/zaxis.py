@@ -197,18 +197,22 @@ class ZPlan:
         return bool(np.all(self.miss <= 0.0))
 
 
-def plan_z(zp: np.ndarray, budget: np.ndarray, Ts: float, v_max: float, a_max: float) -> ZPlan:
+def plan_z(zp: np.ndarray, budget: np.ndarray, Ts: float, v_max: float, a_max: float,
+           before: float | None = None) -> ZPlan:
     """The Z per sample nearest ``zp`` (the programmed Z, module docstring) within ``budget`` of
     it (per sample [m]; the first and last samples held at ``zp``), its steps within ``v_max Ts``
     and its second differences within ``a_max Ts^2``, the robot at rest before and after (the
-    first and last steps within ``a_max Ts^2``). Where no sequence keeps every budget, the one
+    first and last steps within ``a_max Ts^2``). ``before``: the Z of the sample before the
+    first [m] where Z goes on from a piece planned before (the first sample then shared with that
+    piece's last): the first second difference is taken with it, so Z's acceleration holds across
+    the two pieces, not only within each. Where no sequence keeps every budget, the one
     that misses it least (in sum) and by how much each sample misses it."""
     from scipy.optimize import linprog
     from scipy.sparse import coo_matrix, csr_matrix, vstack
 
     K = len(zp)
     unit = a_max * Ts * Ts
-    if K < 3 or float(np.ptp(zp)) == 0.0:  # Z stays (or no step to plan): the programmed Z
+    if K < 3 or (float(np.ptp(zp)) == 0.0 and (before is None or before == zp[0])):  # Z stays: the programmed Z
         return ZPlan(np.asarray(zp, float).copy(), np.zeros(K))
     base = float(zp[0])
     w = (np.asarray(zp, float) - base) / unit  # the programmed Z in units of a_max Ts^2 from its start
@@ -237,12 +241,17 @@ def plan_z(zp: np.ndarray, budget: np.ndarray, Ts: float, v_max: float, a_max: f
     n2 = K
     r2 = np.arange(n2)
     # row j: x[j+1] - 2 x[j] + x[j-1], with x[-1] = x[0] and x[K] = x[K-1]
+    # (or with x[-1] = before, a constant, where Z goes on from the piece before)
     ii = np.r_[r2, r2, r2]
     jj = np.r_[np.minimum(r2 + 1, K - 1), r2, np.maximum(r2 - 1, 0)]
     vv = np.r_[np.ones(n2), -2 * np.ones(n2), np.ones(n2)]
+    shift = np.zeros(n2)
+    if before is not None:
+        vv[2 * n2] = 0.0  # row 0's x[-1] term: the constant below, not x[0]
+        shift[0] = (float(before) - base) / unit
     d2 = coo_matrix((vv, (ii, jj)), shape=(n2, 3 * K)).tocsr()
     rows += [d2, -d2]
-    rhs += [np.ones(n2), np.ones(n2)]
+    rhs += [np.ones(n2) - shift, np.ones(n2) + shift]
     A = vstack([r.tocsr() if hasattr(r, "tocsr") else r for r in rows]).tocsr()
     scale_u = 1e3 * K  # missing the budget costs far more than any distance inside it
     c = np.r_[np.zeros(K), np.ones(K), np.full(K, scale_u)]
