@@ -18,6 +18,8 @@ import numpy as np
 import pytest
 
 from planner.contour import plan_contour
+from planner.contour.passes import parse_contour_request, read_program
+from planner.contour.plan import SETTLE_TOL_SHARE
 from planner.contour.profiles import ARRIVAL_BRAKE_SAMPLES, ARRIVAL_CRUISE_SAMPLES, arrival_run, with_arrival
 from tests.test_contour_feed import feed_by_line
 
@@ -101,3 +103,31 @@ def test_the_last_circle_runs_at_F(freecad):
     assert np.median(speed[on[:-1] & on[1:]]) >= 0.95 * F
     p = c.passes[-1]
     assert p.time_s <= 1.04 * p.length_m / F, (p.time_s, p.length_m / F)
+
+
+@pytest.mark.parametrize("name", ["pcb_gcode.ngc", "fusion360.nc"])
+def test_a_pass_ends_once_it_stops_within_the_tolerance(name):
+    """A cut pass ends at rest within half the tolerance of its programmed end point (its last
+    sample's travel at its speed at most SETTLE_TOL_SHARE of the tolerance), and no later than a
+    sample after it first holds there: no samples creeping the last micrometres (before, under
+    the speed bound 1e-4 m/s: the first pass of each ended 3 samples after it first held there,
+    pcb_gcode's within 4 um of its end at 0.63, 0.12, 0.10, 0.085 mm/s)."""
+    text = (CAM / name).read_text()
+    req = parse_contour_request({"program": text, "origin": "fit", "feed": "program"})
+    res = plan_contour({"program": text, "origin": "fit", "feed": "program"})
+    c = res.contour
+    assert c is not None
+    Ts, tol = res.settings.Ts, c.tolerance_m
+    ends = [b.elements[-1].end for b in read_program(req).passes if b.elements]
+    cut = np.asarray(c.cutting, int)
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], cut, [0]))))
+    assert len(edges) == 2 * len(ends) == 2 * len(c.passes)
+    speed = np.hypot(*res.velocity[:, :2].T)
+    for k, end in enumerate(ends):
+        a, b = edges[2 * k], edges[2 * k + 1]
+        d = np.hypot(*(res.pose[a:b, :2] - (np.asarray(end) + np.asarray(c.origin))).T)
+        away = int(np.flatnonzero(d > tol)[-1])  # a closed pass starts at its end: after it last left
+        held = np.flatnonzero((d < 0.5 * tol) & (speed[a:b] * Ts <= SETTLE_TOL_SHARE * tol))
+        held = held[held > away]
+        assert len(held) and held[-1] == b - a - 1, (k, d[-3:], speed[b - 3:b])  # it ends held there
+        assert held[0] >= b - a - 2, (k, held, d[held], speed[a + held])  # ... within a sample of the first

@@ -76,7 +76,7 @@ from .timing import PathSamples, constraint_rows, turn
 from .tube import SAGITTA_FRACTION
 
 __all__ = ["FEED_CORNER_RAD", "FEED_MOVE_MIN_TOL", "FEED_MOVE_SAMPLES", "HORIZON_RAMPS", "TS_FLOOR_S", "TS_STEP_S",
-           "arc_speed", "contour_settings", "contour_ts", "drive_acceleration", "feed_ts"]
+           "arc_speed", "contour_settings", "contour_ts", "drive_acceleration", "drive_jerk", "feed_ts"]
 
 #: the finest sample time chosen [s]: at 2 ms the benchmark pass took longer than at 3 ms
 #: (1.154 s against 0.822 s, the search's scales) for 2.6x the compute
@@ -111,6 +111,14 @@ def drive_acceleration(model: RobotModel) -> float:
     the centre of the base pivots, psi 0 [m/s^2] (:func:`planner.contour.timing.constraint_rows`;
     16.1 m/s^2 for the moving-slide, 16.07-16.11 over the benchmark part)."""
     return _acceleration(model)
+
+
+def drive_jerk(model: RobotModel, st: Settings) -> float | None:
+    """The tool's acceleration's rate of change under the force-rate limit [m/s^3]:
+    :func:`drive_acceleration` over the slowest drive's rise (320 m/s^3 for the moving-slide at
+    the default limit); None: no limit."""
+    ramp = _ramp(model, st)
+    return None if ramp is None else drive_acceleration(model) / ramp
 
 
 def arc_speed(e: PathElement, a: float, jerk: float | None, v_leg: float, feed: str) -> float:
