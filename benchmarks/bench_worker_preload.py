@@ -31,18 +31,9 @@ start = time.process_time() - t0
 assert status == ("ready", None), status
 from planner.contour import plan_contour
 
-def lines(n, per_pass=50):
-    out, x, y = ["G21 G90"], 0.0, 0.0
-    for i in range(n):
-        p, k = divmod(i, per_pass)
-        if k == 0:
-            x, y = (p % 10) * 1.0, 0.0
-            out += ["G0 Z5", f"G0 X{x:.3f} Y{y:.3f}", "G1 Z-1 F3000"]
-        y, x = (y + 0.5, x) if k % 2 else (y, x + 0.5)
-        out.append(f"G1 X{x:.3f} Y{y:.3f}")
-    return "\n".join(out) + "\n"
+from tests.contour_programs import staircase
 
-req = {"program": lines(150), "feed": "program"}
+req = {"program": staircase(150, 50), "feed": "program"}
 cpu = []
 for _ in range(2):
     t0 = time.process_time()

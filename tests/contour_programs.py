@@ -47,6 +47,20 @@ class Made:
         return self
 
 
+def staircase(n: int, per_pass: int = 100) -> str:
+    """``n`` cut lines of 0.5 mm at F3000 (mm), ``per_pass`` a pass: each pass a staircase from
+    its own start (1 mm apart in X, ten columns), plunged to Z -1 from Z 5."""
+    out, x, y = ["G21 G90"], 0.0, 0.0
+    for i in range(n):
+        p, k = divmod(i, per_pass)
+        if k == 0:
+            x, y = (p % 10) * 1.0, 0.0
+            out += ["G0 Z5", f"G0 X{x:.3f} Y{y:.3f}", "G1 Z-1 F3000"]
+        y, x = (y + 0.5, x) if k % 2 else (y, x + 0.5)
+        out.append(f"G1 X{x:.3f} Y{y:.3f}")
+    return "\n".join(out) + "\n"
+
+
 def _start(name: str, tol_mm: float | None = None) -> Made:
     m = Made(name, "")
     m.lines += ["G21 G90 G17"] + ([f"G64 P{tol_mm:g}"] if tol_mm else []) + ["G0 Z2"]

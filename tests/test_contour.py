@@ -35,6 +35,27 @@ M2
 ORIGIN = [-0.01, -0.01]
 
 
+def arc_points(mv, prev: np.ndarray, end: np.ndarray, n_of) -> np.ndarray:
+    """The points (n + 1, 2) of rs274's arc move ``mv`` (its centre ``mv[3:5]``, its turn
+    ``mv[5]``: > 0 counter-clockwise) from ``prev`` to ``end`` (x, y), ``n = n_of(sweep, r)``
+    pieces (``sweep`` [rad] signed, a full circle where the two ends meet)."""
+    c = np.array(mv[3:5])
+    r = float(np.hypot(*(prev[:2] - c)))
+    a0 = math.atan2(prev[1] - c[1], prev[0] - c[0])
+    sweep = math.atan2(end[1] - c[1], end[0] - c[0]) - a0
+    while mv[5] > 0 and sweep <= 1e-12:
+        sweep += 2 * math.pi
+    while mv[5] <= 0 and sweep >= -1e-12:
+        sweep -= 2 * math.pi
+    a = a0 + sweep * np.linspace(0, 1, n_of(sweep, r) + 1)
+    return c + r * np.stack((np.cos(a), np.sin(a)), axis=1)
+
+
+def sagitta_pieces(sweep: float, r: float) -> int:
+    """Pieces of an arc of ``sweep`` [rad] and radius ``r`` [m] whose sagitta is at most 1e-8 m."""
+    return max(2, math.ceil(abs(sweep) / (2 * math.acos(1 - 1e-8 / r))))
+
+
 def rs274_cut_path(program: str, origin) -> shapely.MultiLineString:
     """The cutting moves (feed, Z < 0) of rs274's canonical program as polylines, arcs densified
     to 1e-8 m sagitta, in the robot frame [m]."""
@@ -50,20 +71,7 @@ def rs274_cut_path(program: str, origin) -> shapely.MultiLineString:
                 lines.append(np.array([prev[:2], end[:2]]))
         else:
             end = np.array([mv[1], mv[2], mv[6]])
-            c = np.array(mv[3:5])
-            r = np.hypot(*(prev[:2] - c))
-            a0 = math.atan2(prev[1] - c[1], prev[0] - c[0])
-            a1 = math.atan2(end[1] - c[1], end[0] - c[0])
-            sweep = a1 - a0
-            if mv[5] > 0:
-                while sweep <= 1e-12:
-                    sweep += 2 * math.pi
-            else:
-                while sweep >= -1e-12:
-                    sweep -= 2 * math.pi
-            n = max(2, math.ceil(abs(sweep) / (2 * math.acos(1 - 1e-8 / r))))
-            a = a0 + sweep * np.linspace(0, 1, n + 1)
-            lines.append(c + r * np.stack((np.cos(a), np.sin(a)), axis=1))
+            lines.append(arc_points(mv, prev, end, sagitta_pieces))
         prev = end
     return shapely.MultiLineString([ln + np.asarray(origin) for ln in lines])
 
@@ -87,17 +95,7 @@ def rs274_cut_passes(program: str, origin) -> list[np.ndarray]:
             elif moved:
                 passes[-1].append(np.array([prev[:2], end[:2]]))
         else:
-            c = np.array(mv[3:5])
-            r = np.hypot(*(prev[:2] - c))
-            a0 = math.atan2(prev[1] - c[1], prev[0] - c[0])
-            sweep = math.atan2(end[1] - c[1], end[0] - c[0]) - a0
-            while mv[5] > 0 and sweep <= 1e-12:
-                sweep += 2 * math.pi
-            while mv[5] < 0 and sweep >= -1e-12:
-                sweep -= 2 * math.pi
-            n = max(2, math.ceil(abs(sweep) / (2 * math.acos(1 - 1e-8 / r))))
-            a = a0 + sweep * np.linspace(0, 1, n + 1)
-            passes[-1].append(c + r * np.stack((np.cos(a), np.sin(a)), axis=1))
+            passes[-1].append(arc_points(mv, prev, end, sagitta_pieces))
         prev = end
     return [np.vstack(p) + np.asarray(origin) for p in passes if p]
 

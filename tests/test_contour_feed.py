@@ -81,20 +81,28 @@ def feed_by_line(program: str) -> dict[int, float]:
     return out
 
 
-def feed_ratio(result, program: str) -> float:
-    """Largest tool speed / F while cutting: each cut sample's speed against its line's F, each
-    straight move between two cut samples (length over its time) against the smaller F of the
-    lines at its ends."""
+def _cut_feed(result, program: str) -> tuple[np.ndarray, np.ndarray]:
+    """Per sample: cutting or not, and its line's F [m/s] (inf off the program's lines)."""
     c = result.contour
     feed = feed_by_line(program)
-    cut = np.asarray(c.cutting)
-    F = np.array([feed[x] if x is not None else np.inf for x in c.program_line])
-    speed = np.hypot(*result.velocity[:, :2].T)
-    ratio = np.where(cut, speed / F, 0.0)
+    return np.asarray(c.cutting), np.array([feed[x] if x is not None else np.inf for x in c.program_line])
+
+
+def chord_feed_ratio(result, program: str) -> float:
+    """Largest straight move between two cut samples (its length over its time, as the exported
+    program runs it) over the smaller F of the lines at its ends."""
+    cut, F = _cut_feed(result, program)
     chord = np.hypot(*np.diff(result.pose[:, :2], axis=0).T) / np.diff(result.time)
     both = cut[:-1] & cut[1:]
-    ratio2 = np.where(both, chord / np.minimum(F[:-1], F[1:]), 0.0)
-    return float(max(ratio.max(), ratio2.max()))
+    return float(np.where(both, chord / np.minimum(F[:-1], F[1:]), 0.0).max(initial=0.0))
+
+
+def feed_ratio(result, program: str) -> float:
+    """Largest tool speed / F while cutting: each cut sample's speed against its line's F, and
+    :func:`chord_feed_ratio`."""
+    cut, F = _cut_feed(result, program)
+    ratio = np.where(cut, np.hypot(*result.velocity[:, :2].T) / F, 0.0)
+    return float(max(ratio.max(), chord_feed_ratio(result, program)))
 
 
 def toppra_at_feed(elements: list[PathElement], origin) -> float:

@@ -28,7 +28,7 @@ import pytest
 
 from planner.contour import plan_contour
 from planner.exchange.gcode import to_gcode
-from tests.test_contour import assert_two_sided
+from tests.test_contour import arc_points, assert_two_sided
 from tests.test_gcode_in import canonical_moves
 from tests.test_machine_program import PRINTED_MM, _program_frame, _samples, _source_distance
 
@@ -77,16 +77,7 @@ def rs274_moves(origin) -> tuple[np.ndarray, np.ndarray]:
                 n = max(int(np.ceil(np.hypot(*(end[:2] - prev[:2])) / 1e-6)), 1)
                 seg = prev[:2] + np.linspace(0, 1, n + 1)[:, None] * (end[:2] - prev[:2])
             else:
-                c = np.array(mv[3:5])
-                a0 = math.atan2(prev[1] - c[1], prev[0] - c[0])
-                sweep = math.atan2(end[1] - c[1], end[0] - c[0]) - a0
-                while mv[5] > 0 and sweep <= 1e-12:
-                    sweep += 2 * math.pi
-                while mv[5] < 0 and sweep >= -1e-12:
-                    sweep -= 2 * math.pi
-                r = float(np.hypot(*(prev[:2] - c)))
-                a = a0 + sweep * np.linspace(0, 1, max(int(np.ceil(abs(sweep) * r / 1e-6)), 2) + 1)
-                seg = c + r * np.stack((np.cos(a), np.sin(a)), axis=1)
+                seg = arc_points(mv, prev, end, lambda sweep, r: max(int(np.ceil(abs(sweep) * r / 1e-6)), 2))
             pts.append(seg[1:] if pts else seg)
             owner.append(np.full(len(pts[-1]), len(owner)))
         prev = end

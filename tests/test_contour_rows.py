@@ -18,7 +18,7 @@ import pytest
 import planner.contour.search as search
 from planner.contour import plan_contour
 from tests.test_contour_arrival import F_TOL
-from tests.test_contour_feed import feed_by_line
+from tests.test_contour_feed import chord_feed_ratio, feed_by_line
 
 CAM = Path(__file__).resolve().parent / "data" / "cam"
 
@@ -67,12 +67,7 @@ def test_a_small_excess_under_the_rows_lowers_them_and_keeps_the_samples(fusion)
     assert c.passes[1].time_s == pytest.approx(float(first.time[-1]), abs=1e-9)
     assert c.passes[1].max_feed_ratio <= 1.0
     # F never exceeded while cutting, from the sampled tool point (what the exported program runs)
-    feed = feed_by_line(text)
-    cut = np.asarray(c.cutting)
-    F = np.array([feed[x] if x is not None else np.inf for x in c.program_line])
-    speed = np.hypot(*np.diff(res.pose[:, :2], axis=0).T) / np.diff(res.time)
-    both = cut[:-1] & cut[1:]
-    assert (speed[both] / np.minimum(F[:-1], F[1:])[both]).max() <= 1 + F_TOL
+    assert chord_feed_ratio(res, text) <= 1 + F_TOL
 
 
 def test_rows_not_lowered_where_the_first_candidate_is_within_F(fusion):

@@ -24,6 +24,7 @@ from planner.schema import (
     PlanRequest,
     error_details,
 )
+from tests.contour_programs import staircase
 from tests.support import with_settings
 
 LAYOUT = {"bounds": {"lower": [-0.08, -0.06], "upper": [0.08, 0.06]}, "obstacles": [], "clearance": 0.0,
@@ -234,16 +235,7 @@ def test_fastest_over_the_limit_is_refused_up_front_with_what_to_change(table1):
 # ---------------------------------------------------------------------------------------
 # G-code programs (issue 33): lines, arc chords, passes and the moves between them counted
 
-def _lines(n: int, per_pass: int = 100) -> str:
-    out, x, y = ["G21 G90"], 0.0, 0.0
-    for i in range(n):
-        p, k = divmod(i, per_pass)
-        if k == 0:
-            x, y = (p % 10) * 1.0, 0.0
-            out += ["G0 Z5", f"G0 X{x:.3f} Y{y:.3f}", "G1 Z-1 F3000"]
-        y, x = (y + 0.5, x) if k % 2 else (y, x + 0.5)
-        out.append(f"G1 X{x:.3f} Y{y:.3f}")
-    return "\n".join(out) + "\n"
+_lines = staircase  # n cut lines, 100 a pass
 
 
 def _circles(n: int, per_pass: int = 100) -> str:
