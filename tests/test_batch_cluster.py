@@ -60,18 +60,23 @@ def worker_pids(address: str) -> dict[str, int]:
 
 
 def kill_one_worker_after(outdir: Path, address: str, n_done: int, killed: list) -> threading.Thread:
-    """A thread that SIGKILLs one worker process once ``n_done`` rows are in the summary;
-    ``killed`` gets ``(address, pid, rows finished at that moment)``."""
+    """A thread that SIGKILLs one worker process once ``n_done`` rows are in the summary, a
+    worker that has finished items of this batch (a worker still starting under load, which
+    the scheduler has given nothing yet, would test nothing); ``killed`` gets ``(address, pid,
+    rows finished at that moment)``."""
 
     def run():
         deadline = time.monotonic() + 300
         while time.monotonic() < deadline:
             s = outdir / "summary.csv"
             if s.exists() and len(s.read_text().splitlines()) > n_done:
-                addr, pid = sorted(worker_pids(address).items())[0]
-                os.kill(pid, signal.SIGKILL)
-                killed.append((addr, pid, len(s.read_text().splitlines()) - 1))
-                return
+                working = {row["worker"] for row in read_summary(outdir)}
+                busy = sorted((a, p) for a, p in worker_pids(address).items() if a in working)
+                if busy:
+                    addr, pid = busy[0]
+                    os.kill(pid, signal.SIGKILL)
+                    killed.append((addr, pid, len(s.read_text().splitlines()) - 1))
+                    return
             time.sleep(0.05)
 
     t = threading.Thread(target=run, daemon=True)
