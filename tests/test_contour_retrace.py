@@ -142,7 +142,7 @@ def test_each_sample_is_on_the_move_the_path_has_reached(planned):
     assert clear.sum() >= len(k) // 2
     assert np.array_equal(line[clear], move[clear]), np.flatnonzero(line[clear] != move[clear])
     ts = float(res.settings.Ts)
-    xyz = _samples(to_gcode(res, source="z"), ts)
+    xyz, _ = _samples(to_gcode(res, source="z"), ts)
     first, last = k[[0, -1]]
     dist = _source_distance(PROGRAM, _program_frame(xyz[first:last + 1], res.contour.origin))
     assert dist.max() <= tol + 2 * PRINTED_MM * 1e-3, dist.max()

@@ -101,18 +101,36 @@ def planned() -> dict[str, tuple[str, PlanResult, str]]:
     return out
 
 
-def _samples(program: str, ts: float) -> np.ndarray:
-    """The exported program as rs274 runs it, one row (x, y, z) [mm] per plan sample: the first
-    rapid is sample 0, each feed move one sample, a dwell of P its P / Ts samples."""
+def _samples(program: str, ts: float) -> tuple[np.ndarray, np.ndarray]:
+    """The exported program as rs274 runs it, one row (x, y, z) [mm] per plan sample: the last
+    rapid before inverse time (G93) is sample 0, each feed move in inverse time one sample, a
+    dwell of P its P / Ts samples; and per sample, whether a move issued as written (a G28 or
+    the first Z move after it or after the start: a rapid, or a feed move in units per minute)
+    moved the tool since the sample before."""
     rows: list[list[float]] = []
+    issued: list[bool] = []
+    inverse, first, moved = False, None, False
     for name, args in _canon(program):
-        if name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
+        if name == "COMMENT" and "feed mode set to inverse time" in args:
+            if not rows:
+                assert first is not None
+                rows, issued, moved = [first], [False], False
+            inverse = True
+        elif name == "COMMENT" and "feed mode set to units per minute" in args:
+            inverse = False
+        elif name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED") and not (inverse and name == "STRAIGHT_FEED"):
+            first, moved = [float(a) for a in args.split(",")[:3]], True
+        elif name == "STRAIGHT_FEED":
             rows.append([float(a) for a in args.split(",")[:3]])
+            issued.append(moved)
+            moved = False
         elif name == "DWELL" and rows:
             n = round(float(args) / ts)
             assert abs(n * ts - float(args)) <= CANON_DWELL_S, f"a dwell of {args} s is not whole samples"
-            rows += [rows[-1]] * n
-    return np.array(rows)
+            rows += [first if moved and first is not None else rows[-1]] * n
+            issued += [moved] + [False] * (n - 1)
+            moved = False
+    return np.array(rows), np.array(issued)
 
 
 @pytest.mark.parametrize("name", list(PROGRAMS))
@@ -147,7 +165,7 @@ def test_machine_program_moves_z_as_the_source(planned, name):
     c = res.contour
     assert c is not None
     p = read_gcode(text)
-    xyz = _samples(program, float(res.settings.Ts))
+    xyz, issued = _samples(program, float(res.settings.Ts))
     assert len(xyz) == len(res.time)
     origin = np.asarray(c.origin)
     z = xyz[:, 2] * 1e-3  # m (the export is in mm), program frame (canonical Z is the program's: no work offset)
@@ -163,7 +181,7 @@ def test_machine_program_moves_z_as_the_source(planned, name):
     travel = moved_xy & ~cutting
     assert travel.any() and np.all(z[travel] >= -1e-9), "a cut while XY travels"
     # plunges and retracts: XY still, Z from the block's start to its end, at most the source's speed
-    dz_steps = np.r_[False, np.abs(np.diff(xyz[:, 2])) > PRINTED_MM]
+    dz_steps = np.r_[False, np.abs(np.diff(xyz[:, 2])) > PRINTED_MM] & ~issued
     assert np.all(~moved_xy[dz_steps] | cutting[dz_steps]), "Z moves during an XY travel"
     assert c.dwell is not None
     holds = [b for b in p.blocks if b.kind == "dwell" and b.reason in ("plunge", "retract")]
@@ -229,6 +247,49 @@ def test_machine_program_takes_the_plan_time(planned, name):
     assert abs(toolpath(read_gcode(program, readback=True)).duration_s - res.metrics.duration_s) < ts
 
 
+#: a move the export issues as written, its start the machine's: the first Z move, a G28 Z
+_STATEMENT = re.compile(r"^(G0 Z|G94 G1 Z|G28 Z|G91 G28 Z)")
+
+
+@pytest.mark.parametrize("name", list(PROGRAMS))
+def test_no_z_word_while_the_machine_s_z_is_unknown(planned, name):
+    """The machine's Z is unknown before the source's first Z move and after a G28 Z until the
+    next (a real machine starts where it was homed, not at Z 0): the export gives those
+    samples no Z word and issues that next move as written, to the source's Z. Run from a
+    machine at Z 50 mm (rs274 after ``G0 Z50``), the tool stays at 50 mm until the source's
+    first Z move and then goes to its Z, as the source's own run does."""
+    text, res, program = planned[name]
+    body = [ln for ln in program.splitlines() if ln and not ln.startswith("(")]
+    unknown, seen = True, []
+    for ln in body:
+        if _STATEMENT.match(ln):
+            seen.append(ln)
+            unknown = "G28" in ln
+        elif unknown and not ln.startswith("G43.1"):  # a tool length offset's Z is not a move
+            assert not re.search(r"\bZ-?[\d.]", ln), (name, ln)
+    approach = [ln for ln in seen if not ln.startswith(("G28", "G91"))]
+    assert approach
+    first_z = float(re.search(r"Z(-?[\d.]+)", approach[0]).group(1))
+
+    def levels(program_text: str) -> list[float]:
+        """The Z levels [mm] the canonical moves go through, from a machine at Z 50 mm, to the
+        first at ``first_z``."""
+        out, scale = [50.0], 1.0
+        head, rest = ("%\n", program_text.split("\n", 1)[1]) if program_text.startswith("%") else ("", program_text)
+        for n, a in _canon(head + "G21 G90\nG0 Z50\n" + rest):
+            scale = {"USE_LENGTH_UNITS(CANON_UNITS_INCHES)": 25.4, "USE_LENGTH_UNITS(CANON_UNITS_MM)": 1.0}.get(
+                f"{n}({a})", scale)
+            z = (float(a.split(",")[2]) if n in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED") else
+                 float(a.split(",")[5]) if n == "ARC_FEED" else None)
+            if z is not None and round(z * scale, 4) != out[-1]:
+                out.append(round(z * scale, 4))
+                if abs(out[-1] - first_z) <= 1e-4:
+                    return out
+        raise AssertionError(f"{name}: never at Z {first_z}: {out}")
+
+    assert levels(program) == levels(text)  # the export's run and the source's alike
+
+
 def test_joint_stream_states_the_words_at_their_samples(planned):
     """The leg-space stream's header names each issued word with its sample and source line."""
     _, res, _ = planned["fusion360"]
@@ -284,7 +345,7 @@ def test_z_in_the_material_is_one_pass_within_the_z_speed(feed):
     assert cutting[first:last + 1].all()
     assert c.dwell is not None and all(d is None for d in c.dwell[first + 1:last + 1])
     ts = float(res.settings.Ts)
-    xyz = _samples(to_gcode(res, source="tabs"), ts)
+    xyz, _ = _samples(to_gcode(res, source="tabs"), ts)
     assert _source_distance(text, _program_frame(xyz[first:last + 1], c.origin)).max() <= \
         c.tolerance_m + 2 * PRINTED_MM * 1e-3
     vz = np.abs(np.diff(xyz[first:last + 1, 2] * 1e-3)) / ts
@@ -381,7 +442,7 @@ def test_z_of_ramps_tabs_and_helices_within_the_z_axis_and_the_tolerance(case):
     c = res.contour
     assert c is not None and len(c.passes) == 1
     ts = float(res.settings.Ts)
-    xyz = _samples(to_gcode(res, source="z"), ts)
+    xyz, _ = _samples(to_gcode(res, source="z"), ts)
     assert len(xyz) == len(res.time)
     cutting = np.asarray(c.cutting)
     first, last = np.nonzero(cutting)[0][[0, -1]]

@@ -7,16 +7,22 @@ import re
 
 from ..schema import PlanResult
 
-__all__ = ["ISSUED", "word_schedule"]
+__all__ = ["ISSUED", "STATEMENT", "word_schedule"]
 
 #: the words a machine program carries over (the motion modes, planes, feed and path modes are
-#: the export's own: G93/G94 feed, one move per sample)
-ISSUED = re.compile(r"^(S|T|M|G43(\.1)?\b|G49\b|G5[4-9](\.[123])?\b)")
+#: the export's own: G93/G94 feed, one move per sample), and the moves the reader keeps as
+#: written because their start is the machine's (:data:`STATEMENT`)
+ISSUED = re.compile(r"^(S|T|M|G43(\.1)?\b|G49\b|G5[4-9](\.[123])?\b|G0 Z|G94 G1 Z|G28 Z|G91 G28 Z)")
+#: a move issued as written, on a line of its own: a G28 Z (the machine goes to its Z home,
+#: unknown to the plan) or the first Z move after the program's start or a G28 (from that
+#: unknown height: ``G0 Z..`` or ``G94 G1 Z.. F..``)
+STATEMENT = re.compile(r"^(G0 Z|G94 G1 Z|G28 Z|G91 G28 Z)")
 
 
 def word_schedule(result: PlanResult) -> list[tuple[int, int, str]]:
     """The issued words of a contour plan as ``(sample, source line, words of that line)`` in
-    order: a line's words are due before the step into the first sample whose ``source_line``
+    order (a line's words as one entry, then each of its :data:`STATEMENT` moves as one): a
+    line's words are due before the step into the first sample whose ``source_line``
     reaches the line (sample 0: before the plan starts); words after the last line the plan
     reaches are due at the end (sample = the number of samples). Empty without a contour
     section or its ``source_line``."""
@@ -32,5 +38,8 @@ def word_schedule(result: PlanResult) -> list[tuple[int, int, str]]:
     for line in sorted(by_line):
         while k < n and c.source_line[k] < line:
             k += 1
-        out.append((k, line, " ".join(by_line[line])))
+        plain = [w for w in by_line[line] if not STATEMENT.match(w)]  # a line's modes and M words first
+        if plain:
+            out.append((k, line, " ".join(plain)))
+        out.extend((k, line, w) for w in by_line[line] if STATEMENT.match(w))
     return out

@@ -21,7 +21,10 @@ A contour plan (its ``contour`` section with ``z_m``, issue 32) is the part prog
 ``G1`` also carries Z in mm (the source program's frame), Z alone moving for a plunge or
 retract; the source's spindle, tool, coolant, stop, tool length and work offset words are
 issued before the first sample that reaches their source line (:func:`._schedule.word_schedule`),
-and a source ``G4`` is one ``G4`` of the samples it takes. Any other plan's program is as above.
+and a source ``G4`` is one ``G4`` of the samples it takes. The machine's Z is unknown before the
+source's first Z move and after a ``G28 Z`` until the next Z move: those samples carry no Z
+word, and that next move is issued as written (``G0 Z..``, or ``G94 G1 Z.. F..`` then ``G93``)
+as is the ``G28`` (``G91 G28 Z..`` then ``G90``). Any other plan's program is as above.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..schema import PlanResult
-from ._schedule import word_schedule
+from ._schedule import STATEMENT, word_schedule
 
 __all__ = ["DECIMALS", "to_gcode"]
 
@@ -98,6 +101,17 @@ def _contour_body(result: PlanResult, xyc_rows: list[str], xy: np.ndarray, c: np
     due: dict[int, list[str]] = {}
     for k, _, words in word_schedule(result):
         due.setdefault(k, []).append(words)
+        if words.startswith("G94 ") and k > 0:  # a feed move from the machine's height, in units per minute
+            due[k].append("G93")
+        elif words.startswith("G91 "):
+            due[k].append("G90")
+    # no Z word while the machine's Z is unknown: before the program's first Z move and after a
+    # G28 Z until the next (those moves are issued as written: word_schedule)
+    known = np.zeros(len(rows) + 1, bool)
+    for k, _, words in word_schedule(result):
+        if STATEMENT.match(words):
+            known[k:] = not words.startswith(("G28", "G91 G28"))
+    rows = [r if known[k] else xyc for k, (r, xyc) in enumerate(zip(rows, xyc_rows))]
     out = [
         _comment("units: X Y tool point in mm (robot frame), C platform angle psi in degrees, Z in mm (the "
                  "source program's frame: its tool length and work offsets as it sets them)"),
@@ -105,11 +119,13 @@ def _contour_body(result: PlanResult, xyc_rows: list[str], xy: np.ndarray, c: np
                  "Z move alone (plunge, retract) is at most its programmed feed or the Z rapid speed"),
         _comment("a source G4 is one G4 of the planned samples it takes; spindle, tool, coolant, stop and offset "
                  "words are where the source issues them"),
+        _comment("Z is the machine's (no Z word) before the source's first Z move and after a G28 Z until the "
+                 "next; that move is issued as written, its time not counted"),
         _comment(f"source: {source or 'rangeplan'}"),
         *(_comment(h) for h in header),
         "G21 G90 G17",
         *due.pop(0, []),
-        f"G0 {xyc_rows[0] if z[0] == 0 else rows[0]}",  # Z 0: where LinuxCNC starts, as the source
+        f"G0 {rows[0]}",
         "G93",
     ]
     k = 1

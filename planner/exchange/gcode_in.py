@@ -13,7 +13,8 @@ other axis is refused), ``G4 P`` (seconds), ``G20 G21`` (converted to m here), `
 ``G43``/``G43 H`` (the tool table is unknown: the Z words after it are the program's),
 ``G43.1 Z``, ``G49`` (the current Z shifts by the change of offset, as LinuxCNC's), ``G54``
 to ``G59.3`` (no offsets table: the identity, warned for any but ``G54``; ``origin`` places
-the program), ``G28`` with Z alone (``G28 G91 Z0.``: a retract above the cut, warned),
+the program), ``G28`` with Z alone (``G28 G91 Z0.``: the machine goes to its Z home, issued as
+written by the export, warned),
 ``G40 G80`` cancels, ``O`` program numbers alone on a line, ``N``, ``( )`` and ``;``
 comments, ``%``, ``M2``/``M30`` (what follows is ignored, as LinuxCNC does). The spindle,
 tool and mode words are kept in ``Program.words``. Anything else (cutter compensation,
@@ -27,13 +28,20 @@ moves form a pass, and feed moves above it between two cutting moves (a tab) joi
 ``z_rapid``). Rapids and other feed moves above it are travel; Z-only moves are plunges and
 retracts (dwells of ``|dZ| / F``, or ``/ z_rapid`` for G0).
 
+The machine's Z is unknown before the program's first Z move and after a ``G28 Z`` until the
+next Z move: the moves there are travel, read at the Z of that next move (or ``cut_below`` if
+lower), and that move is kept in ``Program.words`` as the export issues it (``G0 Z..`` or
+``G94 G1 Z.. F..`` in mm; its time is not counted); it may not be incremental, nor a ramp
+into the cut.
+
 Read back (``readback=True``): the planner's own export (:func:`planner.exchange.to_gcode`)
 read as LinuxCNC runs it, for the editor's preview and the round-trip tests. Two words more
 are accepted: ``G93`` inverse-time feed (``F`` on every feed move's line is 1 / the minutes
 the move takes: its ``duration_s`` is 60 / F, as LinuxCNC times it) and the ``C`` axis (the
 platform angle psi, degrees in the program, rad in ``c_start_rad`` / ``c_end_rad``; a move
 of C alone is a line of length 0). A program without a cutting move is read (the export's
-moves are at Z = 0: travel). Everything else is refused as without it.
+moves are at Z = 0: travel; a Z move not in inverse time and a ``G28 Z`` are moves it issues as
+written, their time not counted). Everything else is refused as without it.
 """
 
 from __future__ import annotations
@@ -214,6 +222,9 @@ def read_gcode(text: str, *, cut_below: float = 0.0, z_rapid_m_s: float = 0.05, 
     tool_offset = 0.0  # the tool length offset in force [m]: G43.1's; G43 H's is unknown here, read as 0
     work_offsets: list[str] = []
     ended = False
+    # the machine's Z before the program's first Z move and after a G28 Z, until the next: unknown
+    # (the moves there are travel at the Z of that next move; the export gives them no Z)
+    z_unknown, unknown_from, unknown_why = not readback, 0, "the program's start"
     lines = text.splitlines()
     n_lines = 0
 
@@ -352,8 +363,15 @@ def read_gcode(text: str, *, cut_below: float = 0.0, z_rapid_m_s: float = 0.05, 
             add_dwell(ln, vals["P"], "G4")
         elif "P" in vals and 64.0 not in gs:
             raise _fail(ln, f"the word P{vals['P']:g} without G4 or G64 is not supported")
-        if 28.0 in gs:
-            pos = _home_z(ln, gs, vals, pos, u, absolute, cut_below, z_rapid_m_s, add_dwell, warnings)
+        if 28.0 in gs and readback:  # the export's G28 Z as written: the machine's, its time not counted
+            _home_words(ln, gs, vals, u, absolute)
+            continue
+        if 28.0 in gs:  # the machine goes to its Z home, unknown here: issued as written
+            words.extend(ProgramWord(line=ln, word=w) for w in _home_words(ln, gs, vals, u, absolute))
+            warnings.append(f"line {ln}: G28 Z (return to Z home) is issued as written; Z home is unknown here: its "
+                            "time is not counted, and the output gives no Z until the program's next Z move")
+            if not z_unknown:
+                z_unknown, unknown_from, unknown_why = True, len(blocks), f"the G28 at line {ln}"
             continue
         if moving:
             motion = moving[0]
@@ -379,10 +397,17 @@ def read_gcode(text: str, *, cut_below: float = 0.0, z_rapid_m_s: float = 0.05, 
             c_target = c_pos
             if "C" in axes:
                 c_target = math.radians(axes["C"]) + (0.0 if absolute else c_pos)
+            if z_unknown and "Z" in axes:  # the first Z move from the machine's (unknown) height
+                approach = _approach_words(ln, motion, absolute, target[2], feed, u, cut_below, unknown_why,
+                                           bool((target[:2] != pos[:2]).any()) or bool(arcw))
+                words.extend(ProgramWord(line=ln, word=w) for w in approach)
+                _at_height(blocks[unknown_from:], float(target[2]), cut_below)
+                pos[2] = target[2]
+                z_unknown = False
             if first_xy is None and (target[:2] != pos[:2]).any():
                 first_xy = pos[:2].copy()
-            _move(ln, motion, pos, target, arcw, u, feed, exact, cut_below, z_rapid_m_s, blocks, add_dwell,
-                  (c_pos, c_target) if readback else None, duration, plane)
+            _move(ln, motion, pos, target, arcw, u, feed, exact, -math.inf if z_unknown else cut_below, z_rapid_m_s,
+                  blocks, add_dwell, (c_pos, c_target) if readback else None, duration, plane)
             pos, c_pos = target, c_target
         if 2 in ms or 30 in ms:
             ended = True
@@ -407,26 +432,46 @@ def read_gcode(text: str, *, cut_below: float = 0.0, z_rapid_m_s: float = 0.05, 
                    warnings=warnings, start=first_xy if first_xy is not None else np.zeros(2))
 
 
-def _home_z(ln: int, gs: list[float], vals: dict[str, float], pos: np.ndarray, u: float, absolute: bool,
-            cut_below: float, z_rapid: float, add_dwell, warnings: list[str]) -> np.ndarray:
-    """``G28`` with Z alone (Fusion 360's ``G28 G91 Z0.``): a rapid to the Z of the
-    intermediate point, then a retract to Z home, which with no parameters is read as at
-    least ``cut_below`` (no time counted for it). Returns the new position."""
+def _home_words(ln: int, gs: list[float], vals: dict[str, float], u: float, absolute: bool) -> list[str]:
+    """``G28`` with Z alone as the export issues it (mm): ``G28 Z..`` or, in incremental mode,
+    ``G91 G28 Z..`` (the export goes back to ``G90`` after it)."""
     if any(g in (0.0, 1.0, 2.0, 3.0) for g in gs):
         raise _fail(ln, "G28 and a motion word on one line")
     if "X" in vals or "Y" in vals or "Z" not in vals:
         which = " ".join(k for k in "XY" if k in vals) or "all axes"
         raise _fail(ln, f"G28: a return to the home position in {which} is not supported (only 'G28 Z...', a Z "
                     f"retract): {_RETRACT}")
-    target = pos.copy()
-    target[2] = vals["Z"] * u if absolute else pos[2] + vals["Z"] * u
-    dz = target[2] - pos[2]
-    z_end = max(target[2], cut_below)
-    add_dwell(ln, abs(dz) / z_rapid, "plunge" if dz < 0 else "retract", (float(pos[2]), float(z_end)))
-    target[2] = z_end
-    warnings.append(f"line {ln}: G28 Z (return to Z home) is read as a retract above the cut (Z home unknown: "
-                    "its time is not counted)")
-    return target
+    z_mm = f"Z{vals['Z'] * u * 1e3:.4f}"
+    return [f"G28 {z_mm}" if absolute else f"G91 G28 {z_mm}"]
+
+
+def _approach_words(ln: int, motion: float, absolute: bool, z: float, feed: float, u: float, cut_below: float,
+                    why: str, xy_moves: bool) -> list[str]:
+    """The first Z move after ``why`` (the machine's Z unknown) as the export issues it: a
+    rapid ``G0 Z..`` or a feed move at its F in units per minute (``G94 G1 Z.. F..``: the export
+    goes back to ``G93`` after it), mm; the XY part of the move, if any, then follows at that Z.
+    Refused where its start matters: incremental, or a ramp into the cut."""
+    if not absolute:
+        raise _fail(ln, f"an incremental Z move (G91) after {why}: the machine's Z there is unknown: make the first Z "
+                    "move after it absolute (G90), e.g. a rapid to the clearance height")
+    if z < cut_below and xy_moves:
+        raise _fail(ln, f"the first Z move after {why} goes into the cut (Z{z / u:g}) while moving in XY, from the "
+                    "machine's height, unknown here: move to a clearance height first (G0 Z...)")
+    if motion == 0.0:
+        return [f"G0 Z{z * 1e3:.4f}"]
+    return [f"G94 G1 Z{z * 1e3:.4f} F{feed * 60e3:.4f}"]
+
+
+def _at_height(blocks: list[ProgramBlock], z: float, cut_below: float) -> None:
+    """The travel and dwells read while the machine's Z was unknown: at ``z`` (the Z of the move
+    that ends it) or at ``cut_below`` if that is lower, in place."""
+    zt = max(z, cut_below)
+    for b in blocks:
+        for e in b.elements:
+            e.z_start_m = e.z_end_m = zt
+        if b.kind == "dwell":
+            b.z_start_m = zt
+            b.z_moves = [(t, zt, line) for t, _, line in b.z_moves]
 
 
 def _move(ln: int, motion: float, pos: np.ndarray, target: np.ndarray, arcw: dict[str, float], u: float,
@@ -440,6 +485,8 @@ def _move(ln: int, motion: float, pos: np.ndarray, target: np.ndarray, arcw: dic
     xy_same = bool(np.all(np.abs(target[:2] - pos[:2]) < 1e-12))
     c_moves = c is not None and c[1] != c[0]
     if motion in (0.0, 1.0) and xy_same and not c_moves:
+        if c is not None and duration is None:  # read back: a Z move the export issues as written
+            return
         if dz != 0.0:
             speed = z_rapid if motion == 0.0 else feed
             add_dwell(ln, duration if duration is not None else abs(dz) / speed, "plunge" if dz < 0 else "retract",
