@@ -114,7 +114,9 @@ def _plan_contour(req: ContourRequest, st: Settings, program: Program | None, t0
     tol = tolerance_of(req, program)
     if req.tolerance_m is None and program.tolerance_m is not None and not 1e-5 <= tol <= 0.01:
         raise PlannerError("invalid_input", f"the program's G64 P gives a tolerance of {tol * 1e3:g} mm, outside "
-                           "0.01..10 mm; give tolerance_m", "tolerance_m")
+                           "0.01..10 mm, what the planner holds (its cells keep a 1e-06 m margin for the model's "
+                           "one-step error); give tolerance_m (CLI: --tolerance) in metres within it, e.g. "
+                           f"{min(max(tol, 1e-5), 0.01):g} to plan as close to the program's as it can", "tolerance_m")
     model = load_robot(req.robot)
     st = contour_settings(req, st, program, tol, model)  # Ts and N for the program's arcs unless given
     if req.origin == "fit":
