@@ -485,11 +485,16 @@ def limit_rows(label: str, res, third: list[float]) -> list[str]:
     # the force change per sample from zero before the start, over its allowed change (as the metric)
     df = np.abs(np.diff(np.vstack([np.zeros((1, f.shape[1])), f]), axis=0)) / res.settings.Ts
     rate_ratio = float((df / rate).max())
-    out = []
-    for i, p in enumerate(c.passes):
-        out.append(f"| {label} | {i} | {p.time_s:.3f} | {third[i]:.4f} | {p.time_s / third[i]:.3f}x | "
-                   f"{p.max_deviation_m / tol:.3f} | {p.max_path_deviation_m / tol:.3f} | "
-                   f"{res.settings.Ts * 1e3:g} |")
+    out: list[str] = []
+    first, prev = 0, ""
+    for i, p in enumerate(c.passes):  # passes alike in a row (depth passes): one line
+        row = (f"| {p.time_s:.3f} | {third[i]:.4f} | {p.time_s / third[i]:.3f}x | {p.max_deviation_m / tol:.3f} | "
+               f"{p.max_path_deviation_m / tol:.3f} | {res.settings.Ts * 1e3:g} |")
+        if out and row == prev:
+            out[-1] = f"| {label} | {first}-{i} {row}"
+            continue
+        first, prev = i, row
+        out.append(f"| {label} | {i} {row}")
     out.append(f"| {label} | all | {c.cut_time_s:.3f} | {sum(third):.4f} | {c.cut_time_s / sum(third):.3f}x | "
                f"{c.max_deviation_m / tol:.3f} | {c.max_path_deviation_m / tol:.3f} | force {m.max_force_ratio:.3f}, "
                f"rate {rate_ratio:.3f} of the limits; within_limits {m.within_limits} |")
