@@ -469,6 +469,38 @@ def element_table(label: str, i: int, els: list[PathElement], opt: Optimum, res,
     return out
 
 
+def limit_rows(label: str, res, third: list[float]) -> list[str]:
+    """Per pass of a ``fastest`` plan: its time over the third-order peer's (``third``, per pass),
+    the two-sided tolerance (the largest distance of the cut from the path and of the path from
+    the cut, each over the tolerance planned to: at most 1), and per program the largest drive
+    force over its limit and the largest force change per sample over ``force_rate_n_s`` x Ts
+    (each at most 1, as ``metrics.within_limits`` says)."""
+    c = res.contour
+    m = res.metrics
+    tol = c.tolerance_m
+    held = res.settings.force_rate_n_s  # the limit the plan held, N/s per drive (None: the default)
+    rate = (np.asarray(load_robot(ROBOT).force_max, float) / DEFAULT_FORCE_RISE_S if held is None
+            else np.asarray(held, float))
+    f = np.asarray(res.drives.force, float)
+    # the force change per sample from zero before the start, over its allowed change (as the metric)
+    df = np.abs(np.diff(np.vstack([np.zeros((1, f.shape[1])), f]), axis=0)) / res.settings.Ts
+    rate_ratio = float((df / rate).max())
+    out: list[str] = []
+    first, prev = 0, ""
+    for i, p in enumerate(c.passes):  # passes alike in a row (depth passes): one line
+        row = (f"| {p.time_s:.3f} | {third[i]:.4f} | {p.time_s / third[i]:.3f}x | {p.max_deviation_m / tol:.3f} | "
+               f"{p.max_path_deviation_m / tol:.3f} | {res.settings.Ts * 1e3:g} |")
+        if out and row == prev:
+            out[-1] = f"| {label} | {first}-{i} {row}"
+            continue
+        first, prev = i, row
+        out.append(f"| {label} | {i} {row}")
+    out.append(f"| {label} | all | {c.cut_time_s:.3f} | {sum(third):.4f} | {c.cut_time_s / sum(third):.3f}x | "
+               f"{c.max_deviation_m / tol:.3f} | {c.max_path_deviation_m / tol:.3f} | force {m.max_force_ratio:.3f}, "
+               f"rate {rate_ratio:.3f} of the limits; within_limits {m.within_limits} |")
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--grids", default="24,48,96",
@@ -510,6 +542,7 @@ def main() -> None:
     summary: list[str] = []
     typed_rows: list[tuple[str, int, int, str]] = []  # program, first and last pass, the row
     element_rows: list[str] = []
+    check_rows: list[str] = []
     for name in args.programs.split(","):
         label, text, origin = load_program(name)
         prog = read_gcode(text)
@@ -534,10 +567,12 @@ def main() -> None:
         print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         tot = np.zeros(8)
         rows: list[tuple[int, str]] = []
+        pass_keys: list = []
         for i, b in enumerate(prog.passes):
             els = b.elements
             key = (tuple((e.kind, *np.round(e.start, 9), *np.round(e.end, 9), round(e.sweep_rad or 0.0, 9),
                           round(e.feed_m_s, 9)) for e in els), tuple(np.round(org, 9)))
+            pass_keys.append(key)
             if key not in memo:
                 topp = topp_time(els, org, leg_speed=True)
                 third = converged_optimum(robot, els, org, grids, rate, False, args.from_zero, args.blocks,
@@ -591,6 +626,8 @@ def main() -> None:
                 j += 1
             print(f"| {rows[k][0]}{'' if j == k else f'-{rows[j][0]}'} {rows[k][1]}")
             k = j + 1
+        if res:
+            check_rows += limit_rows(label, res["fastest"][0], [memo[k][1][-1].time_s for k in pass_keys])
         fast, prg, topp, t3, t3f, L, nominal, t3z = tot
         cf = res["fastest"][1] if res else math.nan
         cp = res["program"][1] if "program" in res else math.nan
@@ -608,6 +645,12 @@ def main() -> None:
           "program / 3rd at F |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     print("\n".join(summary))
+    if check_rows:
+        print("\n### fastest per pass: against the third-order optimum (goal 1: <= 1.0x), the two-sided "
+              "tolerance (cut from path, path from cut, over the tolerance: <= 1), the drive limits\n")
+        print("| program | pass | fastest s | 3rd order s | / 3rd | cut->path / tol | path->cut / tol | Ts ms |")
+        print("|---|---|---|---|---|---|---|---|")
+        print("\n".join(check_rows))
     if typed_rows:
         print(f"\n### fastest at the typed Ts {args.compare_ts:g} s against the defaults (per pass, against the "
               "3rd order)\n")

@@ -137,6 +137,18 @@ TIGHT_FAR = 2.0
 #: (2 passes: 19.9 CPU s at 1 ms, 5.46 at 2 ms, 1.37 at 5 ms against 10.7 / 4.41 / 0.92 without
 #: this term), none at 10 ms (0.29 s) nor at the chosen 4 ms (10 passes 3.31 s against 3.56)
 Z_SLOPE_PLANS = {"program": (0.0, 0.0, 0.3, 0.0), "fastest": (1.8, 0.5, 0.7, 0.0)}
+#: the ``program`` feed's search on a piece with a slope at a fine sample time: its candidate
+#: plans beyond those the piece's estimate counts, in units of the piece's estimate, by the
+#: sample times of :data:`SAMPLE_FACTOR_TS` (interpolated in their logarithm). Not Z misses
+#: (none in these plans): since branch feedcap3's merge (the program feed's cells of whole
+#: samples at F, a slope change's cells at the rising Z bound) the search plans a sloped piece
+#: about three times as often at 1-2 ms, each plan dearer (2 ramp-and-helix passes at 2 ms: 30
+#: plans, 17.1 CPU s of search, against 10 plans, 2.7 s at 49a5c63; at 1 ms 11.7 -> 38-43 CPU s,
+#: bisected to that merge, benchmarks/README.md "fastest and the contour compute and estimates
+#: re-measured"). With 0 at 1-2 ms those passes measured 2.60x and 2.12x their estimate; 1.8 and
+#: 1.3 bound them (1.19x, 1.08x) and leave 10 ramp passes at 2 ms 0.28x (their search is cheaper
+#: a pass: the bound takes the worst); 5 ms and above measured within the estimate (0.75-1.17x)
+SLOPE_SEARCH_PLANS = {"program": (1.8, 1.3, 0.0, 0.0), "fastest": (0.0, 0.0, 0.0, 0.0)}
 #: ``fastest``: seconds of the re-plans of a piece with a slope at least, per
 #: :data:`Z_FASTEST_LENGTH_M` of its length (at least one such length), by the sample times of
 #: :data:`SAMPLE_FACTOR_TS` (interpolated in their logarithm). It was 16 s at 10 ms, fitted to 2
@@ -402,7 +414,8 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
              # a piece with a slope is planned again where its Z misses (at most Z_TRIES plans in
              # all; measured: a ramp and helix pass 7 times); fastest's first miss goes on as a program
              # feed, and costs twice that (measured on 10 ramp and helix passes: 2.05x without it)
-             "z": sum(z_replans(f, els, p, st.Ts) for p, els in zip(per_piece, pieces, strict=True))}
+             "z": sum(z_replans(f, els, p, st.Ts) for p, els in zip(per_piece, pieces, strict=True)),
+             "slope_search": sum(slope_search(f, els, p, st.Ts) for p, els in zip(per_piece, pieces, strict=True))}
     travel_s, read_s = parts["travel"], parts["lines"]
     check = max(ADVICE_WORK * max(per_piece, default=0.0), ADVICE_MIN_S)
     seconds = sum(parts.values())
@@ -417,6 +430,9 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
                     f"{Z_TRIES} times for its Z{', each a search as a program feed' if f == 'fastest' else ''}), "
                     "or split the program"),
               "profiles": "a larger tolerance_m or fewer, longer moves, or split the program",
+              "slope_search": (f"settings.Ts 0.005 s or more instead of {st.Ts:g} s (at 1-2 ms the feed's search "
+                               "plans a piece with a slope about three times as often), or fewer ramps and helices, "
+                               "or split the program"),
               "search": (f"settings.Ts 0.005 s or more instead of {st.Ts:g} s (at a fine Ts the feed's scale is "
                          f"searched on arcs of {_tight_radius_mm(pieces):.2g} mm of radius and less: ~16 plans), "
                          "or fewer such arcs a pass (split the pass)"),
@@ -453,6 +469,15 @@ def z_replans(feed: str, els: list[PathElement], piece_s: float, Ts: float) -> f
         length = sum(e.length_m for e in els)
         out = max(out, floor * max(length / Z_FASTEST_LENGTH_M, 1.0))
     return out
+
+
+def slope_search(feed: str, els: list[PathElement], piece_s: float, Ts: float) -> float:
+    """The seconds of the feed's search beyond the piece's estimate ``piece_s`` [s] on a piece
+    with a slope at the sample time ``Ts`` (:data:`SLOPE_SEARCH_PLANS` times ``piece_s``; 0
+    without a slope)."""
+    if not any(abs(e.z_end_m - e.z_start_m) > 1e-12 for e in els):
+        return 0.0
+    return by_ts(SLOPE_SEARCH_PLANS[feed], Ts) * piece_s
 
 
 def _samples(feed: str, elements: list[PathElement], Ts: float) -> float:
