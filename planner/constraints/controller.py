@@ -337,6 +337,8 @@ class ConstrainedController:
         for name in ("z_prev", "y_nom", "u_prev", "warm", "x1_pred", "flags"):
             getattr(mem, name)[...] = getattr(memory, name)
         self.stats = dataclasses.replace(stats, iterations=list(stats.iterations))
+        if isinstance(self.assembly, CompiledAssembly) and self.assembly.proof.size:
+            self.assembly.proof[0] = 0  # the last proof was of another step: the next step solves all its rows
 
     def loop_arguments(self, max_steps: int) -> tuple[tuple, LoopRecord] | None:
         """For :func:`planner.orchestrator.kernels.simulate_constrained`: its arguments from
