@@ -46,7 +46,11 @@ steps and slack-problem iterations the work estimate counts,
 :func:`planner.orchestrator.work.slack_allowance`: a slack step costs 100-3000x a compiled
 step); the plan stops with ``infeasible`` where either runs out.
 An infeasible step is first solved again with its rows widened by
-:data:`~planner.constraints.rows.RELAX_M` (both backends, as the compiled step does).
+:data:`~planner.constraints.rows.RELAX_M` (both backends, as the compiled step does). On a
+stretch of such steps the compiled step proves each hard QP infeasible on the rows that proved
+the previous one's (the active set and the violated row of its verdict, a sample later), and
+solves the whole hard QP only where those rows alone have a solution: the same steps relaxed,
+at a fraction of the active-set changes (``step_kernels.constrained_step``).
 """
 
 from __future__ import annotations
