@@ -10,6 +10,7 @@ reference; the controller picks one of the two at construction.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -24,7 +25,7 @@ from .registry import assemble as fused_assemble
 from .rows import RELAX_M, ROW_UNIT_M, RowKind, Rows
 from .stagewise import DEPENDENT_TOL, SOLVE_TOL, WARM_TOL
 from .step import FullQP, StepQP
-from .step_kernels import constrained_step
+from .step_kernels import PROOF_FIELDS, constrained_step
 
 __all__ = ["ITERATIONS_PER_MOVE", "KERNEL_SECTIONS", "MAX_ITERATIONS", "RELAX_M", "AssemblyInputs", "CompiledAssembly",
            "StepOutcome"]
@@ -115,6 +116,11 @@ class StepOutcome:
 class CompiledAssembly:
     """The step's QP by the compiled kernels (see the module docstring)."""
 
+    #: solve a step after a proved-infeasible one first on the rows of that proof
+    #: (``step_kernels.constrained_step``); off: every step's hard QP on all its rows (the
+    #: same plans: ``tests/test_relaxed_proof.py`` compares them)
+    carry_proof: ClassVar[bool] = True
+
     def __init__(self, model: RobotModel, seq: RangeSequence, st: Settings, constraints: Constraints):
         self.N = st.N
         self.Ts, self.substeps = st.Ts, st.plant_substeps
@@ -136,12 +142,16 @@ class CompiledAssembly:
         #: the dual method's work space: a response per active row, and the Cholesky factor
         self._V = np.empty((nz + 1, 6 * self.N + nz))
         self._Lm = np.empty((nz + 1, nz + 1))
+        #: the rows that proved the last step's hard QP infeasible, for the next step
+        #: (``step_kernels.record_proof``: a count, then PROOF_FIELDS integers per row of the
+        #: active set and the violated row; empty where :attr:`carry_proof` is off)
+        self.proof = np.zeros(1 + PROOF_FIELDS * (nz + 2) if self.carry_proof else 0, np.int64)
 
     def step_constants(self, refine_tol: tuple[float, float], refine_max: int) -> tuple:
         """The arguments of :func:`~planner.constraints.step_kernels.constrained_step` from
         ``umax`` on (the same for every step of a plan)."""
         return (self.umax, self.zmax, self.du, ROW_UNIT_M, self.N, refine_tol[0], refine_tol[1], refine_max, SOLVE_TOL,
-                DEPENDENT_TOL, WARM_TOL, RELAX_M / ROW_UNIT_M, self.max_iterations, self._V, self._Lm,
+                DEPENDENT_TOL, WARM_TOL, RELAX_M / ROW_UNIT_M, self.max_iterations, self._V, self._Lm, self.proof,
                 self._kernel_inputs)
 
     def step(self, k: int, x: np.ndarray, Ad: np.ndarray, Bd: np.ndarray, y_nom: np.ndarray | None,

@@ -46,7 +46,11 @@ steps and slack-problem iterations the work estimate counts,
 :func:`planner.orchestrator.work.slack_allowance`: a slack step costs 100-3000x a compiled
 step); the plan stops with ``infeasible`` where either runs out.
 An infeasible step is first solved again with its rows widened by
-:data:`~planner.constraints.rows.RELAX_M` (both backends, as the compiled step does).
+:data:`~planner.constraints.rows.RELAX_M` (both backends, as the compiled step does). On a
+stretch of such steps the compiled step proves each hard QP infeasible on the rows that proved
+the previous one's (the active set and the violated row of its verdict, a sample later), and
+solves the whole hard QP only where those rows alone have a solution: the same steps relaxed,
+at a fraction of the active-set changes (``step_kernels.constrained_step``).
 """
 
 from __future__ import annotations
@@ -337,6 +341,8 @@ class ConstrainedController:
         for name in ("z_prev", "y_nom", "u_prev", "warm", "x1_pred", "flags"):
             getattr(mem, name)[...] = getattr(memory, name)
         self.stats = dataclasses.replace(stats, iterations=list(stats.iterations))
+        if isinstance(self.assembly, CompiledAssembly) and self.assembly.proof.size:
+            self.assembly.proof[0] = 0  # the last proof was of another step: the next step solves all its rows
 
     def loop_arguments(self, max_steps: int) -> tuple[tuple, LoopRecord] | None:
         """For :func:`planner.orchestrator.kernels.simulate_constrained`: its arguments from

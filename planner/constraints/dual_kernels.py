@@ -15,7 +15,7 @@ import numpy as np
 from .._jit import njit
 from .stagewise_kernels import affine, substitute, substitute_many
 
-__all__ = ["INFEASIBLE", "ITERATION_LIMIT", "SOLVED", "dual_solve"]
+__all__ = ["INFEASIBLE", "ITERATION_LIMIT", "SOLVED", "dual_solve", "dual_solve_active"]
 
 #: status of a solve (as :mod:`planner.constraints.stagewise`)
 SOLVED, INFEASIBLE, ITERATION_LIMIT = 1, -1, -2
@@ -97,13 +97,29 @@ def _most_violated(col, val, lower, upper, zmax, n_hard, elim, nx, Y, tol):
 @njit(cache=True)
 def dual_solve(ecnt, eax, ceq, elim, Kp, Z, L, A, B, S, P, K, C, Bu, du, x, d, tgt, col, val, lower, upper, zmax,
                n_hard, tol, dep_tol, warm_tol, max_iter, warm, V, Lm, Y):
+    """:func:`dual_solve_active` with its own work space for the active set: ``(status,
+    iterations, n_active, worst)``."""
+    qmax = V.shape[0]
+    status, iterations, n_act, worst, p, side = dual_solve_active(
+        ecnt, eax, ceq, elim, Kp, Z, L, A, B, S, P, K, C, Bu, du, x, d, tgt, col, val, lower, upper, zmax, n_hard, tol,
+        dep_tol, warm_tol, max_iter, warm, V, Lm, Y, np.empty(qmax, np.int64), np.empty(qmax))
+    return status, iterations, n_act, worst
+
+
+@njit(cache=True)
+def dual_solve_active(ecnt, eax, ceq, elim, Kp, Z, L, A, B, S, P, K, C, Bu, du, x, d, tgt, col, val, lower, upper,
+                      zmax, n_hard, tol, dep_tol, warm_tol, max_iter, warm, V, Lm, Y, act, sgn):
     """``stagewise.dual_solve``: the step's QP by the dual active-set method on the
     factorised stage-wise problem, force bounds ``|z| <= zmax`` (N m,); the solution
     ``Y = (X, z)`` into ``Y``; ``warm`` the
     previous solution shifted (``stagewise.shifted``; empty: no warm start); ``V`` (N m + 1,
     6N + N m) and ``Lm`` (N m + 1, N m + 1) are work space (allocated once per plan). Returns
     ``(status, iterations, n_active, worst)`` (status 1 solved, -1 infeasible, -2 iteration
-    limit; ``worst`` the largest violation of a constraint at ``Y``)."""
+    limit; ``worst`` the largest violation of a constraint at ``Y``), and ``(p, side)``: where
+    the status is infeasible, the violated constraint that proved it (its normal a combination
+    of the active ones' that no multiplier can pay for), else -1 and 0. The active constraints
+    (``n_active`` of them) and their sides are left in the work space ``act``, ``sgn`` (N m + 1,):
+    with ``p`` they are the rows of the proof (a QP of those rows alone is infeasible too)."""
     N = ecnt.shape[0]
     m = Bu.shape[1]
     nx = 6 * N
@@ -117,8 +133,6 @@ def dual_solve(ecnt, eax, ceq, elim, Kp, Z, L, A, B, S, P, K, C, Bu, du, x, d, t
     substitute(A, B, P, K, C, L, Z, ecnt, q, r, c, k0, x, N - 1, True, Y)
     Y0 = Y.copy()
     qmax = V.shape[0]
-    act = np.empty(qmax, np.int64)
-    sgn = np.empty(qmax)
     u = np.empty(qmax)
     cvec = np.empty(qmax)
     lvec = np.empty(qmax)
@@ -276,8 +290,13 @@ def dual_solve(ecnt, eax, ceq, elim, Kp, Z, L, A, B, S, P, K, C, Bu, du, x, d, t
     if status == SOLVED and n_act > 0:
         # polish: the minimiser on the final working set afresh from Y0 (``stagewise.dual_solve``)
         _on_working_set(n_act, act, sgn, u, V, Lm, lvec, col, val, lower, upper, zmax, n_hard, nx, Y0, Y)
+    proof = -1
+    proof_side = 0
+    if status == INFEASIBLE:
+        proof = p
+        proof_side = sp_
     p, sp_, worst = _most_violated(col, val, lower, upper, zmax, n_hard, elim, nx, Y, 0.0)
-    return status, iterations, n_act, max(worst, 0.0)
+    return status, iterations, n_act, max(worst, 0.0), proof, proof_side
 
 
 @njit(cache=True)

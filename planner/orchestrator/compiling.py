@@ -49,7 +49,7 @@ KERNEL_MODULES = tuple(dict.fromkeys((*_BASE_MODULES, _registry.__name__,
 #: The row constraints' count and fill kernels: their registry sections'
 #: (:func:`planner.constraints.registry.compile_costs`)
 COMPILE_COST: dict[str, float] = {
-    "simulate_constrained": 24.2, "constrained_step": 20.33, "dual_solve": 19.38, "simulate_paper": 13.47,
+    "simulate_constrained": 24.2, "constrained_step": 20.33, "dual_solve_active": 19.38, "simulate_paper": 13.47,
     "stage_setup": 11.77, "substitute_many": 7.64, "substitute": 6.37, "riccati": 6.18, "zoh": 4.47, "_terms": 4.29,
     "hessian": 4.05, "_drop": 3.13, "assemble": 3.11, "model_step": 2.82, "union_distances": 2.49,
     "free_parts": 2.39, "affine": 1.98, "_expm": 1.82, "_on_working_set": 1.73, "build_grid": 1.62,

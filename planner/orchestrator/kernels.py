@@ -93,7 +93,7 @@ def simulate_paper(packed, x0, lo, hi, qa, qb, qu, K, N, Ts, substeps, max_steps
 @njit(cache=True)
 def simulate_constrained(packed, k0, max_steps, K, Ts, substeps, end, settle, X, U, ACC, z_prev, y_nom, u_prev, warm,
                          x1_pred, flags, iterations, counts, worst, umax, zmax, du, unit, N, refine_tol_m,
-                         refine_tol_rad, refine_max, tol, dep_tol, warm_tol, relax, max_iter, V, Lm, inputs):
+                         refine_tol_rad, refine_max, tol, dep_tol, warm_tol, relax, max_iter, V, Lm, proof, inputs):
     """The constrained-mode loop of :func:`planner.orchestrator.simulate.simulate` from step
     ``k0`` (state ``X[k0]``), compiled: at each sample eq. (8), eq. (9), the constrained step
     (:func:`~planner.constraints.step_kernels.constrained_step`, its arguments from ``umax``
@@ -130,7 +130,7 @@ def simulate_constrained(packed, k0, max_steps, K, Ts, substeps, end, settle, X,
         status, Y, z, Xp, y_next, it, ref, wv, relaxed = constrained_step(
             k, x, Ad, Bd, y_nom if flags[0] else no_poses, u_prev, u0, warm if flags[1] else no_warm, packed, Ts,
             substeps, umax, zmax, du, unit, N, refine_tol_m, refine_tol_rad, refine_max, tol, dep_tol, warm_tol,
-            relax, max_iter, V, Lm, inputs)
+            relax, max_iter, V, Lm, proof, inputs)
         if status != SOLVED:
             return PYTHON_STEP, k, False
         iterations[k] = it
