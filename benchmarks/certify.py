@@ -18,6 +18,23 @@ advice, uncertified plans) and the largest measured / estimated time.
 mode only, each case ``numpy.random.default_rng([seed, i])``, under a server's compute limit
 (``--limit``, 30 s: a request estimated over it is refused up front, ``too_much_work``).
 
+``--profile``: where the run's CPU went, by category (the plan by outcome, ``fastest`` apart;
+the planner's advice search behind a refusal; the checker; the confirmation of refusals; the
+estimates; calibration; retiming; the workers' start), as a table at the end.
+
+``--resume FILE``: the run in slices across sittings (issue 31 goal 1: 10 000 cases where users
+go take hours on 2 cores). Each case's record (outcome, problem, CPU time and estimate, its CPU
+by category; the case itself where it has a problem or a plan over 1.3x) is appended to FILE as
+it finishes; the cases FILE already holds for the same run (generator, seed, ``--limit``) and
+the same code (:func:`code_key`: a hash of ``planner/`` and the checker's modules, uncommitted
+edits included) are skipped. ``--summary FILE [FILE ...]`` prints the table of every case the
+files hold, by run and code (a case recorded twice counted once): outcomes, checker problems,
+the largest CPU / estimate of a plan, plans over 1.5x, CPU s.
+
+    OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python benchmarks/certify.py --users --seed 31 --cases 10000 \\
+        --workers 2 --minutes 60 --resume users31.jsonl
+    .venv/bin/python benchmarks/certify.py --summary users31.jsonl
+
 ``--refusals RATIOS``: the infeasible cases of a run's ``--ratios`` file, each refused request
 tried with :data:`tests.certify_support.REMEDIES` (the advice's setting, twice the horizon,
 ``fastest``, 8 plant sub-steps; :func:`tests.certify_support.try_remedies`): a refusal is
@@ -302,6 +319,15 @@ def _lines(path: Path):
                 continue
 
 
+def _append(path: Path):
+    """``path`` opened to append records, after a newline if a stopped run left its last line cut."""
+    ends_cut = path.exists() and path.stat().st_size > 0 and path.read_bytes()[-1:] != b"\n"
+    f = path.open("a")
+    if ends_cut:
+        f.write("\n")
+    return f
+
+
 def _held(path: Path, run: dict):
     """The case indices ``path`` holds for ``run``."""
     for rec in _lines(path):
@@ -416,7 +442,7 @@ def main() -> None:
     users_limit = args.limit if args.users else None
     run = run_key(args.seed, args.users, users_limit)
     held = set(_held(args.resume, run)) if args.resume is not None else set()
-    resume = args.resume.open("a") if args.resume is not None else None
+    resume = _append(args.resume) if args.resume is not None else None
     costs: list[dict] = []
     t0 = time.perf_counter()
     counts: dict[str, collections.Counter] = {"constrained": collections.Counter(), "paper": collections.Counter()}
