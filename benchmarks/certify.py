@@ -114,8 +114,9 @@ def _init() -> None:
 
 def _time_advice_search() -> None:
     """Count the planner's advice search behind a refusal (``_more_time_advice``,
-    ``_other_advice``: the candidates it plans) apart from the plan that was refused, in the
-    profile (:data:`tests.certify_support.CPU`): a timing wrapper, nothing else changes."""
+    ``_other_advice``: the candidates it plans) apart from the plan that was refused, and its
+    DAQP calls apart from the rest, in the profile (:data:`tests.certify_support.CPU`): timing
+    wrappers, nothing else changes."""
     import importlib
 
     plan_module = importlib.import_module("planner.orchestrator.plan")  # (the package exports the function)
@@ -134,6 +135,18 @@ def _time_advice_search() -> None:
 
         timed._timed = True  # type: ignore[attr-defined]
         setattr(plan_module, name, timed)
+    # the DAQP calls (the QP fallback of the compiled stage-wise solve, the slack problem): in
+    # their own category beside the one they ran in ("plan infeasible: DAQP", ...)
+    qp_module = importlib.import_module("planner.constraints.qp")
+    real_qp = qp_module.solve_qp
+    if not getattr(real_qp, "_timed", False):
+
+        def timed_qp(*args, **kw):
+            with cpu_spent(": DAQP"):
+                return real_qp(*args, **kw)
+
+        timed_qp._timed = True  # type: ignore[attr-defined]
+        setattr(qp_module, "solve_qp", timed_qp)  # noqa: B010
 
 
 def _run(job: tuple[int, int, float | None]) -> tuple[dict, dict, dict]:

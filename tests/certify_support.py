@@ -712,26 +712,35 @@ import time  # noqa: E402
 #: confirmation of refusals ("confirmation"); the benchmark adds its own (case building,
 #: calibration, retiming, the planner's advice search behind a refusal)
 CPU: collections.Counter = collections.Counter()
-_OPEN: list[list] = []  # the categories being timed, innermost last: [category, since, spent]
+#: the categories being timed, innermost last: [category, since, spent, {suffix: spent}]
+_OPEN: list[list] = []
 
 
 @contextlib.contextmanager
 def cpu_spent(category: str):
     """Add the process CPU time of the block to :data:`CPU` [``category``], less the time of
     the blocks timed inside it (theirs). Yields the category's slot: setting ``slot[0]``
-    inside the block names its category once known (a plan's outcome)."""
+    inside the block names its category once known (a plan's outcome). A ``category`` that
+    starts with ":" is a part of the block around it: counted as that block's category (as
+    named when it ends) followed by this suffix ("plan infeasible: DAQP")."""
     now = time.process_time()
     if _OPEN:
         outer = _OPEN[-1]
         outer[2] += now - outer[1]
-    slot = [category, now, 0.0]
+    slot = [category, now, 0.0, collections.Counter()]
     _OPEN.append(slot)
     try:
         yield slot
     finally:
         now = time.process_time()
         _OPEN.pop()
-        CPU[slot[0]] += slot[2] + now - slot[1]
+        spent = slot[2] + now - slot[1]
+        if _OPEN and slot[0].startswith(":"):
+            _OPEN[-1][3][slot[0]] += spent
+        else:
+            CPU[slot[0]] += spent
+        for suffix, v in slot[3].items():
+            CPU[f"{slot[0]}{suffix}"] += v
         if _OPEN:
             _OPEN[-1][1] = now
 

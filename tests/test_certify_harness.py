@@ -78,12 +78,15 @@ def test_every_cpu_second_is_counted_once_in_its_innermost_category():
             slot[0] = "inner renamed"  # a plan's category is named by its outcome, once known
             with cpu_spent("innermost"):
                 spin(0.02)
+            with cpu_spent(": part"):  # a part of the block around it, under its final name
+                spin(0.02)
         spin(0.01)
     total = time.process_time() - t0
-    assert set(CPU) == {"outer", "inner renamed", "innermost"}
+    assert set(CPU) == {"outer", "inner renamed", "innermost", "inner renamed: part"}
     assert sum(CPU.values()) == pytest.approx(total, abs=2e-3)
     assert 0.05 <= CPU["inner renamed"] < 0.05 + 0.015 and CPU["innermost"] >= 0.02
-    assert 0.02 <= CPU["outer"] < 0.035  # its own 2 x 10 ms, not the 70 ms inside it
+    assert CPU["inner renamed: part"] >= 0.02
+    assert 0.02 <= CPU["outer"] < 0.035  # its own 2 x 10 ms, not the 90 ms inside it
     CPU.clear()
 
 
