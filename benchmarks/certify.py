@@ -418,8 +418,43 @@ def summary(paths: list[Path]) -> None:
               f"{cpu / max(1, len(cases)):.2f} |")
         for i, mode, code_, what in problems[:20]:
             print(f"  case {i} {mode} {code_}: {what[:300]}")
+        if cases:
+            per = cpu / len(cases)
+            print(f"  at {per:.2f} CPU s a case, 10 000 cases take {per * 1e4 / 2 / 3600:.1f} h on 2 cores "
+                  "(both busy with this run alone)")
     if len(runs) == 1:
         print_profile([rec for cases in runs.values() for rec in cases.values()])
+    keys = list(runs)
+    for a, b in zip(keys, keys[1:]):
+        _compare(json.loads(a), runs[a], json.loads(b), runs[b])
+
+
+def _compare(run_a: dict, a: dict[int, dict], run_b: dict, b: dict[int, dict]) -> None:
+    """The verdicts of two runs of the same cases (another code: before / after a change) side
+    by side: the cases both hold, those whose outcome or checker verdict differ, those whose
+    refusal message differs (the advice search is bounded by the compute limit in wall time:
+    on a loaded machine it may stop sooner), and the CPU of the common cases."""
+    if (run_a["users"], run_a["seed"], run_a["limit"]) != (run_b["users"], run_b["seed"], run_b["limit"]):
+        return
+    common = sorted(set(a) & set(b))
+    if not common:
+        return
+
+    def verdict(rec: dict) -> list:
+        return [(m, r["outcome"], r.get("problem")) for m, r in sorted(rec["modes"].items())]
+
+    def messages(rec: dict) -> list:
+        return [r.get("message") or "" for _, r in sorted(rec["modes"].items())]
+
+    differ = [i for i in common if verdict(a[i]) != verdict(b[i])]
+    told = [i for i in common if messages(a[i]) != messages(b[i])]
+    cpu_a, cpu_b = sum(a[i]["cpu_s"] for i in common), sum(b[i]["cpu_s"] for i in common)
+    print(f"\ncode {run_a['code']} -> {run_b['code']} (seed {run_a['seed']}): {len(common)} cases in both; "
+          f"outcome or checker verdict differs in {len(differ)} {differ[:20]}; refusal message differs in "
+          f"{len(told)} {told[:20]}; CPU {cpu_a:.0f} -> {cpu_b:.0f} s ({cpu_a / len(common):.2f} -> "
+          f"{cpu_b / len(common):.2f} a case)")
+    for i in differ[:10]:
+        print(f"  case {i}: {verdict(a[i])} -> {verdict(b[i])}")
 
 
 def main() -> None:
