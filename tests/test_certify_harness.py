@@ -150,3 +150,26 @@ def _records_loose(path: Path) -> list[dict]:
         except json.JSONDecodeError:
             continue
     return out
+
+
+def test_summary_sets_two_codes_runs_of_the_same_cases_side_by_side(tmp_path):
+    """``--summary before.jsonl after.jsonl``: the cases both runs hold, which of them changed
+    outcome or checker verdict (named), which changed only their refusal message (the advice
+    search is bounded in wall time), and their CPU either side."""
+
+    def rec(code: str, i: int, outcome: str, message: str, cpu: float) -> str:
+        run = {"users": True, "seed": 31, "limit": 30.0, "code": code}
+        mode = {"outcome": outcome, "problem": None, "seconds": cpu, "estimate": 1.0, "speed": 1.0,
+                "message": message}
+        return json.dumps({"run": run, "index": i, "modes": {"constrained": mode}, "cpu_s": cpu, "cpu": {},
+                           "start_s": None, "case": None})
+
+    before, after = tmp_path / "before.jsonl", tmp_path / "after.jsonl"
+    before.write_text("\n".join([rec("a" * 16, 0, "ok", "", 2.0), rec("a" * 16, 1, "infeasible", "x; 2x plans", 4.0),
+                                 rec("a" * 16, 2, "ok", "", 1.0), rec("a" * 16, 3, "ok", "", 9.0)]) + "\n")
+    after.write_text("\n".join([rec("b" * 16, 0, "ok", "", 1.0), rec("b" * 16, 1, "infeasible", "x", 3.0),
+                                rec("b" * 16, 2, "infeasible", "y", 1.0)]) + "\n")
+    out = _certify("--summary", str(before), str(after))
+    line = next(x for x in out.splitlines() if x.startswith("code aaaa"))
+    assert "3 cases in both" in line and "differs in 1 [2]" in line and "message differs in 2 [1, 2]" in line, line
+    assert "CPU 7 -> 5 s" in line, line
