@@ -169,7 +169,8 @@ def _run(job: tuple[int, int, float | None]) -> tuple[dict, dict, dict]:
         out = (certify_case(case, ("constrained",), work_limit_s=users_limit) if users_limit is not None
                else certify_case(case))
     except Exception as exc:  # a crash is a finding, not the end of the run
-        out = {"constrained": {"outcome": "crash", "problem": repr(exc)}, "paper": {"outcome": "skipped"}}
+        out = {"constrained": {"outcome": "crash", "problem": repr(exc), "index": i},
+               "paper": {"outcome": "skipped", "index": i}}
         return case, out, _cost(t_case, start)
     for mode, rec in out.items():
         rec["speed"] = _SPEED.get(mode, 1.0)
