@@ -162,7 +162,7 @@ def result_fields(result: Any, with_corridor: bool = True) -> dict:
     """What :func:`check_plan` reads of a :class:`planner.schema.PlanResult`, in the shape of
     its JSON (the settings and metrics as JSON types, the arrays as they are: a float64 array
     and its JSON list hold the same numbers). Its whole JSON, the arrays as lists and parsed
-    back (``json.loads(result.model_dump_json())``, what the checker read before), took ~85 %
+    back (``json.loads(result.model_dump_json())``, what the checker read before), took 70-80 %
     of a check's CPU time and told it nothing more (``tests/test_certify.py`` checks that both
     give the same verdict and figures)."""
     out = {"settings": result.settings.model_dump(mode="json"), "metrics": result.metrics.model_dump(mode="json"),
