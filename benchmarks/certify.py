@@ -18,6 +18,23 @@ advice, uncertified plans) and the largest measured / estimated time.
 mode only, each case ``numpy.random.default_rng([seed, i])``, under a server's compute limit
 (``--limit``, 30 s: a request estimated over it is refused up front, ``too_much_work``).
 
+``--profile``: where the run's CPU went, by category (the plan by outcome, ``fastest`` apart;
+the planner's advice search behind a refusal; the checker; the confirmation of refusals; the
+estimates; calibration; retiming; the workers' start), as a table at the end.
+
+``--resume FILE``: the run in slices across sittings (issue 31 goal 1: 10 000 cases where users
+go take hours on 2 cores). Each case's record (outcome, problem, CPU time and estimate, its CPU
+by category; the case itself where it has a problem or a plan over 1.3x) is appended to FILE as
+it finishes; the cases FILE already holds for the same run (generator, seed, ``--limit``) and
+the same code (:func:`code_key`: a hash of ``planner/`` and the checker's modules, uncommitted
+edits included) are skipped. ``--summary FILE [FILE ...]`` prints the table of every case the
+files hold, by run and code (a case recorded twice counted once): outcomes, checker problems,
+the largest CPU / estimate of a plan, plans over 1.5x, CPU s.
+
+    OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python benchmarks/certify.py --users --seed 31 --cases 10000 \\
+        --workers 2 --minutes 60 --resume users31.jsonl
+    .venv/bin/python benchmarks/certify.py --summary users31.jsonl
+
 ``--refusals RATIOS``: the infeasible cases of a run's ``--ratios`` file, each refused request
 tried with :data:`tests.certify_support.REMEDIES` (the advice's setting, twice the horizon,
 ``fastest``, 8 plant sub-steps; :func:`tests.certify_support.try_remedies`): a refusal is
@@ -33,6 +50,7 @@ for _v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import collections  # noqa: E402
+import hashlib  # noqa: E402
 import json  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
@@ -44,7 +62,16 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from tests.certify_support import REMEDIES, certify_case, draw_case, try_remedies, user_case  # noqa: E402
+from tests.certify_support import (  # noqa: E402
+    CPU,
+    REMEDIES,
+    certify_case,
+    cpu_category,
+    cpu_spent,
+    draw_case,
+    try_remedies,
+    user_case,
+)
 
 #: the machine's speed now against the reference machine of the work estimate: Table I's CPU
 #: time measured in each worker every CALIBRATE cases over its time on the quiet reference
@@ -72,30 +99,89 @@ def _cpu(f, *args) -> float:
     return time.process_time() - t0
 
 
+#: this worker's CPU time from its start to the end of :func:`_init` (interpreter, imports,
+#: kernels loaded or compiled): reported with its first case, then None
+_START: list[float | None] = [None]
+
+
 def _init() -> None:
     from planner import warm_up
 
     warm_up()
+    _time_advice_search()
+    _START[0] = time.process_time()
 
 
-def _run(job: tuple[int, int, float | None]) -> tuple[dict, dict]:
+def _time_advice_search() -> None:
+    """Count the planner's advice search behind a refusal (``_more_time_advice``,
+    ``_other_advice``: the candidates it plans) apart from the plan that was refused, and its
+    DAQP calls apart from the rest, in the profile (:data:`tests.certify_support.CPU`): timing
+    wrappers, nothing else changes."""
+    import importlib
+
+    plan_module = importlib.import_module("planner.orchestrator.plan")  # (the package exports the function)
+
+    for name in ("_more_time_advice", "_other_advice"):
+        real = getattr(plan_module, name)
+        if getattr(real, "_timed", False):
+            continue
+
+        def timed(*args, _real=real, **kw):
+            outer = cpu_category() or ""
+            if not outer.startswith("plan"):  # (a retiming's or a confirmation's plan: theirs)
+                return _real(*args, **kw)
+            with cpu_spent("advice search" + (" fastest" if outer.endswith("fastest") else "")):
+                return _real(*args, **kw)
+
+        timed._timed = True  # type: ignore[attr-defined]
+        setattr(plan_module, name, timed)
+    # the DAQP calls (the QP fallback of the compiled stage-wise solve, the slack problem): in
+    # their own category beside the one they ran in ("plan infeasible: DAQP", ...)
+    qp_module = importlib.import_module("planner.constraints.qp")
+    real_qp = qp_module.solve_qp
+    if not getattr(real_qp, "_timed", False):
+
+        def timed_qp(*args, **kw):
+            with cpu_spent(": DAQP"):
+                return real_qp(*args, **kw)
+
+        timed_qp._timed = True  # type: ignore[attr-defined]
+        setattr(qp_module, "solve_qp", timed_qp)  # noqa: B010
+
+
+def _run(job: tuple[int, int, float | None]) -> tuple[dict, dict, dict]:
+    """Case ``i`` of ``seed`` certified: the case, its records by mode, and what it cost:
+    ``{"cpu_s": the case's CPU time, "cpu": by category (tests.certify_support.CPU),
+    "start_s": the worker's start-up CPU (its first case only, else None)}``."""
     seed, i, users_limit = job
+    t_case = time.process_time()
+    CPU.clear()
+    start, _START[0] = _START[0], None
     # drawn here: the workers draw in parallel
-    case = user_case(np.random.default_rng([seed, i])) if users_limit is not None else draw_case(seed, i)
+    with cpu_spent("case building"):
+        case = user_case(np.random.default_rng([seed, i])) if users_limit is not None else draw_case(seed, i)
     if _SINCE[0] >= CALIBRATE:
-        _calibrate()
+        with cpu_spent("calibration"):
+            _calibrate()
         _SINCE[0] = 0
     _SINCE[0] += 1
     try:
         out = (certify_case(case, ("constrained",), work_limit_s=users_limit) if users_limit is not None
                else certify_case(case))
     except Exception as exc:  # a crash is a finding, not the end of the run
-        return case, {"constrained": {"outcome": "crash", "problem": repr(exc)}, "paper": {"outcome": "skipped"}}
+        out = {"constrained": {"outcome": "crash", "problem": repr(exc), "index": i},
+               "paper": {"outcome": "skipped", "index": i}}
+        return case, out, _cost(t_case, start)
     for mode, rec in out.items():
         rec["speed"] = _SPEED.get(mode, 1.0)
         rec["index"] = i  # the case is user_case(default_rng([seed, i])) or draw_case(seed, i): --only i
-        _retime(case, mode, rec)
-    return case, out
+        with cpu_spent("retiming (over 1.5x)"):
+            _retime(case, mode, rec)
+    return case, out, _cost(t_case, start)
+
+
+def _cost(t_case: float, start: float | None) -> dict:
+    return {"cpu_s": time.process_time() - t_case, "cpu": dict(CPU), "start_s": start}
 
 
 def _retime(case: dict, mode: str, rec: dict) -> None:
@@ -212,6 +298,166 @@ def _stop(pool: ProcessPoolExecutor, futures: list) -> int:
     return running
 
 
+# ---------------------------------------------------------------- profile, resume, summary
+
+#: the files whose content decides a case's verdict: a record counts for a run only if made by
+#: the same content (:func:`code_key`)
+CODE_FILES = ("planner/**/*.py", "planner/data/*.json", "tests/certify_support.py", "tests/advice_support.py",
+              "tests/support.py")
+
+
+def code_key() -> str:
+    """A hash of the planner's and the checker's source (:data:`CODE_FILES`), uncommitted
+    edits included: records made by other code are not summed with these."""
+    h = hashlib.sha256()
+    for path in sorted({p for pattern in CODE_FILES for p in ROOT.glob(pattern)}):
+        h.update(str(path.relative_to(ROOT)).encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()[:16]
+
+
+def run_key(seed: int, users: bool, limit: float | None) -> dict:
+    """What makes two records the same case of the same run: the generator, the seed, the
+    compute limit, the code (:func:`code_key`)."""
+    return {"users": bool(users), "seed": int(seed), "limit": limit, "code": code_key()}
+
+
+def _lines(path: Path):
+    """The records of a --resume file (a line cut by a run that was stopped mid-write is skipped)."""
+    if not path.exists():
+        return
+    with path.open() as f:
+        for line in f:
+            try:
+                yield json.loads(line)
+            except json.JSONDecodeError:
+                continue
+
+
+def _append(path: Path):
+    """``path`` opened to append records, after a newline if a stopped run left its last line cut."""
+    ends_cut = path.exists() and path.stat().st_size > 0 and path.read_bytes()[-1:] != b"\n"
+    f = path.open("a")
+    if ends_cut:
+        f.write("\n")
+    return f
+
+
+def _held(path: Path, run: dict):
+    """The case indices ``path`` holds for ``run``."""
+    for rec in _lines(path):
+        if rec.get("run") == run:
+            yield int(rec["index"])
+
+
+def _record(run: dict, case: dict, out: dict, cost: dict) -> dict:
+    """One case's line of a --resume file: its run, index, records by mode, CPU by category;
+    the case itself where it has a problem or a plan over 1.3x its estimate (the others are
+    drawn again from (seed, index))."""
+    keep = any(rec.get("problem") or rec.get("outcome") == "crash" or _ratio(rec) > 1.3 for rec in out.values())
+    i = next((rec["index"] for rec in out.values() if "index" in rec), None)
+    return {"run": run, "index": i, "modes": out, **cost, "case": case if keep else None}
+
+
+def _ratio(rec: dict) -> float:
+    """A plan's CPU time over its estimate at the reference machine's speed (0: not a plan)."""
+    est, sec = rec.get("estimate"), rec.get("seconds")
+    if rec.get("outcome") != "ok" or not est or not sec:
+        return 0.0
+    return sec / rec.get("speed", 1.0) / est
+
+
+def print_profile(costs: list[dict], wall: float | None = None, workers: int = 1) -> None:
+    """The table of where the CPU went (:data:`tests.certify_support.CPU`), summed over cases."""
+    total = sum(c["cpu_s"] for c in costs)
+    by: collections.Counter = collections.Counter()
+    cases_with: collections.Counter = collections.Counter()
+    for c in costs:
+        for k, v in c["cpu"].items():
+            by[k] += v
+            cases_with[k] += 1
+        by["harness glue (the rest of a case)"] += c["cpu_s"] - sum(c["cpu"].values())
+    starts = [c["start_s"] for c in costs if c.get("start_s") is not None]
+    n = max(1, len(costs))
+    print(f"\nwhere the CPU went: {len(costs)} cases, {total:.1f} CPU s in the cases ({total / n:.2f} per case)"
+          + (f", {wall:.0f} s wall on {workers} workers" if wall is not None else "")
+          + f"; worker start (interpreter, imports, kernels loaded): {sum(starts):.1f} CPU s over {len(starts)}")
+    print("| category | cases | CPU s | share | per case in it |\n|---|---|---|---|---|")
+    for k, v in sorted(by.items(), key=lambda kv: -kv[1]):
+        m = cases_with[k] or len(costs)
+        print(f"| {k} | {cases_with[k] or '-'} | {v:.1f} | {100 * v / max(total, 1e-9):.1f} % | {v / m:.3f} |")
+
+
+def summary(paths: list[Path]) -> None:
+    """The table of every case of every run the --resume files hold (a case recorded twice for
+    the same run, by two sittings that overlapped, counted once): outcomes, checker problems,
+    the largest CPU / estimate of a plan, CPU s."""
+    runs: dict[str, dict[int, dict]] = {}
+    for path in paths:
+        for rec in _lines(path):
+            runs.setdefault(json.dumps(rec["run"], sort_keys=True), {}).setdefault(int(rec["index"]), rec)
+    now = code_key()
+    print("| seed | generator | code | cases | outcomes | checker problems | plans | largest CPU / estimate "
+          "(case) | over 1.5x | CPU s | CPU s / case |\n|---|---|---|---|---|---|---|---|---|---|---|")
+    for key, cases in runs.items():
+        run = json.loads(key)
+        outcomes: collections.Counter = collections.Counter()
+        problems, ratios, cpu = [], [], 0.0
+        for i, rec in sorted(cases.items()):
+            cpu += rec["cpu_s"]
+            for mode, r in rec["modes"].items():
+                outcomes[r["outcome"] if len(rec["modes"]) == 1 else f"{mode} {r['outcome']}"] += 1
+                if r.get("problem"):
+                    problems.append((i, mode, r["outcome"], r["problem"]))
+                if _ratio(r):
+                    ratios.append((_ratio(r), i))
+        worst = max(ratios, default=(0.0, None))
+        gen = f"users (limit {run['limit']:g} s)" if run["users"] else "draw_case"
+        code = run["code"] + (" (this code)" if run["code"] == now else "")
+        print(f"| {run['seed']} | {gen} | {code} | {len(cases)} | "
+              + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())) + f" | {len(problems)} | {len(ratios)} | "
+              f"{worst[0]:.2f} ({worst[1]}) | {sum(r > 1.5 for r, _ in ratios)} | {cpu:.0f} | "
+              f"{cpu / max(1, len(cases)):.2f} |")
+        for i, mode, code_, what in problems[:20]:
+            print(f"  case {i} {mode} {code_}: {what[:300]}")
+        if cases:
+            per = cpu / len(cases)
+            print(f"  at {per:.2f} CPU s a case, 10 000 cases take {per * 1e4 / 2 / 3600:.1f} h on 2 cores "
+                  "(both busy with this run alone)")
+    if len(runs) == 1:
+        print_profile([rec for cases in runs.values() for rec in cases.values()])
+    keys = list(runs)
+    for a, b in zip(keys, keys[1:]):
+        _compare(json.loads(a), runs[a], json.loads(b), runs[b])
+
+
+def _compare(run_a: dict, a: dict[int, dict], run_b: dict, b: dict[int, dict]) -> None:
+    """The verdicts of two runs of the same cases (another code: before / after a change) side
+    by side: the cases both hold, those whose outcome or checker verdict differ, those whose
+    refusal message differs (the advice search is bounded by the compute limit in wall time:
+    on a loaded machine it may stop sooner), and the CPU of the common cases."""
+    if (run_a["users"], run_a["seed"], run_a["limit"]) != (run_b["users"], run_b["seed"], run_b["limit"]):
+        return
+    common = sorted(set(a) & set(b))
+    if not common:
+        return
+
+    def verdict(rec: dict) -> list:
+        return [(m, r["outcome"], r.get("problem")) for m, r in sorted(rec["modes"].items())]
+
+    def messages(rec: dict) -> list:
+        return [r.get("message") or "" for _, r in sorted(rec["modes"].items())]
+
+    differ = [i for i in common if verdict(a[i]) != verdict(b[i])]
+    told = [i for i in common if messages(a[i]) != messages(b[i])]
+    cpu_a, cpu_b = sum(a[i]["cpu_s"] for i in common), sum(b[i]["cpu_s"] for i in common)
+    print(f"\ncode {run_a['code']} -> {run_b['code']} (seed {run_a['seed']}): {len(common)} cases in both; "
+          f"outcome or checker verdict differs in {len(differ)} {differ[:20]}; refusal message differs in "
+          f"{len(told)} {told[:20]}; CPU {cpu_a:.0f} -> {cpu_b:.0f} s ({cpu_a / len(common):.2f} -> "
+          f"{cpu_b / len(common):.2f} a case)")
+    for i in differ[:10]:
+        print(f"  case {i}: {verdict(a[i])} -> {verdict(b[i])}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--cases", type=int, default=10_000)
@@ -228,11 +474,25 @@ def main() -> None:
                     "with --refusals: each case's remedies)")
     ap.add_argument("--refusals", type=Path, default=None,
                     help="a --ratios file: try the remedies on its infeasible cases (module docstring)")
+    ap.add_argument("--profile", action="store_true",
+                    help="print where the run's CPU went, by category (plan by outcome, advice search, checker, ...)")
+    ap.add_argument("--resume", type=Path, default=None,
+                    help="append each case's record to this file as it finishes; skip the cases it already holds "
+                    "for the same run (seed, --users, --limit) and code (module docstring)")
+    ap.add_argument("--summary", type=Path, nargs="+", default=None,
+                    help="print the table of --resume files (every case of each run and code) and exit")
     args = ap.parse_args()
+    if args.summary is not None:
+        summary(args.summary)
+        return
     if args.refusals is not None:
         refusals(args.refusals, args.workers, args.limit, args.minutes, args.ratios)
         return
     users_limit = args.limit if args.users else None
+    run = run_key(args.seed, args.users, users_limit)
+    held = set(_held(args.resume, run)) if args.resume is not None else set()
+    resume = _append(args.resume) if args.resume is not None else None
+    costs: list[dict] = []
     t0 = time.perf_counter()
     counts: dict[str, collections.Counter] = {"constrained": collections.Counter(), "paper": collections.Counter()}
     problems, worst, done = [], (0.0, None), 0
@@ -247,11 +507,16 @@ def main() -> None:
     # running at the deadline are stopped (their workers terminated) and counted apart
     pool = ProcessPoolExecutor(args.workers, initializer=_init)
     indices = [int(i) for i in args.only.split(",")] if args.only else range(args.cases)
-    futures = [pool.submit(_run, (args.seed, i, users_limit)) for i in indices]
+    skipped = sum(1 for i in indices if i in held)
+    futures = [pool.submit(_run, (args.seed, i, users_limit)) for i in indices if i not in held]
     try:
         for future in as_completed(futures, timeout=max(1.0, deadline - time.perf_counter())):
-            case, out = future.result()
+            case, out, cost = future.result()
             done += 1
+            costs.append(cost)
+            if resume is not None:
+                resume.write(json.dumps(_record(run, case, out, cost)) + "\n")
+                resume.flush()
             for mode, rec in out.items():
                 counts[mode][rec["outcome"]] += 1
                 if log is not None:
@@ -281,10 +546,13 @@ def main() -> None:
     running = _stop(pool, futures)
     if log is not None:
         log.close()
+    if resume is not None:
+        resume.close()
     wall = time.perf_counter() - t0
     codes = sorted(set(counts["constrained"]) | set(counts["paper"]))
     print(f"\n{done} cases certified in {wall / 60:.1f} min on {args.workers} workers (seed {args.seed}; "
-          f"{running} still running at the deadline, stopped)\n")
+          f"{running} still running at the deadline, stopped"
+          + (f"; {skipped} already in {args.resume}, skipped" if args.resume is not None else "") + ")\n")
     print("| outcome | constrained (default) | paper |\n|---|---|---|")
     for c in codes:
         print(f"| {c} | {counts['constrained'][c]} | {counts['paper'][c]} |")
@@ -319,6 +587,11 @@ def main() -> None:
         with args.problems.open("w") as f:
             for mode, code, what, case in problems:
                 f.write(json.dumps({"mode": mode, "code": code, "problem": what, "case": case}) + "\n")
+    if args.profile:
+        print_profile(costs, wall, args.workers)
+    if args.resume is not None:
+        print(f"\nthe whole of {args.resume}:")
+        summary([args.resume])
 
 
 if __name__ == "__main__":

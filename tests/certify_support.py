@@ -158,6 +158,23 @@ class Verdict:
         return not self.problems
 
 
+def result_fields(result: Any, with_corridor: bool = True) -> dict:
+    """What :func:`check_plan` reads of a :class:`planner.schema.PlanResult`, in the shape of
+    its JSON (the settings and metrics as JSON types, the arrays as they are: a float64 array
+    and its JSON list hold the same numbers). Its whole JSON, the arrays as lists and parsed
+    back (``json.loads(result.model_dump_json())``, what the checker read before), took 70-80 %
+    of a check's CPU time and told it nothing more (``tests/test_certify.py`` checks that both
+    give the same verdict and figures)."""
+    out = {"settings": result.settings.model_dump(mode="json"), "metrics": result.metrics.model_dump(mode="json"),
+           "pose": result.pose, "velocity": result.velocity, "time": result.time,
+           "drives": {"force": result.drives.force, "length": result.drives.length,
+                      "velocity": result.drives.velocity}}
+    if with_corridor:
+        out["corridor"] = {"segments": None if result.corridor.segments is None else
+                           [sg.model_dump(mode="json") for sg in result.corridor.segments]}
+    return out
+
+
 def _close(a: float, b: float, abs_tol: float, rel: float = 1e-9) -> bool:
     return abs(a - b) <= abs_tol + rel * max(abs(a), abs(b))
 
@@ -166,7 +183,8 @@ def check_plan(request: dict, result: Any, segments: list[dict] | None = None) -
     """Certify a plan result (a :class:`planner.schema.PlanResult` or its JSON dict) against
     its request (the dict sent) and the corridor it ran on (``segments``: the request's, or
     for a layout the result's ``corridor.segments``)."""
-    res = result if isinstance(result, dict) else json.loads(result.model_dump_json())
+    with cpu_spent("checker: reading the result"):
+        res = result if isinstance(result, dict) else result_fields(result, with_corridor=segments is None)
     v = Verdict()
     robot = robot_of(request.get("robot"))
     st = res["settings"]
@@ -551,7 +569,8 @@ def cases(draw: Any) -> dict:
 
 
 def _source_free_provider():
-    from hypothesis.internal.conjecture.providers import Constants, HypothesisProvider
+    from hypothesis.internal.conjecture.providers import HypothesisProvider
+    from hypothesis.internal.constants_ast import Constants
 
     class SourceFree(HypothesisProvider):
         """Hypothesis's provider without the constants it collects from the source of the
@@ -680,9 +699,56 @@ def slow_corridor(rng: np.random.Generator) -> dict:
 
 # ---------------------------------------------------------------- certifying one case
 
+import collections  # noqa: E402
+import contextlib  # noqa: E402
 import copy  # noqa: E402
 import re  # noqa: E402
 import time  # noqa: E402
+
+#: CPU seconds of this process by what it spent them on (``benchmarks/certify.py --profile``),
+#: each second counted once, in the innermost category it was spent in (:func:`cpu_spent`):
+#: the plan itself by outcome ("plan ok", "plan ok fastest", "plan infeasible", ...), the
+#: estimates, the checker ("checker", its JSON of the result "checker: result to JSON"), the
+#: confirmation of refusals ("confirmation"); the benchmark adds its own (case building,
+#: calibration, retiming, the planner's advice search behind a refusal)
+CPU: collections.Counter = collections.Counter()
+#: the categories being timed, innermost last: [category, since, spent, {suffix: spent}]
+_OPEN: list[list] = []
+
+
+@contextlib.contextmanager
+def cpu_spent(category: str):
+    """Add the process CPU time of the block to :data:`CPU` [``category``], less the time of
+    the blocks timed inside it (theirs). Yields the category's slot: setting ``slot[0]``
+    inside the block names its category once known (a plan's outcome). A ``category`` that
+    starts with ":" is a part of the block around it: counted as that block's category (as
+    named when it ends) followed by this suffix ("plan infeasible: DAQP")."""
+    now = time.process_time()
+    if _OPEN:
+        outer = _OPEN[-1]
+        outer[2] += now - outer[1]
+    slot = [category, now, 0.0, collections.Counter()]
+    _OPEN.append(slot)
+    try:
+        yield slot
+    finally:
+        now = time.process_time()
+        _OPEN.pop()
+        spent = slot[2] + now - slot[1]
+        if _OPEN and slot[0].startswith(":"):
+            _OPEN[-1][3][slot[0]] += spent
+        else:
+            CPU[slot[0]] += spent
+        for suffix, v in slot[3].items():
+            CPU[f"{slot[0]}{suffix}"] += v
+        if _OPEN:
+            _OPEN[-1][1] = now
+
+
+def cpu_category() -> str | None:
+    """The innermost category being timed (None outside :func:`cpu_spent`)."""
+    return _OPEN[-1][0] if _OPEN else None
+
 
 #: a figure printed as zero (0, 0.0, 0.0000 ...) followed by a unit: never a cause
 ZERO_FIGURE = re.compile(r"(?<!t = )(?<![\d.])0(?:\.0+)?\s*(?:mm|m|s|N|mm/s|m/s|rad|um)\b(?! \.\.)")
@@ -743,7 +809,7 @@ def confirm_error(request: dict, code: str, message: str, field_name: str | None
             return f"the error says no cell size can pass, but a {step:g} m grid finds a path"
         return None
     if code == "unreachable" and (field_name or "").endswith((".start", ".end")) and "needs leg" in message:
-        pose = np.asarray(request["layout"][field_name.rsplit(".", 1)[1]], float)
+        pose = np.asarray(request["layout"][(field_name or "").rsplit(".", 1)[1]], float)
         L = leg_lengths(robot, pose[None])[0]
         if np.all((L >= robot.lmin - 1e-12) & (L <= robot.lmax + 1e-12)):
             return f"the {field_name} pose is within every leg's stroke"
@@ -849,9 +915,11 @@ def certify_case(case: dict, modes: tuple[str, ...] = ("constrained", "paper"),
     out: dict[str, dict] = {}
     for mode in modes:
         req = _with(case, mode=mode)
+        fastest = " fastest" if req["settings"].get("fastest") else ""
         rec: dict[str, Any] = {"outcome": None, "problem": None}
         try:
-            est = estimate_work(req)
+            with cpu_spent("estimate"):
+                est = estimate_work(req)
             rec["estimate"], rec["advice"] = est.seconds, est.advice_seconds
         except PlannerError as exc:
             rec.update(outcome=exc.code, estimate=None, seconds=0.0)
@@ -863,7 +931,12 @@ def certify_case(case: dict, modes: tuple[str, ...] = ("constrained", "paper"),
             continue
         t0 = time.process_time()
         try:
-            result = plan(req, work_limit_s=work_limit_s)
+            with cpu_spent(f"plan ok{fastest}") as slot:
+                try:
+                    result = plan(req, work_limit_s=work_limit_s)
+                except PlannerError as exc:
+                    slot[0] = f"plan {exc.code}{fastest}"
+                    raise
         except PlannerError as exc:
             rec["seconds"] = time.process_time() - t0
             rec["outcome"] = exc.code
@@ -872,10 +945,12 @@ def certify_case(case: dict, modes: tuple[str, ...] = ("constrained", "paper"),
                 # planned on the segmented corridor: estimated from it, as the planner does
                 from planner import segment
 
-                est = estimate_work(req, segment(req).segments)
+                with cpu_spent("estimate"):
+                    est = estimate_work(req, segment(req).segments)
                 rec["estimate"], rec["advice"] = est.seconds, est.advice_seconds
             if mode == "constrained":
-                rec["problem"] = confirm_error(req, exc.code, exc.message, exc.field)
+                with cpu_spent("confirmation"):
+                    rec["problem"] = confirm_error(req, exc.code, exc.message, exc.field)
             out[mode] = rec
             continue
         rec["seconds"] = time.process_time() - t0
@@ -883,9 +958,11 @@ def certify_case(case: dict, modes: tuple[str, ...] = ("constrained", "paper"),
         if req.get("layout") is not None:
             from planner.schema import Segment
 
-            segs = [Segment.model_validate(s) for s in _segments_of(req, result)]
-            rec["estimate"] = estimate_work(req, segs).seconds
-        verdict = check_plan(req, result, _segments_of(req, result))
+            with cpu_spent("estimate"):
+                segs = [Segment.model_validate(s) for s in _segments_of(req, result)]
+                rec["estimate"] = estimate_work(req, segs).seconds
+        with cpu_spent("checker"):
+            verdict = check_plan(req, result, _segments_of(req, result))
         if not verdict.ok:
             rec["problem"] = "; ".join(verdict.problems[:3])
         out[mode] = rec
