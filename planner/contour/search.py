@@ -69,13 +69,18 @@ FEED_MARGIN_TRIES = 5
 FEED_MARGIN_STEP = 0.005
 #: program feed, the time-optimal timing (:meth:`TimingSearch.program_optimal`): its candidates
 #: are planned with the tool-speed rows (``settings.tool_speed_max_m_s``) at the piece's top F
-#: times this (the rows' 16-gon lies inside the circle: 0.981 of the limit in the worst
-#: direction), so the controller's catch-ups after a start or a corner run at F instead of over
-#: it; where that is infeasible, without them (module constants below)
+#: times this (the rows' 32-gon lies inside the circle: 0.9952 of the limit in the worst
+#: direction, ``planner.constraints.motion.TOOL_SPEED_SIDES``: every direction keeps 1.010 F,
+#: above the cells' 0.995 F), so the controller's catch-ups after a start or a corner
+#: and before the end run at F instead of over it; where that is infeasible, without them. On
+#: arcs too (issue 35 goal 2, branch feedcap6): the min-force criterion brakes onto a piece's
+#: end gently and makes up for it by running ahead over F (dxf2gcode's circle 1.03 F for 25
+#: samples), which the samples added for it only made gentler; with the 16-gon's rows (1.9 %
+#: below the limit at the sides' middles) a circle's cells could not be kept at F, so arcs
+#: went without rows then
 FEED_SPEED_ROOM = 1.015
-FEED_ROWS_ARC_SHARE = 0.5
 #: program feed: a plan under the speed rows faster than F by at most this (the catch-ups in the
-#: rows' 16-gon's vertex directions, 1.035 of the rows' limit) is planned again with the rows lowered
+#: rows' polygon's vertex directions) is planned again with the rows lowered
 #: by its excess (:meth:`TimingSearch.lowered_rows`), at most this many times, before samples are
 #: added to its runs (a sample a run: 1.3 % of fusion360's 2 mm lines at 6 ms)
 FEED_ROWS_LOWER_MAX = 1.03
@@ -416,9 +421,7 @@ class TimingSearch:
             if memo is not None and geo else (first, 0, None, True, None)
         # the tool-speed rows at the piece's top F (a little over it: the rows' polygon lies inside
         # the circle), unless the request sets its own: the controller's catch-ups then run at F
-        arcs = sum(e.length_m for e in self.els if e.kind == "arc")
-        rows = rows and self.st.tool_speed_max_m_s is None and arcs < FEED_ROWS_ARC_SHARE * sum(
-            e.length_m for e in self.els)
+        rows = rows and self.st.tool_speed_max_m_s is None
         speed_st = self.st.model_copy(update={"tool_speed_max_m_s": float(self.feed.max()) * FEED_SPEED_ROOM
                                               if limit is None else limit})
         self.plan_st = speed_st if rows else self.st
