@@ -89,16 +89,21 @@ def test_the_program_feed_rows_room_puts_the_polygon_sides_on_F():
     from planner.constraints.motion import TOOL_SPEED_SIDES, ToolSpeedConstraint
 
     assert search.FEED_ROWS_SIDES == TOOL_SPEED_SIDES
-    rows = ToolSpeedConstraint(search.FEED_SPEED_ROOM)  # F = 1 m/s
     from planner.constraints.drives import SPEED_MARGIN
+    from planner.constraints.rows import RELAX_M
 
-    assert rows.limit == pytest.approx(1.0 - SPEED_MARGIN, rel=1e-12)
+    F = 0.01  # m/s
+    rows = ToolSpeedConstraint(F * search.FEED_SPEED_ROOM)
+    side = F * (1.0 - SPEED_MARGIN) - RELAX_M  # the margins below F: relative, and a relaxed step's widening
+    assert rows.limit == pytest.approx(side, rel=1e-12)
     # the polygon's boundary in every direction: between F (the sides' middles) and the room (vertices)
     ang = np.linspace(0.0, 2 * np.pi, 3601)
     d = np.column_stack((np.cos(ang), np.sin(ang)))
     reach = rows.limit / np.abs(d @ rows.normals.T).max(axis=1)
-    assert reach.min() == pytest.approx(1.0 - SPEED_MARGIN, rel=1e-9)
-    assert reach.max() <= search.FEED_SPEED_ROOM * (1 - SPEED_MARGIN) * (1 + 1e-12)
+    assert reach.min() == pytest.approx(side, rel=1e-9)
+    assert reach.max() <= F * search.FEED_SPEED_ROOM * (1 + 1e-12)
+    # a relaxed step (the rows widened by RELAX_M) keeps a limit of F in every direction but the vertices'
+    assert (rows.limit + RELAX_M) <= F
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,8 @@ could not keep a program feed's circle at its cells' 0.995 F, and rows a little 
 its catch-ups run up to 1.5 % over F in the vertex directions).
 The rows are linear in the states, exact (no linearisation) and hard, of the speed kind: the
 slack problem softens them with the leg speeds'. The actual (nonlinear) plant lands within
-the one-step mismatch of the prediction (~1e-9 m/s), far inside the margin.
+the one-step mismatch of the prediction (~1e-9 m/s), far inside the margin; the rows stand
+``RELAX_M`` (8e-7 m/s) lower still, so a step solved with its rows widened by that keeps the limit.
 
 Why rows on the velocity states and not on the moves: the range-space criterion predicts the
 states over the horizon; a speed row is a selection of two of them (as the arrival rows),
@@ -31,7 +32,7 @@ from ..model import RobotModel
 from ..schema import Segment, Settings
 from . import kernels as ck
 from .drives import SPEED_MARGIN
-from .rows import RowBlock, RowConstraint, RowKind, StepContext
+from .rows import RELAX_M, RowBlock, RowConstraint, RowKind, StepContext
 
 __all__ = ["TOOL_SPEED_SIDES", "ToolSpeedConstraint"]
 
@@ -59,9 +60,11 @@ class ToolSpeedConstraint(RowConstraint):
         angles = np.pi * np.arange(half) / half
         #: (TOOL_SPEED_SIDES / 2, 2) the sides' normals
         self.normals = np.ascontiguousarray(np.column_stack((np.cos(angles), np.sin(angles))))
-        #: the rows' bound [m/s] (0 without a limit)
+        #: the rows' bound [m/s] (0 without a limit): :data:`~planner.constraints.rows.RELAX_M` below
+        #: the polygon, so that a relaxed step (its rows widened by that) keeps the limit too (with
+        #: the relative margin alone a plan at 0.05 m/s riding a vertex direction ran 3e-7 m/s over)
         self.limit = 0.0 if speed_max is None else \
-            float(speed_max * math.cos(math.pi / TOOL_SPEED_SIDES) * (1.0 - SPEED_MARGIN))
+            max(float(speed_max * math.cos(math.pi / TOOL_SPEED_SIDES) * (1.0 - SPEED_MARGIN)) - RELAX_M, 0.0)
 
     def rows(self, step: StepContext) -> RowBlock:
         """The directions' rows sample by sample."""
