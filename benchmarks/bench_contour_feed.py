@@ -3,7 +3,7 @@ goal 2: cutting time <= 1.02x it on every pass, no sample faster than F): per pa
 more checkouts side by side, and where the time goes.
 
     OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python benchmarks/bench_contour_feed.py \
-        [--root /tmp/base --root .] [--programs bench,freecad_linuxcnc.ngc,fusion360.nc] [--elements] \
+        [--root /tmp/base --root .] [--programs bench,freecad_linuxcnc.ngc,fusion360.nc] [--elements] [--profile] \
         [--feed fastest]
 
 ``--feed fastest``: the ``fastest`` feed instead, against the same third-order optimum without
@@ -20,6 +20,10 @@ at the defaults, after one untimed plan that loads the kernels): per pass ``time
 largest tool speed over F while cutting, and the CPU seconds of the whole plan. The table gives
 each root's time over the peer's per pass.
 
+``--profile`` (the last root, in this process): per distinct pass, its first 10 and last 8
+samples' travel over ``F Ts`` against the peer's mean speed over F in the same samples, and the
+samples each loses there and between them against L / F.
+
 ``--elements`` (the last root, in this process): per distinct pass and per program line, the
 peer's time and top speed beside the plan's (the samples cutting that line: their count times
 Ts, and their top speed from finite differences of the tool point), and the pass's samples
@@ -32,6 +36,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import math
 import os
 import pickle
 import subprocess
@@ -169,12 +174,47 @@ def element_rows(label: str, i: int, els, peer: dict, res, k: int, tol: float) -
     return out
 
 
+def profile_rows(label: str, i: int, els, peer: dict, res, k: int, head: int = 10, tail: int = 8) -> list[str]:
+    """The start and the end of pass ``i`` (the ``k``-th cutting run) sample by sample against the
+    peer's profile at the same times (``--profile``): each sample's travel over ``F Ts`` and the
+    peer's speed over F, and the samples each loses there against L / F (``sum(1 - v / F)``)."""
+    c = res.contour
+    Ts = res.settings.Ts
+    cut = np.asarray(c.cutting, int)
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], cut, [0]))))
+    if len(edges) != 2 * len(c.passes):
+        return [f"\n{label} pass {i}: {len(edges) // 2} cutting runs for {len(c.passes)} passes, no profile"]
+    a, b = edges[2 * k], edges[2 * k + 1]
+    F = max(e.feed_m_s for e in els)
+    step = np.hypot(*np.diff(res.pose[a:b, :2], axis=0).T) / (F * Ts)
+    # the peer's profile per element (its own clock from 0): one clock over the pass
+    t_el = [np.asarray(x, float) for x in peer["t"]]
+    start = np.concatenate(([0.0], np.cumsum([x[-1] for x in t_el])))[:-1]
+    t_peer = np.concatenate([x + t0 for x, t0 in zip(t_el, start)])
+    v_peer = np.concatenate([np.asarray(x, float).ravel()[:len(tx)] for x, tx in zip(peer["v"], t_el)])
+    n_peer = int(math.ceil(t_peer[-1] / Ts - 1e-9))
+    mid = (np.arange(n_peer) + 0.5) * Ts  # the peer's mean speed over each sample, at its middle
+    peer_step = np.interp(mid, t_peer, v_peer) / F
+    out = [f"\n{label} pass {i}: each sample's travel over F Ts, the plan against the peer at the same time "
+           f"(plan {len(step)} samples, peer {t_peer[-1] / Ts:.1f})\n",
+           "| where | plan | peer | plan lost, samples | peer lost, samples |", "|---|---|---|---|---|"]
+    for name, pl, pe in (("start", step[:head], peer_step[:head]), ("end", step[-tail:], peer_step[-tail:])):
+        out.append(f"| {name} | {' '.join(f'{x:.2f}' for x in pl)} | {' '.join(f'{x:.2f}' for x in pe)} | "
+                   f"{float(np.sum(1 - pl)):.2f} | {float(np.sum(1 - pe)):.2f} |")
+    body, pbody = step[head:-tail], peer_step[head:-tail]
+    out.append(f"| between | {body.min():.2f}-{body.max():.2f} | {pbody.min():.2f}-{pbody.max():.2f} | "
+               f"{float(np.sum(1 - body)):.2f} | {float(np.sum(1 - pbody)):.2f} |")
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("--one", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--root", action="append", default=None, help="a checkout to plan with (repeatable; default .)")
     ap.add_argument("--programs", default="bench,freecad_linuxcnc.ngc,fusion360.nc")
     ap.add_argument("--elements", action="store_true", help="per line of each distinct pass: the plan against the peer")
+    ap.add_argument("--profile", action="store_true",
+                    help="per distinct pass: its first and last samples' speeds against the peer's at the same times")
     ap.add_argument("--cache", default=str(Path.home() / ".cache" / "rangeplan" / "bench_contour_feed"))
     ap.add_argument("--no-cache", action="store_true")
     ap.add_argument("--feed", default="program", choices=("program", "fastest"),
@@ -207,7 +247,7 @@ def main() -> None:
         prog = read_gcode(text)
         org, tol = np.asarray(got[-1]["origin"], float), float(got[-1]["tol"])
         res = None
-        if args.elements:
+        if args.elements or args.profile:
             from planner.contour import plan_contour
 
             res = plan_contour({"program": text, "origin": origin, "feed": args.feed})
@@ -235,7 +275,10 @@ def main() -> None:
                          round(e.feed_m_s, 9), round(e.z_end_m - e.z_start_m, 9)) for e in els])  # depth passes alike
             if res is not None and key not in done:
                 done.add(key)
-                detail += element_rows(label, i, els, peer, res, i, tol)
+                if args.elements:
+                    detail += element_rows(label, i, els, peer, res, i, tol)
+                if args.profile:
+                    detail += profile_rows(label, i, els, peer, res, i)
         cols = " | ".join(f"{t:.3f} | {t / tot_peer:.3f}x" for t in tot)
         rows.append(f"| {label} | all | | | | {tot_peer:.4f} | {cols} |")
         summary.append(f"| {label} | " + " | ".join(

@@ -1,11 +1,12 @@
 """``program`` feed: a small excess over F under the tool-speed rows is answered by lowering the
 rows, not by a sample more per catch-up run (issue 35 goal 2, branch feedcap4).
 
-The rows (``settings.tool_speed_max_m_s``) are a 16-gon inside the circle of their limit: along
-its vertex directions the tool reaches the limit, 1.015 F, along its sides 0.9955 F. On an arc the
-controller's catch-ups pass the vertex directions and run up to 1.5 % over F (fusion360's pass 1:
-its semicircle after a 90-degree corner); a sample more in each such run cost that 0.3 s pass 12
-ms (2.6 %), the rows lowered by the excess cost nothing.
+The rows (``settings.tool_speed_max_m_s``) are a polygon inside the circle of their limit
+(32 sides since branch feedcap6, 16 before): along its vertex directions the tool reaches the
+limit, ``FEED_SPEED_ROOM`` F (1.0048 F; with the 16-gon 1.015 F), along its sides F. On an arc the
+controller's catch-ups pass the vertex directions and run over F (fusion360's pass 1: its
+semicircle after a 90-degree corner, 0.48 %; with the 16-gon 1.5 %); a sample more in each such
+run cost that 0.3 s pass 12 ms (2.6 %), the rows lowered by the excess cost nothing.
 """
 
 from __future__ import annotations

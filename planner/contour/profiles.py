@@ -132,13 +132,16 @@ class OptimalProfiles:
             path, w, T = time_optimal(self.model, els, origin, self.psi, self.h, caps)
             memo[key] = (path.s, T, float(np.sqrt(w.max())))
         s_grid, T, v_peak = memo[key]
+        ds, dt = np.diff(s_grid), np.diff(T)
+        step = np.flatnonzero(ds > 0)
+        rest = (float(ds[step[0]]), float(dt[step[0]]), float(ds[step[-1]]), float(dt[step[-1]])) if step.size else None
         # the path length at the end of every segment: its element's start plus its share of the
         # element's cells (points and junctions: at the boundary)
         total = np.bincount(loc, weights=t.length, minlength=len(els))
         before = np.concatenate(([0.0], np.cumsum(total)))[loc]
         frac = (np.cumsum(t.length) - before) / np.maximum(total[loc], 1e-300)
         s_end = self.start[loc] + np.clip(frac, 0.0, 1.0) * self.lengths[loc]
-        return Optimal(np.interp(s_end, s_grid, T), v_peak)
+        return Optimal(np.interp(s_end, s_grid, T), v_peak, rest, s_end)
 
 
 class Optimal(NamedTuple):
@@ -146,6 +149,39 @@ class Optimal(NamedTuple):
 
     times: np.ndarray  #: the profile's time at the end of each of the tube's segments [s]
     v_peak: float  #: its top speed [m/s]
+    #: the grid's first and last step: (length [m], time [s]) from rest, then to rest (:func:`rest_ends`)
+    rest: tuple[float, float, float, float] | None = None
+    s_end: np.ndarray | None = None  #: the path length at the end of each of the tube's segments [m]
+
+
+def rest_ends(opt: Optimal, jerk: float | None) -> np.ndarray:
+    """``opt.times`` with the profile's first step from rest and last step to rest as drives
+    whose acceleration rises at ``jerk`` [m/s^3] take them (``program`` feed, issue 35 goal 2).
+    The grid's profile takes a step of length ``h`` from rest to the speed ``v`` at a constant
+    acceleration, ``2 h / v``; capped at F (``v`` = F at the grid's second point) that is a
+    sample's travel or more at a slow F (dxf2gcode's circle at F400: ``h`` 63 um, 0.94 samples'
+    travel at 10 ms; freecad's 34 mm at F300: 1.7). Drives whose acceleration rises at ``jerk`` reach
+    ``v`` in ``2 sqrt(v / j)`` over ``v sqrt(v / j)``: the step takes ``h / v + sqrt(v / j)`` (at
+    least ``(6 h / j)^(1/3)``, the step's length at that jerk from rest), so the times after the
+    first step come earlier by the difference (none where it is not positive), and those within
+    the last step by the same at the end, in proportion across each step. Unchanged without the
+    grid's steps (``opt.rest``) or a jerk bound."""
+    times = opt.times
+    if opt.rest is None or opt.s_end is None or jerk is None or not jerk > 0:
+        return times
+
+    def gain(h: float, dt: float) -> float:
+        if not (h > 0 and dt > 0):
+            return 0.0
+        v = 2 * h / dt
+        return max(dt - max(h / v + math.sqrt(v / jerk), (6 * h / jerk) ** (1 / 3)), 0.0)
+
+    h0, dt0, h1, dt1 = opt.rest
+    g0, g1 = gain(h0, dt0), gain(h1, dt1)
+    s = opt.s_end
+    total = float(s[-1])
+    out = times - g0 * np.clip(s / h0, 0.0, 1.0) - g1 * np.clip((s - (total - h1)) / h1, 0.0, 1.0)
+    return np.maximum(np.maximum.accumulate(out), 0.0)
 
 
 def optimal_counts(t: Tube, times: np.ndarray, step: float) -> np.ndarray:

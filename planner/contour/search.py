@@ -25,6 +25,7 @@ from ..errors import PlannerError
 from ..model import RobotModel
 from ..orchestrator import feasible, plan_timed
 from ..schema import MAX_CONTOUR_TOLERANCE_M, MAX_TOTAL_STEPS, MIN_TS, ContourRequest, PathElement, PlanResult, Settings
+from .defaults import drive_jerk
 from .estimate import ADVICE_MIN_S, ADVICE_WORK, FEED_MARGIN, piece_estimate
 from .passes import CELL_SAMPLES, PROGRAM_MARGIN, V0_M_S, TubeSizes, segment_of
 from .path import moves_at
@@ -36,6 +37,7 @@ from .profiles import (
     near_reversal,
     optimal_counts,
     profile_counts,
+    rest_ends,
     run_samples,
     with_arrival,
 )
@@ -67,15 +69,24 @@ PROGRAM_FIXES = 3
 #: under a sample's travel at F: :data:`planner.contour.estimate.FEED_MARGIN`)
 FEED_MARGIN_TRIES = 5
 FEED_MARGIN_STEP = 0.005
+#: the sides of the tool-speed rows' polygon (``planner.constraints.motion.TOOL_SPEED_SIDES``,
+#: which ``tests/test_contour_rest.py`` checks this against)
+FEED_ROWS_SIDES = 32
 #: program feed, the time-optimal timing (:meth:`TimingSearch.program_optimal`): its candidates
 #: are planned with the tool-speed rows (``settings.tool_speed_max_m_s``) at the piece's top F
-#: times this (the rows' 16-gon lies inside the circle: 0.981 of the limit in the worst
-#: direction), so the controller's catch-ups after a start or a corner run at F instead of over
-#: it; where that is infeasible, without them (module constants below)
-FEED_SPEED_ROOM = 1.015
-FEED_ROWS_ARC_SHARE = 0.5
+#: times this, ``1 / cos(pi / sides)``: the rows' polygon lies inside the circle of their limit,
+#: and this puts its sides' middles on F (the sides face the axes: a line along one is held at
+#: F; in the vertex directions up to 0.48 % over, which :meth:`TimingSearch.lowered_rows`
+#: answers), so the controller's catch-ups after a start or a corner and before the end run at
+#: F instead of over it; where that is infeasible, without them. On arcs too (issue 35 goal 2,
+#: branch feedcap6): the min-force criterion brakes onto a piece's end gently and makes up for
+#: it by running ahead over F (dxf2gcode's circle 1.03 F for 25 samples), which the samples
+#: added for it only made gentler; with a 16-gon's rows (1.9 % below the limit at the sides'
+#: middles) a circle's cells at 0.995 F could not be held under rows at F, so arcs went without
+#: rows then (and the rows stood at 1.015 F)
+FEED_SPEED_ROOM = 1.0 / math.cos(math.pi / FEED_ROWS_SIDES)
 #: program feed: a plan under the speed rows faster than F by at most this (the catch-ups in the
-#: rows' 16-gon's vertex directions, 1.035 of the rows' limit) is planned again with the rows lowered
+#: rows' polygon's vertex directions) is planned again with the rows lowered
 #: by its excess (:meth:`TimingSearch.lowered_rows`), at most this many times, before samples are
 #: added to its runs (a sample a run: 1.3 % of fusion360's 2 mm lines at 6 ms)
 FEED_ROWS_LOWER_MAX = 1.03
@@ -161,6 +172,9 @@ class TimingSearch:
         self.lines = dict(zip(chunk, (e.line for e in els)))
         self.run_counts = np.zeros(0, np.int64)  #: the counts :meth:`within_runs` found
         self.plan_st = st  #: the settings the candidates are planned with (:meth:`program_optimal`'s speed rows)
+        #: program feed: the drives' jerk under the force-rate limit [m/s^3] (None: no limit), for
+        #: the profile's steps from and to rest (:func:`~planner.contour.profiles.rest_ends`)
+        self.jerk = drive_jerk(model, st)
 
     def feed_on(self, t: Tube) -> np.ndarray:
         """The programmed F [m/s] of the move each of the tube's segments belongs to."""
@@ -395,6 +409,18 @@ class TimingSearch:
         self.plan_st = before
         return None
 
+    def rest_times(self, t: Tube, opt: Optimal) -> np.ndarray:
+        """The profile's times for the ``program`` feed's counts: with its steps from and to rest
+        as the drives take them (:func:`~planner.contour.profiles.rest_ends`) where that gives the
+        tube fewer samples in all, else as the profile has them (shifted, a junction's rounding
+        can cost the sample the ends gave: the benchmark part's passes, 470 against 469)."""
+        fast = rest_ends(opt, self.jerk)
+        if fast is opt.times:
+            return fast
+        n_fast = int(self.feed_counts(t, optimal_counts(t, fast, self.st.Ts)).sum())
+        n = int(self.feed_counts(t, optimal_counts(t, opt.times, self.st.Ts)).sum())
+        return fast if n_fast < n else opt.times
+
     def program_optimal(self) -> tuple[PlanResult, Tube] | None:
         """The ``program`` feed's timing: the exact path's time-optimal profile with each move's
         speed capped at its own F (``optimal``, built capped: :func:`~planner.contour.plan.plan_cut`),
@@ -416,9 +442,7 @@ class TimingSearch:
             if memo is not None and geo else (first, 0, None, True, None)
         # the tool-speed rows at the piece's top F (a little over it: the rows' polygon lies inside
         # the circle), unless the request sets its own: the controller's catch-ups then run at F
-        arcs = sum(e.length_m for e in self.els if e.kind == "arc")
-        rows = rows and self.st.tool_speed_max_m_s is None and arcs < FEED_ROWS_ARC_SHARE * sum(
-            e.length_m for e in self.els)
+        rows = rows and self.st.tool_speed_max_m_s is None
         speed_st = self.st.model_copy(update={"tool_speed_max_m_s": float(self.feed.max()) * FEED_SPEED_ROOM
                                               if limit is None else limit})
         self.plan_st = speed_st if rows else self.st
@@ -432,7 +456,7 @@ class TimingSearch:
                     raise
                 return None
             t = cur
-            times = optimal(cur).times
+            times = self.rest_times(cur, optimal(cur))
             if not (np.all(np.isfinite(times)) and times[-1] > 0):  # pragma: no cover - a profile that never moves
                 return None
             counts = with_arrival(cur, self.feed_counts(cur, optimal_counts(cur, times, self.st.Ts)), arrive)
@@ -490,7 +514,7 @@ class TimingSearch:
             if got is not None:
                 return got, t
         assert t is not None
-        times = optimal(t).times
+        times = self.rest_times(t, optimal(t))
         feed_of = np.minimum(self.feed_on(t), self.zcap_on(t))
         tried: dict[bytes, PlanResult | None] = {}
 
