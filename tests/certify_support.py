@@ -16,6 +16,12 @@ What a plan must satisfy (README "The result", "Constrained mode"; paper eqs. 1-
   within ``force_rate_n_s`` (default ``force_max`` / 0.05 s, from zero before the start), leg
   speeds within ``speed_max``, no overshoot past the end point along the approach direction.
 
+One check uses the planner's own model: the integration accuracy (issue 31 goal 5). Each
+sample is integrated again from the sample before under that sample's drive force, by the
+model's equations of motion (eqs. 6-7, :mod:`planner.model`; the model itself is tested against
+its numpy reference and the paper elsewhere) with 16 times the plant's RK4 sub-steps: every
+sample within :data:`INTEGRATION_TOL_M` of it (:func:`integration_deviation`).
+
 Errors are confirmed separately (:func:`grid_path_exists`: an independent search for a path
 through the free space on a fine grid, :func:`box_leg_range`: the legs' reach over a box).
 """
@@ -46,6 +52,10 @@ RATE_TOL_REL = 1e-9
 #: overshoot allowed in the constrained mode [m]: a step whose QP is infeasible by less than
 #: 0.8 um is solved with its rows widened by that much (README "Constrained mode")
 OVERSHOOT_TOL_M = 1e-6
+#: the largest distance [m] of a sample from a fine integration of the plan's own forces (issue
+#: 31 goal 5: 1 um), and the reference's sub-steps per plant sub-step
+INTEGRATION_TOL_M = 1e-6
+INTEGRATION_REFINE = 16
 #: default force rise time of the force-rate limit [s] (README: force_max per 0.05 s)
 FORCE_RISE_S = 0.05
 #: the settling tolerances' defaults (README)
@@ -293,7 +303,34 @@ def check_plan(request: dict, result: Any, segments: list[dict] | None = None) -
             v.fail(f"leg speed {sratio:.6f} x speed_max")
     elif mode == "constrained" and st.get("require_settled", True):
         v.fail("a constrained plan returned not contained although require_settled")
+    with cpu_spent("checker: fine integration"):
+        dev = integration_deviation(request.get("robot"), pose, vel, U, Ts, st.get("plant_substeps"))
+    v.figures["integration_deviation_m"] = dev
+    if not dev <= INTEGRATION_TOL_M:
+        v.fail(f"a sample {dev:.3g} m from a fine integration of the plan's forces (over {INTEGRATION_TOL_M:g} m)")
     return v
+
+
+def integration_deviation(robot: Any, pose: np.ndarray, vel: np.ndarray, U: np.ndarray, Ts: float,
+                          substeps: int | None) -> float:
+    """The largest distance [m] in (x, y) of a sample from the sample before integrated over Ts
+    under its drive force, by the planner's model (eqs. 6-7) with :data:`INTEGRATION_REFINE`
+    times the plant's RK4 sub-steps (``substeps``, else what the plant chooses for the robot)."""
+    from planner.model import kernels as mk
+    from planner.model import load_robot
+    from planner.model.plant import plant_substeps
+
+    model = load_robot(robot if robot is not None else "moving-slide")
+    n = INTEGRATION_REFINE * int(substeps or plant_substeps(model, Ts))
+    X = np.ascontiguousarray(np.hstack((pose, vel)), dtype=float)
+    U = np.ascontiguousarray(U, dtype=float)
+    f0 = np.empty(6)
+    worst = 0.0
+    for k in range(len(X) - 1):
+        mk.state_derivative(model.packed, X[k], U[k], f0)
+        x = mk.rk4(model.packed, X[k], U[k], Ts, n, f0)
+        worst = max(worst, math.hypot(x[0] - X[k + 1, 0], x[1] - X[k + 1, 1]))
+    return worst
 
 
 def approach(segs: list[dict], lo: np.ndarray, hi: np.ndarray, end: np.ndarray) -> np.ndarray | None:
