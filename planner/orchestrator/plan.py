@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -44,7 +45,7 @@ from .simulate import Resume, Simulation, simulate
 from .timing import method_of, resolve_timing, timing_info
 from .work import MORE_TIME, check_work, estimate_work, slack_allowance
 
-__all__ = ["plan", "plan_timed", "segment", "warm_up"]
+__all__ = ["AdviceBudget", "plan", "plan_timed", "segment", "warm_up"]
 
 
 def _robot(req: PlanRequest, robot: RobotModel | None) -> RobotModel:
@@ -109,14 +110,10 @@ def _plan(req: PlanRequest, t0: float, robot: RobotModel | None, segments: Seque
         result = _plan_once(req.name, model, st, segments, req.reference, method=method)
     except PlannerError as exc:
         if exc.code == "infeasible" and exc.field == "settings" and segments is not None:
-            budget = None
-            if work_limit_s is not None and work_limit_s > 0:  # what the limit leaves for the checks
-                budget = work_limit_s - (time.perf_counter() - t0)
             estimate_s = estimate_work(req, segments).seconds
+            budget = _advice_budget(work_limit_s, estimate_s, t0)
             advised = _more_time_advice(exc, req.name, model, given, st, segments, budget, estimate_s, cells)
             if "the time plans" not in advised.message:
-                if budget is not None:
-                    budget = work_limit_s - (time.perf_counter() - t0)  # type: ignore[operator]
                 advised = _other_advice(advised, req, model, st, segments, budget, estimate_s, given, cells)
             raise advised from None
         raise
@@ -254,8 +251,43 @@ def _with_more_time(given: Settings, st: Settings, segments: Sequence[Segment], 
         return None
 
 
+@dataclass
+class AdviceBudget:
+    """What the advice search behind a refusal may still take (issue 31 goal 2, issue 33 goal 2):
+    ``seconds`` of work estimate (reference seconds, as :func:`~.work.estimate_work` counts
+    them; None: no bound), from which each candidate's estimate is taken before it is tried,
+    so the same request gets the same advice on a quiet machine and a loaded one (the wall time
+    a candidate took, counted before, stopped the search at another candidate under load);
+    ``deadline``: the :func:`time.perf_counter` value at the server's limit, a safety stop
+    only (a machine so slow that the limit passes: no candidate is started after it)."""
+
+    seconds: float | None = None
+    deadline: float | None = None
+
+    def take(self, cost_s: float, bound_s: float | None = None) -> bool:
+        """Whether a candidate estimated at ``cost_s`` fits what is left (or ``bound_s`` where
+        there is no bound); if it does, it is taken from what is left."""
+        if self.deadline is not None and time.perf_counter() >= self.deadline:
+            return False
+        left = self.seconds if self.seconds is not None else bound_s
+        if left is not None and cost_s > left:
+            return False
+        if self.seconds is not None:
+            self.seconds -= cost_s
+        return True
+
+
+def _advice_budget(work_limit_s: float | None, estimate_s: float, t0: float) -> AdviceBudget:
+    """The advice search's budget under the compute limit ``work_limit_s`` [s] (None or <= 0:
+    no bound): the limit less the refused plan's own estimate (``estimate_s``), and the
+    limit's wall time from ``t0`` (the request's start) as the safety stop."""
+    if work_limit_s is None or work_limit_s <= 0:
+        return AdviceBudget()
+    return AdviceBudget(work_limit_s - estimate_s, t0 + work_limit_s)
+
+
 def _more_time_advice(exc: PlannerError, name: str | None, model: RobotModel, given: Settings, st: Settings,
-                      segments: Sequence[Segment], budget_s: float | None = None,
+                      segments: Sequence[Segment], budget: AdviceBudget | None = None,
                       estimate_s: float = 0.0, cells: tuple[str, float] | None = None) -> PlannerError:
     """``exc`` (an infeasible constrained plan) with advice that was checked: the corridor
     planned again with :data:`MORE_TIME` times the samples of every segment (each candidate
@@ -264,8 +296,9 @@ def _more_time_advice(exc: PlannerError, name: str | None, model: RobotModel, gi
     the budget allow; the first that plans is named in the timing field the request used. If
     the request's time is under that bound, the error says so, with the limit and the amount.
     If none plans, the error says that more time does not help.
-    ``budget_s``: the compute time the checks may take (None: no bound); a candidate whose
-    estimate (``estimate_s`` of the request times the factor) does not fit is not planned.
+    ``budget``: the work the checks may take (None: no bound); a candidate whose estimate
+    (``estimate_s`` of the request times the factor) does not fit is not planned, one that fits
+    is taken from it before it is planned.
     ``cells``: the shape and size [m] of the cells the request's layout was segmented into where
     it left their size out; more samples a segment give another default
     (:func:`~planner.corridor.cell_size_rule`), so advice in samples names these cells too,
@@ -290,16 +323,13 @@ def _more_time_advice(exc: PlannerError, name: str | None, model: RobotModel, gi
             stop = "more time exceeds the limits on samples"
             break
         sub, how = timed
-        if budget_s is not None and estimate_s * factor > budget_s:
+        if budget is not None and not budget.take(estimate_s * factor):
             stop = "more was not tried within the work limit"
             break
-        t_try = time.perf_counter()
         tried.append(factor)
         try:
             settled = _run(name, model, sub, segments, None, abandon=True)[0].metrics.settled
         except PlannerError as again:
-            if budget_s is not None:
-                budget_s -= time.perf_counter() - t_try
             if again.code == "infeasible":
                 continue
             stop = f"{factor}x the time fails otherwise ({again.code})"
@@ -326,7 +356,7 @@ COMBINED_ADVICE_S = 60.0
 
 
 def _other_advice(exc: PlannerError, req: PlanRequest, model: RobotModel, st: Settings,
-                  segments: Sequence[Segment], budget_s: float | None, estimate_s: float,
+                  segments: Sequence[Segment], budget: AdviceBudget | None, estimate_s: float,
                   given: Settings | None = None, cells: tuple[str, float] | None = None) -> PlannerError:
     """``exc`` (an infeasible plan that more time did not cure, or more time was not tried)
     with the first of these remedies that plans, checked (issue 31: at Ts 2 ms a third of the
@@ -340,22 +370,18 @@ def _other_advice(exc: PlannerError, req: PlanRequest, model: RobotModel, st: Se
     within :data:`COMBINED_ADVICE_S` where the request has no work limit; ``given`` and
     ``cells`` as :func:`_more_time_advice` takes them); then ``settings.fastest``, then more
     plant sub-steps (the robot's own
-    count where the request gave fewer, else twice, at most 50); each within ``budget_s`` (its
-    estimate, from ``estimate_s`` of the request, must fit). Unchanged if none plans."""
+    count where the request gave fewer, else twice, at most 50); each within ``budget`` (its
+    estimate, from ``estimate_s`` of the request, must fit, and is taken from it before it is
+    planned). Unchanged if none plans."""
     tried: list[str] = []
+    budget = budget if budget is not None else AdviceBudget()
 
     def plans(sub: Settings) -> bool:
-        """Whether ``sub`` plans the corridor and settles (checked); the time it took is taken
-        from ``budget_s``."""
-        nonlocal budget_s
-        t_try = time.perf_counter()
+        """Whether ``sub`` plans the corridor and settles (checked)."""
         try:
             return bool(_run(req.name, model, sub, segments, None, abandon=True)[0].metrics.settled)
         except PlannerError:
             return False
-        finally:
-            if budget_s is not None:
-                budget_s -= time.perf_counter() - t_try
 
     # a remedy found: the time factors did not help, but the corridor is not too narrow
     head = exc.message.replace(": the corridor is too narrow there for the robot's drive limits", "")
@@ -363,7 +389,7 @@ def _other_advice(exc: PlannerError, req: PlanRequest, model: RobotModel, st: Se
     N = default_N if "N" in st.model_fields_set and st.N < default_N else min(2 * st.N, MAX_HORIZON)
     if N > st.N:
         cost = estimate_s * N / st.N
-        if budget_s is None or cost <= budget_s:
+        if budget.take(cost):
             if plans(st.model_copy(update={"N": N, "require_settled": True})):
                 return PlannerError("infeasible", f"{head}; settings.N = {N} plans (a longer horizon at "
                                     "the same timing, checked)", "settings.N")
@@ -376,7 +402,7 @@ def _other_advice(exc: PlannerError, req: PlanRequest, model: RobotModel, st: Se
         sub, how = timed
         N_far = min(MAX_HORIZON, st.N * factor)
         cost = estimate_s * factor * N_far / st.N
-        if N_far > st.N and cost <= (budget_s if budget_s is not None else COMBINED_ADVICE_S):
+        if N_far > st.N and budget.take(cost, COMBINED_ADVICE_S):
             if plans(sub.model_copy(update={"N": N_far})):
                 return PlannerError("infeasible", f"{head}; settings.N = {N_far} with {factor}x the time ({how}) "
                                     "plans (checked)", "settings.N")
@@ -385,7 +411,7 @@ def _other_advice(exc: PlannerError, req: PlanRequest, model: RobotModel, st: Se
         fast = req.model_copy(update={"settings": Settings.model_validate(
             {**req.settings.model_dump(mode="json", exclude_unset=True, exclude={*TIMING_FIELDS}), "fastest": True})})
         cost = estimate_work(fast, segments).seconds
-        if budget_s is None or cost <= budget_s:
+        if budget.take(cost):
             fst = st.model_copy(update={"fastest": True, "speed_m_s": None, "total_time_s": None,
                                         "segment_samples": None})
             try:
@@ -400,7 +426,7 @@ def _other_advice(exc: PlannerError, req: PlanRequest, model: RobotModel, st: Se
     steps = auto if st.plant_substeps < auto else min(2 * st.plant_substeps, 50)
     if steps > st.plant_substeps and auto > 1:  # (a robot whose stiffness one step a sample suits: no)
         cost = estimate_s * steps / st.plant_substeps
-        if budget_s is None or cost <= budget_s:
+        if budget.take(cost):
             if plans(st.model_copy(update={"plant_substeps": steps, "require_settled": True})):
                 return PlannerError("infeasible", f"{head}; settings.plant_substeps = {steps} plans (a finer "
                                     "integration of the robot at the same timing, checked)",
