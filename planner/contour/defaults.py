@@ -75,7 +75,7 @@ from ..schema import DEFAULT_FORCE_RISE_S, MODE_DEFAULTS, ContourRequest, PathEl
 from .timing import PathSamples, constraint_rows, turn
 from .tube import SAGITTA_FRACTION
 
-__all__ = ["FEED_CORNER_RAD", "FEED_MOVE_MIN_TOL", "FEED_MOVE_SAMPLES", "HORIZON_RAMPS", "TS_FLOOR_S", "TS_STEP_S",
+__all__ = ["ARC_CELL_TS_FRACTION", "FEED_CORNER_RAD", "FEED_MOVE_MIN_TOL", "FEED_MOVE_SAMPLES", "HORIZON_RAMPS", "TS_FLOOR_S", "TS_STEP_S",
            "arc_speed", "contour_settings", "contour_ts", "drive_acceleration", "drive_jerk", "feed_ts"]
 
 #: the finest sample time chosen [s]: at 2 ms the benchmark pass took longer than at 3 ms
@@ -84,6 +84,10 @@ TS_FLOOR_S = 0.003
 #: the sample time is chosen in whole steps of this [s] (module docstring: 1 ms left freecad's circle
 #: 1.016x the optimum at 4 ms where it asks 3.65 ms)
 TS_STEP_S = 0.00025
+#: a program whose passes do not mix lines and arcs: the sample time at most this fraction of
+#: the arcs' chord over their speed, rounded down (module docstring: their cells are re-cut at the
+#: drives' speed, which needs a chord per sample faster than it)
+ARC_CELL_TS_FRACTION = 0.9
 #: the horizon with a chosen sample time: this many force ramps of the slowest drive
 HORIZON_RAMPS = 3.0
 #: program feed: a move that starts or ends a pass or turns a corner gets at least this many
@@ -142,7 +146,10 @@ def contour_ts(program: Program, tol: float, feed: str, model: RobotModel, st: S
     v_leg = float(np.min(model.speed_max))
     s_a = SAGITTA_FRACTION * tol
     need = st.Ts
+    mixed = False  # a pass of lines and arcs
     for b in program.passes:
+        kinds = {e.kind for e in b.elements if e.length_m > 1e-12}
+        mixed = mixed or kinds >= {"arc", "line"}
         for e in b.elements:
             if e.kind != "arc" or not e.radius_m or e.length_m <= 1e-12:
                 continue
@@ -153,7 +160,10 @@ def contour_ts(program: Program, tol: float, feed: str, model: RobotModel, st: S
                 need = min(need, chord / v)
     if need >= st.Ts:
         return st.Ts
-    steps = math.ceil(need / TS_STEP_S - 1e-9)
+    if mixed:
+        steps = math.ceil(need / TS_STEP_S - 1e-9)
+    else:  # arcs alone: their cells re-cut at the drives' speed (planner.contour.search.TimingSearch.arc_cells)
+        steps = math.floor(ARC_CELL_TS_FRACTION * need / TS_STEP_S + 1e-9)
     return min(st.Ts, max(TS_FLOOR_S, round(steps * TS_STEP_S, 9)))  # 0.00325, not 0.0032500000000000003
 
 
