@@ -34,6 +34,20 @@ dxf2gcode (3.10) 4 / 3.5 / 3.25 / 3.2 / 3 ms 0.264 / 0.249 / 0.257 / 0.259 / 0.3
 against 1.940 s), at 0.1 ms pcb_gcode is (1.901 s together), at 0.5 ms freecad stays at 4 ms.
 A program without arcs, or whose arcs the default reaches, keeps the default.
 
+**Arcs alone** (issue 35 goal 1, branch arccells). Rounded up, the chord per sample is at most
+the speed the arc asks, and on an isolated circle that is the whole pass: dxf2gcode's circle (r
+4 mm, ``c / v`` 3.105 ms) at 3.25 ms cruised at 0.165 m/s where the drives turn the tool at
+0.1728 (1.093x the third-order optimum), pcb_gcode's (r 1 mm) 1.046x at 4 ms; 0.05 ms steps
+(3.15 / 3.9 ms) gave 1.060x / 1.020x, and below the need the chords needed two samples each
+(0.312 s at 3 ms). So ``fastest`` re-cuts an arc whose chord per sample is faster than its
+speed into cells of one sample's travel at it (:meth:`planner.contour.search.TimingSearch.arc_cells`),
+and a program whose passes do not mix lines and arcs takes :data:`ARC_CELL_TS_FRACTION` of the
+need, rounded down, to give those cells room: dxf2gcode 3 ms (the floor), 0.207 s (1.039x),
+pcb_gcode 3.5 ms, its circle 0.126 s (0.999x) and its lines' pass 0.252 -> 0.238 s. Where
+lines and arcs share a pass the need stays rounded up: freecad (its pass 0 two 2 mm arcs between
+lines) at 3.5 ms cut 0.336 + 0.248 s against 0.319 + 0.259 s at 3.75, estlcam at 3.25 ms
+0.292 s a pass against 0.280 at 3.5 (measured with the re-cut cells).
+
 **The program feed's sample time** (:func:`feed_ts`, issue 35 goal 2). The controller needs
 6-15 samples to reach F from rest or after a corner and 5-8 to stop (measured on the CAM
 samples at 10 ms), whatever the sample time: on a move of a dozen samples at F that is most of
@@ -75,7 +89,8 @@ from ..schema import DEFAULT_FORCE_RISE_S, MODE_DEFAULTS, ContourRequest, PathEl
 from .timing import PathSamples, constraint_rows, turn
 from .tube import SAGITTA_FRACTION
 
-__all__ = ["ARC_CELL_TS_FRACTION", "FEED_CORNER_RAD", "FEED_MOVE_MIN_TOL", "FEED_MOVE_SAMPLES", "HORIZON_RAMPS", "TS_FLOOR_S", "TS_STEP_S",
+__all__ = ["ARC_CELL_TS_FRACTION",
+           "FEED_CORNER_RAD", "FEED_MOVE_MIN_TOL", "FEED_MOVE_SAMPLES", "HORIZON_RAMPS", "TS_FLOOR_S", "TS_STEP_S",
            "arc_speed", "contour_settings", "contour_ts", "drive_acceleration", "drive_jerk", "feed_ts"]
 
 #: the finest sample time chosen [s]: at 2 ms the benchmark pass took longer than at 3 ms

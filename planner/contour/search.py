@@ -7,7 +7,9 @@ until the plan is feasible and no sample is faster than F (:meth:`TimingSearch.p
 its scale, :class:`Scale`): the heuristic profile scaled (``v = lambda v0``, ``a = lambda^2 a0``,
 :meth:`TimingSearch.heuristic`), and the exact path's time-optimal profile slowed by a scale
 (:meth:`TimingSearch.optimal_search`); each to the largest feasible scale
-(:func:`largest_feasible`; each candidate abandoned at its first step that needs slack). Where
+(:func:`largest_feasible`; each candidate abandoned at its first step that needs slack); an arc
+whose chord per sample is faster than the drives turn the tool on it is cut in cells of one
+sample's travel at their speed (:meth:`TimingSearch.arc_cells`). Where
 a feed's own search finds no timing the other's is tried (:func:`search_timing`); an
 ``infeasible`` verdict's advice is checked before it is given (:func:`confirmed_infeasible`).
 """
@@ -419,7 +421,8 @@ class TimingSearch:
                 made[key] = (t, plan(t))
             return made[key][1]
 
-        kappa = largest_feasible(lambda x: run(x) is not None, 1.0, ARC_RESOLUTION, low=ARC_KAPPA_MIN, high=ARC_KAPPA_MAX)
+        kappa = largest_feasible(lambda x: run(x) is not None, 1.0, ARC_RESOLUTION, low=ARC_KAPPA_MIN,
+                                 high=ARC_KAPPA_MAX)
         if kappa is None:
             return None
         t, res = made[round(kappa, 9)]
