@@ -91,7 +91,7 @@ from .tube import SAGITTA_FRACTION
 
 __all__ = ["ARC_CELL_TS_FRACTION",
            "FEED_CORNER_RAD", "FEED_MOVE_MIN_TOL", "FEED_MOVE_SAMPLES", "HORIZON_RAMPS", "TS_FLOOR_S", "TS_STEP_S",
-           "arc_speed", "contour_settings", "contour_ts", "drive_acceleration", "drive_jerk", "feed_ts"]
+           "arc_speed", "bound_arcs", "contour_settings", "contour_ts", "drive_acceleration", "drive_jerk", "feed_ts"]
 
 #: the finest sample time chosen [s]: at 2 ms the benchmark pass took longer than at 3 ms
 #: (1.154 s against 0.822 s, the search's scales) for 2.6x the compute
@@ -151,6 +151,27 @@ def arc_speed(e: PathElement, a: float, jerk: float | None, v_leg: float, feed: 
     if feed == "program":
         v = min(v, e.feed_m_s)
     return v
+
+
+def bound_arcs(elements: list[PathElement], tol: float, model: RobotModel, st: Settings) -> np.ndarray:
+    """``fastest``: per element the speed the drives turn the tool at on its arc
+    (:func:`arc_speed`) where one sample's travel at it, at ``st.Ts``, is shorter than the arc's
+    chord of the sagitta (the drives, not the tube's chords, bound the arc: its cells are re-cut
+    to one sample at that speed, :meth:`planner.contour.search.TimingSearch.arc_cells`); 0
+    elsewhere [m/s]."""
+    a, jerk = drive_acceleration(model), drive_jerk(model, st)
+    v_leg = float(np.min(model.speed_max))
+    s_a = SAGITTA_FRACTION * tol
+    out = np.zeros(len(elements))
+    for i, e in enumerate(elements):
+        if e.kind != "arc" or not e.radius_m or e.length_m <= 1e-12:
+            continue
+        R = e.radius_m
+        chord = 2 * math.sqrt(max(2 * R * s_a - s_a * s_a, 0.0)) if s_a < R else 2 * R
+        v = arc_speed(e, a, jerk, v_leg, "fastest")
+        if v * st.Ts < chord * (1 - 1e-9):
+            out[i] = v
+    return out
 
 
 def contour_ts(program: Program, tol: float, feed: str, model: RobotModel, st: Settings) -> float:

@@ -27,7 +27,7 @@ from ..errors import PlannerError
 from ..model import RobotModel
 from ..orchestrator import feasible, plan_timed
 from ..schema import MAX_CONTOUR_TOLERANCE_M, MAX_TOTAL_STEPS, MIN_TS, ContourRequest, PathElement, PlanResult, Settings
-from .defaults import arc_speed, drive_acceleration, drive_jerk
+from .defaults import bound_arcs, drive_jerk
 from .estimate import ADVICE_MIN_S, ADVICE_WORK, FEED_MARGIN, piece_estimate
 from .passes import CELL_SAMPLES, PROGRAM_MARGIN, V0_M_S, TubeSizes, piece_tube, segment_of
 from .path import moves_at
@@ -43,7 +43,7 @@ from .profiles import (
     run_samples,
     with_arrival,
 )
-from .tube import SAGITTA_FRACTION, Tube
+from .tube import Tube
 from .zaxis import blend_speed, slopes
 
 __all__ = ["SCALE_MAX", "SCALE_MIN", "SCALE_RESOLUTION", "Found", "Scale", "TimingSearch", "confirmed_infeasible",
@@ -327,9 +327,7 @@ class TimingSearch:
         optimal = self.optimal
         assert optimal is not None
         ref = optimal(self.tube_at(V0_M_S))
-        v_cells = OPT_CELL_SAMPLES * ref.v_peak / CELL_SAMPLES
-        arc_t = self.arc_tube(v_cells, 1.0)
-        t = arc_t or self.tube_at(v_cells)
+        t = self.tube_at(OPT_CELL_SAMPLES * ref.v_peak / CELL_SAMPLES)
         times = optimal(t).times
         if not (np.all(np.isfinite(times)) and times[-1] > 0):  # pragma: no cover - a profile that never moves
             return None
@@ -342,7 +340,7 @@ class TimingSearch:
         # the profile holds it at the scale 1 and a faster one breaks it (accelerations lam^2): at most 1
         high = 1.0 if self.cell_caps is not None else SCALE_MAX
         lam0, low = min(h.lam if h else 1.0, high), SCALE_MIN
-        if beat is not None and arc_t is None:  # arc cells of one sample: a slower scale may not plan
+        if beat is not None:
             room = beat - OPT_END_SAMPLES * self.st.Ts
             if room <= 0:
                 return None
@@ -355,35 +353,17 @@ class TimingSearch:
             return None
         best = run(lam)
         assert best is not None
-        arcs = self.arc_cells(v_cells, best, lambda u: self.attempt(u, optimal_counts(u, optimal(u).times,
-                                                                                        lam * self.st.Ts)))
-        if arcs is not None:
-            best, t = arcs
         if beat is not None and best.time[-1] >= beat:
             return None
         return best, t, Scale("optimal", lam)
 
     def arc_speeds(self) -> np.ndarray:
-        """Per element of the piece: the speed the drives turn the tool at on its arc
-        (:func:`~planner.contour.defaults.arc_speed`) where one sample's travel at it is shorter
-        than the arc's longest tube chord (the drives, not the cells, bound the arc there); 0
-        elsewhere (lines, and arcs whose chord per sample is slower) [m/s]."""
+        """Per element of the piece: :func:`~planner.contour.defaults.bound_arcs` (the drives'
+        turn speed on the arcs whose chord per sample is faster; 0 elsewhere) [m/s]."""
         sizes = self.tube_at
-        out = np.zeros(len(self.els))
         if not isinstance(sizes, TubeSizes):
-            return out
-        a, jerk = drive_acceleration(self.model), drive_jerk(self.model, self.st)
-        v_leg = float(np.min(self.model.speed_max))
-        s_a = SAGITTA_FRACTION * sizes.tol
-        for i, e in enumerate(self.els):
-            if e.kind != "arc" or not e.radius_m or e.length_m <= 1e-12:
-                continue
-            R = e.radius_m
-            chord = 2 * math.sqrt(max(2 * R * s_a - s_a * s_a, 0.0)) if s_a < R else 2 * R
-            v = arc_speed(e, a, jerk, v_leg, "fastest")
-            if v * self.st.Ts < chord * (1 - 1e-9):
-                out[i] = v
-        return out
+            return np.zeros(len(self.els))
+        return bound_arcs(self.els, sizes.tol, self.model, self.st)
 
     def arc_tube(self, v_cells: float, kappa: float) -> Tube | None:
         """The piece's tube with cells sized for the speed ``v_cells`` (as ``tube_at``) and the
