@@ -382,13 +382,15 @@ class TimingSearch:
 
     def arc_cells(self, v_cells: float, best: PlanResult,
                   plan: Callable[[Tube], PlanResult | None]) -> tuple[PlanResult, Tube] | None:
-        """``fastest``, the time-optimal timing at the scale ``lam`` found (``best``) where the
-        drives bound an arc below one chord per sample (:meth:`arc_speeds`): the arc's cells
+        """``fastest`` where the drives bound an arc below one chord per sample (:meth:`arc_speeds`;
+        ``best``: the plan found in the tube of ``kappa`` 1, :meth:`heuristic`'s): the arc's cells
         re-cut to one sample's travel at ``kappa`` times the drives' turn speed each
-        (:func:`~planner.contour.tube.sample_split`), ``kappa`` the largest feasible
-        (:data:`ARC_RESOLUTION`): on the chords of the sagitta a cell holds one sample or two, so
-        the tool turns at ``chord / Ts`` or half of it, and whichever the drives allow (issue 35
-        goal 1: dxf2gcode's circle). The plan and its tube where faster than ``best``; else None."""
+        (:meth:`arc_tube`, ``v_cells`` the size of the other cells), each planned by ``plan``
+        (the heuristic profile at the scales found), ``kappa`` the largest feasible within
+        [:data:`ARC_KAPPA_MIN`, :data:`ARC_KAPPA_MAX`] (:data:`ARC_RESOLUTION`). On the chords of
+        the sagitta a cell holds one sample or two, so the tool turns at ``chord / Ts`` or half of
+        it, whichever the drives allow (issue 35 goal 1: dxf2gcode's circle at 1.093x the
+        third-order optimum). The plan and its tube where faster than ``best``; else None."""
         if not self.arc_speeds().any():
             return None
         made: dict[float, tuple[Tube, PlanResult | None]] = {}
