@@ -34,6 +34,20 @@ dxf2gcode (3.10) 4 / 3.5 / 3.25 / 3.2 / 3 ms 0.264 / 0.249 / 0.257 / 0.259 / 0.3
 against 1.940 s), at 0.1 ms pcb_gcode is (1.901 s together), at 0.5 ms freecad stays at 4 ms.
 A program without arcs, or whose arcs the default reaches, keeps the default.
 
+**Arcs alone** (issue 35 goal 1, branch arccells). Rounded up, the chord per sample is at most
+the speed the arc asks, and on an isolated circle that is the whole pass: dxf2gcode's circle (r
+4 mm, ``c / v`` 3.105 ms) at 3.25 ms cruised at 0.165 m/s where the drives turn the tool at
+0.1728 (1.093x the third-order optimum), pcb_gcode's (r 1 mm) 1.046x at 4 ms; 0.05 ms steps
+(3.15 / 3.9 ms) gave 1.060x / 1.020x, and below the need the chords needed two samples each
+(0.312 s at 3 ms). So ``fastest`` re-cuts an arc whose chord per sample is faster than its
+speed into cells of one sample's travel at it (:meth:`planner.contour.search.TimingSearch.arc_cells`),
+and a program whose passes do not mix lines and arcs takes :data:`ARC_CELL_TS_FRACTION` of the
+need, rounded down, to give those cells room: dxf2gcode 3 ms (the floor), 0.207 s (1.039x),
+pcb_gcode 3.5 ms, its circle 0.126 s (0.999x) and its lines' pass 0.252 -> 0.238 s. Where
+lines and arcs share a pass the need stays rounded up: freecad (its pass 0 two 2 mm arcs between
+lines) at 3.5 ms cut 0.336 + 0.248 s against 0.319 + 0.259 s at 3.75, estlcam at 3.25 ms
+0.292 s a pass against 0.280 at 3.5 (measured with the re-cut cells).
+
 **The program feed's sample time** (:func:`feed_ts`, issue 35 goal 2). The controller needs
 6-15 samples to reach F from rest or after a corner and 5-8 to stop (measured on the CAM
 samples at 10 ms), whatever the sample time: on a move of a dozen samples at F that is most of
@@ -75,8 +89,9 @@ from ..schema import DEFAULT_FORCE_RISE_S, MODE_DEFAULTS, ContourRequest, PathEl
 from .timing import PathSamples, constraint_rows, turn
 from .tube import SAGITTA_FRACTION
 
-__all__ = ["FEED_CORNER_RAD", "FEED_MOVE_MIN_TOL", "FEED_MOVE_SAMPLES", "HORIZON_RAMPS", "TS_FLOOR_S", "TS_STEP_S",
-           "arc_speed", "contour_settings", "contour_ts", "drive_acceleration", "drive_jerk", "feed_ts"]
+__all__ = ["ARC_CELL_TS_FRACTION",
+           "FEED_CORNER_RAD", "FEED_MOVE_MIN_TOL", "FEED_MOVE_SAMPLES", "HORIZON_RAMPS", "TS_FLOOR_S", "TS_STEP_S",
+           "arc_speed", "bound_arcs", "contour_settings", "contour_ts", "drive_acceleration", "drive_jerk", "feed_ts"]
 
 #: the finest sample time chosen [s]: at 2 ms the benchmark pass took longer than at 3 ms
 #: (1.154 s against 0.822 s, the search's scales) for 2.6x the compute
@@ -84,6 +99,10 @@ TS_FLOOR_S = 0.003
 #: the sample time is chosen in whole steps of this [s] (module docstring: 1 ms left freecad's circle
 #: 1.016x the optimum at 4 ms where it asks 3.65 ms)
 TS_STEP_S = 0.00025
+#: a program whose passes do not mix lines and arcs: the sample time at most this fraction of
+#: the arcs' chord over their speed, rounded down (module docstring: their cells are re-cut at the
+#: drives' speed, which needs a chord per sample faster than it)
+ARC_CELL_TS_FRACTION = 0.9
 #: the horizon with a chosen sample time: this many force ramps of the slowest drive
 HORIZON_RAMPS = 3.0
 #: program feed: a move that starts or ends a pass or turns a corner gets at least this many
@@ -134,6 +153,27 @@ def arc_speed(e: PathElement, a: float, jerk: float | None, v_leg: float, feed: 
     return v
 
 
+def bound_arcs(elements: list[PathElement], tol: float, model: RobotModel, st: Settings) -> np.ndarray:
+    """``fastest``: per element the speed the drives turn the tool at on its arc
+    (:func:`arc_speed`) where one sample's travel at it, at ``st.Ts``, is shorter than the arc's
+    chord of the sagitta (the drives, not the tube's chords, bound the arc: its cells are re-cut
+    to one sample at that speed, :meth:`planner.contour.search.TimingSearch.arc_cells`); 0
+    elsewhere [m/s]."""
+    a, jerk = drive_acceleration(model), drive_jerk(model, st)
+    v_leg = float(np.min(model.speed_max))
+    s_a = SAGITTA_FRACTION * tol
+    out = np.zeros(len(elements))
+    for i, e in enumerate(elements):
+        if e.kind != "arc" or not e.radius_m or e.length_m <= 1e-12:
+            continue
+        R = e.radius_m
+        chord = 2 * math.sqrt(max(2 * R * s_a - s_a * s_a, 0.0)) if s_a < R else 2 * R
+        v = arc_speed(e, a, jerk, v_leg, "fastest")
+        if v * st.Ts < chord * (1 - 1e-9):
+            out[i] = v
+    return out
+
+
 def contour_ts(program: Program, tol: float, feed: str, model: RobotModel, st: Settings) -> float:
     """The sample time [s] for the program's arcs (module docstring), at most ``st.Ts``."""
     a = drive_acceleration(model)
@@ -142,7 +182,10 @@ def contour_ts(program: Program, tol: float, feed: str, model: RobotModel, st: S
     v_leg = float(np.min(model.speed_max))
     s_a = SAGITTA_FRACTION * tol
     need = st.Ts
+    mixed = False  # a pass of lines and arcs
     for b in program.passes:
+        kinds = {e.kind for e in b.elements if e.length_m > 1e-12}
+        mixed = mixed or kinds >= {"arc", "line"}
         for e in b.elements:
             if e.kind != "arc" or not e.radius_m or e.length_m <= 1e-12:
                 continue
@@ -153,7 +196,10 @@ def contour_ts(program: Program, tol: float, feed: str, model: RobotModel, st: S
                 need = min(need, chord / v)
     if need >= st.Ts:
         return st.Ts
-    steps = math.ceil(need / TS_STEP_S - 1e-9)
+    if mixed:
+        steps = math.ceil(need / TS_STEP_S - 1e-9)
+    else:  # arcs alone: their cells re-cut at the drives' speed (planner.contour.search.TimingSearch.arc_cells)
+        steps = math.floor(ARC_CELL_TS_FRACTION * need / TS_STEP_S + 1e-9)
     return min(st.Ts, max(TS_FLOOR_S, round(steps * TS_STEP_S, 9)))  # 0.00325, not 0.0032500000000000003
 
 

@@ -7,7 +7,9 @@ until the plan is feasible and no sample is faster than F (:meth:`TimingSearch.p
 its scale, :class:`Scale`): the heuristic profile scaled (``v = lambda v0``, ``a = lambda^2 a0``,
 :meth:`TimingSearch.heuristic`), and the exact path's time-optimal profile slowed by a scale
 (:meth:`TimingSearch.optimal_search`); each to the largest feasible scale
-(:func:`largest_feasible`; each candidate abandoned at its first step that needs slack). Where
+(:func:`largest_feasible`; each candidate abandoned at its first step that needs slack); an arc
+whose chord per sample is faster than the drives turn the tool on it is cut in cells of one
+sample's travel at their speed (:meth:`TimingSearch.arc_cells`). Where
 a feed's own search finds no timing the other's is tried (:func:`search_timing`); an
 ``infeasible`` verdict's advice is checked before it is given (:func:`confirmed_infeasible`).
 """
@@ -25,9 +27,9 @@ from ..errors import PlannerError
 from ..model import RobotModel
 from ..orchestrator import feasible, plan_timed
 from ..schema import MAX_CONTOUR_TOLERANCE_M, MAX_TOTAL_STEPS, MIN_TS, ContourRequest, PathElement, PlanResult, Settings
-from .defaults import drive_jerk
+from .defaults import bound_arcs, drive_jerk
 from .estimate import ADVICE_MIN_S, ADVICE_WORK, FEED_MARGIN, piece_estimate
-from .passes import CELL_SAMPLES, PROGRAM_MARGIN, V0_M_S, TubeSizes, segment_of
+from .passes import CELL_SAMPLES, PROGRAM_MARGIN, V0_M_S, TubeSizes, piece_tube, segment_of
 from .path import moves_at
 from .profiles import (
     ARRIVAL_MAX,
@@ -114,6 +116,11 @@ OPT_RESOLUTION = 1 / 256
 #: the samples a tube plan takes beyond the profile's time (the start point, the lead cells, the
 #: end point): the time-optimal timing is tried where its profile's time plus these beats the other
 OPT_END_SAMPLES = 4
+#: fastest, an arc the drives bound below a chord per sample (:meth:`TimingSearch.arc_cells`):
+#: its cells' speed, a factor ``kappa`` of the drives' turn speed, found to this resolution
+#: within [ARC_KAPPA_MIN, ARC_KAPPA_MAX]
+ARC_RESOLUTION = 1 / 128
+ARC_KAPPA_MIN, ARC_KAPPA_MAX = 0.8, 1.25
 
 
 class Scale(NamedTuple):
@@ -175,6 +182,7 @@ class TimingSearch:
         #: program feed: the drives' jerk under the force-rate limit [m/s^3] (None: no limit), for
         #: the profile's steps from and to rest (:func:`~planner.contour.profiles.rest_ends`)
         self.jerk = drive_jerk(model, st)
+        self.arc_tubes: dict[tuple[int, float], Tube] = {}  #: :meth:`arc_tube`'s, by size and kappa
 
     def feed_on(self, t: Tube) -> np.ndarray:
         """The programmed F [m/s] of the move each of the tube's segments belongs to."""
@@ -277,6 +285,23 @@ class TimingSearch:
         t = self.tube_at(V0_M_S)
         got = self.scaled(t, np.full(len(t.segments), V0_M_S), self.z_capped, h.lam if h else 1.0,
                           h.mu if h else 1.0, SCALE_MAX, self.zcap_on(t))
+        arc_t = self.arc_tube(V0_M_S, 1.0)
+        if arc_t is not None:  # the arcs the drives bound in cells of one sample at their speed
+            v0 = np.full(len(arc_t.segments), V0_M_S)
+            got_a = self.scaled(arc_t, v0, self.z_capped, h.lam if h else 1.0, h.mu if h else 1.0, SCALE_MAX,
+                                self.zcap_on(arc_t))
+            if got_a is not None:  # the speeds' scale's search stops where cells of one sample and two
+                lam = got_a[1][0]  # alternate: the cells' own speed (the speeds' top scale) tried too
+                top = self.scaled_run(arc_t, v0, self.z_capped, self.zcap_on(arc_t), {}, lam, SCALE_MAX / lam)
+                if top is not None and top.time[-1] < got_a[0].time[-1]:
+                    got_a = (top, (lam, SCALE_MAX / lam))
+            if got_a is not None and (got is None or got_a[0].time[-1] < got[0].time[-1]):
+                got, t = got_a, arc_t
+                lam, mu = got[1]
+                faster = self.arc_cells(V0_M_S, got[0], lambda u: self.scaled_run(
+                    u, np.full(len(u.segments), V0_M_S), self.z_capped, self.zcap_on(u), {}, lam, mu))
+                if faster is not None:
+                    got, t = (faster[0], got[1]), faster[1]
         return (got[0], t, Scale("profile", *got[1])) if got is not None else None
 
     def optimal_run(self, t: Tube, times: np.ndarray, tried: dict[bytes, PlanResult | None],
@@ -331,6 +356,61 @@ class TimingSearch:
         if beat is not None and best.time[-1] >= beat:
             return None
         return best, t, Scale("optimal", lam)
+
+    def arc_speeds(self) -> np.ndarray:
+        """Per element of the piece: :func:`~planner.contour.defaults.bound_arcs` (the drives'
+        turn speed on the arcs whose chord per sample is faster; 0 elsewhere) [m/s]."""
+        sizes = self.tube_at
+        if not isinstance(sizes, TubeSizes):
+            return np.zeros(len(self.els))
+        return bound_arcs(self.els, sizes.tol, self.model, self.st)
+
+    def arc_tube(self, v_cells: float, kappa: float) -> Tube | None:
+        """The piece's tube with cells sized for the speed ``v_cells`` (as ``tube_at``) and the
+        arcs of :meth:`arc_speeds` cut in cells of one sample's travel at ``kappa`` times their
+        speed (:func:`~planner.contour.tube.sample_split`); None where no arc is so bound."""
+        v = self.arc_speeds()
+        sizes = self.tube_at
+        if not v.any() or not isinstance(sizes, TubeSizes):
+            return None
+        piece_max = max(v_cells * self.st.Ts * CELL_SAMPLES, 4 * sizes.tol)
+        key = (round(math.log(piece_max) * 8), round(kappa, 9))
+        if key not in self.arc_tubes:
+            self.arc_tubes[key] = piece_tube(sizes.model, sizes.chunk, sizes.els, sizes.origin, sizes.tol, sizes.psi,
+                                             sizes.pos, sizes.elements, piece_max, kappa * v * self.st.Ts)
+        return self.arc_tubes[key]
+
+    def arc_cells(self, v_cells: float, best: PlanResult,
+                  plan: Callable[[Tube], PlanResult | None]) -> tuple[PlanResult, Tube] | None:
+        """``fastest`` where the drives bound an arc below one chord per sample (:meth:`arc_speeds`;
+        ``best``: the plan found in the tube of ``kappa`` 1, :meth:`heuristic`'s): the arc's cells
+        re-cut to one sample's travel at ``kappa`` times the drives' turn speed each
+        (:meth:`arc_tube`, ``v_cells`` the size of the other cells), each planned by ``plan``
+        (the heuristic profile at the scales found), ``kappa`` the largest feasible within
+        [:data:`ARC_KAPPA_MIN`, :data:`ARC_KAPPA_MAX`] (:data:`ARC_RESOLUTION`). On the chords of
+        the sagitta a cell holds one sample or two, so the tool turns at ``chord / Ts`` or half of
+        it, whichever the drives allow (issue 35 goal 1: dxf2gcode's circle at 1.093x the
+        third-order optimum). The plan and its tube where faster than ``best``; else None."""
+        if not self.arc_speeds().any():
+            return None
+        made: dict[float, tuple[Tube, PlanResult | None]] = {}
+
+        def run(kappa: float) -> PlanResult | None:
+            key = round(kappa, 9)
+            if key not in made:
+                t = self.arc_tube(v_cells, kappa)
+                assert t is not None
+                made[key] = (t, plan(t))
+            return made[key][1]
+
+        kappa = largest_feasible(lambda x: run(x) is not None, 1.0, ARC_RESOLUTION, low=ARC_KAPPA_MIN,
+                                 high=ARC_KAPPA_MAX)
+        if kappa is None:
+            return None
+        t, res = made[round(kappa, 9)]
+        if res is None or res.time[-1] >= best.time[-1]:
+            return None
+        return res, t
 
     def feed_counts(self, t: Tube, counts: np.ndarray) -> np.ndarray:
         """``counts`` raised where a cell would be crossed faster than its move's F on average:
@@ -550,6 +630,8 @@ class TimingSearch:
         profile) the heuristic timing, then the time-optimal one where it can beat it; with the
         first pass's ``hint``, its family first and the other where that finds none."""
         best: tuple[PlanResult, Tube, Scale] | None = None
+        if self.arc_speeds().any():  # arcs the drives bound (:meth:`arc_cells`): both families, afresh
+            hint = None
         if hint is None or self.optimal is None:  # the heuristic first, then the time-optimal one if it can beat it
             best = self.heuristic(hint)
             if self.optimal is not None:
