@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -55,7 +56,19 @@ from .estimate import (
     CONTOUR_TRAVEL_S,
     estimate_contour,
 )
-from .join import Part, contour_section, cut_z, dwell_z, join_parts, plan_dwell, plan_travel, travel_z
+from .join import (
+    Part,
+    contour_section,
+    cut_z,
+    dwell_z,
+    held_force,
+    join_parts,
+    plan_dwell,
+    plan_hold,
+    plan_travel,
+    seam_breaks,
+    travel_z,
+)
 from .passes import (
     TubeSizes,
     chunks,
@@ -153,6 +166,22 @@ class _Walk:
         self.memo: dict = {}  # fastest: the time-optimal profiles of the passes (alike passes share one)
         self.progress: Callable[[int, int], None] | None = None  # (cut passes done, cut passes)
 
+    def held(self) -> np.ndarray:
+        """The drive forces [N] the last part left held (zero before the first, after a rest)."""
+        return held_force(self.parts[-1] if self.parts else None, self.model.n_legs)
+
+    def seamed(self, planned: Callable[[np.ndarray | None], Part]) -> Part:
+        """The next part, ``planned(start_force)``: planned from rest (``None``: zero forces), and
+        where its first force steps from the forces the last part left by more than the
+        force-rate limit allows (issue 35: a cut piece's last braking force, 1.4 % over on
+        fusion360 at Ts 3 ms), planned again from those forces (the first step's force-rate rows
+        start from them). A seam within the limit keeps the plan it had."""
+        part = planned(None)
+        before = self.held()
+        if seam_breaks(before, part, self.model, self.st):
+            part = planned(before)
+        return part
+
     def run(self) -> None:
         """Every block: a run of travels as one free move, a dwell at rest, a cut pass."""
         blocks = self.program.blocks
@@ -177,7 +206,8 @@ class _Walk:
         ends (none where it is there already)."""
         target = run[-1].elements[-1].end + self.origin
         if np.hypot(*(target - self.pos)) > 1e-9:
-            part = plan_travel(self.req, self.model, self.st, self.pos, target, CONTOUR_PSI, run[0].line)
+            part = self.seamed(lambda f: plan_travel(self.req, self.model, self.st, self.pos, target, CONTOUR_PSI,
+                                                     run[0].line, f))
             travel_z(part, [e for bb in run for e in bb.elements], self.pos, target)
             self.parts.append(part)
             self.pos = part.result.pose[-1, :2].copy()
@@ -188,6 +218,14 @@ class _Walk:
         within the Z acceleration (:func:`~planner.contour.zaxis.accel_dwell`)."""
         b, z_at = accel_dwell(b, self.z, self.req.z_accel_m_s2)  # Z from rest to rest within its acceleration
         part = plan_dwell(self.pos, CONTOUR_PSI, b.duration_s, self.st.Ts)
+        before = self.held()
+        if seam_breaks(before, part, self.model, self.st):
+            # the part before left forces the drives cannot drop to a rest's zero in one sample:
+            # the rest planned, the robot held there while they fall (issue 35)
+            st = self.st.model_copy(update=cut_settle(self.st, self.tol, drive_jerk(self.model, self.st)))
+            part = plan_hold(self.req, self.model, st, self.pos, CONTOUR_PSI, b.duration_s, before, b.line,
+                             HOLD_ROOM * self.tol)
+            self.pos = part.result.pose[-1, :2].copy()
         dwell_z(part, b, self.z)
         if z_at is not None:
             part.z = z_at(np.linspace(0.0, b.duration_s, len(part.z)))
@@ -202,7 +240,8 @@ class _Walk:
         gap = float(np.hypot(*(b.elements[0].start + origin - self.pos)))
         if gap > 0.5 * tol:
             # a cut that starts away from where the tool is: travel there first (at rest)
-            part = plan_travel(req, model, st, self.pos, b.elements[0].start + origin, CONTOUR_PSI, b.line)
+            part = self.seamed(lambda f: plan_travel(req, model, st, self.pos, b.elements[0].start + origin,
+                                                     CONTOUR_PSI, b.line, f))
             part.z[:], part.source[:] = self.z, b.line
             self.parts.append(part)
             self.pos = part.result.pose[-1, :2].copy()
@@ -210,9 +249,10 @@ class _Walk:
         geo = PathGeometry(b.elements, origin)
         for chunk in chunks(b.elements, slope_stops(req.feed, b.elements, tol, req.z_accel_m_s2)):
             key, level = piece_key([b.elements[k] for k in chunk])
-            part = plan_cut(req, model, st, chunk, origin, tol, CONTOUR_PSI, self.pos, geo, b.elements,
-                            self.hints.get(key, self.hint if level else None), len(self.program.passes), self.memo,
-                            self.limit_at, self.parts[-1].z[-2:] if len(self.parts) > first else None)
+            hint = self.hints.get(key, self.hint if level else None)
+            z_first = self.parts[-1].z[-2:] if len(self.parts) > first else None
+            part = self.seamed(partial(plan_cut, req, model, st, chunk, origin, tol, CONTOUR_PSI, self.pos, geo,
+                                       b.elements, hint, len(self.program.passes), self.memo, self.limit_at, z_first))
             if part.scale is not None:
                 self.hints[key] = part.scale
                 self.hint = part.scale if level else self.hint
@@ -264,9 +304,11 @@ def speed_caps(feed: str, els: list[PathElement], z_max_m_s: float | None) -> np
 def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int], origin: np.ndarray, tol: float,
              psi: float, pos: np.ndarray, geo: PathGeometry, elements: list[PathElement],
              hint: Scale | None = None, passes: int = 1, memo: dict | None = None,
-             limit_at: float | None = None, z_first: np.ndarray | None = None) -> Part:
+             limit_at: float | None = None, z_first: np.ndarray | None = None,
+             start_force: np.ndarray | None = None) -> Part:
     """One piece of a pass planned rest to rest, its Z planned with it (:func:`plan_piece_z`;
-    ``z_first``: the Z of the piece before, its last samples).
+    ``z_first``: the Z of the piece before, its last samples; ``start_force``: the forces the
+    part before left held [N], every candidate planned from them, None: from zero).
     ``hint``: the ``fastest`` scale found for the piece before (where its search starts; the
     search's result is bracketed the same way from any start). No timing found: the
     ``infeasible`` error with its advice checked (:func:`confirmed_infeasible`, its checks
@@ -285,7 +327,7 @@ def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[i
                               chunk, els, hint, z_max_m_s=req.z_rapid_m_s, cell_caps=zc if zc.active else None,
                               optimal=OptimalProfiles(model, st, chunk, els, origin, psi, memo,
                                                       speed_caps(feed, els, req.z_rapid_m_s),
-                                                      zc if zc.active else None))
+                                                      zc if zc.active else None), start_force=start_force)
         if found.result is None:
             raise confirmed_infeasible(req, model, st, chunk, els, origin, tol, psi, pos, elements, found, hint,
                                        passes, limit_at)
@@ -369,6 +411,10 @@ def _cut_part(found: Any, geo: PathGeometry, tol: float) -> Part:
     part.elem = elem
     return part
 
+
+#: a rest planned while the drives release their forces (:func:`~planner.contour.join.plan_hold`)
+#: keeps the tool within this share of the tolerance of where it stopped, in x and y
+HOLD_ROOM = 0.25
 
 #: a cut piece's end (:func:`cut_settle`): the tool's travel in a sample at the speed that counts
 #: as stopped, at most this share of the tolerance
