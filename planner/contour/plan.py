@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from functools import partial
 from typing import Any
 
 import numpy as np
@@ -170,16 +169,47 @@ class _Walk:
         """The drive forces [N] the last part left held (zero before the first, after a rest)."""
         return held_force(self.parts[-1] if self.parts else None, self.model.n_legs)
 
-    def seamed(self, planned: Callable[[np.ndarray | None], Part]) -> Part:
-        """The next part, ``planned(start_force)``: planned from rest (``None``: zero forces), and
-        where its first force steps from the forces the last part left by more than the
-        force-rate limit allows (issue 35: a cut piece's last braking force, 1.4 % over on
-        fusion360 at Ts 3 ms), planned again from those forces (the first step's force-rate rows
-        start from them). A seam within the limit keeps the plan it had."""
-        part = planned(None)
+    def seamed(self, planned: Callable[[np.ndarray, np.ndarray | None], Part], line: int) -> Part:
+        """The next part, ``planned(pos, start_force)`` from where the robot is: planned from
+        rest (``None``: zero forces), and where its first force steps from the forces the last
+        part left by more than the force-rate limit allows (issue 35: a cut piece's last braking
+        force, 1.4 % over on fusion360 at Ts 3 ms), planned again from those forces (the first
+        step's force-rate rows start from them). Where that finds no timing (the forces push
+        the tool off a fine tolerance before they fall: fusion360 at 2 ms), the robot is first
+        held while they fall (:meth:`release`) and the part planned from what is left. A seam
+        within the limit keeps the plan it had."""
+        part = planned(self.pos, None)
         before = self.held()
-        if seam_breaks(before, part, self.model, self.st):
-            part = planned(before)
+        if not seam_breaks(before, part, self.model, self.st):
+            return part
+        try:
+            return planned(self.pos, before)
+        except PlannerError as err:
+            if err.code != "infeasible":
+                raise
+        self.release(0.0, line)
+        before = self.held()
+        part = planned(self.pos, None)
+        return planned(self.pos, before) if seam_breaks(before, part, self.model, self.st) else part
+
+    def release(self, duration: float, line: int) -> Part:
+        """A rest of at least ``duration`` [s] planned from the forces the last part left: the
+        robot held where it is while they fall within the force-rate limit
+        (:func:`~planner.contour.join.plan_hold`), appended to the parts, at the last part's Z,
+        source line and cutting state (between two pieces of a pass the tool is in the cut:
+        its deviation bounded by the last one's plus how far it moved, the distance from the
+        path being 1-Lipschitz)."""
+        last = self.parts[-1]
+        st = self.st.model_copy(update=cut_settle(self.st, self.tol, drive_jerk(self.model, self.st)))
+        part = plan_hold(self.req, self.model, st, self.pos, CONTOUR_PSI, duration, self.held(), line,
+                         HOLD_ROOM * self.tol)
+        part.z[:], part.source[:] = last.z[-1], last.source[-1]
+        part.cutting[:], part.line[:], part.elem[:] = last.cutting[-1], last.line[-1], last.elem[-1]
+        if last.cutting[-1]:
+            moved = np.hypot(*(part.result.pose[:, :2] - part.result.pose[0, :2]).T)
+            part.deviation = float(last.deviation[-1]) + np.maximum(moved, np.append(moved[1:], moved[-1]))
+        self.parts.append(part)
+        self.pos = part.result.pose[-1, :2].copy()
         return part
 
     def run(self) -> None:
@@ -206,8 +236,8 @@ class _Walk:
         ends (none where it is there already)."""
         target = run[-1].elements[-1].end + self.origin
         if np.hypot(*(target - self.pos)) > 1e-9:
-            part = self.seamed(lambda f: plan_travel(self.req, self.model, self.st, self.pos, target, CONTOUR_PSI,
-                                                     run[0].line, f))
+            part = self.seamed(lambda p, f: plan_travel(self.req, self.model, self.st, p, target, CONTOUR_PSI,
+                                                        run[0].line, f), run[0].line)
             travel_z(part, [e for bb in run for e in bb.elements], self.pos, target)
             self.parts.append(part)
             self.pos = part.result.pose[-1, :2].copy()
@@ -218,14 +248,12 @@ class _Walk:
         within the Z acceleration (:func:`~planner.contour.zaxis.accel_dwell`)."""
         b, z_at = accel_dwell(b, self.z, self.req.z_accel_m_s2)  # Z from rest to rest within its acceleration
         part = plan_dwell(self.pos, CONTOUR_PSI, b.duration_s, self.st.Ts)
-        before = self.held()
-        if seam_breaks(before, part, self.model, self.st):
+        if seam_breaks(self.held(), part, self.model, self.st):
             # the part before left forces the drives cannot drop to a rest's zero in one sample:
             # the rest planned, the robot held there while they fall (issue 35)
-            st = self.st.model_copy(update=cut_settle(self.st, self.tol, drive_jerk(self.model, self.st)))
-            part = plan_hold(self.req, self.model, st, self.pos, CONTOUR_PSI, b.duration_s, before, b.line,
-                             HOLD_ROOM * self.tol)
-            self.pos = part.result.pose[-1, :2].copy()
+            part = self.release(b.duration_s, b.line)
+            self.parts.pop()  # (appended below, with its Z, source line and dwell)
+            part.cutting[:] = False  # a rest, as the unplanned one
         dwell_z(part, b, self.z)
         if z_at is not None:
             part.z = z_at(np.linspace(0.0, b.duration_s, len(part.z)))
@@ -240,8 +268,8 @@ class _Walk:
         gap = float(np.hypot(*(b.elements[0].start + origin - self.pos)))
         if gap > 0.5 * tol:
             # a cut that starts away from where the tool is: travel there first (at rest)
-            part = self.seamed(lambda f: plan_travel(req, model, st, self.pos, b.elements[0].start + origin,
-                                                     CONTOUR_PSI, b.line, f))
+            part = self.seamed(lambda p, f: plan_travel(req, model, st, p, b.elements[0].start + origin,
+                                                        CONTOUR_PSI, b.line, f), b.line)
             part.z[:], part.source[:] = self.z, b.line
             self.parts.append(part)
             self.pos = part.result.pose[-1, :2].copy()
@@ -250,9 +278,13 @@ class _Walk:
         for chunk in chunks(b.elements, slope_stops(req.feed, b.elements, tol, req.z_accel_m_s2)):
             key, level = piece_key([b.elements[k] for k in chunk])
             hint = self.hints.get(key, self.hint if level else None)
-            z_first = self.parts[-1].z[-2:] if len(self.parts) > first else None
-            part = self.seamed(partial(plan_cut, req, model, st, chunk, origin, tol, CONTOUR_PSI, self.pos, geo,
-                                       b.elements, hint, len(self.program.passes), self.memo, self.limit_at, z_first))
+            def piece(p: np.ndarray, f: np.ndarray | None, chunk: list[int] = chunk, hint: Scale | None = hint) -> Part:
+                # z_first: the Z of the part before, as the robot leaves it (a release's, if one came between)
+                z_first = self.parts[-1].z[-2:] if len(self.parts) > first else None
+                return plan_cut(req, model, st, chunk, origin, tol, CONTOUR_PSI, p, geo, b.elements, hint,
+                                len(self.program.passes), self.memo, self.limit_at, z_first, f)
+
+            part = self.seamed(piece, b.elements[chunk[0]].line)
             if part.scale is not None:
                 self.hints[key] = part.scale
                 self.hint = part.scale if level else self.hint
