@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -278,13 +279,7 @@ class _Walk:
         for chunk in chunks(b.elements, slope_stops(req.feed, b.elements, tol, req.z_accel_m_s2)):
             key, level = piece_key([b.elements[k] for k in chunk])
             hint = self.hints.get(key, self.hint if level else None)
-            def piece(p: np.ndarray, f: np.ndarray | None, chunk: list[int] = chunk, hint: Scale | None = hint) -> Part:
-                # z_first: the Z of the part before, as the robot leaves it (a release's, if one came between)
-                z_first = self.parts[-1].z[-2:] if len(self.parts) > first else None
-                return plan_cut(req, model, st, chunk, origin, tol, CONTOUR_PSI, p, geo, b.elements, hint,
-                                len(self.program.passes), self.memo, self.limit_at, z_first, f)
-
-            part = self.seamed(piece, b.elements[chunk[0]].line)
+            part = self.seamed(partial(self.piece, b, geo, first, chunk, hint), b.elements[chunk[0]].line)
             if part.scale is not None:
                 self.hints[key] = part.scale
                 self.hint = part.scale if level else self.hint
@@ -294,6 +289,16 @@ class _Walk:
         self.z = b.elements[-1].z_end_m
         if self.progress is not None:
             self.progress(len(self.summaries), len(self.program.passes))
+
+
+    def piece(self, b: ProgramBlock, geo: PathGeometry, first: int, chunk: list[int], hint: Scale | None,
+              pos: np.ndarray, start_force: np.ndarray | None) -> Part:
+        """A piece of the cut pass ``b`` (:func:`plan_cut`) from ``pos`` and ``start_force``; its Z
+        from the last part's, as the robot leaves it (a release's, if one came between), where that
+        is a part of this pass (from index ``first`` on)."""
+        z_first = self.parts[-1].z[-2:] if len(self.parts) > first else None
+        return plan_cut(self.req, self.model, self.st, chunk, self.origin, self.tol, CONTOUR_PSI, pos, geo,
+                        b.elements, hint, len(self.program.passes), self.memo, self.limit_at, z_first, start_force)
 
 
 def _pass_summary(index: int, b: ProgramBlock, cut_parts: list[Part], geo: PathGeometry, tol: float) -> PassSummary:
