@@ -165,6 +165,7 @@ class _Walk:
         self.hint: Scale | None = None  # fastest: the timing of the level piece before (search.piece_hint)
         self.memo: dict = {}  # fastest: the time-optimal profiles of the passes (alike passes share one)
         self.progress: Callable[[int, int], None] | None = None  # (cut passes done, cut passes)
+        self.geo: PathGeometry | None = None  # the cut pass being planned (a release in it measures its deviation)
 
     def held(self) -> np.ndarray:
         """The drive forces [N] the last part left held (zero before the first, after a rest)."""
@@ -197,18 +198,16 @@ class _Walk:
         """A rest of at least ``duration`` [s] planned from the forces the last part left: the
         robot held where it is while they fall within the force-rate limit
         (:func:`~planner.contour.join.plan_hold`), appended to the parts, at the last part's Z,
-        source line and cutting state (between two pieces of a pass the tool is in the cut:
-        its deviation bounded by the last one's plus how far it moved, the distance from the
-        path being 1-Lipschitz)."""
+        source line and cutting state (between two pieces of a pass the tool is in the cut: its
+        deviation measured against the pass, :func:`~planner.contour.passes.measure_deviation`)."""
         last = self.parts[-1]
         st = self.st.model_copy(update=cut_settle(self.st, self.tol, drive_jerk(self.model, self.st)))
         part = plan_hold(self.req, self.model, st, self.pos, CONTOUR_PSI, duration, self.held(), line,
                          HOLD_ROOM * self.tol)
         part.z[:], part.source[:] = last.z[-1], last.source[-1]
         part.cutting[:], part.line[:], part.elem[:] = last.cutting[-1], last.line[-1], last.elem[-1]
-        if last.cutting[-1]:
-            moved = np.hypot(*(part.result.pose[:, :2] - part.result.pose[0, :2]).T)
-            part.deviation = float(last.deviation[-1]) + np.maximum(moved, np.append(moved[1:], moved[-1]))
+        if last.cutting[-1] and self.geo is not None:  # in a pass: measured as its pieces are
+            part.deviation = measure_deviation(part.result.pose[:, :2], part.elem, self.geo, self.tol)
         self.parts.append(part)
         self.pos = part.result.pose[-1, :2].copy()
         return part
@@ -254,7 +253,7 @@ class _Walk:
             # the rest planned, the robot held there while they fall (issue 35)
             part = self.release(b.duration_s, b.line)
             self.parts.pop()  # (appended below, with its Z, source line and dwell)
-            part.cutting[:] = False  # a rest, as the unplanned one
+            part.cutting[:], part.deviation[:] = False, 0.0  # a rest, as the unplanned one
         dwell_z(part, b, self.z)
         if z_at is not None:
             part.z = z_at(np.linspace(0.0, b.duration_s, len(part.z)))
@@ -275,7 +274,7 @@ class _Walk:
             self.parts.append(part)
             self.pos = part.result.pose[-1, :2].copy()
         first = len(self.parts)
-        geo = PathGeometry(b.elements, origin)
+        geo = self.geo = PathGeometry(b.elements, origin)
         for chunk in chunks(b.elements, slope_stops(req.feed, b.elements, tol, req.z_accel_m_s2)):
             key, level = piece_key([b.elements[k] for k in chunk])
             hint = self.hints.get(key, self.hint if level else None)
@@ -286,6 +285,7 @@ class _Walk:
             self.parts.append(part)
             self.pos = part.result.pose[-1, :2].copy()
         self.summaries.append(_pass_summary(len(self.summaries), b, self.parts[first:], geo, tol))
+        self.geo = None
         self.z = b.elements[-1].z_end_m
         if self.progress is not None:
             self.progress(len(self.summaries), len(self.program.passes))
