@@ -109,7 +109,7 @@ def test_a_plan_whose_seams_keep_the_limit_is_unchanged(monkeypatch):
 @pytest.mark.parametrize("feed", ["program", "fastest"])
 @pytest.mark.parametrize("name", list(PROGRAMS))
 def test_the_force_rate_holds_across_every_seam(name, feed, Ts):
-    """The six programs in both feeds at Ts 2 and 3 ms (on main 11 of these 24 plans broke the
+    """The six programs in both feeds at Ts 2 and 3 ms (on main 12 of these 24 plans broke the
     rate at a seam, up to 1.86x the limit: freecad, fastest, 2 ms; benchmarks/bench_contour_seams.py
     sweeps 1, 5, 10 ms and the rule's too): no force step over the limit anywhere, and
     ``within_limits`` is what the result's arrays say; the tolerance kept."""
