@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-from planner.constraints.rows import RELAX_M
 from planner.contour import plan_contour
 from planner.contour.timing import constraint_rows, path_samples, profile_time, speed_profile, time_optimal
 from planner.exchange import read_gcode
@@ -185,5 +184,7 @@ def test_a_program_at_a_fine_sample_time_with_the_force_rate_limit():
     assert res.contour.max_deviation_m <= 2e-5
     assert res.metrics.max_force_ratio <= 1 + 1e-6 and res.metrics.contained
     f_max = float(np.max(load_robot("moving-slide").force_max))
-    # the joined forces' largest step, the joins included, within the rate (to a relaxed step's widening)
-    assert res.metrics.max_force_rate_n_s * 0.001 <= f_max / 0.05 * 0.001 + RELAX_M * f_max + 1e-9
+    # the joined forces' largest step, the joins included, within the rate (issue 35: the seams'
+    # steps too, to within_limits' 1e-9; they were held to a relaxed step's widening before)
+    assert res.metrics.max_force_rate_n_s <= f_max / 0.05 * (1 + 1e-9)
+    assert res.metrics.within_limits

@@ -184,9 +184,9 @@ def test_contained_includes_psi_with_its_tolerance(monkeypatch):
     assert res.metrics.max_corridor_violation_m <= CONTAIN_TOL_M
     real = result_module.build_result
 
-    def tilted(robot, name, st, seq, segments, sim, report, timing, offset):
+    def tilted(robot, name, st, seq, segments, sim, report, timing, start_force=None, *, offset):
         sim.X[len(sim.X) // 2:, 2] += offset  # psi off its (zero-width) range from mid-plan on
-        return real(robot, name, st, seq, segments, sim, report, timing)
+        return real(robot, name, st, seq, segments, sim, report, timing, start_force)
 
     plan_module = importlib.import_module("planner.orchestrator.plan")
     for offset, expected in ((0.5 * CONTAIN_TOL_RAD, True), (2 * CONTAIN_TOL_RAD, False)):

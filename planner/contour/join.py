@@ -18,7 +18,7 @@ import numpy as np
 from ..constraints import force_rate
 from ..errors import PlannerError
 from ..model import RobotModel, kinematics
-from ..orchestrator import plan
+from ..orchestrator import RATE_TOL_REL, limit_metrics, plan, plan_timed
 from ..schema import (
     MAX_HORIZON,
     ContourRequest,
@@ -78,9 +78,52 @@ def _horizon(req: ContourRequest, st: Settings, model: RobotModel) -> Settings:
     return st if n <= st.N else st.model_copy(update={"N": n})
 
 
+def held_force(part: Part | None, n_legs: int) -> np.ndarray:
+    """The drive forces [N] a part leaves held at its end (its last force applied; a rest's, or
+    before the first part: zero), from which the next part's first force steps."""
+    if part is None or part.result.metrics is None or len(part.result.time) < 2:
+        return np.zeros(n_legs)
+    return np.asarray(part.result.drives.force[-2], float)
+
+
+def seam_breaks(before: np.ndarray, part: Part, model: RobotModel, st: Settings) -> bool:
+    """Whether the step from the forces ``before`` [N] to ``part``'s first force (zero for a
+    rest) exceeds the force-rate limit (by more than the relative tolerance ``within_limits``
+    allows, :data:`planner.orchestrator.RATE_TOL_REL`)."""
+    rate = force_rate(model, st)
+    if rate is None:
+        return False
+    first = np.asarray(part.result.drives.force[0], float) if part.result.metrics is not None \
+        else np.zeros(model.n_legs)
+    return bool(np.any(np.abs(first - before) > rate * st.Ts * (1.0 + RATE_TOL_REL)))
+
+
+def plan_hold(req: ContourRequest, model: RobotModel, st: Settings, pos: np.ndarray, psi: float, duration: float,
+              start_force: np.ndarray, line: int, room: float) -> Part:
+    """A rest (plunge, retract, G4, pause) after a part that left forces the drives cannot
+    release within one sample's rise (:func:`seam_breaks` with a rest): the robot held at
+    ``pos`` for ``duration`` (at least), planned in the constrained mode from ``start_force``
+    [N] (the forces fall within the rate limit while the controller keeps the tool within
+    ``room`` [m] of ``pos`` in x and y), until it settles."""
+    n = max(int(math.ceil(duration / st.Ts - 1e-9)), 2)
+    # two boxes about the point (their centre the start and the end): no point to leave at the
+    # first sample or to arrive at, which the forces still falling would push the tool past
+    box = Segment.model_validate({"lower": [pos[0] - room, pos[1] - room, psi],
+                                  "upper": [pos[0] + room, pos[1] + room, psi]})
+    segs = [box, box]
+    try:
+        res = plan_timed(f"rest line {line}", model, st, segs, [1, n - 1], abandon=False, start_force=start_force)
+    except PlannerError as err:
+        raise PlannerError(err.code, f"line {line}: the drives' forces released at rest at [{pos[0]:.4f}, "
+                           f"{pos[1]:.4f}] m (robot frame): {err.message}", "program") from None
+    K = len(res.time)
+    return Part(res, np.zeros(K, bool), np.zeros(K, np.int64), np.zeros(K), segments=segs)
+
+
 def plan_travel(req: ContourRequest, model: RobotModel, st: Settings, a: np.ndarray, b: np.ndarray, psi: float,
-                line: int) -> Part:
-    """A free move from ``a`` to ``b`` (at rest at both) inside a box about the straight move."""
+                line: int, start_force: np.ndarray | None = None) -> Part:
+    """A free move from ``a`` to ``b`` (at rest at both) inside a box about the straight move;
+    ``start_force``: the forces the part before left [N] (:func:`planner.orchestrator.plan`)."""
     lo = np.minimum(a, b) - RAPID_MARGIN_M
     hi = np.maximum(a, b) + RAPID_MARGIN_M
     segs = [{"lower": [a[0], a[1], psi], "upper": [a[0], a[1], psi]},
@@ -92,7 +135,7 @@ def plan_travel(req: ContourRequest, model: RobotModel, st: Settings, a: np.ndar
     settings["settle_speed_m_s"] = min(st.settle_speed_m_s, 1e-4)
     try:
         res = plan({"name": f"travel line {line}", "robot": req.robot, "segments": segs, "settings": settings},
-                   robot=model)
+                   robot=model, start_force=start_force)
     except PlannerError as err:
         raise PlannerError(err.code, f"line {line}: the move from [{a[0]:.4f}, {a[1]:.4f}] to [{b[0]:.4f}, "
                            f"{b[1]:.4f}] m (robot frame): {err.message}", "program") from None
@@ -170,7 +213,9 @@ def join_parts(parts: list[Part], req: ContourRequest, st: Settings, model: Robo
     last, dropped), the metrics combined over the parts. The rows held from a sample to the
     next (drive forces, and the acceleration under them) at a shared sample are the next
     part's: its first step's force (the previous part's row after its last sample is a 0
-    placeholder)."""
+    placeholder). The drive limits (``within_limits``, the largest force, force rate, leg speed,
+    stroke and tool speed) are computed over the joined samples
+    (:func:`planner.orchestrator.limit_metrics`), never combined from the parts'."""
 
     planned = [p.result for p in parts if p.result.metrics is not None]
     first = planned[0]
@@ -224,8 +269,10 @@ def join_parts(parts: list[Part], req: ContourRequest, st: Settings, model: Robo
     md["duration_s"] = (K - 1) * Ts
     md["steps"] = K - 1
     md["compute_ms"] = 0.0
-    md["max_force_rate_n_s"] = float(np.abs(np.diff(np.vstack((np.zeros((1, a["force"].shape[1])), a["force"])),
-                                                    axis=0)).max() / Ts)
+    # the drive limits over the joined plan, as a plan's are (one implementation): a step over the
+    # force-rate limit at a seam between two parts counts as anywhere else (issue 35)
+    md.update(limit_metrics(model, st.model_copy(update={"mode": "constrained"}), a["velocity"], a["length"], a["legv"],
+                            a["force"]))
     segments = [s for p in parts for s in p.segments]
     timing = Timing(method="fastest" if req.feed == "fastest" else "segment_samples",
                     samples_per_segment=first.settings.samples_per_segment, segment_samples=None,

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -55,7 +56,19 @@ from .estimate import (
     CONTOUR_TRAVEL_S,
     estimate_contour,
 )
-from .join import Part, contour_section, cut_z, dwell_z, join_parts, plan_dwell, plan_travel, travel_z
+from .join import (
+    Part,
+    contour_section,
+    cut_z,
+    dwell_z,
+    held_force,
+    join_parts,
+    plan_dwell,
+    plan_hold,
+    plan_travel,
+    seam_breaks,
+    travel_z,
+)
 from .passes import (
     TubeSizes,
     chunks,
@@ -152,6 +165,52 @@ class _Walk:
         self.hint: Scale | None = None  # fastest: the timing of the level piece before (search.piece_hint)
         self.memo: dict = {}  # fastest: the time-optimal profiles of the passes (alike passes share one)
         self.progress: Callable[[int, int], None] | None = None  # (cut passes done, cut passes)
+        self.geo: PathGeometry | None = None  # the cut pass being planned (a release in it measures its deviation)
+
+    def held(self) -> np.ndarray:
+        """The drive forces [N] the last part left held (zero before the first, after a rest)."""
+        return held_force(self.parts[-1] if self.parts else None, self.model.n_legs)
+
+    def seamed(self, planned: Callable[[np.ndarray, np.ndarray | None], Part], line: int) -> Part:
+        """The next part, ``planned(pos, start_force)`` from where the robot is: planned from
+        rest (``None``: zero forces), and where its first force steps from the forces the last
+        part left by more than the force-rate limit allows (issue 35: a cut piece's last braking
+        force, 1.4 % over on fusion360 at Ts 3 ms), planned again from those forces (the first
+        step's force-rate rows start from them). Where that finds no timing (the forces push
+        the tool off a fine tolerance before they fall: fusion360 at 2 ms), the robot is first
+        held while they fall (:meth:`release`) and the part planned from what is left. A seam
+        within the limit keeps the plan it had."""
+        part = planned(self.pos, None)
+        before = self.held()
+        if not seam_breaks(before, part, self.model, self.st):
+            return part
+        try:
+            return planned(self.pos, before)
+        except PlannerError as err:
+            if err.code != "infeasible":
+                raise
+        self.release(0.0, line)
+        before = self.held()
+        part = planned(self.pos, None)
+        return planned(self.pos, before) if seam_breaks(before, part, self.model, self.st) else part
+
+    def release(self, duration: float, line: int) -> Part:
+        """A rest of at least ``duration`` [s] planned from the forces the last part left: the
+        robot held where it is while they fall within the force-rate limit
+        (:func:`~planner.contour.join.plan_hold`), appended to the parts, at the last part's Z,
+        source line and cutting state (between two pieces of a pass the tool is in the cut: its
+        deviation measured against the pass, :func:`~planner.contour.passes.measure_deviation`)."""
+        last = self.parts[-1]
+        st = self.st.model_copy(update=cut_settle(self.st, self.tol, drive_jerk(self.model, self.st)))
+        part = plan_hold(self.req, self.model, st, self.pos, CONTOUR_PSI, duration, self.held(), line,
+                         HOLD_ROOM * self.tol)
+        part.z[:], part.source[:] = last.z[-1], last.source[-1]
+        part.cutting[:], part.line[:], part.elem[:] = last.cutting[-1], last.line[-1], last.elem[-1]
+        if last.cutting[-1] and self.geo is not None:  # in a pass: measured as its pieces are
+            part.deviation = measure_deviation(part.result.pose[:, :2], part.elem, self.geo, self.tol)
+        self.parts.append(part)
+        self.pos = part.result.pose[-1, :2].copy()
+        return part
 
     def run(self) -> None:
         """Every block: a run of travels as one free move, a dwell at rest, a cut pass."""
@@ -177,7 +236,8 @@ class _Walk:
         ends (none where it is there already)."""
         target = run[-1].elements[-1].end + self.origin
         if np.hypot(*(target - self.pos)) > 1e-9:
-            part = plan_travel(self.req, self.model, self.st, self.pos, target, CONTOUR_PSI, run[0].line)
+            part = self.seamed(lambda p, f: plan_travel(self.req, self.model, self.st, p, target, CONTOUR_PSI,
+                                                        run[0].line, f), run[0].line)
             travel_z(part, [e for bb in run for e in bb.elements], self.pos, target)
             self.parts.append(part)
             self.pos = part.result.pose[-1, :2].copy()
@@ -188,6 +248,12 @@ class _Walk:
         within the Z acceleration (:func:`~planner.contour.zaxis.accel_dwell`)."""
         b, z_at = accel_dwell(b, self.z, self.req.z_accel_m_s2)  # Z from rest to rest within its acceleration
         part = plan_dwell(self.pos, CONTOUR_PSI, b.duration_s, self.st.Ts)
+        if seam_breaks(self.held(), part, self.model, self.st):
+            # the part before left forces the drives cannot drop to a rest's zero in one sample:
+            # the rest planned, the robot held there while they fall (issue 35)
+            part = self.release(b.duration_s, b.line)
+            self.parts.pop()  # (appended below, with its Z, source line and dwell)
+            part.cutting[:], part.deviation[:] = False, 0.0  # a rest, as the unplanned one
         dwell_z(part, b, self.z)
         if z_at is not None:
             part.z = z_at(np.linspace(0.0, b.duration_s, len(part.z)))
@@ -202,26 +268,37 @@ class _Walk:
         gap = float(np.hypot(*(b.elements[0].start + origin - self.pos)))
         if gap > 0.5 * tol:
             # a cut that starts away from where the tool is: travel there first (at rest)
-            part = plan_travel(req, model, st, self.pos, b.elements[0].start + origin, CONTOUR_PSI, b.line)
+            part = self.seamed(lambda p, f: plan_travel(req, model, st, p, b.elements[0].start + origin,
+                                                        CONTOUR_PSI, b.line, f), b.line)
             part.z[:], part.source[:] = self.z, b.line
             self.parts.append(part)
             self.pos = part.result.pose[-1, :2].copy()
         first = len(self.parts)
-        geo = PathGeometry(b.elements, origin)
+        geo = self.geo = PathGeometry(b.elements, origin)
         for chunk in chunks(b.elements, slope_stops(req.feed, b.elements, tol, req.z_accel_m_s2)):
             key, level = piece_key([b.elements[k] for k in chunk])
-            part = plan_cut(req, model, st, chunk, origin, tol, CONTOUR_PSI, self.pos, geo, b.elements,
-                            self.hints.get(key, self.hint if level else None), len(self.program.passes), self.memo,
-                            self.limit_at, self.parts[-1].z[-2:] if len(self.parts) > first else None)
+            hint = self.hints.get(key, self.hint if level else None)
+            part = self.seamed(partial(self.piece, b, geo, first, chunk, hint), b.elements[chunk[0]].line)
             if part.scale is not None:
                 self.hints[key] = part.scale
                 self.hint = part.scale if level else self.hint
             self.parts.append(part)
             self.pos = part.result.pose[-1, :2].copy()
         self.summaries.append(_pass_summary(len(self.summaries), b, self.parts[first:], geo, tol))
+        self.geo = None
         self.z = b.elements[-1].z_end_m
         if self.progress is not None:
             self.progress(len(self.summaries), len(self.program.passes))
+
+
+    def piece(self, b: ProgramBlock, geo: PathGeometry, first: int, chunk: list[int], hint: Scale | None,
+              pos: np.ndarray, start_force: np.ndarray | None) -> Part:
+        """A piece of the cut pass ``b`` (:func:`plan_cut`) from ``pos`` and ``start_force``; its Z
+        from the last part's, as the robot leaves it (a release's, if one came between), where that
+        is a part of this pass (from index ``first`` on)."""
+        z_first = self.parts[-1].z[-2:] if len(self.parts) > first else None
+        return plan_cut(self.req, self.model, self.st, chunk, self.origin, self.tol, CONTOUR_PSI, pos, geo,
+                        b.elements, hint, len(self.program.passes), self.memo, self.limit_at, z_first, start_force)
 
 
 def _pass_summary(index: int, b: ProgramBlock, cut_parts: list[Part], geo: PathGeometry, tol: float) -> PassSummary:
@@ -264,9 +341,11 @@ def speed_caps(feed: str, els: list[PathElement], z_max_m_s: float | None) -> np
 def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[int], origin: np.ndarray, tol: float,
              psi: float, pos: np.ndarray, geo: PathGeometry, elements: list[PathElement],
              hint: Scale | None = None, passes: int = 1, memo: dict | None = None,
-             limit_at: float | None = None, z_first: np.ndarray | None = None) -> Part:
+             limit_at: float | None = None, z_first: np.ndarray | None = None,
+             start_force: np.ndarray | None = None) -> Part:
     """One piece of a pass planned rest to rest, its Z planned with it (:func:`plan_piece_z`;
-    ``z_first``: the Z of the piece before, its last samples).
+    ``z_first``: the Z of the piece before, its last samples; ``start_force``: the forces the
+    part before left held [N], every candidate planned from them, None: from zero).
     ``hint``: the ``fastest`` scale found for the piece before (where its search starts; the
     search's result is bracketed the same way from any start). No timing found: the
     ``infeasible`` error with its advice checked (:func:`confirmed_infeasible`, its checks
@@ -285,7 +364,7 @@ def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[i
                               chunk, els, hint, z_max_m_s=req.z_rapid_m_s, cell_caps=zc if zc.active else None,
                               optimal=OptimalProfiles(model, st, chunk, els, origin, psi, memo,
                                                       speed_caps(feed, els, req.z_rapid_m_s),
-                                                      zc if zc.active else None))
+                                                      zc if zc.active else None), start_force=start_force)
         if found.result is None:
             raise confirmed_infeasible(req, model, st, chunk, els, origin, tol, psi, pos, elements, found, hint,
                                        passes, limit_at)
@@ -369,6 +448,10 @@ def _cut_part(found: Any, geo: PathGeometry, tol: float) -> Part:
     part.elem = elem
     return part
 
+
+#: a rest planned while the drives release their forces (:func:`~planner.contour.join.plan_hold`)
+#: keeps the tool within this share of the tolerance of where it stopped, in x and y
+HOLD_ROOM = 0.25
 
 #: a cut piece's end (:func:`cut_settle`): the tool's travel in a sample at the speed that counts
 #: as stopped, at most this share of the tolerance

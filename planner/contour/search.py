@@ -183,6 +183,7 @@ class TimingSearch:
         #: the profile's steps from and to rest (:func:`~planner.contour.profiles.rest_ends`)
         self.jerk = drive_jerk(model, st)
         self.arc_tubes: dict[tuple[int, float], Tube] = {}  #: :meth:`arc_tube`'s, by size and kappa
+        self.start_force: np.ndarray | None = None  #: the forces held before a candidate's first sample [N]
 
     def feed_on(self, t: Tube) -> np.ndarray:
         """The programmed F [m/s] of the move each of the tube's segments belongs to."""
@@ -207,7 +208,8 @@ class TimingSearch:
             return None
         check_counts(counts, self.els[0].line)
         try:
-            res = plan_timed(self.name, self.model, self.plan_st, t.segments, counts.tolist())
+            res = plan_timed(self.name, self.model, self.plan_st, t.segments, counts.tolist(),
+                             start_force=self.start_force)
         except PlannerError as err:
             if err.code not in ("infeasible", "not_settled"):
                 raise
@@ -646,7 +648,8 @@ class TimingSearch:
 def search_timing(feed_mode: str, model: RobotModel, st: Settings, tube_at: Callable[[float], Tube], chunk: list[int],
                   els: list[PathElement], hint: Scale | None, deadline: float | None = None,
                   optimal: Callable[[Tube], Optimal] | None = None, z_max_m_s: float | None = None,
-                  cell_caps: Callable[[Tube], np.ndarray] | None = None) -> Found:
+                  cell_caps: Callable[[Tube], np.ndarray] | None = None,
+                  start_force: np.ndarray | None = None) -> Found:
     """A timing of the piece for the feed mode, in the tube ``tube_at(v)`` with cells sized for
     the profile's speed ``v`` (``program``: the programmed F times the profile's scale, so that
     a slower profile has shorter cells: the criterion pulls the robot toward each cell's
@@ -661,8 +664,11 @@ def search_timing(feed_mode: str, model: RobotModel, st: Settings, tube_at: Call
     planned. ``z_max_m_s``: the Z axis speed, which bounds the XY speed along a move whose Z
     changes (:func:`z_caps`), in both feeds (the program feed's F is capped by it already:
     :func:`planner.exchange._tabs.cap_z_speed`); ``cell_caps``: per segment of a tube a further
-    bound on the XY speed [m/s] (the Z axis acceleration's, :class:`planner.contour.zaxis.ZCaps`)."""
+    bound on the XY speed [m/s] (the Z axis acceleration's, :class:`planner.contour.zaxis.ZCaps`).
+    ``start_force``: the drive forces the part before left [N], every candidate planned from them
+    (:func:`planner.orchestrator.plan_timed`; None: from zero, the robot at rest)."""
     search = TimingSearch(model, st, tube_at, chunk, els, deadline, optimal, z_max_m_s, cell_caps)
+    search.start_force = start_force
     found = search.found
     if feed_mode == "program":
         got_p = search.program_feed()

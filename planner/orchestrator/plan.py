@@ -70,22 +70,25 @@ def segment(request: Any, *, robot: RobotModel | None = None) -> Segmentation:
 
 
 def plan(request: Any, *, robot: RobotModel | None = None, segments: Sequence[Segment] | None = None,
-         work_limit_s: float | None = None) -> PlanResult:
+         work_limit_s: float | None = None, start_force: np.ndarray | None = None) -> PlanResult:
     """Plan a trajectory for ``request`` (a dict in the one JSON shape or a validated
     :class:`~planner.schema.PlanRequest`). ``robot`` overrides the request's robot model,
     ``segments`` its corridor. ``work_limit_s``: a layout's corridor, once segmented, is
     estimated again (:func:`~planner.orchestrator.work.check_work`) and refused with
     ``too_much_work`` over this many seconds. Raises :class:`~planner.errors.PlannerError`
     naming the cause. ``settings.backend = "reference"`` runs numpy only (no kernel is
-    compiled or loaded: :func:`planner._jit.numpy_only`)."""
+    compiled or loaded: :func:`planner._jit.numpy_only`). ``start_force``: the drive forces [N]
+    held before the first sample (a plan that continues another, :mod:`planner.contour`): the
+    first step's force-rate rows start from them, and the result's force rates count the first
+    force's step from them; default zero (the robot at rest)."""
     t0 = time.perf_counter()
     req = parse_request(request)
     with numpy_only(req.settings.backend == "reference"):
-        return _plan(req, t0, robot, segments, work_limit_s)
+        return _plan(req, t0, robot, segments, work_limit_s, start_force)
 
 
 def _plan(req: PlanRequest, t0: float, robot: RobotModel | None, segments: Sequence[Segment] | None,
-          work_limit_s: float | None) -> PlanResult:
+          work_limit_s: float | None, start_force: np.ndarray | None = None) -> PlanResult:
     model = _robot(req, robot)
     st = _with_substeps(req, model)
     if segments is None:
@@ -100,14 +103,14 @@ def _plan(req: PlanRequest, t0: float, robot: RobotModel | None, segments: Seque
     if segments is not None:
         check_segments(model, segments)
         if st.fastest:
-            result = _fastest(req.name, model, st, segments)
+            result = _fastest(req.name, model, st, segments, start_force)
             result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3
             return result
     method = method_of(st)
     given = st
     st = resolve_timing(st, segments)  # speed_m_s / total_time_s -> samples_per_segment
     try:
-        result = _plan_once(req.name, model, st, segments, req.reference, method=method)
+        result = _plan_once(req.name, model, st, segments, req.reference, start_force, method=method)
     except PlannerError as exc:
         if exc.code == "infeasible" and exc.field == "settings" and segments is not None:
             estimate_s = estimate_work(req, segments).seconds
@@ -439,19 +442,20 @@ def _other_advice(exc: PlannerError, req: PlanRequest, model: RobotModel, st: Se
 
 
 def _plan_once(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment] | None,
-               reference: Reference | None, **timing: object) -> PlanResult:
+               reference: Reference | None, start_force: np.ndarray | None = None, **timing: object) -> PlanResult:
     """One run of the loop at fixed timing; raises ``infeasible`` for a constrained plan that
     needed slack when ``require_settled`` asks for a guaranteed plan."""
-    return _run(name, model, st, segments, reference, timing=timing)[0]
+    return _run(name, model, st, segments, reference, timing=timing, start_force=start_force)[0]
 
 
 def _run(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment] | None,
          reference: Reference | None,
          resume: Resume | None = None, keep: Sequence[int] = (), timing: dict | None = None,
-         abandon: bool = False) -> tuple[PlanResult, Simulation]:
+         abandon: bool = False, start_force: np.ndarray | None = None) -> tuple[PlanResult, Simulation]:
     """:func:`_plan_once` from ``resume`` (or the start), remembering the states at ``keep``;
     returns the simulation too. ``abandon``: stop at the first infeasible step (a candidate
-    of the ``fastest`` search)."""
+    of the ``fastest`` search). ``start_force``: the forces held before the first sample [N]
+    (:func:`plan`; zero if None)."""
     seq: RangeSequence
     if segments is not None:
         seq = range_sequence(list(segments), st, model.n_legs)
@@ -465,9 +469,12 @@ def _run(name: str | None, model: RobotModel, st: Settings, segments: Sequence[S
     if st.mode == "constrained":
         controller = ConstrainedController(model, seq, st, segments, abandon=abandon,
                                            slack=slack_allowance(st, seq.K + st.tail_steps))
+        if start_force is not None:  # the first step's force-rate rows from the forces held before it
+            controller.memory.u_prev[:] = start_force
     sim = simulate(model, seq, st, controller, resume, keep)
     report = controller.report() if controller is not None else {}
-    result = build_result(model, name, st, seq, segments, sim, report, timing_info(st, segments, **(timing or {})))
+    result = build_result(model, name, st, seq, segments, sim, report, timing_info(st, segments, **(timing or {})),
+                          start_force)
     mt = result.metrics
     if controller is not None and (mt.infeasible_steps or 0) > 0 and st.require_settled:
         raise controller.infeasible_error(
@@ -478,29 +485,31 @@ def _run(name: str | None, model: RobotModel, st: Settings, segments: Sequence[S
 
 
 def plan_timed(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment],
-               counts: Sequence[int], *, abandon: bool = True) -> PlanResult:
+               counts: Sequence[int], *, abandon: bool = True, start_force: np.ndarray | None = None) -> PlanResult:
     """One constrained plan of ``segments`` held ``counts`` samples each (a caller's own
     timing search, e.g. :mod:`planner.contour`). ``abandon``: raise ``infeasible`` at the first
-    step that needs slack instead of planning on. The segments' reach is the caller's check."""
+    step that needs slack instead of planning on. The segments' reach is the caller's check.
+    ``start_force``: the forces held before the first sample [N] (:func:`plan`)."""
     t0 = time.perf_counter()
     sub = st.model_copy(update={"fastest": False, "segment_samples": [int(c) for c in counts],
                                 "samples_per_segment": int(max(counts)), "require_settled": True})
     with numpy_only(st.backend == "reference"):
         result = _run(name, model, sub, segments, None, abandon=abandon,
-                      timing={"method": "segment_samples"})[0]
+                      timing={"method": "segment_samples"}, start_force=start_force)[0]
     result.metrics.compute_ms = (time.perf_counter() - t0) * 1e3
     return result
 
 
-def _fastest(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment]) -> PlanResult:
-    """The plan at the fastest feasible timing (:mod:`.fastest`)."""
+def _fastest(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment],
+             start_force: np.ndarray | None = None) -> PlanResult:
+    """The plan at the fastest feasible timing (:mod:`.fastest`; ``start_force``: :func:`plan`)."""
     gaps = corridor_gaps(segments, 2 * MARGIN_M, 2 * MARGIN_RAD)
 
     def plan_at(counts: np.ndarray, resume: Resume | None, keep: Sequence[int]) -> tuple[PlanResult, Simulation]:
         # require_settled: a candidate is abandoned at its first infeasible step
         sub = st.model_copy(update={"fastest": False, "segment_samples": [int(c) for c in counts],
                                     "samples_per_segment": int(counts.max()), "require_settled": True})
-        return _run(name, model, sub, segments, None, resume, keep, abandon=True)
+        return _run(name, model, sub, segments, None, resume, keep, abandon=True, start_force=start_force)
 
     best, evaluations = search_fastest(plan_at, st, segments)
     if best is None or best.result is None:

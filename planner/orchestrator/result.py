@@ -19,7 +19,7 @@ from ..model import RobotModel, kinematics
 from ..schema import UNITS, CorridorSamples, CorridorSegment, Drives, Metrics, PlanResult, Segment, Settings, Timing
 from .simulate import Simulation
 
-__all__ = ["build_result", "overshoot", "to_csv", "csv_columns"]
+__all__ = ["build_result", "limit_metrics", "overshoot", "to_csv", "csv_columns"]
 
 
 def overshoot(poses: np.ndarray, direction: np.ndarray | None, end: np.ndarray, first_sample: int) -> float:
@@ -55,10 +55,45 @@ RATE_TOL_REL = 1e-9
 TOOL_SPEED_TOL_REL = 1e-9
 
 
+def limit_metrics(robot: RobotModel, st: Settings, velocity: np.ndarray, lengths: np.ndarray, leg_velocity: np.ndarray,
+                  force: np.ndarray, start_force: np.ndarray | None = None) -> dict:
+    """The drive-limit metrics of a sampled plan (the one implementation: a plan's result,
+    :func:`build_result`, and a contour's joined parts, :func:`planner.contour.join.join_parts`):
+    the largest drive force, force rate, leg speed, stroke violation and tool speed, and in the
+    constrained mode ``within_limits``. ``force`` (K, n_legs): the forces held from each sample
+    to the next, the last row the plan's end (not a force applied); the rates are the steps of
+    the forces applied, the first from ``start_force`` (zero if None: the robot at rest)."""
+    K = len(force)
+    before = np.zeros((1, force.shape[1])) if start_force is None else np.asarray(start_force, float).reshape(1, -1)
+    # drive-force rates: the force steps at each sample (from the forces before the start) over Ts;
+    # the last row is the zero of the plan's end, not a force applied
+    dU = np.diff(np.vstack((before, force[:-1])), axis=0) if K > 1 else np.zeros((0, force.shape[1]))
+    stroke = float(np.max(np.maximum(np.maximum(robot.length_min - lengths, 0), lengths - robot.length_max)))
+    out = {
+        "max_drive_force_n": float(np.abs(force).max()),
+        "max_force_rate_n_s": float(np.abs(dU).max(initial=0.0) / st.Ts),
+        "force_limit_n": float(robot.force_max.min()),
+        "max_force_ratio": float((np.abs(force) / robot.force_max).max()),
+        "max_drive_speed_m_s": float(np.abs(leg_velocity).max()),
+        "max_speed_ratio": float((np.abs(leg_velocity) / robot.speed_max).max()),
+        "max_stroke_violation_m": stroke,
+        "max_tool_speed_m_s": float(np.hypot(velocity[:, 0], velocity[:, 1]).max()),
+    }
+    if st.mode == "constrained":
+        rate = force_rate(robot, st)  # per drive [N/s], None: no limit
+        rate_ok = rate is None or bool(np.all(np.abs(dU) <= rate * st.Ts * (1.0 + RATE_TOL_REL)))
+        tool_ok = (st.tool_speed_max_m_s is None
+                   or out["max_tool_speed_m_s"] <= st.tool_speed_max_m_s * (1.0 + TOOL_SPEED_TOL_REL))
+        out["within_limits"] = bool(out["max_force_ratio"] <= 1.0 + 1e-12 and out["max_speed_ratio"] <= 1.0
+                                    and stroke <= CONTAIN_TOL_M and rate_ok and tool_ok)
+    return out
+
+
 def build_result(robot: RobotModel, name: str | None, st: Settings, seq: RangeSequence,
                  segments: Sequence[Segment] | None, sim: Simulation, controller_report: dict,
-                 timing: Timing) -> PlanResult:
-    """The result of one simulated plan. ``compute_ms`` is left 0 for the caller to set."""
+                 timing: Timing, start_force: np.ndarray | None = None) -> PlanResult:
+    """The result of one simulated plan. ``compute_ms`` is left 0 for the caller to set.
+    ``start_force``: the forces held before the first sample (:func:`limit_metrics`)."""
     X, U, ACC, steps = sim.X, sim.U, sim.ACC, sim.steps
     _check_finite(pose=X, force=U, acceleration=ACC)
     K = steps + 1
@@ -87,10 +122,7 @@ def build_result(robot: RobotModel, name: str | None, st: Settings, seq: RangeSe
         union_violation, psi_violation = ti_violation, ti_violation_rad
         first = max(seq.K - st.N, 0)
         direction = _trajectory_direction(poses, seq.end, first)
-    # drive-force rates: the force steps at each sample (from zero before the start) over Ts;
-    # the last row is the zero of the plan's end, not a force applied
-    dU = np.diff(np.vstack((np.zeros((1, U.shape[1])), U[:-1])), axis=0) if K > 1 else np.zeros((0, U.shape[1]))
-    stroke = float(np.max(np.maximum(np.maximum(robot.length_min - lengths, 0), lengths - robot.length_max)))
+    limits = limit_metrics(robot, st, vel, lengths, leg_vel, U, start_force)
     metrics = {
         "duration_s": float(t[-1]),
         "steps": int(steps),
@@ -103,14 +135,7 @@ def build_result(robot: RobotModel, name: str | None, st: Settings, seq: RangeSe
         "max_corridor_violation_rad": float(psi_violation.max()),
         "time_indexed_violation_m": float(ti_violation.max()),
         "time_indexed_violation_rad": float(ti_violation_rad.max()),
-        "max_drive_force_n": float(np.abs(U).max()),
-        "max_force_rate_n_s": float(np.abs(dU).max(initial=0.0) / st.Ts),
-        "force_limit_n": float(robot.force_max.min()),
-        "max_force_ratio": float((np.abs(U) / robot.force_max).max()),
-        "max_drive_speed_m_s": float(np.abs(leg_vel).max()),
-        "max_speed_ratio": float((np.abs(leg_vel) / robot.speed_max).max()),
-        "max_stroke_violation_m": stroke,
-        "max_tool_speed_m_s": float(np.hypot(vel[:, 0], vel[:, 1]).max()),
+        **{k: v for k, v in limits.items() if k != "within_limits"},
         "min_singularity_measure": float(kinematics.singularity_measure(robot, poses).min()),
         "energy": float(np.sum(U * U) * st.Ts),
         "path_length_m": float(np.sum(np.hypot(*np.diff(poses[:, :2], axis=0).T))),
@@ -125,12 +150,7 @@ def build_result(robot: RobotModel, name: str | None, st: Settings, seq: RangeSe
             union = max(union, pv)
         metrics["contained"] = bool(metrics.get("infeasible_steps", 0) == 0 and union <= CONTAIN_TOL_M
                                     and metrics["max_corridor_violation_rad"] <= CONTAIN_TOL_RAD)
-        rate = force_rate(robot, st)  # per drive [N/s], None: no limit
-        rate_ok = rate is None or bool(np.all(np.abs(dU) <= rate * st.Ts * (1.0 + RATE_TOL_REL)))
-        tool_ok = (st.tool_speed_max_m_s is None
-                   or metrics["max_tool_speed_m_s"] <= st.tool_speed_max_m_s * (1.0 + TOOL_SPEED_TOL_REL))
-        metrics["within_limits"] = bool(metrics["max_force_ratio"] <= 1.0 + 1e-12 and metrics["max_speed_ratio"] <= 1.0
-                                        and stroke <= CONTAIN_TOL_M and rate_ok and tool_ok)
+        metrics["within_limits"] = limits["within_limits"]
     corridor = CorridorSamples.model_construct(
         lower=lower, upper=upper, violation_m=ti_violation,
         segments=None if segments is None else
