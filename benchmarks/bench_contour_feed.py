@@ -133,15 +133,22 @@ def capped_peer(robot, els, origin, rate, cache: Path | None, capped: bool = Tru
     return got
 
 
+def cutting_run(res, k: int, where: str, what: str) -> tuple[int, int] | list[str]:
+    """The samples [a, b) of the plan's ``k``-th cutting run, or the note ``where`` prints in
+    place of its ``what`` if the runs are not one a pass."""
+    c = res.contour
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], np.asarray(c.cutting, int), [0]))))
+    if len(edges) != 2 * len(c.passes):
+        return [f"\n{where}: {len(edges) // 2} cutting runs for {len(c.passes)} passes, no {what}"]
+    return int(edges[2 * k]), int(edges[2 * k + 1])
+
+
 def element_rows(label: str, i: int, els, peer: dict, res, k: int, tol: float) -> list[str]:
     """Where pass ``i`` (the ``k``-th cutting run) loses its time against the peer (``--elements``)."""
-    c = res.contour
-    Ts = res.settings.Ts
-    cut = np.asarray(c.cutting, int)
-    edges = np.flatnonzero(np.diff(np.concatenate(([0], cut, [0]))))
-    if len(edges) != 2 * len(c.passes):
-        return [f"\n{label} pass {i}: {len(edges) // 2} cutting runs for {len(c.passes)} passes, no table"]
-    a, b = edges[2 * k], edges[2 * k + 1]
+    run = cutting_run(res, k, f"{label} pass {i}", "table")
+    if isinstance(run, list):
+        return run
+    (a, b), c, Ts = run, res.contour, res.settings.Ts
     lines = np.array([-1 if x is None else x for x in c.program_line[a:b]])
     xy = res.pose[a:b, :2]
     step = np.hypot(*np.diff(xy, axis=0).T) / Ts
@@ -178,13 +185,10 @@ def profile_rows(label: str, i: int, els, peer: dict, res, k: int, head: int = 1
     """The start and the end of pass ``i`` (the ``k``-th cutting run) sample by sample against the
     peer's profile at the same times (``--profile``): each sample's travel over ``F Ts`` and the
     peer's speed over F, and the samples each loses there against L / F (``sum(1 - v / F)``)."""
-    c = res.contour
-    Ts = res.settings.Ts
-    cut = np.asarray(c.cutting, int)
-    edges = np.flatnonzero(np.diff(np.concatenate(([0], cut, [0]))))
-    if len(edges) != 2 * len(c.passes):
-        return [f"\n{label} pass {i}: {len(edges) // 2} cutting runs for {len(c.passes)} passes, no profile"]
-    a, b = edges[2 * k], edges[2 * k + 1]
+    run = cutting_run(res, k, f"{label} pass {i}", "profile")
+    if isinstance(run, list):
+        return run
+    (a, b), Ts = run, res.settings.Ts
     F = max(e.feed_m_s for e in els)
     step = np.hypot(*np.diff(res.pose[a:b, :2], axis=0).T) / (F * Ts)
     # the peer's profile per element (its own clock from 0): one clock over the pass

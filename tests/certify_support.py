@@ -1135,3 +1135,28 @@ def try_remedies(case: dict, message: str, limit_s: float = 30.0) -> dict[str, s
             continue
         out[name] = "ok" if check_plan(fixed, result, _segments_of(fixed, result)).ok else "uncertified"
     return out
+
+
+def users_case(i: int) -> dict:
+    """Case ``i`` of the users run of seed 31 (``benchmarks/certify.py --users --seed 31``), in
+    the constrained mode."""
+    return _with(user_case(np.random.default_rng([31, i])), mode="constrained")
+
+
+def cpu_over_estimate(req: dict, table1: dict) -> float:
+    """``req``'s CPU time over its work estimate at the reference machine's speed (Table I's
+    CPU time now over its 20 ms there, as benchmarks/certify.py calibrates; the least of 3
+    timings each)."""
+    from planner import estimate_work, plan
+
+    def cpu(r: dict) -> float:
+        best = np.inf
+        for _ in range(3):
+            t0 = time.process_time()
+            plan(r)
+            best = min(best, time.process_time() - t0)
+        return best
+
+    speed = cpu(table1) / 0.020
+    return cpu(req) / speed / estimate_work(req).seconds
+
