@@ -18,7 +18,7 @@ import numpy as np
 from ..constraints import force_rate
 from ..errors import PlannerError
 from ..model import RobotModel, kinematics
-from ..orchestrator import RATE_TOL_REL, limit_metrics, plan, plan_timed
+from ..orchestrator import limit_metrics, plan, plan_timed, rates_within
 from ..schema import (
     MAX_HORIZON,
     ContourRequest,
@@ -88,14 +88,11 @@ def held_force(part: Part | None, n_legs: int) -> np.ndarray:
 
 def seam_breaks(before: np.ndarray, part: Part, model: RobotModel, st: Settings) -> bool:
     """Whether the step from the forces ``before`` [N] to ``part``'s first force (zero for a
-    rest) exceeds the force-rate limit (by more than the relative tolerance ``within_limits``
-    allows, :data:`planner.orchestrator.RATE_TOL_REL`)."""
-    rate = force_rate(model, st)
-    if rate is None:
-        return False
+    rest) exceeds the force-rate limit (as ``within_limits`` counts it:
+    :func:`planner.orchestrator.rates_within`)."""
     first = np.asarray(part.result.drives.force[0], float) if part.result.metrics is not None \
         else np.zeros(model.n_legs)
-    return bool(np.any(np.abs(first - before) > rate * st.Ts * (1.0 + RATE_TOL_REL)))
+    return not rates_within(model, st, (first - before)[None, :])
 
 
 def plan_hold(req: ContourRequest, model: RobotModel, st: Settings, pos: np.ndarray, psi: float, duration: float,

@@ -99,16 +99,15 @@ def _contour_body(result: PlanResult, xyc_rows: list[str], xy: np.ndarray, c: np
     dwell = contour.dwell or [None] * len(rows)
     line_of = contour.source_line or [0] * len(rows)
     due: dict[int, list[str]] = {}
+    # no Z word while the machine's Z is unknown: before the program's first Z move and after a
+    # G28 Z until the next (those moves are issued as written: word_schedule)
+    known = np.zeros(len(rows) + 1, bool)
     for k, _, words in word_schedule(result):
         due.setdefault(k, []).append(words)
         if words.startswith("G94 ") and k > 0:  # a feed move from the machine's height, in units per minute
             due[k].append("G93")
         elif words.startswith("G91 "):
             due[k].append("G90")
-    # no Z word while the machine's Z is unknown: before the program's first Z move and after a
-    # G28 Z until the next (those moves are issued as written: word_schedule)
-    known = np.zeros(len(rows) + 1, bool)
-    for k, _, words in word_schedule(result):
         if STATEMENT.match(words):
             known[k:] = not words.startswith(("G28", "G91 G28"))
     rows = [r if known[k] else xyc for k, (r, xyc) in enumerate(zip(rows, xyc_rows))]

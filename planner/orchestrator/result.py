@@ -19,7 +19,7 @@ from ..model import RobotModel, kinematics
 from ..schema import UNITS, CorridorSamples, CorridorSegment, Drives, Metrics, PlanResult, Segment, Settings, Timing
 from .simulate import Simulation
 
-__all__ = ["build_result", "limit_metrics", "overshoot", "to_csv", "csv_columns"]
+__all__ = ["build_result", "limit_metrics", "overshoot", "rates_within", "to_csv", "csv_columns"]
 
 
 def overshoot(poses: np.ndarray, direction: np.ndarray | None, end: np.ndarray, first_sample: int) -> float:
@@ -55,6 +55,13 @@ RATE_TOL_REL = 1e-9
 TOOL_SPEED_TOL_REL = 1e-9
 
 
+def rates_within(robot: RobotModel, st: Settings, dU: np.ndarray) -> bool:
+    """Whether the drive-force steps ``dU`` [N] (a sample each) keep the force-rate limit of
+    ``st`` (to the relative tolerance :data:`RATE_TOL_REL`; no limit: true)."""
+    rate = force_rate(robot, st)  # per drive [N/s], None: no limit
+    return rate is None or bool(np.all(np.abs(dU) <= rate * st.Ts * (1.0 + RATE_TOL_REL)))
+
+
 def limit_metrics(robot: RobotModel, st: Settings, velocity: np.ndarray, lengths: np.ndarray, leg_velocity: np.ndarray,
                   force: np.ndarray, start_force: np.ndarray | None = None) -> dict:
     """The drive-limit metrics of a sampled plan (the one implementation: a plan's result,
@@ -80,8 +87,7 @@ def limit_metrics(robot: RobotModel, st: Settings, velocity: np.ndarray, lengths
         "max_tool_speed_m_s": float(np.hypot(velocity[:, 0], velocity[:, 1]).max()),
     }
     if st.mode == "constrained":
-        rate = force_rate(robot, st)  # per drive [N/s], None: no limit
-        rate_ok = rate is None or bool(np.all(np.abs(dU) <= rate * st.Ts * (1.0 + RATE_TOL_REL)))
+        rate_ok = rates_within(robot, st, dU)
         tool_ok = (st.tool_speed_max_m_s is None
                    or out["max_tool_speed_m_s"] <= st.tool_speed_max_m_s * (1.0 + TOOL_SPEED_TOL_REL))
         out["within_limits"] = bool(out["max_force_ratio"] <= 1.0 + 1e-12 and out["max_speed_ratio"] <= 1.0
