@@ -208,11 +208,23 @@ async def _accepted(request: Request, row: dict, applied: bool) -> JSONResponse:
     return JSONResponse(job_status(row), status_code=202, headers=headers)
 
 
+@dataclass(frozen=True)
+class _ToJob:
+    """A contour the synchronous lane did not answer: run it as a job, with its estimate [s] if
+    known; ``now``: answer 202 at once (else the handler waits for its worker's estimate)."""
+
+    estimate_s: float | None
+    now: bool
+
+
 async def _estimated_contour(request: Request, job: ContourJob, threshold: float,
-                             limits: JobLimits) -> Response | float | None:
+                             limits: JobLimits) -> Response | _ToJob:
     """A contour estimated on a synchronous worker before it is queued (module docstring): its
-    answer when that worker planned it (within ``threshold``) or refused it, else its estimate
-    [s] (a job), or None when jobs hold every worker (queued unestimated)."""
+    answer when that worker planned it (its estimate within ``threshold``) or refused it, else
+    a job: with its estimate (over ``threshold``); at once, unestimated, when the synchronous
+    limit ran out first (a large program read on a loaded machine, or an estimate that was
+    low: a job then rather than a timeout, as the job lane's synchronous contour does); or
+    unestimated, its worker's estimate awaited, when jobs hold every worker."""
     svc = service(request)
     t0 = time.perf_counter()
     outcome = await svc.arun(dataclasses.replace(job, sync_within_s=threshold))
@@ -221,10 +233,12 @@ async def _estimated_contour(request: Request, job: ContourJob, threshold: float
         if work.seconds > admitted_s(limits.job_timeout_s):  # over the jobs' limit too: refused now
             return outcome_response(failed(too_much_work(work, admitted_s(limits.job_timeout_s),
                                                          limits.job_timeout_s)), "json")
-        return work.seconds
+        return _ToJob(work.seconds, True)
+    if isinstance(outcome, Failed) and outcome.error.code == "timeout" and limits.job_timeout_s > limits.sync_limit_s:
+        return _ToJob(None, True)
     if (isinstance(outcome, Failed) and outcome.status == 503 and outcome.error.code == "busy"
             and svc.job_workers >= svc.workers):  # jobs may hold every worker: the job lane estimates it
-        return None
+        return _ToJob(None, False)
     observe_job(request.app, job, time.perf_counter() - t0, outcome)
     return await respond(request, outcome, job.format)
 
@@ -236,6 +250,7 @@ async def run_as_job(request: Request, job: ContourJob | PlanJob, fmt: str) -> R
     pref = parse_prefer(request.headers.getlist("prefer"))
     threshold = min(pref.wait_s if pref.wait_s is not None else limits.async_after_s, admitted_s(limits.sync_limit_s))
     est_s: float | None = None
+    accept_now = pref.respond_async
     if isinstance(job, PlanJob):  # estimated here, before it is queued (as the service does)
         est = await asyncio.get_running_loop().run_in_executor(None, estimate, job)
         est_s = est.seconds if est is not None else None
@@ -246,10 +261,10 @@ async def run_as_job(request: Request, job: ContourJob | PlanJob, fmt: str) -> R
         if not pref.respond_async and (est_s is None or est_s <= threshold):
             return await submit(request, job, fmt)  # short: synchronous, under the synchronous limit
     elif not pref.respond_async:  # a contour: estimated (and, if short, planned) on a synchronous worker
-        answer = await _estimated_contour(request, job, threshold, limits)
-        if isinstance(answer, Response):
-            return answer
-        est_s = answer
+        lane = await _estimated_contour(request, job, threshold, limits)
+        if isinstance(lane, Response):
+            return lane
+        est_s, accept_now = lane.estimate_s, lane.now
     st = store(request)
     job_id = new_id()
     if not await storage_io.write(st.create_job, job_id, job.kind, _unit(job), total=1 if isinstance(job, PlanJob)
@@ -262,7 +277,7 @@ async def run_as_job(request: Request, job: ContourJob | PlanJob, fmt: str) -> R
     tasks = _tasks(app)  # held until it ends (the loop keeps only weak references to tasks)
     tasks.add(task)
     task.add_done_callback(tasks.discard)
-    if pref.respond_async or (est_s is not None and est_s > threshold):
+    if accept_now or (est_s is not None and est_s > threshold):
         row = await storage_io.read(st.get_job, job_id)
         if row is not None:  # (a job that ended already and was dropped: never within max_jobs)
             return await _accepted(request, row, pref.respond_async)
@@ -272,7 +287,7 @@ async def run_as_job(request: Request, job: ContourJob | PlanJob, fmt: str) -> R
         if task.done():
             outcome = task.result()
             await storage_io.write(st.delete_job, job_id)  # answered here: nothing to poll
-            return outcome_response(outcome, fmt)
+            return await respond(request, outcome, fmt)
         row = await storage_io.read(st.get_job, job_id)
         if row is None:
             raise RuntimeError(f"job {job_id} vanished")
