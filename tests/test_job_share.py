@@ -9,6 +9,7 @@ import re
 import statistics
 import threading
 import time
+from typing import Any
 
 import pytest
 
@@ -46,7 +47,7 @@ def metric(text: str, name: str, labels: str = "") -> float:
     return float(m.group(1))
 
 
-def timed_plan(c, body: dict) -> tuple[int, float, dict]:
+def timed_plan(c, body: dict) -> tuple[int, float, Any]:
     t0 = time.perf_counter()
     r = c.post("/v1/plan", json=body)
     return r.status_code, time.perf_counter() - t0, r
