@@ -14,13 +14,15 @@ batches submit typed jobs (:data:`app.jobs.Job`) and get a typed outcome
    status they answer (``timeout`` and ``too_much_memory`` 422, ``busy`` 503, a dead worker
    500), as the worker maps the planner's;
 4. **keep synchronous requests apart from jobs** (issue 33): a *job* (``background=True``: a
-   contour, or a plan answered 202, up to the job limit ``RANGEPLAN_JOB_TIMEOUT_S``) runs on
+   contour or a plan answered 202, up to the job limit ``RANGEPLAN_JOB_TIMEOUT_S``) runs on
    a share of the workers, at most :attr:`JobService.job_workers` at once
    (``RANGEPLAN_JOB_WORKERS``, default one fewer than the workers); more jobs wait their turn
    here, holding no worker and no thread of the synchronous requests. A synchronous request
    never waits behind a job: on a local pool it takes a free worker before any waiting job
    (:class:`app.workers.PlanPool`), and with jobs on every worker (a share of all of them) it
-   is answered ``busy`` (503) at once.
+   is answered ``busy`` (503) at once; the synchronous requests on the workers are kept with
+   their estimates (:meth:`JobService.sync_left`) so that a busy answer can say when a slot
+   is expected to free.
 
 Batch items on a local process pool or a Dask cluster run :func:`app.executors.run_bounded`,
 the same estimate, limit and mapping, in a planning process of the process that runs them
