@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import statistics
+import threading
 import time
 
 import httpx
@@ -110,6 +111,32 @@ def test_retry_after_says_when_a_job_ends_and_when_a_slot_frees(tmp_path):
         left = c.get(medium.headers["Location"]).json()["eta_s"]
         assert 1 < int(busy.headers["Retry-After"]) and abs(int(busy.headers["Retry-After"]) - left) <= 2, \
             (busy.headers["Retry-After"], left)
+
+
+def test_a_full_queue_says_when_the_synchronous_work_ends(tmp_path):
+    """One worker and no queue (``max_queue`` 0): while a synchronous 17 s plan runs (``Prefer:
+    wait=30``), the next plan finds no place and is told busy with the time left of the one
+    running (its estimate less its time so far), not 1 s."""
+    app = create_app(Store(tmp_path), workers=1, timeout_s=30, max_queue=0, access=AccessPolicy())
+    with api_client(app) as c:
+        wait_for(lambda: all_ready(c, 1), what="a ready worker")
+        answers: list = []
+        first = threading.Thread(target=lambda: answers.append(
+            c.post("/v1/plan", json=medium_job(), headers={"Prefer": "wait=30"})))
+        first.start()
+        try:
+            wait_for(lambda: app.state.service.stats()["in_flight"] == 1, what="the 17 s plan on the worker")
+            busy = c.post("/v1/plan", json=load_example("table1"))
+            left = app.state.service.sync_left()
+            assert busy.status_code == 503 and busy.json()["error"]["code"] == "busy", busy.text
+            assert len(left) == 1 and left[0] > 5, left
+            assert 1 < int(busy.headers["Retry-After"]) and abs(int(busy.headers["Retry-After"]) - left[0]) <= 2, \
+                (busy.headers["Retry-After"], left)
+        finally:
+            first.join(300)
+        # it held the place throughout (200, or a timeout on a machine loaded beyond its 30 s)
+        assert answers and answers[0].status_code in (200, 422), answers
+        assert app.state.service.sync_left() == []
 
 
 def hundred_thousand_lines() -> str:
