@@ -17,8 +17,12 @@ new request besides the rest of those already under way (answers, hand-overs to 
 and a probe waits for a few milliseconds. Requests still pass at the speed the loop does
 their work: with a backlog the loop only turns more often (a turn costs ~20 us).
 
-Waiting is bounded: with ``queue`` requests waiting, another is answered 503 ``busy`` with
-``Retry-After: 1`` at once, as a full plan queue is (``RANGEPLAN_MAX_QUEUE``).
+Waiting is bounded: with ``queue`` requests waiting, another is answered 503 ``busy`` at
+once, with ``Retry-After: 1`` (:data:`RETRY_AFTER_S`): here the first place frees at the next
+turn of the loop, within milliseconds, so a second is already the honest upper bound; the
+busy answers of the workers (a full plan queue, ``RANGEPLAN_MAX_QUEUE``; jobs on every worker)
+say instead when their first slot is expected to free, from the work under way
+(:func:`app.routers.deps.busy_retry_after`).
 """
 
 from __future__ import annotations
@@ -27,7 +31,10 @@ import asyncio
 import json
 from collections import deque
 
-__all__ = ["EXEMPT_PATHS", "Admission", "AdmissionGate"]
+__all__ = ["EXEMPT_PATHS", "RETRY_AFTER_S", "Admission", "AdmissionGate"]
+
+#: the ``Retry-After`` of the gate's 503 [s]: the least HTTP can say (a place frees in a turn)
+RETRY_AFTER_S = 1
 
 #: answered without waiting: the probes and the metrics a monitor scrapes under load
 EXEMPT_PATHS = frozenset({"/health", "/ready", "/metrics"})
@@ -77,7 +84,7 @@ async def _busy(send, message: str) -> None:
     body = json.dumps({"error": {"code": "busy", "message": message, "field": None}}).encode()
     await send({"type": "http.response.start", "status": 503,
                 "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode()),
-                            (b"retry-after", b"1")]})
+                            (b"retry-after", str(RETRY_AFTER_S).encode())]})
     await send({"type": "http.response.body", "body": body})
 
 

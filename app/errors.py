@@ -11,7 +11,8 @@ from pydantic import BaseModel
 from app.jobs import ErrorDetail
 from planner.schema import error_details
 
-__all__ = ["CODES_BY_STATUS", "ErrorDetail", "ErrorResponse", "error_response", "errors_doc", "validation_response"]
+__all__ = ["CODES_BY_STATUS", "RETRY_AFTER_BUSY_DOC", "ErrorDetail", "ErrorResponse", "error_response", "errors_doc",
+           "validation_response"]
 
 CODES_BY_STATUS = {400: "bad_request", 401: "unauthorized", 404: "not_found", 405: "method_not_allowed",
                    406: "not_acceptable", 409: "name_taken", 413: "too_large", 415: "unsupported_media_type",
@@ -23,6 +24,13 @@ _DESCRIPTIONS = {400: "Bad request (e.g. a Host this server does not answer to)"
                  507: "The store is full", 500: "Internal error"}
 
 
+#: the OpenAPI header of a busy answer (503)
+RETRY_AFTER_BUSY_DOC = {"description": "Seconds until the first slot is expected to free (1-60): the least time left "
+                        "of the work on the workers (each job's estimate less what it has run, or its measured time "
+                        "per unit), 1 when unknown or when only the event loop's queue is full",
+                        "schema": {"type": "integer", "minimum": 1, "maximum": 60}}
+
+
 class ErrorResponse(BaseModel):
     error: ErrorDetail
 
@@ -31,7 +39,10 @@ def errors_doc(*statuses: int, descriptions: dict[int, str] | None = None) -> di
     """OpenAPI ``responses`` entries for these error statuses (``descriptions``: what a status
     means on these operations, where it says more than the service-wide text)."""
     texts = {**_DESCRIPTIONS, **(descriptions or {})}
-    return {s: {"model": ErrorResponse, "description": texts.get(s, "Error")} for s in statuses}
+    out: dict = {s: {"model": ErrorResponse, "description": texts.get(s, "Error")} for s in statuses}
+    if 503 in out:
+        out[503]["headers"] = {"Retry-After": RETRY_AFTER_BUSY_DOC}
+    return out
 
 
 def error_response(status: int, code: str, message: str, field: str | None = None,

@@ -1,18 +1,22 @@
 """Progress of a job while it runs (issue 35): the one rule of the time left
-(:func:`time_left`, for ``GET /v1/jobs/{id}`` and the CLI's progress line), the callback a
-worker's job writes its progress to the store with (:func:`job_progress`), and the one of a
-job run in this thread (:func:`progress_here`). No web framework or editor import."""
+(:func:`time_left`, for ``GET /v1/jobs/{id}`` and the CLI's progress line), the one rule of
+when to come back (:func:`retry_after`: a job's ``Retry-After`` from its time left and the work
+queued ahead of it, :func:`job_wait`; a busy answer's from when the first slot frees,
+:func:`first_free`), the callback a worker's job writes its progress to the store with
+(:func:`job_progress`), and the one of a job run in this thread (:func:`progress_here`). No
+web framework or editor import."""
 
 from __future__ import annotations
 
 import contextlib
 import contextvars
+import math
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from typing import Protocol
 
-__all__ = ["JOIN_SHARE", "PROGRESS_EVERY_S", "ProgressStore", "here", "job_progress", "progress_here", "time_left",
-           "with_estimate"]
+__all__ = ["JOIN_SHARE", "PROGRESS_EVERY_S", "RETRY_MAX_S", "RETRY_MIN_S", "ProgressStore", "first_free", "here",
+           "job_progress", "job_wait", "progress_here", "retry_after", "row_left", "time_left", "with_estimate"]
 
 
 class ProgressStore(Protocol):
@@ -42,6 +46,50 @@ def time_left(done: int, total: int | None, started: float | None, updated: floa
     if estimate_s is not None:
         return max(estimate_s - max(0.0, now - (now if started is None else started)), 0.1 * estimate_s)
     return None
+
+
+#: the range of a ``Retry-After`` [s]: at least a second (HTTP's unit), at most a minute (a client
+#: polling a job that overruns its estimate, or waiting for a slot, hears again within a minute)
+RETRY_MIN_S = 1
+RETRY_MAX_S = 60
+
+
+def retry_after(seconds: float | None) -> int:
+    """A ``Retry-After`` [s] for an expected wait of ``seconds``: rounded up, within
+    [:data:`RETRY_MIN_S`, :data:`RETRY_MAX_S`]; the least when the wait is unknown."""
+    if seconds is None or not math.isfinite(seconds):
+        return RETRY_MIN_S
+    return int(min(RETRY_MAX_S, max(RETRY_MIN_S, math.ceil(seconds))))
+
+
+def row_left(row: dict, now: float) -> float | None:
+    """:func:`time_left` of a job's row (the store's ``jobs`` columns); None when unknown."""
+    return time_left(int(row["done"]), row["total"], row["started"], row["updated"], now, row["estimate_s"])
+
+
+def job_wait(rows: list[dict], job_id: str, workers: int, now: float) -> float | None:
+    """When the job ``job_id`` is expected to end [s from ``now``], from the unfinished jobs'
+    rows in the order they were queued (``rows``): a running job's time left (:func:`row_left`);
+    a queued one's own estimate plus the work ahead of it (the running jobs' time left and the
+    queued ones' estimates before it) shared by the ``workers`` of the jobs' share. None when
+    the job is not among the rows; an unknown time counts 0 (a contour whose worker has not
+    read its program yet)."""
+    ahead = 0.0
+    for row in rows:
+        left = row_left(row, now) or 0.0
+        if row["id"] == job_id:
+            return left if row["state"] == "running" else ahead / max(1, int(workers)) + left
+        ahead += left
+    return None
+
+
+def first_free(rows: list[dict], now: float, others: Sequence[float] = ()) -> float | None:
+    """When the first slot of a busy server is expected to free [s from ``now``]: the least time
+    left of the running jobs (``rows``, the store's unfinished jobs) and of ``others`` (the time
+    left of the synchronous requests on a worker); None when none is known."""
+    lefts = [left for row in rows if row["state"] == "running" and (left := row_left(row, now)) is not None]
+    lefts += [max(0.0, float(s)) for s in others]
+    return min(lefts, default=None)
 
 
 #: a progress callback ``(done, total, estimate_s)`` of a job run in this thread (the CLI's

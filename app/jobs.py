@@ -140,10 +140,14 @@ class ExportJob:
 @dataclass(frozen=True)
 class ContourJob:
     """Contour a G-code program (:func:`planner.contour.plan_contour`; ``POST /v1/contour``),
-    stored and answered like a :class:`PlanJob`. Estimated where it runs, not before it is
-    queued: the worker reads the program once (a program of tens of thousands of lines takes
-    seconds and ~90 MB to read), refuses it over ``work_limit_s`` (``too_much_work``) and
-    plans it."""
+    stored and answered like a :class:`PlanJob`. Estimated where it runs: the worker reads the
+    program once (a program of tens of thousands of lines takes seconds and ~90 MB to read, never
+    in the server process), refuses it over ``work_limit_s`` (``too_much_work``) and plans it.
+    With ``sync_within_s`` (``POST /v1/contour`` on a synchronous worker, before any job is
+    queued: :func:`app.routers.jobs.run_as_job`) it plans only a program estimated at most that
+    long; a longer one ends after its estimate, :class:`Done` with ``deferred`` set, and is run
+    again as an HTTP job (its program read again there: cheaper than shipping the read program
+    back and forth, ``benchmarks/README.md``)."""
 
     request: ContourRequest
     format: str = "json"
@@ -155,6 +159,9 @@ class ContourJob:
     #: the HTTP job this runs as (a row of the store's ``jobs``): the worker writes its
     #: estimate and its progress (cut passes done) there (:func:`app.job_progress.job_progress`)
     job_id: str | None = None
+    #: plan it only if its work estimate is at most this [s]; else end after the estimate
+    #: (:class:`Done` with ``deferred``): the synchronous lane's test of ``POST /v1/contour``
+    sync_within_s: float | None = None
     kind: ClassVar[str] = "contour"
 
 
@@ -190,12 +197,15 @@ Job = PlanJob | SegmentJob | ImportJob | EditorJob | ExportJob | ContourJob | Sl
 @dataclass(frozen=True)
 class Done:
     """A job that ran to the end: ``payload`` (bytes ready to send; empty when ``path``
-    holds them), the stored plan's id, a plan's metrics summary, the spool file."""
+    holds them), the stored plan's id, a plan's metrics summary, the spool file; ``deferred``:
+    a :class:`ContourJob` with ``sync_within_s`` that stopped after its estimate (over it: no
+    plan, no payload), to be run as an HTTP job."""
 
     payload: bytes | None = b""
     plan_id: str | None = None
     summary: dict[str, Any] | None = None
     path: str | None = None
+    deferred: ContourWork | None = None
     ok: ClassVar[bool] = True
 
 
@@ -348,8 +358,10 @@ def _contour(job: ContourJob) -> Done:
     program = read_gcode(req.program, cut_below=req.cut_below_m, z_rapid_m_s=req.z_rapid_m_s)
     progress = None
     here = job_progress.here()
-    if job.work_limit_s or job.job_id or here is not None:
+    if job.work_limit_s or job.job_id or here is not None or job.sync_within_s is not None:
         work = ContourWork(*estimate_contour(req, program))
+        if job.sync_within_s is not None and work.seconds > job.sync_within_s:
+            return Done(None, deferred=work)  # too long to answer synchronously: a job (before any limit's refusal)
         if job.work_limit_s and work.seconds > job.work_limit_s:
             raise PlannerError(**too_much_work(work, job.work_limit_s))
         if job.job_id:
@@ -544,12 +556,13 @@ def admitted_s(timeout_s: float) -> float:
     return float(timeout_s) / ESTIMATE_MARGIN
 
 
-def check_estimate(job: Job, timeout_s: float | None) -> Failed | None:
-    """A :class:`Failed` ``too_much_work`` if the job's work estimate exceeds what the time limit
-    ``timeout_s`` admits (:func:`admitted_s`)."""
+def check_estimate(job: Job, timeout_s: float | None, work: Any = None) -> Failed | None:
+    """A :class:`Failed` ``too_much_work`` if the job's work estimate (``work``, the caller's
+    :func:`estimate` if it has it) exceeds what the time limit ``timeout_s`` admits
+    (:func:`admitted_s`)."""
     if not timeout_s or timeout_s <= 0:
         return None
-    est = estimate(job)
+    est = estimate(job) if work is None else work
     if est is not None and est.seconds > admitted_s(timeout_s):
         return failed(too_much_work(est, admitted_s(timeout_s), float(timeout_s)))
     return None

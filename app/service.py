@@ -14,13 +14,15 @@ batches submit typed jobs (:data:`app.jobs.Job`) and get a typed outcome
    status they answer (``timeout`` and ``too_much_memory`` 422, ``busy`` 503, a dead worker
    500), as the worker maps the planner's;
 4. **keep synchronous requests apart from jobs** (issue 33): a *job* (``background=True``: a
-   contour, or a plan answered 202, up to the job limit ``RANGEPLAN_JOB_TIMEOUT_S``) runs on
+   contour or a plan answered 202, up to the job limit ``RANGEPLAN_JOB_TIMEOUT_S``) runs on
    a share of the workers, at most :attr:`JobService.job_workers` at once
    (``RANGEPLAN_JOB_WORKERS``, default one fewer than the workers); more jobs wait their turn
    here, holding no worker and no thread of the synchronous requests. A synchronous request
    never waits behind a job: on a local pool it takes a free worker before any waiting job
    (:class:`app.workers.PlanPool`), and with jobs on every worker (a share of all of them) it
-   is answered ``busy`` (503) at once.
+   is answered ``busy`` (503) at once; the synchronous requests on the workers are kept with
+   their estimates (:meth:`JobService.sync_left`) so that a busy answer can say when a slot
+   is expected to free.
 
 Batch items on a local process pool or a Dask cluster run :func:`app.executors.run_bounded`,
 the same estimate, limit and mapping, in a planning process of the process that runs them
@@ -38,7 +40,7 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 from app.executors import InProcessExecutor, JobExecutor, describe_failure, on_reference
-from app.jobs import ExportJob, Job, Outcome, bounded, check_estimate
+from app.jobs import ExportJob, Job, Outcome, bounded, check_estimate, estimate
 from app.workers import JobTimeout, PlanPool, PoolBusy, WorkerCrashed
 
 __all__ = ["JobService", "KernelCompile", "describe_failure"]
@@ -128,6 +130,10 @@ class JobService:
         self._job_threads: ThreadPoolExecutor | None = None  # one per job slot: the share itself
         self.jobs_queued = 0  #: jobs waiting for a slot of the share
         self.jobs_running = 0  #: jobs holding a slot (on a worker, or taking the next free one)
+        #: synchronous requests handed to the executor: when each was, and its work estimate [s]
+        #: (None: not estimated before it runs), for :meth:`sync_left`
+        self._sync: dict[int, tuple[float, float | None]] = {}
+        self._sync_seq = 0
 
     @property
     def workers(self) -> int:
@@ -182,7 +188,8 @@ class JobService:
         if running is not None:
             job = on_reference(job)
         timeout_s = self.timeout_s if limit_s is None else float(limit_s)
-        refused = check_estimate(job, timeout_s)
+        work = estimate(job)
+        refused = check_estimate(job, timeout_s, work)
         if refused is not None:
             if running is not None and refused.error.code == "too_much_work":
                 when = ("are not compiled (the background compile ended without finishing)"
@@ -195,10 +202,31 @@ class JobService:
             return refused
         limit = self.export_timeout_s if isinstance(job, ExportJob) else timeout_s
         job = bounded(job, limit)
+        if background:  # (a job's time left is its row's: app.routers.jobs)
+            try:
+                return self.pool.run(job, limit, background=True)
+            except (JobTimeout, PoolBusy, WorkerCrashed) as exc:
+                return describe_failure(exc, job, limit, self.memory_mb)
+        with self._threads_lock:
+            self._sync_seq = key = self._sync_seq + 1
+            self._sync[key] = (time.monotonic(), None if work is None else float(work.seconds))
         try:
-            return self.pool.run(job, limit, background=True) if background else self.pool.run(job, limit)
+            return self.pool.run(job, limit)
         except (JobTimeout, PoolBusy, WorkerCrashed) as exc:
             return describe_failure(exc, job, limit, self.memory_mb)
+        finally:
+            with self._threads_lock:
+                del self._sync[key]
+
+    def sync_left(self) -> list[float]:
+        """The expected time left [s] of each synchronous request handed to the executor with a
+        work estimate: the estimate less the time since (waiting for a worker counts as run: a
+        lower bound), not below 0. What a busy answer's ``Retry-After`` is made of with the
+        jobs' time left (:func:`app.job_progress.first_free`)."""
+        now = time.monotonic()
+        with self._threads_lock:
+            sync = list(self._sync.values())
+        return [max(0.0, est - (now - t0)) for t0, est in sync if est is not None]
 
     def start_threads(self) -> None:
         """Start the threads :meth:`arun` waits on, before the first request (the API's and

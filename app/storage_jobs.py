@@ -81,6 +81,15 @@ class JobRows:
         out["error"] = None if out["error"] is None else json.loads(out["error"])
         return out
 
+    def unfinished_jobs(self) -> list[dict]:
+        """The ``queued`` and ``running`` jobs' rows in the order they were created (the order the
+        jobs' share takes them: :func:`app.job_progress.job_wait`), without their errors."""
+        cols = [c for c in self._JOB_COLUMNS if c != "error"]
+        with self._connect() as con:
+            rows = con.execute(f"SELECT {', '.join(cols)} FROM jobs WHERE state IN ('queued', 'running') "
+                               "ORDER BY seq").fetchall()
+        return [dict(zip(cols, row, strict=True)) for row in rows]
+
     def delete_job(self, id: str) -> bool:
         with self._write("NORMAL") as con:
             return con.execute("DELETE FROM jobs WHERE id = ?", (id,)).rowcount > 0

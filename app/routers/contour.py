@@ -3,13 +3,15 @@
 An ``APIRouter`` included by :func:`app.api.create_app`. The request body is the schema's
 :class:`~planner.schema.ContourRequest`; the response the usual plan result (with its
 ``contour`` section) or ``?format=csv|gcode|joints|dxf``, stored like a plan (``GET
-/v1/plans/{id}``). The handler only validates the body: the worker reads the program, never
-the server process (a program of tens of thousands of lines takes seconds and ~90 MB to
-read), once, under the job's time limit and memory cap: a bad program is a 422 naming the
-line (field ``program``) and the cause, one whose work estimate exceeds the compute limit is
-refused (``too_much_work``) before it is planned; the body size limit bounds the program's
-text (413). A long program is a job (:mod:`app.routers.jobs`): 202 Accepted, its progress,
-then its result.
+/v1/plans/{id}``). The handler only validates the body: a worker of the synchronous lane
+reads the program, never the server process (a program of tens of thousands of lines takes
+seconds and ~90 MB to read), under the synchronous time limit and the memory cap, and
+estimates it before anything is queued: a bad program is a 422 naming the line (field
+``program``) and the cause, one whose work estimate exceeds the jobs' compute limit is refused
+(``too_much_work``) before it is planned, a short one is planned on that worker (read once);
+the body size limit bounds the program's text (413), and so the read and the estimate (6 CPU
+s at the cap: benchmarks/bench_contour_lanes.py). A long program is a job
+(:mod:`app.routers.jobs`): 202 Accepted with its estimate, its progress, then its result.
 """
 
 from __future__ import annotations

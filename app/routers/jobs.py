@@ -7,11 +7,18 @@ work is short, and ``202 Accepted`` with a job (``Location: /v1/jobs/{id}``) whe
   ``Preference-Applied: respond-async``), or
 * the work estimate is over the threshold: ``RANGEPLAN_ASYNC_AFTER_S`` (10 s), or the request's
   ``Prefer: wait=N`` (RFC 7240: "I will wait N seconds"), never above the synchronous limit
-  ``RANGEPLAN_PLAN_TIMEOUT_S``; a plan is estimated by the server before it is queued, a
-  contour by the worker that reads its program (the handler waits for that estimate: a row
-  of the store), or
-* a synchronous contour is still running at the synchronous limit (the estimate was low): it
-  becomes a job then, rather than a timeout.
+  ``RANGEPLAN_PLAN_TIMEOUT_S``. Both are estimated before anything is queued, off the event
+  loop: a plan by the server (microseconds to milliseconds, on a thread), a contour by a
+  worker of the synchronous lane, which reads its program (seconds for a long one, and ~90 MB:
+  never in the server process), estimates it and, when the estimate is within the threshold,
+  plans it right there (the program read once); over it, the worker ends after the estimate
+  and the contour is queued as a job with that estimate (its program read again by the job's
+  worker: cheaper than shipping the read program, 29 MB of pickle for 100 000 lines, through
+  the server). So a short contour never waits behind long jobs, as a short plan does not.
+  Only when jobs hold every worker (``RANGEPLAN_JOB_WORKERS`` >= ``RANGEPLAN_WORKERS``) is a
+  contour queued unestimated, its worker's estimate awaited (a row of the store), or
+* a synchronous contour queued so is still running at the synchronous limit: it becomes a
+  job then, rather than a timeout.
 
 A job runs under ``RANGEPLAN_JOB_TIMEOUT_S`` (600 s; a contour always does, as it may become
 one), on the jobs' share of the workers (``RANGEPLAN_JOB_WORKERS``: at most that many at once,
@@ -22,6 +29,14 @@ when it is still waiting or running at the synchronous limit. ``GET /v1/jobs/{id
 contour's cut passes, written by the worker after each pass), the work estimate, ``eta_s``
 and, once done, ``result``: the stored plan's URL (``/v1/plans/{id}``, any ``?format=``), or
 ``error`` (the error the synchronous call would have answered).
+
+``Retry-After`` (a 202, and ``GET /v1/jobs/{id}`` while the job is queued or running) says when
+the job is expected to end, within 1-60 s (:func:`app.job_progress.job_wait`): a running job's
+time left (``eta_s``); a queued one's estimate plus the work ahead of it (the running jobs'
+time left and the estimates of the jobs queued before it) shared by the jobs' workers. A
+client that follows it polls a 30 s job about once, not 30 times; a job that overruns its
+estimate is told again from its measured progress. A busy answer (503) says when the first
+slot is expected to free (:func:`app.routers.deps.busy_retry_after`).
 
 Progress crosses the process boundary through the SQLite store the worker already opens to
 store its plan (:func:`app.job_progress.job_progress`): the same for a local planning process, the
@@ -49,11 +64,13 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from app import storage_io
 from app.errors import error_response, errors_doc
-from app.job_progress import time_left
+from app.failures import too_much_work
+from app.job_progress import RETRY_MAX_S, RETRY_MIN_S, job_wait, retry_after, time_left
 from app.jobs import (
     ContourJob,
     Done,
     ErrorDetail,
+    Failed,
     Job,
     Outcome,
     PlanJob,
@@ -61,9 +78,10 @@ from app.jobs import (
     check_estimate,
     crashed,
     estimate,
+    failed,
 )
 from app.observability import observe_job
-from app.routers.deps import outcome_response, store, submit
+from app.routers.deps import busy_retry_after, outcome_response, respond, service, store, submit
 from app.storage import Store, new_id
 
 __all__ = ["ACCEPTED_DOC", "JobStatus", "PREFER", "job_limits", "job_status", "parse_prefer", "router", "run_as_job"]
@@ -101,12 +119,19 @@ PREFER = Header(None, description="RFC 7240. `respond-async`: answer 202 Accepte
                 "answer synchronously only if the work estimate is at most N s (else 202; default "
                 "RANGEPLAN_ASYNC_AFTER_S)")
 
+#: the OpenAPI description of a job's ``Retry-After`` (a 202, GET /v1/jobs/{id} while it runs)
+RETRY_AFTER_JOB = (f"Seconds before polling it ({RETRY_MIN_S}-{RETRY_MAX_S}): when the job is expected to end, its "
+                   "time left (its work estimate less what it has run, or its measured time per unit) and, while it "
+                   "is queued, the work ahead of it (the running jobs' time left and the estimates of the jobs "
+                   "queued before it) shared by the jobs' workers (RANGEPLAN_JOB_WORKERS)")
+
 ACCEPTED_DOC: dict[int | str, dict[str, Any]] = {202: {
     "model": JobStatus, "description": "Accepted as a job (asked by `Prefer: respond-async`, or the work "
     "estimate is over the threshold): poll `Location` (GET /v1/jobs/{id}) until `state` is done, then GET its "
     "`result`", "headers": {
         "Location": {"description": "The job: GET /v1/jobs/{id}", "schema": {"type": "string"}},
-        "Retry-After": {"description": "Seconds before polling it", "schema": {"type": "integer"}},
+        "Retry-After": {"description": RETRY_AFTER_JOB, "schema": {"type": "integer", "minimum": RETRY_MIN_S,
+                                                                   "maximum": RETRY_MAX_S}},
         "Preference-Applied": {"description": "respond-async when the request asked for it",
                                "schema": {"type": "string"}}},
     "links": {"GetJob": {"operationId": "get_job", "parameters": {"job_id": "$response.body#/id"}}}}}
@@ -170,11 +195,52 @@ def _unit(job: Job) -> str:
     return "passes" if isinstance(job, ContourJob) else "plans"
 
 
-def _accepted(row: dict, applied: bool) -> JSONResponse:
-    headers = {"Location": f"/v1/jobs/{row['id']}", "Retry-After": "1"}
+async def job_retry_after(request: Request, job_id: str) -> int:
+    """The ``Retry-After`` [s] of the job ``job_id`` (module docstring; its rows read off the loop)."""
+    rows = await storage_io.read(store(request).unfinished_jobs)
+    return retry_after(job_wait(rows, job_id, service(request).job_workers, time.time()))
+
+
+async def _accepted(request: Request, row: dict, applied: bool) -> JSONResponse:
+    headers = {"Location": f"/v1/jobs/{row['id']}", "Retry-After": str(await job_retry_after(request, row["id"]))}
     if applied:
         headers["Preference-Applied"] = "respond-async"
     return JSONResponse(job_status(row), status_code=202, headers=headers)
+
+
+@dataclass(frozen=True)
+class _ToJob:
+    """A contour the synchronous lane did not answer: run it as a job, with its estimate [s] if
+    known; ``now``: answer 202 at once (else the handler waits for its worker's estimate)."""
+
+    estimate_s: float | None
+    now: bool
+
+
+async def _estimated_contour(request: Request, job: ContourJob, threshold: float,
+                             limits: JobLimits) -> Response | _ToJob:
+    """A contour estimated on a synchronous worker before it is queued (module docstring): its
+    answer when that worker planned it (its estimate within ``threshold``) or refused it, else
+    a job: with its estimate (over ``threshold``); at once, unestimated, when the synchronous
+    limit ran out first (a large program read on a loaded machine, or an estimate that was
+    low: a job then rather than a timeout, as the job lane's synchronous contour does); or
+    unestimated, its worker's estimate awaited, when jobs hold every worker."""
+    svc = service(request)
+    t0 = time.perf_counter()
+    outcome = await svc.arun(dataclasses.replace(job, sync_within_s=threshold))
+    if isinstance(outcome, Done) and outcome.deferred is not None:
+        work = outcome.deferred
+        if work.seconds > admitted_s(limits.job_timeout_s):  # over the jobs' limit too: refused now
+            return outcome_response(failed(too_much_work(work, admitted_s(limits.job_timeout_s),
+                                                         limits.job_timeout_s)), "json")
+        return _ToJob(work.seconds, True)
+    if isinstance(outcome, Failed) and outcome.error.code == "timeout" and limits.job_timeout_s > limits.sync_limit_s:
+        return _ToJob(None, True)
+    if (isinstance(outcome, Failed) and outcome.status == 503 and outcome.error.code == "busy"
+            and svc.job_workers >= svc.workers):  # jobs may hold every worker: the job lane estimates it
+        return _ToJob(None, False)
+    observe_job(request.app, job, time.perf_counter() - t0, outcome)
+    return await respond(request, outcome, job.format)
 
 
 async def run_as_job(request: Request, job: ContourJob | PlanJob, fmt: str) -> Response:
@@ -184,6 +250,7 @@ async def run_as_job(request: Request, job: ContourJob | PlanJob, fmt: str) -> R
     pref = parse_prefer(request.headers.getlist("prefer"))
     threshold = min(pref.wait_s if pref.wait_s is not None else limits.async_after_s, admitted_s(limits.sync_limit_s))
     est_s: float | None = None
+    accept_now = pref.respond_async
     if isinstance(job, PlanJob):  # estimated here, before it is queued (as the service does)
         est = await asyncio.get_running_loop().run_in_executor(None, estimate, job)
         est_s = est.seconds if est is not None else None
@@ -193,35 +260,40 @@ async def run_as_job(request: Request, job: ContourJob | PlanJob, fmt: str) -> R
                 return outcome_response(refused, fmt)
         if not pref.respond_async and (est_s is None or est_s <= threshold):
             return await submit(request, job, fmt)  # short: synchronous, under the synchronous limit
+    elif not pref.respond_async:  # a contour: estimated (and, if short, planned) on a synchronous worker
+        lane = await _estimated_contour(request, job, threshold, limits)
+        if isinstance(lane, Response):
+            return lane
+        est_s, accept_now = lane.estimate_s, lane.now
     st = store(request)
     job_id = new_id()
     if not await storage_io.write(st.create_job, job_id, job.kind, _unit(job), total=1 if isinstance(job, PlanJob)
                                   else None, estimate_s=est_s, max_jobs=limits.max_jobs,
                                   max_age_s=limits.max_age_s):
         return error_response(503, "busy", f"{limits.max_jobs} jobs are unfinished (RANGEPLAN_MAX_JOBS); retry when "
-                              "one has ended", headers={"Retry-After": "5"})
+                              "one has ended", headers={"Retry-After": str(await busy_retry_after(request))})
     job = dataclasses.replace(job, job_id=job_id)
     task = asyncio.ensure_future(_run(app, job, fmt, limits.job_timeout_s))
     tasks = _tasks(app)  # held until it ends (the loop keeps only weak references to tasks)
     tasks.add(task)
     task.add_done_callback(tasks.discard)
-    if pref.respond_async or (est_s is not None and est_s > threshold):
+    if accept_now or (est_s is not None and est_s > threshold):
         row = await storage_io.read(st.get_job, job_id)
         if row is not None:  # (a job that ended already and was dropped: never within max_jobs)
-            return _accepted(row, pref.respond_async)
+            return await _accepted(request, row, pref.respond_async)
     t0 = time.monotonic()
     while True:  # a contour: synchronous unless its worker's estimate is over the threshold
         await asyncio.wait({task}, timeout=POLL_S)
         if task.done():
             outcome = task.result()
             await storage_io.write(st.delete_job, job_id)  # answered here: nothing to poll
-            return outcome_response(outcome, fmt)
+            return await respond(request, outcome, fmt)
         row = await storage_io.read(st.get_job, job_id)
         if row is None:
             raise RuntimeError(f"job {job_id} vanished")
         est_s = row["estimate_s"]
         if (est_s is not None and est_s > threshold) or time.monotonic() - t0 > limits.sync_limit_s:
-            return _accepted(row, False)
+            return await _accepted(request, row, False)
 
 
 def _tasks(app: FastAPI) -> set:
@@ -279,14 +351,20 @@ def job_status(row: dict) -> dict[str, Any]:
 
 
 @router.get("/v1/jobs/{job_id}", response_model=JobStatus, operation_id="get_job",
-            responses={**errors_doc(404, descriptions={404: "Unknown job id (or a finished job dropped: "
+            responses={200: {"description": "The job's status; `Retry-After` while it is queued or running",
+                             "headers": {"Retry-After": {"description": RETRY_AFTER_JOB, "schema": {
+                                 "type": "integer", "minimum": RETRY_MIN_S, "maximum": RETRY_MAX_S}}}},
+                       **errors_doc(404, descriptions={404: "Unknown job id (or a finished job dropped: "
                                                        "RANGEPLAN_MAX_JOBS, RANGEPLAN_JOB_MAX_AGE_S)"})})
 async def get_job(job_id: str, request: Request):
     """A job's state, progress (units done of total), work estimate, time left and, once done,
-    its result's URL (the stored plan) or its error. ``Retry-After`` while it runs."""
+    its result's URL (the stored plan) or its error. ``Retry-After`` while it is queued or runs:
+    when it is expected to end (1-60 s; the work ahead of it counted while it is queued)."""
     row = await storage_io.read(store(request).get_job, job_id)
     if row is None:
         raise StarletteHTTPException(404, f"no job with id {job_id!r}")
-    headers = {"Retry-After": "1"} if row["state"] in ("queued", "running") else None
+    headers = None
+    if row["state"] in ("queued", "running"):
+        headers = {"Retry-After": str(await job_retry_after(request, job_id))}
     return JSONResponse(job_status(row), headers=headers)
 
