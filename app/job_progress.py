@@ -38,11 +38,13 @@ def time_left(done: int, total: int | None, started: float | None, updated: floa
     """Estimated time left of a job [s], the one rule of ``GET /v1/jobs/{id}`` and of the CLI's
     progress line: once a unit is done, the time per unit measured up to the last unit done
     (``updated``), for the units left and the join after them (:data:`JOIN_SHARE`), less the
-    time since that unit; before, the work estimate less the time run (not below a tenth of
-    it); ``None`` without either."""
+    time since that unit (not below a tenth of a unit's time: a unit that takes longer than
+    the mean is still running, and a running job never says 0 s left); before, the work
+    estimate less the time run (not below a tenth of it); ``None`` without either."""
     if done > 0 and total and started is not None:
         updated = now if updated is None else updated
-        return max((updated - started) / done * (total - done + JOIN_SHARE * total) - (now - updated), 0.0)
+        per_unit = (updated - started) / done
+        return max(per_unit * (total - done + JOIN_SHARE * total) - (now - updated), 0.1 * per_unit)
     if estimate_s is not None:
         return max(estimate_s - max(0.0, now - (now if started is None else started)), 0.1 * estimate_s)
     return None

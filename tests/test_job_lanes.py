@@ -23,7 +23,7 @@ import httpx
 import pytest
 
 from app.api import create_app
-from app.job_progress import RETRY_MAX_S, first_free, job_wait, retry_after, row_left
+from app.job_progress import RETRY_MAX_S, first_free, job_wait, retry_after, row_left, time_left
 from app.security import AccessPolicy
 from app.storage import Store
 from tests.support import api_client, load_example, with_settings
@@ -71,6 +71,18 @@ def test_the_wait_rule_counts_the_work_ahead_over_the_workers():
     # it grows with the estimate
     waits = [retry_after(job_wait([row("x", "running", e, started=now)], "x", 1, now)) for e in (0.5, 3, 17, 45, 116)]
     assert waits == sorted(waits) and waits[0] == 1 and waits[-1] == RETRY_MAX_S and len(set(waits)) == 5
+
+
+def test_a_running_job_never_says_no_time_left():
+    """A unit that takes longer than the mean keeps a positive time left (a tenth of a unit's
+    time), where the measured rule alone gave 0 s while the job still ran (seen on a loaded
+    machine: ``eta_s`` 0 before the last pass ended); the rule itself unchanged otherwise."""
+    # 2 of 4 passes done in 2 s (1 s a pass), the last done at t = 2
+    assert time_left(2, 4, 0.0, 2.0, 2.0, 8.0) == pytest.approx(1.0 * (2 + 0.3 * 4))
+    assert time_left(2, 4, 0.0, 2.0, 3.0, 8.0) == pytest.approx(1.0 * (2 + 0.3 * 4) - 1.0)
+    for late in (10.0, 100.0):  # the third pass overruns the mean by far
+        assert time_left(2, 4, 0.0, 2.0, 2.0 + late, 8.0) == pytest.approx(0.1)
+    assert time_left(4, 4, 0.0, 4.0, 50.0, 8.0) == pytest.approx(0.1)  # the join after the passes
 
 
 def test_retry_after_says_when_a_job_ends_and_when_a_slot_frees(tmp_path):
