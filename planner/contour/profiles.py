@@ -72,7 +72,24 @@ def profile_counts(t: Tube, v_cap: np.ndarray, a: float, Ts: float, a_turn: floa
     speed = np.minimum(v, np.maximum(mean, 0.25 * v))[cells]
     counts[cells] = np.maximum(1, np.ceil(t.length[cells] / np.maximum(speed, 1e-12) / Ts - 1e-9)).astype(np.int64)
     counts[t.lead] = 1  # the lead cells at the pass's ends (planner.contour.tube)
+    return start_free(t, counts)
+
+
+def start_free(t: Tube, counts: np.ndarray) -> np.ndarray:
+    """``counts`` with the tube's start point (its first segment) held
+    :data:`START_POINT_SAMPLES` samples: the robot at rest there is sample 0 (the range
+    sequence's start), and a count of one pinned sample 1 there too, so the drives' first force
+    (which the force-rate limit lets rise in the first sample) had to wait a sample: every piece
+    lost one sample at its start (issue 35: dxf2gcode's first force 0.2 N, then 9 N a sample
+    later; the third-order peer's starts at once). Sample 1 is then the lead cell's, which
+    holds the start point (:mod:`planner.contour.tube`)."""
+    if len(counts) > 1 and t.length[0] == 0 and t.segments[0].is_point:
+        counts[0] = START_POINT_SAMPLES
     return counts
+
+
+#: the samples a piece's start point is held beyond sample 0 (:func:`start_free`)
+START_POINT_SAMPLES = 0
 
 
 def optimal_caps(path: PathSamples, a_all: np.ndarray, rho: float, chord: np.ndarray, Ts: float,
@@ -202,7 +219,7 @@ def optimal_counts(t: Tube, times: np.ndarray, step: float) -> np.ndarray:
     counts[j] = 1
     counts = np.maximum(counts, 1)
     counts[t.lead] = 1
-    return counts
+    return start_free(t, counts)
 
 
 #: program feed: at most this many samples added before a piece's end (:func:`with_arrival`)
