@@ -627,6 +627,33 @@ class TimingSearch:
             got_p = (got[0], t) if got is not None else None
         return got_p
 
+    def end_trimmed(self, res: PlanResult, t: Tube, limit: np.ndarray | None) -> PlanResult:
+        """``res`` (the timing found in ``t``) planned once more with the end point held no
+        sample beyond the end's lead cell, kept where that is feasible, shorter and (``limit``:
+        per segment the speed no sample may exceed, the programmed F in ``program`` feed, the Z
+        axis speed's bound) within ``limit``. The range sequence pins the lead cell's one sample
+        onto the end point already (:mod:`planner.contour.tube`), and the end point's own sample
+        pinned a second one there, after which the robot may settle: where it had settled at
+        the first, a sample lost at every piece's end (issue 35: pcb_gcode's circle in
+        ``program`` feed arrives within 4 um of the end at 0.69 mm/s, settled, a sample before
+        its plan ended). Where the robot needs that sample to arrive at rest (the arrival rows
+        at the sequence's last sample: the tightest ``fastest`` timings), the plan found stays."""
+        counts = np.asarray(res.settings.segment_samples, np.int64).copy()
+        if len(counts) != len(t.segments) or counts[-1] != 1 or not t.segments[-1].is_point:
+            return res
+        counts[-1] = 0
+        kept, self.plan_st = self.plan_st, self.plan_st.model_copy(
+            update={"tool_speed_max_m_s": res.settings.tool_speed_max_m_s})  # the rows it was planned with
+        try:
+            got = self.attempt(t, counts)
+        finally:
+            self.plan_st = kept
+        if got is None or len(got.time) >= len(res.time):
+            return res
+        if limit is not None and overspeed(got, t, counts, limit) > 1.0:
+            return res
+        return got
+
     def fastest(self, hint: Scale | None) -> tuple[PlanResult, Tube, Scale] | None:
         """The ``fastest`` feed's search: without a ``hint`` (or without the time-optimal
         profile) the heuristic timing, then the time-optimal one where it can beat it; with the
@@ -670,6 +697,7 @@ def search_timing(feed_mode: str, model: RobotModel, st: Settings, tube_at: Call
     search = TimingSearch(model, st, tube_at, chunk, els, deadline, optimal, z_max_m_s, cell_caps)
     search.start_force = start_force
     found = search.found
+    capped = feed_mode == "program"
     if feed_mode == "program":
         got_p = search.program_feed()
         if got_p is not None:
@@ -682,6 +710,12 @@ def search_timing(feed_mode: str, model: RobotModel, st: Settings, tube_at: Call
             got_p = search.program_loop()
             if got_p is not None:
                 found.result, found.tube = got_p
+                capped = True
+    if found.result is not None and found.tube is not None:
+        t = found.tube
+        limit = np.minimum(search.feed_on(t), search.zcap_on(t)) if capped else \
+            search.zcap_on(t) if search.z_capped else None
+        found.result = search.end_trimmed(found.result, t, limit)
     return found
 
 
