@@ -677,6 +677,19 @@ class TimingSearch:
             return res
         return got
 
+    def remember_trim(self, before: PlanResult, after: PlanResult) -> None:
+        """A pass of the same moves (depth passes) plans ``after``'s counts (the end trimmed,
+        :meth:`end_trimmed`) at once where :meth:`program_optimal` kept ``before``'s for it: one
+        plan a pass, not two (the bench part in ``program`` feed: 31 plans for 16, 4.1 -> 5.8
+        CPU s, without it)."""
+        memo, geo = getattr(self.optimal, "memo", None), getattr(self.optimal, "geo", None)
+        key = ("feed margin", geo, self.st.Ts)
+        if memo is None or not geo or key not in memo:
+            return
+        margin, arrive, known, rows, limit = memo[key]
+        if known is not None and np.array_equal(known, np.asarray(before.settings.segment_samples, np.int64)):
+            memo[key] = (margin, arrive, np.asarray(after.settings.segment_samples, np.int64), rows, limit)
+
     def start_held(self, res: PlanResult, t: Tube) -> PlanResult | None:
         """``res`` (the timing found in ``t``) planned again with its start point held one
         sample, the timing after it as it was (as every piece was planned before
@@ -760,6 +773,8 @@ def search_timing(feed_mode: str, model: RobotModel, st: Settings, tube_at: Call
         trimmed = search.end_trimmed(found.result, t, limit)
         if trimmed is not found.result:
             found.untrimmed, found.result = found.result, trimmed
+            if feed_mode == "program":
+                search.remember_trim(found.untrimmed, trimmed)
     return found
 
 
