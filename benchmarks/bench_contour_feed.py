@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import importlib
 import json
 import math
 import os
@@ -271,6 +272,9 @@ def main() -> None:
         return
     roots = args.root or [str(HERE.parent)]
     _paths(roots[-1])
+    # the last root's planner for --lag, --profile, --elements (bench_contour_optimum puts its own
+    # checkout first on the path: imported first, this script's checkout planned them whatever the roots)
+    importlib.import_module("planner")
     from bench_contour_optimum import ROBOT, load_program  # type: ignore[import-not-found]
 
     from planner.exchange import read_gcode
