@@ -4,7 +4,7 @@ more checkouts side by side, and where the time goes.
 
     OPENBLAS_NUM_THREADS=1 nice -n 10 .venv/bin/python benchmarks/bench_contour_feed.py \
         [--root /tmp/base --root .] [--programs bench,freecad_linuxcnc.ngc,fusion360.nc] [--elements] [--profile] \
-        [--feed fastest]
+        [--lag] [--feed fastest]
 
 ``--feed fastest``: the ``fastest`` feed instead, against the same third-order optimum without
 the F cap (``bench_contour_optimum``'s fair peer, cached the same way): its before/after per pass
@@ -24,6 +24,11 @@ each root's time over the peer's per pass.
 samples' travel over ``F Ts`` against the peer's mean speed over F in the same samples, and the
 samples each loses there and between them against L / F.
 
+``--lag`` (the last root, in this process): per distinct pass, the plan's lag behind the peer
+at the same path position (``j Ts - t_peer(s_j)``, in samples) gained in each phase: the first
+sample, the speeding up, the cruise, the braking, the stop (:func:`lag_rows`); its end is the
+pass's time over the peer's.
+
 ``--elements`` (the last root, in this process): per distinct pass and per program line, the
 peer's time and top speed beside the plan's (the samples cutting that line: their count times
 Ts, and their top speed from finite differences of the tool point), and the pass's samples
@@ -35,6 +40,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import importlib
 import json
 import math
 import os
@@ -211,6 +217,41 @@ def profile_rows(label: str, i: int, els, peer: dict, res, k: int, head: int = 1
     return out
 
 
+def lag_rows(label: str, i: int, els, peer: dict, res, k: int) -> list[str]:
+    """Where pass ``i`` (the ``k``-th cutting run) falls behind the peer (``--lag``): per sample
+    ``j`` of the plan (from the pass's start, at rest: the sample before the run), its lag
+    ``j Ts - t_peer(s_j)`` in samples, ``s_j`` its path length (the travel of its samples, scaled
+    to the pass's length: chords of arcs), ``t_peer`` when the peer is there; by phase: the
+    first sample, the speeding up (to the first sample within 5 % of the pass's top speed), the
+    cruise, the braking (from the last sample within 5 % of the top to where the plan's speed is
+    under 20 % of it), the stop. The lag at the end is the pass's time over the peer's."""
+    run = cutting_run(res, k, f"{label} pass {i}", "lag")
+    if isinstance(run, list):
+        return run
+    (a, b), Ts = run, res.settings.Ts
+    t_el = [np.asarray(x, float) for x in peer["t"]]
+    t0 = np.concatenate(([0.0], np.cumsum([x[-1] for x in t_el])))[:-1]
+    tp = np.concatenate([x + t for x, t in zip(t_el, t0)])
+    vp = np.concatenate([np.asarray(x, float).ravel()[:len(tx)] for x, tx in zip(peer["v"], t_el)])
+    order = np.argsort(tp, kind="stable")
+    tp, vp = tp[order], vp[order]
+    sp = np.concatenate(([0.0], np.cumsum(0.5 * (vp[1:] + vp[:-1]) * np.diff(tp))))
+    xy = res.pose[a - 1:b, :2]  # from the pass's start (the sample before its run) to its last
+    s = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))))
+    s = s * sum(e.length_m for e in els) / max(float(s[-1]), 1e-300)
+    lag = (np.arange(len(s)) * Ts - np.interp(s, sp * s[-1] / sp[-1], tp)) / Ts
+    v = np.hypot(*np.diff(xy, axis=0).T) / Ts
+    top = float(v.max())
+    up = int(np.flatnonzero(v >= 0.95 * top)[0]) + 1
+    down = int(np.flatnonzero(v >= 0.95 * top)[-1]) + 1
+    slow = [j + 1 for j in range(down, len(v)) if v[j] < 0.2 * top]
+    stop = slow[0] if slow else len(v)
+    marks = [("first sample", 0, 1), ("speeding up", 1, up), ("cruise", up, down), ("braking", down, stop),
+             ("stop", stop, len(s) - 1)]
+    cells = " | ".join(f"{j0}-{j1}: {lag[j1] - lag[j0]:+.2f}" for _, j0, j1 in marks)
+    return [f"| {label} | {i} | {len(s) - 1} | {peer['time'] / Ts:.2f} | {cells} | {lag[-1]:+.2f} |"]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("--one", default=None, help=argparse.SUPPRESS)
@@ -219,6 +260,8 @@ def main() -> None:
     ap.add_argument("--elements", action="store_true", help="per line of each distinct pass: the plan against the peer")
     ap.add_argument("--profile", action="store_true",
                     help="per distinct pass: its first and last samples' speeds against the peer's at the same times")
+    ap.add_argument("--lag", action="store_true",
+                    help="per distinct pass: the plan's lag behind the peer at the same path position, by phase")
     ap.add_argument("--cache", default=str(Path.home() / ".cache" / "rangeplan" / "bench_contour_feed"))
     ap.add_argument("--no-cache", action="store_true")
     ap.add_argument("--feed", default="program", choices=("program", "fastest"),
@@ -229,6 +272,9 @@ def main() -> None:
         return
     roots = args.root or [str(HERE.parent)]
     _paths(roots[-1])
+    # the last root's planner for --lag, --profile, --elements (bench_contour_optimum puts its own
+    # checkout first on the path: imported first, this script's checkout planned them whatever the roots)
+    importlib.import_module("planner")
     from bench_contour_optimum import ROBOT, load_program  # type: ignore[import-not-found]
 
     from planner.exchange import read_gcode
@@ -245,13 +291,14 @@ def main() -> None:
     rows: list[str] = [f"| program | pass | mm | F mm/min | L / F s | {peer_col} | " + head + " |",
                        "|---|---|---|---|---|---|" + "---|---|" * len(roots)]
     detail: list[str] = []
+    lags: list[str] = []
     for name in args.programs.split(","):
         label, text, origin = load_program(name)
         got = [run_root(r, name, args.feed) for r in roots]
         prog = read_gcode(text)
         org, tol = np.asarray(got[-1]["origin"], float), float(got[-1]["tol"])
         res = None
-        if args.elements or args.profile:
+        if args.elements or args.profile or args.lag:
             from planner.contour import plan_contour
 
             res = plan_contour({"program": text, "origin": origin, "feed": args.feed})
@@ -283,6 +330,8 @@ def main() -> None:
                     detail += element_rows(label, i, els, peer, res, i, tol)
                 if args.profile:
                     detail += profile_rows(label, i, els, peer, res, i)
+                if args.lag:
+                    lags += lag_rows(label, i, els, peer, res, i)
         cols = " | ".join(f"{t:.3f} | {t / tot_peer:.3f}x" for t in tot)
         rows.append(f"| {label} | all | | | | {tot_peer:.4f} | {cols} |")
         summary.append(f"| {label} | " + " | ".join(
@@ -297,6 +346,13 @@ def main() -> None:
     print("\n".join(summary))
     if detail:
         print("\n".join(detail))
+    if lags:
+        print("\n### the plan's lag behind the peer at the same path position, samples (j Ts - t_peer(s_j)), "
+              "gained per phase (samples j0-j1 of the plan)\n")
+        print("| program | pass | plan samples | peer samples | first sample | speeding up | cruise | braking | stop | "
+              "lag at the end |")
+        print("|---|---|---|---|---|---|---|---|---|---|")
+        print("\n".join(lags))
 
 
 if __name__ == "__main__":

@@ -358,13 +358,17 @@ def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[i
     # sample under its move's F, and sizes its cells by it)
     slow, gentle = np.full(len(chunk), np.inf), np.ones(len(chunk))
     feed, els, top0, eased = req.feed, els0, None, False
-    for _ in range(Z_TRIES):
+    # the start point held no sample (profiles.start_free) until Z misses, then one, as before; the
+    # end point's own sample dropped at a pass's last piece (search.TimingSearch.end_trimmed)
+    start, last = None, chunk[-1] == len(elements) - 1
+    for _ in range(Z_TRIES + 1):  # (one more: the start held)
         zc = ZCaps(els0, chunk, tol, req.z_rapid_m_s, req.z_accel_m_s2, slow, gentle)
         found = search_timing(feed, model, st, TubeSizes(model, st, chunk, els, origin, tol, psi, pos, elements),
                               chunk, els, hint, z_max_m_s=req.z_rapid_m_s, cell_caps=zc if zc.active else None,
                               optimal=OptimalProfiles(model, st, chunk, els, origin, psi, memo,
                                                       speed_caps(feed, els, req.z_rapid_m_s),
-                                                      zc if zc.active else None), start_force=start_force)
+                                                      zc if zc.active else None), start_force=start_force,
+                              start_samples=start, trim_end=last)
         if found.result is None:
             raise confirmed_infeasible(req, model, st, chunk, els, origin, tol, psi, pos, elements, found, hint,
                                        passes, limit_at)
@@ -372,6 +376,27 @@ def plan_cut(req: ContourRequest, model: RobotModel, st: Settings, chunk: list[i
         zp = plan_piece_z(part, elements, origin, tol, st.Ts, req, z_first)
         if zp.ok:
             return part
+        if found.untrimmed is not None:  # Z within its limits on the plan before its end was shortened?
+            found.result = found.untrimmed
+            part = _cut_part(found, geo, tol)
+            zp = plan_piece_z(part, elements, origin, tol, st.Ts, req, z_first)
+            if zp.ok:
+                return part
+        if start is None:
+            # Z starts from rest within its acceleration: on a ramp the tool starts on (a piece
+            # after a slope stop, planned from the forces the last one left: fusion360's line 23 at
+            # Ts 3 ms, 12.8 um over Z's tolerance) it needs the sample the start point was held:
+            # the timing found with it (one plan), else the search again with it
+            assert found.search is not None and found.tube is not None
+            held = found.search.start_held(found.result, found.tube)
+            if held is not None:
+                found.result = held
+                part = _cut_part(found, geo, tol)
+                zp = plan_piece_z(part, elements, origin, tol, st.Ts, req, z_first)
+                if zp.ok:
+                    return part
+            start = 1
+            continue
         if feed == "fastest" and not eased:  # once: fastest again, gentler along the slopes Z missed on
             eased = True
             for k in np.unique(part.elem[zp.miss > 0]):

@@ -41,12 +41,13 @@ def corner_radius(turn: np.ndarray, rho: float) -> np.ndarray:
 
 
 def profile_counts(t: Tube, v_cap: np.ndarray, a: float, Ts: float, a_turn: float | None = None,
-                   jerk: float | None = None) -> np.ndarray:
+                   jerk: float | None = None, start: int | None = None) -> np.ndarray:
     """Sample counts per segment of the tube from a speed profile: cell speed at most
     ``v_cap`` (per segment), ``sqrt(a_turn R)`` on arcs, ``sqrt(a_turn R_corner)`` at junctions
     (``a_turn``: ``a`` if not given), reached with acceleration ``a`` from rest and back to rest;
     ``jerk``: within ``(jerk / 2)^(1/3) (3 d)^(2/3)`` at a distance ``d`` from the rest at either
-    end (the speed of a start from rest at that jerk: the drive forces rise at a bounded rate)."""
+    end (the speed of a start from rest at that jerk: the drive forces rise at a bounded rate).
+    ``start``: the samples the start point is held (:func:`start_free`)."""
     n = len(t.segments)
     a_turn = a if a_turn is None else a_turn
     v = v_cap.astype(float).copy()
@@ -72,7 +73,26 @@ def profile_counts(t: Tube, v_cap: np.ndarray, a: float, Ts: float, a_turn: floa
     speed = np.minimum(v, np.maximum(mean, 0.25 * v))[cells]
     counts[cells] = np.maximum(1, np.ceil(t.length[cells] / np.maximum(speed, 1e-12) / Ts - 1e-9)).astype(np.int64)
     counts[t.lead] = 1  # the lead cells at the pass's ends (planner.contour.tube)
+    return start_free(t, counts, start)
+
+
+def start_free(t: Tube, counts: np.ndarray, start: int | None = None) -> np.ndarray:
+    """``counts`` with the tube's start point (its first segment) held ``start`` samples
+    (None: :data:`START_POINT_SAMPLES`): the robot at rest there is sample 0 (the range
+    sequence's start), and a count of one pinned sample 1 there too, so the drives' first force
+    (which the force-rate limit lets rise in the first sample) had to wait a sample: every piece
+    lost one sample at its start (issue 35: dxf2gcode's first force 0.2 N, then 9 N a sample
+    later; the third-order peer's starts at once). Sample 1 is then the lead cell's, which
+    holds the start point (:mod:`planner.contour.tube`). One sample (``start`` 1, as before)
+    where the Z axis, which starts from rest within its acceleration, needs it to follow a
+    ramp that the tool starts on (:func:`planner.contour.plan.plan_cut`)."""
+    if len(counts) > 1 and t.length[0] == 0 and t.segments[0].is_point:
+        counts[0] = START_POINT_SAMPLES if start is None else start
     return counts
+
+
+#: the samples a piece's start point is held beyond sample 0 (:func:`start_free`)
+START_POINT_SAMPLES = 0
 
 
 def optimal_caps(path: PathSamples, a_all: np.ndarray, rho: float, chord: np.ndarray, Ts: float,
@@ -184,13 +204,14 @@ def rest_ends(opt: Optimal, jerk: float | None) -> np.ndarray:
     return np.maximum(np.maximum.accumulate(out), 0.0)
 
 
-def optimal_counts(t: Tube, times: np.ndarray, step: float) -> np.ndarray:
+def optimal_counts(t: Tube, times: np.ndarray, step: float, start: int | None = None) -> np.ndarray:
     """Sample counts per segment of the tube from the profile's times at the segments' ends
     (``step``: the sample time over the scale): the samples up to each end, rounded. A sample
     of a segment the profile crosses in no time is taken from the cell before where that has
     two: a junction cell's (it lies inside both its neighbours) and the end's lead cell's (the
     range sequence narrows it onto the end point: its sample is the one that arrives there).
-    Every segment at least one sample, the lead cells one."""
+    Every segment at least one sample, the lead cells one, the start point ``start``
+    (:func:`start_free`)."""
     b = np.round(times / step).astype(np.int64)
     counts = np.diff(np.concatenate(([0], b)))
     take = (t.length == 0) & (t.turn > 0)
@@ -202,7 +223,7 @@ def optimal_counts(t: Tube, times: np.ndarray, step: float) -> np.ndarray:
     counts[j] = 1
     counts = np.maximum(counts, 1)
     counts[t.lead] = 1
-    return counts
+    return start_free(t, counts, start)
 
 
 #: program feed: at most this many samples added before a piece's end (:func:`with_arrival`)

@@ -113,9 +113,10 @@ SLOPE_STOP_M_S = 0.05
 #: the time-optimal timing's scale is found to this relative resolution (its profile is near
 #: the drives' limits everywhere: the scale found is near 1, and a finer step is worth its plans)
 OPT_RESOLUTION = 1 / 256
-#: the samples a tube plan takes beyond the profile's time (the start point, the lead cells, the
-#: end point): the time-optimal timing is tried where its profile's time plus these beats the other
-OPT_END_SAMPLES = 4
+#: the samples a tube plan takes beyond the profile's time (the lead cells, the end point; the
+#: start point took one more before it was held no sample, :func:`~planner.contour.profiles.start_free`):
+#: the time-optimal timing is tried where its profile's time plus these beats the other
+OPT_END_SAMPLES = 3
 #: fastest, an arc the drives bound below a chord per sample (:meth:`TimingSearch.arc_cells`):
 #: its cells' speed, a factor ``kappa`` of the drives' turn speed, found to this resolution
 #: within [ARC_KAPPA_MIN, ARC_KAPPA_MAX]
@@ -145,6 +146,10 @@ class Found:
         self.scale: Scale | None = None
         self.stop_line: int | None = None
         self.plans = 0
+        #: the plan found before :meth:`TimingSearch.end_trimmed` shortened it (None: not shortened)
+        self.untrimmed: PlanResult | None = None
+        #: the search that found it (:meth:`TimingSearch.start_held` replans it)
+        self.search: TimingSearch | None = None
 
     def failed(self, err: PlannerError, t: Tube, counts: np.ndarray, els_line: Callable[[int], int]) -> None:
         """Note where a candidate stopped (``at t = ... s`` in the controller's message)."""
@@ -184,6 +189,8 @@ class TimingSearch:
         self.jerk = drive_jerk(model, st)
         self.arc_tubes: dict[tuple[int, float], Tube] = {}  #: :meth:`arc_tube`'s, by size and kappa
         self.start_force: np.ndarray | None = None  #: the forces held before a candidate's first sample [N]
+        #: the samples the start point is held (None: :data:`~planner.contour.profiles.START_POINT_SAMPLES`)
+        self.start: int | None = None
 
     def feed_on(self, t: Tube) -> np.ndarray:
         """The programmed F [m/s] of the move each of the tube's segments belongs to."""
@@ -227,7 +234,8 @@ class TimingSearch:
         for _ in range(PROGRAM_TRIES):
             t = self.tube_at(float(self.feed.max()) * scale)
             feed_of = self.feed_on(t)
-            counts = profile_counts(t, feed_of * scale, A_PROGRAM_M_S2 * scale * scale, self.st.Ts)
+            counts = profile_counts(t, feed_of * scale, A_PROGRAM_M_S2 * scale * scale, self.st.Ts,
+                                    start=self.start)
             res = self.attempt(t, counts)
             if res is None:
                 scale *= 0.7
@@ -247,7 +255,8 @@ class TimingSearch:
         v = v_cap * lam * mu
         if self.z_capped:  # a ramp's or helix's Z within the axis speed, whatever the scale
             v = np.minimum(v, self.shape_on(t))
-        counts = profile_counts(t, v, A0_M_S2 * lam * lam, self.st.Ts, A0_M_S2 * (lam * mu) ** 2, J0_M_S3 * lam ** 3)
+        counts = profile_counts(t, v, A0_M_S2 * lam * lam, self.st.Ts, A0_M_S2 * (lam * mu) ** 2, J0_M_S3 * lam ** 3,
+                                self.start)
         key = counts.tobytes()
         if key not in tried:
             res = self.attempt(t, counts)
@@ -310,7 +319,7 @@ class TimingSearch:
                     lam: float) -> PlanResult | None:
         """The time-optimal profile's ``times`` scaled in time by ``1 / lam`` planned in ``t``
         (``tried``: the plans by their sample counts)."""
-        counts = optimal_counts(t, times, lam * self.st.Ts)
+        counts = optimal_counts(t, times, lam * self.st.Ts, self.start)
         key = counts.tobytes()
         if key not in tried:
             res = self.attempt(t, counts)
@@ -499,8 +508,8 @@ class TimingSearch:
         fast = rest_ends(opt, self.jerk)
         if fast is opt.times:
             return fast
-        n_fast = int(self.feed_counts(t, optimal_counts(t, fast, self.st.Ts)).sum())
-        n = int(self.feed_counts(t, optimal_counts(t, opt.times, self.st.Ts)).sum())
+        n_fast = int(self.feed_counts(t, optimal_counts(t, fast, self.st.Ts, self.start)).sum())
+        n = int(self.feed_counts(t, optimal_counts(t, opt.times, self.st.Ts, self.start)).sum())
         return fast if n_fast < n else opt.times
 
     def program_optimal(self) -> tuple[PlanResult, Tube] | None:
@@ -541,7 +550,8 @@ class TimingSearch:
             times = self.rest_times(cur, optimal(cur))
             if not (np.all(np.isfinite(times)) and times[-1] > 0):  # pragma: no cover - a profile that never moves
                 return None
-            counts = with_arrival(cur, self.feed_counts(cur, optimal_counts(cur, times, self.st.Ts)), arrive)
+            counts = with_arrival(cur, self.feed_counts(cur, optimal_counts(cur, times, self.st.Ts, self.start)),
+                                  arrive)
             if known is not None and len(known) == len(counts):  # a pass of the same moves' run samples
                 counts, known = known, None
             res = self.attempt(cur, counts)
@@ -601,7 +611,8 @@ class TimingSearch:
         tried: dict[bytes, PlanResult | None] = {}
 
         def run(lam: float) -> PlanResult | None:
-            counts = with_arrival(t, self.feed_counts(t, optimal_counts(t, times, lam * self.st.Ts)), arrive)
+            counts = with_arrival(t, self.feed_counts(t, optimal_counts(t, times, lam * self.st.Ts, self.start)),
+                                  arrive)
             key = counts.tobytes()
             if key not in tried:
                 tried[key] = self.within_feed(t, counts, feed_of)
@@ -627,6 +638,70 @@ class TimingSearch:
             got_p = (got[0], t) if got is not None else None
         return got_p
 
+    def replanned(self, res: PlanResult, t: Tube, counts: np.ndarray) -> PlanResult | None:
+        """``counts`` planned in ``t`` under the speed rows ``res`` (a plan found) was planned
+        with; None where infeasible."""
+        kept, self.plan_st = self.plan_st, self.plan_st.model_copy(
+            update={"tool_speed_max_m_s": res.settings.tool_speed_max_m_s})
+        try:
+            return self.attempt(t, counts)
+        finally:
+            self.plan_st = kept
+
+    def end_trimmed(self, res: PlanResult, t: Tube, limit: np.ndarray | None) -> PlanResult:
+        """``res`` (the timing found in ``t``) planned once more with the end point held no
+        sample beyond the end's lead cell, kept where that is feasible, shorter and (``limit``:
+        per segment the speed no sample may exceed, the programmed F in ``program`` feed, the Z
+        axis speed's bound) within ``limit``. The range sequence pins the lead cell's one sample
+        onto the end point already (:mod:`planner.contour.tube`), and the end point's own sample
+        pinned a second one there, after which the robot may settle: where it had settled at
+        the first, a sample lost at every piece's end (issue 35: pcb_gcode's circle in
+        ``program`` feed arrives within 4 um of the end at 0.69 mm/s, settled, a sample before
+        its plan ended). Tried only where ``res`` had settled at the lead cell's sample (where
+        the robot needs the end point's sample to arrive at rest, the tightest ``fastest``
+        timings, the arrival rows at the sequence's last sample would not let it: one plan spent
+        for nothing on each of the bench part's 15 passes)."""
+        counts = np.asarray(res.settings.segment_samples, np.int64).copy()
+        if len(counts) != len(t.segments) or counts[-1] != 1 or not t.segments[-1].is_point:
+            return res
+        k = int(counts[:-1].sum())  # the lead cell's sample
+        if k >= len(res.time) or not (
+                float(np.hypot(*(res.pose[k, :2] - t.segments[-1].centre[:2]))) < self.st.settle_position_m
+                and float(np.hypot(*res.velocity[k, :2])) < self.st.settle_speed_m_s):
+            return res
+        counts[-1] = 0
+        got = self.replanned(res, t, counts)
+        if got is None or len(got.time) >= len(res.time):
+            return res
+        if limit is not None and overspeed(got, t, counts, limit) > 1.0:
+            return res
+        return got
+
+    def remember_trim(self, before: PlanResult, after: PlanResult) -> None:
+        """A pass of the same moves (depth passes) plans ``after``'s counts (the end trimmed,
+        :meth:`end_trimmed`) at once where :meth:`program_optimal` kept ``before``'s for it: one
+        plan a pass, not two (the bench part in ``program`` feed: 31 plans for 16, 4.1 -> 5.8
+        CPU s, without it)."""
+        memo, geo = getattr(self.optimal, "memo", None), getattr(self.optimal, "geo", None)
+        key = ("feed margin", geo, self.st.Ts)
+        if memo is None or not geo or key not in memo:
+            return
+        margin, arrive, known, rows, limit = memo[key]
+        if known is not None and np.array_equal(known, np.asarray(before.settings.segment_samples, np.int64)):
+            memo[key] = (margin, arrive, np.asarray(after.settings.segment_samples, np.int64), rows, limit)
+
+    def start_held(self, res: PlanResult, t: Tube) -> PlanResult | None:
+        """``res`` (the timing found in ``t``) planned again with its start point held one
+        sample, the timing after it as it was (as every piece was planned before
+        :func:`~planner.contour.profiles.start_free`): where the Z axis missed, it starts from
+        rest a sample before the tool leaves (:func:`planner.contour.plan.plan_cut`). None
+        where that is infeasible or the start point was held already."""
+        counts = np.asarray(res.settings.segment_samples, np.int64).copy()
+        if len(counts) != len(t.segments) or counts[0] != 0:
+            return None
+        counts[0] = 1
+        return self.replanned(res, t, counts)
+
     def fastest(self, hint: Scale | None) -> tuple[PlanResult, Tube, Scale] | None:
         """The ``fastest`` feed's search: without a ``hint`` (or without the time-optimal
         profile) the heuristic timing, then the time-optimal one where it can beat it; with the
@@ -649,7 +724,8 @@ def search_timing(feed_mode: str, model: RobotModel, st: Settings, tube_at: Call
                   els: list[PathElement], hint: Scale | None, deadline: float | None = None,
                   optimal: Callable[[Tube], Optimal] | None = None, z_max_m_s: float | None = None,
                   cell_caps: Callable[[Tube], np.ndarray] | None = None,
-                  start_force: np.ndarray | None = None) -> Found:
+                  start_force: np.ndarray | None = None, start_samples: int | None = None,
+                  trim_end: bool = True) -> Found:
     """A timing of the piece for the feed mode, in the tube ``tube_at(v)`` with cells sized for
     the profile's speed ``v`` (``program``: the programmed F times the profile's scale, so that
     a slower profile has shorter cells: the criterion pulls the robot toward each cell's
@@ -666,10 +742,17 @@ def search_timing(feed_mode: str, model: RobotModel, st: Settings, tube_at: Call
     :func:`planner.exchange._tabs.cap_z_speed`); ``cell_caps``: per segment of a tube a further
     bound on the XY speed [m/s] (the Z axis acceleration's, :class:`planner.contour.zaxis.ZCaps`).
     ``start_force``: the drive forces the part before left [N], every candidate planned from them
-    (:func:`planner.orchestrator.plan_timed`; None: from zero, the robot at rest)."""
+    (:func:`planner.orchestrator.plan_timed`; None: from zero, the robot at rest).
+    ``start_samples``: the samples the start point is held (None: none beyond sample 0,
+    :func:`~planner.contour.profiles.start_free`); ``trim_end``: the plan found tried once more
+    without the end point's own sample (:meth:`TimingSearch.end_trimmed`; ``found.untrimmed``
+    the plan before, where it is shorter)."""
     search = TimingSearch(model, st, tube_at, chunk, els, deadline, optimal, z_max_m_s, cell_caps)
     search.start_force = start_force
+    search.start = start_samples
     found = search.found
+    found.search = search
+    capped = feed_mode == "program"
     if feed_mode == "program":
         got_p = search.program_feed()
         if got_p is not None:
@@ -682,6 +765,16 @@ def search_timing(feed_mode: str, model: RobotModel, st: Settings, tube_at: Call
             got_p = search.program_loop()
             if got_p is not None:
                 found.result, found.tube = got_p
+                capped = True
+    if trim_end and found.result is not None and found.tube is not None:
+        t = found.tube
+        limit = np.minimum(search.feed_on(t), search.zcap_on(t)) if capped else \
+            search.zcap_on(t) if search.z_capped else None
+        trimmed = search.end_trimmed(found.result, t, limit)
+        if trimmed is not found.result:
+            found.untrimmed, found.result = found.result, trimmed
+            if feed_mode == "program":
+                search.remember_trim(found.untrimmed, trimmed)
     return found
 
 
