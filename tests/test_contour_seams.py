@@ -82,6 +82,7 @@ def test_a_joined_plan_over_the_limit_does_not_say_within(fusion_3ms, monkeypatc
     joined forces break the rate at the seams, and the result says so (on main it said within
     because the parts' flags were ANDed); its largest force rate is the joined forces'."""
     monkeypatch.setattr(contour_plan, "seam_breaks", lambda *a, **k: False)
+    monkeypatch.setattr(contour_plan, "rest_breaks", lambda *a, **k: False)
     res = _contour("fusion360.nc", "fastest", 0.003)
     r = rate_ratio(res)
     assert r.max() > 1 + REL  # the seams as they were
@@ -98,6 +99,7 @@ def test_a_plan_whose_seams_keep_the_limit_is_unchanged(monkeypatch):
     rule's Ts 10 ms: the largest seam step 0.02 of the limit)."""
     res = _contour("freecad_linuxcnc.ngc", "program")
     monkeypatch.setattr(contour_plan, "seam_breaks", lambda *a, **k: False)
+    monkeypatch.setattr(contour_plan, "rest_breaks", lambda *a, **k: False)
     before = _contour("freecad_linuxcnc.ngc", "program")
     for a, b in ((res.drives.force, before.drives.force), (res.pose, before.pose)):
         assert np.array_equal(np.asarray(a), np.asarray(b))
