@@ -156,19 +156,20 @@ def main() -> None:
         cam(args.limit, [None if t == "rule" else float(t) * 1e-3 for t in args.ts.split(",")], args.json,
             args.only, args.feed, (shard_k, shard_n))
         return
-    print(f"| program | feed | Ts ms | lines | passes | moves | est s | CPU s | CPU/est | {args.limit:g} s | outcome |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print(f"| program | feed | Ts ms | lines | passes | moves | est s | CPU s | CPU/est | parts planned 1/2/3+ times | "
+          f"{args.limit:g} s | outcome |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     ratios: list[float] = []
     rows: list[tuple[str, float, float]] = []  # feed, Ts, CPU / estimate
     spent = 0.0
 
     def record(index: int, req: dict, est: float | None, cpu: float | None, out: str,
-               Ts_used: float | None = None) -> None:
+               Ts_used: float | None = None, plans: list[int] | None = None) -> None:
         if args.json:
             with open(args.json, "a") as fh:
                 fh.write(json.dumps({"seed": args.seed, "large": not args.small, "index": index, "feed": req["feed"],
                                      "Ts": (req.get("settings") or {}).get("Ts", 0.01), "Ts_used": Ts_used,
-                                     "est": est, "cpu": cpu, "outcome": out}) + "\n")
+                                     "est": est, "cpu": cpu, "outcome": out, "plans": plans}) + "\n")
 
     for index, (made, req) in enumerate(cases(args.seed, large=not args.small)):
         if args.only and args.only not in made.name:
@@ -183,7 +184,7 @@ def main() -> None:
             est, detail = estimate_contour(r, program_)
         except PlannerError as exc:  # refused before any work (a pass no tube fits: too_large)
             print(f"| {made.name} | {req['feed']} | - | {made.text.count(chr(10))} | {made.passes} | {made.moves} | "
-                  f"- | - | - | refused | {exc.code} up front |", flush=True)
+                  f"- | - | - | - | refused | {exc.code} up front |", flush=True)
             record(index, req, None, None, f"{exc.code} up front")
             continue
         del program_
@@ -195,19 +196,20 @@ def main() -> None:
         admitted = "admitted" if est * margin <= args.limit else "refused"
         if est > args.skip_over or spent + est > args.work_cap:
             why = "not run" if est > args.skip_over else "not run (work cap)"
-            print(f"{head} - | - | {admitted} | {why} |", flush=True)
+            print(f"{head} - | - | - | {admitted} | {why} |", flush=True)
             record(index, req, est, None, why, Ts)
             continue
         spent += est
-        cpu, out = measure(req, est)
+        cpu, out, plans, _ = measure(req, est, detail=True)
+        counts = f"{plans.count(1)}/{plans.count(2)}/{sum(n >= 3 for n in plans)}"
         if cpu is None:
-            print(f"{head} > {3 * est + 10:.3g} | - | {admitted} | {out} |", flush=True)
-            record(index, req, est, None, out, Ts)
+            print(f"{head} > {3 * est + 10:.3g} | - | {counts} | {admitted} | {out} |", flush=True)
+            record(index, req, est, None, out, Ts, plans)
             continue
         ratios.append(cpu / est)
         rows.append((req["feed"], Ts, cpu / est))
-        record(index, req, est, cpu, out, Ts)
-        print(f"{head} {cpu:.3g} | {cpu / est:.2f} | {admitted} | {out} |", flush=True)
+        record(index, req, est, cpu, out, Ts, plans)
+        print(f"{head} {cpu:.3g} | {cpu / est:.2f} | {counts} | {admitted} | {out} |", flush=True)
     summary(rows)
 
 

@@ -156,6 +156,24 @@ SLOPE_SEARCH_PLANS = {"program": (1.8, 1.3, 0.0, 0.0), "fastest": (0.0, 0.0, 0.0
 #: retraced line, fixed by branch rampfix: 0.29 CPU s now): none left
 Z_FASTEST_PIECE_S = (0.0, 0.0, 0.0, 0.0)
 Z_FASTEST_LENGTH_M = 0.015
+#: ``fastest``: the work of a piece after a slope stop beyond what the pass's estimate counts, in
+#: units of the piece's own estimate (:func:`piece_estimate`), by the sample times of
+#: :data:`SAMPLE_FACTOR_TS` (interpolated in their logarithm). The planner ends a piece where Z's
+#: slope changes sharply (:func:`planner.contour.search.slope_stops`: a ramp's start and end), the
+#: estimate's pieces do not; the piece after such a stop starts from the braking forces the one
+#: before left, planned from them at once where the drives cannot drop them in a sample
+#: (:meth:`planner.contour.plan._Walk.seamed`), and where that finds no timing the robot is held
+#: while they fall and the piece planned from rest again (issue 35 goal 5, branch seamest).
+#: Fitted with ``benchmarks/refit_contour_estimate.py`` on the rows of
+#: ``benchmarks/bench_contour_estimate.py --cam`` (benchmarks/README.md, "seams predicted"): the
+#: only program with such stops is fusion360.nc (its first pass: a ramp of slope 1 in, the level
+#: cut, a ramp out), measured without this term at 1.05-1.94x (1.29-1.58x at 5-10 ms, 1.94x at
+#: 2 ms where its level piece's plan from the ramp's forces found no timing, 1.4 CPU s, and its
+#: plan from rest after the release took 6.9 s against 1.13 s estimated: its arc cells searched
+#: at the edge of feasibility at 0.02 mm); one factor at every sample time (a table by Ts fitted
+#: to one program would fit its noise), 2.0 puts its rows at 0.6-1.45x. No generated program has
+#: such stops (their ramps' slope changes are passed)
+SLOPE_STOP_PLANS = (2.0, 2.0, 2.0, 2.0)
 
 
 def sample_factor(Ts: float, N: int, feed: str = "program") -> float:
@@ -417,7 +435,8 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
              # all; measured: a ramp and helix pass 7 times); fastest's first miss goes on as a program
              # feed, and costs twice that (measured on 10 ramp and helix passes: 2.05x without it)
              "z": sum(z_replans(f, els, p, st.Ts) for p, els in zip(per_piece, pieces, strict=True)),
-             "slope_search": sum(slope_search(f, els, p, st.Ts) for p, els in zip(per_piece, pieces, strict=True))}
+             "slope_search": sum(slope_search(f, els, p, st.Ts) for p, els in zip(per_piece, pieces, strict=True)),
+             "seams": seam_work(req, program, tol, st.Ts, c.passes, st.N)}
     travel_s, read_s = parts["travel"], parts["lines"]
     check = max(ADVICE_WORK * max(per_piece, default=0.0), ADVICE_MIN_S)
     seconds = sum(parts.values())
@@ -435,6 +454,9 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
               "slope_search": (f"settings.Ts 0.005 s or more instead of {st.Ts:g} s (at 1-2 ms the feed's search "
                                "plans a piece with a slope about three times as often), or fewer ramps and helices, "
                                "or split the program"),
+              "seams": (f"a larger settings.Ts than {st.Ts:g} s, or gentler ramps (a pass is planned in pieces where "
+                        "Z's slope changes sharply, each after the first from the forces the one before left), or "
+                        "split the program"),
               "search": (f"settings.Ts 0.005 s or more instead of {st.Ts:g} s (at a fine Ts the feed's scale is "
                          f"searched on arcs of {_tight_radius_mm(pieces):.2g} mm of radius and less: ~16 plans), "
                          "or fewer such arcs a pass (split the pass)"),
@@ -470,6 +492,24 @@ def z_replans(feed: str, els: list[PathElement], piece_s: float, Ts: float) -> f
     if floor > 0:
         length = sum(e.length_m for e in els)
         out = max(out, floor * max(length / Z_FASTEST_LENGTH_M, 1.0))
+    return out
+
+
+def seam_work(req: Any, program: Program, tol: float, Ts: float, passes: int, N: int) -> float:
+    """The seconds of the pieces after a slope stop beyond the pass's estimate
+    (:data:`SLOPE_STOP_PLANS` times each such piece's :func:`piece_estimate`; ``fastest`` only:
+    the program feed does not split its passes there)."""
+    k = by_ts(SLOPE_STOP_PLANS, Ts)
+    if req.feed != "fastest" or k <= 0:
+        return 0.0
+    from .search import slope_stops  # (search imports this module's constants)
+
+    out = 0.0
+    for b in program.passes:
+        stops = set(slope_stops(req.feed, b.elements, tol, req.z_accel_m_s2))
+        for chunk in chunks(b.elements, stops)[1:]:
+            if chunk[0] - 1 in stops and not b.elements[chunk[0] - 1].exact_stop:  # (exact stops: pieces counted)
+                out += k * piece_estimate(req.feed, [b.elements[j] for j in chunk], Ts, passes, tol, N)
     return out
 
 
