@@ -172,7 +172,7 @@ Z_FASTEST_LENGTH_M = 0.015
 #: Fitted with ``benchmarks/refit_contour_estimate.py`` on the rows of
 #: ``benchmarks/bench_contour_estimate.py --cam`` (benchmarks/README.md, "seams predicted"): the
 #: only program with such stops is fusion360.nc (its first pass: a ramp of slope 1 in, the level
-#: cut, a ramp out), measured without this term at 1.05-1.94x (1.29-1.58x at 5-10 ms, 1.94x at
+#: cut, a ramp out), measured without this term at 0.96-1.94x (1.29-1.80x at 5-10 ms, 1.94x at
 #: 2 ms where its level piece's plan from the ramp's forces found no timing, 1.4 CPU s, and its
 #: plan from rest after the release took 6.9 s against 1.13 s estimated: its arc cells searched
 #: at the edge of feasibility at 0.02 mm); one factor at every sample time (a table by Ts fitted
