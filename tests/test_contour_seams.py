@@ -82,6 +82,7 @@ def test_a_joined_plan_over_the_limit_does_not_say_within(fusion_3ms, monkeypatc
     joined forces break the rate at the seams, and the result says so (on main it said within
     because the parts' flags were ANDed); its largest force rate is the joined forces'."""
     monkeypatch.setattr(contour_plan, "seam_breaks", lambda *a, **k: False)
+    monkeypatch.setattr(contour_plan, "rest_breaks", lambda *a, **k: False)
     res = _contour("fusion360.nc", "fastest", 0.003)
     r = rate_ratio(res)
     assert r.max() > 1 + REL  # the seams as they were
@@ -98,6 +99,7 @@ def test_a_plan_whose_seams_keep_the_limit_is_unchanged(monkeypatch):
     rule's Ts 10 ms: the largest seam step 0.02 of the limit)."""
     res = _contour("freecad_linuxcnc.ngc", "program")
     monkeypatch.setattr(contour_plan, "seam_breaks", lambda *a, **k: False)
+    monkeypatch.setattr(contour_plan, "rest_breaks", lambda *a, **k: False)
     before = _contour("freecad_linuxcnc.ngc", "program")
     for a, b in ((res.drives.force, before.drives.force), (res.pose, before.pose)):
         assert np.array_equal(np.asarray(a), np.asarray(b))
@@ -138,3 +140,29 @@ def test_a_plan_from_held_forces_steps_from_them():
     assert res.metrics.within_limits is bool(np.all(steps <= r * (1 + REL)))
     plain = plan(req)  # from rest: the first force within one rise of zero
     assert np.all(np.abs(np.asarray(plain.drives.force)[0]) <= r * (1 + REL))
+
+
+def test_a_seam_the_forces_left_break_is_planned_once(monkeypatch):
+    """fusion360 ``fastest`` at Ts 3 ms: the level piece after the ramp starts from the ramp's
+    braking forces, more than the drives drop in a sample (9.06 N, 9 N a sample): it is planned
+    from them at once (on main after seamforce: from rest, found over the limit, planned again),
+    every part once, and the plan is the one planned from them (the rate holds at every seam)."""
+    plans: list[int] = []
+    seamed = contour_plan._Walk.seamed
+
+    def counted(self, planned, line):
+        n = [0]
+
+        def once(pos, f):
+            n[0] += 1
+            return planned(pos, f)
+
+        part = seamed(self, once, line)
+        plans.append(n[0])
+        return part
+
+    monkeypatch.setattr(contour_plan._Walk, "seamed", counted)
+    res = _contour("fusion360.nc", "fastest", 0.003)
+    assert plans and all(n == 1 for n in plans), plans
+    assert rate_ratio(res).max() <= 1 + REL
+    assert res.metrics.within_limits is independent_within(res) is True

@@ -147,8 +147,13 @@ Z_SLOPE_PLANS = {"program": (0.0, 0.0, 0.3, 0.0), "fastest": (1.8, 0.5, 0.7, 0.0
 #: bisected to that merge, benchmarks/README.md "fastest and the contour compute and estimates
 #: re-measured"). With 0 at 1-2 ms those passes measured 2.60x and 2.12x their estimate; 1.8 and
 #: 1.3 bound them (1.19x, 1.08x) and leave 10 ramp passes at 2 ms 0.28x (their search is cheaper
-#: a pass: the bound takes the worst); 5 ms and above measured within the estimate (0.75-1.17x)
-SLOPE_SEARCH_PLANS = {"program": (1.8, 1.3, 0.0, 0.0), "fastest": (0.0, 0.0, 0.0, 0.0)}
+#: a pass: the bound takes the worst); 5 ms and above measured within the estimate (0.75-1.17x).
+#: Re-measured on 2026-11-28 (branch seamest, benchmarks/README.md "seams predicted"): the search
+#: is back to its cost before that merge, those 2 passes 11.4 CPU s at 1 ms and 4.54 s at 2 ms,
+#: 10 passes at 2 ms 15.3 s (0.32x, 0.27x, 0.20x with 1.8 and 1.3; 0.70x, 0.52x, 0.39x without),
+#: and the term put freecad_linuxcnc.ngc's gentle helix at 0.13-0.23x at 2-3 ms: 0 again, the
+#: table kept for a refit
+SLOPE_SEARCH_PLANS = {"program": (0.0, 0.0, 0.0, 0.0), "fastest": (0.0, 0.0, 0.0, 0.0)}
 #: ``fastest``: seconds of the re-plans of a piece with a slope at least, per
 #: :data:`Z_FASTEST_LENGTH_M` of its length (at least one such length), by the sample times of
 #: :data:`SAMPLE_FACTOR_TS` (interpolated in their logarithm). It was 16 s at 10 ms, fitted to 2
@@ -156,6 +161,25 @@ SLOPE_SEARCH_PLANS = {"program": (1.8, 1.3, 0.0, 0.0), "fastest": (0.0, 0.0, 0.0
 #: retraced line, fixed by branch rampfix: 0.29 CPU s now): none left
 Z_FASTEST_PIECE_S = (0.0, 0.0, 0.0, 0.0)
 Z_FASTEST_LENGTH_M = 0.015
+#: ``fastest``: the work of a piece after a slope stop beyond what the pass's estimate counts, in
+#: units of the piece's own estimate (:func:`piece_estimate`), by the sample times of
+#: :data:`SAMPLE_FACTOR_TS` (interpolated in their logarithm). The planner ends a piece where Z's
+#: slope changes sharply (:func:`planner.contour.search.slope_stops`: a ramp's start and end), the
+#: estimate's pieces do not; the piece after such a stop starts from the braking forces the one
+#: before left, planned from them at once where the drives cannot drop them in a sample
+#: (:meth:`planner.contour.plan._Walk.seamed`), and where that finds no timing the robot is held
+#: while they fall and the piece planned from rest again (issue 35 goal 5, branch seamest).
+#: Fitted with ``benchmarks/refit_contour_estimate.py`` on the rows of
+#: ``benchmarks/bench_contour_estimate.py --cam`` (benchmarks/README.md, "seams predicted"): the
+#: only program with such stops is fusion360.nc (its first pass: a ramp of slope 1 in, the level
+#: cut, a ramp out), measured without this term at 0.96-1.94x (1.29-1.80x at 5-10 ms, 1.94x at
+#: 2 ms where its level piece's plan from the ramp's forces found no timing, 1.4 CPU s, and its
+#: plan from rest after the release took 6.9 s against 1.13 s estimated: its arc cells searched
+#: at the edge of feasibility at 0.02 mm); one factor at every sample time (a table by Ts fitted
+#: to one program would fit its noise), 2.5 puts its rows at 0.5-1.35x (2.0: 0.56-1.42x, the 2 ms
+#: row's serial test failed once of three on a loaded machine). No generated program has such
+#: stops (their ramps' slope changes are passed)
+SLOPE_STOP_PLANS = (2.5, 2.5, 2.5, 2.5)
 
 
 def sample_factor(Ts: float, N: int, feed: str = "program") -> float:
@@ -417,7 +441,8 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
              # all; measured: a ramp and helix pass 7 times); fastest's first miss goes on as a program
              # feed, and costs twice that (measured on 10 ramp and helix passes: 2.05x without it)
              "z": sum(z_replans(f, els, p, st.Ts) for p, els in zip(per_piece, pieces, strict=True)),
-             "slope_search": sum(slope_search(f, els, p, st.Ts) for p, els in zip(per_piece, pieces, strict=True))}
+             "slope_search": sum(slope_search(f, els, p, st.Ts) for p, els in zip(per_piece, pieces, strict=True)),
+             "seams": seam_work(req, program, tol, st.Ts, c.passes, st.N)}
     travel_s, read_s = parts["travel"], parts["lines"]
     check = max(ADVICE_WORK * max(per_piece, default=0.0), ADVICE_MIN_S)
     seconds = sum(parts.values())
@@ -435,6 +460,9 @@ def estimate_contour(request: Any, program: Program | None = None) -> tuple[floa
               "slope_search": (f"settings.Ts 0.005 s or more instead of {st.Ts:g} s (at 1-2 ms the feed's search "
                                "plans a piece with a slope about three times as often), or fewer ramps and helices, "
                                "or split the program"),
+              "seams": (f"a larger settings.Ts than {st.Ts:g} s, or gentler ramps (a pass is planned in pieces where "
+                        "Z's slope changes sharply, each after the first from the forces the one before left), or "
+                        "split the program"),
               "search": (f"settings.Ts 0.005 s or more instead of {st.Ts:g} s (at a fine Ts the feed's scale is "
                          f"searched on arcs of {_tight_radius_mm(pieces):.2g} mm of radius and less: ~16 plans), "
                          "or fewer such arcs a pass (split the pass)"),
@@ -470,6 +498,24 @@ def z_replans(feed: str, els: list[PathElement], piece_s: float, Ts: float) -> f
     if floor > 0:
         length = sum(e.length_m for e in els)
         out = max(out, floor * max(length / Z_FASTEST_LENGTH_M, 1.0))
+    return out
+
+
+def seam_work(req: Any, program: Program, tol: float, Ts: float, passes: int, N: int) -> float:
+    """The seconds of the pieces after a slope stop beyond the pass's estimate
+    (:data:`SLOPE_STOP_PLANS` times each such piece's :func:`piece_estimate`; ``fastest`` only:
+    the program feed does not split its passes there)."""
+    k = by_ts(SLOPE_STOP_PLANS, Ts)
+    if req.feed != "fastest" or k <= 0:
+        return 0.0
+    from .search import slope_stops  # (search imports this module's constants)
+
+    out = 0.0
+    for b in program.passes:
+        stops = set(slope_stops(req.feed, b.elements, tol, req.z_accel_m_s2))
+        for chunk in chunks(b.elements, stops)[1:]:
+            if chunk[0] - 1 in stops and not b.elements[chunk[0] - 1].exact_stop:  # (exact stops: pieces counted)
+                out += k * piece_estimate(req.feed, [b.elements[j] for j in chunk], Ts, passes, tol, N)
     return out
 
 

@@ -86,6 +86,14 @@ def held_force(part: Part | None, n_legs: int) -> np.ndarray:
     return np.asarray(part.result.drives.force[-2], float)
 
 
+def rest_breaks(before: np.ndarray, model: RobotModel, st: Settings) -> bool:
+    """Whether the forces ``before`` [N] are more than the drives can drop to zero in one sample
+    within the force-rate limit (a rest after them breaks it; a part planned from rest, whose
+    first force is within one sample's rise of zero, breaks it unless that force leans the same
+    way: :meth:`planner.contour.plan._Walk.seamed` plans such a part from them at once)."""
+    return not rates_within(model, st, np.asarray(before, float)[None, :])
+
+
 def seam_breaks(before: np.ndarray, part: Part, model: RobotModel, st: Settings) -> bool:
     """Whether the step from the forces ``before`` [N] to ``part``'s first force (zero for a
     rest) exceeds the force-rate limit (as ``within_limits`` counts it:
