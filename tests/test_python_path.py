@@ -33,7 +33,7 @@ def _fallback_qps(req: dict) -> list[tuple[qp_module.DenseQP, np.ndarray | None,
     seen: list[tuple[qp_module.DenseQP, np.ndarray | None, np.ndarray | None]] = []
     orig = qp_module.DenseQP.solve_slack
 
-    def spy(self, arrival=None, iter_limit=None, start=None):
+    def spy(self, arrival=None, iter_limit=None, start=None, seconds=None):
         seen.append((self, arrival, start))
         return orig(self, arrival, iter_limit, start)
 

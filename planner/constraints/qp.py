@@ -25,9 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ARRIVAL_SLACK_WEIGHT", "DAQP_SETTINGS", "RETRY_FLAGS", "RETRY_SETTINGS", "SCREEN_FIRST", "SCREEN_NEAR",
-           "SCREEN_ROUNDS", "SCREEN_TOL", "SLACK_ITER_LIMIT", "SLACK_RHO1", "SLACK_RHO2", "DenseQP", "QPSolution",
-           "factor", "rows_ldp", "solve_qp"]
+__all__ = ["ARRIVAL_SLACK_WEIGHT", "DAQP_ITERATION_S", "DAQP_SETTINGS", "RETRY_FLAGS", "RETRY_SETTINGS",
+           "SCREEN_FIRST", "SCREEN_NEAR", "SCREEN_ROUNDS", "SCREEN_TOL", "SLACK_ITER_LIMIT", "SLACK_RHO1",
+           "SLACK_RHO2", "WORK_BOUND_FLAG", "DenseQP", "QPSolution", "daqp_iterations", "factor", "rows_ldp",
+           "solve_qp"]
 
 #: DAQP's tolerances (rows in row units: 1e-9 of a millimetre) and iteration limit
 DAQP_SETTINGS = {"primal_tol": 1e-9, "dual_tol": 1e-12, "iter_limit": 2000}
@@ -68,6 +69,16 @@ SLACK_RHO1 = 1e6
 ARRIVAL_SLACK_WEIGHT = 1e-3
 #: sense of an equality row for DAQP
 EQUALITY = 5
+#: CPU seconds of one DAQP iteration per row it holds (bounds included) and per variable: an
+#: iteration checks every row it holds against the current point (the least-distance form's
+#: ``rows x variables`` product dominates). Measured on the refused steps of users cases 7, 16,
+#: 41, 63 of seed 31 (N 100, 5-6 legs, 1 000-5 500 rows of 504-604 variables): 1.9-3.5e-10 s,
+#: this the largest; the work bound of a refused step (:func:`daqp_iterations`) takes it so
+#: that a solve it cuts does not overrun what was left
+DAQP_ITERATION_S = 2.5e-10
+#: the flag of a solve that was not started or was stopped at the request's work bound
+#: (:func:`daqp_iterations`), not at DAQP's own limit or verdict
+WORK_BOUND_FLAG = -100
 
 
 @dataclass(slots=True, eq=False)
@@ -106,6 +117,15 @@ def solve_qp(H: np.ndarray, f: np.ndarray, A: np.ndarray, upper: np.ndarray, low
 
     x, _, flag, info = daqp.solve(H, f, A, upper, lower, sense, **kw)
     return QPSolution(x, int(flag), int(info["iterations"]), lam=info.get("lam"))
+
+
+def daqp_iterations(seconds: float, rows: int, variables: int, cap: int) -> int:
+    """The DAQP iterations that ``seconds`` of work pay for on a QP of ``rows`` rows (the bounds
+    on its variables included) and ``variables`` variables (:data:`DAQP_ITERATION_S`), at most
+    ``cap`` (0 if nothing is left)."""
+    if seconds <= 0.0:
+        return 0
+    return int(min(cap, seconds / (DAQP_ITERATION_S * max(1, rows) * max(1, variables))))
 
 
 def factor(H: np.ndarray) -> np.ndarray:
@@ -176,16 +196,25 @@ class DenseQP:
     #: solves of a step with the same rows
     M: np.ndarray | None = None
 
-    def solve_hard(self, start: np.ndarray | None = None) -> QPSolution:
-        """The hard QP with every hard row given to DAQP (the numpy reference's solve)."""
+    def solve_hard(self, start: np.ndarray | None = None, iter_limit: int | None = None) -> QPSolution:
+        """The hard QP with every hard row given to DAQP (the numpy reference's solve);
+        ``iter_limit``: DAQP's iteration limit instead of :data:`DAQP_SETTINGS`'s (a refused
+        step's work bound: 0 is not solved, :data:`WORK_BOUND_FLAG`)."""
         nh = self.n_hard
+        if iter_limit is not None and iter_limit <= 0:
+            return QPSolution(np.zeros(len(self.f)), WORK_BOUND_FLAG, 0)
         bu = np.concatenate((self.zmax, self.upper[:nh]))
         bl = np.concatenate((-self.zmax, self.lower[:nh]))
         sense = np.zeros(len(bu), dtype=np.int32)
         sense[bu - bl <= 0] = EQUALITY
         if self.Rinv is not None:
-            return _solve_ldp(self.Rinv, self.f, self._ldp_rows()[:nh], bu, bl, sense, start)
-        return solve_qp(self.H, self.f, self.A[:nh], bu, bl, sense, start)
+            sol = _solve_ldp(self.Rinv, self.f, self._ldp_rows()[:nh], bu, bl, sense, start, iter_limit)
+        else:
+            sol = solve_qp(self.H, self.f, self.A[:nh], bu, bl, sense, start, iter_limit)
+        if (iter_limit is not None and iter_limit < DAQP_SETTINGS["iter_limit"] and not sol.ok
+                and sol.iterations >= iter_limit):
+            sol.flag = WORK_BOUND_FLAG  # stopped by the bound, not at DAQP's own limit
+        return sol
 
     def _ldp_rows(self) -> np.ndarray:
         """``A R^-1`` (formed once)."""
@@ -201,7 +230,7 @@ class DenseQP:
         return float(np.maximum(np.maximum(self.lower[:nh] - r, r - self.upper[:nh]), 0.0).max(initial=0.0))
 
     def solve_slack(self, arrival: np.ndarray | None = None, iter_limit: int | None = None,
-                    start: np.ndarray | None = None) -> QPSolution:
+                    start: np.ndarray | None = None, seconds: float | None = None) -> QPSolution:
         """Every row (corridor, speed and stroke) softened by four slacks ``s >= 0`` (row
         units: corridor m and rad, stroke m, leg speed m/s by :class:`RowKind`; the rows where
         ``arrival`` (a mask) is true, the arrival speed, m/s), penalised by
@@ -223,7 +252,13 @@ class DenseQP:
         row (issue 33 goal 2: users case 7 of seed 31, N 100 x 6 legs, ran four cold rounds
         and every row to the 20 000-iteration limit, 15 CPU s, and was reported without a
         solution; warm, 1 421 iterations, 0.7 s; case 16 10 530 -> 4 526 iterations, the same
-        optimum)."""
+        optimum).
+
+        ``seconds``: the work it may take (a refused step's work bound; None: no bound), each
+        solve's iterations at :data:`DAQP_ITERATION_S` a row held and variable
+        (:func:`daqp_iterations`); a solve that the bound stops or leaves no iteration ends the
+        problem unsolved with :data:`WORK_BOUND_FLAG` (issue 33 goal 2: at N 100 one refused
+        step's slack problem took 2-6 CPU s, 3-30x its whole plan's estimate)."""
         nz, kinds = len(self.f), self.kinds
         ns = 4
         w = np.array([1.0, 1.0, 1.0, ARRIVAL_SLACK_WEIGHT])
@@ -285,8 +320,26 @@ class DenseQP:
                 sol.lam = lam
             return sol
 
+        spent = 0.0  # the work of the solves so far [s] (DAQP_ITERATION_S)
+
+        def bounded(held: np.ndarray | None, iterations: int, warm: np.ndarray | None = None) -> QPSolution:
+            """``run`` within ``seconds`` (the work bound): its iterations at most what is
+            left of it pays for; :data:`WORK_BOUND_FLAG` where the bound stops it."""
+            nonlocal spent
+            if seconds is None:
+                return run(held, iterations, warm)
+            rows = nb + (len(As) if held is None else int(held.sum()))
+            cap = daqp_iterations(seconds - spent, rows, nb, iterations)
+            if cap <= 0:
+                return QPSolution(np.zeros(nb), WORK_BOUND_FLAG, 0)
+            sol = run(held, cap, warm)
+            spent += sol.iterations * DAQP_ITERATION_S * rows * nb
+            if not sol.ok and cap < iterations and sol.iterations >= cap:
+                sol.flag = WORK_BOUND_FLAG
+            return sol
+
         if Rinv is None:
-            return run(None, limit)
+            return bounded(None, limit)
         # the side of each two-sided row nearer to the start: (upper copies, lower copies) as As
         z0 = np.zeros(nz) if start is None else np.clip(start, -self.zmax, self.zmax)
         r0 = self.A @ z0
@@ -308,8 +361,10 @@ class DenseQP:
         used = 0
         warm = None
         for _ in range(SCREEN_ROUNDS):
-            sol = run(held, limit - used, warm)
+            sol = bounded(held, limit - used, warm)
             used += sol.iterations
+            if sol.flag == WORK_BOUND_FLAG:
+                return QPSolution(sol.z, WORK_BOUND_FLAG, used)
             if used >= limit:
                 return QPSolution(sol.z, sol.flag if sol.ok else -1, used)
             if not sol.ok:  # a numerical failure on the rows held: every row, afresh
@@ -323,7 +378,7 @@ class DenseQP:
                 return QPSolution(sol.z, sol.flag, used)
             held |= out | near(Az)  # and the sides near the solution: fewer rounds
             warm = _working_set(sol.lam)
-        sol = run(None, limit - used, warm)
+        sol = bounded(None, limit - used, warm)
         return QPSolution(sol.z, sol.flag, used + sol.iterations)
 
 
