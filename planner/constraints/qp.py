@@ -25,10 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ARRIVAL_SLACK_WEIGHT", "DAQP_ITERATION_S", "DAQP_SETTINGS", "RETRY_FLAGS", "RETRY_SETTINGS",
-           "SCREEN_FIRST", "SCREEN_NEAR", "SCREEN_ROUNDS", "SCREEN_TOL", "SLACK_ITER_LIMIT", "SLACK_RHO1",
-           "SLACK_RHO2", "WORK_BOUND_FLAG", "DenseQP", "QPSolution", "daqp_iterations", "factor", "rows_ldp",
-           "solve_qp"]
+__all__ = ["ARRIVAL_SLACK_WEIGHT", "DAQP_ITERATION_LARGE_S", "DAQP_ITERATION_S", "DAQP_LARGE_ENTRIES",
+           "DAQP_SETTINGS", "RETRY_FLAGS", "RETRY_SETTINGS", "SCREEN_FIRST", "SCREEN_NEAR", "SCREEN_ROUNDS",
+           "SCREEN_TOL", "SLACK_ITER_LIMIT", "SLACK_RHO1", "SLACK_RHO2", "WORK_BOUND_FLAG", "DenseQP", "QPSolution",
+           "daqp_iteration_s", "daqp_iterations", "factor", "rows_ldp", "solve_qp"]
 
 #: DAQP's tolerances (rows in row units: 1e-9 of a millimetre) and iteration limit
 DAQP_SETTINGS = {"primal_tol": 1e-9, "dual_tol": 1e-12, "iter_limit": 2000}
@@ -71,11 +71,14 @@ ARRIVAL_SLACK_WEIGHT = 1e-3
 EQUALITY = 5
 #: CPU seconds of one DAQP iteration per row it holds (bounds included) and per variable: an
 #: iteration checks every row it holds against the current point (the least-distance form's
-#: ``rows x variables`` product dominates). Measured on the refused steps of users cases 7, 16,
-#: 41, 63 of seed 31 (N 100, 5-6 legs, 1 000-5 500 rows of 504-604 variables): 1.9-3.5e-10 s,
-#: this the largest; the work bound of a refused step (:func:`daqp_iterations`) takes it so
-#: that a solve it cuts does not overrun what was left
-DAQP_ITERATION_S = 2.5e-10
+#: ``rows x variables`` product dominates). Measured: 1.1e-10 s on small problems (users case 38
+#: of seed 31, 755 rows x 249 variables, in cache), up to :data:`DAQP_ITERATION_LARGE_S` on
+#: large ones (the refused steps of cases 7, 16, 41, 63: 1 000-5 500 rows x 504-604 variables,
+#: 1.9-3.5e-10 s, more under load); :func:`daqp_iterations` interpolates in ``rows x variables``
+#: up to :data:`DAQP_LARGE_ENTRIES`
+DAQP_ITERATION_S = 1.1e-10
+DAQP_ITERATION_LARGE_S = 3.5e-10
+DAQP_LARGE_ENTRIES = 2e6
 #: the flag of a solve that was not started or was stopped at the request's work bound
 #: (:func:`daqp_iterations`), not at DAQP's own limit or verdict
 WORK_BOUND_FLAG = -100
@@ -119,13 +122,20 @@ def solve_qp(H: np.ndarray, f: np.ndarray, A: np.ndarray, upper: np.ndarray, low
     return QPSolution(x, int(flag), int(info["iterations"]), lam=info.get("lam"))
 
 
+def daqp_iteration_s(rows: int, variables: int) -> float:
+    """CPU seconds of one DAQP iteration on a QP of ``rows`` rows (the bounds on its variables
+    included) and ``variables`` variables (:data:`DAQP_ITERATION_S`)."""
+    entries = max(1, rows) * max(1, variables)
+    share = min(1.0, entries / DAQP_LARGE_ENTRIES)
+    return entries * (DAQP_ITERATION_S + (DAQP_ITERATION_LARGE_S - DAQP_ITERATION_S) * share)
+
+
 def daqp_iterations(seconds: float, rows: int, variables: int, cap: int) -> int:
-    """The DAQP iterations that ``seconds`` of work pay for on a QP of ``rows`` rows (the bounds
-    on its variables included) and ``variables`` variables (:data:`DAQP_ITERATION_S`), at most
-    ``cap`` (0 if nothing is left)."""
+    """The DAQP iterations that ``seconds`` of work pay for on a QP of ``rows`` rows and
+    ``variables`` variables (:func:`daqp_iteration_s`), at most ``cap`` (0 if nothing is left)."""
     if seconds <= 0.0:
         return 0
-    return int(min(cap, seconds / (DAQP_ITERATION_S * max(1, rows) * max(1, variables))))
+    return int(min(cap, seconds / daqp_iteration_s(rows, variables)))
 
 
 def factor(H: np.ndarray) -> np.ndarray:
@@ -333,7 +343,7 @@ class DenseQP:
             if cap <= 0:
                 return QPSolution(np.zeros(nb), WORK_BOUND_FLAG, 0)
             sol = run(held, cap, warm)
-            spent += sol.iterations * DAQP_ITERATION_S * rows * nb
+            spent += sol.iterations * daqp_iteration_s(rows, nb)
             if not sol.ok and cap < iterations and sol.iterations >= cap:
                 sol.flag = WORK_BOUND_FLAG
             return sol
