@@ -102,8 +102,8 @@ def test_a_refusals_figures_are_the_slack_problems_optimum(samples):
     seen = []
     orig = qp_module.DenseQP.solve_slack
 
-    def spy(self, arrival=None, iter_limit=None, start=None, seconds=None):
-        sol = orig(self, arrival, iter_limit, start, seconds)
+    def spy(self, arrival=None, iter_limit=None, start=None, left=None):
+        sol = orig(self, arrival, iter_limit, start, left)
         seen.append((self, arrival, sol))
         return sol
 
@@ -139,8 +139,14 @@ def test_the_work_bound_follows_the_estimate_and_only_a_strict_plan_has_one():
     assert qp_module.daqp_iterations(0.0, 100, 10, 2000) == 0
     assert qp_module.daqp_iterations(-1.0, 100, 10, 2000) == 0
     assert qp_module.daqp_iterations(1e3, 100, 10, 2000) == 2000
-    a, b = qp_module.daqp_iterations(0.1, 1000, 600, 10 ** 9), qp_module.daqp_iterations(0.1, 4000, 600, 10 ** 9)
-    assert a == pytest.approx(4 * b, rel=1e-2)
+    counts = [qp_module.daqp_iterations(0.1, rows, 600, 10 ** 9) for rows in (200, 1000, 4000, 8000)]
+    assert counts == sorted(counts, reverse=True) and counts[-1] > 0
+    for rows, n in zip((200, 1000, 4000, 8000), counts, strict=True):  # what they cost fits, one more does not
+        assert n * qp_module.daqp_iteration_s(rows, 600) <= 0.1 < (n + 1) * qp_module.daqp_iteration_s(rows, 600)
+    # per row and variable: the small problems' cost, the large ones' beyond DAQP_LARGE_ENTRIES
+    assert qp_module.daqp_iteration_s(10, 10) / 100 == pytest.approx(qp_module.DAQP_ITERATION_S, rel=1e-3)
+    big = int(qp_module.DAQP_LARGE_ENTRIES)
+    assert qp_module.daqp_iteration_s(big, 2) / (2 * big) == pytest.approx(qp_module.DAQP_ITERATION_LARGE_S)
     bound = WorkBound.of(2.0, REFUSAL_WORK, 0.0)
     assert bound.seconds == pytest.approx(2.0 * REFUSAL_WORK)
     for settled in (True, False):

@@ -491,7 +491,7 @@ class ConstrainedController:
                 f"{_slack_words(stats.failures < stats.infeasible, stats.slack_max_m, stats.speed_slack_max_m_s)})")
         bound = self.bound
         sol = dense.solve_slack(arrival, None if self.st.require_settled else int(min(left, SLACK_ITER_LIMIT)),
-                                self.warm_start(), None if bound is None or work is None else work())
+                                self.warm_start(), None if bound is None else work)
         stats.slack_iterations += sol.iterations
         if bound is not None and sol.flag == WORK_BOUND_FLAG:
             # stopped at the request's work bound: the refusal says what was proved, no figure

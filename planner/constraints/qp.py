@@ -21,6 +21,7 @@ form (identity Hessian: its setup only scales the rows); the slack problem is sc
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -79,6 +80,11 @@ EQUALITY = 5
 DAQP_ITERATION_S = 1.1e-10
 DAQP_ITERATION_LARGE_S = 3.5e-10
 DAQP_LARGE_ENTRIES = 2e6
+#: DAQP's exit flag at its iteration limit
+ITERATION_LIMIT_FLAG = -4
+#: the fewest and the most iterations of a piece of a bounded solve (:meth:`DenseQP.solve_slack`)
+BOUND_PIECE_MIN = 50
+BOUND_PIECE_MAX = 1000
 #: the flag of a solve that was not started or was stopped at the request's work bound
 #: (:func:`daqp_iterations`), not at DAQP's own limit or verdict
 WORK_BOUND_FLAG = -100
@@ -240,7 +246,7 @@ class DenseQP:
         return float(np.maximum(np.maximum(self.lower[:nh] - r, r - self.upper[:nh]), 0.0).max(initial=0.0))
 
     def solve_slack(self, arrival: np.ndarray | None = None, iter_limit: int | None = None,
-                    start: np.ndarray | None = None, seconds: float | None = None) -> QPSolution:
+                    start: np.ndarray | None = None, left: Callable[[], float] | None = None) -> QPSolution:
         """Every row (corridor, speed and stroke) softened by four slacks ``s >= 0`` (row
         units: corridor m and rad, stroke m, leg speed m/s by :class:`RowKind`; the rows where
         ``arrival`` (a mask) is true, the arrival speed, m/s), penalised by
@@ -264,10 +270,10 @@ class DenseQP:
         solution; warm, 1 421 iterations, 0.7 s; case 16 10 530 -> 4 526 iterations, the same
         optimum).
 
-        ``seconds``: the work it may take (a refused step's work bound; None: no bound), each
-        solve's iterations at :data:`DAQP_ITERATION_S` a row held and variable
-        (:func:`daqp_iterations`); a solve that the bound stops or leaves no iteration ends the
-        problem unsolved with :data:`WORK_BOUND_FLAG` (issue 33 goal 2: at N 100 one refused
+        ``left``: a function giving the work [CPU s] it may still take (a refused step's work
+        bound; None: no bound); each solve runs in pieces of iterations that what is left pays
+        for (:func:`daqp_iterations`); a solve that the bound stops or leaves no iteration ends
+        the problem unsolved with :data:`WORK_BOUND_FLAG` (issue 33 goal 2: at N 100 one refused
         step's slack problem took 2-6 CPU s, 3-30x its whole plan's estimate)."""
         nz, kinds = len(self.f), self.kinds
         ns = 4
@@ -330,23 +336,31 @@ class DenseQP:
                 sol.lam = lam
             return sol
 
-        spent = 0.0  # the work of the solves so far [s] (DAQP_ITERATION_S)
-
         def bounded(held: np.ndarray | None, iterations: int, warm: np.ndarray | None = None) -> QPSolution:
-            """``run`` within ``seconds`` (the work bound): its iterations at most what is
-            left of it pays for; :data:`WORK_BOUND_FLAG` where the bound stops it."""
-            nonlocal spent
-            if seconds is None:
+            """``run`` within the work ``left`` (measured): in pieces of half the iterations
+            that what is left pays for (:func:`daqp_iterations`), at most
+            :data:`BOUND_PIECE_MAX`, each from the working set where the one before stopped, the
+            time measured between them (a DAQP iteration costs up to 4x the model: users case 0
+            of seed 31, 0.5 ms on 1 724 x 404); :data:`WORK_BOUND_FLAG` where the bound stops
+            it. A solve whose whole iteration limit fits in half of what is left runs whole, as
+            without a bound."""
+            if left is None:
                 return run(held, iterations, warm)
             rows = nb + (len(As) if held is None else int(held.sum()))
-            cap = daqp_iterations(seconds - spent, rows, nb, iterations)
-            if cap <= 0:
-                return QPSolution(np.zeros(nb), WORK_BOUND_FLAG, 0)
-            sol = run(held, cap, warm)
-            spent += sol.iterations * daqp_iteration_s(rows, nb)
-            if not sol.ok and cap < iterations and sol.iterations >= cap:
-                sol.flag = WORK_BOUND_FLAG
-            return sol
+            done = 0
+            z = np.zeros(nb)
+            while True:
+                cap = daqp_iterations(left(), rows, nb, iterations - done)
+                if cap <= 0:
+                    return QPSolution(z, WORK_BOUND_FLAG, done)
+                rest = iterations - done
+                piece = rest if cap // 2 >= rest else min(rest, max(BOUND_PIECE_MIN, min(cap // 2, BOUND_PIECE_MAX)))
+                sol = run(held, piece, warm)
+                done += sol.iterations
+                sol.iterations, z = done, sol.z
+                if sol.ok or sol.flag != ITERATION_LIMIT_FLAG or done >= iterations or sol.lam is None:
+                    return sol
+                warm = _working_set(sol.lam)  # go on from where it stopped
 
         if Rinv is None:
             return bounded(None, limit)
