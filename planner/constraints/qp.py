@@ -337,30 +337,39 @@ class DenseQP:
             return sol
 
         def bounded(held: np.ndarray | None, iterations: int, warm: np.ndarray | None = None) -> QPSolution:
-            """``run`` within the work ``left`` (measured): in pieces of half the iterations
-            that what is left pays for (:func:`daqp_iterations`), at most
-            :data:`BOUND_PIECE_MAX`, each from the working set where the one before stopped, the
-            time measured between them (a DAQP iteration costs up to 4x the model: users case 0
-            of seed 31, 0.5 ms on 1 724 x 404); :data:`WORK_BOUND_FLAG` where the bound stops
-            it. A solve whose whole iteration limit fits in half of what is left runs whole, as
-            without a bound."""
+            """``run`` within the work ``left`` (measured). A solve whose whole iteration limit
+            what is left pays for (:func:`daqp_iterations`) runs whole, as without a bound;
+            otherwise in pieces of half of what is left pays for (at most
+            :data:`BOUND_PIECE_MAX`), each from the working set where the one before stopped,
+            the time measured between them (a DAQP iteration costs up to 4x the model: users
+            case 0 of seed 31, 0.5 ms on 1 724 x 404); :data:`WORK_BOUND_FLAG` where the bound
+            stops it. (Pieces converge more slowly than a whole solve: users case 27 did not in
+            17 pieces of 1 000 where the whole solve did, so a solve the bound leaves room for is
+            never cut into pieces.)"""
             if left is None:
                 return run(held, iterations, warm)
             rows = nb + (len(As) if held is None else int(held.sum()))
+            cap = daqp_iterations(left(), rows, nb, iterations)
+            if cap <= 0:
+                return QPSolution(np.zeros(nb), WORK_BOUND_FLAG, 0)
+            if cap >= iterations:  # the bound does not bind by the model: the solve as without it
+                return run(held, iterations, warm)
             done = 0
-            z = np.zeros(nb)
             while True:
-                cap = daqp_iterations(left(), rows, nb, iterations - done)
-                if cap <= 0:
-                    return QPSolution(z, WORK_BOUND_FLAG, done)
                 rest = iterations - done
-                piece = rest if cap // 2 >= rest else min(rest, max(BOUND_PIECE_MIN, min(cap // 2, BOUND_PIECE_MAX)))
+                piece = min(rest, max(BOUND_PIECE_MIN, min(cap // 2, BOUND_PIECE_MAX)))
                 sol = run(held, piece, warm)
                 done += sol.iterations
-                sol.iterations, z = done, sol.z
-                if sol.ok or sol.flag != ITERATION_LIMIT_FLAG or done >= iterations or sol.lam is None:
+                sol.iterations = done
+                if sol.ok or sol.flag != ITERATION_LIMIT_FLAG:
                     return sol
-                warm = _working_set(sol.lam)  # go on from where it stopped
+                # stopped at the piece's end: on from there while the bound leaves iterations (a
+                # solve in pieces that reaches its own limit was cut short by them too)
+                cap = daqp_iterations(left(), rows, nb, iterations - done)
+                if cap <= 0 or done >= iterations or sol.lam is None:
+                    sol.flag = WORK_BOUND_FLAG
+                    return sol
+                warm = _working_set(sol.lam)
 
         if Rinv is None:
             return bounded(None, limit)
