@@ -323,12 +323,17 @@ class DenseQP:
             for retry in ((None if Rinv is None else SCREEN_FIRST), *RETRY_SETTINGS):
                 if sol.iterations and (sol.flag not in RETRY_FLAGS or sol.iterations >= iterations):
                     break
+                if sol.iterations and left is not None and left() <= 0.0:
+                    # no retry past the work bound (users case 42 of seed 31: a whole solve cycled
+                    # for 1.7 s, twice the model, then two retries took 0.8 s more)
+                    sol.flag = WORK_BOUND_FLAG
+                    break
                 # the slack problem always has a solution (the previous forces meet the hard rows):
                 # DAQP cycled or lost its factorisation, a numerical failure; solved again
-                left = iterations - sol.iterations
+                rest = iterations - sol.iterations
                 bits = s_ if warm is None or sol.iterations else warm[sel]  # a retry starts afresh
-                again = (_solve_ldp(Rinv, fs, A_, u_, l_, bits, iter_limit=left, retry=retry) if Rinv is not None
-                         else solve_qp(Hs, fs, A_, u_, l_, bits, iter_limit=left, retry=retry))
+                again = (_solve_ldp(Rinv, fs, A_, u_, l_, bits, iter_limit=rest, retry=retry) if Rinv is not None
+                         else solve_qp(Hs, fs, A_, u_, l_, bits, iter_limit=rest, retry=retry))
                 sol = QPSolution(again.z, again.flag, sol.iterations + again.iterations, lam=again.lam)
             if sol.lam is not None:  # the working set, as sense bits over every bound and one-sided row
                 lam = np.zeros(len(ub))
