@@ -39,7 +39,9 @@ solve, refine, finish) is written once, here.
 Infeasibility. If the hard QP has no solution, the step is solved again with the rows
 softened by slack variables (:meth:`~planner.constraints.qp.DenseQP.solve_slack`; forces stay
 hard). With ``settings.require_settled`` (default) the plan stops there with
-``PlannerError("infeasible")`` (time and slack in the message); otherwise every such step is
+``PlannerError("infeasible")`` (time and slack in the message), its work bounded by
+:class:`WorkBound` (where the bound stops the step's solves, the message says the slack was
+not computed within it); otherwise every such step is
 counted (``infeasible_steps``), its slack reported (``constraint_slack_max_m``,
 ``speed_slack_max_m_s``) and the result marks the plan not contained, within ``slack`` (the
 steps and slack-problem iterations the work estimate counts,
