@@ -1143,20 +1143,43 @@ def users_case(i: int) -> dict:
     return _with(user_case(np.random.default_rng([31, i])), mode="constrained")
 
 
-def cpu_over_estimate(req: dict, table1: dict) -> float:
+def cpu_over_estimate(req: dict, table1: dict, refused: bool = False) -> float:
     """``req``'s CPU time over its work estimate at the reference machine's speed (Table I's
     CPU time now over its 20 ms there, as benchmarks/certify.py calibrates; the least of 3
-    timings each)."""
+    timings each). ``refused``: ``req`` is refused (``infeasible``), and its own CPU time is
+    measured, up to where its advice search starts (as ``certify.py --profile`` separates "plan
+    infeasible" from "advice search")."""
+    import sys
+
+    import pytest
+
     from planner import estimate_work, plan
 
-    def cpu(r: dict) -> float:
+    orchestrator = sys.modules["planner.orchestrator.plan"]
+
+    class _AdviceStarts(Exception):
+        pass
+
+    def no_advice(exc, *args, **kwargs):
+        raise _AdviceStarts
+
+    def cpu(r: dict, refused: bool = False) -> float:
         best = np.inf
         for _ in range(3):
             t0 = time.process_time()
-            plan(r)
+            if refused:
+                with pytest.MonkeyPatch.context() as mp:
+                    mp.setattr(orchestrator, "_more_time_advice", no_advice)
+                    try:
+                        plan(r)
+                        raise AssertionError("planned, not refused")
+                    except _AdviceStarts:
+                        pass
+            else:
+                plan(r)
             best = min(best, time.process_time() - t0)
         return best
 
     speed = cpu(table1) / 0.020
-    return cpu(req) / speed / estimate_work(req).seconds
+    return cpu(req, refused) / speed / estimate_work(req).seconds
 

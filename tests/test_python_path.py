@@ -8,6 +8,9 @@ iteration. Measured before/after: benchmarks/README.md."""
 
 from __future__ import annotations
 
+import math
+import sys
+
 import numpy as np
 import pytest
 
@@ -33,7 +36,7 @@ def _fallback_qps(req: dict) -> list[tuple[qp_module.DenseQP, np.ndarray | None,
     seen: list[tuple[qp_module.DenseQP, np.ndarray | None, np.ndarray | None]] = []
     orig = qp_module.DenseQP.solve_slack
 
-    def spy(self, arrival=None, iter_limit=None, start=None):
+    def spy(self, arrival=None, iter_limit=None, start=None, left=None):
         seen.append((self, arrival, start))
         return orig(self, arrival, iter_limit, start)
 
@@ -123,6 +126,9 @@ def test_case38_plans_as_with_the_plain_forms_and_asks_daqp_once_a_step():
     assert check_plan(req, res, _segments_of(req, res)).ok
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(FullQP, "dense", _plain_dense)
+        # the plain forms cost more than the refused-step work bound lets a plan take past 1.3x
+        # its estimate (the plan is already there): the comparison is of answers, without it
+        mp.setattr(sys.modules["planner.orchestrator.plan"], "REFUSAL_WORK", math.inf)
         ref = plan(req)
     assert ref.metrics.qp_fallbacks == m.qp_fallbacks and ref.metrics.qp_relaxed_steps == m.qp_relaxed_steps
     assert np.abs(np.asarray(res.pose) - np.asarray(ref.pose)).max() <= 1e-9

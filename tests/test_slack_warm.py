@@ -26,7 +26,7 @@ def _refused_slack_problem(i: int) -> tuple[qp_module.DenseQP, np.ndarray | None
     req = _with(user_case(np.random.default_rng([31, i])), mode="constrained")
     seen = []
 
-    def spy(self, arrival=None, iter_limit=None, start=None):
+    def spy(self, arrival=None, iter_limit=None, start=None, left=None):
         seen.append((self, arrival, start))
         raise _Captured
 

@@ -26,7 +26,7 @@ Modules, by concept:
 """
 
 from .composed import Constraints, force_rate
-from .controller import CONTAIN_TOL_M, CONTAIN_TOL_RAD, ConstrainedController, ControllerStats, Memory
+from .controller import CONTAIN_TOL_M, CONTAIN_TOL_RAD, ConstrainedController, ControllerStats, Memory, WorkBound
 from .corridor import (
     END_TOL_M,
     END_TOL_RAD,
@@ -50,4 +50,4 @@ __all__ = ["CONTAIN_TOL_M", "CONTAIN_TOL_RAD", "END_TOL_M", "END_TOL_RAD", "MARG
            "SPEED_MARGIN", "ArrivalConstraint", "ConstrainedController", "Constraints", "ControllerStats", "Memory",
            "CorridorConstraint", "DenseQP", "DriveForceConstraint", "DriveForceRateConstraint",
            "EndApproachConstraint", "LegSpeedConstraint", "LegStrokeConstraint", "QPSolution", "RowKind", "Rows",
-           "force_rate"]
+           "WorkBound", "force_rate"]

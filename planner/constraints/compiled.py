@@ -205,10 +205,10 @@ class CompiledAssembly:
             qp.full = FullQP.form(qp.Ad, qp.Bd, self.umax, self.du_moves, qp.x, qp.d, qp.W, qp.tgt, qp.rows)
         return qp.full
 
-    def solve(self, qp: StepQP, start: np.ndarray | None) -> QPSolution:
+    def solve(self, qp: StepQP, start: np.ndarray | None, iter_limit: int | None = None) -> QPSolution:
         """The hard QP from the warm start ``start`` (scaled moves), every row given to DAQP
-        (the Python path of a step)."""
-        return self.full(qp).solve(qp.rows, self.zmax, start)
+        (the Python path of a step; ``iter_limit``: :meth:`DenseQP.solve_hard`)."""
+        return self.full(qp).solve(qp.rows, self.zmax, start, iter_limit)
 
     def one_step_error(self, qp: StepQP, u: np.ndarray) -> tuple[np.ndarray, float, float]:
         """The plant's next state under ``u`` [N] and how far it lands from the prediction

@@ -39,7 +39,9 @@ solve, refine, finish) is written once, here.
 Infeasibility. If the hard QP has no solution, the step is solved again with the rows
 softened by slack variables (:meth:`~planner.constraints.qp.DenseQP.solve_slack`; forces stay
 hard). With ``settings.require_settled`` (default) the plan stops there with
-``PlannerError("infeasible")`` (time and slack in the message); otherwise every such step is
+``PlannerError("infeasible")`` (time and slack in the message), its work bounded by
+:class:`WorkBound` (where the bound stops the step's solves, the message says the slack was
+not computed within it); otherwise every such step is
 counted (``infeasible_steps``), its slack reported (``constraint_slack_max_m``,
 ``speed_slack_max_m_s``) and the result marks the plan not contained, within ``slack`` (the
 steps and slack-problem iterations the work estimate counts,
@@ -58,7 +60,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Protocol
 
@@ -72,13 +74,14 @@ from ..schema import Segment, Settings
 from .compiled import MAX_ITERATIONS, CompiledAssembly
 from .composed import Constraints
 from .corridor import MARGIN_M, MARGIN_RAD
-from .qp import SLACK_ITER_LIMIT, DenseQP, QPSolution
+from .qp import DAQP_SETTINGS, SLACK_ITER_LIMIT, WORK_BOUND_FLAG, DenseQP, QPSolution, daqp_iterations
 from .reference import ReferenceAssembly
 from .rows import RELAX_M, ROW_UNIT_M, RowKind
 from .stagewise import INFEASIBLE, SOLVED, shifted
 
 __all__ = ["CONTAIN_TOL_M", "CONTAIN_TOL_RAD", "REFINE_MAX", "REFINE_TOL_M", "REFINE_TOL_RAD", "Assembly",
-           "ConstrainedController", "ControllerStats", "LoopRecord", "Memory"]
+           "ConstrainedController", "ControllerStats", "HARD_ITER_LIMIT", "LoopRecord", "Memory", "STEP_WORK_FLOOR_S",
+           "WorkBound"]
 
 #: a plan is "contained" when its actual corridor violation is at most this [m] ...
 CONTAIN_TOL_M = 1e-9
@@ -91,6 +94,14 @@ CONTAIN_TOL_RAD = 1e-7
 REFINE_TOL_M = 1e-8
 REFINE_TOL_RAD = 3e-8
 REFINE_MAX = 3
+#: DAQP's own iteration limit of a hard solve
+HARD_ITER_LIMIT = int(DAQP_SETTINGS["iter_limit"])
+#: the work [CPU s] every step on the Python path may take whatever the plan used before it
+#: (:meth:`WorkBound.for_step`): its QPs when small are solved, so that the bound cuts only the
+#: work that grows with the horizon (users case 38, 5 legs, N 49: an accepted plan past 1.3x
+#: its 0.052 s estimate whose three Python-path steps take 5-10 ms each; a refused step at N
+#: 100 takes 0.5-6 s)
+STEP_WORK_FLOOR_S = 0.05
 
 
 class Assembly(Protocol):
@@ -102,7 +113,7 @@ class Assembly(Protocol):
 
     def set_offset(self, qp: Any, u: np.ndarray, x1: np.ndarray) -> None: ...
 
-    def solve(self, qp: Any, start: np.ndarray | None) -> QPSolution: ...
+    def solve(self, qp: Any, start: np.ndarray | None, iter_limit: int | None = None) -> QPSolution: ...
 
     def relax(self, qp: Any, only: RowKind | None = None) -> None: ...
 
@@ -113,6 +124,43 @@ class Assembly(Protocol):
     def violation(self, qp: Any, sol: QPSolution) -> float: ...
 
     def finish(self, qp: Any, z: np.ndarray, hard: QPSolution | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+
+@dataclass(frozen=True)
+class WorkBound:
+    """The work a plan that stops at its first infeasible step (``require_settled``) may take
+    (issue 33 goal 2, issue 31 goal 6: a refusal's own work within 1.5x its estimate, like a
+    plan's): ``seconds`` of CPU time (``time.process_time``) from ``start``, the plan's
+    ``factor`` times its work estimate ``estimate_s``. A step on the Python path (DAQP: its
+    hard QP, relaxed, then the slack problem) gives each solve the iterations that what is left
+    pays for (:func:`~planner.constraints.qp.daqp_iterations`), or :data:`STEP_WORK_FLOOR_S`
+    of the step's where that is more; DAQP's own limits where they are less. Where the bound
+    stops them, the refusal says what was found and that the rest was not computed within the
+    bound."""
+
+    seconds: float  #: CPU seconds the plan may take
+    start: float  #: ``time.process_time()`` at the plan's start
+    estimate_s: float  #: the request's work estimate [s]
+    factor: float  #: ``seconds / estimate_s``
+
+    @classmethod
+    def of(cls, estimate_s: float, factor: float, start: float) -> WorkBound:
+        """``factor`` times the estimate ``estimate_s`` from ``start``."""
+        return cls(factor * estimate_s, start, estimate_s, factor)
+
+    def left(self) -> float:
+        """CPU seconds left [s] (negative past the bound)."""
+        return self.seconds - (time.process_time() - self.start)
+
+    def for_step(self) -> Callable[[], float]:
+        """For a step starting now: a function giving the work it has left [s], what is left of
+        the bound or of :data:`STEP_WORK_FLOOR_S` from now, whichever is more."""
+        floor = time.process_time() + STEP_WORK_FLOOR_S
+        return lambda: max(self.left(), floor - time.process_time())
+
+    def words(self) -> str:
+        """The bound, in words."""
+        return f"the request's work bound, {self.factor:g}x its estimate of {self.estimate_s:.3g} s"
 
 
 @dataclass
@@ -197,8 +245,11 @@ class ConstrainedController:
 
     def __init__(self, model: RobotModel, seq: RangeSequence, st: Settings,
                  segments: Sequence[Segment] | None = None, abandon: bool = False,
-                 slack: tuple[int, int] = (0, 0)):
+                 slack: tuple[int, int] = (0, 0), bound: WorkBound | None = None):
         self.model, self.seq, self.st = model, seq, st
+        #: the work the plan may take (:class:`WorkBound`; None: no bound): with
+        #: ``require_settled`` only (a plan with slack steps has its own, ``slack``)
+        self.bound = bound if st.require_settled else None
         #: with ``require_settled`` false: the infeasible steps and the slack-problem iterations
         #: the plan may take (the work estimate's, :func:`planner.orchestrator.work.slack_allowance`)
         self.slack_steps, self.slack_iterations = slack
@@ -283,19 +334,32 @@ class ConstrainedController:
             proved = False
         qp = asm.build(k, x, Ad, Bd, self.y_nom, self.u_prev, self.guess())
         start = self.warm_start()
-        sol = QPSolution(np.zeros(0), INFEASIBLE, 0) if proved else asm.solve(qp, start)
+        # with a work bound each DAQP solve of the step gets the iterations that what is left
+        # pays for, or the step's floor (a small QP is solved whatever the plan used): users
+        # case 7 (6 legs, N 100, Ts 1 ms) had used 1.68 CPU s of its 1.55 when its step at t =
+        # 0.766 s came here, and three hard solves took 1.6 s more, none to a verdict
+        left = self.bound.for_step() if self.bound is not None else None
+        nz = self.N * self.n_legs
+
+        def limit() -> int | None:
+            """DAQP's iteration limit of the next hard solve (None: its own)."""
+            return None if left is None else daqp_iterations(left(), qp.rows.n_hard + nz, nz, HARD_ITER_LIMIT)
+
+        sol = QPSolution(np.zeros(0), INFEASIBLE, 0) if proved else asm.solve(qp, start, limit())
         iterations = sol.iterations
         if not sol.ok:  # as the compiled step: once more with the rows widened by RELAX_M
             asm.relax(qp)
-            sol = QPSolution(np.zeros(0), INFEASIBLE, 0) if proved else asm.solve(qp, start)
+            sol = QPSolution(np.zeros(0), INFEASIBLE, 0) if proved else asm.solve(qp, start, limit())
             iterations += sol.iterations
+            # the relaxed hard QP found infeasible (by the compiled dual method, or DAQP's verdict)
+            proved = proved or sol.flag == INFEASIBLE
             if not sol.ok:
                 # the speed rows (leg speeds, arrival) by RELAX_M more: what the slack problem
                 # accepts as a numerical failure (slack <= RELAX_M, _slack_step) at a twentieth
                 # of its cost (issue 31: at Ts 1 ms the arrival rows of the last samples before
                 # the end point, infeasible by 1e-8 m/s, took 0.6 s a step on the slack problem)
                 asm.relax(qp, RowKind.SPEED)
-                sol = asm.solve(qp, start)
+                sol = asm.solve(qp, start, limit())
                 iterations += sol.iterations
             stats.relaxed += 1 if sol.ok else 0
         # while the plant under the solution's first move lands farther from the prediction
@@ -318,7 +382,7 @@ class ConstrainedController:
         else:
             rows = qp.rows  # the arrival rows: the speed rows before the legs' (the registry's row order)
             arrival = (rows.kinds == RowKind.SPEED) & (np.arange(rows.n_rows) < rows.speed0)
-            z, slack_iterations = self._slack_step(k, asm.dense(qp), arrival)
+            z, slack_iterations = self._slack_step(k, asm.dense(qp), arrival, proved, left)
             hard = None
             iterations += slack_iterations
         stats.iterations.append(iterations)
@@ -404,10 +468,14 @@ class ConstrainedController:
             z[:m] = np.clip(z[:m], z0 - rate / self.constraints.forces.umax, z0 + rate / self.constraints.forces.umax)
         return np.clip(z, -zmax, zmax)
 
-    def _slack_step(self, k: int, dense: DenseQP, arrival: np.ndarray) -> tuple[np.ndarray, int]:
+    def _slack_step(self, k: int, dense: DenseQP, arrival: np.ndarray, proved: bool = True,
+                    work: Callable[[], float] | None = None) -> tuple[np.ndarray, int]:
         """The step's moves from the slack problem (``arrival``: the mask of the arrival rows,
         softened apart) and its iterations; counts the step and its slack, raises
-        ``infeasible`` with ``require_settled`` or past :attr:`slack_steps`."""
+        ``infeasible`` with ``require_settled`` or past :attr:`slack_steps`. ``proved``: the
+        step's hard QP, its rows widened by ``RELAX_M``, was found infeasible (not left unsolved
+        at the work bound); what the refusal says where :attr:`bound` stops the slack problem.
+        ``work``: the work the step has left [s] (:meth:`WorkBound.for_step`)."""
         nz = len(dense.f)
         stats = self.stats
         left = self.slack_iterations - stats.slack_iterations
@@ -423,9 +491,24 @@ class ConstrainedController:
                 f"{stats.first_infeasible_s:.3f} s and stops at t = {k * self.st.Ts:.3f} s (segment "
                 f"{int(self.seq.segment[min(k, self.seq.K - 1)])}; "
                 f"{_slack_words(stats.failures < stats.infeasible, stats.slack_max_m, stats.speed_slack_max_m_s)})")
+        bound = self.bound
         sol = dense.solve_slack(arrival, None if self.st.require_settled else int(min(left, SLACK_ITER_LIMIT)),
-                                self.warm_start())
+                                self.warm_start(), None if bound is None else work)
         stats.slack_iterations += sol.iterations
+        if bound is not None and sol.flag == WORK_BOUND_FLAG:
+            # stopped at the request's work bound: the refusal says what was proved, no figure
+            stats.failures += 1
+            stats.infeasible += 1
+            if stats.infeasible == 1:
+                stats.first_infeasible_s = k * self.st.Ts
+            where = f"at t = {k * self.st.Ts:.3f} s (segment {int(self.seq.segment[min(k, self.seq.K - 1)])})"
+            what = (f"{where} the robot cannot keep the corridor within its drive limits (its QP, rows widened by "
+                    f"{RELAX_M * 1e6:g} um, has no solution with the drive forces and force rates held; by how much "
+                    f"the corridor would be left was not computed within {bound.words()})" if proved else
+                    f"{where} the step's QP was not solved within {bound.words()}: whether the robot can keep the "
+                    "corridor there within its drive limits, and by how much it would leave it, was not computed")
+            raise self.infeasible_error(what, "set require_settled to false to get the plan with its violations "
+                                        "reported")
         zs = sol.z
         if not sol.ok:  # even the slack problem failed: go on with the previous plan's moves
             self.stats.failures += 1

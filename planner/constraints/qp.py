@@ -21,13 +21,15 @@ form (identity Hessian: its setup only scales the rows); the slack problem is sc
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ARRIVAL_SLACK_WEIGHT", "DAQP_SETTINGS", "RETRY_FLAGS", "RETRY_SETTINGS", "SCREEN_FIRST", "SCREEN_NEAR",
-           "SCREEN_ROUNDS", "SCREEN_TOL", "SLACK_ITER_LIMIT", "SLACK_RHO1", "SLACK_RHO2", "DenseQP", "QPSolution",
-           "factor", "rows_ldp", "solve_qp"]
+__all__ = ["ARRIVAL_SLACK_WEIGHT", "DAQP_ITERATION_LARGE_S", "DAQP_ITERATION_S", "DAQP_LARGE_ENTRIES",
+           "DAQP_SETTINGS", "RETRY_FLAGS", "RETRY_SETTINGS", "SCREEN_FIRST", "SCREEN_NEAR", "SCREEN_ROUNDS",
+           "SCREEN_TOL", "SLACK_ITER_LIMIT", "SLACK_RHO1", "SLACK_RHO2", "WORK_BOUND_FLAG", "DenseQP", "QPSolution",
+           "daqp_iteration_s", "daqp_iterations", "factor", "rows_ldp", "solve_qp"]
 
 #: DAQP's tolerances (rows in row units: 1e-9 of a millimetre) and iteration limit
 DAQP_SETTINGS = {"primal_tol": 1e-9, "dual_tol": 1e-12, "iter_limit": 2000}
@@ -68,6 +70,24 @@ SLACK_RHO1 = 1e6
 ARRIVAL_SLACK_WEIGHT = 1e-3
 #: sense of an equality row for DAQP
 EQUALITY = 5
+#: CPU seconds of one DAQP iteration per row it holds (bounds included) and per variable: an
+#: iteration checks every row it holds against the current point (the least-distance form's
+#: ``rows x variables`` product dominates). Measured: 1.1e-10 s on small problems (users case 38
+#: of seed 31, 755 rows x 249 variables, in cache), up to :data:`DAQP_ITERATION_LARGE_S` on
+#: large ones (the refused steps of cases 7, 16, 41, 63: 1 000-5 500 rows x 504-604 variables,
+#: 1.9-3.5e-10 s, more under load); :func:`daqp_iterations` interpolates in ``rows x variables``
+#: up to :data:`DAQP_LARGE_ENTRIES`
+DAQP_ITERATION_S = 1.1e-10
+DAQP_ITERATION_LARGE_S = 3.5e-10
+DAQP_LARGE_ENTRIES = 2e6
+#: DAQP's exit flag at its iteration limit
+ITERATION_LIMIT_FLAG = -4
+#: the fewest and the most iterations of a piece of a bounded solve (:meth:`DenseQP.solve_slack`)
+BOUND_PIECE_MIN = 50
+BOUND_PIECE_MAX = 1000
+#: the flag of a solve that was not started or was stopped at the request's work bound
+#: (:func:`daqp_iterations`), not at DAQP's own limit or verdict
+WORK_BOUND_FLAG = -100
 
 
 @dataclass(slots=True, eq=False)
@@ -106,6 +126,22 @@ def solve_qp(H: np.ndarray, f: np.ndarray, A: np.ndarray, upper: np.ndarray, low
 
     x, _, flag, info = daqp.solve(H, f, A, upper, lower, sense, **kw)
     return QPSolution(x, int(flag), int(info["iterations"]), lam=info.get("lam"))
+
+
+def daqp_iteration_s(rows: int, variables: int) -> float:
+    """CPU seconds of one DAQP iteration on a QP of ``rows`` rows (the bounds on its variables
+    included) and ``variables`` variables (:data:`DAQP_ITERATION_S`)."""
+    entries = max(1, rows) * max(1, variables)
+    share = min(1.0, entries / DAQP_LARGE_ENTRIES)
+    return entries * (DAQP_ITERATION_S + (DAQP_ITERATION_LARGE_S - DAQP_ITERATION_S) * share)
+
+
+def daqp_iterations(seconds: float, rows: int, variables: int, cap: int) -> int:
+    """The DAQP iterations that ``seconds`` of work pay for on a QP of ``rows`` rows and
+    ``variables`` variables (:func:`daqp_iteration_s`), at most ``cap`` (0 if nothing is left)."""
+    if seconds <= 0.0:
+        return 0
+    return int(min(cap, seconds / daqp_iteration_s(rows, variables)))
 
 
 def factor(H: np.ndarray) -> np.ndarray:
@@ -176,16 +212,25 @@ class DenseQP:
     #: solves of a step with the same rows
     M: np.ndarray | None = None
 
-    def solve_hard(self, start: np.ndarray | None = None) -> QPSolution:
-        """The hard QP with every hard row given to DAQP (the numpy reference's solve)."""
+    def solve_hard(self, start: np.ndarray | None = None, iter_limit: int | None = None) -> QPSolution:
+        """The hard QP with every hard row given to DAQP (the numpy reference's solve);
+        ``iter_limit``: DAQP's iteration limit instead of :data:`DAQP_SETTINGS`'s (a refused
+        step's work bound: 0 is not solved, :data:`WORK_BOUND_FLAG`)."""
         nh = self.n_hard
+        if iter_limit is not None and iter_limit <= 0:
+            return QPSolution(np.zeros(len(self.f)), WORK_BOUND_FLAG, 0)
         bu = np.concatenate((self.zmax, self.upper[:nh]))
         bl = np.concatenate((-self.zmax, self.lower[:nh]))
         sense = np.zeros(len(bu), dtype=np.int32)
         sense[bu - bl <= 0] = EQUALITY
         if self.Rinv is not None:
-            return _solve_ldp(self.Rinv, self.f, self._ldp_rows()[:nh], bu, bl, sense, start)
-        return solve_qp(self.H, self.f, self.A[:nh], bu, bl, sense, start)
+            sol = _solve_ldp(self.Rinv, self.f, self._ldp_rows()[:nh], bu, bl, sense, start, iter_limit)
+        else:
+            sol = solve_qp(self.H, self.f, self.A[:nh], bu, bl, sense, start, iter_limit)
+        if (iter_limit is not None and iter_limit < DAQP_SETTINGS["iter_limit"] and not sol.ok
+                and sol.iterations >= iter_limit):
+            sol.flag = WORK_BOUND_FLAG  # stopped by the bound, not at DAQP's own limit
+        return sol
 
     def _ldp_rows(self) -> np.ndarray:
         """``A R^-1`` (formed once)."""
@@ -201,7 +246,7 @@ class DenseQP:
         return float(np.maximum(np.maximum(self.lower[:nh] - r, r - self.upper[:nh]), 0.0).max(initial=0.0))
 
     def solve_slack(self, arrival: np.ndarray | None = None, iter_limit: int | None = None,
-                    start: np.ndarray | None = None) -> QPSolution:
+                    start: np.ndarray | None = None, left: Callable[[], float] | None = None) -> QPSolution:
         """Every row (corridor, speed and stroke) softened by four slacks ``s >= 0`` (row
         units: corridor m and rad, stroke m, leg speed m/s by :class:`RowKind`; the rows where
         ``arrival`` (a mask) is true, the arrival speed, m/s), penalised by
@@ -223,7 +268,13 @@ class DenseQP:
         row (issue 33 goal 2: users case 7 of seed 31, N 100 x 6 legs, ran four cold rounds
         and every row to the 20 000-iteration limit, 15 CPU s, and was reported without a
         solution; warm, 1 421 iterations, 0.7 s; case 16 10 530 -> 4 526 iterations, the same
-        optimum)."""
+        optimum).
+
+        ``left``: a function giving the work [CPU s] it may still take (a refused step's work
+        bound; None: no bound); each solve runs in pieces of iterations that what is left pays
+        for (:func:`daqp_iterations`); a solve that the bound stops or leaves no iteration ends
+        the problem unsolved with :data:`WORK_BOUND_FLAG` (issue 33 goal 2: at N 100 one refused
+        step's slack problem took 2-6 CPU s, 3-30x its whole plan's estimate)."""
         nz, kinds = len(self.f), self.kinds
         ns = 4
         w = np.array([1.0, 1.0, 1.0, ARRIVAL_SLACK_WEIGHT])
@@ -272,12 +323,17 @@ class DenseQP:
             for retry in ((None if Rinv is None else SCREEN_FIRST), *RETRY_SETTINGS):
                 if sol.iterations and (sol.flag not in RETRY_FLAGS or sol.iterations >= iterations):
                     break
+                if sol.iterations and left is not None and left() <= 0.0:
+                    # no retry past the work bound (users case 42 of seed 31: a whole solve cycled
+                    # for 1.7 s, twice the model, then two retries took 0.8 s more)
+                    sol.flag = WORK_BOUND_FLAG
+                    break
                 # the slack problem always has a solution (the previous forces meet the hard rows):
                 # DAQP cycled or lost its factorisation, a numerical failure; solved again
-                left = iterations - sol.iterations
+                rest = iterations - sol.iterations
                 bits = s_ if warm is None or sol.iterations else warm[sel]  # a retry starts afresh
-                again = (_solve_ldp(Rinv, fs, A_, u_, l_, bits, iter_limit=left, retry=retry) if Rinv is not None
-                         else solve_qp(Hs, fs, A_, u_, l_, bits, iter_limit=left, retry=retry))
+                again = (_solve_ldp(Rinv, fs, A_, u_, l_, bits, iter_limit=rest, retry=retry) if Rinv is not None
+                         else solve_qp(Hs, fs, A_, u_, l_, bits, iter_limit=rest, retry=retry))
                 sol = QPSolution(again.z, again.flag, sol.iterations + again.iterations, lam=again.lam)
             if sol.lam is not None:  # the working set, as sense bits over every bound and one-sided row
                 lam = np.zeros(len(ub))
@@ -285,8 +341,43 @@ class DenseQP:
                 sol.lam = lam
             return sol
 
+        def bounded(held: np.ndarray | None, iterations: int, warm: np.ndarray | None = None) -> QPSolution:
+            """``run`` within the work ``left`` (measured). A solve whose whole iteration limit
+            what is left pays for (:func:`daqp_iterations`) runs whole, as without a bound;
+            otherwise in pieces of half of what is left pays for (at most
+            :data:`BOUND_PIECE_MAX`), each from the working set where the one before stopped,
+            the time measured between them (a DAQP iteration costs up to 4x the model: users
+            case 0 of seed 31, 0.5 ms on 1 724 x 404); :data:`WORK_BOUND_FLAG` where the bound
+            stops it. (Pieces converge more slowly than a whole solve: users case 27 did not in
+            17 pieces of 1 000 where the whole solve did, so a solve the bound leaves room for is
+            never cut into pieces.)"""
+            if left is None:
+                return run(held, iterations, warm)
+            rows = nb + (len(As) if held is None else int(held.sum()))
+            cap = daqp_iterations(left(), rows, nb, iterations)
+            if cap <= 0:
+                return QPSolution(np.zeros(nb), WORK_BOUND_FLAG, 0)
+            if cap >= iterations:  # the bound does not bind by the model: the solve as without it
+                return run(held, iterations, warm)
+            done = 0
+            while True:
+                rest = iterations - done
+                piece = min(rest, max(BOUND_PIECE_MIN, min(cap // 2, BOUND_PIECE_MAX)))
+                sol = run(held, piece, warm)
+                done += sol.iterations
+                sol.iterations = done
+                if sol.ok or sol.flag != ITERATION_LIMIT_FLAG:
+                    return sol
+                # stopped at the piece's end: on from there while the bound leaves iterations (a
+                # solve in pieces that reaches its own limit was cut short by them too)
+                cap = daqp_iterations(left(), rows, nb, iterations - done)
+                if cap <= 0 or done >= iterations or sol.lam is None:
+                    sol.flag = WORK_BOUND_FLAG
+                    return sol
+                warm = _working_set(sol.lam)
+
         if Rinv is None:
-            return run(None, limit)
+            return bounded(None, limit)
         # the side of each two-sided row nearer to the start: (upper copies, lower copies) as As
         z0 = np.zeros(nz) if start is None else np.clip(start, -self.zmax, self.zmax)
         r0 = self.A @ z0
@@ -308,8 +399,10 @@ class DenseQP:
         used = 0
         warm = None
         for _ in range(SCREEN_ROUNDS):
-            sol = run(held, limit - used, warm)
+            sol = bounded(held, limit - used, warm)
             used += sol.iterations
+            if sol.flag == WORK_BOUND_FLAG:
+                return QPSolution(sol.z, WORK_BOUND_FLAG, used)
             if used >= limit:
                 return QPSolution(sol.z, sol.flag if sol.ok else -1, used)
             if not sol.ok:  # a numerical failure on the rows held: every row, afresh
@@ -323,7 +416,7 @@ class DenseQP:
                 return QPSolution(sol.z, sol.flag, used)
             held |= out | near(Az)  # and the sides near the solution: fewer rounds
             warm = _working_set(sol.lam)
-        sol = run(None, limit - used, warm)
+        sol = bounded(None, limit - used, warm)
         return QPSolution(sol.z, sol.flag, used + sol.iterations)
 
 

@@ -128,9 +128,10 @@ class ReferenceAssembly:
         assert qp.dense is not None  # set by build
         return qp.dense
 
-    def solve(self, qp: ReferenceQP, start: np.ndarray | None) -> QPSolution:
-        """The hard QP, every hard row given to DAQP, from the warm start ``start``."""
-        return self.dense(qp).solve_hard(start)
+    def solve(self, qp: ReferenceQP, start: np.ndarray | None, iter_limit: int | None = None) -> QPSolution:
+        """The hard QP, every hard row given to DAQP, from the warm start ``start``
+        (``iter_limit``: :meth:`DenseQP.solve_hard`)."""
+        return self.dense(qp).solve_hard(start, iter_limit)
 
     def one_step_error(self, qp: ReferenceQP, u: np.ndarray) -> tuple[np.ndarray, float, float]:
         """The plant's next state under ``u`` [N] and how far it lands from the prediction

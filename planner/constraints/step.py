@@ -83,12 +83,13 @@ class FullQP:
         return DenseQP(self.H, self.f, A, self.lower, self.upper, rows.kinds, rows.n_hard, zmax, self.Rinv,
                        self.rows_ldp[1])
 
-    def solve(self, rows: Rows, zmax: np.ndarray, start: np.ndarray | None) -> QPSolution:
+    def solve(self, rows: Rows, zmax: np.ndarray, start: np.ndarray | None,
+              iter_limit: int | None = None) -> QPSolution:
         """The hard QP, every hard row given to DAQP, from the warm start ``start``; the
         predicted states at its solution in ``states``, its largest row violation in
-        ``violation``."""
+        ``violation``. ``iter_limit``: :meth:`DenseQP.solve_hard`."""
         dense = self.dense(rows, zmax)
-        sol = dense.solve_hard(start)
+        sol = dense.solve_hard(start, iter_limit)
         if sol.ok:
             sol.states = self.predict(sol.z)
             sol.violation = dense.violation(sol.z)

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from .._jit import numpy_only
-from ..constraints import MARGIN_M, MARGIN_RAD, ConstrainedController
+from ..constraints import MARGIN_M, MARGIN_RAD, ConstrainedController, WorkBound
 from ..corridor import RangeSequence, Segmentation, range_sequence, reference_sequence
 from ..corridor import segment as segment_layout
 from ..corridor.geometry import corridor_gaps
@@ -43,7 +43,7 @@ from .fastest import search as search_fastest
 from .result import build_result
 from .simulate import Resume, Simulation, simulate
 from .timing import method_of, resolve_timing, timing_info
-from .work import MORE_TIME, check_work, estimate_work, slack_allowance
+from .work import MORE_TIME, REFUSAL_WORK, check_work, estimate_work, slack_allowance
 
 __all__ = ["AdviceBudget", "plan", "plan_timed", "segment", "warm_up"]
 
@@ -82,13 +82,15 @@ def plan(request: Any, *, robot: RobotModel | None = None, segments: Sequence[Se
     first step's force-rate rows start from them, and the result's force rates count the first
     force's step from them; default zero (the robot at rest)."""
     t0 = time.perf_counter()
+    cpu0 = time.process_time()
     req = parse_request(request)
     with numpy_only(req.settings.backend == "reference"):
-        return _plan(req, t0, robot, segments, work_limit_s, start_force)
+        return _plan(req, t0, robot, segments, work_limit_s, start_force, cpu0)
 
 
 def _plan(req: PlanRequest, t0: float, robot: RobotModel | None, segments: Sequence[Segment] | None,
-          work_limit_s: float | None, start_force: np.ndarray | None = None) -> PlanResult:
+          work_limit_s: float | None, start_force: np.ndarray | None = None,
+          cpu0: float | None = None) -> PlanResult:
     model = _robot(req, robot)
     st = _with_substeps(req, model)
     if segments is None:
@@ -109,11 +111,14 @@ def _plan(req: PlanRequest, t0: float, robot: RobotModel | None, segments: Seque
     method = method_of(st)
     given = st
     st = resolve_timing(st, segments)  # speed_m_s / total_time_s -> samples_per_segment
+    bound = None  # a refused plan's own work within REFUSAL_WORK x its estimate, as a plan's
+    if st.mode == "constrained" and st.require_settled and cpu0 is not None:
+        bound = WorkBound.of(estimate_work(req, segments).seconds, REFUSAL_WORK, cpu0)
     try:
-        result = _plan_once(req.name, model, st, segments, req.reference, start_force, method=method)
+        result = _plan_once(req.name, model, st, segments, req.reference, start_force, bound, method=method)
     except PlannerError as exc:
         if exc.code == "infeasible" and exc.field == "settings" and segments is not None:
-            estimate_s = estimate_work(req, segments).seconds
+            estimate_s = bound.estimate_s if bound is not None else estimate_work(req, segments).seconds
             budget = _advice_budget(work_limit_s, estimate_s, t0)
             advised = _more_time_advice(exc, req.name, model, given, st, segments, budget, estimate_s, cells)
             if "the time plans" not in advised.message:
@@ -442,20 +447,23 @@ def _other_advice(exc: PlannerError, req: PlanRequest, model: RobotModel, st: Se
 
 
 def _plan_once(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment] | None,
-               reference: Reference | None, start_force: np.ndarray | None = None, **timing: object) -> PlanResult:
+               reference: Reference | None, start_force: np.ndarray | None = None, bound: WorkBound | None = None,
+               **timing: object) -> PlanResult:
     """One run of the loop at fixed timing; raises ``infeasible`` for a constrained plan that
-    needed slack when ``require_settled`` asks for a guaranteed plan."""
-    return _run(name, model, st, segments, reference, timing=timing, start_force=start_force)[0]
+    needed slack when ``require_settled`` asks for a guaranteed plan (``bound``: the work its
+    refused step may take, :class:`~planner.constraints.controller.WorkBound`)."""
+    return _run(name, model, st, segments, reference, timing=timing, start_force=start_force, bound=bound)[0]
 
 
 def _run(name: str | None, model: RobotModel, st: Settings, segments: Sequence[Segment] | None,
          reference: Reference | None,
          resume: Resume | None = None, keep: Sequence[int] = (), timing: dict | None = None,
-         abandon: bool = False, start_force: np.ndarray | None = None) -> tuple[PlanResult, Simulation]:
+         abandon: bool = False, start_force: np.ndarray | None = None,
+         bound: WorkBound | None = None) -> tuple[PlanResult, Simulation]:
     """:func:`_plan_once` from ``resume`` (or the start), remembering the states at ``keep``;
     returns the simulation too. ``abandon``: stop at the first infeasible step (a candidate
     of the ``fastest`` search). ``start_force``: the forces held before the first sample [N]
-    (:func:`plan`; zero if None)."""
+    (:func:`plan`; zero if None). ``bound``: the work a refused step may take (:func:`_plan_once`)."""
     seq: RangeSequence
     if segments is not None:
         seq = range_sequence(list(segments), st, model.n_legs)
@@ -468,7 +476,7 @@ def _run(name: str | None, model: RobotModel, st: Settings, segments: Sequence[S
     controller: ConstrainedController | None = None
     if st.mode == "constrained":
         controller = ConstrainedController(model, seq, st, segments, abandon=abandon,
-                                           slack=slack_allowance(st, seq.K + st.tail_steps))
+                                           slack=slack_allowance(st, seq.K + st.tail_steps), bound=bound)
         if start_force is not None:  # the first step's force-rate rows from the forces held before it
             controller.memory.u_prev[:] = start_force
     sim = simulate(model, seq, st, controller, resume, keep)

@@ -73,12 +73,20 @@ from ..schema import (
 from .timing import centre_path_length, method_of, moving_segments
 
 __all__ = ["FASTEST_A_M_S2", "FASTEST_BISECTION", "FASTEST_FRICTION_COST", "FASTEST_HORIZON_COST", "FASTEST_RAMPS",
-           "FASTEST_SLOW_S", "FASTEST_V_SHARE", "MORE_TIME", "RATE_FRICTION_V_M_S", "RATE_RAMPS_MAX",
+           "FASTEST_SLOW_S", "FASTEST_V_SHARE", "MORE_TIME", "RATE_FRICTION_V_M_S", "REFUSAL_WORK", "RATE_RAMPS_MAX",
            "RATE_STEP_S",
            "WorkEstimate", "robot_motion",
            "check_work", "estimate_work", "fastest_count", "fastest_steps", "rate_step_cost", "slack_allowance",
            "slack_costs"]
 
+#: a plan that stops at its first infeasible step (``require_settled``) may take this many times
+#: its estimate in CPU seconds before the refused step's DAQP solves are cut
+#: (:class:`planner.constraints.controller.WorkBound`; issue 33 goal 2: a refusal's own work
+#: within 1.5x its estimate, like a plan's; at N 100 one refused step's slack problem took 2-6
+#: CPU s against estimates of 0.18-1.2 s). Below 1.5: the bound is counted in this machine's
+#: CPU seconds (the estimate's are the reference machine's) and the work after the cut (the
+#: message, the plan's result) is not
+REFUSAL_WORK = 1.3
 #: the time factors the advice of an infeasible constrained plan tries, in this order (each
 #: planned until its first infeasible step; the first that plans is advised), as far as the
 #: limits on samples allow (issue 31: a speed of 5 m/s on Table I planned at 1/32 of it)
