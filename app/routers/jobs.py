@@ -108,9 +108,8 @@ class JobStatus(BaseModel):
     updated: float = Field(description="When its row last changed (progress), s since the Unix epoch")
     eta_s: float | None = Field(description="Estimated time left, s: the work estimate less the time run until the "
                                 "first unit is done (not below a tenth of it), then the measured time per unit "
-                                "times the units left and the join after them (0.3 units per unit), not below a tenth of a "
-                                "unit's time while it runs; 0 once ended, "
-                                "null when unknown")
+                                "times the units left and the join after them (0.3 units per unit), not below a "
+                                "tenth of a unit's time while it runs; 0 once ended, null when unknown")
     result: str | None = Field(description="Once done: the stored plan's URL (GET it, with ?format= if you like)")
     plan_id: str | None = Field(description="Once done: the stored plan's id")
     error: ErrorDetail | None = Field(description="Once failed: the error the synchronous call would have answered")
