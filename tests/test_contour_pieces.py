@@ -1,5 +1,5 @@
 """``fastest``: a pass's pieces end where Z's slope changes sharply, each planned rest to rest
-with its own timing (issue 35 goal 1, :func:`planner.contour.search.slope_stops`); a piece's
+with its own timing (issue 35 goal 1, :func:`planner.contour.zaxis.slope_stops`); a piece's
 search starts from the scale of a piece of the same shape only (:func:`planner.contour.search.piece_key`).
 
 Properties, not outputs: a pass is no slower than its pieces planned apart (splitting into rest-to-rest
@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from planner.contour import plan_contour
-from planner.contour.search import OPT_END_SAMPLES, SLOPE_STOP_M_S, slope_stops
-from planner.contour.zaxis import FIRST_BUDGET
+from planner.contour.search import OPT_END_SAMPLES
+from planner.contour.zaxis import FIRST_BUDGET, SLOPE_STOP_M_S, slope_stops
 from planner.exchange import read_gcode
 
 ORIGIN = [-0.004, -0.004]

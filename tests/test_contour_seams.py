@@ -145,24 +145,39 @@ def test_a_plan_from_held_forces_steps_from_them():
 def test_a_seam_the_forces_left_break_is_planned_once(monkeypatch):
     """fusion360 ``fastest`` at Ts 3 ms: the level piece after the ramp starts from the ramp's
     braking forces, more than the drives drop in a sample (9.06 N, 9 N a sample): it is planned
-    from them at once (on main after seamforce: from rest, found over the limit, planned again),
-    every part once, and the plan is the one planned from them (the rate holds at every seam)."""
-    plans: list[int] = []
+    from them at once (on main after seamforce: from rest, found over the limit, planned again).
+    A part after forces a rest could take is planned from rest, and again from those forces only
+    where its first force stepped too far from them the other way (a piece that turns back after
+    a stop: since a piece leaves its start in its first sample, its first force is up to a
+    sample's rise, 6.2 N held against 9 N the other way on fusion360 line 20). The plan is the
+    one planned from them where the seam broke (the rate holds at every seam)."""
+    from planner.contour.join import rest_breaks, seam_breaks
+
+    parts: list[tuple[bool, list[tuple[bool, bool]]]] = []
     seamed = contour_plan._Walk.seamed
 
     def counted(self, planned, line):
-        n = [0]
+        before = self.held()
+        calls: list[tuple[bool, bool]] = []  # (from held forces, its seam broke)
 
         def once(pos, f):
-            n[0] += 1
-            return planned(pos, f)
+            part = planned(pos, f)
+            calls.append((f is not None, seam_breaks(before, part, self.model, self.st)))
+            return part
 
         part = seamed(self, once, line)
-        plans.append(n[0])
+        parts.append((rest_breaks(before, self.model, self.st), calls))
         return part
 
     monkeypatch.setattr(contour_plan._Walk, "seamed", counted)
     res = _contour("fusion360.nc", "fastest", 0.003)
-    assert plans and all(n == 1 for n in plans), plans
+    assert any(breaks for breaks, _ in parts), "no seam the forces break: the prediction is not exercised"
+    for breaks, calls in parts:
+        if breaks:  # predicted: planned once, from the held forces
+            assert [held for held, _ in calls] == [True], parts
+        else:  # from rest; again from the held forces only where that seam broke
+            assert calls[0][0] is False and len(calls) <= 2, parts
+            assert (len(calls) == 2) == calls[0][1], parts
+            assert len(calls) == 1 or calls[1][0] is True, parts
     assert rate_ratio(res).max() <= 1 + REL
     assert res.metrics.within_limits is independent_within(res) is True

@@ -331,7 +331,7 @@ def test_corridor_plan_gcode_is_unchanged():
 def test_z_in_the_material_is_one_pass_within_the_z_speed(feed):
     """The ramp, the tab and the helix of TAB_PASS are cut in one pass: its cutting samples
     run from the ramp to the end without a dwell (no retract; ``fastest`` comes to rest where the
-    slope changes sharply, as the exact path must, ``search.slope_stops``), the tool point of the
+    slope changes sharply, as the exact path must, ``zaxis.slope_stops``), the tool point of the
     exported program as rs274 runs it is within the tolerance of the source's 3-D moves at each
     of them, and Z moves at most at the Z axis speed between samples (the tab's flanks made
     steep, the axis slow: the bound binds)."""

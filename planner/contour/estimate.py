@@ -30,7 +30,7 @@ from .passes import (
 from .placement import check_reach
 from .profiles import GRID_H_MAX, GRID_H_MIN, GRID_POINTS, GRID_POINTS_MIN
 from .tube import SAGITTA_FRACTION
-from .zaxis import Z_TRIES
+from .zaxis import Z_TRIES, slope_stops
 
 #: program feed's tube cells: a whole number of samples at F, this much shorter, as first tried
 #: (the one definition: :mod:`planner.contour.search` imports it; 1 % before issue 35 goal 2,
@@ -164,7 +164,7 @@ Z_FASTEST_LENGTH_M = 0.015
 #: ``fastest``: the work of a piece after a slope stop beyond what the pass's estimate counts, in
 #: units of the piece's own estimate (:func:`piece_estimate`), by the sample times of
 #: :data:`SAMPLE_FACTOR_TS` (interpolated in their logarithm). The planner ends a piece where Z's
-#: slope changes sharply (:func:`planner.contour.search.slope_stops`: a ramp's start and end), the
+#: slope changes sharply (:func:`planner.contour.zaxis.slope_stops`: a ramp's start and end), the
 #: estimate's pieces do not; the piece after such a stop starts from the braking forces the one
 #: before left, planned from them at once where the drives cannot drop them in a sample
 #: (:meth:`planner.contour.plan._Walk.seamed`), and where that finds no timing the robot is held
@@ -508,7 +508,6 @@ def seam_work(req: Any, program: Program, tol: float, Ts: float, passes: int, N:
     k = by_ts(SLOPE_STOP_PLANS, Ts)
     if req.feed != "fastest" or k <= 0:
         return 0.0
-    from .search import slope_stops  # (search imports this module's constants)
 
     out = 0.0
     for b in program.passes:

@@ -142,7 +142,7 @@ def walk_program(program: Program, tol: float) -> Iterator[WalkStep]:
 def chunks(elements: list[PathElement], split_after: Collection[int] = ()) -> list[list[int]]:
     """The element indices of a pass in pieces the robot plans rest to rest: split after each
     exact-stop move (G61) and after the moves ``split_after`` (``fastest``: where Z's slope
-    changes too sharply to pass, :func:`planner.contour.search.slope_stops`)."""
+    changes too sharply to pass, :func:`planner.contour.zaxis.slope_stops`)."""
     out: list[list[int]] = [[]]
     for k, e in enumerate(elements):
         out[-1].append(k)

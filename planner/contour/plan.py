@@ -82,9 +82,9 @@ from .passes import (
 from .path import move_of, move_speeds, progress
 from .placement import CONTOUR_PSI, check_reach, check_reachable, fit_origin, proposal
 from .profiles import OptimalProfiles
-from .search import Scale, confirmed_infeasible, largest_feasible, piece_key, search_timing, slope_stops, z_caps
+from .search import Scale, confirmed_infeasible, largest_feasible, piece_key, search_timing, z_caps
 from .tube import PathGeometry, path_to_cut
-from .zaxis import Z_EASE, Z_TRIES, ZCaps, ZPlan, accel_dwell, plan_z
+from .zaxis import Z_EASE, Z_TRIES, ZCaps, ZPlan, accel_dwell, plan_z, slope_stops
 
 # the names this module had before issue 34 split it (the estimate's constants, the search's
 # scale finder) stay importable from it

@@ -44,10 +44,10 @@ from .profiles import (
     with_arrival,
 )
 from .tube import Tube
-from .zaxis import blend_speed, slopes
+from .zaxis import slopes
 
 __all__ = ["SCALE_MAX", "SCALE_MIN", "SCALE_RESOLUTION", "Found", "Scale", "TimingSearch", "confirmed_infeasible",
-           "largest_feasible", "overspeed", "overspeed_of", "piece_key", "search_timing", "slope_stops",
+           "largest_feasible", "overspeed", "overspeed_of", "piece_key", "search_timing",
            "z_caps"]
 
 #: fastest: the reference acceleration the scale's square multiplies [m/s^2] (the reference
@@ -107,9 +107,6 @@ ADVICE_TS = 0.5
 #: the profile's top speed (shorter cells keep the robot nearer the profile's progress, longer
 #: ones lose fewer samples to cells shorter than a sample's travel)
 OPT_CELL_SAMPLES = 1.5
-#: fastest: a pass's pieces end where Z lets the tool pass a slope change no faster than this [m/s]
-#: (:func:`slope_stops`)
-SLOPE_STOP_M_S = 0.05
 #: the time-optimal timing's scale is found to this relative resolution (its profile is near
 #: the drives' limits everywhere: the scale found is near 1, and a finer step is worth its plans)
 OPT_RESOLUTION = 1 / 256
@@ -830,26 +827,6 @@ def confirmed_infeasible(req: ContourRequest, model: RobotModel, st: Settings, c
     msg = f"{head}; {' and '.join(tried)} do not plan either (checked); " if tried else f"{head}; "
     return PlannerError("infeasible", msg + f"{' and '.join(not_tried)} not checked within the work bound "
                         f"({budget:.2g} s); give a larger tolerance_m or a smaller settings.Ts", "tolerance_m")
-
-
-def slope_stops(feed: str, els: list[PathElement], tol: float, a_max: float) -> list[int]:
-    """``fastest``: the moves of a pass after which its pieces end (:func:`planner.contour.passes.chunks`,
-    each piece planned rest to rest) because Z's slope changes there so sharply that Z lets the
-    tool pass no faster than :data:`SLOPE_STOP_M_S` (the blend's speed within the tolerance at
-    the Z acceleration ``a_max``, :func:`planner.contour.zaxis.blend_speed`; a ramp's start and
-    end). Its own timing per piece (a ramp's within the Z axis, the level cut's at the drives')
-    instead of one scale and Z caps over the whole pass; the exact path stops there as well (with
-    a Z acceleration limit Z's velocity, slope times speed, is continuous). Measured on
-    fusion360's first pass (ramps of slope 1 in and out, a blend of 4.9 mm/s): 0.711 s as one
-    piece (its first timing missed Z by 0.10 mm and was planned again slower), 0.405 s in three.
-    A gentle slope change is passed: freecad's helix (slope 0.04) into its circle, a blend of
-    0.18 m/s, took 0.344 s as two pieces, 0.292 s as one. Not in ``program`` feed (at F the blend
-    is near F and a stop costs the pieces' ends)."""
-    if feed != "fastest":
-        return []
-    g = slopes(els)
-    return [k for k in range(len(els) - 1)
-            if g[k] != g[k + 1] and blend_speed(abs(g[k + 1] - g[k]), tol, a_max) < SLOPE_STOP_M_S]
 
 
 def piece_key(els: list[PathElement]) -> tuple[tuple, bool]:
