@@ -49,12 +49,27 @@ def test_the_advice_is_the_same_when_the_wall_clock_runs_3x_fast(monkeypatch, li
     counted (main before this change), Table I in 0.05 s at a 1.2 s limit tried 32x and advised
     it at 1x, and stopped before it and advised fastest at 3x.
     (A first plan of the process loads the kernels: planned once before, so that the wall
-    time's safety stop at the limit is far.)"""
+    time's safety stop at the limit is far.) The figure of the violation is not compared
+    (:func:`_where_and_advice`)."""
     plan(TABLE1)
     quiet = _refusal(TOO_FAST, limit_s)
     _fast_clock(monkeypatch, 3.0)
     loaded = _refusal(TOO_FAST, limit_s)
-    assert loaded == quiet
+    assert _where_and_advice(loaded) == _where_and_advice(quiet)
+
+
+def _where_and_advice(message: str) -> tuple[str, str]:
+    """A refusal's place (``at t = ... s (segment n)``) and everything after its verdict (the
+    advice). Not the figure of the violation between them: the refused step's slack problem is
+    bounded by the CPU time the plan used (``planner.constraints.WorkBound``, issue 33 goal 2),
+    so on a loaded machine, or on a process's first plan, the message may say the figure was not
+    computed within the bound where a quiet run gives it (seen in ``make test``'s parallel run:
+    "by how much the corridor would be left was not computed" against "left by 93 mm"); the
+    verdict, its place and the advice do not change."""
+    where = message.split(")", 1)[0]
+    assert where.startswith("at t = "), message
+    verdict, advice = message.split("; set require_settled to false", 1)
+    return where, advice
 
 
 def test_the_candidates_are_the_ones_whose_estimates_fit_the_limit():
