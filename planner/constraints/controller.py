@@ -74,7 +74,7 @@ from ..schema import Segment, Settings
 from .compiled import MAX_ITERATIONS, CompiledAssembly
 from .composed import Constraints
 from .corridor import MARGIN_M, MARGIN_RAD
-from .qp import DAQP_SETTINGS, SLACK_ITER_LIMIT, WORK_BOUND_FLAG, DenseQP, QPSolution, daqp_iterations
+from .qp import DAQP_SETTINGS, SLACK_ITER_LIMIT, WORK_BOUND_FLAG, DenseQP, QPSolution, daqp_iterations, small_solve
 from .reference import ReferenceAssembly
 from .rows import RELAX_M, ROW_UNIT_M, RowKind
 from .stagewise import INFEASIBLE, SOLVED, shifted
@@ -343,7 +343,9 @@ class ConstrainedController:
 
         def limit() -> int | None:
             """DAQP's iteration limit of the next hard solve (None: its own)."""
-            return None if left is None else daqp_iterations(left(), qp.rows.n_hard + nz, nz, HARD_ITER_LIMIT)
+            if left is None or small_solve(qp.rows.n_hard + nz, nz, HARD_ITER_LIMIT):
+                return None
+            return daqp_iterations(left(), qp.rows.n_hard + nz, nz, HARD_ITER_LIMIT)
 
         sol = QPSolution(np.zeros(0), INFEASIBLE, 0) if proved else asm.solve(qp, start, limit())
         iterations = sol.iterations

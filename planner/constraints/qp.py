@@ -29,7 +29,7 @@ import numpy as np
 __all__ = ["ARRIVAL_SLACK_WEIGHT", "DAQP_ITERATION_LARGE_S", "DAQP_ITERATION_S", "DAQP_LARGE_ENTRIES",
            "DAQP_SETTINGS", "RETRY_FLAGS", "RETRY_SETTINGS", "SCREEN_FIRST", "SCREEN_NEAR", "SCREEN_ROUNDS",
            "SCREEN_TOL", "SLACK_ITER_LIMIT", "SLACK_RHO1", "SLACK_RHO2", "WORK_BOUND_FLAG", "DenseQP", "QPSolution",
-           "daqp_iteration_s", "daqp_iterations", "factor", "rows_ldp", "solve_qp"]
+           "daqp_iteration_s", "daqp_iterations", "small_solve", "SMALL_SOLVE_S", "factor", "rows_ldp", "solve_qp"]
 
 #: DAQP's tolerances (rows in row units: 1e-9 of a millimetre) and iteration limit
 DAQP_SETTINGS = {"primal_tol": 1e-9, "dual_tol": 1e-12, "iter_limit": 2000}
@@ -134,6 +134,22 @@ def daqp_iteration_s(rows: int, variables: int) -> float:
     entries = max(1, rows) * max(1, variables)
     share = min(1.0, entries / DAQP_LARGE_ENTRIES)
     return entries * (DAQP_ITERATION_S + (DAQP_ITERATION_LARGE_S - DAQP_ITERATION_S) * share)
+
+
+#: a DAQP solve whose whole iteration limit the model prices at most this [CPU s] runs whole
+#: whatever the work bound has left (:func:`small_solve`): the bound is there for the solves that
+#: grow with the horizon (2-6 CPU s at N 100 x 6 legs), not for a small request's figure
+#: (Table I in 0.05 s, 4 legs x N 30: the slack problem's last round, 1 159 rows x 124, is priced
+#: 0.35 s for its 19 059 iterations and took 0.08 s whole; a CLI's first plan has used 0.53 s of
+#: its 0.04 s bound loading the kernels when it gets there, and the solve cut into pieces did not
+#: converge in 9 985 iterations). N 100 x 6 legs is priced ~10 s, N 60 x 4 legs ~0.9 s: bounded
+SMALL_SOLVE_S = 0.5
+
+
+def small_solve(rows: int, variables: int, iterations: int) -> bool:
+    """Whether ``iterations`` DAQP iterations on a QP of ``rows`` rows and ``variables``
+    variables cost at most :data:`SMALL_SOLVE_S` by the model (:func:`daqp_iteration_s`)."""
+    return iterations * daqp_iteration_s(rows, variables) <= SMALL_SOLVE_S
 
 
 def daqp_iterations(seconds: float, rows: int, variables: int, cap: int) -> int:
@@ -351,9 +367,9 @@ class DenseQP:
             stops it. (Pieces converge more slowly than a whole solve: users case 27 did not in
             17 pieces of 1 000 where the whole solve did, so a solve the bound leaves room for is
             never cut into pieces.)"""
-            if left is None:
-                return run(held, iterations, warm)
             rows = nb + (len(As) if held is None else int(held.sum()))
+            if left is None or small_solve(rows, nb, iterations):
+                return run(held, iterations, warm)
             cap = daqp_iterations(left(), rows, nb, iterations)
             if cap <= 0:
                 return QPSolution(np.zeros(nb), WORK_BOUND_FLAG, 0)
